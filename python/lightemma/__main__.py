@@ -1,0 +1,5 @@
+import sys
+
+from lightemma.cli import main
+
+sys.exit(main())

@@ -1,0 +1,60 @@
+"""The ``lightemma`` command line.
+
+Each subcommand lives in its own module under ``lightemma.cli`` and exposes
+``add_parser(subparsers) -> argparse.ArgumentParser`` which registers the
+subcommand and sets ``func`` (a callable taking the parsed namespace and
+returning an exit code) via ``parser.set_defaults(func=...)``.
+
+Errors meant for the user are raised as :class:`lightemma.errors.UserError`
+(or ``ValueError``/``FileNotFoundError``) and printed as one clear line, never
+as a traceback (set ``LIGHTEMMA_DEBUG=1`` to see the traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+from collections.abc import Sequence
+
+# subcommand modules, in the order `lightemma --help` lists them
+SUBCOMMANDS: list[str] = []
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from lightemma import __version__
+
+    parser = argparse.ArgumentParser(
+        prog="lightemma",
+        description="Benchmark how well vision-language models drive (nuScenes, LightEMMA protocol).",
+    )
+    parser.add_argument("--version", action="version", version=f"lightemma {__version__}")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name in SUBCOMMANDS:
+        importlib.import_module(f"lightemma.cli.{name}").add_parser(subparsers)
+    return parser
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    from lightemma.errors import UserError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if getattr(args, "func", None) is None:
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        print("lightemma: interrupted", file=sys.stderr)
+        return 130
+    except (UserError, ValueError, FileNotFoundError) as exc:
+        if os.environ.get("LIGHTEMMA_DEBUG"):
+            raise
+        print(f"lightemma {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
