@@ -1,0 +1,7 @@
+//! lightemma's numeric and text kernels (placeholder until the core lands).
+use pyo3::prelude::*;
+
+#[pymodule]
+fn _core(_m: &Bound<'_, PyModule>) -> PyResult<()> {
+    Ok(())
+}
