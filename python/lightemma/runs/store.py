@@ -1,0 +1,281 @@
+"""Crash-safe storage of runs.
+
+A run directory is ``<output>/<model-slug>/<run-id>/`` holding
+
+* ``manifest.json`` — what was run (model, backend, parameters, prompt set and
+  hash, dataset, lightemma version, …), always replaced atomically;
+* ``frames.jsonl`` — one whole JSON object per finished frame, appended as a
+  single ``write`` of a complete line and flushed.
+
+A crash can at worst leave a truncated last line. Readers ignore it (and say
+so); :class:`RunWriter` cuts it off before appending, so the file never holds
+a line glued onto a fragment. When a frame appears more than once (a
+``--retry-failed`` pass appends a fresh record) the last record wins.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import re
+import secrets
+import tempfile
+import threading
+from collections.abc import Iterator, Mapping
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lightemma.errors import RunStoreError
+
+MANIFEST_FILE = "manifest.json"
+FRAMES_FILE = "frames.jsonl"
+FORMAT = "lightemma-run/1"
+
+
+def _to_jsonable(value: Any) -> Any:
+    """``json.dumps`` fallback: NumPy arrays and scalars become plain lists and numbers."""
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, Path):
+        return str(value)
+    raise TypeError(f"object of type {type(value).__name__} is not JSON serializable")
+
+
+def _sanitize(value: Any) -> Any:
+    """Replace non-finite floats by ``None`` so that every line is strict JSON."""
+    if isinstance(value, float):
+        return value if math.isfinite(value) else None
+    if isinstance(value, dict):
+        return {k: _sanitize(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_sanitize(v) for v in value]
+    if isinstance(value, np.ndarray):
+        return _sanitize(value.tolist())
+    if isinstance(value, np.generic):
+        return _sanitize(value.item())
+    return value
+
+
+def dumps_line(record: Mapping[str, Any]) -> str:
+    """One record as one line of strict JSON (NaN/inf become null), newline-terminated."""
+    return json.dumps(_sanitize(record), default=_to_jsonable, allow_nan=False, ensure_ascii=False) + "\n"
+
+
+def write_json_atomic(path: str | os.PathLike[str], data: Mapping[str, Any]) -> None:
+    """Write ``data`` as pretty JSON to ``path`` via a temporary file and ``os.replace``."""
+    path = Path(path)
+    text = json.dumps(_sanitize(dict(data)), default=_to_jsonable, indent=2, allow_nan=False, ensure_ascii=False)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text + "\n")
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def slugify(name: str) -> str:
+    """A model string as a directory name: ``openai/gpt-4o`` -> ``openai--gpt-4o``."""
+    slug = re.sub(r"[^A-Za-z0-9._-]+", "-", name.replace("/", "--").replace(":", "-")).strip("-.")
+    return slug or "model"
+
+
+def new_run_id(now: datetime | None = None) -> str:
+    """A sortable, unique run id such as ``20261122T021700Z-3fa9c1``."""
+    now = now or datetime.now(timezone.utc)
+    return f"{now.strftime('%Y%m%dT%H%M%SZ')}-{secrets.token_hex(3)}"
+
+
+def create_run_dir(output: str | os.PathLike[str], model: str, manifest: Mapping[str, Any], *, run_id: str | None = None) -> Path:
+    """Create ``<output>/<slug(model)>/<run_id>/`` with its manifest and an empty ``frames.jsonl``."""
+    run_dir = Path(output) / slugify(model) / (run_id or new_run_id())
+    try:
+        run_dir.mkdir(parents=True, exist_ok=False)
+    except FileExistsError:
+        raise RunStoreError(f"run directory {run_dir} already exists; pass --resume {run_dir} to continue it") from None
+    full = {"format": FORMAT, "run_id": run_dir.name, **manifest}
+    write_json_atomic(run_dir / MANIFEST_FILE, full)
+    (run_dir / FRAMES_FILE).touch()
+    return run_dir
+
+
+def read_manifest(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
+    """The manifest of a run directory; a clear :class:`RunStoreError` if it is missing or foreign."""
+    run_dir = Path(run_dir)
+    path = run_dir / MANIFEST_FILE
+    if not run_dir.is_dir():
+        raise RunStoreError(f"{run_dir} is not a directory (expected a lightemma run directory)")
+    if not path.is_file():
+        raise RunStoreError(f"{run_dir} is not a lightemma run directory: no {MANIFEST_FILE}")
+    try:
+        manifest = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise RunStoreError(f"{path} is unreadable: {exc}") from None
+    if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
+        raise RunStoreError(f"{path} is not a lightemma run manifest (format {manifest.get('format') if isinstance(manifest, dict) else None!r}, expected {FORMAT!r})")
+    return manifest
+
+
+def update_manifest(run_dir: str | os.PathLike[str], **fields: Any) -> dict[str, Any]:
+    """Merge ``fields`` into the manifest and rewrite it atomically; returns the new manifest."""
+    manifest = read_manifest(run_dir)
+    manifest.update(fields)
+    write_json_atomic(Path(run_dir) / MANIFEST_FILE, manifest)
+    return manifest
+
+
+def _iter_lines(path: Path) -> Iterator[tuple[int, bytes, bool]]:
+    """Yield (line number, raw line, complete) for each line of ``path``."""
+    with open(path, "rb") as fh:
+        for number, raw in enumerate(fh, start=1):
+            yield number, raw, raw.endswith(b"\n")
+
+
+@dataclass
+class RunContents:
+    """What :func:`read_run` found in a run directory."""
+
+    run_dir: Path
+    manifest: dict[str, Any]
+    records: dict[str, dict[str, Any]]  # frame_id -> last record, in first-seen order
+    corrupt_lines: list[int] = field(default_factory=list)
+    truncated_tail: bool = False
+    duplicates: int = 0
+
+    @property
+    def complete(self) -> bool:
+        """True when the manifest says the run finished (``finished_at`` set)."""
+        return bool(self.manifest.get("finished_at"))
+
+    def warnings(self) -> list[str]:
+        out = []
+        if self.truncated_tail:
+            out.append(f"{self.run_dir}: ignored a truncated last line (the run was interrupted)")
+        if self.corrupt_lines:
+            shown = ", ".join(map(str, self.corrupt_lines[:10]))
+            out.append(f"{self.run_dir}: skipped {len(self.corrupt_lines)} corrupt line(s) of {FRAMES_FILE} (line {shown}{', …' if len(self.corrupt_lines) > 10 else ''})")
+        if not self.complete:
+            out.append(f"{self.run_dir}: run not finished; using the {len(self.records)} frame(s) done so far")
+        return out
+
+
+def iter_records(run_dir: str | os.PathLike[str], *, counts: RunContents | None = None) -> Iterator[dict[str, Any]]:
+    """Stream the records of ``frames.jsonl`` in file order (duplicates included), skipping bad lines.
+
+    Bad lines are counted into ``counts`` when given. Memory stays flat in the
+    number of frames.
+    """
+    path = Path(run_dir) / FRAMES_FILE
+    if not path.is_file():
+        raise RunStoreError(f"{Path(run_dir)} has no {FRAMES_FILE}")
+    for number, raw, complete in _iter_lines(path):
+        if not complete:
+            if counts is not None:
+                counts.truncated_tail = True
+            continue
+        if not raw.strip():
+            continue
+        try:
+            record = json.loads(raw)
+        except (json.JSONDecodeError, UnicodeDecodeError):
+            record = None
+        if not isinstance(record, dict) or not isinstance(record.get("frame_id"), str):
+            if counts is not None:
+                counts.corrupt_lines.append(number)
+            continue
+        yield record
+
+
+def read_run(run_dir: str | os.PathLike[str]) -> RunContents:
+    """Read a whole run: manifest plus the last record of each frame."""
+    run_dir = Path(run_dir)
+    contents = RunContents(run_dir=run_dir, manifest=read_manifest(run_dir), records={})
+    for record in iter_records(run_dir, counts=contents):
+        if record["frame_id"] in contents.records:
+            contents.duplicates += 1
+        contents.records[record["frame_id"]] = record
+    return contents
+
+
+def find_run_dirs(path: str | os.PathLike[str]) -> list[Path]:
+    """Run directories at or below ``path`` (a run dir, a model dir or an output dir), sorted."""
+    path = Path(path)
+    if (path / MANIFEST_FILE).is_file():
+        return [path]
+    if not path.is_dir():
+        raise RunStoreError(f"{path} does not exist")
+    return sorted(p.parent for p in path.glob(f"**/{MANIFEST_FILE}"))
+
+
+class RunWriter:
+    """Append whole lines to ``frames.jsonl``; safe to share between threads and asyncio tasks.
+
+    Opening repairs a truncated last line left by a crash (it is cut off, since
+    the frame it belonged to was not finished and will be redone).
+    """
+
+    def __init__(self, run_dir: str | os.PathLike[str], *, fsync: bool = False) -> None:
+        self.path = Path(run_dir) / FRAMES_FILE
+        self._fsync = fsync
+        self._lock = threading.Lock()
+        self.repaired_bytes = self._repair_tail()
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+
+    def _repair_tail(self) -> int:
+        if not self.path.exists():
+            return 0
+        size = self.path.stat().st_size
+        if size == 0:
+            return 0
+        with open(self.path, "rb+") as fh:
+            fh.seek(-1, os.SEEK_END)
+            if fh.read(1) == b"\n":
+                return 0
+            # find the last newline; everything after it is a fragment
+            block = 1 << 16
+            pos = size
+            keep = 0
+            while pos > 0:
+                start = max(0, pos - block)
+                fh.seek(start)
+                chunk = fh.read(pos - start)
+                idx = chunk.rfind(b"\n")
+                if idx >= 0:
+                    keep = start + idx + 1
+                    break
+                pos = start
+            fh.truncate(keep)
+            return size - keep
+
+    def append(self, record: Mapping[str, Any]) -> None:
+        """Write one record as one complete line (a single ``write`` call) and flush it."""
+        data = dumps_line(record).encode("utf-8")
+        with self._lock:
+            view = memoryview(data)
+            while view:
+                written = os.write(self._fd, view)
+                view = view[written:]
+            if self._fsync:
+                os.fsync(self._fd)
+
+    def close(self) -> None:
+        with self._lock:
+            if self._fd >= 0:
+                os.close(self._fd)
+                self._fd = -1
+
+    def __enter__(self) -> RunWriter:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
