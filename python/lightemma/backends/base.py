@@ -1,0 +1,85 @@
+"""The one small interface every backend implements.
+
+A backend turns chat requests (one prompt text plus, optionally, the frame's
+CAM_FRONT image) into results. It is asynchronous and takes a *batch* of
+requests, so that
+
+* API backends run the requests of a batch concurrently, and
+* local backends (``hf``, ``vllm``) can gather requests that arrive together
+  into one batched forward pass.
+
+The three-stage chain is written once, per frame, on top of this interface;
+every backend (API, local, baselines) runs through the same chain, parser,
+accounting and run store.
+
+API errors are never model text: a failed call returns a :class:`ChatResult`
+with ``text=None`` and ``error`` set to an error class name.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Protocol, runtime_checkable
+
+STAGES = ("scene", "intent", "actions")
+
+
+@dataclass(frozen=True)
+class GenerationParams:
+    """Decoding parameters, recorded in every run's manifest."""
+
+    temperature: float = 0.0
+    max_tokens: int = 512
+
+
+@dataclass(frozen=True)
+class ChatRequest:
+    """One stage of one frame: a single user turn of ``text`` plus the image (if any)."""
+
+    text: str
+    stage: str  # one of STAGES
+    frame_id: str
+    image_path: str | None = None
+    params: GenerationParams = field(default_factory=GenerationParams)
+    # The frame itself, for backends that need no model (baselines) — never sent to a provider.
+    frame: Any = None
+
+
+@dataclass
+class ChatResult:
+    """What one call returned. ``text`` is None exactly when ``error`` is set."""
+
+    text: str | None
+    input_tokens: int | None = None
+    output_tokens: int | None = None
+    seconds: float = 0.0
+    cost_cents: float | None = None
+    error: str | None = None  # error class, e.g. "RateLimitError", "Timeout", "APIConnectionError"
+    error_message: str | None = None  # short, secret-free description
+    cached: bool = False  # answered from the response cache
+    retries: int = 0  # transport-level retries before this result
+
+    @property
+    def ok(self) -> bool:
+        return self.error is None and self.text is not None
+
+
+@runtime_checkable
+class Backend(Protocol):
+    """A model behind ``generate``. ``info`` is recorded in the run manifest."""
+
+    name: str
+
+    @property
+    def info(self) -> Mapping[str, Any]:
+        """Backend kind, model id, GPUs used, how tokens are counted, … (JSON-able)."""
+        ...
+
+    async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
+        """Answer every request, in order; never raises for a per-request failure."""
+        ...
+
+    async def aclose(self) -> None:
+        """Release connections, threads, GPU memory."""
+        ...
