@@ -43,7 +43,7 @@ class Received:
     """One request as the server saw it."""
 
     path: str
-    headers: dict[str, str]
+    headers: dict[str, str]  # names lower-cased
     body: dict[str, Any]
     index: int  # arrival order, from 0
 
@@ -157,7 +157,7 @@ class FakeOpenAIServer:
                     body = json.loads(raw or b"{}")
                 except json.JSONDecodeError:
                     body = {}
-                req = Received(path=self.path, headers=dict(self.headers.items()), body=body, index=next(server._counter))
+                req = Received(path=self.path, headers={k.lower(): v for k, v in self.headers.items()}, body=body, index=next(server._counter))
                 if server.record:
                     with server._lock:
                         server.requests.append(req)

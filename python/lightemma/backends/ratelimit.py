@@ -52,7 +52,6 @@ class RateLimiter:
         self.requests = _Bucket(rpm) if rpm else None
         self.tokens = _Bucket(tpm) if tpm else None
         self._paused_until = 0.0
-        self._lock = asyncio.Lock()
         self.waited = 0.0  # total seconds callers spent waiting here
 
     @property
@@ -64,25 +63,26 @@ class RateLimiter:
         self._paused_until = max(self._paused_until, time.monotonic() + seconds)
 
     async def acquire(self, tokens: float = 0.0) -> None:
-        """Wait until one request and ``tokens`` tokens fit in the limits, then take them."""
-        if not self.active and self._paused_until <= time.monotonic():
-            return
+        """Wait until one request and ``tokens`` tokens fit in the limits, then take them.
+
+        The check and the take happen with no ``await`` between them, so the
+        event loop makes them atomic without a lock.
+        """
         start = time.monotonic()
-        async with self._lock:  # FIFO: one waiter at a time holds the head of the queue
-            while True:
-                now = time.monotonic()
-                wait = max(0.0, self._paused_until - now)
-                if self.requests is not None:
-                    wait = max(wait, self.requests.wait_time(1, now))
-                if self.tokens is not None and tokens:
-                    wait = max(wait, self.tokens.wait_time(tokens, now))
-                if wait <= 0:
-                    break
-                await asyncio.sleep(wait)
+        while True:
+            now = time.monotonic()
+            wait = max(0.0, self._paused_until - now)
             if self.requests is not None:
-                self.requests.take(1)
+                wait = max(wait, self.requests.wait_time(1, now))
             if self.tokens is not None and tokens:
-                self.tokens.take(tokens)
+                wait = max(wait, self.tokens.wait_time(tokens, now))
+            if wait <= 0:
+                break
+            await asyncio.sleep(wait)
+        if self.requests is not None:
+            self.requests.take(1)
+        if self.tokens is not None and tokens:
+            self.tokens.take(tokens)
         self.waited += time.monotonic() - start
 
     def settle(self, estimate: float, actual: float | None) -> None:

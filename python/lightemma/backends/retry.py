@@ -26,6 +26,8 @@ def error_class(exc: BaseException) -> str:
     name = type(exc).__name__
     if name in ("TimeoutError", "ReadTimeout", "ConnectTimeout", "APITimeoutError"):
         return "Timeout"
+    if name in ("InternalServerError", "APIError") and "Connection error" in str(exc):
+        return "APIConnectionError"  # litellm files dropped/truncated connections under 500
     return name
 
 
@@ -41,17 +43,18 @@ def short_message(exc: BaseException, limit: int = 300, secrets: tuple[str, ...]
 
 def retry_after_seconds(exc: BaseException) -> float | None:
     """The server's ``Retry-After`` (seconds) carried by a rate-limit or 5xx error, if any."""
-    response = getattr(exc, "response", None)
-    headers = getattr(response, "headers", None)
-    if headers is None:
-        return None
-    value = headers.get("retry-after") or headers.get("Retry-After")
-    if value is None:
-        return None
-    try:
-        return max(0.0, float(value))
-    except ValueError:
-        return None
+    candidates = (getattr(exc, "litellm_response_headers", None), getattr(getattr(exc, "response", None), "headers", None))
+    for headers in candidates:
+        if not headers:
+            continue
+        value = headers.get("retry-after") or headers.get("Retry-After")
+        if value is None:
+            continue
+        try:
+            return max(0.0, float(value))
+        except ValueError:
+            return None
+    return None
 
 
 @dataclass(frozen=True)
