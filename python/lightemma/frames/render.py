@@ -8,6 +8,7 @@ written ``0.0``.
 from __future__ import annotations
 
 import math
+from decimal import Decimal
 from collections.abc import Sequence
 
 import numpy as np
@@ -29,16 +30,9 @@ def format_number(x: float) -> str:
         return "0.0"
     text = repr(value)
     if "e" in text or "E" in text:
-        # exponent notation: expand with enough digits to round-trip, then trim zeros
-        mantissa, exponent = text.lower().split("e")
-        digits = len(mantissa.replace("-", "").replace(".", "").lstrip("0"))
-        places = max(0, digits - int(exponent) - 1)
-        text = f"{value:.{places}f}"
-        if "." in text:
-            text = text.rstrip("0")
-            if text.endswith("."):
-                text += "0"
-        else:
+        # exponent notation: expand repr's shortest round-tripping digits exactly
+        text = format(Decimal(text), "f")
+        if "." not in text:
             text += ".0"
     return text
 

@@ -172,12 +172,13 @@ def build_scenario(index: int, *, seed: int = 0, keyframes: int = 40) -> Scenari
         desc = f"Accelerating from {v0:.1f} to {vmax:.1f} m/s at {a:.2f} m/s² towards a green light"
     elif kind == "brake-red-light":
         v0 = float(rng.uniform(8.0, 11.0))
-        decel = float(rng.uniform(1.5, 2.5))
         t_brake = float(rng.uniform(0.3, 0.4)) * duration
-        profile = SpeedProfile(v0, ((t_brake, 0.0), (v0 / decel, -decel)))
+        t_stop = float(rng.uniform(0.65, 0.75)) * duration  # at rest for the last quarter or so
+        decel = v0 / (t_stop - t_brake)
+        profile = SpeedProfile(v0, ((t_brake, 0.0), (t_stop - t_brake, -decel)))
         stop_s = float(profile.s(duration)) + 2.0
         light = TrafficLight(stop_s=stop_s, schedule=((0.0, "yellow"), (max(0.0, t_brake - 1.5), "red")))
-        p = {"v0": v0, "decel": decel, "t_brake": t_brake}
+        p = {"v0": v0, "decel": decel, "t_brake": t_brake, "t_stop": t_stop}
         desc = f"Braking from {v0:.1f} m/s at {decel:.2f} m/s² to stop at a red light"
     elif kind == "wait-then-go-green":
         t_green = float(rng.uniform(0.4, 0.5)) * duration
