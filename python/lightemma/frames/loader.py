@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from lightemma.errors import DatasetError
+from lightemma.errors import DatasetError, UserError
 from lightemma.frames import geometry
 from lightemma.frames.model import FrameSet
 
@@ -125,7 +125,12 @@ def load_tables(dataroot: str | os.PathLike[str], version: str) -> NuScenes:
     or ``KeyError`` from inside the devkit.
     """
     root = check_dataroot(dataroot, version)
-    from nuscenes.nuscenes import NuScenes  # lazy: the devkit pulls in cv2, sklearn, matplotlib
+    try:
+        from nuscenes.nuscenes import NuScenes  # lazy: the devkit pulls in cv2, sklearn, matplotlib
+    except ImportError as exc:
+        raise UserError(
+            f"loading nuScenes needs nuscenes-devkit (pip install nuscenes-devkit==1.2.0): {exc}"
+        ) from exc
 
     table_root = os.path.join(root, version)
     try:
@@ -387,15 +392,17 @@ def _handle_missing_images(fs: FrameSet, policy: str) -> FrameSet:
     if not missing:
         return fs
     ids = [fs.frame_ids[i] for i in missing]
-    listing = "; ".join(f"{fs.frame_ids[i]} ({fs.image_paths[i]})" for i in missing[:10])
-    more = f"; and {len(missing) - 10} more" if len(missing) > 10 else ""
+    listing = ", ".join(ids[:10]) + (f" and {len(ids) - 10} more" if len(ids) > 10 else "")
+    example = fs.image_paths[missing[0]]
     if policy == "error":
-        raise DatasetError(f"{len(missing)} of {len(fs)} frame image(s) missing: {listing}{more}")
+        raise DatasetError(
+            f"{len(missing)} of {len(fs)} frame image(s) missing (first: {example}): {listing}"
+        )
     if policy == "keep":
-        log.warning("%d of %d frame image(s) missing, frames kept: %s%s", len(missing), len(fs), listing, more)
+        log.warning("%d of %d frame image(s) missing (first: %s), frames kept: %s", len(missing), len(fs), example, listing)
         object.__setattr__(fs, "missing_images", ids)
         return fs
-    log.warning("%d of %d frame image(s) missing, frames skipped: %s%s", len(missing), len(fs), listing, more)
+    log.warning("%d of %d frame image(s) missing (first: %s), frames skipped: %s", len(missing), len(fs), example, listing)
     drop = set(missing)
     kept = fs._take([i for i in range(len(fs)) if i not in drop])
     object.__setattr__(kept, "missing_images", ids)
