@@ -26,9 +26,15 @@ def make_small_dataset(root: Path, **overrides) -> Path:
     return write_dataset(root, **kwargs)
 
 
+_BUILT: dict[str, Path] = {}
+
+
 @pytest.fixture(scope="session")
 def small_root(tmp_path_factory) -> Path:
-    return make_small_dataset(tmp_path_factory.mktemp("synth-small"))
+    """Built once per test session, even when several modules import this fixture."""
+    if "small" not in _BUILT:
+        _BUILT["small"] = make_small_dataset(tmp_path_factory.mktemp("synth-small"))
+    return _BUILT["small"]
 
 
 @pytest.fixture

@@ -10,7 +10,7 @@ import shutil
 
 import numpy as np
 import pytest
-from hypothesis import example, given
+from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import lightemma
@@ -37,12 +37,14 @@ def truth():
 # --------------------------------------------------------------------------- geometry
 
 
+@settings(deadline=None)
 @given(st.floats(-math.pi + 1e-9, math.pi - 1e-9))
 def test_yaw_from_quaternion_inverts_a_yaw_rotation(yaw):
     q = np.array([math.cos(yaw / 2), 0.0, 0.0, math.sin(yaw / 2)])
     assert geometry.yaw_from_quaternion(q) == pytest.approx(yaw, abs=1e-12)
 
 
+@settings(deadline=None)
 @given(
     st.floats(2.0, 500.0),
     st.floats(-math.pi, math.pi),
@@ -71,6 +73,7 @@ def test_to_ego_frame_puts_the_heading_on_plus_x():
     np.testing.assert_allclose(out[0], [[3.0, 0.0], [0.0, 3.0]], atol=1e-12)
 
 
+@settings(deadline=None)
 @given(st.lists(st.floats(-50, 50, allow_nan=False), min_size=1, max_size=20))
 def test_round_like_python_matches_builtin_round(values):
     out = geometry.round_like_python(np.array(values))
@@ -114,6 +117,7 @@ def test_format_number_is_plain_decimal():
         format_number(float("inf"))
 
 
+@settings(deadline=None)
 @given(st.floats(allow_nan=False, allow_infinity=False))
 @example(5.960464477539063e-08)
 @example(1e300)
@@ -352,6 +356,15 @@ def test_select_head_describe(small_root, fs):
     assert (d["version"], d["split"], d["window"], d["n_frames"]) == (VERSION, "all", "reference", len(fs))
     assert d["scenes"] == sorted(d["scenes"]) and len(d["scenes"]) == SMALL["scenes"]
     assert fs.head(3).describe()["scenes"] == [fs.scene_names[0]]
+
+
+def test_frame_sets_pickle(fs):
+    import pickle
+
+    back = pickle.loads(pickle.dumps(fs))
+    assert back.frame_ids == fs.frame_ids and back.describe() == fs.describe()
+    np.testing.assert_array_equal(back.gt_positions, fs.gt_positions)
+    assert back.get(fs.frame_ids[4]).frame_id == fs.frame_ids[4]
 
 
 def test_loading_is_deterministic(small_root, fs):

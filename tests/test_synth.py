@@ -9,7 +9,7 @@ import os
 
 import numpy as np
 import pytest
-from hypothesis import given
+from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
@@ -36,6 +36,7 @@ def _digest(root) -> dict[str, str]:
 # --------------------------------------------------------------------------- closed-form kinematics
 
 
+@settings(deadline=None)
 @given(st.floats(0, 15), st.floats(0.1, 3), st.floats(0.5, 8), st.floats(0, 30))
 def test_speed_profile_is_consistent(v0, accel, duration, t):
     prof = SpeedProfile(v0, ((duration, accel), (2.0, 0.0)))
@@ -51,6 +52,7 @@ def test_speed_profile_refuses_negative_speed():
         SpeedProfile(5.0, ((3.0, -2.0),))
 
 
+@settings(deadline=None)
 @given(st.floats(5, 40), st.sampled_from([1.0, -1.0]), st.floats(-math.pi, math.pi))
 def test_quarter_arc_turns_by_a_right_angle_and_keeps_unit_speed(radius, sign, yaw0):
     path = Path(10.0, -4.0, yaw0, ((7.0, 0.0), (math.pi / 2 * radius, sign / radius)))
