@@ -127,7 +127,7 @@ def _intersection(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None
     h = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
     base = np.array([x, y, 0.0])
-    centre = base + 7.5 * h
+    centre = base + scn.light.crossing * h
     half_w, half_l = 6.0, 60.0
     quad = np.stack([centre - half_w * h - half_l * n, centre + half_w * h - half_l * n,
                      centre + half_w * h + half_l * n, centre - half_w * h + half_l * n])
@@ -143,7 +143,7 @@ def _traffic_light(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, t: flo
     x, y, yaw = scn.path.pose(scn.light.stop_s)
     h = np.array([math.cos(yaw), math.sin(yaw), 0.0])
     n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
-    far = np.array([x, y, 0.0]) + 15.0 * h
+    far = np.array([x, y, 0.0]) + (scn.light.crossing + 7.5) * h  # on the far side of the crossing
     pole_base = far + (RIGHT_EDGE - 2.5) * n
     pole_top = pole_base + np.array([0, 0, 6.0])
     arm_end = far + 0.0 * n + np.array([0, 0, 6.0])

@@ -54,6 +54,7 @@ class TrafficLight:
 
     stop_s: float
     schedule: tuple[tuple[float, str], ...]
+    crossing: float = 7.5  # metres from the stop line to the crossing road's centre line
 
     def colour(self, t: float) -> str:
         """Colour shown at time ``t`` (s): 'red', 'yellow' or 'green'."""
@@ -206,7 +207,8 @@ def build_scenario(index: int, *, seed: int = 0, keyframes: int = 40) -> Scenari
         approach = v * float(rng.uniform(0.3, 0.45)) * duration
         profile = SpeedProfile(v)
         segments = ((approach, 0.0), (math.pi / 2 * radius, sign / radius), (1000.0, 0.0))
-        light = TrafficLight(stop_s=approach - 4.0, schedule=((0.0, "green"),))
+        # the crossing road is the one turned into: its centre line is the exit straight
+        light = TrafficLight(stop_s=approach - 4.0, schedule=((0.0, "green"),), crossing=4.0 + radius)
         p = {"speed": v, "radius": radius, "approach": approach}
         side = "left" if sign > 0 else "right"
         desc = f"Turning {side} at a green light at {v:.1f} m/s on a {radius:.1f} m radius"
