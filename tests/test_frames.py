@@ -545,3 +545,18 @@ def test_bad_arguments_are_value_errors(small_root):
         load_frames(small_root, VERSION, split="all", on_missing_image="ignore")
     with pytest.raises(DatasetError, match="empty"):
         load_frames(small_root, VERSION, scenes=[])
+
+
+def test_keyframe_timestamps_that_do_not_increase_are_named(small_copy):
+    path = small_copy / VERSION / "ego_pose.json"
+    poses = json.loads(path.read_text())
+    scenes = sorted(json.loads((small_copy / VERSION / "scene.json").read_text()), key=lambda s: s["name"])
+    samples = {s["token"]: s for s in read_table(small_copy, VERSION, "sample")}
+    sds = {sd["sample_token"]: sd for sd in read_table(small_copy, VERSION, "sample_data") if sd["is_key_frame"]}
+    first = scenes[0]["first_sample_token"]
+    second = samples[first]["next"]
+    by_token = {p["token"]: p for p in poses}
+    by_token[sds[second]["ego_pose_token"]]["timestamp"] = by_token[sds[first]["ego_pose_token"]]["timestamp"]
+    path.write_text(json.dumps(poses))
+    with pytest.raises(DatasetError, match=f"scene {scenes[0]['name']}: keyframe timestamps do not increase"):
+        load_frames(small_copy, VERSION, split="all")

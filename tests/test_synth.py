@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from PIL import Image
 
-from frames_fixtures import SMALL, make_small_dataset, read_table, small_root  # noqa: F401
+from frames_fixtures import SMALL, read_table, small_root  # noqa: F401
 from lightemma.cli import main
 from lightemma.errors import UserError
 from lightemma.frames.loader import TABLES

@@ -258,7 +258,8 @@ def write_dataset(
         images: draw the JPEGs (``False`` writes tables only, e.g. for benchmarks).
         sweeps: also write the 12 Hz CAM_FRONT sweeps between keyframes.
         image_size: (width, height); the intrinsics are scaled to it.
-        overwrite: replace an existing ``outdir/version`` instead of refusing.
+        overwrite: rewrite the tables of an existing ``outdir/version`` instead of refusing
+            (images of scenes no longer in the tables are left in place).
     """
     if not isinstance(version, str) or not version or os.sep in version or version in (".", ".."):
         raise UserError(f"invalid version folder name {version!r}")
