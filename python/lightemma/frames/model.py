@@ -17,8 +17,12 @@ class Frame:
 
     Positions are in the ego frame of this keyframe (x forward, y left, metres);
     actions are (speed m/s, curvature 1/m) pairs at 0.5 s spacing, most recent
-    last. ``history_actions`` are post-processed as SPEC §1 "reference" says;
-    ``gt_actions`` are the raw future actions (analysis only, never scored).
+    last. ``history_actions`` are post-processed as SPEC §1 "reference" says:
+    action k (k = 1..6) is the speed of segment c−7+k → c−6+k and the curvature
+    of (c−8+k, c−7+k, c−6+k). ``gt_actions`` are the raw (unthresholded,
+    unrounded) future actions by the same formulas shifted to the future: speed
+    of segment c+k−1 → c+k, curvature of (c+k−2, c+k−1, c+k); analysis only,
+    never scored.
     """
 
     frame_id: str
