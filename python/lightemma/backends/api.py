@@ -36,6 +36,8 @@ litellm.telemetry = False
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
+# The providers of the paper's API models; an empty variable counts as missing.
+PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 
 
@@ -62,9 +64,13 @@ def require_api_key(model: str, api_base: str | None = None) -> str | None:
         return os.environ.get("OPENAI_API_KEY") or NO_KEY
     if api_base:
         return None  # a custom base for another provider: litellm reads that provider's variables
-    check = litellm.validate_environment(model=model)
-    missing = check.get("missing_keys") or []
-    if not check.get("keys_in_environment") and missing:
+    names = PROVIDER_KEYS.get(provider or "")
+    if names is not None:
+        missing = [] if any(os.environ.get(n, "").strip() for n in names) else list(names)
+    else:
+        check = litellm.validate_environment(model=model)
+        missing = [] if check.get("keys_in_environment") else list(check.get("missing_keys") or [])
+    if missing:
         names = " or ".join(missing)
         raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
     return None

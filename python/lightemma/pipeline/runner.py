@@ -218,9 +218,10 @@ def run(
     prompts = load_prompt_set(prompt_set)
     output = Path(output)
     instance = _make_backend(config, output)
+    dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
+               "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit}
+    config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
-        dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
-                   "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit}
         if frames is None:
             frames = _load_frames(dataset)
         else:
@@ -274,7 +275,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                         f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
     instance = _make_backend(config, run_dir.parent.parent)
     try:
-        all_frames = _head(frames, manifest["dataset"].get("limit")) if frames is not None else _load_frames(manifest["dataset"])
+        dataset = config.get("dataset") or {}
+        all_frames = _head(frames, dataset.get("limit")) if frames is not None else _load_frames(dataset)
         contents = read_run(run_dir)
         for warning in contents.warnings():
             if log and "not finished" not in warning:
