@@ -60,7 +60,7 @@ def require_api_key(model: str, api_base: str | None = None) -> str | None:
     a :class:`UserError` naming the environment variable(s).
     """
     provider = _provider(model)
-    if api_base and provider in ("openai", "hosted_vllm", "text-completion-openai"):
+    if api_base and provider in ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "text-completion-openai"):
         return os.environ.get("OPENAI_API_KEY") or NO_KEY
     if api_base:
         return None  # a custom base for another provider: litellm reads that provider's variables
