@@ -174,3 +174,29 @@ def test_server_pause_holds_every_caller():
         return time.monotonic() - start
 
     assert asyncio.run(go()) >= 0.28
+
+
+NATIVE = [
+    ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", "/v1/messages", (1000 * 3e-6 + 50 * 1.5e-5) * 100),
+    ("claude-3.7-sonnet", "ANTHROPIC_API_KEY", "/v1/messages", (1000 * 3e-6 + 50 * 15e-6) * 100),  # registry price
+    ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", "/models/gemini-2.5-flash:generateContent", (1000 * 3e-7 + 50 * 2.5e-6) * 100),
+    ("Gemini-2.0-Flash", "GEMINI_API_KEY", "/models/gemini-2.0-flash:generateContent", (1000 * 0.1e-6 + 50 * 0.4e-6) * 100),
+]
+
+
+@pytest.mark.parametrize(("model", "variable", "path", "cost"), NATIVE, ids=[n[0] for n in NATIVE])
+def test_native_provider_protocols_through_litellm(monkeypatch, image, model, variable, path, cost):
+    monkeypatch.setenv(variable, "native-test-key-0123456789")
+    with FakeOpenAIServer([Reply.error(429, retry_after=0.05)]) as server:
+        backend = create_backend(model, api_base=server.root_url, retry=FAST)
+        result = ask(backend, image=image)
+    assert result.ok and result.text.startswith("A two-lane") and result.retries == 1
+    assert (result.input_tokens, result.output_tokens) == (1000, 50)
+    assert result.cost_cents == pytest.approx(cost)
+    req = server.requests[-1]
+    assert req.path.split("?")[0].endswith(path) and req.has_image and req.text == "describe"
+    if req.protocol == "anthropic":
+        assert req.body["temperature"] == 0 and req.body["max_tokens"] == 512
+    else:
+        config = req.body["generationConfig"]
+        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == 512, config
