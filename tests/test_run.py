@@ -47,9 +47,10 @@ def records_of(result, frames=None):
     return records if frames is None else [records[f.frame_id] for f in frames]
 
 
-def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames):
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames, transport):
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", concurrency=4, **FAST)
+        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", concurrency=4, transport=transport, **FAST)
     records = records_of(result)
     assert sorted(records) == sorted(f.frame_id for f in frames)
     assert server.stages().count("scene") == server.stages().count("intent") == server.stages().count("actions") == 8
@@ -63,6 +64,7 @@ def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames):
         assert rec["cost_cents"] == pytest.approx(3 * (1000 * 2.5e-6 + 50 * 1e-5) * 100)
         assert [c["stage"] for c in rec["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
     manifest = result.manifest
+    assert manifest["backend"]["transport"] == transport and manifest["config"]["transport"] == transport
     assert manifest["prompt_set"] == load_prompt_set().describe()
     assert manifest["params"]["sent"] == {"temperature": 0.0, "max_tokens": 512}
     assert manifest["params"]["integrate_method"] == "euler" and manifest["finished_at"]

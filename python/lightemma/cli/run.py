@@ -37,6 +37,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     ex.add_argument("--tpm", type=float, help="client-side limit: tokens per minute")
     ex.add_argument("--cache", nargs="?", const=True, default=None, metavar="PATH",
                     help="SQLite response cache for temperature-0 requests (default path OUTPUT/cache.sqlite)")
+    ex.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
+                    help="with --api-base: call the OpenAI-compatible server through litellm (default) or directly (less CPU per call)")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
     gen = p.add_argument_group("prompting")
     gen.add_argument("--prompt-set", default=DEFAULT_PROMPT_SET, help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
@@ -69,7 +71,7 @@ def main(args: argparse.Namespace) -> int:
             limit=args.limit, output=args.output, backend=args.backend, api_base=args.api_base, concurrency=args.concurrency or 16,
             temperature=args.temperature, max_tokens=args.max_tokens, reask=args.reask, max_attempts=args.max_attempts,
             integrate_method=args.integrate, prompt_set=args.prompt_set, timeout=args.timeout, max_retries=args.max_retries,
-            backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, progress=progress, log=stderr_log,
+            backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, transport=args.transport, progress=progress, log=stderr_log,
         )
     print(result.report())
     return 0

@@ -80,7 +80,7 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
 
         cache = config.get("cache")
         options.update(
-            timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"],
+            timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"], transport=config.get("transport", "litellm"),
             retry=RetryPolicy(max_retries=config["max_retries"], base=config["backoff_base"], cap=config["backoff_cap"]),
             cache=ResponseCache(cache if os.path.isabs(cache) else output / cache) if cache else None,
         )
@@ -189,6 +189,7 @@ def run(
     rpm: float | None = None,
     tpm: float | None = None,
     cache: str | bool | None = None,
+    transport: str = "litellm",
     backend_options: dict[str, Any] | None = None,
     progress: bool = True,
     log: Log | None = None,
@@ -199,7 +200,8 @@ def run(
     :class:`~lightemma.frames.FrameSet`) or are loaded with
     :func:`lightemma.load_frames` from ``dataroot``/``version``/``split``/
     ``scenes``/``window``; ``limit`` keeps the first N. ``cache=True`` keeps a
-    response cache at ``<output>/cache.sqlite`` (or give a path).
+    response cache at ``<output>/cache.sqlite`` (or give a path). ``transport="direct"``
+    talks to an OpenAI-compatible ``api_base`` without litellm (less CPU per call).
     A missing API key raises :class:`~lightemma.errors.UserError` before any work.
     """
     if concurrency < 1:
@@ -211,7 +213,7 @@ def run(
         "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
         "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
-        "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "backend_options": backend_options or {},
+        "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
     }
     policy = _policy(config)  # validates reask / attempts / method before any work
