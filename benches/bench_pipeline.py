@@ -11,7 +11,7 @@ Process CPU includes litellm's per-call work (request building, logging,
 cost); lightemma's own share is measured separately by the same run over an
 in-process backend that answers instantly (``pipeline_cpu_ms_per_frame``).
 
-    python benches/bench_pipeline.py [--frames 3908] [--latency 1.0] [--concurrency 64] [--json out.json]
+    python benches/bench_pipeline.py [--frames 3908] [--latency 1.0] [--concurrency 64] [--transport litellm|direct] [--json out.json]
 """
 
 from __future__ import annotations
@@ -114,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=3908)
     parser.add_argument("--latency", type=float, default=1.0)
     parser.add_argument("--concurrency", type=int, default=64)
+    parser.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
+                        help="litellm (default) or the direct aiohttp client for OpenAI-compatible servers")
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args(argv)
 
@@ -126,12 +128,13 @@ def main(argv: list[str] | None = None) -> int:
             (tmp / "img").mkdir()
             frames = make_frames(tmp / "img", args.frames)
             # warm-up: imports, litellm's first-call setup (not timed)
-            run("openai/bench-model", api_base=url, frames=frames[:2], output=tmp / "warm", concurrency=2, progress=False)
+            run("openai/bench-model", api_base=url, frames=frames[:2], output=tmp / "warm", concurrency=2, progress=False,
+                transport=args.transport)
             sampler = MemorySampler()
             sampler.start()
             cpu0, wall0 = time.process_time(), time.perf_counter()
             result = run("openai/bench-model", api_base=url, frames=frames, output=tmp / "runs", concurrency=args.concurrency,
-                         progress=False, timeout=60.0)
+                         progress=False, timeout=60.0, transport=args.transport)
             wall = time.perf_counter() - wall0
             cpu = time.process_time() - cpu0
             sampler.stop()
@@ -146,6 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     quarter = max(1, len(rss) // 4)
     figures = {
         "frames": args.frames,
+        "transport": args.transport,
         "latency_s": args.latency,
         "concurrency": args.concurrency,
         "wall_s": round(wall, 2),
