@@ -267,3 +267,5 @@ def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_roo
     assert "OPENAI_API_KEY" in cli("run", "--model", "gpt-4o", "--dataroot", synth_root, env={"OPENAI_API_KEY": " "}).stderr
     done = cli("run", "--retry-failed", "--model", "gpt-4o", "--dataroot", synth_root)
     assert done.returncode == 2 and "--retry-failed needs --resume" in done.stderr
+    done = cli("run", "--resume", tmp_path, "--model", "gpt-4o")
+    assert done.returncode == 2 and "drop --model" in done.stderr

@@ -137,7 +137,7 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
 
 
 def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: dict[str, Any],
-             progress: bool, kind: str, already: int) -> RunResult:
+             progress: bool, kind: str, already: int, log: Log | None) -> RunResult:
     """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume."""
     manifest = read_manifest(run_dir)
     sessions = list(manifest.get("sessions", []))
@@ -152,6 +152,10 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
             else:
                 done = 0
                 asyncio.run(backend.aclose())
+    except KeyboardInterrupt:
+        if log:
+            log(f"interrupted; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+        raise
     finally:
         bar.close()
     wall = time.perf_counter() - start
@@ -249,7 +253,7 @@ def run(
         raise
     if log:
         log(f"run directory: {run_dir}  ({len(frames)} frames, concurrency {concurrency})")
-    return _session(run_dir, frames, instance, prompts, config, progress, "run", 0)
+    return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
 
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
@@ -290,7 +294,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         raise
     if log:
         log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run")
-    return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo))
+    return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo), log)
 
 
 def _version() -> str:
