@@ -56,8 +56,8 @@ def test_models_that_reject_temperature_0_get_none_sent(image):
 
 @pytest.mark.parametrize("first", [
     Reply.error(429, retry_after=0.3), Reply.error(500), Reply.error(503), Reply(content="x" * 400, truncate=True),
-    Reply(content="late", delay=1.5),
-], ids=["429-retry-after", "500", "503", "truncated-body", "timeout"])
+    Reply(content="late", delay=1.5), Reply(reset=True),
+], ids=["429-retry-after", "500", "503", "truncated-body", "timeout", "connection-reset"])
 @TRANSPORTS
 def test_transient_failures_are_retried_then_succeed(first, transport):
     with FakeOpenAIServer([first]) as server:
@@ -73,7 +73,8 @@ def test_transient_failures_are_retried_then_succeed(first, transport):
 @pytest.mark.parametrize(("reply", "error"), [
     (Reply.error(500), "InternalServerError"), (Reply.error(429), "RateLimitError"),
     (Reply(content="x" * 400, truncate=True), "APIConnectionError"), (Reply(content="late", delay=0.8), "Timeout"),
-], ids=["500", "429", "truncated", "timeout"])
+    (Reply(reset=True), "APIConnectionError"),
+], ids=["500", "429", "truncated", "timeout", "reset"])
 @TRANSPORTS
 def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, error, transport):
     with FakeOpenAIServer(lambda req: reply) as server:

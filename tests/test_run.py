@@ -1,6 +1,5 @@
 """The three-stage chain and the runner, end to end against the loopback server."""
 
-import json
 import os
 
 import numpy as np
