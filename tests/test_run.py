@@ -268,3 +268,16 @@ def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_roo
     assert done.returncode == 2 and "--retry-failed needs --resume" in done.stderr
     done = cli("run", "--resume", tmp_path, "--model", "gpt-4o")
     assert done.returncode == 2 and "drop --model" in done.stderr
+
+
+def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
+    def per_frame(i, stage, n):
+        return Reply("") if (i == 0 and stage == "actions" and n == 1) else None
+
+    with FakeOpenAIServer(scripted(frames[:1], per_frame)) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames[:1], output=tmp_path, **FAST)
+    rec = records_of(result, frames[:1])[0]
+    assert (rec["first_status"], rec["status"], rec["n_attempts"]) == ("failed", "ok", 2)
+    assert rec["attempts"][0]["error"] == "EmptyResponse" and rec["attempts"][0]["answer"] is None
+    assert rec["input_tokens"] == 4000  # the empty answer's usage counts
+    assert server.stages() == ["scene", "intent", "actions", "actions"]

@@ -238,10 +238,6 @@ class APIBackend:
                                   seconds=time.perf_counter() - start, retries=retries)
             self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0,
                                 (result.input_tokens or 0) + (result.output_tokens or 0))
-            if result.error == "EmptyResponse" and self.retry.should_retry(result.error, retries):
-                await asyncio.sleep(self.retry.delay(retries))
-                retries += 1
-                continue
             if key is not None and result.ok:
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
             return result
