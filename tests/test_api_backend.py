@@ -217,3 +217,20 @@ def test_direct_transport_needs_an_openai_compatible_endpoint():
         create_backend("anthropic/claude-sonnet-4-6", api_base="http://127.0.0.1:9", transport="direct", api_key="x")
     with pytest.raises(UserError, match="unknown transport"):
         create_backend("openai/m", api_base="http://127.0.0.1:9/v1", transport="carrier-pigeon")
+
+
+def test_the_image_cache_reads_each_image_once_and_stays_within_its_byte_budget(tmp_path):
+    from lightemma.backends.api import _ImageCache
+
+    paths = []
+    for i in range(5):
+        path = tmp_path / f"{i}.png"
+        path.write_bytes(bytes([i]) * 300)  # same size each; the cache never decodes
+        paths.append(str(path))
+    one = len(_ImageCache().get(paths[0])[0])
+    cache = _ImageCache(max_bytes=3 * one)
+    first = cache.get(paths[0])
+    assert first[0].startswith("data:image/png;base64,") and cache.get(paths[0]) is first
+    for p in paths[1:]:
+        cache.get(p)
+    assert cache.bytes <= 3 * one and len(cache._items) == 3 and paths[0] not in cache._items

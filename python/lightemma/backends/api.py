@@ -90,10 +90,14 @@ def _secret_values() -> tuple[str, ...]:
 
 
 class _ImageCache:
-    """Base64 data URLs (and content digests) of recently used images, read once per frame."""
+    """Base64 data URLs (and content digests) of recently used images: each frame's image is read once.
 
-    def __init__(self, size: int = 512) -> None:
-        self.size = size
+    Bounded by total size (default 64 MiB, about 240 full-size CAM_FRONT images), least recently used out first.
+    """
+
+    def __init__(self, max_bytes: int = 64 << 20) -> None:
+        self.max_bytes = max_bytes
+        self.bytes = 0
         self._items: OrderedDict[str, tuple[str, str]] = OrderedDict()
 
     def get(self, path: str) -> tuple[str, str]:
@@ -106,8 +110,10 @@ class _ImageCache:
         mime = _MIME.get(os.path.splitext(path)[1].lower(), "image/jpeg")
         item = (f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}", hashlib.sha256(data).hexdigest())
         self._items[path] = item
-        if len(self._items) > self.size:
-            self._items.popitem(last=False)
+        self.bytes += len(item[0])
+        while self.bytes > self.max_bytes and len(self._items) > 1:
+            _, (url, _) = self._items.popitem(last=False)
+            self.bytes -= len(url)
         return item
 
 
