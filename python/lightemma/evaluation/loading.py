@@ -1,0 +1,337 @@
+"""Load run directories into compact per-frame columns, streaming.
+
+A run's ``frames.jsonl`` is read line by line (:func:`lightemma.runs.store.iter_records`);
+each record is reduced at once to a few numbers (trajectory, ground truth,
+statuses, time, tokens, cost), gathered in NumPy chunks, so memory holds
+about 250 bytes per frame and never the decoded records themselves. Stage
+texts are fetched later, only for the frames a figure needs
+(:func:`read_frame_records`).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lightemma.errors import RunStoreError
+from lightemma.evaluation.models import infer_family, known_model
+from lightemma.runs.store import RunContents, iter_records, read_manifest
+
+STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
+UNKNOWN_STATUS = -1
+_NAN6x2 = [[math.nan, math.nan]] * 6
+_CHUNK = 8192
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What a manifest says about a run; missing keys are None."""
+
+    run_dir: Path
+    model: str
+    label: str
+    family: str
+    generation: int | None
+    gpus: int | None
+    integrator: str
+    wall_seconds: float | None
+    concurrency: int | None
+    complete: bool
+    dataset: Mapping[str, Any] | None
+    manifest: Mapping[str, Any]
+
+
+@dataclass
+class RunData:
+    """The frames of one run as columns (rows in first-seen frame order, last record wins)."""
+
+    info: RunInfo
+    frame_ids: list[str]
+    trajectory: np.ndarray  # (N, 6, 2), NaN where the run has no valid prediction
+    gt_positions: np.ndarray  # (N, 6, 2)
+    status: np.ndarray  # (N,) int8: 0 ok, 1 corrected, 2 failed, -1 unknown
+    first_status: np.ndarray  # (N,) int8
+    seconds: np.ndarray  # (N,) float64, NaN unknown
+    input_tokens: np.ndarray
+    output_tokens: np.ndarray
+    cost_cents: np.ndarray
+    history_actions: np.ndarray | None = None  # (N, 6, 2) with details=True
+    actions: np.ndarray | None = None  # (N, 6, 2) predicted, with details=True
+    corrupt_lines: int = 0
+    truncated_tail: bool = False
+    duplicates: int = 0
+    bad_records: int = 0  # well-formed JSON lacking usable ground truth
+    warnings: list[str] = field(default_factory=list)
+
+    def __len__(self) -> int:
+        return len(self.frame_ids)
+
+    @property
+    def valid(self) -> np.ndarray:
+        """Frames with a usable final prediction (not failed, finite trajectory)."""
+        return (self.status != STATUS_CODES["failed"]) & np.isfinite(self.trajectory).all(axis=(1, 2))
+
+    def index(self) -> dict[str, int]:
+        """frame_id → row."""
+        return {fid: i for i, fid in enumerate(self.frame_ids)}
+
+
+def _get(mapping: Any, *keys: str) -> Any:
+    for key in keys:
+        if not isinstance(mapping, Mapping):
+            return None
+        mapping = mapping.get(key)
+    return mapping
+
+
+def _as_int(value: Any) -> int | None:
+    try:
+        return int(value) if value is not None else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _parse_time(value: Any) -> datetime | None:
+    if not isinstance(value, str):
+        return None
+    try:
+        return datetime.fromisoformat(value.replace("Z", "+00:00"))
+    except ValueError:
+        return None
+
+
+def _wall_seconds(manifest: Mapping[str, Any]) -> float | None:
+    for key in ("wall_seconds", "elapsed_seconds"):
+        value = manifest.get(key)
+        if isinstance(value, (int, float)) and value > 0:
+            return float(value)
+    start, end = _parse_time(manifest.get("started_at")), _parse_time(manifest.get("finished_at"))
+    if start and end and end > start:
+        return (end - start).total_seconds()
+    return None
+
+
+def _integrator(manifest: Mapping[str, Any]) -> str:
+    value = manifest.get("integrator")
+    if isinstance(value, Mapping):
+        value = value.get("method")
+    if not isinstance(value, str):
+        value = _get(manifest, "params", "integrator")
+        if isinstance(value, Mapping):
+            value = value.get("method")
+    return value if isinstance(value, str) else "euler"
+
+
+def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None = None) -> RunInfo:
+    """Read what evaluation needs from a run's manifest, defensively."""
+    run_dir = Path(run_dir)
+    manifest = dict(manifest if manifest is not None else read_manifest(run_dir))
+    model = str(manifest.get("model") or run_dir.parent.name or "unknown")
+    known = known_model(model) if not model.startswith("baseline:") else None
+    label = manifest.get("display_name") or (known.display_name if known else model)
+    family = manifest.get("family") or (known.family if known else infer_family(model))
+    gpus = _as_int(manifest.get("gpus"))
+    if gpus is None:
+        gpus = _as_int(_get(manifest, "backend", "gpus")) or _as_int(_get(manifest, "backend_info", "gpus"))
+    dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), Mapping) else None
+    return RunInfo(
+        run_dir=run_dir,
+        model=model,
+        label=str(label),
+        family=str(family),
+        generation=_as_int(manifest.get("generation")) or (known.generation if known else None),
+        gpus=gpus,
+        integrator=_integrator(manifest),
+        wall_seconds=_wall_seconds(manifest),
+        concurrency=_as_int(manifest.get("concurrency")),
+        complete=bool(manifest.get("finished_at")),
+        dataset=dataset,
+        manifest=manifest,
+    )
+
+
+def _number(value: Any) -> float:
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
+
+
+def _first_status(record: Mapping[str, Any]) -> Any:
+    first = record.get("first_status")
+    if first is None:
+        attempts = record.get("attempts")
+        if isinstance(attempts, list) and attempts and isinstance(attempts[0], Mapping):
+            first = attempts[0].get("status")
+    return first if first is not None else record.get("status")
+
+
+def _pairs(value: Any) -> Any:
+    """A 6×2 nested list or the NaN placeholder when missing or mis-shaped."""
+    if isinstance(value, list) and len(value) == 6 and all(isinstance(p, list) and len(p) == 2 for p in value):
+        return [[v if v is not None else math.nan for v in p] for p in value]
+    return _NAN6x2
+
+
+class _Columns:
+    """Accumulates per-record values in lists and flushes them to NumPy chunks."""
+
+    NAMES = ("trajectory", "actions", "gt", "history", "status", "first", "seconds", "inp", "out", "cost")
+    DTYPES = {"status": np.int8, "first": np.int8}
+
+    def __init__(self, details: bool) -> None:
+        self.details = details
+        self.pending: dict[str, list[Any]] = {n: [] for n in self.NAMES}
+        self.chunks: dict[str, list[np.ndarray]] = {n: [] for n in self.NAMES}
+        self.rows = 0
+        self.unintegrated: dict[int, Any] = {}  # row -> actions, for records lacking a trajectory
+
+    def add(self, record: Mapping[str, Any]) -> None:
+        p = self.pending
+        trajectory = _pairs(record.get("trajectory"))
+        p["trajectory"].append(trajectory)
+        if self.details:
+            p["actions"].append(_pairs(record.get("actions")))
+        elif trajectory is _NAN6x2 and record.get("actions") is not None:
+            self.unintegrated[self.rows] = _pairs(record.get("actions"))
+        p["gt"].append(record["gt_positions"])
+        if self.details:
+            p["history"].append(_pairs(record.get("history_actions")))
+        p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
+        p["first"].append(STATUS_CODES.get(_first_status(record), UNKNOWN_STATUS))
+        p["seconds"].append(_number(record.get("seconds")))
+        p["inp"].append(_number(record.get("input_tokens")))
+        p["out"].append(_number(record.get("output_tokens")))
+        p["cost"].append(_number(record.get("cost_cents")))
+        self.rows += 1
+        if len(p["status"]) >= _CHUNK:
+            self.flush()
+
+    def flush(self) -> None:
+        for name, values in self.pending.items():
+            if values:
+                self.chunks[name].append(np.asarray(values, dtype=self.DTYPES.get(name, np.float64)))
+                values.clear()
+
+    def column(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+        self.flush()
+        parts = self.chunks.pop(name)
+        dtype = self.DTYPES.get(name, np.float64)
+        return np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
+
+
+def _usable_gt(value: Any) -> bool:
+    return (
+        isinstance(value, list)
+        and len(value) == 6
+        and all(isinstance(p, list) and len(p) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p) for p in value)
+    )
+
+
+def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunData:
+    """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
+
+    ``details=True`` also keeps history and predicted actions (for scenario
+    analysis). Corrupt lines, a truncated tail, records without usable ground
+    truth and an unfinished run are counted and described in ``warnings``.
+    Raises :class:`RunStoreError` for a missing, unreadable or foreign directory.
+    """
+    run_dir = Path(run_dir)
+    info = run_info(run_dir)
+    counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
+    columns = _Columns(details)
+    rows: dict[str, int] = {}
+    bad = duplicates = 0
+    try:
+        for record in iter_records(run_dir, counts=counts):
+            if not _usable_gt(record.get("gt_positions")):
+                bad += 1
+                continue
+            fid = record["frame_id"]
+            if fid in rows:
+                duplicates += 1
+            rows[fid] = columns.rows
+            columns.add(record)
+    except OSError as exc:
+        raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
+    order = np.fromiter(rows.values(), dtype=np.int64, count=len(rows))
+    keep_all = duplicates == 0
+
+    def take(name: str, shape: tuple[int, ...]) -> np.ndarray:
+        col = columns.column(name, shape)
+        return col if keep_all else col[order]
+
+    trajectory = columns.column("trajectory", (6, 2))
+    if details:
+        actions = columns.column("actions", (6, 2))
+    else:
+        actions = np.full((len(trajectory), 6, 2), np.nan) if columns.unintegrated else None
+        for row, pairs in columns.unintegrated.items():
+            actions[row] = pairs
+    if actions is not None:
+        trajectory = _fill_from_actions(trajectory, actions, info.integrator)
+    if not keep_all:
+        trajectory = trajectory[order]
+        actions = actions[order] if details else None
+    data = RunData(
+        info=info,
+        frame_ids=list(rows),
+        trajectory=trajectory,
+        gt_positions=take("gt", (6, 2)),
+        status=take("status", ()),
+        first_status=take("first", ()),
+        seconds=take("seconds", ()),
+        input_tokens=take("inp", ()),
+        output_tokens=take("out", ()),
+        cost_cents=take("cost", ()),
+        history_actions=take("history", (6, 2)) if details else None,
+        actions=actions if details else None,
+        corrupt_lines=len(counts.corrupt_lines),
+        truncated_tail=counts.truncated_tail,
+        duplicates=duplicates,
+        bad_records=bad,
+    )
+    data.warnings = _warnings(data)
+    return data
+
+
+def _warnings(data: RunData) -> list[str]:
+    """One line per problem met while loading: truncated tail, corrupt lines, unfinished run, …"""
+    where = data.info.run_dir
+    out = []
+    if data.truncated_tail:
+        out.append(f"{where}: ignored a truncated last line (the run was interrupted)")
+    if data.corrupt_lines:
+        out.append(f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl")
+    if data.bad_records:
+        out.append(f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions)")
+    if not data.info.complete:
+        out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
+    if not data.frame_ids:
+        out.append(f"{where}: no frames to evaluate")
+    return out
+
+
+def _fill_from_actions(trajectory: np.ndarray, actions: np.ndarray, method: str) -> np.ndarray:
+    """Integrate actions (through the Rust core) for records that carry actions but no trajectory."""
+    missing = ~np.isfinite(trajectory).all(axis=(1, 2)) & np.isfinite(actions).all(axis=(1, 2))
+    if missing.any():
+        from lightemma import integrate
+
+        trajectory = trajectory.copy()
+        trajectory[missing] = integrate(np.ascontiguousarray(actions[missing]), method=method)
+    return trajectory
+
+
+def read_frame_records(run_dir: str | os.PathLike[str], frame_ids: Iterable[str]) -> dict[str, dict[str, Any]]:
+    """The full last record of each wanted frame (stage texts included), streaming the file."""
+    wanted = set(frame_ids)
+    found: dict[str, dict[str, Any]] = {}
+    for record in iter_records(run_dir):
+        if record["frame_id"] in wanted:
+            found[record["frame_id"]] = record
+    return found
