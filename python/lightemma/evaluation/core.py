@@ -122,7 +122,7 @@ def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
     return names
 
 
-def _unique_labels(runs: list[RunData]) -> list[str]:
+def unique_labels(runs: list[RunData]) -> list[str]:
     """Display labels, made distinct by integrator or run id where two runs share one."""
     original = [r.info.label for r in runs]
     labels = list(original)
@@ -200,7 +200,7 @@ def evaluate_loaded(
         if note:
             warnings.append(note)
     results = []
-    for run, label in zip(runs, _unique_labels(runs)):
+    for run, label in zip(runs, unique_labels(runs)):
         if shared is not None and present is not None:
             index = run.index()
             scored = np.fromiter((index[f] for f in shared), dtype=np.int64, count=len(shared))
