@@ -1,7 +1,15 @@
-//! lightemma's numeric and text kernels (placeholder until the core lands).
-use pyo3::prelude::*;
+//! lightemma's numeric and text kernels.
+//!
+//! * [`parse`] (with [`lexer`]): a model's stage-3 answer → (speed, curvature) actions;
+//! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
+//! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
+//! * [`error`]: the one error type, mapped to Python's `ValueError` in `python.rs`.
+//!
+//! Everything but `python.rs` is plain Rust, tested with `cargo test` without Python.
 
-#[pymodule]
-fn _core(_m: &Bound<'_, PyModule>) -> PyResult<()> {
-    Ok(())
-}
+pub mod error;
+pub mod kinematics;
+pub mod lexer;
+pub mod metrics;
+pub mod parse;
+mod python;

@@ -1,0 +1,25 @@
+"""Type stubs for the compiled module ``lightemma._core`` (private; use ``lightemma``)."""
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+METHODS: list[str]
+CONVENTIONS: list[str]
+PARSE_MODES: list[str]
+
+def parse_actions(
+    texts: list[str], n: int = 6, mode: str = "lenient"
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8], list[str]]:
+    """Parse answers: actions (N, n, 2) with NaN where failed, status codes (0 ok, 1 corrected, 2 failed), reasons."""
+
+def integrate(actions: npt.NDArray[np.float64], dt: float = 0.5, method: str = "euler") -> npt.NDArray[np.float64]:
+    """Integrate C-contiguous (N, T, 2) actions into (N, T, 2) positions."""
+
+def displacement_errors(pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
+    """Per-step Euclidean errors (N, T) of two C-contiguous (N, T, 2) arrays."""
+
+def evaluate(
+    pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float64], convention: str = "lightemma", miss_threshold: float = 2.0
+) -> tuple[float, float, float, float, float, float, int]:
+    """(ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames) over (N, 6, 2) arrays."""

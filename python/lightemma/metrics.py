@@ -1,0 +1,76 @@
+"""Displacement errors and ADE/FDE under the three conventions (SPEC §5)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+from numpy.typing import ArrayLike
+
+from lightemma import _core
+from lightemma._arrays import as_frames
+
+CONVENTIONS: tuple[str, ...] = tuple(_core.CONVENTIONS)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Frame-weighted means over the evaluated frames, in metres (miss rate as a share).
+
+    ``convention`` says how ``ade_1s``/``ade_2s``/``ade_3s`` are defined:
+    ``lightemma`` (the paper's table: mean(e1, e2), mean(e3, e4), mean(e5, e6)),
+    ``stp3`` (mean over the horizon up to that second) or ``uniad`` (e2, e4, e6).
+    ``ade_avg`` = mean(e1..e6), ``fde`` = e6, ``miss_rate`` = share of frames
+    whose largest error exceeds ``miss_threshold``.
+    """
+
+    ade_1s: float
+    ade_2s: float
+    ade_3s: float
+    ade_avg: float
+    fde: float
+    miss_rate: float
+    n_frames: int
+    convention: str = "lightemma"
+    miss_threshold: float = 2.0
+
+    def to_dict(self) -> dict[str, float | int | str]:
+        return asdict(self)
+
+
+def _pair(pred: ArrayLike, gt: ArrayLike) -> tuple[np.ndarray, np.ndarray, bool]:
+    p, single_p = as_frames(pred, "pred")
+    g, single_g = as_frames(gt, "gt")
+    if p.shape != g.shape:
+        shown_p = p.shape[1:] if single_p else p.shape
+        shown_g = g.shape[1:] if single_g else g.shape
+        raise ValueError(f"pred has shape {shown_p} but gt has shape {shown_g}; they must match")
+    return p, g, single_p and single_g
+
+
+def displacement_errors(pred: ArrayLike, gt: ArrayLike) -> np.ndarray:
+    """Euclidean error per frame and step: (N, T, 2) × 2 → (N, T); (T, 2) × 2 → (T,).
+
+    >>> import lightemma
+    >>> lightemma.displacement_errors([[3.0, 4.0]], [[0.0, 0.0]]).tolist()
+    [5.0]
+    """
+    p, g, single = _pair(pred, gt)
+    out = _core.displacement_errors(p, g)
+    return out[0] if single else out
+
+
+def evaluate(pred: ArrayLike, gt: ArrayLike, *, convention: str = "lightemma", miss_threshold: float = 2.0) -> Metrics:
+    """Score predicted trajectories (N, 6, 2) against ground truth (N, 6, 2).
+
+    Raises ``ValueError`` naming the frame and step of any NaN/inf, and for an
+    empty batch, mismatched shapes or an unknown convention.
+
+    >>> import numpy as np, lightemma
+    >>> gt = np.zeros((1, 6, 2)); pred = gt + [0.0, 1.0]
+    >>> lightemma.evaluate(pred, gt).ade_avg
+    1.0
+    """
+    p, g, _ = _pair(pred, gt)
+    values = _core.evaluate(p, g, convention, float(miss_threshold))
+    return Metrics(*values, convention=convention, miss_threshold=float(miss_threshold))

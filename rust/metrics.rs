@@ -1,0 +1,210 @@
+//! Displacement errors and their aggregation (SPEC §5).
+//!
+//! Per frame `e_k = ‖pred_k − gt_k‖`, k = 1..6 (0.5 … 3.0 s). Totals are
+//! frame-weighted means over the evaluated frames.
+
+use crate::error::{CoreError, CoreResult};
+
+/// The number of steps every convention is defined on (0.5 s … 3.0 s).
+pub const HORIZON: usize = 6;
+
+/// How ADE at 1 s, 2 s and 3 s are defined.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Convention {
+    /// The paper's table: mean of the two errors inside each second.
+    Lightemma,
+    /// ST-P3: average over the horizon up to that second.
+    Stp3,
+    /// UniAD: the error at that instant.
+    Uniad,
+}
+
+impl Convention {
+    pub const NAMES: &'static [&'static str] = &["lightemma", "stp3", "uniad"];
+
+    pub fn from_name(name: &str) -> CoreResult<Self> {
+        match name {
+            "lightemma" => Ok(Convention::Lightemma),
+            "stp3" => Ok(Convention::Stp3),
+            "uniad" => Ok(Convention::Uniad),
+            _ => Err(CoreError::UnknownName {
+                kind: "convention",
+                name: name.to_owned(),
+                allowed: Self::NAMES,
+            }),
+        }
+    }
+
+    /// The (first, last) step indices (0-based, inclusive) averaged for second `s` (1..=3).
+    fn window(self, s: usize) -> (usize, usize) {
+        let last = 2 * s - 1;
+        match self {
+            Convention::Lightemma => (last - 1, last),
+            Convention::Stp3 => (0, last),
+            Convention::Uniad => (last, last),
+        }
+    }
+}
+
+/// Aggregated metrics over a batch of frames.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Summary {
+    pub ade_1s: f64,
+    pub ade_2s: f64,
+    pub ade_3s: f64,
+    pub ade_avg: f64,
+    pub fde: f64,
+    pub miss_rate: f64,
+    pub n_frames: usize,
+}
+
+/// Check that `pred` and `gt` (both `N × T × 2`) hold only finite numbers.
+fn check_finite(values: &[f64], steps: usize, what: &'static str) -> CoreResult<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(idx) => Err(CoreError::NonFinite {
+            what,
+            frame: idx / (2 * steps),
+            step: (idx / 2) % steps,
+        }),
+    }
+}
+
+/// Per-step Euclidean errors, `N × T`, written into `out`.
+pub fn displacement_errors(pred: &[f64], gt: &[f64], out: &mut [f64]) -> CoreResult<()> {
+    if pred.len() != gt.len() || out.len() * 2 != pred.len() {
+        return Err(CoreError::Shape(format!(
+            "prediction ({} numbers) and ground truth ({} numbers) differ in size",
+            pred.len(),
+            gt.len()
+        )));
+    }
+    for ((p, g), e) in pred
+        .chunks_exact(2)
+        .zip(gt.chunks_exact(2))
+        .zip(out.iter_mut())
+    {
+        *e = (p[0] - g[0]).hypot(p[1] - g[1]);
+    }
+    Ok(())
+}
+
+/// Aggregate `N × 6` trajectories under `convention`; a frame misses when any
+/// step's error exceeds `miss_threshold` metres.
+pub fn evaluate(
+    pred: &[f64],
+    gt: &[f64],
+    steps: usize,
+    convention: Convention,
+    miss_threshold: f64,
+) -> CoreResult<Summary> {
+    if steps != HORIZON {
+        return Err(CoreError::Shape(format!(
+            "metrics are defined on {HORIZON} steps (0.5 … 3.0 s), got T={steps}"
+        )));
+    }
+    if !(miss_threshold.is_finite() && miss_threshold >= 0.0) {
+        return Err(CoreError::Argument(format!(
+            "miss_threshold must be a non-negative number of metres, got {miss_threshold}"
+        )));
+    }
+    if pred.len() != gt.len() {
+        return Err(CoreError::Shape(format!(
+            "prediction ({} numbers) and ground truth ({} numbers) differ in size",
+            pred.len(),
+            gt.len()
+        )));
+    }
+    let n = pred.len() / (2 * steps);
+    if n == 0 {
+        return Err(CoreError::Shape(
+            "cannot evaluate an empty batch (0 frames)".to_owned(),
+        ));
+    }
+    check_finite(gt, steps, "ground truth")?;
+    check_finite(pred, steps, "prediction")?;
+    let windows = [1, 2, 3].map(|s| convention.window(s));
+    let mut sums = [0.0_f64; 5]; // ade 1s, 2s, 3s, avg, fde
+    let mut misses = 0_usize;
+    let mut e = [0.0_f64; HORIZON];
+    for (p, g) in pred.chunks_exact(2 * steps).zip(gt.chunks_exact(2 * steps)) {
+        let mut worst = 0.0_f64;
+        for k in 0..HORIZON {
+            e[k] = (p[2 * k] - g[2 * k]).hypot(p[2 * k + 1] - g[2 * k + 1]);
+            worst = worst.max(e[k]);
+        }
+        for (sum, &(a, b)) in sums.iter_mut().zip(windows.iter()) {
+            *sum += e[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
+        }
+        sums[3] += e.iter().sum::<f64>() / HORIZON as f64;
+        sums[4] += e[HORIZON - 1];
+        if worst > miss_threshold {
+            misses += 1;
+        }
+    }
+    let nf = n as f64;
+    Ok(Summary {
+        ade_1s: sums[0] / nf,
+        ade_2s: sums[1] / nf,
+        ade_3s: sums[2] / nf,
+        ade_avg: sums[3] / nf,
+        fde: sums[4] / nf,
+        miss_rate: misses as f64 / nf,
+        n_frames: n,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Ground truth at the origin; predictions displaced along y by the given errors.
+    fn batch(errors: &[[f64; 6]]) -> (Vec<f64>, Vec<f64>) {
+        let pred = errors
+            .iter()
+            .flat_map(|e| e.iter().flat_map(|&d| [0.0, d]))
+            .collect();
+        (pred, vec![0.0; errors.len() * 12])
+    }
+
+    #[test]
+    fn conventions_on_one_frame() {
+        let (p, g) = batch(&[[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]]);
+        let l = evaluate(&p, &g, 6, Convention::Lightemma, 2.0).unwrap();
+        assert_eq!((l.ade_1s, l.ade_2s, l.ade_3s), (1.5, 3.5, 5.5));
+        assert_eq!((l.ade_avg, l.fde, l.miss_rate), (3.5, 6.0, 1.0));
+        let s = evaluate(&p, &g, 6, Convention::Stp3, 2.0).unwrap();
+        assert_eq!((s.ade_1s, s.ade_2s, s.ade_3s), (1.5, 2.5, 3.5));
+        let u = evaluate(&p, &g, 6, Convention::Uniad, 2.0).unwrap();
+        assert_eq!((u.ade_1s, u.ade_2s, u.ade_3s), (2.0, 4.0, 6.0));
+    }
+
+    #[test]
+    fn totals_are_frame_weighted_and_misses_counted() {
+        let (p, g) = batch(&[[0.0; 6], [1.0; 6], [3.0, 0.0, 0.0, 0.0, 0.0, 0.0]]);
+        let m = evaluate(&p, &g, 6, Convention::Lightemma, 2.0).unwrap();
+        assert_eq!(m.n_frames, 3);
+        assert!((m.ade_avg - (0.0 + 1.0 + 0.5) / 3.0).abs() < 1e-12);
+        assert!((m.miss_rate - 1.0 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn non_finite_and_shapes_are_errors() {
+        let (p, mut g) = batch(&[[0.0; 6], [0.0; 6]]);
+        g[12 + 7] = f64::NAN;
+        let err = evaluate(&p, &g, 6, Convention::Lightemma, 2.0).unwrap_err();
+        assert_eq!(
+            err,
+            CoreError::NonFinite {
+                what: "ground truth",
+                frame: 1,
+                step: 3
+            }
+        );
+        assert!(evaluate(&[], &[], 6, Convention::Lightemma, 2.0).is_err());
+        assert!(evaluate(&p[..8], &g[..8], 4, Convention::Lightemma, 2.0).is_err());
+        assert!(Convention::from_name("nuscenes").is_err());
+        let mut out = vec![0.0; 3];
+        assert!(displacement_errors(&p, &g, &mut out).is_err());
+    }
+}

@@ -1,0 +1,178 @@
+//! The Python binding `lightemma._core`: thin wrappers that borrow NumPy arrays,
+//! release the GIL for large batches and return NumPy arrays. All errors become
+//! `ValueError` here, in one place.
+
+use numpy::ndarray::{Array1, Array2, Array3};
+use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::pybacked::PyBackedStr;
+
+use crate::error::CoreError;
+use crate::{kinematics, metrics, parse};
+
+/// Batches at least this large run with the GIL released.
+const DETACH_MIN_FRAMES: usize = 2048;
+
+impl From<CoreError> for PyErr {
+    fn from(err: CoreError) -> PyErr {
+        PyValueError::new_err(err.to_string())
+    }
+}
+
+/// Run `f` with the GIL released when the batch is large enough to be worth it.
+fn maybe_detach<T, F>(py: Python<'_>, frames: usize, f: F) -> T
+where
+    F: FnOnce() -> T + Send,
+    T: Send,
+{
+    if frames >= DETACH_MIN_FRAMES {
+        py.detach(f)
+    } else {
+        f()
+    }
+}
+
+/// Borrow a C-contiguous float64 array of shape (N, T, 2); returns (data, N, T).
+fn frames_view<'a>(
+    array: &'a PyReadonlyArrayDyn<'_, f64>,
+    name: &str,
+) -> PyResult<(&'a [f64], usize, usize)> {
+    let shape = array.shape();
+    if shape.len() != 3 || shape[2] != 2 {
+        return Err(
+            CoreError::Shape(format!("{name} must have shape (N, T, 2), got {shape:?}")).into(),
+        );
+    }
+    let data = array
+        .as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))?;
+    Ok((data, shape[0], shape[1]))
+}
+
+fn shape_to_3d(data: Vec<f64>, n: usize, t: usize) -> PyResult<Array3<f64>> {
+    Array3::from_shape_vec((n, t, 2), data).map_err(|e| PyValueError::new_err(e.to_string()))
+}
+
+/// What `parse_actions` returns: actions, status codes, reasons.
+type ParsedBatch<'py> = (
+    Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray1<u8>>,
+    Vec<String>,
+);
+
+/// parse_actions(texts, n, mode) -> (actions (N, n, 2), status codes (N,), reasons)
+#[pyfunction]
+#[pyo3(signature = (texts, n = 6, mode = "lenient"))]
+fn parse_actions<'py>(
+    py: Python<'py>,
+    texts: Vec<PyBackedStr>,
+    n: usize,
+    mode: &str,
+) -> PyResult<ParsedBatch<'py>> {
+    let mode = parse::Mode::from_name(mode)?;
+    let count = texts.len();
+    let (values, status, reasons) =
+        maybe_detach(py, count, || parse::parse_batch(&texts, n, mode))?;
+    let values = shape_to_3d(values, count, n)?;
+    Ok((
+        values.into_pyarray(py),
+        Array1::from(status).into_pyarray(py),
+        reasons,
+    ))
+}
+
+/// integrate(actions (N, T, 2), dt, method) -> positions (N, T, 2)
+#[pyfunction]
+#[pyo3(signature = (actions, dt = 0.5, method = "euler"))]
+fn integrate<'py>(
+    py: Python<'py>,
+    actions: PyReadonlyArrayDyn<'py, f64>,
+    dt: f64,
+    method: &str,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let method = kinematics::Method::from_name(method)?;
+    let (data, n, t) = frames_view(&actions, "actions")?;
+    if t == 0 {
+        return Err(
+            CoreError::Shape("actions must have at least one step (T ≥ 1)".to_owned()).into(),
+        );
+    }
+    let out = maybe_detach(py, n, || {
+        let mut out = vec![0.0; data.len()];
+        kinematics::integrate_batch(data, t, dt, method, &mut out).map(|()| out)
+    })?;
+    Ok(shape_to_3d(out, n, t)?.into_pyarray(py))
+}
+
+/// Check that prediction and ground truth are both (N, T, 2) with equal N and T.
+fn paired_views<'a>(
+    pred: &'a PyReadonlyArrayDyn<'_, f64>,
+    gt: &'a PyReadonlyArrayDyn<'_, f64>,
+) -> PyResult<(&'a [f64], &'a [f64], usize, usize)> {
+    let (p, n, t) = frames_view(pred, "pred")?;
+    let (g, gn, gt_steps) = frames_view(gt, "gt")?;
+    if (n, t) != (gn, gt_steps) {
+        return Err(CoreError::Shape(format!(
+            "pred has shape ({n}, {t}, 2) but gt has shape ({gn}, {gt_steps}, 2); they must match"
+        ))
+        .into());
+    }
+    Ok((p, g, n, t))
+}
+
+/// displacement_errors(pred (N, T, 2), gt (N, T, 2)) -> errors (N, T)
+#[pyfunction]
+fn displacement_errors<'py>(
+    py: Python<'py>,
+    pred: PyReadonlyArrayDyn<'py, f64>,
+    gt: PyReadonlyArrayDyn<'py, f64>,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let (p, g, n, t) = paired_views(&pred, &gt)?;
+    let out = maybe_detach(py, n, || {
+        let mut out = vec![0.0; n * t];
+        metrics::displacement_errors(p, g, &mut out).map(|()| out)
+    })?;
+    let out =
+        Array2::from_shape_vec((n, t), out).map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(out.into_pyarray(py))
+}
+
+/// evaluate(pred, gt, convention, miss_threshold) -> (ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames)
+#[pyfunction]
+#[pyo3(signature = (pred, gt, convention = "lightemma", miss_threshold = 2.0))]
+fn evaluate(
+    py: Python<'_>,
+    pred: PyReadonlyArrayDyn<'_, f64>,
+    gt: PyReadonlyArrayDyn<'_, f64>,
+    convention: &str,
+    miss_threshold: f64,
+) -> PyResult<(f64, f64, f64, f64, f64, f64, usize)> {
+    let convention = metrics::Convention::from_name(convention)?;
+    let (p, g, n, t) = paired_views(&pred, &gt)?;
+    let s = maybe_detach(py, n, || {
+        metrics::evaluate(p, g, t, convention, miss_threshold)
+    })?;
+    Ok((
+        s.ade_1s,
+        s.ade_2s,
+        s.ade_3s,
+        s.ade_avg,
+        s.fde,
+        s.miss_rate,
+        s.n_frames,
+    ))
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(parse_actions, m)?)?;
+    m.add_function(wrap_pyfunction!(integrate, m)?)?;
+    m.add_function(wrap_pyfunction!(displacement_errors, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add("METHODS", kinematics::Method::NAMES.to_vec())?;
+    m.add("CONVENTIONS", metrics::Convention::NAMES.to_vec())?;
+    m.add("PARSE_MODES", parse::Mode::NAMES.to_vec())?;
+    m.add("__version__", env!("CARGO_PKG_VERSION"))?;
+    Ok(())
+}
