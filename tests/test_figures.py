@@ -126,8 +126,21 @@ def test_bubble_points_from_evaluation_and_paper(tmp_path):
 
 
 def test_history_bias_figure_is_drawn(tmp_path):
-    run = load_run(write_synthetic_run(tmp_path, "openai/gpt-4o", 200, seed=3), details=True)
-    fig = history_bias_figure([run])
+    """A model that keeps turning after the turn ended: its points and bar are red, the truth green."""
+    import lightemma
+    from lightemma.evaluation.synthetic import make_record
+    from lightemma.runs.store import RunWriter, create_run_dir
+
+    run_dir = create_run_dir(tmp_path, "m", {"model": "m", "finished_at": "t"})
+    straight = np.stack([8.0 * STEPS, np.zeros(6)], axis=1)
+    with RunWriter(run_dir) as w:
+        for i, k in enumerate(np.linspace(-0.08, 0.08, 40)):
+            pred = lightemma.integrate(np.array([[8.0, k]] * 6), method="midpoint")
+            hist = np.array([[8.0, k]] * 6)
+            w.append(make_record(f"f{i}", straight, pred, history_actions=hist))
+    fig = history_bias_figure([load_run(run_dir, details=True)])
+    scatter, bars = fig.axes
+    assert len(bars.patches) == 1 and bars.patches[0].get_height() == pytest.approx(1.0, rel=0.02)
     (png,) = save_figure(fig, tmp_path / "bias", formats=("png",))
     img = pixels(png)
-    assert near(img, rgb(GT_COLOR), 60).sum() > 100 and near(img, rgb(pred_color(0)), 60).sum() > 100
+    assert near(img, rgb(GT_COLOR), 40).sum() > 100 and near(img, rgb(pred_color(0)), 40).sum() > 500

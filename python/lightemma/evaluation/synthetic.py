@@ -96,9 +96,10 @@ def synthetic_records(
     filler = ("the road ahead is clear with parked cars on the right " * (1 + text_chars // 50))[:text_chars]
     for start in range(0, n_frames, batch):
         n = min(batch, n_frames - start)
-        v0 = truth.uniform(0.0, 14.0, n)
-        acc = truth.uniform(-2.0, 1.5, n)
-        curv = truth.normal(0.0, 0.03, n) * (truth.random(n) < 0.4)
+        # always draw a whole batch so that frame k has the same truth whatever n_frames is
+        v0 = truth.uniform(0.0, 14.0, batch)[:n]
+        acc = truth.uniform(-2.0, 1.5, batch)[:n]
+        curv = (truth.normal(0.0, 0.03, batch) * (truth.random(batch) < 0.4))[:n]
         steps = np.arange(1, 7) * DT
         gt_act = np.stack([np.clip(v0[:, None] + acc[:, None] * steps, 0.0, None), np.repeat(curv[:, None], 6, 1)], axis=2)
         hist = np.stack([np.clip(v0[:, None] - acc[:, None] * steps[::-1], 0.0, None), np.repeat(curv[:, None] * 0.8, 6, 1)], axis=2)

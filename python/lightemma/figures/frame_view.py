@@ -63,12 +63,8 @@ def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str,
     ax.scatter(points[visible, 0], points[visible, 1], s=width * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
 
 
-def draw_camera(ax: Any, camera: Camera | None, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
+def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
     """The camera view with the trajectories drawn on the ground; a grey canvas when there is no image."""
-    if camera is None:
-        ax.axis("off")
-        ax.text(0.5, 0.5, "no camera calibration", ha="center", va="center", transform=ax.transAxes, color="0.4")
-        return
     width, height = camera.size
     if camera.image is not None:
         ax.imshow(camera.image)
@@ -84,18 +80,16 @@ def draw_camera(ax: Any, camera: Camera | None, gt: np.ndarray, predictions: Map
     ax.axis("off")
 
 
-def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None, history: np.ndarray | None = None) -> None:
+def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
     """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now."""
-    def plot(traj: np.ndarray, color: str, width: float, style: str = "-") -> None:
+    def plot(traj: np.ndarray, color: str, width: float, label: str) -> None:
         pts = np.concatenate([np.zeros((1, 2)), traj])
-        ax.plot(-pts[:, 1], pts[:, 0], style, color=color, linewidth=width, marker="o", markersize=2.5)
+        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label)
 
-    if history is not None:
-        plot(np.asarray(history)[::-1], "0.5", 1.0, "--")
-    plot(gt, GT_COLOR, 2.2)
+    plot(gt, GT_COLOR, 2.2, "ground truth")
     for i, (label, trajectory) in enumerate(predictions.items()):
         if np.isfinite(trajectory).all():
-            plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.6)
+            plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.6, label)
     everything = np.concatenate([np.zeros((1, 2)), gt] + [t for t in predictions.values() if np.isfinite(t).all()])
     reach = max(5.0, float(np.abs(everything).max()) * 1.1)
     ax.set_xlim(-reach / 2, reach / 2)
@@ -105,6 +99,17 @@ def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, 
     ax.set_facecolor("#f4f4f4")
     ax.tick_params(labelsize=6)
     ax.set_title("bird's-eye (m)", fontsize=7)
+
+
+def _camera_with_inset(ax: Any, camera: Camera | None, gt: np.ndarray, preds: Mapping[str, np.ndarray], colors: Mapping[str, str] | None, bounds: tuple[float, ...]) -> Any:
+    """Camera view with a BEV inset; without a camera the BEV fills the axes. Returns the inset (or None)."""
+    if camera is None:
+        draw_bev(ax, gt, preds, colors=colors)
+        return None
+    draw_camera(ax, camera, gt, preds, colors=colors)
+    inset = ax.inset_axes(bounds)
+    draw_bev(inset, gt, preds, colors=colors)
+    return inset
 
 
 def _stage_text(texts: Mapping[str, Any], limit: int) -> str:
@@ -124,7 +129,6 @@ def frame_figure(
     camera: Camera | None = None,
     texts: Mapping[str, Any] | None = None,
     title: str | None = None,
-    history: np.ndarray | None = None,
     text_limit: int = 420,
 ) -> Any:
     """One frame: camera view with trajectories, BEV inset, and (if given) the stage texts.
@@ -145,10 +149,8 @@ def frame_figure(
         text_ax.text(0.0, 1.0, _stage_text(texts, text_limit), va="top", ha="left", fontsize=7.5, family="monospace", transform=text_ax.transAxes)
     else:
         ax = fig.add_axes((0.02, 0.02, 0.96, 0.90))
-    draw_camera(ax, camera, gt, preds)
+    _camera_with_inset(ax, camera, gt, preds, None, (0.74, 0.50, 0.25, 0.48))
     ax.legend(loc="lower left", fontsize=8, framealpha=0.8)
-    inset = ax.inset_axes((0.74, 0.50, 0.25, 0.48))
-    draw_bev(inset, gt, preds, history=history)
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
@@ -175,13 +177,12 @@ def model_grid(
     for i, (ax, label) in enumerate(zip(axes.flat, labels)):
         pred = {label: np.asarray(predictions[label], dtype=np.float64)}
         colors = {label: pred_color(i)}
-        draw_camera(ax, camera, gt, pred, colors=colors)
+        inset = _camera_with_inset(ax, camera, gt, pred, colors, (0.70, 0.45, 0.29, 0.54))
         error = (errors or {}).get(label)
         ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=pred_color(i))
-        inset = ax.inset_axes((0.70, 0.45, 0.29, 0.54))
-        draw_bev(inset, gt, pred, colors=colors)
-        inset.set_title("")
-        inset.tick_params(labelsize=5)
+        if inset is not None:
+            inset.set_title("")
+            inset.tick_params(labelsize=5)
     if title:
         fig.suptitle(title, fontsize=10)
     fig.tight_layout()

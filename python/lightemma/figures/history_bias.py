@@ -30,8 +30,8 @@ def history_bias_figure(runs: Sequence[Any], *, max_points: int = 4000) -> Any:
             continue
         keep = rng.permutation(len(k["history"]))[:max_points]
         if not truth_drawn:
-            scatter.scatter(k["history"][keep], k["true"][keep], s=8, color=GT_COLOR, alpha=0.35, label=f"truth (slope {_fmt(stat['slope_true'])})")
-            _fit_line(scatter, k["history"], k["true"], GT_COLOR)
+            scatter.scatter(k["history"][keep], k["true"][keep], s=8, color=GT_COLOR, alpha=0.5, zorder=3, label=f"truth (slope {_fmt(stat['slope_true'])})")
+            _fit_line(scatter, k["history"], k["true"], GT_COLOR, zorder=5)
             truth_drawn = True
         color = pred_color(i)
         scatter.scatter(k["history"][keep], k["pred"][keep], s=8, color=color, alpha=0.35, label=f"{label} (slope {_fmt(stat['slope_pred'])})")
@@ -63,8 +63,8 @@ def _fmt(value: float | None) -> str:
     return "-" if value is None else f"{value:.2f}"
 
 
-def _fit_line(ax: Any, x: np.ndarray, y: np.ndarray, color: str) -> None:
+def _fit_line(ax: Any, x: np.ndarray, y: np.ndarray, color: str, zorder: float = 4) -> None:
     if len(x) >= 2 and np.ptp(x) > 0:
         slope, intercept = np.polyfit(x, y, 1)
         xs = np.array([x.min(), x.max()])
-        ax.plot(xs, slope * xs + intercept, color=color, linewidth=1.8)
+        ax.plot(xs, slope * xs + intercept, color=color, linewidth=1.8, zorder=zorder)
