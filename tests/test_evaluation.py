@@ -246,3 +246,25 @@ def test_missing_manifest_keys_fall_back(tmp_path):
     row = evaluate_runs([run_dir]).efficiency_rows()[0]
     assert row["model"] == "somebody/unknown-vlm" and row["family"] == "Other"
     assert row["gpus"] == 2 and row["input_tokens"] is None and row["run_wall_seconds"] is None
+
+
+def test_manifest_in_the_run_pipelines_shape(tmp_path):
+    manifest = {
+        "model": "baseline:oracle",
+        "display_name": "Baseline (oracle actions)",
+        "model_info": {"family": "baseline", "generation": 0, "gpus": 0},
+        "backend": {"backend": "baseline", "kind": "oracle"},
+        "config": {"integrate_method": "midpoint", "concurrency": 4},
+        "sessions": [{"wall_seconds": 10.0}, {"wall_seconds": 5.0}],
+        "finished_at": "2026-01-01T00:00:15+00:00",
+    }
+    run_dir = create_run_dir(tmp_path, "baseline:oracle", manifest)
+    with RunWriter(run_dir) as w:
+        for i in range(3):
+            w.append(make_record(f"f{i}", np.zeros((6, 2)), np.zeros((6, 2))))
+    ev = evaluate_runs([run_dir])
+    model = ev.models[0]
+    assert (model.label, model.family, model.integrator) == ("Baseline (oracle actions)", "Baseline", "midpoint")
+    row = ev.efficiency_rows()[0]
+    assert row["run_wall_seconds"] == 15.0 and row["frames_per_second"] == pytest.approx(0.2)
+    assert row["gpus"] is None and row["concurrency"] == 4

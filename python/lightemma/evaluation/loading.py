@@ -21,7 +21,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.errors import RunStoreError
-from lightemma.evaluation.models import infer_family, known_model
+from lightemma.evaluation.models import FAMILIES, infer_family, known_model
 from lightemma.runs.store import RunContents, iter_records, read_manifest
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
@@ -108,9 +108,14 @@ def _parse_time(value: Any) -> datetime | None:
 
 
 def _wall_seconds(manifest: Mapping[str, Any]) -> float | None:
-    for key in ("wall_seconds", "elapsed_seconds"):
-        value = manifest.get(key)
-        if isinstance(value, (int, float)) and value > 0:
+    """Run wall time: the sum over sessions (a resumed run has several), else what the manifest says."""
+    sessions = manifest.get("sessions")
+    if isinstance(sessions, list):
+        walls = [s.get("wall_seconds") for s in sessions if isinstance(s, Mapping)]
+        if walls and all(isinstance(w, (int, float)) for w in walls) and sum(walls) > 0:
+            return float(sum(walls))
+    for value in (manifest.get("wall_seconds"), _get(manifest, "summary", "wall_seconds")):
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
             return float(value)
     start, end = _parse_time(manifest.get("started_at")), _parse_time(manifest.get("finished_at"))
     if start and end and end > start:
@@ -119,14 +124,34 @@ def _wall_seconds(manifest: Mapping[str, Any]) -> float | None:
 
 
 def _integrator(manifest: Mapping[str, Any]) -> str:
-    value = manifest.get("integrator")
-    if isinstance(value, Mapping):
-        value = value.get("method")
-    if not isinstance(value, str):
-        value = _get(manifest, "params", "integrator")
+    for value in (
+        manifest.get("integrator"),
+        _get(manifest, "config", "integrate_method"),
+        _get(manifest, "params", "integrate_method"),
+        _get(manifest, "params", "integrator"),
+    ):
         if isinstance(value, Mapping):
             value = value.get("method")
-    return value if isinstance(value, str) else "euler"
+        if isinstance(value, str):
+            return value
+    return "euler"
+
+
+def _family(manifest: Mapping[str, Any], model: str, known: Any) -> str:
+    """Family in the spelling of :data:`FAMILIES` (manifests may say ``baseline`` or ``other``)."""
+    value = manifest.get("family") or _get(manifest, "model_info", "family")
+    if isinstance(value, str) and value:
+        return next((f for f in FAMILIES if f.lower() == value.lower()), value)
+    return known.family if known else infer_family(model)
+
+
+def _gpus(manifest: Mapping[str, Any]) -> int | None:
+    """GPUs the run used: the backend's report, else the registry's (0 means none: an API)."""
+    for value in (manifest.get("gpus"), _get(manifest, "backend", "gpus"), _get(manifest, "backend_info", "gpus"), _get(manifest, "model_info", "gpus")):
+        gpus = _as_int(value)
+        if gpus:
+            return gpus
+    return None
 
 
 def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None = None) -> RunInfo:
@@ -136,21 +161,18 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
     model = str(manifest.get("model") or run_dir.parent.name or "unknown")
     known = known_model(model) if not model.startswith("baseline:") else None
     label = manifest.get("display_name") or (known.display_name if known else model)
-    family = manifest.get("family") or (known.family if known else infer_family(model))
-    gpus = _as_int(manifest.get("gpus"))
-    if gpus is None:
-        gpus = _as_int(_get(manifest, "backend", "gpus")) or _as_int(_get(manifest, "backend_info", "gpus"))
+    generation = _as_int(manifest.get("generation")) or _as_int(_get(manifest, "model_info", "generation"))
     dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), Mapping) else None
     return RunInfo(
         run_dir=run_dir,
         model=model,
         label=str(label),
-        family=str(family),
-        generation=_as_int(manifest.get("generation")) or (known.generation if known else None),
-        gpus=gpus,
+        family=_family(manifest, model, known),
+        generation=generation or (known.generation if known else None),
+        gpus=_gpus(manifest),
         integrator=_integrator(manifest),
         wall_seconds=_wall_seconds(manifest),
-        concurrency=_as_int(manifest.get("concurrency")),
+        concurrency=_as_int(manifest.get("concurrency")) or _as_int(_get(manifest, "config", "concurrency")),
         complete=bool(manifest.get("finished_at")),
         dataset=dataset,
         manifest=manifest,
