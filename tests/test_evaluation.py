@@ -268,3 +268,16 @@ def test_manifest_in_the_run_pipelines_shape(tmp_path):
     row = ev.efficiency_rows()[0]
     assert row["run_wall_seconds"] == 15.0 and row["frames_per_second"] == pytest.approx(0.2)
     assert row["gpus"] is None and row["concurrency"] == 4
+
+
+def test_block_scoring_equals_one_call(two_runs, monkeypatch):
+    """Scoring in blocks (bounded memory) gives the same numbers as one call over all frames."""
+    import lightemma.evaluation.core as core
+
+    out, a, b = two_runs
+    whole = evaluate_runs([a], convention="all").to_dict()["accuracy"]
+    monkeypatch.setattr(core, "SCORE_BLOCK", 7)
+    blocks = evaluate_runs([a], convention="all").to_dict()["accuracy"]
+    for convention in ("lightemma", "stp3", "uniad"):
+        for key in ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde", "miss_rate"):
+            assert blocks[convention][0][key] == pytest.approx(whole[convention][0][key], rel=1e-12)

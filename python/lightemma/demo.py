@@ -73,12 +73,12 @@ def run_demo(
     log: Callable[[str], None] = print,
 ) -> DemoResult:
     """Generate data, run baselines (and keyed API models), evaluate, report; see the module docstring."""
+    out = Path(out).resolve()
+    _prepare(out)
     import lightemma
     from lightemma.report import write_report
     from lightemma.synth import KINDS, write_dataset
 
-    out = Path(out).resolve()
-    _prepare(out)
     scenes = scenes or len(KINDS)
     log(f"1/3 writing a synthetic dataset ({scenes} scenes × {keyframes} keyframes) to {out / 'data'}")
     dataroot = Path(write_dataset(out / "data", scenes=scenes, seed=0, version=VERSION, keyframes=keyframes, images=True, sweeps=False, overwrite=True))

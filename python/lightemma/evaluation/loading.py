@@ -27,7 +27,7 @@ from lightemma.runs.store import RunContents, iter_records, read_manifest
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
 _NAN6x2 = [[math.nan, math.nan]] * 6
-_CHUNK = 8192
+_CHUNK = 2048
 
 
 @dataclass(frozen=True)
@@ -67,7 +67,7 @@ class RunData:
     corrupt_lines: int = 0
     truncated_tail: bool = False
     duplicates: int = 0
-    bad_records: int = 0  # well-formed JSON lacking usable ground truth
+    bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
     warnings: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
@@ -75,8 +75,9 @@ class RunData:
 
     @property
     def valid(self) -> np.ndarray:
-        """Frames with a usable final prediction (not failed, finite trajectory)."""
-        return (self.status != STATUS_CODES["failed"]) & np.isfinite(self.trajectory).all(axis=(1, 2))
+        """Frames with a usable final prediction (not failed, finite trajectory) and usable ground truth."""
+        finite = np.isfinite(self.trajectory).all(axis=(1, 2)) & np.isfinite(self.gt_positions).all(axis=(1, 2))
+        return (self.status != STATUS_CODES["failed"]) & finite
 
     def index(self) -> dict[str, int]:
         """frame_id → row."""
@@ -179,8 +180,11 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
     )
 
 
+_NUMERIC = (int, float)
+
+
 def _number(value: Any) -> float:
-    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
+    return value if type(value) in _NUMERIC else math.nan  # exact types: bool is not a number here
 
 
 def _first_status(record: Mapping[str, Any]) -> Any:
@@ -192,17 +196,33 @@ def _first_status(record: Mapping[str, Any]) -> Any:
     return first if first is not None else record.get("status")
 
 
-def _pairs(value: Any) -> Any:
-    """A 6×2 nested list or the NaN placeholder when missing or mis-shaped."""
-    if isinstance(value, list) and len(value) == 6 and all(isinstance(p, list) and len(p) == 2 for p in value):
-        return [[v if v is not None else math.nan for v in p] for p in value]
-    return _NAN6x2
+def pairs_array(values: list[Any]) -> np.ndarray:
+    """(n, 6, 2) float64 from a list of 6×2 nested lists; an entry that is mis-shaped or not numeric becomes NaN.
+
+    The whole list is converted at once; only when that fails is it converted entry by entry.
+    """
+    try:
+        array = np.array(values, dtype=np.float64)
+        if array.shape == (len(values), 6, 2):
+            return array
+    except (ValueError, TypeError):
+        pass
+    out = np.full((len(values), 6, 2), np.nan)
+    for i, value in enumerate(values):
+        try:
+            array = np.array(value, dtype=np.float64)
+        except (ValueError, TypeError):
+            continue
+        if array.shape == (6, 2):
+            out[i] = array
+    return out
 
 
 class _Columns:
-    """Accumulates per-record values in lists and flushes them to NumPy chunks."""
+    """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows."""
 
-    NAMES = ("trajectory", "actions", "gt", "history", "status", "first", "seconds", "inp", "out", "cost")
+    PAIRS = ("trajectory", "actions", "gt", "history")
+    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost")
     DTYPES = {"status": np.int8, "first": np.int8}
 
     def __init__(self, details: bool) -> None:
@@ -212,17 +232,18 @@ class _Columns:
         self.rows = 0
         self.unintegrated: dict[int, Any] = {}  # row -> actions, for records lacking a trajectory
 
-    def add(self, record: Mapping[str, Any]) -> None:
+    def add(self, record: Mapping[str, Any], gt: list[Any]) -> None:
         p = self.pending
-        trajectory = _pairs(record.get("trajectory"))
-        p["trajectory"].append(trajectory)
+        trajectory = record.get("trajectory")
+        p["trajectory"].append(_NAN6x2 if trajectory is None else trajectory)
+        actions = record.get("actions")
         if self.details:
-            p["actions"].append(_pairs(record.get("actions")))
-        elif trajectory is _NAN6x2 and record.get("actions") is not None:
-            self.unintegrated[self.rows] = _pairs(record.get("actions"))
-        p["gt"].append(record["gt_positions"])
-        if self.details:
-            p["history"].append(_pairs(record.get("history_actions")))
+            p["actions"].append(_NAN6x2 if actions is None else actions)
+            history = record.get("history_actions")
+            p["history"].append(_NAN6x2 if history is None else history)
+        elif trajectory is None and actions is not None:
+            self.unintegrated[self.rows] = actions
+        p["gt"].append(gt)
         p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
         p["first"].append(STATUS_CODES.get(_first_status(record), UNKNOWN_STATUS))
         p["seconds"].append(_number(record.get("seconds")))
@@ -236,7 +257,11 @@ class _Columns:
     def flush(self) -> None:
         for name, values in self.pending.items():
             if values:
-                self.chunks[name].append(np.asarray(values, dtype=self.DTYPES.get(name, np.float64)))
+                if name in self.PAIRS:
+                    chunk = pairs_array(values)
+                else:
+                    chunk = np.asarray(values, dtype=self.DTYPES.get(name, np.float64))
+                self.chunks[name].append(chunk)
                 values.clear()
 
     def column(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
@@ -244,14 +269,6 @@ class _Columns:
         parts = self.chunks.pop(name)
         dtype = self.DTYPES.get(name, np.float64)
         return np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
-
-
-def _usable_gt(value: Any) -> bool:
-    return (
-        isinstance(value, list)
-        and len(value) == 6
-        and all(isinstance(p, list) and len(p) == 2 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in p) for p in value)
-    )
 
 
 def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunData:
@@ -270,14 +287,15 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
     bad = duplicates = 0
     try:
         for record in iter_records(run_dir, counts=counts):
-            if not _usable_gt(record.get("gt_positions")):
-                bad += 1
+            gt = record.get("gt_positions")
+            if type(gt) is not list or len(gt) != 6:
+                bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
                 continue
             fid = record["frame_id"]
             if fid in rows:
                 duplicates += 1
             rows[fid] = columns.rows
-            columns.add(record)
+            columns.add(record, gt)
     except OSError as exc:
         raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
     order = np.fromiter(rows.values(), dtype=np.int64, count=len(rows))
@@ -290,20 +308,23 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
     trajectory = columns.column("trajectory", (6, 2))
     if details:
         actions = columns.column("actions", (6, 2))
+    elif columns.unintegrated:
+        actions = np.full((len(trajectory), 6, 2), np.nan)
+        actions[list(columns.unintegrated)] = pairs_array(list(columns.unintegrated.values()))
     else:
-        actions = np.full((len(trajectory), 6, 2), np.nan) if columns.unintegrated else None
-        for row, pairs in columns.unintegrated.items():
-            actions[row] = pairs
+        actions = None
     if actions is not None:
         trajectory = _fill_from_actions(trajectory, actions, info.integrator)
     if not keep_all:
         trajectory = trajectory[order]
         actions = actions[order] if details else None
+    gt = take("gt", (6, 2))
+    bad += int((~np.isfinite(gt).all(axis=(1, 2))).sum())
     data = RunData(
         info=info,
         frame_ids=list(rows),
         trajectory=trajectory,
-        gt_positions=take("gt", (6, 2)),
+        gt_positions=gt,
         status=take("status", ()),
         first_status=take("first", ()),
         seconds=take("seconds", ()),
