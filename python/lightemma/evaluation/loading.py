@@ -283,7 +283,8 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
     info = run_info(run_dir)
     counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
     columns = _Columns(details)
-    rows: dict[str, int] = {}
+    seen: set[str] = set()
+    frame_ids: list[str] = []  # one per kept record, in file order (duplicates included)
     bad = duplicates = 0
     try:
         for record in iter_records(run_dir, counts=counts):
@@ -292,14 +293,22 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
                 bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
                 continue
             fid = record["frame_id"]
-            if fid in rows:
+            if fid in seen:
                 duplicates += 1
-            rows[fid] = columns.rows
+            else:
+                seen.add(fid)
+            frame_ids.append(fid)
             columns.add(record, gt)
     except OSError as exc:
         raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
-    order = np.fromiter(rows.values(), dtype=np.int64, count=len(rows))
+    del seen
     keep_all = duplicates == 0
+    if not keep_all:  # last record wins, rows in first-seen order (the rare path: a --retry-failed pass)
+        last: dict[str, int] = {}
+        for row, fid in enumerate(frame_ids):
+            last[fid] = row
+        frame_ids = list(last)
+        order = np.fromiter(last.values(), dtype=np.int64, count=len(last))
 
     def take(name: str, shape: tuple[int, ...]) -> np.ndarray:
         col = columns.column(name, shape)
@@ -322,7 +331,7 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
     bad += int((~np.isfinite(gt).all(axis=(1, 2))).sum())
     data = RunData(
         info=info,
-        frame_ids=list(rows),
+        frame_ids=frame_ids,
         trajectory=trajectory,
         gt_positions=gt,
         status=take("status", ()),
