@@ -9,6 +9,8 @@
 //!   `inf` and `infinity` are numbers too (non-finite, so they never pass);
 //! * a number glued to a word (`v1`, `step2`, `0.5s`, `c_1`) is part of that
 //!   word, not a number;
+//! * a **label** is not a number either: `Step 1:` (a number followed by `:`),
+//!   a list marker `2. ` at the start of a line, or a unit `1/m`;
 //! * brackets `(`/`[` and `)`/`]`, commas and semicolons are tokens; anything
 //!   else is `Other`.
 
@@ -46,6 +48,8 @@ pub fn tokenize(text: &str, out: &mut Vec<Token>, scratch: &mut String) {
     let mut i = 0;
     // whether the previous character (if any) belongs to a word
     let mut prev_word = false;
+    // whether only whitespace precedes on the current line
+    let mut line_start = true;
     while i < bytes.len() {
         let b = bytes[i];
         let (c, width) = if b < 0x80 {
@@ -57,16 +61,29 @@ pub fn tokenize(text: &str, out: &mut Vec<Token>, scratch: &mut String) {
         };
         if c.is_whitespace() {
             prev_word = false;
+            line_start |= c == '\n';
             i += width;
             continue;
         }
         let start = i;
+        let at_line_start = line_start;
+        line_start = false;
         // numbers, possibly signed
         let signed = matches!(c, '-' | '+' | UNICODE_MINUS) && !prev_word;
         let num_start = if signed { i + width } else { i };
         if (signed || !prev_word) && starts_number(bytes, num_start) {
             let end = scan_number(bytes, num_start);
             let glued = text[end..].chars().next().is_some_and(is_word_char);
+            if !glued && is_label(bytes, end, at_line_start && !signed) {
+                out.push(Token {
+                    kind: Kind::Other,
+                    pos: start,
+                });
+                prev_word = true;
+                line_start = false;
+                i = end;
+                continue;
+            }
             if glued {
                 // e.g. `0.5s`, `1st`: part of a word
                 let end = scan_word(text, end);
@@ -127,6 +144,17 @@ pub fn tokenize(text: &str, out: &mut Vec<Token>, scratch: &mut String) {
         out.push(Token { kind, pos: start });
         prev_word = false;
         i += width;
+    }
+}
+
+/// Whether the number ending at `end` is a label: `1:`, a list marker `1. ` at
+/// the start of a line (`list_position`), or a unit such as `1/m`.
+fn is_label(bytes: &[u8], end: usize, list_position: bool) -> bool {
+    match bytes.get(end) {
+        Some(b':') => true,
+        Some(b'.') => list_position && bytes.get(end + 1).is_none_or(u8::is_ascii_whitespace),
+        Some(b'/') => bytes.get(end + 1).is_some_and(u8::is_ascii_alphabetic),
+        _ => false,
     }
 }
 
@@ -218,6 +246,18 @@ mod tests {
             nums("v1 = 5.0, c1 = 0.01, step2 x_3 0.5s 1st v1.5"),
             vec![5.0, 0.01]
         );
+    }
+
+    #[test]
+    fn labels_list_markers_and_units_are_not_numbers() {
+        assert_eq!(nums("Step 1: speed 5.0, curvature 0.01"), vec![5.0, 0.01]);
+        assert_eq!(
+            nums("1. 5.0, 0.01\n  2. 5.5 0.0"),
+            vec![5.0, 0.01, 5.5, 0.0]
+        );
+        assert_eq!(nums("c1 = 0.01 1/m, v = 3 m/s"), vec![0.01, 3.0]);
+        // a fraction ending a sentence mid-line is still a number
+        assert_eq!(nums("speed 5. then 4.5"), vec![5.0, 4.5]);
     }
 
     #[test]

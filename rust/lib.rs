@@ -8,6 +8,7 @@
 //! Everything but `python.rs` is plain Rust, tested with `cargo test` without Python.
 
 pub mod error;
+pub mod fastmath;
 pub mod kinematics;
 pub mod lexer;
 pub mod metrics;

@@ -3,7 +3,14 @@
 //! Per frame `e_k = ‖pred_k − gt_k‖`, k = 1..6 (0.5 … 3.0 s). Totals are
 //! frame-weighted means over the evaluated frames.
 
+use rayon::prelude::*;
+
 use crate::error::{CoreError, CoreResult};
+use crate::kinematics::PARALLEL_MIN_FRAMES;
+
+/// Frames per partial sum. Partial sums are added in a fixed order, so results do
+/// not depend on the number of threads.
+const FRAMES_PER_BLOCK: usize = 4_096;
 
 /// The number of steps every convention is defined on (0.5 s … 3.0 s).
 pub const HORIZON: usize = 6;
@@ -58,6 +65,47 @@ pub struct Summary {
     pub n_frames: usize,
 }
 
+#[inline(always)]
+fn distance(dx: f64, dy: f64) -> f64 {
+    (dx * dx + dy * dy).sqrt()
+}
+
+/// Partial sums over a block of frames: ADE 1s/2s/3s, ADE avg and FDE sums, and misses.
+#[derive(Default, Clone, Copy)]
+struct Partial {
+    sums: [f64; 5],
+    misses: usize,
+}
+
+fn block_sums(
+    pred: &[f64],
+    gt: &[f64],
+    windows: &[(usize, usize); 3],
+    miss_threshold: f64,
+) -> Partial {
+    let mut acc = Partial::default();
+    let mut e = [0.0_f64; HORIZON];
+    for (p, g) in pred
+        .chunks_exact(2 * HORIZON)
+        .zip(gt.chunks_exact(2 * HORIZON))
+    {
+        let mut worst = 0.0_f64;
+        for k in 0..HORIZON {
+            e[k] = distance(p[2 * k] - g[2 * k], p[2 * k + 1] - g[2 * k + 1]);
+            worst = worst.max(e[k]);
+        }
+        for (sum, &(a, b)) in acc.sums.iter_mut().zip(windows.iter()) {
+            *sum += e[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
+        }
+        acc.sums[3] += e.iter().sum::<f64>() / HORIZON as f64;
+        acc.sums[4] += e[HORIZON - 1];
+        if worst > miss_threshold {
+            acc.misses += 1;
+        }
+    }
+    acc
+}
+
 /// Check that `pred` and `gt` (both `N × T × 2`) hold only finite numbers.
 fn check_finite(values: &[f64], steps: usize, what: &'static str) -> CoreResult<()> {
     match values.iter().position(|v| !v.is_finite()) {
@@ -84,7 +132,7 @@ pub fn displacement_errors(pred: &[f64], gt: &[f64], out: &mut [f64]) -> CoreRes
         .zip(gt.chunks_exact(2))
         .zip(out.iter_mut())
     {
-        *e = (p[0] - g[0]).hypot(p[1] - g[1]);
+        *e = distance(p[0] - g[0], p[1] - g[1]);
     }
     Ok(())
 }
@@ -124,23 +172,25 @@ pub fn evaluate(
     check_finite(gt, steps, "ground truth")?;
     check_finite(pred, steps, "prediction")?;
     let windows = [1, 2, 3].map(|s| convention.window(s));
-    let mut sums = [0.0_f64; 5]; // ade 1s, 2s, 3s, avg, fde
+    let block = FRAMES_PER_BLOCK * 2 * HORIZON;
+    let partials: Vec<Partial> = if n >= PARALLEL_MIN_FRAMES {
+        pred.par_chunks(block)
+            .zip(gt.par_chunks(block))
+            .map(|(p, g)| block_sums(p, g, &windows, miss_threshold))
+            .collect()
+    } else {
+        pred.chunks(block)
+            .zip(gt.chunks(block))
+            .map(|(p, g)| block_sums(p, g, &windows, miss_threshold))
+            .collect()
+    };
+    let mut sums = [0.0_f64; 5];
     let mut misses = 0_usize;
-    let mut e = [0.0_f64; HORIZON];
-    for (p, g) in pred.chunks_exact(2 * steps).zip(gt.chunks_exact(2 * steps)) {
-        let mut worst = 0.0_f64;
-        for k in 0..HORIZON {
-            e[k] = (p[2 * k] - g[2 * k]).hypot(p[2 * k + 1] - g[2 * k + 1]);
-            worst = worst.max(e[k]);
+    for partial in &partials {
+        for (total, part) in sums.iter_mut().zip(partial.sums) {
+            *total += part;
         }
-        for (sum, &(a, b)) in sums.iter_mut().zip(windows.iter()) {
-            *sum += e[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
-        }
-        sums[3] += e.iter().sum::<f64>() / HORIZON as f64;
-        sums[4] += e[HORIZON - 1];
-        if worst > miss_threshold {
-            misses += 1;
-        }
+        misses += partial.misses;
     }
     let nf = n as f64;
     Ok(Summary {

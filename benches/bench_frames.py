@@ -1,0 +1,107 @@
+"""Benchmark: frames for a synthetic dataset the size of nuScenes v1.0-test.
+
+Writes (once, tables only, no images) 150 scenes x 40 keyframes with CAM_FRONT
+sweeps, then reports separately:
+
+* the devkit's table load (``NuScenes(...)`` through ``lightemma.frames.load_tables``),
+* lightemma's frame extraction (``extract_frames``: scene chains, windows, geometry,
+  image existence checks) — wall time (best of ``--repeat``) and peak Python/NumPy
+  memory (tracemalloc, a separate run).
+
+Target: extraction under 2 s on top of the devkit's load.
+
+    PYTHONPATH=python python benches/bench_frames.py [--scenes 150] [--keyframes 40] [--root DIR] [--json]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import platform
+import sys
+import tempfile
+import time
+import tracemalloc
+
+VERSION = "v1.0-test"
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--scenes", type=int, default=150)
+    ap.add_argument("--keyframes", type=int, default=40)
+    ap.add_argument("--root", help="dataset folder to reuse or create (default: a temporary folder)")
+    ap.add_argument("--repeat", type=int, default=3, help="extraction runs; the best is reported")
+    ap.add_argument("--json", action="store_true", help="print the figures as JSON")
+    args = ap.parse_args(argv)
+
+    import logging
+
+    from lightemma.frames import extract_frames, load_tables
+
+    logging.getLogger("lightemma.frames").setLevel(logging.ERROR)  # no images on purpose
+    from lightemma.synth import write_dataset
+
+    tmp = None
+    root = args.root
+    if root is None:
+        tmp = tempfile.TemporaryDirectory(prefix="lightemma-bench-")
+        root = tmp.name
+    gen_s = None
+    if not os.path.isfile(os.path.join(root, VERSION, "scene.json")):
+        t0 = time.perf_counter()
+        write_dataset(root, scenes=args.scenes, keyframes=args.keyframes, version=VERSION, images=False, seed=0)
+        gen_s = time.perf_counter() - t0
+
+    import nuscenes.nuscenes  # noqa: F401  (import cost is not table load time)
+
+    t0 = time.perf_counter()
+    nusc = load_tables(root, VERSION)
+    load_s = time.perf_counter() - t0
+
+    times = []
+    fs = None
+    for _ in range(max(1, args.repeat)):
+        t0 = time.perf_counter()
+        fs = extract_frames(nusc, split="all", on_missing_image="keep")
+        times.append(time.perf_counter() - t0)
+    assert fs is not None
+
+    tracemalloc.start()
+    extract_frames(nusc, split="all", on_missing_image="keep")
+    _, peak = tracemalloc.get_traced_memory()
+    tracemalloc.stop()
+
+    figures = {
+        "scenes": args.scenes,
+        "keyframes_per_scene": args.keyframes,
+        "frames": len(fs),
+        "sample_data_records": len(nusc.sample_data),
+        "generate_s": None if gen_s is None else round(gen_s, 2),
+        "devkit_table_load_s": round(load_s, 3),
+        "extraction_s_best": round(min(times), 3),
+        "extraction_s_runs": [round(t, 3) for t in times],
+        "extraction_peak_mib": round(peak / 2**20, 1),
+        "target_extraction_s": 2.0,
+        "python": platform.python_version(),
+        "cpu_count": os.cpu_count(),
+    }
+    if args.json:
+        print(json.dumps(figures, indent=2))
+    else:
+        print(f"synthetic {VERSION}-sized dataset: {args.scenes} scenes x {args.keyframes} keyframes, "
+              f"{figures['sample_data_records']} sample_data records -> {len(fs)} frames (reference window)")
+        if gen_s is not None:
+            print(f"  generate tables (no images):   {gen_s:7.2f} s")
+        print(f"  devkit table load (NuScenes):  {load_s:7.3f} s")
+        print(f"  lightemma frame extraction:    {min(times):7.3f} s best of {len(times)} "
+              f"(target < 2 s)  runs: {', '.join(f'{t:.3f}' for t in times)}")
+        print(f"  extraction peak memory:        {peak / 2**20:7.1f} MiB (tracemalloc)")
+    if tmp is not None:
+        tmp.cleanup()
+    return 0 if min(times) < 2.0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,23 @@
+"""nuScenes frames as SPEC §1 defines them: loading, geometry, prompt rendering.
+
+Public names: :func:`load_frames`, :class:`Frame`, :class:`FrameSet`,
+:func:`extract_frames`, :func:`load_tables`, :func:`format_number`,
+:func:`format_history`. The devkit is imported only when tables are loaded.
+"""
+
+from __future__ import annotations
+
+from lightemma.frames.loader import extract_frames, load_frames, load_tables, window_range
+from lightemma.frames.model import Frame, FrameSet
+from lightemma.frames.render import format_history, format_number
+
+__all__ = [
+    "Frame",
+    "FrameSet",
+    "extract_frames",
+    "format_history",
+    "format_number",
+    "load_frames",
+    "load_tables",
+    "window_range",
+]
