@@ -80,3 +80,19 @@ def test_frame_as_mapping_and_errors_are_results_not_exceptions():
     assert no_frame.error == "ValueError"
     with pytest.raises(ValueError, match="unknown baseline"):
         BaselineBackend("magic")
+
+
+def test_baselines_on_frames_of_a_synthetic_dataset(tmp_path):
+    """Frame objects from load_frames: the oracle answers the frame's own gt_actions."""
+    from lightemma.synth import write_dataset
+
+    root = write_dataset(tmp_path, scenes=8, keyframes=16, image_size=(160, 90), sweeps=False)
+    frames = list(lightemma.load_frames(root, "v1.0-mini", split="all"))
+    for kind, field in (("oracle", "gt_actions"), ("constant", "history_actions")):
+        results = asyncio.run(BaselineBackend(kind).generate([ChatRequest(text="", stage="actions", frame_id=f.frame_id, frame=f) for f in frames]))
+        parsed = lightemma.parse_actions([r.text for r in results], mode="strict")
+        assert set(parsed.status) == {"ok"}
+        expected = np.stack([getattr(f, field) for f in frames])
+        if kind == "constant":
+            expected = np.repeat(expected[:, -1:], 6, axis=1)
+        np.testing.assert_allclose(parsed.actions, expected, atol=1e-6)

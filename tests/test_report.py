@@ -70,3 +70,35 @@ def test_cli_report_and_its_errors(tmp_path, capsys):
     assert main(["report", str(tmp_path / "missing"), "--out", str(tmp_path / "rep2")]) == 2
     err = capsys.readouterr().err.strip()
     assert err.startswith("lightemma report: error:") and "does not exist" in err and "\n" not in err
+
+
+def test_pictures_use_the_camera_of_the_runs_dataset(tmp_path):
+    """Runs made on a (synthetic) nuScenes dataset: pictures get its CAM_FRONT image and calibration."""
+    import lightemma
+    from lightemma.backends.baseline import baseline_actions
+    from lightemma.evaluation import load_run
+    from lightemma.evaluation.synthetic import make_record
+    from lightemma.pictures import CameraSource
+    from lightemma.runs.store import RunWriter, create_run_dir
+    from lightemma.synth import write_dataset
+
+    root = write_dataset(tmp_path / "data", scenes=8, keyframes=16, image_size=(320, 180), sweeps=False)
+    frames = lightemma.load_frames(root, "v1.0-mini", split="all")
+    run_dirs = []
+    for kind in ("constant", "cv"):
+        run_dir = create_run_dir(tmp_path / "runs", f"baseline:{kind}", {"model": f"baseline:{kind}", "dataset": frames.describe(), "finished_at": "t"})
+        with RunWriter(run_dir) as w:
+            for frame in frames:
+                actions = baseline_actions(kind, frame)
+                w.append(make_record(frame.frame_id, frame.gt_positions, lightemma.integrate(actions), actions=actions, history_actions=frame.history_actions))
+        run_dirs.append(run_dir)
+    runs = [load_run(d, details=True) for d in run_dirs]
+    cameras = CameraSource().cameras(runs, frames.frame_ids[:3])
+    for fid, camera in cameras.items():
+        assert camera is not None and camera.image.shape == (180, 320, 3), fid
+        np.testing.assert_allclose(camera.intrinsic, frames[frames.frame_ids.index(fid)].camera_intrinsic)
+    index = write_report(run_dirs, tmp_path / "report", top=1, convention="lightemma")
+    text = index.read_text()
+    assert "no camera view" not in text and "figures/frames/" in text
+    grid = next((tmp_path / "report" / "figures" / "frames").glob("disagree_*_grid.png"))
+    assert len(np.unique(np.asarray(Image.open(grid).convert("RGB")).reshape(-1, 3), axis=0)) > 200  # a photo-like image, not flat panels
