@@ -102,3 +102,18 @@ def test_pictures_use_the_camera_of_the_runs_dataset(tmp_path):
     assert "no camera view" not in text and "figures/frames/" in text
     grid = next((tmp_path / "report" / "figures" / "frames").glob("disagree_*_grid.png"))
     assert len(np.unique(np.asarray(Image.open(grid).convert("RGB")).reshape(-1, 3), axis=0)) > 200  # a photo-like image, not flat panels
+
+
+def test_report_of_a_run_without_frames(tmp_path):
+    from lightemma.runs.store import create_run_dir
+
+    create_run_dir(tmp_path / "runs", "openai/gpt-4o", {"model": "openai/gpt-4o"})
+    text = write_report([tmp_path / "runs"], tmp_path / "rep", with_paper=False).read_text()
+    assert "No model has a scored frame yet" in text and "no frames to evaluate" in text
+
+
+def test_public_names():
+    import lightemma
+
+    assert lightemma.evaluate_runs is __import__("lightemma.evaluation", fromlist=["x"]).evaluate_runs
+    assert callable(lightemma.write_report) and callable(lightemma.run_demo)

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import os
 import shutil
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -99,8 +98,3 @@ def run_demo(
     log(f"3/3 evaluating and writing the report to {out / 'report'}")
     index = write_report([out / "runs"], out / "report", convention="all", with_paper=True, top=3)
     return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index)
-
-
-def main_log(message: str) -> None:
-    """Progress lines go to stderr so that stdout holds only the result."""
-    print(message, file=sys.stderr, flush=True)

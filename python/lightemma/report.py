@@ -22,7 +22,7 @@ import numpy as np
 
 from lightemma.evaluation import Evaluation, RunData, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
-from lightemma.tables import Column, Table, to_csv, to_latex, to_markdown
+from lightemma.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
 
 SCENARIO_NOTE = "ADE avg (m) per tag; each model on its valid frames (or the common frames). Tags: see docs/evaluate.md."
 
@@ -69,16 +69,14 @@ def _scenario_table(rows: list[dict[str, Any]], labels: Sequence[str]) -> Table:
 
 
 def _bias_table(rows: list[dict[str, Any]]) -> Table:
-    from lightemma.tables import _fixed
-
     columns = [
         Column("model", "Model"),
         Column("frames", "Moving frames"),
-        Column("slope_pred", "Slope pred/hist", _fixed(2)),
-        Column("slope_true", "Slope true/hist", _fixed(2)),
+        Column("slope_pred", "Slope pred/hist", fixed(2)),
+        Column("slope_true", "Slope true/hist", fixed(2)),
         Column("after_turn_frames", "Straight-after-turn frames"),
-        Column("carry_pred", "Carried over (pred)", _fixed(2)),
-        Column("carry_true", "Carried over (truth)", _fixed(2)),
+        Column("carry_pred", "Carried over (pred)", fixed(2)),
+        Column("carry_true", "Carried over (truth)", fixed(2)),
     ]
     return Table("History bias: predicted vs true curvature against the last history curvature", columns, rows, name="history_bias")
 
@@ -149,7 +147,12 @@ def write_report(
 
     w.lines += ["## Fig. 1 — ADE by family and generation", ""]
     main_convention = evaluation.conventions[0] if "lightemma" not in evaluation.conventions else "lightemma"
-    w.figure(bubble_chart(bubble_points(evaluation, convention=main_convention, with_paper=with_paper)), "bubble", "ADE avg per model; bubble area ∝ time per frame; colour = family" + ("; hollow = the paper's" if with_paper else ""))
+    points = bubble_points(evaluation, convention=main_convention, with_paper=with_paper)
+    if any(p["ade_avg"] is not None for p in points):
+        caption = "ADE avg per model; bubble area ∝ time per frame; colour = family" + ("; hollow = the paper's" if with_paper else "")
+        w.figure(bubble_chart(points), "bubble", caption)
+    else:
+        w.lines += ["No model has a scored frame yet; no chart.", ""]
 
     shared = None
     if common:

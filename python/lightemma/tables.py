@@ -19,7 +19,7 @@ from typing import Any
 FORMATS = ("md", "csv", "latex", "json")
 
 
-def _fixed(digits: int) -> Callable[[Any], str]:
+def fixed(digits: int) -> Callable[[Any], str]:
     def fmt(value: Any) -> str:
         if value is None or (isinstance(value, float) and not math.isfinite(value)):
             return "-"
@@ -48,25 +48,25 @@ class Column:
 ACCURACY_COLUMNS: tuple[Column, ...] = (
     Column("model", "Model"),
     Column("frames", "Frames"),
-    Column("fe_pct", "FE (%)", _fixed(2)),
-    Column("fe_corr_pct", "FE corr (%)", _fixed(2)),
-    Column("ade_1s", "ADE 1s (m)", _fixed(2)),
-    Column("ade_2s", "ADE 2s (m)", _fixed(2)),
-    Column("ade_3s", "ADE 3s (m)", _fixed(2)),
-    Column("ade_avg", "ADE avg (m)", _fixed(2)),
-    Column("fde", "FDE (m)", _fixed(2)),
+    Column("fe_pct", "FE (%)", fixed(2)),
+    Column("fe_corr_pct", "FE corr (%)", fixed(2)),
+    Column("ade_1s", "ADE 1s (m)", fixed(2)),
+    Column("ade_2s", "ADE 2s (m)", fixed(2)),
+    Column("ade_3s", "ADE 3s (m)", fixed(2)),
+    Column("ade_avg", "ADE avg (m)", fixed(2)),
+    Column("fde", "FDE (m)", fixed(2)),
     Column("miss_rate", "Miss (%)", _percent),
 )
 
 EFFICIENCY_COLUMNS: tuple[Column, ...] = (
     Column("model", "Model"),
-    Column("seconds_per_frame", "Time/frame (s)", _fixed(1)),
-    Column("cost_cents_per_frame", "Cost/frame (¢)", _fixed(2)),
-    Column("input_tokens", "Input tokens", _fixed(0)),
-    Column("output_tokens", "Output tokens", _fixed(0)),
+    Column("seconds_per_frame", "Time/frame (s)", fixed(1)),
+    Column("cost_cents_per_frame", "Cost/frame (¢)", fixed(2)),
+    Column("input_tokens", "Input tokens", fixed(0)),
+    Column("output_tokens", "Output tokens", fixed(0)),
     Column("gpus", "GPUs"),
-    Column("run_wall_seconds", "Run wall (s)", _fixed(1)),
-    Column("frames_per_second", "Frames/s", _fixed(2)),
+    Column("run_wall_seconds", "Run wall (s)", fixed(1)),
+    Column("frames_per_second", "Frames/s", fixed(2)),
     Column("frames", "Frames"),
 )
 

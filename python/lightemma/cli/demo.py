@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -22,12 +23,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return parser
 
 
+def _progress(message: str) -> None:
+    """Progress lines go to stderr, so that stdout holds only where the results are."""
+    print(message, file=sys.stderr, flush=True)
+
+
 def run(args: argparse.Namespace) -> int:
-    from lightemma.demo import main_log, run_demo
+    from lightemma.demo import run_demo
 
     if args.keyframes < 15:
         raise ValueError(f"--keyframes must be at least 15 (the reference window needs 15 keyframes for one frame), got {args.keyframes}")
-    result = run_demo(args.out, scenes=args.scenes, keyframes=args.keyframes, use_api=not args.no_api, api_limit=args.api_limit, log=main_log)
+    result = run_demo(args.out, scenes=args.scenes, keyframes=args.keyframes, use_api=not args.no_api, api_limit=args.api_limit, log=_progress)
     print(f"demo report: {result.index}")
     print(f"runs: {result.out / 'runs'}   dataset: {result.dataroot}")
     return 0

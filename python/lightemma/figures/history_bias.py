@@ -41,7 +41,8 @@ def history_bias_figure(runs: Sequence[Any], *, max_points: int = 4000) -> Any:
     scatter.set_xlabel("last history curvature (1/m)")
     scatter.set_ylabel("mean future curvature, 0–3 s (1/m)")
     scatter.set_title("predicted vs true curvature against history", fontsize=10)
-    scatter.legend(fontsize=7, loc="upper left")
+    if scatter.get_legend_handles_labels()[0]:
+        scatter.legend(fontsize=7, loc="upper left")
     with_turns = [s for s in stats if s["carry_pred"] is not None]
     if with_turns:
         x = np.arange(len(with_turns))
