@@ -281,3 +281,8 @@ def test_block_scoring_equals_one_call(two_runs, monkeypatch):
     for convention in ("lightemma", "stp3", "uniad"):
         for key in ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde", "miss_rate"):
             assert blocks[convention][0][key] == pytest.approx(whole[convention][0][key], rel=1e-12)
+
+
+def test_unknown_convention_is_refused_before_reading(tmp_path):
+    with pytest.raises(UserError, match="unknown convention 'nope'"):
+        evaluate_runs([tmp_path / "not-even-there"], convention="nope")

@@ -252,5 +252,6 @@ def evaluate_runs(
     all of them. Unfinished runs are evaluated on their finished frames; corrupt
     lines are skipped; both are reported in ``Evaluation.warnings``.
     """
+    conventions = _conventions(convention)  # check the arguments before reading any run
     runs = [load_run(d) for d in expand_run_dirs(run_dirs)]
-    return evaluate_loaded(runs, convention=convention, common=common, miss_threshold=miss_threshold)
+    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold)
