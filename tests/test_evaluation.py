@@ -286,3 +286,18 @@ def test_block_scoring_equals_one_call(two_runs, monkeypatch):
 def test_unknown_convention_is_refused_before_reading(tmp_path):
     with pytest.raises(UserError, match="unknown convention 'nope'"):
         evaluate_runs([tmp_path / "not-even-there"], convention="nope")
+
+
+def test_loading_restores_the_garbage_collector(two_runs, tmp_path):
+    import gc
+
+    out, a, b = two_runs
+    assert gc.isenabled()
+    load_run(a)
+    assert gc.isenabled()
+    gc.disable()
+    try:
+        load_run(a)
+        assert not gc.isenabled()  # left as the caller had it
+    finally:
+        gc.enable()

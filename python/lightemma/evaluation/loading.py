@@ -10,9 +10,11 @@ texts are fetched later, only for the frames a figure needs
 
 from __future__ import annotations
 
+import gc
 import math
 import os
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime
 from pathlib import Path
@@ -271,6 +273,18 @@ class _Columns:
         return np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
 
 
+@contextmanager
+def _gc_paused() -> Iterator[None]:
+    """Pause the cyclic garbage collector (restoring its previous state afterwards)."""
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunData:
     """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
 
@@ -287,18 +301,19 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
     frame_ids: list[str] = []  # one per kept record, in file order (duplicates included)
     bad = duplicates = 0
     try:
-        for record in iter_records(run_dir, counts=counts):
-            gt = record.get("gt_positions")
-            if type(gt) is not list or len(gt) != 6:
-                bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
-                continue
-            fid = record["frame_id"]
-            if fid in seen:
-                duplicates += 1
-            else:
-                seen.add(fid)
-            frame_ids.append(fid)
-            columns.add(record, gt)
+        with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
+            for record in iter_records(run_dir, counts=counts):
+                gt = record.get("gt_positions")
+                if type(gt) is not list or len(gt) != 6:
+                    bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
+                    continue
+                fid = record["frame_id"]
+                if fid in seen:
+                    duplicates += 1
+                else:
+                    seen.add(fid)
+                frame_ids.append(fid)
+                columns.add(record, gt)
     except OSError as exc:
         raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
     del seen
