@@ -301,3 +301,14 @@ def test_loading_restores_the_garbage_collector(two_runs, tmp_path):
         assert not gc.isenabled()  # left as the caller had it
     finally:
         gc.enable()
+
+
+def test_pairs_array_turns_bad_entries_into_nan():
+    from lightemma.evaluation.loading import pairs_array
+
+    good = [[1.0, 2], [3, 4.5]] * 3
+    np.testing.assert_array_equal(pairs_array([good, good]), np.array([good, good], dtype=float))
+    bad = [[[1, 2]] * 5, [[1, 2, 3]] * 6, "abcdef", [["a", "b"]] * 6, 5, [[1, 2]] * 7, [[None, 1]] * 6]
+    out = pairs_array([good, *bad])
+    assert np.isfinite(out[0]).all() and not np.isfinite(out[1:]).all(axis=(1, 2)).any()
+    assert pairs_array([]).shape == (0, 6, 2)

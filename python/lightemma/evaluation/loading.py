@@ -11,6 +11,7 @@ texts are fetched later, only for the frames a figure needs
 from __future__ import annotations
 
 import gc
+import itertools
 import math
 import os
 from collections.abc import Iterable, Iterator, Mapping
@@ -201,13 +202,14 @@ def _first_status(record: Mapping[str, Any]) -> Any:
 def pairs_array(values: list[Any]) -> np.ndarray:
     """(n, 6, 2) float64 from a list of 6×2 nested lists; an entry that is mis-shaped or not numeric becomes NaN.
 
-    The whole list is converted at once; only when that fails is it converted entry by entry.
+    When every entry has 6 pairs of 2 the numbers are streamed into one array at
+    once; otherwise (or when a value is not a number) entries are converted one by one.
     """
+    chain = itertools.chain.from_iterable
     try:
-        array = np.array(values, dtype=np.float64)
-        if array.shape == (len(values), 6, 2):
-            return array
-    except (ValueError, TypeError):
+        if set(map(len, values)) == {6} and set(map(len, chain(values))) == {2}:
+            return np.fromiter(chain(chain(values)), dtype=np.float64, count=12 * len(values)).reshape(-1, 6, 2)
+    except (TypeError, ValueError):
         pass
     out = np.full((len(values), 6, 2), np.nan)
     for i, value in enumerate(values):
