@@ -24,7 +24,6 @@ from lightemma.evaluation import Evaluation, RunData, evaluate_loaded, evaluatio
 from lightemma.evaluation.core import unique_labels
 from lightemma.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
 
-SCENARIO_NOTE = "ADE avg (m) per tag; each model on its valid frames (or the common frames). Tags: see docs/evaluate.md."
 
 
 def _slug(text: str) -> str:
@@ -154,13 +153,12 @@ def write_report(
     else:
         w.lines += ["No model has a scored frame yet; no chart.", ""]
 
-    shared = None
-    if common:
-        from lightemma.evaluation import common_frames
+    from lightemma.evaluation import common_frames
 
-        shared = common_frames(runs)
-    w.lines += ["## Scenarios", "", SCENARIO_NOTE, ""]
-    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared), labels), latex=False)
+    shared = common_frames(runs) if len(runs) > 1 else None
+    scope = f"the {len(shared)} frames valid for every run" if shared else "each run's valid frames"
+    w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
+    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     w.table(_bias_table(history_bias(runs)), latex=False)
     w.figure(history_bias_figure(runs), "history_bias", "predicted and true future curvature against the last history curvature")
