@@ -15,7 +15,8 @@ from lightemma.evaluation.core import (
     evaluate_runs,
     expand_run_dirs,
 )
-from lightemma.evaluation.loading import RunData, RunInfo, load_run, read_frame_records, run_info
+from lightemma.evaluation.loading import RunData, load_run, read_frame_records
+from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.tables import accuracy_table, efficiency_table, evaluation_tables
 
 __all__ = [
