@@ -118,3 +118,16 @@ def test_public_names():
 
     assert lightemma.evaluate_runs is __import__("lightemma.evaluation", fromlist=["x"]).evaluate_runs
     assert callable(lightemma.write_report) and callable(lightemma.run_demo)
+
+
+def test_requested_frames_are_drawn_and_unknown_ones_refused(tmp_path, capsys):
+    runs = tmp_path / "runs"
+    write_synthetic_run(runs, "openai/gpt-4o", 12)
+    write_synthetic_run(runs, "baseline:cv", 12, noise=1.0)
+    assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--frame", "scene-0000/9", "--top", "0", "--convention", "lightemma"]) == 0
+    text = (tmp_path / "rep" / "index.md").read_text()
+    assert "**requested frame** — frame `scene-0000/9`" in text
+    assert (tmp_path / "rep" / "figures" / "frames" / "frame_scene-0000_9_grid.png").is_file()
+    capsys.readouterr()
+    assert main(["report", str(runs), "--out", str(tmp_path / "rep2"), "--frame", "nope/1"]) == 2
+    assert "frame(s) not in any run: nope/1" in capsys.readouterr().err

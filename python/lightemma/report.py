@@ -22,6 +22,7 @@ import numpy as np
 
 from lightemma.evaluation import Evaluation, RunData, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
+from lightemma.errors import UserError
 from lightemma.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
 
 
@@ -118,13 +119,21 @@ def write_report(
     top: int = 5,
     dataroot: str | None = None,
     pictures: bool = True,
+    frames: Sequence[str] = (),
 ) -> Path:
-    """Evaluate runs and write tables, figures and the scenario analysis into ``out``; returns ``index.md``."""
+    """Evaluate runs and write tables, figures and the scenario analysis into ``out``; returns ``index.md``.
+
+    ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases).
+    """
     from lightemma.figures import bubble_chart, bubble_points, history_bias_figure
     from lightemma.pictures import CameraSource
     from lightemma.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
 
     runs = [load_run(d, details=True) for d in expand_run_dirs(run_dirs)]
+    known = set().union(*(r.frame_ids for r in runs)) if runs else set()
+    missing = [fid for fid in frames if fid not in known]
+    if missing:
+        raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
     evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common)
     order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
     runs.sort(key=lambda r: order[r.info.run_dir])
@@ -163,12 +172,13 @@ def write_report(
     w.table(_bias_table(history_bias(runs)), latex=False)
     w.figure(history_bias_figure(runs), "history_bias", "predicted and true future curvature against the last history curvature")
 
-    picks = [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]
+    picks = [("frame", fid, "requested frame") for fid in frames]
+    picks += [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]
     picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS)]
     if pictures and picks:
         source = CameraSource(dataroot)
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
-        w.lines += ["## Frames where models disagree most, and the worst frame per failure case", ""]
+        w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
         w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
         _frame_pictures(w, runs, labels, picks, cameras)
     index = out / "index.md"

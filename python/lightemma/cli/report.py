@@ -20,6 +20,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--no-paper", action="store_true", help="leave the paper's rows out of the tables and chart")
     parser.add_argument("--top", type=int, default=5, metavar="N", help="pictures of the N frames where models disagree most (default: 5)")
     parser.add_argument("--dataroot", metavar="DIR", help="dataset location for camera images, if not where the runs were made")
+    parser.add_argument("--frame", action="append", default=[], metavar="FRAME_ID", help="also draw this frame (repeatable)")
     parser.add_argument("--no-pictures", action="store_true", help="skip per-frame pictures")
     parser.set_defaults(func=run)
     return parser
@@ -37,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
         top=args.top,
         dataroot=args.dataroot,
         pictures=not args.no_pictures,
+        frames=args.frame,
     )
     print(f"report written to {index}")
     return 0
