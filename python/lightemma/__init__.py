@@ -28,6 +28,9 @@ _EXPORTS: dict[str, str] = {
     "load_frames": "lightemma.frames",
     "Frame": "lightemma.frames",
     "FrameSet": "lightemma.frames",
+    "run": "lightemma.pipeline",
+    "resume": "lightemma.pipeline",
+    "RunResult": "lightemma.pipeline",
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
@@ -51,3 +54,4 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from lightemma.frames import Frame, FrameSet, load_frames
     from lightemma.kinematics import integrate
     from lightemma.metrics import CONVENTIONS, Metrics, displacement_errors, evaluate
+    from lightemma.pipeline import RunResult, resume, run

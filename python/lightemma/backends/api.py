@@ -1,0 +1,273 @@
+"""The API backend: any litellm model (OpenAI, Anthropic, Gemini, OpenAI-compatible servers).
+
+Each request is one user turn: the frame's image as a base64 data URL plus the
+stage text. Calls are asynchronous; concurrency is bounded by the runner, the
+request/token rate by :class:`~lightemma.backends.ratelimit.RateLimiter`, and
+transient failures (429, 5xx, timeouts, dropped connections) are retried here
+with exponential backoff and jitter — litellm's own retries are switched off.
+A call that still fails returns a :class:`ChatResult` with the error class and
+a short, secret-free message; its text is never model text.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import base64
+import hashlib
+import os
+import time
+from collections import OrderedDict
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
+from lightemma.backends.ratelimit import RateLimiter
+from lightemma.backends.retry import FATAL, RetryPolicy, error_class, retry_after_seconds, short_message
+from lightemma.cache import ResponseCache, request_key
+from lightemma.errors import UserError
+from lightemma.registry import ModelInfo, price_per_token, resolve
+
+os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")  # never fetch the price list over the network
+
+import litellm  # noqa: E402  (after the environment default above)
+
+litellm.suppress_debug_info = True
+litellm.telemetry = False
+
+_MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
+NO_KEY = "sk-no-key-required"
+ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
+
+
+class FatalBackendError(UserError):
+    """An error no retry can fix (bad key, unknown model, rejected parameter): the run stops."""
+
+
+def litellm_model(info: ModelInfo, api_base: str | None) -> str:
+    """The litellm model string for ``info``: local checkpoints behind ``--api-base`` go as ``openai/<id>``."""
+    if api_base and info.backend in ("hf", "vllm"):
+        return f"openai/{info.model_id}"
+    return info.model_id
+
+
+def require_api_key(model: str, api_base: str | None = None) -> str | None:
+    """Check the provider's API key is set, before any work; return the key to pass explicitly, if any.
+
+    For an OpenAI-compatible endpoint (``api_base``) a key is optional:
+    ``OPENAI_API_KEY`` when set, else a placeholder. Otherwise a missing key is
+    a :class:`UserError` naming the environment variable(s).
+    """
+    provider = _provider(model)
+    if api_base and provider in ("openai", "hosted_vllm", "text-completion-openai"):
+        return os.environ.get("OPENAI_API_KEY") or NO_KEY
+    if api_base:
+        return None  # a custom base for another provider: litellm reads that provider's variables
+    check = litellm.validate_environment(model=model)
+    missing = check.get("missing_keys") or []
+    if not check.get("keys_in_environment") and missing:
+        names = " or ".join(missing)
+        raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
+    return None
+
+
+def _provider(model: str) -> str | None:
+    try:
+        return litellm.get_llm_provider(model)[1]
+    except Exception:  # noqa: BLE001 - an unknown provider is litellm's error to report at call time
+        return None
+
+
+def _secret_values() -> tuple[str, ...]:
+    """Values of environment variables that look like credentials, to scrub from messages."""
+    return tuple(v for k, v in os.environ.items() if len(v) >= 8 and any(t in k.upper() for t in ("KEY", "TOKEN", "SECRET")))
+
+
+class _ImageCache:
+    """Base64 data URLs (and content digests) of recently used images, read once per frame."""
+
+    def __init__(self, size: int = 512) -> None:
+        self.size = size
+        self._items: OrderedDict[str, tuple[str, str]] = OrderedDict()
+
+    def get(self, path: str) -> tuple[str, str]:
+        item = self._items.get(path)
+        if item is not None:
+            self._items.move_to_end(path)
+            return item
+        with open(path, "rb") as fh:
+            data = fh.read()
+        mime = _MIME.get(os.path.splitext(path)[1].lower(), "image/jpeg")
+        item = (f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}", hashlib.sha256(data).hexdigest())
+        self._items[path] = item
+        if len(self._items) > self.size:
+            self._items.popitem(last=False)
+        return item
+
+
+class APIBackend:
+    """A litellm-backed model. See the module docstring for the call semantics."""
+
+    name = "api"
+
+    def __init__(
+        self,
+        model: str | ModelInfo,
+        *,
+        api_base: str | None = None,
+        api_key: str | None = None,
+        timeout: float = 120.0,
+        retry: RetryPolicy | None = None,
+        rpm: float | None = None,
+        tpm: float | None = None,
+        cache: ResponseCache | None = None,
+    ) -> None:
+        self.model_info = resolve(model) if isinstance(model, str) else model
+        self.api_base = api_base
+        self.model = litellm_model(self.model_info, api_base)
+        self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base)
+        self.timeout = float(timeout)
+        self.retry = retry or RetryPolicy()
+        self.limiter = RateLimiter(rpm=rpm, tpm=tpm)
+        self.cache = cache
+        self._images = _ImageCache()
+        self._secrets = tuple(s for s in (*_secret_values(), self._api_key or "") if s and s != NO_KEY)
+        self._price = price_per_token(self.model_info)
+        self._litellm_prices = True  # switched off after litellm fails to price this model once
+        self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
+
+    def _supports(self, param: str) -> bool:
+        try:
+            supported = litellm.get_supported_openai_params(model=self.model)
+        except Exception:  # noqa: BLE001 - unknown model: assume the OpenAI parameter set
+            return True
+        return supported is None or param in supported
+
+    def effective_params(self, params: GenerationParams) -> dict[str, Any]:
+        """The decoding parameters actually sent (temperature omitted where the provider rejects it)."""
+        out: dict[str, Any] = {"max_tokens": params.max_tokens}
+        if self._sends_temperature:
+            out["temperature"] = params.temperature
+        return out
+
+    @property
+    def info(self) -> Mapping[str, Any]:
+        return {
+            "kind": "api",
+            "model": self.model,
+            "api_base": self.api_base,
+            "registry": self.model_info.to_dict(),
+            "litellm_version": _litellm_version(),
+            "token_counting": "provider-reported usage (prompt_tokens / completion_tokens)",
+            "cost": "litellm.completion_cost (bundled price list), else the registry's provider price",
+            "temperature_sent": self._sends_temperature,
+            "timeout_s": self.timeout,
+            "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap},
+            "rate_limit": {"rpm": self.limiter.requests.capacity if self.limiter.requests else None,
+                           "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None},
+            "cache": str(self.cache.path) if self.cache else None,
+            "gpus": 0,
+        }
+
+    async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
+        """Answer every request concurrently, in order; failures come back as error results."""
+        if len(requests) == 1:
+            return [await self._call(requests[0])]
+        return list(await asyncio.gather(*(self._call(r) for r in requests)))
+
+    async def _call(self, req: ChatRequest) -> ChatResult:
+        start = time.perf_counter()
+        content: list[dict[str, Any]] = []
+        digest = None
+        if req.image_path:
+            try:
+                url, digest = self._images.get(str(req.image_path))
+            except OSError as exc:
+                return ChatResult(text=None, error="ImageReadError", error_message=short_message(exc), seconds=time.perf_counter() - start)
+            content.append({"type": "image_url", "image_url": {"url": url}})
+        content.append({"type": "text", "text": req.text})
+        messages = [{"role": "user", "content": content}]
+        params = self.effective_params(req.params)
+
+        key = None
+        if self.cache is not None and params.get("temperature", None) == 0:
+            key = request_key(self.model, self.api_base, params, req.text, digest)
+            hit = self.cache.get(key)
+            if hit is not None:
+                return ChatResult(text=hit["text"], input_tokens=hit["input_tokens"], output_tokens=hit["output_tokens"],
+                                  seconds=time.perf_counter() - start, cost_cents=0.0, cached=True)
+
+        retries = 0
+        while True:
+            await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0)
+            try:
+                response = await litellm.acompletion(
+                    model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
+                    timeout=self.timeout, num_retries=0, max_retries=0, **params,
+                )
+            except asyncio.CancelledError:
+                raise
+            except Exception as exc:  # noqa: BLE001 - every provider error becomes a recorded error class
+                err = error_class(exc)
+                if err in FATAL:
+                    raise FatalBackendError(f"{self.model}: {err}: {short_message(exc, secrets=self._secrets)}") from None
+                if self.retry.should_retry(err, retries):
+                    after = retry_after_seconds(exc)
+                    if after:
+                        self.limiter.pause(after)
+                    await asyncio.sleep(self.retry.delay(retries, after))
+                    retries += 1
+                    continue
+                return ChatResult(text=None, error=err, error_message=short_message(exc, secrets=self._secrets),
+                                  seconds=time.perf_counter() - start, retries=retries)
+            result = self._result(response, start, retries)
+            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0,
+                                (result.input_tokens or 0) + (result.output_tokens or 0))
+            if result.error == "EmptyResponse" and self.retry.should_retry(result.error, retries):
+                await asyncio.sleep(self.retry.delay(retries))
+                retries += 1
+                continue
+            if key is not None and result.ok:
+                self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
+            return result
+
+    def _result(self, response: Any, start: float, retries: int) -> ChatResult:
+        usage = getattr(response, "usage", None)
+        tin = getattr(usage, "prompt_tokens", None)
+        tout = getattr(usage, "completion_tokens", None)
+        cost = self._cost(response, tin, tout)
+        try:
+            text = response.choices[0].message.content
+        except (AttributeError, IndexError):
+            text = None
+        seconds = time.perf_counter() - start
+        if not text or not str(text).strip():
+            reason = getattr(response.choices[0], "finish_reason", None) if getattr(response, "choices", None) else None
+            return ChatResult(text=None, input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost,
+                              error="EmptyResponse", error_message=f"no answer text (finish_reason={reason})", retries=retries)
+        return ChatResult(text=str(text), input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries)
+
+    def _cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
+        """Cost in US cents: litellm's price list, else the registry price, else None (unknown)."""
+        if self._litellm_prices:
+            try:
+                usd = litellm.completion_cost(completion_response=response)
+                if usd:
+                    return float(usd) * 100.0
+            except Exception:  # noqa: BLE001 - unknown model: fall back below, and stop asking
+                self._litellm_prices = False
+        if self._price is not None and tin is not None and tout is not None:
+            return (tin * self._price[0] + tout * self._price[1]) * 100.0
+        return None
+
+    async def aclose(self) -> None:
+        if self.cache is not None:
+            self.cache.close()
+
+
+def _litellm_version() -> str | None:
+    try:
+        from importlib.metadata import version
+
+        return version("litellm")
+    except Exception:  # noqa: BLE001
+        return None

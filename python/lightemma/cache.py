@@ -1,0 +1,86 @@
+"""An on-disk response cache (SQLite) for deterministic requests.
+
+The key is a SHA-256 over the model string, the API base, the decoding
+parameters and the messages, where an image is represented by the SHA-256 of
+its bytes (so keys are cheap to compute and never hold image data). Only
+deterministic requests (temperature 0) are cached; the caller decides.
+
+Stored per key: the answer text and the provider-reported usage and cost of the
+original call. A hit is reported as such (``ChatResult.cached``) with the time
+the lookup took, so timings in a run stay honest.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import sqlite3
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+_SCHEMA = """
+CREATE TABLE IF NOT EXISTS responses (
+    key TEXT PRIMARY KEY,
+    model TEXT NOT NULL,
+    text TEXT NOT NULL,
+    input_tokens INTEGER,
+    output_tokens INTEGER,
+    cost_cents REAL,
+    created REAL NOT NULL
+)
+"""
+
+
+def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None) -> str:
+    """The cache key of one single-turn request."""
+    payload = json.dumps([model, api_base or "", params, text, image_digest or ""], sort_keys=True, separators=(",", ":"))
+    return hashlib.sha256(payload.encode("utf-8")).hexdigest()
+
+
+class ResponseCache:
+    """A thread-safe SQLite store of answers by request key."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = threading.Lock()
+        try:
+            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self._db.execute("PRAGMA journal_mode=WAL")
+            self._db.execute("PRAGMA synchronous=NORMAL")
+            self._db.execute(_SCHEMA)
+        except sqlite3.DatabaseError as exc:
+            raise OSError(f"response cache {self.path} is unusable: {exc}") from None
+        self.hits = 0
+        self.misses = 0
+
+    def get(self, key: str) -> dict[str, Any] | None:
+        """The stored answer for ``key`` (text, input_tokens, output_tokens, cost_cents), or None."""
+        with self._lock:
+            row = self._db.execute(
+                "SELECT text, input_tokens, output_tokens, cost_cents FROM responses WHERE key = ?", (key,)
+            ).fetchone()
+        if row is None:
+            self.misses += 1
+            return None
+        self.hits += 1
+        return {"text": row[0], "input_tokens": row[1], "output_tokens": row[2], "cost_cents": row[3]}
+
+    def put(self, key: str, model: str, text: str, input_tokens: int | None, output_tokens: int | None, cost_cents: float | None) -> None:
+        """Store one successful answer (an error is never cached)."""
+        with self._lock:
+            self._db.execute(
+                "INSERT OR REPLACE INTO responses VALUES (?, ?, ?, ?, ?, ?, ?)",
+                (key, model, text, input_tokens, output_tokens, cost_cents, time.time()),
+            )
+
+    def __len__(self) -> int:
+        with self._lock:
+            return int(self._db.execute("SELECT COUNT(*) FROM responses").fetchone()[0])
+
+    def close(self) -> None:
+        with self._lock:
+            self._db.close()

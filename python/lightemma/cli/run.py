@@ -1,0 +1,75 @@
+"""``lightemma run``: a model over a frame set through the three-stage chain (or ``--resume`` one)."""
+
+from __future__ import annotations
+
+import argparse
+
+from lightemma.prompts import DEFAULT_PROMPT_SET
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    p = subparsers.add_parser(
+        "run",
+        help="run a model over nuScenes frames (three-stage chain), crash-safe and resumable",
+        description="Run a vision-language model over a frame set through the three-stage chain "
+        "(scene → intent → actions). Records go to OUTPUT/<model>/<run_id>/frames.jsonl as frames finish; "
+        "an interrupted run is finished with --resume RUN_DIR.",
+    )
+    p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or baseline:constant|cv|oracle")
+    p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")
+    p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1)")
+    data = p.add_argument_group("frames")
+    data.add_argument("--dataroot", help="nuScenes directory")
+    data.add_argument("--version", default="v1.0-test", help="nuScenes version (default v1.0-test, the paper's set)")
+    data.add_argument("--split", help="scene split of the version (e.g. val for v1.0-trainval)")
+    data.add_argument("--scenes", nargs="+", metavar="SCENE", help="explicit scene names")
+    data.add_argument("--window", choices=("reference", "full"), default="reference", help="frames per scene (SPEC §1)")
+    data.add_argument("--limit", type=int, help="only the first N frames")
+    ex = p.add_argument_group("execution")
+    ex.add_argument("--concurrency", type=int, help="frames in flight at once (default 16; on --resume, the run's own)")
+    ex.add_argument("--output", default="runs", help="output directory (default ./runs)")
+    ex.add_argument("--resume", metavar="RUN_DIR", help="finish this run (everything else is read from its manifest)")
+    ex.add_argument("--retry-failed", action="store_true", help="with --resume: also re-run frames that ended failed")
+    ex.add_argument("--timeout", type=float, default=120.0, help="per-call timeout in seconds (default 120)")
+    ex.add_argument("--max-retries", type=int, default=6, help="retries of 429/5xx/timeouts/dropped connections per call (default 6)")
+    ex.add_argument("--backoff", type=float, default=1.0, help="base of the exponential backoff in seconds (default 1)")
+    ex.add_argument("--rpm", type=float, help="client-side limit: requests per minute")
+    ex.add_argument("--tpm", type=float, help="client-side limit: tokens per minute")
+    ex.add_argument("--cache", nargs="?", const=True, default=None, metavar="PATH",
+                    help="SQLite response cache for temperature-0 requests (default path OUTPUT/cache.sqlite)")
+    ex.add_argument("--no-progress", action="store_true", help="no progress bar")
+    gen = p.add_argument_group("prompting")
+    gen.add_argument("--prompt-set", default=DEFAULT_PROMPT_SET, help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
+    gen.add_argument("--temperature", type=float, default=0.0, help="sampling temperature where the provider allows it (default 0)")
+    gen.add_argument("--max-tokens", type=int, default=512, help="max output tokens per stage (default 512)")
+    gen.add_argument("--reask", choices=("actions", "chain"), default="actions", help="on a failed answer re-ask stage 3 (default) or the whole chain")
+    gen.add_argument("--max-attempts", type=int, default=5, help="attempts per frame in all (default 5)")
+    gen.add_argument("--integrate", choices=("euler", "midpoint"), default="euler", help="actions → trajectory (default euler, the paper's)")
+    p.set_defaults(func=main)
+    return p
+
+
+def main(args: argparse.Namespace) -> int:
+    from lightemma.errors import UserError
+    from lightemma.pipeline.runner import resume, run, stderr_log
+
+    progress = not args.no_progress
+    if args.resume:
+        result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
+                        concurrency=args.concurrency)
+    else:
+        if args.retry_failed:
+            raise UserError("--retry-failed needs --resume RUN_DIR")
+        if not args.model:
+            raise UserError("--model is required (or --resume RUN_DIR)")
+        if not args.dataroot:
+            raise UserError("--dataroot is required (a nuScenes directory)")
+        result = run(
+            args.model, dataroot=args.dataroot, version=args.version, split=args.split, scenes=args.scenes, window=args.window,
+            limit=args.limit, output=args.output, backend=args.backend, api_base=args.api_base, concurrency=args.concurrency or 16,
+            temperature=args.temperature, max_tokens=args.max_tokens, reask=args.reask, max_attempts=args.max_attempts,
+            integrate_method=args.integrate, prompt_set=args.prompt_set, timeout=args.timeout, max_retries=args.max_retries,
+            backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, progress=progress, log=stderr_log,
+        )
+    print(result.report())
+    return 0

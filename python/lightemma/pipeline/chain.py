@@ -1,0 +1,195 @@
+"""The three-stage chain for one frame, written once for every backend.
+
+scene description → driving intent → actions (SPEC §2), each one call with the
+frame's image; each stage's text is pasted into the next. The stage-3 answer is
+parsed by the Rust core in lenient mode (``ok`` / ``corrected`` / ``failed``).
+A failed answer — or a call that failed with an API error after the backend's
+retries — is re-asked: stage 3 alone (``reask="actions"``, the default; an
+earlier stage that failed is redone first) or the whole chain
+(``reask="chain"``), up to ``max_attempts`` attempts in all.
+
+An API error is never model text: a failed call ends its attempt with the
+error class recorded, and only texts of successful calls reach a prompt.
+Every call's tokens, time and cost count toward the frame (SPEC §3, §6).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams
+from lightemma.prompts import PromptSet, format_history
+
+REASK_MODES = ("actions", "chain")
+INTEGRATION_METHODS = ("euler", "midpoint")
+
+
+@dataclass(frozen=True)
+class ChainPolicy:
+    """How a frame is asked and re-asked; recorded in the run manifest."""
+
+    params: GenerationParams = field(default_factory=GenerationParams)
+    reask: str = "actions"
+    max_attempts: int = 5
+    integrate_method: str = "euler"
+
+    def __post_init__(self) -> None:
+        if self.reask not in REASK_MODES:
+            raise ValueError(f"reask must be one of {', '.join(REASK_MODES)}, got {self.reask!r}")
+        if self.max_attempts < 1:
+            raise ValueError(f"max_attempts must be at least 1, got {self.max_attempts}")
+        if self.integrate_method not in INTEGRATION_METHODS:
+            raise ValueError(f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
+                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method}
+
+
+def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
+    """One call as stored in an attempt: text or error, usage, time, cost."""
+    return {
+        "stage": stage,
+        "text": result.text if result.ok else None,
+        "error": result.error,
+        "error_message": result.error_message,
+        "input_tokens": result.input_tokens,
+        "output_tokens": result.output_tokens,
+        "seconds": round(result.seconds, 4),
+        "cost_cents": result.cost_cents,
+        "cached": result.cached,
+        "retries": result.retries,
+    }
+
+
+def _sum(values: list[Any], *, unknown_is_none: bool) -> Any:
+    """Sum of ``values``; None when any is None and ``unknown_is_none``, or when all are None."""
+    known = [v for v in values if v is not None]
+    if not known or (unknown_is_none and len(known) != len(values)):
+        return None
+    return sum(known)
+
+
+def _totals(calls: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "input_tokens": _sum([c["input_tokens"] for c in calls], unknown_is_none=False),
+        "output_tokens": _sum([c["output_tokens"] for c in calls], unknown_is_none=False),
+        "seconds": round(sum(c["seconds"] for c in calls), 4),
+        "cost_cents": _sum([c["cost_cents"] for c in calls], unknown_is_none=True),
+    }
+
+
+class _Attempt:
+    """Collects the calls of one attempt."""
+
+    def __init__(self, number: int) -> None:
+        self.number = number
+        self.calls: list[dict[str, Any]] = []
+        self.error: str | None = None
+
+    def record(self, stage: str, result: ChatResult) -> str | None:
+        self.calls.append(_call_record(stage, result))
+        if not result.ok:
+            self.error = result.error or "Error"
+            return None
+        return result.text
+
+    def finish(self, answer: str | None, status: str, reason: str) -> dict[str, Any]:
+        return {"attempt": self.number, "calls": self.calls, "answer": answer, "status": status, "reason": reason,
+                "error": self.error, **_totals(self.calls)}
+
+
+def _parse(answer: str) -> tuple[str, str, np.ndarray]:
+    """Lenient parse of one answer: (status, reason, actions (6, 2))."""
+    from lightemma import parse_actions
+
+    parsed = parse_actions([answer], n=6, mode="lenient")
+    return str(parsed.status[0]), str(parsed.reason[0]), np.asarray(parsed.actions[0], dtype=np.float64)
+
+
+def _as_list(value: Any) -> Any:
+    return None if value is None else np.asarray(value, dtype=np.float64).tolist()
+
+
+async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy) -> dict[str, Any]:
+    """Run the chain on one frame and return its run record (SPEC §9).
+
+    ``frame`` needs ``frame_id``, ``scene_name``, ``sample_token``,
+    ``image_path``, ``history_actions`` (6, 2) and ``gt_positions`` (6, 2).
+    Raises only what the backend raises as fatal (e.g. a rejected API key).
+    """
+    start = time.perf_counter()
+    history = format_history(frame.history_actions)
+    image = str(frame.image_path) if getattr(frame, "image_path", None) else None
+
+    async def ask(stage: str, text: str) -> ChatResult:
+        request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame)
+        return (await backend.generate([request]))[0]
+
+    attempts: list[dict[str, Any]] = []
+    scene: str | None = None
+    intent: str | None = None
+    actions = None
+    answer: str | None = None
+    for number in range(1, policy.max_attempts + 1):
+        attempt = _Attempt(number)
+        if policy.reask == "chain":
+            scene = intent = None
+        if scene is None:
+            scene = attempt.record("scene", await ask("scene", prompts.render("scene")))
+        if scene is not None and intent is None:
+            intent = attempt.record("intent", await ask("intent", prompts.render("intent", scene=scene, history=history)))
+        answer = None
+        if scene is not None and intent is not None:
+            answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, history=history, intent=intent)))
+        if answer is None:
+            attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}"))
+            continue
+        status, reason, parsed = _parse(answer)
+        attempts.append(attempt.finish(answer, status, reason))
+        if status != "failed":
+            actions = parsed
+            break
+
+    return _frame_record(frame, attempts, scene, intent, answer, actions, policy, time.perf_counter() - start)
+
+
+def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None, intent: str | None, answer: str | None,
+                  actions: np.ndarray | None, policy: ChainPolicy, seconds: float) -> dict[str, Any]:
+    trajectory = None
+    if actions is not None:
+        from lightemma import integrate
+
+        trajectory = integrate(actions, dt=0.5, method=policy.integrate_method)
+    calls = [c for a in attempts for c in a["calls"]]
+    last = attempts[-1]
+    totals = _totals(calls)
+    return {
+        "frame_id": frame.frame_id,
+        "scene_name": frame.scene_name,
+        "sample_token": frame.sample_token,
+        "status": last["status"],
+        "first_status": attempts[0]["status"],
+        "n_attempts": len(attempts),
+        "attempts": attempts,
+        "actions": _as_list(actions),
+        "trajectory": _as_list(trajectory),
+        "gt_positions": _as_list(frame.gt_positions),
+        "history_actions": _as_list(frame.history_actions),
+        "scene_text": scene,
+        "intent_text": intent,
+        "answer": answer,
+        "error": last["error"] if last["status"] == "failed" else None,
+        "seconds": round(seconds, 4),
+        "call_seconds": totals["seconds"],
+        "input_tokens": totals["input_tokens"],
+        "output_tokens": totals["output_tokens"],
+        "cost_cents": totals["cost_cents"],
+        "cached": any(c["cached"] for c in calls),
+        "cached_calls": sum(1 for c in calls if c["cached"]),
+        "retries": sum(c["retries"] for c in calls),
+    }

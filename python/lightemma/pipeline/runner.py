@@ -1,0 +1,300 @@
+"""Run a model over a frame set: many frames in flight, one whole record per finished frame.
+
+:func:`run` starts a run directory (``<output>/<model>/<run_id>/``, see
+:mod:`lightemma.runs.store`) and :func:`resume` finishes one after a crash or
+an interrupt, from its manifest alone, without redoing finished frames
+(``retry_failed=True`` re-runs the frames whose last record is ``failed``).
+
+Frames run through :func:`lightemma.pipeline.chain.run_frame` on up to
+``concurrency`` frames at once, for any backend; each record is appended to
+``frames.jsonl`` as soon as its frame finishes, so a crash loses at most the
+frames in flight.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import platform
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from lightemma.backends import Backend, GenerationParams, backend_kind, create_backend
+from lightemma.errors import RunStoreError, UserError
+from lightemma.pipeline.chain import ChainPolicy, run_frame
+from lightemma.pipeline.progress import Progress
+from lightemma.pipeline.summary import format_summary, summarize
+from lightemma.prompts import DEFAULT_PROMPT_SET, PromptSet, load_prompt_set
+from lightemma.registry import resolve
+from lightemma.runs.store import RunWriter, create_run_dir, read_manifest, read_run, update_manifest
+
+Log = Callable[[str], None]
+
+
+@dataclass
+class RunResult:
+    """What a run or resume produced."""
+
+    run_dir: Path
+    manifest: dict[str, Any]
+    summary: dict[str, Any]
+    frames_run: int  # frames run in this session
+
+    def report(self) -> str:
+        """The final summary as text."""
+        return format_summary(self.summary, title=f"{self.manifest.get('display_name', self.manifest['model'])} — {self.run_dir}")
+
+
+def _now() -> str:
+    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+
+
+def _git_revision() -> str | None:
+    """``git describe`` of the source tree lightemma runs from (None outside a checkout)."""
+    try:
+        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=40"], cwd=Path(__file__).resolve().parent,
+                             capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return out.stdout.strip() or None if out.returncode == 0 else None
+
+
+def _policy(config: dict[str, Any]) -> ChainPolicy:
+    return ChainPolicy(params=GenerationParams(temperature=config["temperature"], max_tokens=config["max_tokens"]),
+                       reask=config["reask"], max_attempts=config["max_attempts"], integrate_method=config["integrate_method"])
+
+
+def _make_backend(config: dict[str, Any], output: Path) -> Backend:
+    """The backend a run's config names; checks the API key before anything else happens."""
+    kind = backend_kind(config["model"], config["backend"], config["api_base"])
+    options = dict(config.get("backend_options") or {})
+    if kind == "api":
+        from lightemma.backends.retry import RetryPolicy
+        from lightemma.cache import ResponseCache
+
+        cache = config.get("cache")
+        options.update(
+            timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"],
+            retry=RetryPolicy(max_retries=config["max_retries"], base=config["backoff_base"], cap=config["backoff_cap"]),
+            cache=ResponseCache(cache if os.path.isabs(cache) else output / cache) if cache else None,
+        )
+    return create_backend(config["model"], backend=kind, api_base=config["api_base"], **options)
+
+
+def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
+    """Load the frames a manifest's ``dataset`` describes (dataroot, version, split/scenes, window, limit)."""
+    if not dataset.get("dataroot") or not dataset.get("version"):
+        raise UserError("this run was made from frames passed in memory; pass frames=... to resume it")
+    from lightemma import load_frames
+
+    frames = load_frames(dataset["dataroot"], dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"),
+                         window=dataset.get("window", "reference"))
+    return _head(frames, dataset.get("limit"))
+
+
+def _head(frames: Any, limit: int | None) -> Sequence[Any]:
+    if limit is None:
+        return frames
+    if limit < 1:
+        raise UserError(f"--limit must be at least 1, got {limit}")
+    return frames.head(limit) if hasattr(frames, "head") else list(frames)[:limit]
+
+
+def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
+    described = dict(frames.describe()) if hasattr(frames, "describe") else {}
+    return {**described, **{k: v for k, v in dataset.items() if v is not None}, "n_frames": len(frames)}
+
+
+async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
+                   concurrency: int, bar: Progress) -> int:
+    """Run every frame, ``concurrency`` at a time, appending each record as it finishes."""
+    iterator = iter(frames)
+    done = 0
+
+    async def worker() -> None:
+        nonlocal done
+        for frame in iterator:  # shared: each frame goes to exactly one worker
+            record = await run_frame(frame, backend, prompts, policy)
+            writer.append(record)
+            bar.update(record)
+            done += 1
+
+    tasks = [asyncio.create_task(worker()) for _ in range(max(1, min(concurrency, len(frames))))]
+    try:
+        await asyncio.gather(*tasks)
+    finally:
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        await backend.aclose()
+    return done
+
+
+def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: dict[str, Any],
+             progress: bool, kind: str, already: int) -> RunResult:
+    """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume."""
+    manifest = read_manifest(run_dir)
+    sessions = list(manifest.get("sessions", []))
+    sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"]})
+    update_manifest(run_dir, sessions=sessions, finished_at=None)
+    bar = Progress(already + len(todo), enabled=progress, initial=already)
+    start = time.perf_counter()
+    try:
+        with RunWriter(run_dir) as writer:
+            if todo:
+                done = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar))
+            else:
+                done = 0
+                asyncio.run(backend.aclose())
+    finally:
+        bar.close()
+    wall = time.perf_counter() - start
+    contents = read_run(run_dir)
+    summary = summarize(contents.records.values(), wall_seconds=wall, frames_run=done)
+    sessions[-1].update(finished_at=_now(), frames_run=done, wall_seconds=round(wall, 3))
+    manifest = update_manifest(run_dir, sessions=sessions, finished_at=_now(), summary=summary)
+    return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=done)
+
+
+def run(
+    model: str,
+    *,
+    dataroot: str | os.PathLike[str] | None = None,
+    version: str = "v1.0-test",
+    split: str | None = None,
+    scenes: Sequence[str] | None = None,
+    window: str = "reference",
+    limit: int | None = None,
+    frames: Sequence[Any] | None = None,
+    output: str | os.PathLike[str] = "runs",
+    backend: str | None = None,
+    api_base: str | None = None,
+    concurrency: int = 16,
+    temperature: float = 0.0,
+    max_tokens: int = 512,
+    reask: str = "actions",
+    max_attempts: int = 5,
+    integrate_method: str = "euler",
+    prompt_set: str = DEFAULT_PROMPT_SET,
+    timeout: float = 120.0,
+    max_retries: int = 6,
+    backoff_base: float = 1.0,
+    backoff_cap: float = 60.0,
+    rpm: float | None = None,
+    tpm: float | None = None,
+    cache: str | bool | None = None,
+    backend_options: dict[str, Any] | None = None,
+    progress: bool = True,
+    log: Log | None = None,
+) -> RunResult:
+    """Run ``model`` over a frame set through the three-stage chain; returns the run's summary.
+
+    Frames come from ``frames`` (any sequence of Frame-like objects, e.g. a
+    :class:`~lightemma.frames.FrameSet`) or are loaded with
+    :func:`lightemma.load_frames` from ``dataroot``/``version``/``split``/
+    ``scenes``/``window``; ``limit`` keeps the first N. ``cache=True`` keeps a
+    response cache at ``<output>/cache.sqlite`` (or give a path).
+    A missing API key raises :class:`~lightemma.errors.UserError` before any work.
+    """
+    if concurrency < 1:
+        raise UserError(f"--concurrency must be at least 1, got {concurrency}")
+    if frames is None and dataroot is None:
+        raise UserError("give --dataroot (a nuScenes directory) or frames=...")
+    info = resolve(model)
+    config: dict[str, Any] = {
+        "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
+        "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
+        "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
+        "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "backend_options": backend_options or {},
+        "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
+    }
+    policy = _policy(config)  # validates reask / attempts / method before any work
+    prompts = load_prompt_set(prompt_set)
+    output = Path(output)
+    instance = _make_backend(config, output)
+    try:
+        dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
+                   "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit}
+        if frames is None:
+            frames = _load_frames(dataset)
+        else:
+            frames = _head(frames, limit)
+        manifest = {
+            "model": model,
+            "display_name": info.display_name,
+            "model_info": info.to_dict(),
+            "backend": dict(instance.info),
+            "config": config,
+            "params": {**policy.to_dict(), "sent": instance.effective_params(policy.params) if hasattr(instance, "effective_params") else None},
+            "prompt_set": prompts.describe(),
+            "dataset": _describe(frames, dataset),
+            "lightemma_version": _version(),
+            "git_revision": _git_revision(),
+            "python": platform.python_version(),
+            "started_at": _now(),
+            "finished_at": None,
+        }
+        run_dir = create_run_dir(output, model, manifest)
+    except BaseException:
+        asyncio.run(instance.aclose())
+        raise
+    if log:
+        log(f"run directory: {run_dir}  ({len(frames)} frames, concurrency {concurrency})")
+    return _session(run_dir, frames, instance, prompts, config, progress, "run", 0)
+
+
+def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
+           concurrency: int | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
+    """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
+
+    ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
+    records are appended; readers keep the last). The prompt set must be the
+    one the run started with (same content hash). ``frames`` is needed only
+    for runs started from in-memory frames.
+    """
+    run_dir = Path(run_dir)
+    manifest = read_manifest(run_dir)
+    config = dict(manifest.get("config") or {})
+    if not config.get("model"):
+        raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
+    if concurrency is not None:
+        if concurrency < 1:
+            raise UserError(f"--concurrency must be at least 1, got {concurrency}")
+        config["concurrency"] = concurrency
+    recorded = manifest.get("prompt_set", {})
+    prompts = load_prompt_set(recorded.get("name", config["prompt_set"]))
+    if prompts.hash != recorded.get("hash"):
+        raise UserError(f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
+                        f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
+    instance = _make_backend(config, run_dir.parent.parent)
+    try:
+        all_frames = _head(frames, manifest["dataset"].get("limit")) if frames is not None else _load_frames(manifest["dataset"])
+        contents = read_run(run_dir)
+        for warning in contents.warnings():
+            if log and "not finished" not in warning:
+                log(warning)
+        records = contents.records
+        todo = [f for f in all_frames if f.frame_id not in records or (retry_failed and records[f.frame_id].get("status") == "failed")]
+    except BaseException:
+        asyncio.run(instance.aclose())
+        raise
+    if log:
+        log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run")
+    return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo))
+
+
+def _version() -> str:
+    from lightemma import __version__
+
+    return __version__
+
+
+def stderr_log(message: str) -> None:
+    """The CLI's logger: one line to stderr."""
+    print(f"lightemma run: {message}", file=sys.stderr, flush=True)

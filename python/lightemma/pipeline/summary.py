@@ -1,0 +1,80 @@
+"""Run summaries: statuses, format-error rates, ADE, time, tokens, cost, throughput (SPEC §3, §6)."""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
+from typing import Any
+
+import numpy as np
+
+
+def _mean(values: list[float]) -> float | None:
+    return float(np.mean(values)) if values else None
+
+
+def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | None = None, frames_run: int | None = None) -> dict[str, Any]:
+    """Aggregate run records (one per frame, the final one) into a summary dict.
+
+    ``wall_seconds`` and ``frames_run`` describe this session (frames actually
+    run now, not those found done by a resume) and give frames per second.
+    """
+    records = list(records)
+    n = len(records)
+    statuses = {s: sum(1 for r in records if r.get("status") == s) for s in ("ok", "corrected", "failed")}
+    first_not_ok = sum(1 for r in records if r.get("first_status") != "ok")
+    first_failed = sum(1 for r in records if r.get("first_status") == "failed")
+    costs = [r.get("cost_cents") for r in records]
+    known_costs = [c for c in costs if c is not None]
+    valid = [r for r in records if r.get("trajectory") is not None and r.get("gt_positions") is not None]
+    ade = None
+    if valid:
+        from lightemma import evaluate
+
+        pred = np.asarray([r["trajectory"] for r in valid], dtype=np.float64)
+        gt = np.asarray([r["gt_positions"] for r in valid], dtype=np.float64)
+        ade = float(evaluate(pred, gt).ade_avg)
+    summary: dict[str, Any] = {
+        "frames": n,
+        **statuses,
+        "fe_percent": 100.0 * first_not_ok / n if n else None,
+        "fe_corr_percent": 100.0 * first_failed / n if n else None,
+        "ade_avg": ade,
+        "ade_frames": len(valid),
+        "mean_seconds_per_frame": _mean([r["seconds"] for r in records if r.get("seconds") is not None]),
+        "mean_input_tokens": _mean([r["input_tokens"] for r in records if r.get("input_tokens") is not None]),
+        "mean_output_tokens": _mean([r["output_tokens"] for r in records if r.get("output_tokens") is not None]),
+        "total_cost_cents": sum(known_costs) if known_costs else None,
+        "mean_cost_cents": _mean(known_costs),
+        "frames_cost_unknown": n - len(known_costs),
+        "attempts": sum(r.get("n_attempts", len(r.get("attempts", []))) for r in records),
+        "api_errors": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", []) if c.get("error")),
+        "cached_calls": sum(r.get("cached_calls", 0) for r in records),
+    }
+    if wall_seconds is not None:
+        summary["wall_seconds"] = wall_seconds
+        summary["frames_run"] = frames_run
+        summary["frames_per_second"] = (frames_run / wall_seconds) if frames_run and wall_seconds > 0 else None
+    return summary
+
+
+def _fmt(value: Any, spec: str, unit: str = "") -> str:
+    return "n/a" if value is None else f"{value:{spec}}{unit}"
+
+
+def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
+    """A few aligned lines for the terminal."""
+    lines = [title] if title else []
+    lines += [
+        f"frames        {summary['frames']}  (ok {summary['ok']}, corrected {summary['corrected']}, failed {summary['failed']})",
+        f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}",
+        f"ADE avg       {_fmt(summary['ade_avg'], '.3f', ' m')}  over {summary['ade_frames']} frame(s)",
+        f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}",
+        f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}",
+        f"cost          {_fmt(summary['total_cost_cents'], '.2f', ' ¢')} total, {_fmt(summary['mean_cost_cents'], '.3f', ' ¢')}/frame"
+        + (f"  ({summary['frames_cost_unknown']} frame(s) unpriced)" if summary["frames_cost_unknown"] else ""),
+        f"calls         {summary['attempts']} attempt(s), {summary['api_errors']} API error(s), {summary['cached_calls']} cached",
+    ]
+    if "wall_seconds" in summary:
+        lines.append(f"wall time     {summary['wall_seconds']:.1f} s for {summary['frames_run']} frame(s), "
+                     f"{_fmt(summary['frames_per_second'], '.2f', ' frames/s')}")
+    return "\n".join(lines)

@@ -1,0 +1,116 @@
+"""Prompt sets: the three stages of the chain as versioned data.
+
+A prompt set is a JSON file in this package (``<name>.json``) with a ``name``,
+a ``description`` and one template per stage (``scene``, ``intent``,
+``actions``; see SPEC §2). Templates use the placeholders ``{scene}``,
+``{history}`` and ``{intent}``; nothing else in them is special, so braces,
+brackets and parentheses in the wording are taken literally.
+
+Every run records the prompt set's name and its content hash (SHA-256 of the
+canonical JSON of the file's content), so a result can always be traced to the
+exact wording, and a resumed run refuses to continue under different wording.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from functools import lru_cache
+from importlib import resources
+from typing import Any
+
+from lightemma.errors import UserError
+
+DEFAULT_PROMPT_SET = "lightemma-v1"
+STAGE_NAMES = ("scene", "intent", "actions")
+PLACEHOLDERS = {"scene": (), "intent": ("scene", "history"), "actions": ("scene", "history", "intent")}
+
+
+def content_hash(data: dict[str, Any]) -> str:
+    """``sha256:<hex>`` of the canonical JSON (sorted keys, no spaces) of a prompt set's content."""
+    canonical = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+    return "sha256:" + hashlib.sha256(canonical.encode("utf-8")).hexdigest()
+
+
+@dataclass(frozen=True)
+class PromptSet:
+    """A named, hashed set of stage templates."""
+
+    name: str
+    description: str
+    stages: dict[str, str]
+    hash: str
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], *, origin: str = "prompt set") -> PromptSet:
+        """Validate ``data`` (the JSON content) and build the set; errors name ``origin``."""
+        stages = data.get("stages")
+        if not isinstance(data.get("name"), str) or not isinstance(stages, dict):
+            raise UserError(f"{origin}: a prompt set needs a string 'name' and a 'stages' object")
+        missing = [s for s in STAGE_NAMES if not isinstance(stages.get(s), str)]
+        if missing:
+            raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGE_NAMES)})")
+        for stage, needed in PLACEHOLDERS.items():
+            absent = [p for p in needed if "{" + p + "}" not in stages[stage]]
+            if absent:
+                raise UserError(f"{origin}: the {stage!r} template lacks placeholder(s) {', '.join('{' + p + '}' for p in absent)}")
+        return cls(name=data["name"], description=str(data.get("description", "")), stages=dict(stages), hash=content_hash(data))
+
+    def render(self, stage: str, *, scene: str = "", history: str = "", intent: str = "") -> str:
+        """The text of ``stage`` with the earlier stages' texts and the history filled in."""
+        values = {"scene": scene, "history": history, "intent": intent}
+        text = self.stages[stage]
+        for key in PLACEHOLDERS[stage]:
+            text = text.replace("{" + key + "}", values[key].strip())
+        return text
+
+    def describe(self) -> dict[str, str]:
+        """What a run manifest records about the prompt set."""
+        return {"name": self.name, "hash": self.hash}
+
+
+def available_prompt_sets() -> list[str]:
+    """Names of the prompt sets shipped with lightemma."""
+    return sorted(p.name[: -len(".json")] for p in resources.files(__package__).iterdir() if p.name.endswith(".json"))
+
+
+@lru_cache(maxsize=None)
+def load_prompt_set(name: str = DEFAULT_PROMPT_SET) -> PromptSet:
+    """Load a shipped prompt set by name, or a prompt-set JSON file by path."""
+    if name.endswith(".json"):
+        origin = name
+        try:
+            with open(name, encoding="utf-8") as fh:
+                data = json.load(fh)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UserError(f"prompt set file {name}: {exc}") from None
+    else:
+        resource = resources.files(__package__) / f"{name}.json"
+        if not resource.is_file():
+            raise UserError(f"unknown prompt set {name!r}; available: {', '.join(available_prompt_sets())}")
+        origin = f"prompt set {name!r}"
+        data = json.loads(resource.read_text(encoding="utf-8"))
+    if not isinstance(data, dict):
+        raise UserError(f"{origin}: expected a JSON object")
+    return PromptSet.from_dict(data, origin=origin)
+
+
+def format_history(actions: Any) -> str:
+    """The history actions rendered as plain decimals, via :func:`lightemma.frames.format_history`.
+
+    Falls back to an equivalent local rendering while the frames module is not
+    installed (``[(4.512, 0.0), …]``, ``-0.0`` as ``0.0``).
+    """
+    try:
+        from lightemma.frames import format_history as frames_format_history
+    except ImportError:
+        return "[" + ", ".join(f"({_plain(v)}, {_plain(c)})" for v, c in actions) + "]"
+    return frames_format_history(actions)
+
+
+def _plain(x: Any) -> str:
+    """A plain decimal for one number (fallback renderer)."""
+    text = f"{float(x) + 0.0:.3f}".rstrip("0")  # + 0.0 turns -0.0 into 0.0
+    text = text + "0" if text.endswith(".") else text
+    return "0.0" if text in ("-0.0", "0.0") else text

@@ -1,0 +1,142 @@
+"""The model registry: the paper's 15 models, the baselines, and any other model string.
+
+Each paper model carries its display name exactly as in the paper's tables,
+its family, its generation order within the family (1 = oldest), how it is
+reached (``api`` through litellm, or a local ``hf`` checkpoint also servable by
+``vllm``), the H100 GPUs the paper used, and its price.
+
+API ids were checked against litellm's bundled price list
+(``litellm.model_cost``, litellm 1.106.2). Where that list lacks a paper model
+the entry carries the provider's list price itself, with where and when it was
+read (``price_source``, ``price_read``); litellm's price wins whenever it has one.
+
+Anything not in the registry is taken as a litellm model string
+(``anthropic/…``, ``gemini/…``, ``openai/NAME`` with ``--api-base``, …).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from lightemma.errors import UserError
+
+ANTHROPIC_PRICES = "docs.anthropic.com/en/docs/about-claude/pricing (stored copy)"
+GOOGLE_PRICES = "ai.google.dev/gemini-api/docs/pricing (as quoted by morphllm.com/gemini-api-pricing, stored copy)"
+PRICE_READ = "2026-11-22"
+
+
+@dataclass(frozen=True)
+class ModelInfo:
+    """One model: how to name it, reach it, and price it."""
+
+    key: str  # registry key, e.g. "gpt-4o"
+    display_name: str  # as in the paper's tables, e.g. "GPT-4o"
+    family: str  # GPT, Claude, Gemini, Qwen, LLaMA, baseline, or "other"
+    generation: int  # order within the family, 1 = oldest (0 = not a paper model)
+    model_id: str  # litellm model string (api) or Hugging Face checkpoint (hf / vllm)
+    backend: str  # "api" | "hf" | "vllm" | "baseline"
+    gpus: int = 0  # H100 GPUs the paper used (local models)
+    # Price in USD per million tokens when litellm's bundled list lacks the model.
+    input_usd_per_mtok: float | None = None
+    output_usd_per_mtok: float | None = None
+    price_source: str | None = None
+    price_read: str | None = None
+    # Some providers reject temperature 0 (gpt-5 family: only the default, 1, while
+    # reasoning); False means "send no temperature, the provider default applies".
+    supports_temperature: bool = True
+    in_paper: bool = True
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able form, recorded in run manifests."""
+        return asdict(self)
+
+    @property
+    def needs_api_key(self) -> bool:
+        return self.backend == "api"
+
+
+def _api(key: str, display: str, family: str, gen: int, model_id: str, **kw: Any) -> ModelInfo:
+    return ModelInfo(key=key, display_name=display, family=family, generation=gen, model_id=model_id, backend="api", **kw)
+
+
+def _local(key: str, display: str, family: str, gen: int, checkpoint: str, gpus: int) -> ModelInfo:
+    return ModelInfo(key=key, display_name=display, family=family, generation=gen, model_id=checkpoint, backend="hf", gpus=gpus)
+
+
+_ANTHROPIC_SONNET = dict(input_usd_per_mtok=3.0, output_usd_per_mtok=15.0, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ)
+
+PAPER_MODELS: tuple[ModelInfo, ...] = (
+    _api("gpt-4o", "GPT-4o", "GPT", 1, "gpt-4o"),
+    _api("gpt-5.0", "GPT-5.0", "GPT", 2, "gpt-5", supports_temperature=False),
+    _api("gpt-5.2", "GPT-5.2", "GPT", 3, "gpt-5.2", supports_temperature=False),
+    _api("claude-3.7-sonnet", "Claude-3.7-Sonnet", "Claude", 1, "anthropic/claude-3-7-sonnet-20250219", **_ANTHROPIC_SONNET),
+    _api("claude-4.0-sonnet", "Claude-4.0-Sonnet", "Claude", 2, "anthropic/claude-sonnet-4-20250514", **_ANTHROPIC_SONNET),
+    _api("claude-4.6-sonnet", "Claude-4.6-Sonnet", "Claude", 3, "anthropic/claude-sonnet-4-6"),
+    _api("gemini-2.0-flash", "Gemini-2.0-Flash", "Gemini", 1, "gemini/gemini-2.0-flash",
+         input_usd_per_mtok=0.10, output_usd_per_mtok=0.40, price_source=GOOGLE_PRICES, price_read=PRICE_READ),
+    _api("gemini-2.5-flash", "Gemini-2.5-Flash", "Gemini", 2, "gemini/gemini-2.5-flash"),
+    _api("gemini-3.0-flash", "Gemini-3.0-Flash", "Gemini", 3, "gemini/gemini-3-flash-preview"),
+    _local("qwen-2.0-vl-7b", "Qwen-2.0-VL-7B", "Qwen", 1, "Qwen/Qwen2-VL-7B-Instruct", 1),
+    _local("qwen-2.5-vl-7b", "Qwen-2.5-VL-7B", "Qwen", 2, "Qwen/Qwen2.5-VL-7B-Instruct", 1),
+    _local("qwen-3.0-vl-8b", "Qwen-3.0-VL-8B", "Qwen", 3, "Qwen/Qwen3-VL-8B-Instruct", 1),
+    _local("llama-3.2-11b", "LLaMA-3.2-11B", "LLaMA", 1, "meta-llama/Llama-3.2-11B-Vision-Instruct", 1),
+    _local("llama-3.2-90b", "LLaMA-3.2-90B", "LLaMA", 2, "meta-llama/Llama-3.2-90B-Vision-Instruct", 3),
+    _local("llama-4.0-17b-scout", "LLaMA-4.0-17B-Scout", "LLaMA", 3, "meta-llama/Llama-4-Scout-17B-16E-Instruct", 3),
+)
+
+BASELINES: tuple[ModelInfo, ...] = tuple(
+    ModelInfo(key=f"baseline:{kind}", display_name=f"Baseline ({label})", family="baseline", generation=0,
+              model_id=f"baseline:{kind}", backend="baseline", in_paper=False)
+    for kind, label in (("constant", "constant actions"), ("cv", "constant velocity"), ("oracle", "oracle actions"))
+)
+
+MODELS: tuple[ModelInfo, ...] = PAPER_MODELS + BASELINES
+
+
+def _norm(name: str) -> str:
+    return name.strip().lower()
+
+
+_INDEX: dict[str, ModelInfo] = {}
+for _m in MODELS:
+    for _name in (_m.key, _m.display_name, _m.model_id):
+        _INDEX.setdefault(_norm(_name), _m)
+
+
+def lookup(name: str) -> ModelInfo | None:
+    """The registry entry for a key, paper display name or provider id, or None."""
+    return _INDEX.get(_norm(name))
+
+
+def resolve(name: str) -> ModelInfo:
+    """The registry entry for ``name``, or an ad-hoc entry for any other model string.
+
+    ``baseline:KIND`` strings outside the registry are rejected with the known kinds.
+    """
+    if not name or not name.strip():
+        raise UserError("--model is empty; give a registry name (see `lightemma models`) or a litellm model string")
+    found = lookup(name)
+    if found is not None:
+        return found
+    if _norm(name).startswith("baseline:"):
+        kinds = ", ".join(m.key for m in BASELINES)
+        raise UserError(f"unknown baseline {name!r}; known: {kinds}")
+    return ModelInfo(key=name, display_name=name, family="other", generation=0, model_id=name, backend="api", in_paper=False)
+
+
+def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
+    """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
+    import litellm
+
+    entry = litellm.model_cost.get(info.model_id) or litellm.model_cost.get(info.model_id.split("/", 1)[-1])
+    if entry and entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
+        return float(entry["input_cost_per_token"]), float(entry["output_cost_per_token"])
+    if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:
+        return info.input_usd_per_mtok / 1e6, info.output_usd_per_mtok / 1e6
+    return None
+
+
+def list_models() -> list[dict[str, Any]]:
+    """The registry as plain dicts, in table order (paper models, then baselines)."""
+    return [m.to_dict() for m in MODELS]

@@ -1,0 +1,226 @@
+"""A real HTTP server on 127.0.0.1 that speaks the OpenAI chat-completions protocol.
+
+Scripted per request, for tests and benchmarks of the API backend — no internet:
+
+    def script(req: Received) -> Reply:
+        if req.stage == "actions":
+            return Reply("[(5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)]")
+        return Reply("a quiet street")
+
+    with FakeOpenAIServer(script) as server:
+        ...  # point litellm at model "openai/test-model", api_base=server.url
+
+``script`` may also be a list of replies (served in order, then :func:`default_reply`).
+A reply can be an HTTP error with headers (``Reply.error(429, retry_after=1)``),
+slow (``delay``), or cut off mid-body (``truncate=True``). Every request is
+recorded in ``server.requests`` (a :class:`Received`), thread-safely.
+
+Run as a script (``python tests/fake_openai.py --latency 1.0``) it serves the
+default script forever and prints its URL on the first line of stdout.
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import socket
+import sys
+import threading
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from typing import Any
+
+GOOD_ACTIONS = "[(5.0, 0.0), (5.2, 0.001), (5.4, 0.002), (5.6, 0.0), (5.8, -0.001), (6.0, 0.0)]"
+SCENE_TEXT = "A two-lane urban road; a white van is parked on the right; the traffic light ahead is green."
+INTENT_TEXT = "The ego vehicle has been cruising at about 5 m/s in its lane; keep the lane and accelerate gently."
+
+
+@dataclass
+class Received:
+    """One request as the server saw it."""
+
+    path: str
+    headers: dict[str, str]  # names lower-cased
+    body: dict[str, Any]
+    index: int  # arrival order, from 0
+
+    @property
+    def text(self) -> str:
+        """The concatenated text parts of the last user message."""
+        content = self.body.get("messages", [{}])[-1].get("content", "")
+        if isinstance(content, str):
+            return content
+        return "\n".join(part.get("text", "") for part in content if part.get("type") == "text")
+
+    @property
+    def has_image(self) -> bool:
+        content = self.body.get("messages", [{}])[-1].get("content", "")
+        return isinstance(content, list) and any(p.get("type") == "image_url" for p in content)
+
+    @property
+    def stage(self) -> str:
+        """Which stage of the chain this is, recognised from the prompt wording."""
+        text = self.text
+        if "(v1, c1)" in text:
+            return "actions"
+        if "past 3 seconds" in text:
+            return "intent"
+        return "scene"
+
+
+@dataclass
+class Reply:
+    """What the server answers to one request."""
+
+    content: str | None = None
+    status: int = 200
+    prompt_tokens: int = 1000
+    completion_tokens: int = 50
+    delay: float = 0.0  # seconds to wait before answering
+    headers: dict[str, str] = field(default_factory=dict)
+    truncate: bool = False  # send half the body, then drop the connection
+    body: Any = None  # a raw JSON body to send instead of a completion
+
+    @classmethod
+    def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
+        headers = {"Retry-After": str(retry_after)} if retry_after is not None else {}
+        kind = {429: "rate_limit_exceeded", 401: "invalid_api_key"}.get(status, "server_error")
+        return cls(status=status, headers=headers, delay=delay, body={"error": {"message": message, "type": kind, "code": kind}})
+
+
+def default_reply(req: Received) -> Reply:
+    """A well-behaved model: scene, intent and a well-formed action list."""
+    return Reply({"scene": SCENE_TEXT, "intent": INTENT_TEXT, "actions": GOOD_ACTIONS}[req.stage])
+
+
+Script = Callable[[Received], Reply] | Sequence[Reply]
+
+
+def _completion(req: Received, reply: Reply) -> dict[str, Any]:
+    return {
+        "id": f"chatcmpl-{req.index}",
+        "object": "chat.completion",
+        "created": int(time.time()),
+        "model": req.body.get("model", "fake"),
+        "choices": [{"index": 0, "message": {"role": "assistant", "content": reply.content}, "finish_reason": "stop"}],
+        "usage": {"prompt_tokens": reply.prompt_tokens, "completion_tokens": reply.completion_tokens,
+                  "total_tokens": reply.prompt_tokens + reply.completion_tokens},
+    }
+
+
+class FakeOpenAIServer:
+    """The loopback server; a context manager. ``url`` ends in ``/v1`` (an OpenAI ``api_base``)."""
+
+    def __init__(self, script: Script | None = None, *, latency: float = 0.0, host: str = "127.0.0.1", port: int = 0, record: bool = True) -> None:
+        self.latency = latency  # added to every reply's own delay
+        self.requests: list[Received] = []
+        self.record = record
+        self._lock = threading.Lock()
+        self._counter = itertools.count()
+        if script is None:
+            self._next: Callable[[Received], Reply] = default_reply
+        elif callable(script):
+            self._next = script
+        else:
+            queue = list(script)
+
+            def from_list(req: Received) -> Reply:
+                with self._lock:
+                    return queue.pop(0) if queue else default_reply(req)
+
+            self._next = from_list
+        self._httpd = ThreadingHTTPServer((host, port), self._handler_class())
+        self._httpd.daemon_threads = True
+        self._thread: threading.Thread | None = None
+
+    @property
+    def url(self) -> str:
+        host, port = self._httpd.server_address[:2]
+        return f"http://{host}:{port}/v1"
+
+    def _handler_class(self) -> type[BaseHTTPRequestHandler]:
+        server = self
+
+        class Handler(BaseHTTPRequestHandler):
+            protocol_version = "HTTP/1.1"
+
+            def log_message(self, *args: Any) -> None:  # quiet
+                pass
+
+            def do_POST(self) -> None:  # noqa: N802 - http.server naming
+                length = int(self.headers.get("Content-Length") or 0)
+                raw = self.rfile.read(length)
+                try:
+                    body = json.loads(raw or b"{}")
+                except json.JSONDecodeError:
+                    body = {}
+                req = Received(path=self.path, headers={k.lower(): v for k, v in self.headers.items()}, body=body, index=next(server._counter))
+                if server.record:
+                    with server._lock:
+                        server.requests.append(req)
+                reply = server._next(req)
+                wait = server.latency + reply.delay
+                if wait > 0:
+                    time.sleep(wait)
+                payload = reply.body if reply.body is not None else _completion(req, reply)
+                data = json.dumps(payload).encode("utf-8")
+                try:
+                    self.send_response(reply.status)
+                    self.send_header("Content-Type", "application/json")
+                    self.send_header("Content-Length", str(len(data)))
+                    for key, value in reply.headers.items():
+                        self.send_header(key, value)
+                    self.end_headers()
+                    if reply.truncate:
+                        self.wfile.write(data[: len(data) // 2])
+                        self.wfile.flush()
+                        self.connection.shutdown(socket.SHUT_RDWR)
+                        self.close_connection = True
+                        return
+                    self.wfile.write(data)
+                except (BrokenPipeError, ConnectionResetError, OSError):
+                    self.close_connection = True
+
+        return Handler
+
+    def start(self) -> FakeOpenAIServer:
+        self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)
+        self._thread.start()
+        return self
+
+    def stop(self) -> None:
+        self._httpd.shutdown()
+        self._httpd.server_close()
+
+    def stages(self) -> list[str]:
+        """The stage of every request received so far, in arrival order."""
+        with self._lock:
+            return [r.stage for r in self.requests]
+
+    def __enter__(self) -> FakeOpenAIServer:
+        return self.start()
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Serve the default script (plus ``--latency`` seconds per call) until killed."""
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--latency", type=float, default=0.0)
+    parser.add_argument("--port", type=int, default=0)
+    args = parser.parse_args(argv)
+    server = FakeOpenAIServer(latency=args.latency, port=args.port, record=False)
+    print(server.url, flush=True)
+    try:
+        server._httpd.serve_forever(poll_interval=0.05)
+    except KeyboardInterrupt:
+        pass
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

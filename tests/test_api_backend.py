@@ -1,0 +1,176 @@
+"""The litellm API backend against a real loopback server: retries, errors, cache, limits."""
+
+import asyncio
+import base64
+import time
+
+import pytest
+from fake_openai import FakeOpenAIServer, Reply
+from PIL import Image
+
+from lightemma.backends import ChatRequest, GenerationParams, create_backend
+from lightemma.backends.api import FatalBackendError
+from lightemma.backends.ratelimit import RateLimiter
+from lightemma.backends.retry import RETRYABLE, RetryPolicy, short_message
+from lightemma.cache import ResponseCache
+
+FAST = RetryPolicy(max_retries=3, base=0.01, cap=0.05)
+
+
+@pytest.fixture
+def image(tmp_path):
+    path = tmp_path / "cam.jpg"
+    Image.new("RGB", (8, 8), (10, 20, 30)).save(path)
+    return path
+
+
+def ask(backend, text="describe", image=None, params=GenerationParams()):
+    req = ChatRequest(text=text, stage="scene", frame_id="scene-1/a", image_path=str(image) if image else None, params=params)
+    return asyncio.run(backend.generate([req]))[0]
+
+
+def test_a_call_sends_one_image_as_data_url_with_temperature_0_and_512_tokens(image):
+    with FakeOpenAIServer() as server:
+        backend = create_backend("openai/gpt-4o", api_base=server.url, retry=FAST)
+        result = ask(backend, image=image)
+    assert result.ok and result.text.startswith("A two-lane urban road")
+    assert (result.input_tokens, result.output_tokens, result.retries, result.cached) == (1000, 50, 0, False)
+    assert result.cost_cents == pytest.approx((1000 * 2.5e-6 + 50 * 1e-5) * 100)  # litellm's gpt-4o price
+    body = server.requests[0].body
+    assert body["temperature"] == 0 and body["max_tokens"] == 512
+    images = [p for p in body["messages"][0]["content"] if p["type"] == "image_url"]
+    assert len(images) == 1
+    assert images[0]["image_url"]["url"] == "data:image/jpeg;base64," + base64.b64encode(image.read_bytes()).decode()
+
+
+def test_models_that_reject_temperature_0_get_none_sent(image):
+    with FakeOpenAIServer() as server:
+        backend = create_backend("gpt-5", api_base=server.url, retry=FAST)
+        assert ask(backend).ok
+    assert "temperature" not in server.requests[0].body
+    assert backend.info["temperature_sent"] is False
+
+
+@pytest.mark.parametrize("first", [
+    Reply.error(429, retry_after=0.3), Reply.error(500), Reply.error(503), Reply(content="x" * 400, truncate=True),
+    Reply(content="late", delay=1.5),
+], ids=["429-retry-after", "500", "503", "truncated-body", "timeout"])
+def test_transient_failures_are_retried_then_succeed(first):
+    with FakeOpenAIServer([first]) as server:
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=0.5)
+        start = time.perf_counter()
+        result = ask(backend)
+        elapsed = time.perf_counter() - start
+    assert result.ok and result.retries == 1 and len(server.requests) == 2
+    if first.headers.get("Retry-After"):
+        assert elapsed >= 0.3  # the server's Retry-After is honoured
+
+
+@pytest.mark.parametrize(("reply", "error"), [
+    (Reply.error(500), "InternalServerError"), (Reply.error(429), "RateLimitError"),
+    (Reply(content="x" * 400, truncate=True), "APIConnectionError"), (Reply(content="late", delay=0.8), "Timeout"),
+])
+def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, error):
+    with FakeOpenAIServer(lambda req: reply) as server:
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=0.3)
+        result = ask(backend)
+    assert result.text is None and not result.ok
+    assert result.error == error and error in RETRYABLE
+    assert result.retries == FAST.max_retries and len(server.requests) == FAST.max_retries + 1
+    assert result.error_message and len(result.error_message) <= 301
+
+
+def test_non_retryable_request_errors_fail_at_once():
+    with FakeOpenAIServer(lambda req: Reply.error(400, "bad image")) as server:
+        result = ask(create_backend("openai/test-model", api_base=server.url, retry=FAST))
+    assert result.error == "BadRequestError" and result.retries == 0 and len(server.requests) == 1
+
+
+def test_an_empty_answer_is_an_error_not_text():
+    with FakeOpenAIServer(lambda req: Reply(content="")) as server:
+        result = ask(create_backend("openai/test-model", api_base=server.url, retry=RetryPolicy(max_retries=1, base=0.01)))
+    assert result.error == "EmptyResponse" and result.text is None and len(server.requests) == 2
+
+
+def test_a_rejected_key_stops_the_run_and_the_key_is_not_in_the_message(monkeypatch):
+    secret = "sk-test-TOPSECRET-0123456789"
+    monkeypatch.setenv("OPENAI_API_KEY", secret)
+    with FakeOpenAIServer(lambda req: Reply.error(401, f"Incorrect API key provided: {secret}")) as server:
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST)
+        with pytest.raises(FatalBackendError) as info:
+            ask(backend)
+    assert server.requests[0].headers["authorization"] == f"Bearer {secret}"
+    assert secret not in str(info.value) and "AuthenticationError" in str(info.value)
+
+
+def test_short_message_redacts_keys_and_is_one_line():
+    exc = RuntimeError("failed\nwith key sk-abcdef1234567890 and Bearer xyz.123 and api_key=hunter22")
+    text = short_message(exc, secrets=("hunter22",))
+    assert "\n" not in text and "sk-abcdef" not in text and "xyz.123" not in text and "hunter22" not in text
+
+
+def test_the_response_cache_serves_repeated_deterministic_requests(tmp_path, image):
+    with FakeOpenAIServer() as server:
+        cache = ResponseCache(tmp_path / "c.sqlite")
+        backend = create_backend("openai/gpt-4o", api_base=server.url, retry=FAST, cache=cache)
+        first, second = ask(backend, image=image), ask(backend, image=image)
+        other = ask(backend, text="something else", image=image)
+        warm = ask(backend, image=image, params=GenerationParams(temperature=0.7))
+        asyncio.run(backend.aclose())
+    assert len(server.requests) == 3  # second was a hit; temperature 0.7 is never cached
+    assert (first.cached, second.cached, other.cached, warm.cached) == (False, True, False, False)
+    assert second.text == first.text and second.input_tokens == first.input_tokens
+    assert second.cost_cents == 0.0 and second.seconds < first.seconds + 1
+    reopened = ResponseCache(tmp_path / "c.sqlite")
+    assert len(reopened) == 2 and reopened.hits == 0
+
+
+def test_retry_delays_grow_exponentially_with_jitter_and_honour_retry_after():
+    policy = RetryPolicy(max_retries=5, base=1.0, cap=8.0)
+    for k in range(6):
+        assert 0.0 <= policy.delay(k) <= min(8.0, 2.0**k)
+    assert policy.delay(0, retry_after=3.0) >= 3.0
+    assert policy.delay(0, retry_after=100.0) <= 8.0
+    assert policy.should_retry("RateLimitError", 4) and not policy.should_retry("RateLimitError", 5)
+    assert not policy.should_retry("BadRequestError", 0)
+
+
+def test_rate_limiter_queues_requests_beyond_the_per_minute_budget():
+    limiter = RateLimiter(rpm=600)  # 10 per second, a burst of 600 allowed
+
+    async def burst(n):
+        start = time.monotonic()
+        await asyncio.gather(*(limiter.acquire() for _ in range(n)))
+        return time.monotonic() - start
+
+    assert asyncio.run(burst(600)) < 0.2
+    assert 0.4 <= asyncio.run(burst(5)) < 1.5  # bucket empty: 5 more take ~0.5 s
+
+
+def test_rate_limiter_token_budget_and_settlement():
+    limiter = RateLimiter(tpm=60_000)  # 1000 tokens per second
+
+    async def go():
+        await limiter.acquire(60_000)
+        limiter.settle(60_000, 59_500)  # 500 tokens came back
+        start = time.monotonic()
+        await limiter.acquire(500)
+        fast = time.monotonic() - start
+        start = time.monotonic()
+        await limiter.acquire(300)
+        return fast, time.monotonic() - start
+
+    fast, slow = asyncio.run(go())
+    assert fast < 0.05 and 0.2 <= slow < 1.0
+
+
+def test_server_pause_holds_every_caller():
+    limiter = RateLimiter()
+
+    async def go():
+        limiter.pause(0.3)
+        start = time.monotonic()
+        await limiter.acquire()
+        return time.monotonic() - start
+
+    assert asyncio.run(go()) >= 0.28

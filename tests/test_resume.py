@@ -1,0 +1,138 @@
+"""Crash safety and resume: SIGKILL mid-run, truncated tails, --retry-failed, prompt-hash guard."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from collections import Counter
+from pathlib import Path
+
+import pytest
+from fake_openai import FakeOpenAIServer, Reply, default_reply
+from memframes import FrameIndex, make_frames
+
+from lightemma.errors import UserError
+from lightemma.pipeline import resume, run
+from lightemma.runs.store import FRAMES_FILE, read_manifest, read_run, update_manifest
+
+FAST = dict(backoff_base=0.01, backoff_cap=0.05, progress=False)
+HERE = Path(__file__).parent
+
+
+def lines_of(run_dir):
+    """Every line of frames.jsonl parsed (fails on a corrupt line)."""
+    return [json.loads(line) for line in (run_dir / FRAMES_FILE).read_text().splitlines()]
+
+
+def wait_for_lines(path, n, timeout=30.0):
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if path.exists() and path.read_bytes().count(b"\n") >= n:
+            return
+        time.sleep(0.02)
+    raise AssertionError(f"{path} never reached {n} lines")
+
+
+def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path):
+    n = 12
+    frames = make_frames(tmp_path, n)
+    with FakeOpenAIServer(latency=0.05) as server:
+        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
+        proc = subprocess.Popen([sys.executable, str(HERE / "memframes.py"), str(tmp_path / "out"), server.url, str(n), str(tmp_path)],
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        try:
+            deadline = time.monotonic() + 60
+            while not list((tmp_path / "out").rglob(FRAMES_FILE)) and time.monotonic() < deadline:
+                time.sleep(0.02)
+            (frames_file,) = list((tmp_path / "out").rglob(FRAMES_FILE))
+            wait_for_lines(frames_file, 3)
+            proc.send_signal(signal.SIGKILL)
+            proc.wait(timeout=10)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+        run_dir = frames_file.parent
+        killed = read_run(run_dir)
+        assert not killed.complete and 3 <= len(killed.records) < n, proc.stderr.read().decode()[-2000:]
+        # a crash in the middle of a write leaves a fragment: simulate one on top of the kill
+        with open(frames_file, "ab") as fh:
+            fh.write(b'{"frame_id": "scene-0000/tok')
+        assert read_run(run_dir).truncated_tail
+        result = resume(run_dir, frames=frames, **{k: v for k, v in FAST.items() if k == "progress"})
+    assert result.frames_run == n - len(killed.records)
+    counts = Counter(rec["frame_id"] for rec in lines_of(run_dir))
+    assert counts == Counter(f.frame_id for f in frames)  # every frame exactly once, no corrupt line
+    final = read_run(run_dir)
+    assert final.complete and not final.truncated_tail and not final.corrupt_lines and final.duplicates == 0
+    assert [s["kind"] for s in read_manifest(run_dir)["sessions"]] == ["run", "resume"]
+    assert result.summary["frames"] == n and result.summary["ok"] == n
+
+
+def test_resume_after_a_truncated_file_redoes_only_missing_frames(tmp_path):
+    frames = make_frames(tmp_path, 6)
+    with FakeOpenAIServer() as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
+        path = first.run_dir / FRAMES_FILE
+        lines = path.read_bytes().splitlines(keepends=True)
+        path.write_bytes(b"".join(lines[:4]) + lines[4][: len(lines[4]) // 2])  # lost frames 5, 6 (one half-written)
+        kept = {json.loads(line)["frame_id"] for line in lines[:4]}
+        before = len(server.requests)
+        result = resume(first.run_dir, frames=frames, progress=False)
+    assert result.frames_run == 2 and len(server.requests) - before == 6
+    assert Counter(r["frame_id"] for r in lines_of(first.run_dir)) == Counter(f.frame_id for f in frames)
+    assert kept <= set(read_run(first.run_dir).records)
+
+
+def test_resume_of_a_finished_run_does_nothing(tmp_path):
+    frames = make_frames(tmp_path, 3)
+    with FakeOpenAIServer() as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
+        before = len(server.requests)
+        again = resume(first.run_dir, frames=frames, progress=False)
+    assert again.frames_run == 0 and len(server.requests) == before and again.summary["frames"] == 3
+
+
+def test_retry_failed_reruns_only_failed_frames_and_the_last_record_wins(tmp_path):
+    frames = make_frames(tmp_path, 6)
+    index = FrameIndex(frames)
+    broken = {1, 4}
+    fixed = {"now": False}
+
+    def script(req):
+        if req.stage == "actions" and index(req) in broken and not fixed["now"]:
+            return Reply("no idea")
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_attempts=2, **FAST)
+        assert first.summary["failed"] == 2
+        fixed["now"] = True
+        before = len(server.requests)
+        plain = resume(first.run_dir, frames=frames, progress=False)
+        assert plain.frames_run == 0 and len(server.requests) == before  # failed frames are finished frames
+        again = resume(first.run_dir, retry_failed=True, frames=frames, progress=False)
+    assert again.frames_run == 2 and len(server.requests) - before == 2 * 3
+    contents = read_run(first.run_dir)
+    assert contents.duplicates == 2 and all(r["status"] == "ok" for r in contents.records.values())
+    assert again.summary["failed"] == 0 and again.summary["ok"] == 6
+
+
+def test_resume_refuses_a_changed_prompt_set(tmp_path):
+    frames = make_frames(tmp_path, 2)
+    with FakeOpenAIServer() as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
+    update_manifest(first.run_dir, prompt_set={"name": "lightemma-v1", "hash": "sha256:0000"})
+    with pytest.raises(UserError, match="prompt set 'lightemma-v1' has changed"):
+        resume(first.run_dir, frames=frames, progress=False)
+
+
+def test_resume_of_in_memory_frames_needs_them_and_a_foreign_dir_is_refused(tmp_path):
+    frames = make_frames(tmp_path, 2)
+    with FakeOpenAIServer() as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
+    with pytest.raises(UserError, match="frames passed in memory"):
+        resume(first.run_dir, progress=False)
+    with pytest.raises(UserError, match="not a lightemma run directory"):
+        resume(tmp_path, progress=False)

@@ -1,0 +1,225 @@
+"""The three-stage chain and the runner, end to end against the loopback server."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+from fake_openai import GOOD_ACTIONS, INTENT_TEXT, SCENE_TEXT, FakeOpenAIServer, Reply, default_reply
+from memframes import FrameIndex, make_frames
+
+import lightemma
+from lightemma.backends.api import FatalBackendError
+from lightemma.errors import UserError
+from lightemma.pipeline import run
+from lightemma.prompts import load_prompt_set
+from lightemma.runs.store import FRAMES_FILE, read_run
+
+FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=5.0, progress=False)
+SPEC_FIELDS = {"frame_id", "scene_name", "sample_token", "status", "first_status", "attempts", "actions", "trajectory",
+               "gt_positions", "history_actions", "seconds", "input_tokens", "output_tokens", "cost_cents",
+               "scene_text", "intent_text", "answer", "cached"}
+CORRECTED = "Sure! For the next 6 steps:\nv1 = 5.0, c1 = 0.0\nv2 = 5.0 c2 = 0.0\n5.0 0.0\n5.0 0.0\n5.0 0.0\n5.0 0.0"
+GARBAGE = "I cannot predict the future."
+
+
+@pytest.fixture
+def frames(tmp_path):
+    return make_frames(tmp_path, 8)
+
+
+def scripted(frames, per_frame):
+    """A server script: ``per_frame(index, stage, nth_call_of_that_stage_for_the_frame)`` -> Reply or None (default)."""
+    index = FrameIndex(frames)
+    seen = {}
+
+    def script(req):
+        i, stage = index(req), req.stage
+        n = seen[(i, stage)] = seen.get((i, stage), 0) + 1
+        return per_frame(i, stage, n) or default_reply(req)
+
+    return script
+
+
+def records_of(result, frames=None):
+    """The run's records by frame id (file order is completion order), or as a list in ``frames`` order."""
+    records = read_run(result.run_dir).records
+    return records if frames is None else [records[f.frame_id] for f in frames]
+
+
+def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames):
+    with FakeOpenAIServer() as server:
+        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", concurrency=4, **FAST)
+    records = records_of(result)
+    assert sorted(records) == sorted(f.frame_id for f in frames)
+    assert server.stages().count("scene") == server.stages().count("intent") == server.stages().count("actions") == 8
+    for frame, rec in zip(frames, records_of(result, frames)):
+        assert SPEC_FIELDS <= set(rec)
+        assert (rec["status"], rec["first_status"], rec["n_attempts"]) == ("ok", "ok", 1)
+        assert (rec["scene_text"], rec["intent_text"], rec["answer"]) == (SCENE_TEXT, INTENT_TEXT, GOOD_ACTIONS)
+        assert np.allclose(rec["trajectory"], lightemma.integrate(np.array(rec["actions"]), method="euler"))
+        assert np.allclose(rec["history_actions"], frame.history_actions) and np.allclose(rec["gt_positions"], frame.gt_positions)
+        assert (rec["input_tokens"], rec["output_tokens"]) == (3000, 150)
+        assert rec["cost_cents"] == pytest.approx(3 * (1000 * 2.5e-6 + 50 * 1e-5) * 100)
+        assert [c["stage"] for c in rec["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
+    manifest = result.manifest
+    assert manifest["prompt_set"] == load_prompt_set().describe()
+    assert manifest["params"]["sent"] == {"temperature": 0.0, "max_tokens": 512}
+    assert manifest["params"]["integrate_method"] == "euler" and manifest["finished_at"]
+    assert {"lightemma_version", "git_revision", "started_at", "backend", "dataset"} <= set(manifest)
+    summary = result.summary
+    assert (summary["frames"], summary["ok"], summary["fe_percent"], summary["fe_corr_percent"]) == (8, 8, 0.0, 0.0)
+    assert summary["ade_avg"] == pytest.approx(float(lightemma.evaluate(
+        np.array([r["trajectory"] for r in records.values()]), np.array([r["gt_positions"] for r in records.values()])).ade_avg))
+    assert "FE" in result.report() and "frames/s" in result.report()
+
+
+def test_stage_texts_flow_into_the_next_prompts(tmp_path, frames):
+    def per_frame(i, stage, n):
+        return Reply({"scene": f"SCENE-OF-{i}", "intent": f"INTENT-OF-{i}", "actions": GOOD_ACTIONS}[stage])
+
+    with FakeOpenAIServer(scripted(frames, per_frame)) as server:
+        run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, concurrency=8, **FAST)
+    index = FrameIndex(frames)
+    for req in server.requests:
+        i = index(req)
+        assert req.has_image
+        if req.stage == "intent":
+            assert f"SCENE-OF-{i}" in req.text and "INTENT-OF" not in req.text
+            assert f"({5.0 + 0.5 * i}, 0.0)" in req.text  # plain-decimal history
+        if req.stage == "actions":
+            assert f"SCENE-OF-{i}" in req.text and f"INTENT-OF-{i}" in req.text
+
+
+def test_malformed_answers_are_reasked_and_counted_as_format_errors(tmp_path, frames):
+    def per_frame(i, stage, n):
+        if stage != "actions":
+            return None
+        if i == 0 and n == 1:
+            return Reply(GARBAGE)  # FE corr, then fixed by a re-ask
+        if i == 1:
+            return Reply(CORRECTED)  # FE, corrected by the lenient parser: no re-ask
+        if i == 2:
+            return Reply(GARBAGE)  # never valid
+        return None
+
+    with FakeOpenAIServer(scripted(frames, per_frame)) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_attempts=3, **FAST)
+    recs = records_of(result, frames)
+    assert (recs[0]["first_status"], recs[0]["status"], recs[0]["n_attempts"]) == ("failed", "ok", 2)
+    assert [c["stage"] for c in recs[0]["attempts"][1]["calls"]] == ["actions"]  # stage 3 alone re-asked
+    assert recs[0]["attempts"][0]["answer"] == GARBAGE and "found" in recs[0]["attempts"][0]["reason"]
+    assert (recs[1]["first_status"], recs[1]["status"], recs[1]["n_attempts"]) == ("corrected", "corrected", 1)
+    assert recs[1]["attempts"][0]["reason"]
+    assert (recs[2]["status"], recs[2]["n_attempts"], recs[2]["actions"], recs[2]["trajectory"]) == ("failed", 3, None, None)
+    assert recs[2]["input_tokens"] == 5 * 1000  # scene + intent + 3 answers all count
+    s = result.summary
+    assert (s["ok"], s["corrected"], s["failed"]) == (6, 1, 1)
+    assert s["fe_percent"] == pytest.approx(100 * 3 / 8) and s["fe_corr_percent"] == pytest.approx(100 * 2 / 8)
+    assert s["ade_frames"] == 7
+    assert server.stages().count("scene") == 8  # nothing but stage 3 was re-asked
+
+
+def test_reask_chain_reruns_all_three_stages(tmp_path, frames):
+    def per_frame(i, stage, n):
+        return Reply(GARBAGE) if (i == 0 and stage == "actions" and n == 1) else None
+
+    with FakeOpenAIServer(scripted(frames[:1], per_frame)) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames[:1], output=tmp_path, reask="chain", **FAST)
+    rec = next(iter(records_of(result).values()))
+    assert server.stages() == ["scene", "intent", "actions"] * 2
+    assert [c["stage"] for c in rec["attempts"][1]["calls"]] == ["scene", "intent", "actions"]
+    assert rec["status"] == "ok" and rec["first_status"] == "failed"
+
+
+def test_api_errors_fail_the_frame_never_the_run_and_never_leak_into_prompts(tmp_path, frames):
+    marker = "UPSTREAM-EXPLODED"
+
+    def per_frame(i, stage, n):
+        if i == 3 and stage == "intent":
+            return Reply.error(500, marker)  # intent never succeeds
+        if i == 4 and stage == "scene" and n <= 3:
+            return Reply.error(503, marker)  # first attempt's scene fails after retries, then works
+        return None
+
+    with FakeOpenAIServer(scripted(frames, per_frame)) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_retries=2, max_attempts=2, **FAST)
+    recs = records_of(result)
+    bad, flaky = recs[frames[3].frame_id], recs[frames[4].frame_id]
+    assert (bad["status"], bad["first_status"], bad["error"], bad["n_attempts"]) == ("failed", "failed", "InternalServerError", 2)
+    assert bad["attempts"][0]["calls"][-1]["text"] is None and bad["attempts"][0]["answer"] is None
+    assert bad["attempts"][0]["calls"][-1]["retries"] == 2
+    assert [c["stage"] for c in bad["attempts"][1]["calls"]] == ["intent"]  # the failed stage is redone, not stage 1
+    assert (flaky["status"], flaky["first_status"], flaky["n_attempts"]) == ("ok", "failed", 2)
+    assert flaky["attempts"][0]["error"] == "ServiceUnavailableError"
+    assert all(marker not in req.text and "Error" not in req.text for req in server.requests)
+    assert result.summary["failed"] == 1 and result.summary["api_errors"] == 3
+
+
+def test_unknown_price_gives_null_cost(tmp_path, frames):
+    with FakeOpenAIServer() as server:
+        result = run("openai/no-such-model-xyz", api_base=server.url, frames=frames[:2], output=tmp_path, **FAST)
+    assert all(r["cost_cents"] is None for r in records_of(result).values())
+    assert result.summary["total_cost_cents"] is None and result.summary["frames_cost_unknown"] == 2
+
+
+def test_api_keys_never_appear_in_any_file_the_run_writes(tmp_path, frames, monkeypatch):
+    secret = "sk-proj-NEVERWRITE-abcdef0123456789"
+    monkeypatch.setenv("OPENAI_API_KEY", secret)
+
+    def per_frame(i, stage, n):
+        return Reply.error(400, f"invalid request for key {secret}") if i == 0 else None
+
+    with FakeOpenAIServer(scripted(frames, per_frame)) as server:
+        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", cache=True, **FAST)
+    assert server.requests[0].headers["authorization"] == f"Bearer {secret}"
+    assert records_of(result)[frames[0].frame_id]["status"] == "failed"
+    written = [p for p in (tmp_path / "out").rglob("*") if p.is_file()]
+    assert any(p.name == FRAMES_FILE for p in written) and any(p.suffix == ".sqlite" for p in written)
+    for path in written:
+        assert secret.encode() not in path.read_bytes(), path
+        assert b"NEVERWRITE" not in path.read_bytes(), path
+
+
+def test_a_missing_api_key_fails_before_any_work(tmp_path, frames, monkeypatch):
+    monkeypatch.delenv("OPENAI_API_KEY", raising=False)
+    with pytest.raises(UserError, match="OPENAI_API_KEY"):
+        run("gpt-4o", frames=frames, output=tmp_path / "out", **FAST)
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_rejected_key_stops_the_run_which_stays_resumable(tmp_path, frames):
+    with FakeOpenAIServer(lambda req: Reply.error(401, "bad key")) as server:
+        with pytest.raises(FatalBackendError, match="AuthenticationError"):
+            run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
+    (run_dir,) = [p.parent for p in tmp_path.rglob("manifest.json")]
+    contents = read_run(run_dir)
+    assert contents.records == {} and not contents.complete
+
+
+def test_the_response_cache_is_recorded_per_call(tmp_path, frames):
+    with FakeOpenAIServer() as server:
+        first = run("openai/gpt-4o", api_base=server.url, frames=frames[:2], output=tmp_path, cache=True, **FAST)
+        second = run("openai/gpt-4o", api_base=server.url, frames=frames[:2], output=tmp_path, cache=True, **FAST)
+    assert len(server.requests) == 6  # the second run was served from the cache
+    recs = list(records_of(second).values())
+    assert all(r["cached"] and r["cached_calls"] == 3 and r["cost_cents"] == 0.0 for r in recs)
+    assert not any(r["cached"] for r in records_of(first).values())
+    assert second.summary["cached_calls"] == 6
+    assert second.manifest["backend"]["cache"] == str(tmp_path / "cache.sqlite")
+
+
+def test_many_frames_are_in_flight_at_once(tmp_path):
+    frames = make_frames(tmp_path, 16)
+    with FakeOpenAIServer(latency=0.2) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, concurrency=16, **FAST)
+    # 3 sequential calls of 0.2 s per frame; 16 frames at once take ~0.6 s, one at a time ~9.6 s
+    assert result.summary["wall_seconds"] < 3.0
+    assert result.summary["frames_per_second"] > 5
+
+
+def test_invalid_settings_are_refused_before_any_work(tmp_path, frames):
+    for bad in (dict(reask="sometimes"), dict(max_attempts=0), dict(integrate_method="rk4"), dict(concurrency=0)):
+        with pytest.raises((UserError, ValueError)):
+            run("openai/test-model", api_base="http://127.0.0.1:9/v1", frames=frames, output=tmp_path / "x", **{**FAST, **bad})
+    assert not (tmp_path / "x").exists()
