@@ -5,7 +5,7 @@ and ``AutoProcessor.from_pretrained`` load exactly as they load a real checkpoin
 the real model and processor classes of the family (Qwen2-VL, Qwen2.5-VL,
 Qwen3-VL, Mllama), a byte-level BPE tokenizer trained here on a few sentences
 (every byte is a token, so any text round-trips) with the family's special
-tokens, the family's chat-template shape, and tiny dimensions (hidden size 32,
+tokens, the family's chat-template shape, and tiny dimensions (hidden size 32 by default,
 one or two layers, one vision block, 8-16 px patches) so that each model has a
 few hundred thousand parameters and generates in milliseconds on a CPU.
 
@@ -89,12 +89,20 @@ def _qwen_video_processor(family: str, patch: int):
     return cls(patch_size=patch, temporal_patch_size=2, merge_size=2)
 
 
-def _text(tokenizer, **extra):
+def _text(tokenizer, dims: dict[str, int], **extra):
     """Tiny decoder dimensions shared by the families (a few hundred thousand parameters)."""
     eos, pad = _ids(tokenizer, tokenizer.eos_token, tokenizer.pad_token)
-    return dict(vocab_size=len(tokenizer), hidden_size=32, intermediate_size=64, num_hidden_layers=2,
-                num_attention_heads=4, num_key_value_heads=2, max_position_embeddings=4096,
+    hidden, heads = dims["hidden_size"], dims["heads"]
+    return dict(vocab_size=len(tokenizer), hidden_size=hidden, intermediate_size=2 * hidden, num_hidden_layers=2,
+                num_attention_heads=heads, num_key_value_heads=max(1, heads // 2), max_position_embeddings=4096,
                 bos_token_id=tokenizer.bos_token_id, eos_token_id=eos, pad_token_id=pad, **extra)
+
+
+def _mrope(dims: dict[str, int], **extra) -> dict[str, object]:
+    """Multimodal RoPE over (time, height, width): the sections split half the head dimension."""
+    half = dims["hidden_size"] // dims["heads"] // 2
+    return {"rope_type": "default", "rope_theta": 10000.0, "mrope_section": [half // 2, half // 4, half - half // 2 - half // 4],
+            **extra}
 
 
 def _qwen_special_ids(tokenizer) -> dict[str, int]:
@@ -102,51 +110,49 @@ def _qwen_special_ids(tokenizer) -> dict[str, int]:
     return dict(image_token_id=image, video_token_id=video, vision_start_token_id=start, vision_end_token_id=end)
 
 
-def _build_qwen2_vl(tokenizer):
+def _build_qwen2_vl(tokenizer, dims):
     from transformers import Qwen2VLConfig, Qwen2VLForConditionalGeneration
 
     patch = 8
     config = Qwen2VLConfig(
-        text_config=_text(tokenizer, rope_parameters={"rope_type": "default", "rope_theta": 10000.0,
-                                                      "mrope_section": [2, 1, 1]}),
-        vision_config=dict(depth=1, embed_dim=32, hidden_size=32, num_heads=2, mlp_ratio=2, patch_size=patch,
+        text_config=_text(tokenizer, dims, rope_parameters=_mrope(dims)),
+        vision_config=dict(depth=1, embed_dim=32, hidden_size=dims["hidden_size"], num_heads=2, mlp_ratio=2, patch_size=patch,
                            spatial_merge_size=2, temporal_patch_size=2),
         **_qwen_special_ids(tokenizer))
     return Qwen2VLForConditionalGeneration(config), patch
 
 
-def _build_qwen2_5_vl(tokenizer):
+def _build_qwen2_5_vl(tokenizer, dims):
     from transformers import Qwen2_5_VLConfig, Qwen2_5_VLForConditionalGeneration
 
     patch = 8
     config = Qwen2_5_VLConfig(
-        text_config=_text(tokenizer, rope_parameters={"rope_type": "default", "rope_theta": 10000.0,
-                                                      "mrope_section": [2, 1, 1]}),
+        text_config=_text(tokenizer, dims, rope_parameters=_mrope(dims)),
         vision_config=dict(depth=1, hidden_size=32, intermediate_size=64, num_heads=2, patch_size=patch,
-                           spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=32, window_size=32,
+                           spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"], window_size=32,
                            fullatt_block_indexes=[0]),
         **_qwen_special_ids(tokenizer))
     return Qwen2_5_VLForConditionalGeneration(config), patch
 
 
-def _build_qwen3_vl(tokenizer):
+def _build_qwen3_vl(tokenizer, dims):
     from transformers import Qwen3VLConfig, Qwen3VLForConditionalGeneration
 
     patch = 8
     config = Qwen3VLConfig(
-        text_config=_text(tokenizer, head_dim=8, rope_parameters={"rope_type": "default", "rope_theta": 10000.0,
-                                                                  "mrope_section": [2, 1, 1], "mrope_interleaved": True}),
+        text_config=_text(tokenizer, dims, head_dim=dims["hidden_size"] // dims["heads"],
+                          rope_parameters=_mrope(dims, mrope_interleaved=True)),
         vision_config=dict(depth=1, hidden_size=32, intermediate_size=64, num_heads=2, patch_size=patch,
-                           spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=32,
+                           spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"],
                            num_position_embeddings=64, deepstack_visual_indexes=[0]),
         **_qwen_special_ids(tokenizer))
     return Qwen3VLForConditionalGeneration(config), patch
 
 
-def _qwen_saver(build: Callable, family: str) -> Callable[[Path], None]:
-    def save(path: Path) -> None:
+def _qwen_saver(build: Callable, family: str) -> Callable[[Path, dict[str, int]], None]:
+    def save(path: Path, dims: dict[str, int]) -> None:
         tokenizer = _qwen_tokenizer()
-        model, patch = build(tokenizer)
+        model, patch = build(tokenizer, dims)
         from transformers import Qwen2_5_VLProcessor, Qwen2VLProcessor, Qwen3VLProcessor
 
         cls = {"qwen2_vl": Qwen2VLProcessor, "qwen2_5_vl": Qwen2_5_VLProcessor, "qwen3_vl": Qwen3VLProcessor}[family]
@@ -157,13 +163,13 @@ def _qwen_saver(build: Callable, family: str) -> Callable[[Path], None]:
     return save
 
 
-def _save_mllama(path: Path) -> None:
+def _save_mllama(path: Path, dims: dict[str, int]) -> None:
     from transformers import MllamaConfig, MllamaForConditionalGeneration, MllamaImageProcessor, MllamaProcessor
 
     tokenizer = byte_level_tokenizer(LLAMA_SPECIALS, bos="<|begin_of_text|>", eos="<|eot_id|>",
                                      pad="<|finetune_right_pad_id|>")
     tile = 32
-    text = _text(tokenizer, cross_attention_layers=[1], rope_parameters={"rope_type": "default", "rope_theta": 10000.0})
+    text = _text(tokenizer, dims, cross_attention_layers=[1], rope_parameters={"rope_type": "default", "rope_theta": 10000.0})
     config = MllamaConfig(
         text_config=text,
         vision_config=dict(hidden_size=16, num_hidden_layers=1, num_global_layers=1, attention_heads=2,
@@ -184,7 +190,7 @@ def _save(model, processor, path: Path) -> None:
     processor.save_pretrained(path)
 
 
-BUILDERS: dict[str, Callable[[Path], None]] = {
+BUILDERS: dict[str, Callable[[Path, dict[str, int]], None]] = {
     "qwen2_vl": _qwen_saver(_build_qwen2_vl, "qwen2_vl"),
     "qwen2_5_vl": _qwen_saver(_build_qwen2_5_vl, "qwen2_5_vl"),
     "qwen3_vl": _qwen_saver(_build_qwen3_vl, "qwen3_vl"),
@@ -193,11 +199,15 @@ BUILDERS: dict[str, Callable[[Path], None]] = {
 FAMILIES = tuple(BUILDERS)
 
 
-def build_tiny_model(family: str, path: str | Path, *, seed: int = 0) -> Path:
-    """Write a tiny random-weight checkpoint of ``family`` (one of :data:`FAMILIES`) to ``path``."""
+def build_tiny_model(family: str, path: str | Path, *, seed: int = 0, hidden_size: int = 32, heads: int = 4) -> Path:
+    """Write a tiny random-weight checkpoint of ``family`` (one of :data:`FAMILIES`) to ``path``.
+
+    ``hidden_size`` and ``heads`` size the language model (vLLM's attention kernels want a head
+    dimension of at least 32, e.g. ``hidden_size=128, heads=2``); the vision tower stays tiny.
+    """
     import torch
 
     path = Path(path)
     torch.manual_seed(seed)
-    BUILDERS[family](path)
+    BUILDERS[family](path, {"hidden_size": hidden_size, "heads": heads})
     return path

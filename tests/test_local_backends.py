@@ -263,7 +263,7 @@ def test_without_torch_the_hf_backend_says_which_extra_to_install(monkeypatch):
 
 
 def test_importing_lightemma_and_the_local_backends_does_not_import_torch():
-    code = ("import sys, lightemma, lightemma.backends, lightemma.backends.hf, "
+    code = ("import sys, lightemma, lightemma.backends, lightemma.backends.hf, lightemma.backends.vllm, "
             "lightemma.backends.batching, lightemma.cli.run\n"
             "heavy = sorted(m for m in ('torch', 'transformers', 'vllm') if m in sys.modules)\n"
             "print(heavy)")
@@ -277,3 +277,182 @@ def test_local_options_are_refused_for_an_api_model(dataroot, tmp_path, capsys):
     assert code == 2
     assert "--batch-size" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+
+
+# -- vllm: request building, batching and accounting against a stand-in engine ------------------------
+
+
+class FakeSamplingParams:
+    def __init__(self, *, temperature, max_tokens):
+        self.temperature, self.max_tokens = temperature, max_tokens
+
+
+class FakeLLM:
+    """Stands in for ``vllm.LLM``: records what it is given; answers stage 3 badly in its first stage-3 chat call.
+
+    Its token counts follow vLLM's: ``prompt_token_ids`` includes 100 image tokens when an image is given
+    and ``num_cached_tokens`` is that image prefix from the second request of the same image on.
+    """
+
+    instances = []
+
+    def __init__(self, model, **kwargs):
+        self.model, self.kwargs, self.calls, self.seen, self.action_calls = model, kwargs, [], set(), 0
+        model_type = "qwen2_5_vl" if "mllama" not in str(model) else "mllama"
+        self.llm_engine = type("E", (), {"model_config": type("C", (), {"hf_config": type("H", (), {"model_type": model_type})})})
+        FakeLLM.instances.append(self)
+
+    def chat(self, conversations, sampling_params=None, use_tqdm=True):
+        self.calls.append((conversations, sampling_params, use_tqdm))
+        self.action_calls += any("(v1, c1)" in c[0]["content"][-1]["text"] for c in conversations)
+        return [self._answer(c, sampling_params) for c in conversations]
+
+    def _answer(self, conversation, sampling):
+        (turn,) = conversation
+        parts = turn["content"]
+        image = parts[0]["image_pil"] if parts[0]["type"] == "image_pil" else None
+        text = parts[-1]["text"]
+        key = image.tobytes() if image is not None else b""
+        cached = 100 if key in self.seen else 0
+        self.seen.add(key)
+        if "(v1, c1)" in text:
+            good = "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.4, 0.0), (5.5, 0.0)]"
+            answer = "I would rather not say." if self.action_calls == 1 else good
+        else:
+            answer = f"A road seen in {image.size[0]}x{image.size[1]} pixels." if image else "No image."
+        words = answer.split()[: sampling.max_tokens]
+        completion = type("Completion", (), {"text": " ".join(words), "token_ids": list(range(len(words) + 1))})
+        prompt = list(range(len(text.split()) + (100 if image is not None else 0)))
+        return type("RequestOutput", (), {"prompt_token_ids": prompt, "outputs": [completion], "num_cached_tokens": cached})
+
+
+@pytest.fixture
+def fake_vllm(monkeypatch):
+    """A stand-in ``vllm`` module (``LLM``, ``SamplingParams``), installed as ``sys.modules['vllm']``."""
+    module = type(sys)("vllm")
+    module.LLM, module.SamplingParams, module.__version__ = FakeLLM, FakeSamplingParams, "0.32.0-fake"
+    FakeLLM.instances.clear()
+    monkeypatch.setitem(sys.modules, "vllm", module)
+    return module
+
+
+def vllm_backend(**options):
+    from lightemma.backends.vllm import VLLMBackend
+
+    return VLLMBackend("Qwen/Qwen2.5-VL-7B-Instruct", **options)
+
+
+def test_vllm_sends_one_chat_per_stage_batch_with_the_image_first_and_greedy_sampling(fake_vllm, images):
+    backend = vllm_backend(batch_size=4, batch_window=1.0, tensor_parallel_size=2, max_pixels=40 * 30)
+    (llm,) = FakeLLM.instances
+    assert llm.model == "Qwen/Qwen2.5-VL-7B-Instruct"
+    assert llm.kwargs["limit_mm_per_prompt"] == {"image": 1} and llm.kwargs["enable_prefix_caching"] is True
+    assert (llm.kwargs["tensor_parallel_size"], llm.kwargs["gpu_memory_utilization"]) == (2, 0.9)
+    requests = requests_for(images, max_tokens=7)
+    results = answer(backend, requests)
+    assert [len(c[0]) for c in llm.calls] == [4, 2]
+    for conversations, sampling, use_tqdm in llm.calls:
+        assert (sampling.temperature, sampling.max_tokens, use_tqdm) == (0.0, 7, False)
+        for conversation in conversations:
+            (turn,) = conversation
+            assert turn["role"] == "user" and [p["type"] for p in turn["content"]] == ["image_pil", "text"]
+            w, h = turn["content"][0]["image_pil"].size
+            assert w * h <= 40 * 30
+    sent = [c for conversations, _, _ in llm.calls for c in conversations]
+    assert [c[0]["content"][1]["text"] for c in sent] == [r.text for r in requests]
+    for result, conversation in zip(results, sent):
+        words = len(conversation[0]["content"][1]["text"].split())
+        assert (result.input_tokens, result.output_tokens, result.cost_cents) == (words + 100, len(result.text.split()) + 1, None)
+        assert result.text.startswith("A road seen in") and result.seconds > 0
+    info = backend.info
+    assert (info["backend"], info["gpus"], info["tensor_parallel_size"], info["model_type"], info["vllm"]) == \
+        ("vllm", 2, 2, "qwen2_5_vl", "0.32.0-fake")
+    assert info["engine"]["limit_mm_per_prompt"] == {"image": 1} and json.dumps(info)
+
+
+def test_lightemma_run_with_the_vllm_backend_reasks_and_accounts_like_any_backend(fake_vllm, dataroot, tmp_path, capsys):
+    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
+                     "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
+                     "--tensor-parallel-size", "1", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    contents = read_run(run_dir)
+    assert contents.manifest["backend"]["backend"] == "vllm"
+    assert contents.manifest["backend"]["model"] == "Qwen/Qwen2.5-VL-7B-Instruct"  # the registry name's checkpoint
+    (llm,) = FakeLLM.instances
+    # stage-synchronous: scene ×4, intent ×4, actions ×4 (all bad), re-asked actions ×4 (all good)
+    assert [len(c[0]) for c in llm.calls] == [4, 4, 4, 4]
+    for record in contents.records.values():
+        assert (record["status"], record["first_status"], record["n_attempts"]) == ("ok", "failed", 2)
+        calls = [c for a in record["attempts"] for c in a["calls"]]
+        assert [c["stage"] for c in calls] == ["scene", "intent", "actions", "actions"]
+        assert record["input_tokens"] == sum(c["input_tokens"] for c in calls) > 400
+        assert record["cost_cents"] is None and np.allclose(record["actions"][0], [5.0, 0.0])
+
+
+def test_vllm_refuses_llama_3_2_vision_and_points_to_hf(fake_vllm, tmp_path):
+    from lightemma.backends import create_backend
+
+    with pytest.raises(UserError, match="--backend hf"):
+        create_backend("llama-3.2-11b", backend="vllm")  # registry name -> meta-llama/Llama-3.2-11B-Vision-Instruct
+    checkpoint = tmp_path / "my-finetune"
+    checkpoint.mkdir()
+    (checkpoint / "config.json").write_text(json.dumps({"model_type": "mllama"}))
+    with pytest.raises(UserError, match="mllama.*--backend hf"):
+        create_backend(str(checkpoint), backend="vllm")
+    with pytest.raises(UserError, match="--backend hf"):  # caught from the engine's config too
+        create_backend(str(tmp_path / "renamed-mllama"), backend="vllm")
+    assert not [i for i in FakeLLM.instances if "Llama-3.2" in i.model or i.model == str(checkpoint)]
+
+
+def test_a_failing_vllm_batch_gives_error_results(fake_vllm, images):
+    backend = vllm_backend(batch_size=2)
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("CUDA error: an illegal memory access was encountered")
+
+    FakeLLM.instances[0].chat = broken
+    results = answer(backend, requests_for(images)[:2], together=True)
+    assert [(r.ok, r.error) for r in results] == [(False, "RuntimeError")] * 2
+    assert "illegal memory access" in results[0].error_message
+
+
+def test_vllm_counts_prompt_tokens_served_from_the_prefix_cache(fake_vllm, images):
+    backend = vllm_backend(batch_size=8)
+    first = requests_for(images[:2], stage="scene")
+    second = requests_for(images[:2], stage="intent")
+
+    async def main():
+        await backend.generate(first)
+        await backend.generate(second)
+        await backend.aclose()
+
+    asyncio.run(main())
+    assert backend.stats["prefix_cached_tokens"] == 2 * 100 and backend.stats["batches"] == 2
+
+
+def test_vllm_bad_options_and_missing_vllm_are_user_errors(monkeypatch):
+    from lightemma.backends.vllm import VLLMBackend
+
+    with pytest.raises(UserError, match="--tensor-parallel-size"):
+        VLLMBackend("Qwen/Qwen2-VL-7B-Instruct", tensor_parallel_size=0)
+    with pytest.raises(UserError, match="--gpu-memory-utilization"):
+        VLLMBackend("Qwen/Qwen2-VL-7B-Instruct", gpu_memory_utilization=1.5)
+    monkeypatch.setitem(sys.modules, "vllm", None)
+    with pytest.raises(UserError, match=r"pip install 'lightemma\[vllm\]'"):
+        VLLMBackend("Qwen/Qwen2-VL-7B-Instruct")
+
+
+@pytest.mark.gpu
+def test_vllm_end_to_end_on_a_gpu(dataroot, tmp_path):
+    """Only where vLLM is installed (its own environment, with a GPU): a tiny Qwen2-VL through `lightemma run`."""
+    pytest.importorskip("vllm")
+    path = build_tiny_model("qwen2_vl", tmp_path / "tiny", hidden_size=128, heads=2)
+    code = cli_main(["run", "--backend", "vllm", "--model", str(path), "--dataroot", str(dataroot), "--version", "v1.0-mini",
+                     "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path / "out"), "--max-tokens", "8",
+                     "--max-attempts", "2", "--gpu-memory-utilization", "0.3", "--no-progress"])
+    assert code == 0
+    (run_dir,) = [p.parent for p in (tmp_path / "out").glob("*/*/manifest.json")]
+    records = list(read_run(run_dir).records.values())
+    assert len(records) == N_FRAMES
+    assert all(r["input_tokens"] > 0 and r["output_tokens"] > 0 and r["cost_cents"] is None for r in records)
