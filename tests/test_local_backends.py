@@ -32,6 +32,17 @@ MAX_ATTEMPTS = 3
 N_FRAMES = 4  # one synthetic scene of 18 keyframes gives 4 reference frames
 
 
+@pytest.fixture(scope="module", autouse=True)
+def one_torch_thread():
+    """Tiny models are overhead-bound: one intra-op thread is 3x faster than two and immune to busy neighbours."""
+    import torch
+
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.fixture(scope="module")
 def dataroot(tmp_path_factory):
     root = tmp_path_factory.mktemp("synth")
