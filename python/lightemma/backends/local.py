@@ -18,7 +18,7 @@ from typing import Any
 from lightemma.backends.base import ChatRequest
 from lightemma.errors import UserError
 
-# Llama-3.2-Vision (model_type "mllama") runs on hf only: current vLLM (0.32) removed it.
+# Llama-3.2-Vision (model_type "mllama") runs on hf only: current vLLM (0.32) does not support it.
 MLLAMA_MODEL_TYPE = "mllama"
 
 

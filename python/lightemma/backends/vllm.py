@@ -8,9 +8,8 @@ batching. Each conversation is one user turn with the image first
 (:mod:`lightemma.backends.local`), and prefix caching is on, so the template
 header and image of a frame are computed once and reused by its later stages.
 
-Not supported by current vLLM (0.32): Llama-3.2-Vision (``mllama``), which was
-removed together with vLLM's encoder-decoder support; such models are refused
-with a pointer to ``--backend hf``. An OpenAI-compatible ``vllm serve`` server
+Not supported by current vLLM (0.32): Llama-3.2-Vision (``mllama``); such
+models are refused with a pointer to ``--backend hf``. An OpenAI-compatible ``vllm serve`` server
 is reached instead through the API backend with ``--api-base``.
 
 vLLM needs a GPU and its own environment (it pins torch and transformers): it
@@ -31,8 +30,7 @@ from lightemma.errors import UserError
 
 DEFAULT_BATCH_SIZE = 64
 DEFAULT_BATCH_WINDOW = 0.02
-MLLAMA_REFUSAL = ("{model} is Llama-3.2-Vision (mllama), which vLLM 0.32 does not support "
-                  "(vLLM removed its encoder-decoder models); run it with --backend hf")
+MLLAMA_REFUSAL = "{model} is Llama-3.2-Vision (mllama), which vLLM 0.32 does not support; run it with --backend hf"
 
 
 class VLLMBackend:
