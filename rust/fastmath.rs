@@ -31,9 +31,22 @@ const C6: f64 = -1.135_964_755_778_819_5e-11;
 /// (sin x, cos x).
 #[inline(always)]
 pub fn sin_cos(x: f64) -> (f64, f64) {
-    if x.is_nan() || x.abs() > FAST_LIMIT {
-        return x.sin_cos(); // huge or NaN
+    if in_fast_range(x) {
+        sin_cos_reduced(x)
+    } else {
+        x.sin_cos() // huge or NaN
     }
+}
+
+/// Whether [`sin_cos_reduced`] is accurate for `x` (false for NaN).
+#[inline(always)]
+pub fn in_fast_range(x: f64) -> bool {
+    x.abs() <= FAST_LIMIT
+}
+
+/// The branch-free polynomial path of [`sin_cos`], valid where [`in_fast_range`] holds.
+#[inline(always)]
+pub fn sin_cos_reduced(x: f64) -> (f64, f64) {
     // round to nearest with the 1.5·2^52 trick: `f64::round` is a libm call without SSE4.1
     let j = (x * TWO_OVER_PI + ROUNDER) - ROUNDER;
     let r = ((x - j * PIO2_1) - j * PIO2_2) - j * PIO2_3;

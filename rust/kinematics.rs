@@ -76,19 +76,37 @@ const LANES: usize = 8;
 fn integrate_lanes(actions: &[f64], steps: usize, dt: f64, method: Method, out: &mut [f64]) {
     let frame_len = 2 * steps;
     let (mut x, mut y, mut heading) = ([0.0_f64; LANES], [0.0_f64; LANES], [0.0_f64; LANES]);
+    let (mut v, mut turn, mut sin, mut cos) = (
+        [0.0_f64; LANES],
+        [0.0_f64; LANES],
+        [0.0_f64; LANES],
+        [0.0_f64; LANES],
+    );
     for k in 0..steps {
+        let mut direction = [0.0_f64; LANES];
         for lane in 0..LANES {
             let at = lane * frame_len + 2 * k;
-            let (v, kappa) = (actions[at], actions[at + 1]);
-            let turn = kappa * v * dt;
-            let direction = match method {
+            v[lane] = actions[at];
+            turn[lane] = actions[at + 1] * v[lane] * dt;
+            direction[lane] = match method {
                 Method::Euler => heading[lane],
-                Method::Midpoint => heading[lane] + 0.5 * turn,
+                Method::Midpoint => heading[lane] + 0.5 * turn[lane],
             };
-            let (sin, cos) = fastmath::sin_cos(direction);
-            x[lane] += v * cos * dt;
-            y[lane] += v * sin * dt;
-            heading[lane] += turn;
+        }
+        // branch-free so that the lanes vectorise; rare out-of-range headings are redone
+        for lane in 0..LANES {
+            (sin[lane], cos[lane]) = fastmath::sin_cos_reduced(direction[lane]);
+        }
+        if !direction.iter().all(|&d| fastmath::in_fast_range(d)) {
+            for lane in 0..LANES {
+                (sin[lane], cos[lane]) = fastmath::sin_cos(direction[lane]);
+            }
+        }
+        for lane in 0..LANES {
+            x[lane] += v[lane] * cos[lane] * dt;
+            y[lane] += v[lane] * sin[lane] * dt;
+            heading[lane] += turn[lane];
+            let at = lane * frame_len + 2 * k;
             out[at] = x[lane];
             out[at + 1] = y[lane];
         }

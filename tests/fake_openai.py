@@ -1,5 +1,9 @@
 """A real HTTP server on 127.0.0.1 that speaks the OpenAI chat-completions protocol.
 
+It also answers the native protocols of the providers the registry routes natively through
+litellm: Anthropic messages (``POST …/v1/messages``) and Gemini ``…:generateContent``; the
+protocol is chosen by the request path, and the same script drives all three.
+
 Scripted per request, for tests and benchmarks of the API backend — no internet:
 
     def script(req: Received) -> Reply:
@@ -48,17 +52,29 @@ class Received:
     index: int  # arrival order, from 0
 
     @property
+    def protocol(self) -> str:
+        """``openai``, ``anthropic`` or ``gemini``, from the path."""
+        if ":generateContent" in self.path:
+            return "gemini"
+        if self.path.split("?")[0].endswith("/messages"):
+            return "anthropic"
+        return "openai"
+
+    def _parts(self) -> list[dict[str, Any]]:
+        """The content parts of the last user turn, whatever the protocol."""
+        if self.protocol == "gemini":
+            return list(self.body.get("contents", [{}])[-1].get("parts", []))
+        content = self.body.get("messages", [{}])[-1].get("content", "")
+        return [{"type": "text", "text": content}] if isinstance(content, str) else list(content)
+
+    @property
     def text(self) -> str:
         """The concatenated text parts of the last user message."""
-        content = self.body.get("messages", [{}])[-1].get("content", "")
-        if isinstance(content, str):
-            return content
-        return "\n".join(part.get("text", "") for part in content if part.get("type") == "text")
+        return "\n".join(p["text"] for p in self._parts() if isinstance(p.get("text"), str))
 
     @property
     def has_image(self) -> bool:
-        content = self.body.get("messages", [{}])[-1].get("content", "")
-        return isinstance(content, list) and any(p.get("type") == "image_url" for p in content)
+        return any(p.get("type") in ("image_url", "image") or "inline_data" in p or "inlineData" in p for p in self._parts())
 
     @property
     def stage(self) -> str:
@@ -100,6 +116,15 @@ Script = Callable[[Received], Reply] | Sequence[Reply]
 
 
 def _completion(req: Received, reply: Reply) -> dict[str, Any]:
+    """A successful answer in the request's protocol."""
+    if req.protocol == "anthropic":
+        return {"id": f"msg_{req.index}", "type": "message", "role": "assistant", "model": req.body.get("model", "fake"),
+                "content": [{"type": "text", "text": reply.content}], "stop_reason": "end_turn", "stop_sequence": None,
+                "usage": {"input_tokens": reply.prompt_tokens, "output_tokens": reply.completion_tokens}}
+    if req.protocol == "gemini":
+        return {"candidates": [{"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": "STOP", "index": 0}],
+                "usageMetadata": {"promptTokenCount": reply.prompt_tokens, "candidatesTokenCount": reply.completion_tokens,
+                                  "totalTokenCount": reply.prompt_tokens + reply.completion_tokens}}
     return {
         "id": f"chatcmpl-{req.index}",
         "object": "chat.completion",
@@ -137,9 +162,15 @@ class FakeOpenAIServer:
         self._thread: threading.Thread | None = None
 
     @property
-    def url(self) -> str:
+    def root_url(self) -> str:
+        """``http://127.0.0.1:PORT`` (an ``api_base`` for the native protocols)."""
         host, port = self._httpd.server_address[:2]
-        return f"http://{host}:{port}/v1"
+        return f"http://{host}:{port}"
+
+    @property
+    def url(self) -> str:
+        """``http://127.0.0.1:PORT/v1``: an OpenAI ``api_base``."""
+        return f"{self.root_url}/v1"
 
     def _handler_class(self) -> type[BaseHTTPRequestHandler]:
         server = self

@@ -47,18 +47,3 @@ class FrameIndex:
         url = next(p["image_url"]["url"] for p in content if p["type"] == "image_url")
         return self._by_url[url]
 
-
-def main(argv: list[str]) -> int:
-    """``python memframes.py OUTPUT API_BASE N IMAGE_DIR``: a run over N in-memory frames (for kill tests)."""
-    from lightemma.pipeline import run
-
-    output, api_base, n, images = argv
-    run("openai/test-model", api_base=api_base, frames=make_frames(Path(images), int(n)), output=output,
-        concurrency=2, progress=False, backoff_base=0.01, backoff_cap=0.05)
-    return 0
-
-
-if __name__ == "__main__":
-    import sys
-
-    sys.exit(main(sys.argv[1:]))

@@ -13,8 +13,10 @@ from lightemma.backends.api import FatalBackendError
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import RETRYABLE, RetryPolicy, short_message
 from lightemma.cache import ResponseCache
+from lightemma.errors import UserError
 
 FAST = RetryPolicy(max_retries=3, base=0.01, cap=0.05)
+TRANSPORTS = pytest.mark.parametrize("transport", ["litellm", "direct"])
 
 
 @pytest.fixture
@@ -29,15 +31,16 @@ def ask(backend, text="describe", image=None, params=GenerationParams()):
     return asyncio.run(backend.generate([req]))[0]
 
 
-def test_a_call_sends_one_image_as_data_url_with_temperature_0_and_512_tokens(image):
+@TRANSPORTS
+def test_a_call_sends_one_image_as_data_url_with_temperature_0_and_512_tokens(image, transport):
     with FakeOpenAIServer() as server:
-        backend = create_backend("openai/gpt-4o", api_base=server.url, retry=FAST)
+        backend = create_backend("openai/gpt-4o", api_base=server.url, retry=FAST, transport=transport)
         result = ask(backend, image=image)
     assert result.ok and result.text.startswith("A two-lane urban road")
     assert (result.input_tokens, result.output_tokens, result.retries, result.cached) == (1000, 50, 0, False)
     assert result.cost_cents == pytest.approx((1000 * 2.5e-6 + 50 * 1e-5) * 100)  # litellm's gpt-4o price
     body = server.requests[0].body
-    assert body["temperature"] == 0 and body["max_tokens"] == 512
+    assert body["model"] == "gpt-4o" and body["temperature"] == 0 and body["max_tokens"] == 512
     images = [p for p in body["messages"][0]["content"] if p["type"] == "image_url"]
     assert len(images) == 1
     assert images[0]["image_url"]["url"] == "data:image/jpeg;base64," + base64.b64encode(image.read_bytes()).decode()
@@ -55,9 +58,10 @@ def test_models_that_reject_temperature_0_get_none_sent(image):
     Reply.error(429, retry_after=0.3), Reply.error(500), Reply.error(503), Reply(content="x" * 400, truncate=True),
     Reply(content="late", delay=1.5),
 ], ids=["429-retry-after", "500", "503", "truncated-body", "timeout"])
-def test_transient_failures_are_retried_then_succeed(first):
+@TRANSPORTS
+def test_transient_failures_are_retried_then_succeed(first, transport):
     with FakeOpenAIServer([first]) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=0.5)
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=0.5, transport=transport)
         start = time.perf_counter()
         result = ask(backend)
         elapsed = time.perf_counter() - start
@@ -69,10 +73,11 @@ def test_transient_failures_are_retried_then_succeed(first):
 @pytest.mark.parametrize(("reply", "error"), [
     (Reply.error(500), "InternalServerError"), (Reply.error(429), "RateLimitError"),
     (Reply(content="x" * 400, truncate=True), "APIConnectionError"), (Reply(content="late", delay=0.8), "Timeout"),
-])
-def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, error):
+], ids=["500", "429", "truncated", "timeout"])
+@TRANSPORTS
+def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, error, transport):
     with FakeOpenAIServer(lambda req: reply) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=0.3)
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=0.3, transport=transport)
         result = ask(backend)
     assert result.text is None and not result.ok
     assert result.error == error and error in RETRYABLE
@@ -80,23 +85,26 @@ def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, 
     assert result.error_message and len(result.error_message) <= 301
 
 
-def test_non_retryable_request_errors_fail_at_once():
+@TRANSPORTS
+def test_non_retryable_request_errors_fail_at_once(transport):
     with FakeOpenAIServer(lambda req: Reply.error(400, "bad image")) as server:
-        result = ask(create_backend("openai/test-model", api_base=server.url, retry=FAST))
+        result = ask(create_backend("openai/test-model", api_base=server.url, retry=FAST, transport=transport))
     assert result.error == "BadRequestError" and result.retries == 0 and len(server.requests) == 1
 
 
-def test_an_empty_answer_is_an_error_not_text():
+@TRANSPORTS
+def test_an_empty_answer_is_an_error_not_text(transport):
     with FakeOpenAIServer(lambda req: Reply(content="")) as server:
-        result = ask(create_backend("openai/test-model", api_base=server.url, retry=RetryPolicy(max_retries=1, base=0.01)))
+        result = ask(create_backend("openai/test-model", api_base=server.url, retry=RetryPolicy(max_retries=1, base=0.01), transport=transport))
     assert result.error == "EmptyResponse" and result.text is None and len(server.requests) == 2
 
 
-def test_a_rejected_key_stops_the_run_and_the_key_is_not_in_the_message(monkeypatch):
+@TRANSPORTS
+def test_a_rejected_key_stops_the_run_and_the_key_is_not_in_the_message(monkeypatch, transport):
     secret = "sk-test-TOPSECRET-0123456789"
     monkeypatch.setenv("OPENAI_API_KEY", secret)
     with FakeOpenAIServer(lambda req: Reply.error(401, f"Incorrect API key provided: {secret}")) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST)
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, transport=transport)
         with pytest.raises(FatalBackendError) as info:
             ask(backend)
     assert server.requests[0].headers["authorization"] == f"Bearer {secret}"
@@ -174,3 +182,36 @@ def test_server_pause_holds_every_caller():
         return time.monotonic() - start
 
     assert asyncio.run(go()) >= 0.28
+
+
+NATIVE = [
+    ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", "/v1/messages", (1000 * 3e-6 + 50 * 1.5e-5) * 100),
+    ("claude-3.7-sonnet", "ANTHROPIC_API_KEY", "/v1/messages", (1000 * 3e-6 + 50 * 15e-6) * 100),  # registry price
+    ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", "/models/gemini-2.5-flash:generateContent", (1000 * 3e-7 + 50 * 2.5e-6) * 100),
+    ("Gemini-2.0-Flash", "GEMINI_API_KEY", "/models/gemini-2.0-flash:generateContent", (1000 * 0.1e-6 + 50 * 0.4e-6) * 100),
+]
+
+
+@pytest.mark.parametrize(("model", "variable", "path", "cost"), NATIVE, ids=[n[0] for n in NATIVE])
+def test_native_provider_protocols_through_litellm(monkeypatch, image, model, variable, path, cost):
+    monkeypatch.setenv(variable, "native-test-key-0123456789")
+    with FakeOpenAIServer([Reply.error(429, retry_after=0.05)]) as server:
+        backend = create_backend(model, api_base=server.root_url, retry=FAST)
+        result = ask(backend, image=image)
+    assert result.ok and result.text.startswith("A two-lane") and result.retries == 1
+    assert (result.input_tokens, result.output_tokens) == (1000, 50)
+    assert result.cost_cents == pytest.approx(cost)
+    req = server.requests[-1]
+    assert req.path.split("?")[0].endswith(path) and req.has_image and req.text == "describe"
+    if req.protocol == "anthropic":
+        assert req.body["temperature"] == 0 and req.body["max_tokens"] == 512
+    else:
+        config = req.body["generationConfig"]
+        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == 512, config
+
+
+def test_direct_transport_needs_an_openai_compatible_endpoint():
+    with pytest.raises(UserError, match="transport 'direct' needs --api-base"):
+        create_backend("anthropic/claude-sonnet-4-6", api_base="http://127.0.0.1:9", transport="direct", api_key="x")
+    with pytest.raises(UserError, match="unknown transport"):
+        create_backend("openai/m", api_base="http://127.0.0.1:9/v1", transport="carrier-pigeon")

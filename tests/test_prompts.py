@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from lightemma.errors import UserError
-from lightemma.prompts import DEFAULT_PROMPT_SET, PromptSet, available_prompt_sets, content_hash, format_history, load_prompt_set
+from lightemma.frames import format_history
+from lightemma.prompts import DEFAULT_PROMPT_SET, PromptSet, available_prompt_sets, content_hash, load_prompt_set
 
 
 def test_default_set_is_shipped_as_package_data_and_hashed_over_its_content():

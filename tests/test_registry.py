@@ -110,6 +110,9 @@ def test_missing_api_key_names_the_variable(monkeypatch, model, variable):
         monkeypatch.delenv(name, raising=False)
     with pytest.raises(UserError, match=variable):
         create_backend(model)
+    monkeypatch.setenv(variable, "")  # set but empty is missing too
+    with pytest.raises(UserError, match=variable):
+        create_backend(model)
 
 
 def test_openai_compatible_endpoint_needs_no_key(monkeypatch):

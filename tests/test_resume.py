@@ -1,7 +1,6 @@
 """Crash safety and resume: SIGKILL mid-run, truncated tails, --retry-failed, prompt-hash guard."""
 
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -18,7 +17,6 @@ from lightemma.pipeline import resume, run
 from lightemma.runs.store import FRAMES_FILE, read_manifest, read_run, update_manifest
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, progress=False)
-HERE = Path(__file__).parent
 
 
 def lines_of(run_dir):
@@ -35,18 +33,23 @@ def wait_for_lines(path, n, timeout=30.0):
     raise AssertionError(f"{path} never reached {n} lines")
 
 
-def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path):
-    n = 12
-    frames = make_frames(tmp_path, n)
+def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path, synth_root):
+    """`lightemma run` killed with SIGKILL after a few frames; `--resume RUN_DIR` alone finishes it."""
+    import lightemma
+
+    frame_ids = lightemma.load_frames(synth_root, "v1.0-mini", split="all").frame_ids
+    n = len(frame_ids)
+    out = tmp_path / "out"
     with FakeOpenAIServer(latency=0.05) as server:
-        env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(HERE), os.environ.get("PYTHONPATH", "")])}
-        proc = subprocess.Popen([sys.executable, str(HERE / "memframes.py"), str(tmp_path / "out"), server.url, str(n), str(tmp_path)],
-                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        command = [sys.executable, "-m", "lightemma", "run", "--model", "openai/test-model", "--api-base", server.url,
+                   "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--concurrency", "2",
+                   "--output", str(out), "--no-progress"]
+        proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             deadline = time.monotonic() + 60
-            while not list((tmp_path / "out").rglob(FRAMES_FILE)) and time.monotonic() < deadline:
+            while not list(out.rglob(FRAMES_FILE)) and time.monotonic() < deadline:
                 time.sleep(0.02)
-            (frames_file,) = list((tmp_path / "out").rglob(FRAMES_FILE))
+            (frames_file,) = list(out.rglob(FRAMES_FILE))
             wait_for_lines(frames_file, 3)
             proc.send_signal(signal.SIGKILL)
             proc.wait(timeout=10)
@@ -55,19 +58,24 @@ def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path):
                 proc.kill()
         run_dir = frames_file.parent
         killed = read_run(run_dir)
+        assert proc.returncode == -signal.SIGKILL
         assert not killed.complete and 3 <= len(killed.records) < n, proc.stderr.read().decode()[-2000:]
         # a crash in the middle of a write leaves a fragment: simulate one on top of the kill
         with open(frames_file, "ab") as fh:
-            fh.write(b'{"frame_id": "scene-0000/tok')
+            fh.write(b'{"frame_id": "synth-0000-cruise/tok')
         assert read_run(run_dir).truncated_tail
-        result = resume(run_dir, frames=frames, **{k: v for k, v in FAST.items() if k == "progress"})
-    assert result.frames_run == n - len(killed.records)
+        before = len(server.requests)
+        resumed = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--no-progress"],
+                                 capture_output=True, text=True, timeout=120)
+        assert resumed.returncode == 0, resumed.stderr
+    assert f"{len(killed.records)} frame(s) recorded, {n - len(killed.records)} to run" in resumed.stderr
+    assert len(server.requests) - before == 3 * (n - len(killed.records))
     counts = Counter(rec["frame_id"] for rec in lines_of(run_dir))
-    assert counts == Counter(f.frame_id for f in frames)  # every frame exactly once, no corrupt line
+    assert counts == Counter(frame_ids)  # every frame exactly once, no corrupt line
     final = read_run(run_dir)
     assert final.complete and not final.truncated_tail and not final.corrupt_lines and final.duplicates == 0
     assert [s["kind"] for s in read_manifest(run_dir)["sessions"]] == ["run", "resume"]
-    assert result.summary["frames"] == n and result.summary["ok"] == n
+    assert final.manifest["summary"]["frames"] == n and final.manifest["summary"]["ok"] == n
 
 
 def test_resume_after_a_truncated_file_redoes_only_missing_frames(tmp_path):

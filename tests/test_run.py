@@ -47,9 +47,10 @@ def records_of(result, frames=None):
     return records if frames is None else [records[f.frame_id] for f in frames]
 
 
-def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames):
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames, transport):
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", concurrency=4, **FAST)
+        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", concurrency=4, transport=transport, **FAST)
     records = records_of(result)
     assert sorted(records) == sorted(f.frame_id for f in frames)
     assert server.stages().count("scene") == server.stages().count("intent") == server.stages().count("actions") == 8
@@ -63,6 +64,7 @@ def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames):
         assert rec["cost_cents"] == pytest.approx(3 * (1000 * 2.5e-6 + 50 * 1e-5) * 100)
         assert [c["stage"] for c in rec["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
     manifest = result.manifest
+    assert manifest["backend"]["transport"] == transport and manifest["config"]["transport"] == transport
     assert manifest["prompt_set"] == load_prompt_set().describe()
     assert manifest["params"]["sent"] == {"temperature": 0.0, "max_tokens": 512}
     assert manifest["params"]["integrate_method"] == "euler" and manifest["finished_at"]
@@ -223,3 +225,47 @@ def test_invalid_settings_are_refused_before_any_work(tmp_path, frames):
         with pytest.raises((UserError, ValueError)):
             run("openai/test-model", api_base="http://127.0.0.1:9/v1", frames=frames, output=tmp_path / "x", **{**FAST, **bad})
     assert not (tmp_path / "x").exists()
+
+
+def cli(*args, env=None):
+    """Run ``python -m lightemma`` in a subprocess; returns the CompletedProcess."""
+    import subprocess
+    import sys
+
+    merged = {**os.environ, **(env or {})}
+    return subprocess.run([sys.executable, "-m", "lightemma", *map(str, args)], capture_output=True, text=True, timeout=120,
+                          env={k: v for k, v in merged.items() if v is not None})
+
+
+def test_cli_run_over_a_synthetic_dataset(tmp_path, synth_root):
+    with FakeOpenAIServer() as server:
+        done = cli("run", "--model", "openai/gpt-4o", "--api-base", server.url, "--dataroot", synth_root, "--version", "v1.0-mini",
+                   "--split", "all", "--limit", 10, "--concurrency", 4, "--output", tmp_path, "--no-progress")
+    assert done.returncode == 0, done.stderr
+    assert "FE" in done.stdout and "ADE avg" in done.stdout and "run directory:" in done.stderr
+    (run_dir,) = [p.parent for p in tmp_path.rglob("manifest.json")]
+    assert run_dir.parent.name == "openai--gpt-4o"
+    contents = read_run(run_dir)
+    assert len(contents.records) == 10 and contents.complete
+    frames = lightemma.load_frames(synth_root, "v1.0-mini", split="all").head(10)
+    assert set(contents.records) == set(frames.frame_ids)
+    manifest = contents.manifest
+    assert manifest["dataset"]["version"] == "v1.0-mini" and manifest["dataset"]["n_frames"] == 10
+    assert manifest["config"]["dataset"]["limit"] == 10
+    rec = contents.records[frames.frame_ids[0]]
+    assert np.allclose(rec["gt_positions"], frames[0].gt_positions)
+    assert lightemma.frames.format_history(frames[0].history_actions) in server.requests[1].text or any(
+        lightemma.frames.format_history(frames[0].history_actions) in r.text for r in server.requests)
+
+
+def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_root):
+    env = {"OPENAI_API_KEY": None}
+    done = cli("run", "--model", "gpt-4o", "--dataroot", synth_root, "--version", "v1.0-mini", "--split", "all",
+               "--output", tmp_path, env=env)
+    assert done.returncode == 2 and "OPENAI_API_KEY" in done.stderr and "Traceback" not in done.stderr
+    assert not list(tmp_path.iterdir())
+    assert "OPENAI_API_KEY" in cli("run", "--model", "gpt-4o", "--dataroot", synth_root, env={"OPENAI_API_KEY": " "}).stderr
+    done = cli("run", "--retry-failed", "--model", "gpt-4o", "--dataroot", synth_root)
+    assert done.returncode == 2 and "--retry-failed needs --resume" in done.stderr
+    done = cli("run", "--resume", tmp_path, "--model", "gpt-4o")
+    assert done.returncode == 2 and "drop --model" in done.stderr

@@ -36,6 +36,9 @@ litellm.telemetry = False
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
+OPENAI_COMPATIBLE = ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "text-completion-openai")
+# The providers of the paper's API models; an empty variable counts as missing.
+PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 
 
@@ -58,13 +61,17 @@ def require_api_key(model: str, api_base: str | None = None) -> str | None:
     a :class:`UserError` naming the environment variable(s).
     """
     provider = _provider(model)
-    if api_base and provider in ("openai", "hosted_vllm", "text-completion-openai"):
+    if api_base and provider in OPENAI_COMPATIBLE:
         return os.environ.get("OPENAI_API_KEY") or NO_KEY
     if api_base:
         return None  # a custom base for another provider: litellm reads that provider's variables
-    check = litellm.validate_environment(model=model)
-    missing = check.get("missing_keys") or []
-    if not check.get("keys_in_environment") and missing:
+    names = PROVIDER_KEYS.get(provider or "")
+    if names is not None:
+        missing = [] if any(os.environ.get(n, "").strip() for n in names) else list(names)
+    else:
+        check = litellm.validate_environment(model=model)
+        missing = [] if check.get("keys_in_environment") else list(check.get("missing_keys") or [])
+    if missing:
         names = " or ".join(missing)
         raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
     return None
@@ -120,6 +127,7 @@ class APIBackend:
         rpm: float | None = None,
         tpm: float | None = None,
         cache: ResponseCache | None = None,
+        transport: str = "litellm",
     ) -> None:
         self.model_info = resolve(model) if isinstance(model, str) else model
         self.api_base = api_base
@@ -134,6 +142,16 @@ class APIBackend:
         self._price = price_per_token(self.model_info)
         self._litellm_prices = True  # switched off after litellm fails to price this model once
         self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
+        self.transport = transport
+        self._http = None
+        if transport == "direct":
+            if not api_base or _provider(self.model) not in OPENAI_COMPATIBLE:
+                raise UserError(f"transport 'direct' needs --api-base and an OpenAI-compatible model string (openai/NAME), got {self.model!r}")
+            from lightemma.backends.openai_http import OpenAIHTTPClient
+
+            self._http = OpenAIHTTPClient(api_base, self._api_key, self.timeout)
+        elif transport != "litellm":
+            raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
 
     def _supports(self, param: str) -> bool:
         try:
@@ -153,12 +171,14 @@ class APIBackend:
     def info(self) -> Mapping[str, Any]:
         return {
             "kind": "api",
+            "transport": self.transport,
             "model": self.model,
             "api_base": self.api_base,
             "registry": self.model_info.to_dict(),
             "litellm_version": _litellm_version(),
             "token_counting": "provider-reported usage (prompt_tokens / completion_tokens)",
-            "cost": "litellm.completion_cost (bundled price list), else the registry's provider price",
+            "cost": ("litellm's bundled price list, else the registry's provider price" if self.transport == "litellm"
+                     else "price list × provider-reported tokens (litellm's bundled list, else the registry's)"),
             "temperature_sent": self._sends_temperature,
             "timeout_s": self.timeout,
             "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap},
@@ -200,10 +220,7 @@ class APIBackend:
         while True:
             await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0)
             try:
-                response = await litellm.acompletion(
-                    model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
-                    timeout=self.timeout, num_retries=0, max_retries=0, **params,
-                )
+                result = await self._send(messages, params, start, retries)
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - every provider error becomes a recorded error class
@@ -219,7 +236,6 @@ class APIBackend:
                     continue
                 return ChatResult(text=None, error=err, error_message=short_message(exc, secrets=self._secrets),
                                   seconds=time.perf_counter() - start, retries=retries)
-            result = self._result(response, start, retries)
             self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0,
                                 (result.input_tokens or 0) + (result.output_tokens or 0))
             if result.error == "EmptyResponse" and self.retry.should_retry(result.error, retries):
@@ -230,36 +246,58 @@ class APIBackend:
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
             return result
 
-    def _result(self, response: Any, start: float, retries: int) -> ChatResult:
-        usage = getattr(response, "usage", None)
-        tin = getattr(usage, "prompt_tokens", None)
-        tout = getattr(usage, "completion_tokens", None)
-        cost = self._cost(response, tin, tout)
-        try:
-            text = response.choices[0].message.content
-        except (AttributeError, IndexError):
-            text = None
+    async def _send(self, messages: list[dict[str, Any]], params: dict[str, Any], start: float, retries: int) -> ChatResult:
+        """One call over the configured transport; raises on a failed call."""
+        if self._http is not None:
+            data = await self._http.chat(self._wire_model, messages, params)
+            usage = data.get("usage") or {}
+            tin, tout = usage.get("prompt_tokens"), usage.get("completion_tokens")
+            choice = (data.get("choices") or [{}])[0]
+            text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
+            cost = self._price_cost(tin, tout)
+        else:
+            response = await litellm.acompletion(
+                model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
+                timeout=self.timeout, num_retries=0, max_retries=0, **params,
+            )
+            usage = getattr(response, "usage", None)
+            tin, tout = getattr(usage, "prompt_tokens", None), getattr(usage, "completion_tokens", None)
+            choices = getattr(response, "choices", None) or [None]
+            text = getattr(getattr(choices[0], "message", None), "content", None)
+            finish = getattr(choices[0], "finish_reason", None)
+            cost = self._litellm_cost(response, tin, tout)
         seconds = time.perf_counter() - start
         if not text or not str(text).strip():
-            reason = getattr(response.choices[0], "finish_reason", None) if getattr(response, "choices", None) else None
             return ChatResult(text=None, input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost,
-                              error="EmptyResponse", error_message=f"no answer text (finish_reason={reason})", retries=retries)
+                              error="EmptyResponse", error_message=f"no answer text (finish_reason={finish})", retries=retries)
         return ChatResult(text=str(text), input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries)
 
-    def _cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
-        """Cost in US cents: litellm's price list, else the registry price, else None (unknown)."""
-        if self._litellm_prices:
+    @property
+    def _wire_model(self) -> str:
+        """The model name an OpenAI-compatible server expects (the litellm provider prefix removed)."""
+        return self.model.split("/", 1)[1] if "/" in self.model and _provider(self.model) in OPENAI_COMPATIBLE else self.model
+
+    def _litellm_cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
+        """Cost in US cents: what litellm priced the call at (its bundled list), else the registry price."""
+        usd = (getattr(response, "_hidden_params", None) or {}).get("response_cost")
+        if usd is None and self._litellm_prices:
             try:
                 usd = litellm.completion_cost(completion_response=response)
-                if usd:
-                    return float(usd) * 100.0
             except Exception:  # noqa: BLE001 - unknown model: fall back below, and stop asking
                 self._litellm_prices = False
+        if usd:
+            return float(usd) * 100.0
+        return self._price_cost(tin, tout)
+
+    def _price_cost(self, tin: int | None, tout: int | None) -> float | None:
+        """Cost in US cents from the per-token price (None when the price or the usage is unknown)."""
         if self._price is not None and tin is not None and tout is not None:
             return (tin * self._price[0] + tout * self._price[1]) * 100.0
         return None
 
     async def aclose(self) -> None:
+        if self._http is not None:
+            await self._http.aclose()
         if self.cache is not None:
             self.cache.close()
 

@@ -43,7 +43,8 @@ def short_message(exc: BaseException, limit: int = 300, secrets: tuple[str, ...]
 
 def retry_after_seconds(exc: BaseException) -> float | None:
     """The server's ``Retry-After`` (seconds) carried by a rate-limit or 5xx error, if any."""
-    candidates = (getattr(exc, "litellm_response_headers", None), getattr(getattr(exc, "response", None), "headers", None))
+    candidates = (getattr(exc, "litellm_response_headers", None), getattr(getattr(exc, "response", None), "headers", None),
+                  getattr(exc, "headers", None))
     for headers in candidates:
         if not headers:
             continue

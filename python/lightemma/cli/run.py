@@ -37,6 +37,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     ex.add_argument("--tpm", type=float, help="client-side limit: tokens per minute")
     ex.add_argument("--cache", nargs="?", const=True, default=None, metavar="PATH",
                     help="SQLite response cache for temperature-0 requests (default path OUTPUT/cache.sqlite)")
+    ex.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
+                    help="with --api-base: call the OpenAI-compatible server through litellm (default) or directly (less CPU per call)")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
     local = p.add_argument_group("local models (--backend hf | vllm)")
     local.add_argument("--batch-size", type=int, help="requests per batched forward pass (default 8; 1 is the paper's way)")
@@ -84,6 +86,10 @@ def main(args: argparse.Namespace) -> int:
 
     progress = not args.no_progress
     if args.resume:
+        given = [flag for flag, value in (("--model", args.model), ("--dataroot", args.dataroot), ("--api-base", args.api_base),
+                                          ("--scenes", args.scenes), ("--split", args.split), ("--limit", args.limit)) if value]
+        if given:
+            raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
                         concurrency=args.concurrency)
     else:
@@ -101,7 +107,7 @@ def main(args: argparse.Namespace) -> int:
             limit=args.limit, output=args.output, backend=args.backend, api_base=args.api_base, concurrency=concurrency,
             temperature=args.temperature, max_tokens=args.max_tokens, reask=args.reask, max_attempts=args.max_attempts,
             integrate_method=args.integrate, prompt_set=args.prompt_set, timeout=args.timeout, max_retries=args.max_retries,
-            backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, progress=progress, log=stderr_log,
+            backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, transport=args.transport, progress=progress, log=stderr_log,
             backend_options=options,
         )
     print(result.report())

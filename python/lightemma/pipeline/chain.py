@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams
-from lightemma.prompts import PromptSet, format_history
+from lightemma.frames import format_history
+from lightemma.prompts import PromptSet
 
 REASK_MODES = ("actions", "chain")
 INTEGRATION_METHODS = ("euler", "midpoint")

@@ -80,7 +80,7 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
 
         cache = config.get("cache")
         options.update(
-            timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"],
+            timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"], transport=config.get("transport", "litellm"),
             retry=RetryPolicy(max_retries=config["max_retries"], base=config["backoff_base"], cap=config["backoff_cap"]),
             cache=ResponseCache(cache if os.path.isabs(cache) else output / cache) if cache else None,
         )
@@ -137,7 +137,7 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
 
 
 def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: dict[str, Any],
-             progress: bool, kind: str, already: int) -> RunResult:
+             progress: bool, kind: str, already: int, log: Log | None) -> RunResult:
     """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume."""
     manifest = read_manifest(run_dir)
     sessions = list(manifest.get("sessions", []))
@@ -152,6 +152,10 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
             else:
                 done = 0
                 asyncio.run(backend.aclose())
+    except KeyboardInterrupt:
+        if log:
+            log(f"interrupted; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+        raise
     finally:
         bar.close()
     wall = time.perf_counter() - start
@@ -189,6 +193,7 @@ def run(
     rpm: float | None = None,
     tpm: float | None = None,
     cache: str | bool | None = None,
+    transport: str = "litellm",
     backend_options: dict[str, Any] | None = None,
     progress: bool = True,
     log: Log | None = None,
@@ -199,7 +204,8 @@ def run(
     :class:`~lightemma.frames.FrameSet`) or are loaded with
     :func:`lightemma.load_frames` from ``dataroot``/``version``/``split``/
     ``scenes``/``window``; ``limit`` keeps the first N. ``cache=True`` keeps a
-    response cache at ``<output>/cache.sqlite`` (or give a path).
+    response cache at ``<output>/cache.sqlite`` (or give a path). ``transport="direct"``
+    talks to an OpenAI-compatible ``api_base`` without litellm (less CPU per call).
     A missing API key raises :class:`~lightemma.errors.UserError` before any work.
     """
     if concurrency < 1:
@@ -211,16 +217,17 @@ def run(
         "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
         "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
-        "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "backend_options": backend_options or {},
+        "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
     }
     policy = _policy(config)  # validates reask / attempts / method before any work
     prompts = load_prompt_set(prompt_set)
     output = Path(output)
     instance = _make_backend(config, output)
+    dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
+               "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit}
+    config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
-        dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
-                   "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit}
         if frames is None:
             frames = _load_frames(dataset)
         else:
@@ -246,7 +253,7 @@ def run(
         raise
     if log:
         log(f"run directory: {run_dir}  ({len(frames)} frames, concurrency {concurrency})")
-    return _session(run_dir, frames, instance, prompts, config, progress, "run", 0)
+    return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
 
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
@@ -274,7 +281,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                         f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
     instance = _make_backend(config, run_dir.parent.parent)
     try:
-        all_frames = _head(frames, manifest["dataset"].get("limit")) if frames is not None else _load_frames(manifest["dataset"])
+        dataset = config.get("dataset") or {}
+        all_frames = _head(frames, dataset.get("limit")) if frames is not None else _load_frames(dataset)
         contents = read_run(run_dir)
         for warning in contents.warnings():
             if log and "not finished" not in warning:
@@ -286,7 +294,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         raise
     if log:
         log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run")
-    return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo))
+    return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo), log)
 
 
 def _version() -> str:

@@ -94,23 +94,3 @@ def load_prompt_set(name: str = DEFAULT_PROMPT_SET) -> PromptSet:
     if not isinstance(data, dict):
         raise UserError(f"{origin}: expected a JSON object")
     return PromptSet.from_dict(data, origin=origin)
-
-
-def format_history(actions: Any) -> str:
-    """The history actions rendered as plain decimals, via :func:`lightemma.frames.format_history`.
-
-    Falls back to an equivalent local rendering while the frames module is not
-    installed (``[(4.512, 0.0), …]``, ``-0.0`` as ``0.0``).
-    """
-    try:
-        from lightemma.frames import format_history as frames_format_history
-    except ImportError:
-        return "[" + ", ".join(f"({_plain(v)}, {_plain(c)})" for v, c in actions) + "]"
-    return frames_format_history(actions)
-
-
-def _plain(x: Any) -> str:
-    """A plain decimal for one number (fallback renderer)."""
-    text = f"{float(x) + 0.0:.3f}".rstrip("0")  # + 0.0 turns -0.0 into 0.0
-    text = text + "0" if text.endswith(".") else text
-    return "0.0" if text in ("-0.0", "0.0") else text
