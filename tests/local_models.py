@@ -3,7 +3,7 @@
 Each builder writes a directory that ``AutoModelForImageTextToText.from_pretrained``
 and ``AutoProcessor.from_pretrained`` load exactly as they load a real checkpoint:
 the real model and processor classes of the family (Qwen2-VL, Qwen2.5-VL,
-Qwen3-VL, Mllama), a byte-level BPE tokenizer trained here on a few sentences
+Qwen3-VL, Mllama, Llama-4), a byte-level BPE tokenizer trained here on a few sentences
 (every byte is a token, so any text round-trips) with the family's special
 tokens, the family's chat-template shape, and tiny dimensions (hidden size 32 by default,
 one or two layers, one vision block, 8-16 px patches) so that each model has a
@@ -31,6 +31,10 @@ QWEN_SPECIALS = ["<|endoftext|>", "<|im_start|>", "<|im_end|>", "<|vision_start|
 LLAMA_SPECIALS = ["<|begin_of_text|>", "<|end_of_text|>", "<|start_header_id|>", "<|end_header_id|>", "<|eot_id|>",
                   "<|finetune_right_pad_id|>", "<|python_tag|>", "<|image|>"]
 
+LLAMA4_SPECIALS = ["<|begin_of_text|>", "<|end_of_text|>", "<|header_start|>", "<|header_end|>", "<|eot|>",
+                   "<|finetune_right_pad|>", "<|image_start|>", "<|image_end|>", "<|image|>", "<|patch|>",
+                   "<|tile_x_separator|>", "<|tile_y_separator|>"]
+
 # The families' chat templates, reduced to what a single user turn of [image, text] needs (plus system/assistant turns).
 QWEN_TEMPLATE = (
     "{% for message in messages %}<|im_start|>{{ message['role'] }}\n"
@@ -49,6 +53,9 @@ LLAMA_TEMPLATE = (
     "{% endfor %}{% endif %}<|eot_id|>{% endfor %}"
     "{% if add_generation_prompt %}<|start_header_id|>assistant<|end_header_id|>\n\n{% endif %}"
 )
+
+LLAMA4_TEMPLATE = LLAMA_TEMPLATE.replace("<|start_header_id|>", "<|header_start|>").replace(
+    "<|end_header_id|>", "<|header_end|>").replace("<|eot_id|>", "<|eot|>")
 
 
 def byte_level_tokenizer(specials: list[str], *, bos: str | None, eos: str, pad: str, vocab_size: int = 384):
@@ -183,6 +190,29 @@ def _save_mllama(path: Path, dims: dict[str, int]) -> None:
     _save(model, processor, path)
 
 
+def _save_llama4(path: Path, dims: dict[str, int]) -> None:
+    from transformers import Llama4Config, Llama4ForConditionalGeneration, Llama4ImageProcessor, Llama4Processor
+
+    tokenizer = byte_level_tokenizer(LLAMA4_SPECIALS, bos="<|begin_of_text|>", eos="<|eot|>", pad="<|finetune_right_pad|>")
+    tile, patch = 32, 8
+    hidden, heads = dims["hidden_size"], dims["heads"]
+    text = _text(tokenizer, dims, head_dim=hidden // heads, intermediate_size_mlp=2 * hidden, num_local_experts=2,
+                 num_experts_per_tok=1, interleave_moe_layer_step=2, rope_parameters={"rope_type": "default", "rope_theta": 10000.0})
+    boi, eoi, image = _ids(tokenizer, "<|image_start|>", "<|image_end|>", "<|patch|>")
+    # the vision MLP's width must equal the pixel-shuffled patch width: hidden / ratio² = 16 / 0.25 = 64
+    config = Llama4Config(
+        text_config=text,
+        vision_config=dict(hidden_size=16, num_hidden_layers=1, num_attention_heads=2, intermediate_size=64, image_size=tile,
+                           patch_size=patch, pixel_shuffle_ratio=0.5, projector_input_dim=32, projector_output_dim=32,
+                           vision_output_dim=32, rope_parameters={"rope_type": "default", "rope_theta": 10000.0}),
+        boi_token_index=boi, eoi_token_index=eoi, image_token_index=image)
+    model = Llama4ForConditionalGeneration(config)
+    image_processor = Llama4ImageProcessor(size={"height": tile, "width": tile}, max_patches=2)
+    processor = Llama4Processor(image_processor=image_processor, tokenizer=tokenizer, patch_size=patch,
+                                pixel_shuffle_ratio=0.5, chat_template=LLAMA4_TEMPLATE)
+    _save(model, processor, path)
+
+
 def _save(model, processor, path: Path) -> None:
     model.generation_config.eos_token_id = model.config.get_text_config().eos_token_id
     model.generation_config.pad_token_id = model.config.get_text_config().pad_token_id
@@ -195,6 +225,7 @@ BUILDERS: dict[str, Callable[[Path, dict[str, int]], None]] = {
     "qwen2_5_vl": _qwen_saver(_build_qwen2_5_vl, "qwen2_5_vl"),
     "qwen3_vl": _qwen_saver(_build_qwen3_vl, "qwen3_vl"),
     "mllama": _save_mllama,
+    "llama4": _save_llama4,
 }
 FAMILIES = tuple(BUILDERS)
 

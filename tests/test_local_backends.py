@@ -1,7 +1,7 @@
 """Local backends on tiny random-weight checkpoints, offline on CPU: hf end to end, batching, accounting; vllm.
 
-The ``hf`` tests build real (tiny) Qwen2-VL, Qwen2.5-VL, Qwen3-VL and Mllama
-checkpoints with :mod:`local_models` and load them exactly as real ones are
+The ``hf`` tests build real (tiny) Qwen2-VL, Qwen2.5-VL, Qwen3-VL, Mllama and
+Llama-4 checkpoints with :mod:`local_models` and load them exactly as real ones are
 loaded. They need the ``hf`` extra (torch, torchvision, transformers) and are
 never skipped. The ``vllm`` backend is tested here with an injected fake
 ``LLM``; the one end-to-end vLLM test runs only where vLLM is installed.
@@ -189,10 +189,18 @@ def test_input_tokens_count_the_image_tokens_each_model_has(tiny, images):
     processor = backend._processor
     for i, path_ in enumerate(images[:2]):
         extra = got[i].input_tokens - got[i + 2].input_tokens
+        image = Image.open(path_).convert("RGB")
         if family == "mllama":
             assert extra == 1  # one <|image|> token; the image enters through cross-attention
+        elif family == "llama4":
+            # <|image_start|>, <|patch|> per (pixel-shuffled) patch of each tile and the global view, separators,
+            # <|image|>, <|image_end|>: count them in what the processor makes of a bare image
+            specials = {processor.tokenizer.convert_tokens_to_ids(t) for t in
+                        ("<|image_start|>", "<|image_end|>", "<|image|>", "<|patch|>", "<|tile_x_separator|>", "<|tile_y_separator|>")}
+            ids = processor(text=["<|image|>"], images=[[image]], return_tensors="pt")["input_ids"][0].tolist()
+            assert extra == sum(t in specials for t in ids) > 4
         else:
-            pixels = processor.image_processor(images=[Image.open(path_).convert("RGB")], return_tensors="pt")
+            pixels = processor.image_processor(images=[image], return_tensors="pt")
             merged = int(pixels["image_grid_thw"][0].prod()) // processor.image_processor.merge_size ** 2
             assert extra == merged + 2  # <|vision_start|> + one <|image_pad|> per merged patch + <|vision_end|>
 
