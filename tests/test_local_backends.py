@@ -475,3 +475,25 @@ def test_vllm_end_to_end_on_a_gpu(dataroot, tmp_path):
     records = list(read_run(run_dir).records.values())
     assert len(records) == N_FRAMES
     assert all(r["input_tokens"] > 0 and r["output_tokens"] > 0 and r["cost_cents"] is None for r in records)
+
+
+def test_a_batch_that_runs_out_of_gpu_memory_is_halved_until_it_fits(qwen2_vl, images):
+    import torch
+
+    requests = requests_for(images)[:5]
+    alone = answer(hf(qwen2_vl, batch_size=1), requests)
+    backend = hf(qwen2_vl, batch_size=5, batch_window=1.0)
+    generate = backend._model.generate
+    sizes = []
+
+    def tight_memory(**inputs):
+        sizes.append(inputs["input_ids"].shape[0])
+        if inputs["input_ids"].shape[0] > 2:
+            raise torch.cuda.OutOfMemoryError("CUDA out of memory. Tried to allocate 20.00 GiB")
+        return generate(**inputs)
+
+    backend._model.generate = tight_memory
+    got = answer(backend, requests, together=True)
+    assert sizes == [5, 2, 3, 1, 2]  # 5 -> 2 + 3 -> 2 + (1 + 2)
+    assert backend.stats["oom_splits"] == 2 and backend.stats["batches"] == 1
+    assert [(r.text, r.input_tokens, r.output_tokens) for r in got] == [(r.text, r.input_tokens, r.output_tokens) for r in alone]

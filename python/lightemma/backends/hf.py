@@ -73,6 +73,8 @@ class HFBackend:
         self.gpus = sum(1 for d in self.devices if d.startswith("cuda"))  # distinct GPUs holding weights; 0 on CPU
         self._image_cap = self._cap_images(max_pixels)
         self._eos_ids = self._end_ids()
+        self._oom_error = getattr(torch, "OutOfMemoryError", torch.cuda.OutOfMemoryError)
+        self.oom_splits = 0  # batches halved after running out of GPU memory
         self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
                                      name=f"lightemma-hf-{self.model_type}")
 
@@ -131,8 +133,8 @@ class HFBackend:
 
     @property
     def stats(self) -> dict[str, Any]:
-        """Batches run so far, requests answered, mean and max batch size."""
-        return self._batcher.stats.to_dict()
+        """Batches run so far, requests answered, mean and max batch size, batches halved for memory."""
+        return {**self._batcher.stats.to_dict(), "oom_splits": self.oom_splits}
 
     @property
     def info(self) -> Mapping[str, Any]:
@@ -178,7 +180,8 @@ class HFBackend:
     def _run_batch(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """One left-padded ``generate`` over ``requests`` (same stage and params); results in order.
 
-        A batch mixing requests with and without an image runs as two batches.
+        A batch mixing requests with and without an image runs as two batches. A batch that runs
+        out of GPU memory is halved and retried (down to single requests, whose OOM is an error).
         """
         with_image = [i for i, r in enumerate(requests) if r.image_path]
         if 0 < len(with_image) < len(requests):
@@ -188,6 +191,18 @@ class HFBackend:
                 for i, result in zip(part, self._run_batch([requests[i] for i in part])):
                     results[i] = result
             return [r for r in results if r is not None]
+        try:
+            return self._generate(requests)
+        except self._oom_error:
+            if len(requests) == 1:
+                raise
+            self.oom_splits += 1
+            if self._torch.cuda.is_available():
+                self._torch.cuda.empty_cache()
+            half = len(requests) // 2
+            return self._run_batch(requests[:half]) + self._run_batch(requests[half:])
+
+    def _generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         start = time.perf_counter()
         inputs = self._encode(requests)
         params = requests[0].params
