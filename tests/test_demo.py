@@ -20,7 +20,7 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     for variable in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY"):
         monkeypatch.delenv(variable, raising=False)
     monkeypatch.chdir(tmp_path)
-    assert main(["demo", "--keyframes", "16"]) == 0
+    assert main(["demo", "--keyframes", "15"]) == 0
     out = tmp_path / "lightemma-demo"
     index = out / "report" / "index.md"
     assert f"demo report: {index}" in capsys.readouterr().out
@@ -37,7 +37,7 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     assert "pictures have no camera view" not in text
     assert list((out / "report" / "figures" / "frames").glob("*_grid.png"))
     # a second demo into the same folder replaces the runs instead of piling them up
-    run_demo(out, scenes=2, keyframes=15, use_api=False, log=lambda message: None)
+    run_demo(out, scenes=1, keyframes=15, use_api=False, log=lambda message: None)
     assert len(list((out / "runs").glob("*/*/manifest.json"))) == 4
 
 

@@ -109,6 +109,18 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
         w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
 
 
+def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
+    """One entry per frame (the first kind), its captions joined: a frame is drawn once."""
+    merged: dict[str, tuple[str, str, str]] = {}
+    for kind, fid, caption in picks:
+        if fid in merged:
+            first_kind, _, captions = merged[fid]
+            merged[fid] = (first_kind, fid, f"{captions}; {caption}")
+        else:
+            merged[fid] = (kind, fid, caption)
+    return list(merged.values())
+
+
 def write_report(
     run_dirs: Iterable[str | os.PathLike[str]],
     out: str | os.PathLike[str],
@@ -120,10 +132,13 @@ def write_report(
     dataroot: str | None = None,
     pictures: bool = True,
     frames: Sequence[str] = (),
+    case_tags: Sequence[str] | None = None,
 ) -> Path:
     """Evaluate runs and write tables, figures and the scenario analysis into ``out``; returns ``index.md``.
 
-    ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases).
+    ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases);
+    ``case_tags`` are the scenario tags whose worst frame is drawn (default
+    :data:`lightemma.scenarios.CASE_TAGS`; ``()`` for none).
     """
     from lightemma.figures import bubble_chart, bubble_points, history_bias_figure
     from lightemma.pictures import CameraSource
@@ -174,7 +189,8 @@ def write_report(
 
     picks = [("frame", fid, "requested frame") for fid in frames]
     picks += [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]
-    picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS)]
+    picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS if case_tags is None else case_tags)]
+    picks = _merge_picks(picks)
     if pictures and picks:
         source = CameraSource(dataroot)
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
