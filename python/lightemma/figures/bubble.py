@@ -47,7 +47,9 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
         area = MIN_AREA + (MAX_AREA - MIN_AREA) * (secs / slowest)
         hollow = p.get("source") == "paper"
         ax.scatter([xpos], [p["ade_avg"]], s=area, facecolors="none" if hollow else color, edgecolors=color, linewidths=1.5, alpha=0.75, zorder=3)
-        ax.annotate(f"{p['ade_avg']:.2f}", (xpos, p["ade_avg"]), ha="center", va="center", fontsize=7, zorder=4)
+        radius = math.sqrt(area / math.pi)  # points
+        inside = radius >= 11  # small bubbles get their number above them
+        ax.annotate(f"{p['ade_avg']:.2f}", (xpos, p["ade_avg"]), xytext=(0, 0 if inside else radius + 3), textcoords="offset points", ha="center", va="center" if inside else "bottom", fontsize=7, zorder=4)
     ax.set_xticks(xs)
     ax.set_xticklabels([str(p["model"]) + (" (paper)" if p.get("source") == "paper" else "") for p in shown], rotation=40, ha="right", fontsize=8)
     ades = [p["ade_avg"] for p in shown]
