@@ -36,9 +36,18 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     # pictures drawn with the synthetic camera images (no "no camera view" note)
     assert "pictures have no camera view" not in text
     assert list((out / "report" / "figures" / "frames").glob("*_grid.png"))
-    # a second demo into the same folder replaces the runs instead of piling them up
-    run_demo(out, scenes=1, keyframes=15, use_api=False, log=lambda message: None)
-    assert len(list((out / "runs").glob("*/*/manifest.json"))) == 4
+    # a second demo into the same folder replaces the runs instead of piling them up; with a key
+    # set, the API model runs too (here against a local OpenAI-compatible server)
+    from fake_openai import FakeOpenAIServer
+
+    monkeypatch.setenv("OPENAI_API_KEY", "sk-test")
+    with FakeOpenAIServer() as server:
+        result = run_demo(out, scenes=1, keyframes=15, api_limit=1, api_base=server.url, log=lambda message: None)
+        assert server.requests  # the model was asked
+    assert len(list((out / "runs").glob("*/*/manifest.json"))) == 5 == len(result.run_dirs)
+    evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
+    gpt = next(r for r in evaluation["accuracy"]["lightemma"] if r["model"] == "GPT-4o")
+    assert gpt["frames_in_run"] == 1
 
 
 def test_demo_refuses_a_folder_it_did_not_make(tmp_path):

@@ -69,9 +69,13 @@ def run_demo(
     keyframes: int = 24,
     use_api: bool = True,
     api_limit: int = 12,
+    api_base: str | None = None,
     log: Callable[[str], None] = print,
 ) -> DemoResult:
-    """Generate data, run baselines (and keyed API models), evaluate, report; see the module docstring."""
+    """Generate data, run baselines (and keyed API models), evaluate, report; see the module docstring.
+
+    ``api_base`` sends the API models to another OpenAI-compatible server.
+    """
     out = Path(out).resolve()
     _prepare(out)
     import lightemma
@@ -88,7 +92,8 @@ def run_demo(
         limit = api_limit if not model.startswith("baseline:") else None
         log(f"2/3 run {i}/{len(models)}: {model} ({method})" + (f", first {limit} frames" if limit else ""))
         try:
-            result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32, **common)
+            api = {"timeout": 60.0, "max_retries": 2, "api_base": api_base} if limit else {}  # a demo should not wait long
+            result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32, **api, **common)
         except UserError as exc:
             if model.startswith("baseline:"):
                 raise

@@ -19,6 +19,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--keyframes", type=int, default=24, metavar="N", help="keyframes per scene (default: 24, i.e. 10 frames per scene)")
     parser.add_argument("--no-api", action="store_true", help="run no API model even when a key is set")
     parser.add_argument("--api-limit", type=int, default=12, metavar="N", help="frames per API model (default: 12; they cost money)")
+    parser.add_argument("--api-base", metavar="URL", help="send the API models to this OpenAI-compatible server")
     parser.set_defaults(func=run)
     return parser
 
@@ -33,7 +34,7 @@ def run(args: argparse.Namespace) -> int:
 
     if args.keyframes < 15:
         raise ValueError(f"--keyframes must be at least 15 (the reference window needs 15 keyframes for one frame), got {args.keyframes}")
-    result = run_demo(args.out, scenes=args.scenes, keyframes=args.keyframes, use_api=not args.no_api, api_limit=args.api_limit, log=_progress)
+    result = run_demo(args.out, scenes=args.scenes, keyframes=args.keyframes, use_api=not args.no_api, api_limit=args.api_limit, api_base=args.api_base, log=_progress)
     print(f"demo report: {result.index}")
     print(f"runs: {result.out / 'runs'}   dataset: {result.dataroot}")
     return 0
