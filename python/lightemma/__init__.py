@@ -31,6 +31,9 @@ _EXPORTS: dict[str, str] = {
     "run": "lightemma.pipeline",
     "resume": "lightemma.pipeline",
     "RunResult": "lightemma.pipeline",
+    "evaluate_runs": "lightemma.evaluation",
+    "write_report": "lightemma.report",
+    "run_demo": "lightemma.demo",
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
@@ -51,7 +54,10 @@ def __dir__() -> list[str]:
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from lightemma.actions import ParsedActions, parse_actions
+    from lightemma.demo import run_demo
+    from lightemma.evaluation import evaluate_runs
     from lightemma.frames import Frame, FrameSet, load_frames
     from lightemma.kinematics import integrate
     from lightemma.metrics import CONVENTIONS, Metrics, displacement_errors, evaluate
     from lightemma.pipeline import RunResult, resume, run
+    from lightemma.report import write_report

@@ -19,7 +19,7 @@ import sys
 from collections.abc import Sequence
 
 # subcommand modules, in the order `lightemma --help` lists them
-SUBCOMMANDS: list[str] = ["synth", "run"]
+SUBCOMMANDS: list[str] = ["demo", "synth", "run", "evaluate", "report"]
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -40,6 +40,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     ex.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
                     help="with --api-base: call the OpenAI-compatible server through litellm (default) or directly (less CPU per call)")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
+    local = p.add_argument_group("local models (--backend hf | vllm)")
+    local.add_argument("--batch-size", type=int, help="requests per batched forward pass (default 8; 1 is the paper's way)")
+    local.add_argument("--max-pixels", type=int, help="cap on image pixels (width × height) fed to the model")
+    local.add_argument("--dtype", choices=("auto", "bfloat16", "float16", "float32"), help="weights dtype (default auto: bf16 on GPU, fp32 on CPU)")
+    local.add_argument("--device", help="hf: cuda or cpu (default cuda when present; device_map=auto over all GPUs)")
+    local.add_argument("--tensor-parallel-size", type=int, help="vllm: GPUs to shard the model over (default 1)")
+    local.add_argument("--gpu-memory-utilization", type=float, help="vllm: share of GPU memory vLLM may use (default 0.9)")
     gen = p.add_argument_group("prompting")
     gen.add_argument("--prompt-set", default=DEFAULT_PROMPT_SET, help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
     gen.add_argument("--temperature", type=float, default=0.0, help="sampling temperature where the provider allows it (default 0)")
@@ -49,6 +56,28 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--integrate", choices=("euler", "midpoint"), default="euler", help="actions → trajectory (default euler, the paper's)")
     p.set_defaults(func=main)
     return p
+
+
+# option -> backends that take it
+LOCAL_OPTIONS = {"batch_size": ("hf", "vllm"), "max_pixels": ("hf", "vllm"), "dtype": ("hf", "vllm"), "device": ("hf",),
+                 "tensor_parallel_size": ("vllm",), "gpu_memory_utilization": ("vllm",)}
+
+
+def local_backend_options(args: argparse.Namespace) -> dict[str, object]:
+    """The local-model options given on the command line, checked against the backend that will run."""
+    from lightemma.backends import backend_kind
+    from lightemma.errors import UserError
+
+    given = {name: getattr(args, name) for name in LOCAL_OPTIONS if getattr(args, name, None) is not None}
+    if not given:
+        return {}
+    kind = backend_kind(args.model, args.backend, args.api_base)
+    wrong = [name for name in given if kind not in LOCAL_OPTIONS[name]]
+    if wrong:
+        flags = ", ".join("--" + name.replace("_", "-") for name in wrong)
+        raise UserError(f"{flags} do(es) not apply to the {kind} backend (they are for "
+                        f"{' / '.join(sorted({b for n in wrong for b in LOCAL_OPTIONS[n]}))})")
+    return given
 
 
 def main(args: argparse.Namespace) -> int:
@@ -70,12 +99,16 @@ def main(args: argparse.Namespace) -> int:
             raise UserError("--model is required (or --resume RUN_DIR)")
         if not args.dataroot:
             raise UserError("--dataroot is required (a nuScenes directory)")
+        options = local_backend_options(args)
+        # local backends batch across frames in flight: keep at least one batch's worth of frames going
+        concurrency = args.concurrency or max(16, int(options.get("batch_size", 0)))
         result = run(
             args.model, dataroot=args.dataroot, version=args.version, split=args.split, scenes=args.scenes, window=args.window,
-            limit=args.limit, output=args.output, backend=args.backend, api_base=args.api_base, concurrency=args.concurrency or 16,
+            limit=args.limit, output=args.output, backend=args.backend, api_base=args.api_base, concurrency=concurrency,
             temperature=args.temperature, max_tokens=args.max_tokens, reask=args.reask, max_attempts=args.max_attempts,
             integrate_method=args.integrate, prompt_set=args.prompt_set, timeout=args.timeout, max_retries=args.max_retries,
             backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, transport=args.transport, progress=progress, log=stderr_log,
+            backend_options=options,
         )
     print(result.report())
     return 0

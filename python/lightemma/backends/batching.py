@@ -1,0 +1,184 @@
+"""Micro-batching for local backends: many single-request ``generate`` calls, one batched forward pass.
+
+The runner drives every backend the same way: one three-stage chain per frame,
+up to ``concurrency`` frames in flight, each stage awaiting
+``backend.generate([request])``. A local model is only fast when it answers
+many prompts at once, so :class:`MicroBatcher` sits between the two:
+
+* ``submit`` puts each request on a queue and awaits its future;
+* one worker thread — the only thread that touches the model — takes the
+  oldest pending request, waits at most ``batch_window`` seconds for the queue
+  to hold ``batch_size`` requests that can share its batch, runs ONE batched
+  call of ``run_batch`` and resolves each request's future with its result.
+
+Requests share a batch only when they are of the same stage and carry the same
+:class:`~lightemma.backends.base.GenerationParams`; when several stages are
+pending, the batch is built around the stage of the *oldest* pending request,
+and requests of other stages wait, in order, for a later batch. Because frames
+move through the chain in lockstep (all stage-1 requests arrive together, then
+their stage-2 requests, …), this is stage-synchronous batching in practice:
+stage 1 for a batch of frames, then stage 2, then stage 3, then re-asks.
+
+The batcher is loop-agnostic (results are handed back with
+``call_soon_threadsafe`` to the loop that submitted them), so one backend can
+serve several ``asyncio.run`` sessions (a run, then a resume). It never raises
+for a request: if ``run_batch`` raises, each request of that batch gets a
+:class:`~lightemma.backends.base.ChatResult` carrying the error class and message.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import threading
+import time
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+from lightemma.backends.base import ChatRequest, ChatResult
+
+RunBatch = Callable[[Sequence[ChatRequest]], list[ChatResult]]
+
+DEFAULT_BATCH_WINDOW = 0.01  # seconds the worker waits for a batch to fill
+
+
+@dataclass
+class BatchStats:
+    """What the worker has done so far: batches run, requests answered, the size of each batch."""
+
+    batches: int = 0
+    requests: int = 0
+    seconds: float = 0.0
+    sizes: list[int] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, float | int]:
+        return {"batches": self.batches, "requests": self.requests, "seconds": round(self.seconds, 4),
+                "mean_batch_size": round(self.requests / self.batches, 3) if self.batches else 0.0,
+                "max_batch_size": max(self.sizes, default=0)}
+
+
+@dataclass
+class _Pending:
+    request: ChatRequest
+    future: asyncio.Future[ChatResult]
+    loop: asyncio.AbstractEventLoop
+
+    @property
+    def key(self) -> tuple[str, object]:
+        return (self.request.stage, self.request.params)
+
+
+def error_result(exc: BaseException, seconds: float = 0.0) -> ChatResult:
+    """A failed call as a result: the exception's class and a one-line message, never model text."""
+    message = " ".join(str(exc).split())[:300] or type(exc).__name__
+    return ChatResult(text=None, seconds=seconds, error=type(exc).__name__, error_message=message)
+
+
+class MicroBatcher:
+    """Gather concurrently submitted requests into batches of ``batch_size`` run by one worker thread."""
+
+    def __init__(self, run_batch: RunBatch, *, batch_size: int = 8, batch_window: float = DEFAULT_BATCH_WINDOW,
+                 name: str = "lightemma-batcher") -> None:
+        if batch_size < 1:
+            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+        if batch_window < 0:
+            raise ValueError(f"batch_window must be >= 0 seconds, got {batch_window}")
+        self.batch_size = batch_size
+        self.batch_window = batch_window
+        self.stats = BatchStats()
+        self._run_batch = run_batch
+        self._name = name
+        self._queue: deque[_Pending] = deque()
+        self._cond = threading.Condition()
+        self._thread: threading.Thread | None = None
+        self._closed = False
+
+    # -- the asyncio side -------------------------------------------------------------------------
+
+    async def submit(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
+        """Queue ``requests`` and wait for their results, in order."""
+        if not requests:
+            return []
+        loop = asyncio.get_running_loop()
+        pending = [_Pending(r, loop.create_future(), loop) for r in requests]
+        with self._cond:
+            if self._closed:
+                raise RuntimeError("the backend is closed")
+            self._queue.extend(pending)
+            self._ensure_worker()
+            self._cond.notify()
+        return list(await asyncio.gather(*(p.future for p in pending)))
+
+    async def aclose(self) -> None:
+        """Stop the worker after the batch it is running; requests still queued get an error result."""
+        with self._cond:
+            self._closed = True
+            leftover = list(self._queue)
+            self._queue.clear()
+            self._cond.notify_all()
+            thread = self._thread
+        for p in leftover:
+            self._resolve(p, error_result(RuntimeError("the backend was closed before this request ran")))
+        if thread is not None and thread is not threading.current_thread():
+            await asyncio.to_thread(thread.join)
+
+    def _ensure_worker(self) -> None:
+        if self._thread is None or not self._thread.is_alive():
+            self._thread = threading.Thread(target=self._work, name=self._name, daemon=True)
+            self._thread.start()
+
+    # -- the worker thread ------------------------------------------------------------------------
+
+    def _take_batch(self) -> list[_Pending] | None:
+        """Block for the next batch (None when closed): the oldest request plus same-key requests."""
+        with self._cond:
+            while not self._queue and not self._closed:
+                self._cond.wait()
+            if self._closed:
+                return None
+            key = self._queue[0].key
+            deadline = time.monotonic() + self.batch_window
+            while sum(p.key == key for p in self._queue) < self.batch_size and not self._closed:
+                remaining = deadline - time.monotonic()
+                if remaining <= 0:
+                    break
+                self._cond.wait(remaining)
+            if self._closed:
+                return None
+            batch: list[_Pending] = []
+            rest: deque[_Pending] = deque()
+            for p in self._queue:
+                (batch if p.key == key and len(batch) < self.batch_size else rest).append(p)
+            self._queue = rest
+            return batch
+
+    def _work(self) -> None:
+        while (batch := self._take_batch()) is not None:
+            live = [p for p in batch if not p.future.cancelled()]
+            if not live:
+                continue
+            start = time.perf_counter()
+            try:
+                results = self._run_batch([p.request for p in live])
+                if len(results) != len(live):
+                    raise RuntimeError(f"run_batch returned {len(results)} results for {len(live)} requests")
+            except Exception as exc:  # noqa: BLE001 - every request of the batch gets the error, none raises
+                results = [error_result(exc, time.perf_counter() - start) for _ in live]
+            elapsed = time.perf_counter() - start
+            self.stats.batches += 1
+            self.stats.requests += len(live)
+            self.stats.seconds += elapsed
+            self.stats.sizes.append(len(live))
+            for p, result in zip(live, results):
+                self._resolve(p, result)
+
+    @staticmethod
+    def _resolve(p: _Pending, result: ChatResult) -> None:
+        def settle() -> None:
+            if not p.future.done():
+                p.future.set_result(result)
+
+        try:
+            p.loop.call_soon_threadsafe(settle)
+        except RuntimeError:  # the submitting loop is gone; nobody is waiting
+            pass

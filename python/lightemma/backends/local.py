@@ -1,0 +1,93 @@
+"""What the local backends (``hf``, ``vllm``) share: the chat turn, image loading, imports, checkpoint facts.
+
+Every stage of a frame is ONE user turn whose content is the image first, then
+the stage's text. The image goes first in every backend so that the prompt
+prefix (template header + image) is identical across the three stages of a
+frame, which lets vLLM's prefix cache reuse it; the layout is the same for
+``hf`` so both backends see the same prompt.
+"""
+
+from __future__ import annotations
+
+import importlib
+import json
+import math
+from pathlib import Path
+from typing import Any
+
+from lightemma.backends.base import ChatRequest
+from lightemma.errors import UserError
+
+# Llama-3.2-Vision (model_type "mllama") runs on hf only: current vLLM (0.32) does not support it.
+MLLAMA_MODEL_TYPE = "mllama"
+
+
+def require(module: str, extra: str) -> Any:
+    """Import ``module`` or raise a :class:`UserError` naming the extra that provides it."""
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:
+        raise UserError(f"the {extra} backend needs {module.split('.')[0]} ({exc}); install it with: "
+                        f"pip install 'lightemma[{extra}]'") from None
+
+
+def user_turn(request: ChatRequest, image_part: dict[str, Any] | None) -> list[dict[str, Any]]:
+    """The conversation for one request: a single user turn, ``image_part`` first (if any), then the text."""
+    content: list[dict[str, Any]] = [image_part] if image_part is not None else []
+    content.append({"type": "text", "text": request.text})
+    return [{"role": "user", "content": content}]
+
+
+def cap_pixels(width: int, height: int, max_pixels: int | None) -> tuple[int, int]:
+    """(width, height) scaled down, aspect kept, so that width × height ≤ ``max_pixels`` (never up)."""
+    if max_pixels is None or width * height <= max_pixels:
+        return width, height
+    scale = math.sqrt(max_pixels / (width * height))
+    return max(1, math.floor(width * scale)), max(1, math.floor(height * scale))
+
+
+def load_image(path: str, max_pixels: int | None = None) -> Any:
+    """The image at ``path`` as an RGB ``PIL.Image``, downscaled to at most ``max_pixels`` pixels when given."""
+    from PIL import Image
+
+    try:
+        with Image.open(path) as img:
+            image = img.convert("RGB")
+    except (OSError, ValueError) as exc:
+        raise UserError(f"cannot read image {path}: {exc}") from None
+    size = cap_pixels(*image.size, max_pixels)
+    return image if size == image.size else image.resize(size, Image.Resampling.BICUBIC)
+
+
+def checkpoint_config(model: str) -> dict[str, Any] | None:
+    """The ``config.json`` of a local checkpoint directory, or None (hub ids are not fetched here)."""
+    path = Path(model) / "config.json"
+    if not path.is_file():
+        return None
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, json.JSONDecodeError):
+        return None
+    return data if isinstance(data, dict) else None
+
+
+def is_mllama(model: str, model_type: str | None = None) -> bool:
+    """True for Llama-3.2-Vision: by ``model_type`` (or the checkpoint's config.json) or by the hub id."""
+    if model_type is None:
+        config = checkpoint_config(model)
+        model_type = config.get("model_type") if config else None
+    if model_type is not None:
+        return model_type == MLLAMA_MODEL_TYPE
+    name = model.lower()
+    return "llama-3.2" in name and "vision" in name
+
+
+def token_counting(model_type: str) -> str:
+    """How input/output tokens are counted for a model of ``model_type`` (recorded in the manifest)."""
+    if model_type == MLLAMA_MODEL_TYPE:
+        image = ("one <|image|> token per image (the image itself enters through cross-attention "
+                 "and has no prompt tokens)")
+    else:
+        image = "the image placeholder tokens the processor expands the image into (one per merged vision patch)"
+    return (f"input: non-padding prompt token ids after the model's processor and chat template, including {image}; "
+            "output: generated token ids up to and including the first end-of-turn token")

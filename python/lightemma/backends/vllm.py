@@ -1,0 +1,166 @@
+"""``vllm`` backend: a local checkpoint through vLLM's offline ``LLM.chat``, batched over a whole stage.
+
+Requests from the per-frame chains are gathered by the same
+:class:`~lightemma.backends.batching.MicroBatcher` as the ``hf`` backend (one
+stage per batch, default up to 64 requests) and answered by ONE ``LLM.chat``
+call over the batch's conversations; vLLM schedules them with continuous
+batching. Each conversation is one user turn with the image first
+(:mod:`lightemma.backends.local`), and prefix caching is on, so the template
+header and image of a frame are computed once and reused by its later stages.
+
+Not supported by current vLLM (0.32): Llama-3.2-Vision (``mllama``); such
+models are refused with a pointer to ``--backend hf``. An OpenAI-compatible ``vllm serve`` server
+is reached instead through the API backend with ``--api-base``.
+
+vLLM needs a GPU and its own environment (it pins torch and transformers): it
+is the ``vllm`` extra, separate from ``hf``. It is imported when a backend is
+built, never when this module is imported.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends.batching import MicroBatcher
+from lightemma.backends.local import is_mllama, load_image, require, token_counting, user_turn
+from lightemma.errors import UserError
+
+DEFAULT_BATCH_SIZE = 64
+DEFAULT_BATCH_WINDOW = 0.02
+MLLAMA_REFUSAL = "{model} is Llama-3.2-Vision (mllama), which vLLM 0.32 does not support; run it with --backend hf"
+
+
+class VLLMBackend:
+    """A vLLM engine answering the chain's requests, one ``LLM.chat`` per micro-batch.
+
+    Options: ``batch_size`` (requests per ``LLM.chat`` call, default 64),
+    ``batch_window``, ``tensor_parallel_size`` (GPUs to shard over, default 1),
+    ``gpu_memory_utilization`` (default 0.9), ``max_pixels`` (Pillow downscale
+    of each image before vLLM's processor), ``dtype`` (``auto`` lets vLLM take
+    the checkpoint's, i.e. bf16 for the paper's models), ``max_model_len``,
+    ``seed``, ``enable_prefix_caching`` (default on), ``engine_options`` (more
+    ``vllm.LLM`` keyword arguments). ``vllm`` is the vllm module itself, for
+    tests that inject a stand-in.
+    """
+
+    name = "vllm"
+
+    def __init__(self, model: str, *, batch_size: int = DEFAULT_BATCH_SIZE, batch_window: float = DEFAULT_BATCH_WINDOW,
+                 tensor_parallel_size: int = 1, gpu_memory_utilization: float = 0.9, max_pixels: int | None = None,
+                 dtype: str = "auto", max_model_len: int | None = None, seed: int = 0,
+                 enable_prefix_caching: bool = True, engine_options: Mapping[str, Any] | None = None,
+                 vllm: Any = None) -> None:
+        if is_mllama(model):
+            raise UserError(MLLAMA_REFUSAL.format(model=model))
+        if tensor_parallel_size < 1:
+            raise UserError(f"--tensor-parallel-size must be at least 1, got {tensor_parallel_size}")
+        if not 0 < gpu_memory_utilization <= 1:
+            raise UserError(f"--gpu-memory-utilization must be in (0, 1], got {gpu_memory_utilization}")
+        if max_pixels is not None and max_pixels < 1:
+            raise UserError(f"--max-pixels must be a positive number of pixels, got {max_pixels}")
+        if batch_size < 1:
+            raise UserError(f"--batch-size must be at least 1, got {batch_size}")
+        self._vllm = vllm if vllm is not None else require("vllm", "vllm")
+        self.model_id = model
+        self.max_pixels = max_pixels
+        self.tensor_parallel_size = tensor_parallel_size
+        self.gpu_memory_utilization = gpu_memory_utilization
+        self.enable_prefix_caching = enable_prefix_caching
+        self.engine_kwargs: dict[str, Any] = {
+            "tensor_parallel_size": tensor_parallel_size,
+            "gpu_memory_utilization": gpu_memory_utilization,
+            "dtype": dtype,
+            "seed": seed,
+            "limit_mm_per_prompt": {"image": 1},
+            "enable_prefix_caching": enable_prefix_caching,
+            **({"max_model_len": max_model_len} if max_model_len else {}),
+            **dict(engine_options or {}),
+        }
+        try:
+            self._llm = self._vllm.LLM(model, **self.engine_kwargs)
+        except (OSError, ValueError) as exc:
+            raise UserError(f"vLLM cannot load {model!r}: {' '.join(str(exc).split())[:400]}") from None
+        self.model_type = self._engine_model_type()
+        if is_mllama(model, self.model_type):
+            raise UserError(MLLAMA_REFUSAL.format(model=model))
+        self.prefix_cached_tokens = 0
+        self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
+                                     name="lightemma-vllm")
+
+    def _engine_model_type(self) -> str:
+        """The checkpoint's ``model_type`` as the engine loaded it ("unknown" where it cannot be read)."""
+        try:
+            return str(self._llm.llm_engine.model_config.hf_config.model_type)
+        except AttributeError:
+            return "unknown"
+
+    # -- the Backend interface --------------------------------------------------------------------
+
+    @property
+    def stats(self) -> dict[str, Any]:
+        """Batches run so far, requests answered, batch sizes, prompt tokens served from the prefix cache."""
+        return {**self._batcher.stats.to_dict(), "prefix_cached_tokens": self.prefix_cached_tokens}
+
+    @property
+    def info(self) -> Mapping[str, Any]:
+        engine = {k: v for k, v in self.engine_kwargs.items() if isinstance(v, (str, int, float, bool, dict, type(None)))}
+        return {
+            "backend": "vllm",
+            "model": self.model_id,
+            "model_type": self.model_type,
+            "gpus": self.tensor_parallel_size,
+            "tensor_parallel_size": self.tensor_parallel_size,
+            "gpu_memory_utilization": self.gpu_memory_utilization,
+            "dtype": engine.get("dtype"),
+            "engine": engine,
+            "batch_size": self._batcher.batch_size,
+            "batch_window_s": self._batcher.batch_window,
+            "batching": "one LLM.chat per micro-batch of one stage (vLLM continuous batching inside); image first, "
+                        "prefix caching " + ("on" if self.enable_prefix_caching else "off"),
+            "max_pixels": self.max_pixels,
+            "image_cap": "Pillow downscale before vLLM's processor" if self.max_pixels else None,
+            "decoding": "greedy at temperature 0, else sampling at the given temperature",
+            "token_counting": token_counting(self.model_type) + " (vLLM's prompt_token_ids and output token_ids)",
+            "seconds": "wall time of the LLM.chat call the request ran in",
+            "vllm": getattr(self._vllm, "__version__", None),
+        }
+
+    async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
+        """Answer ``requests`` (in order) through the micro-batcher; a failed batch gives error results."""
+        return await self._batcher.submit(requests)
+
+    async def aclose(self) -> None:
+        """Stop the worker thread and drop the engine."""
+        await self._batcher.aclose()
+        self._llm = None
+
+    # -- one batch, on the worker thread ----------------------------------------------------------
+
+    def conversation(self, request: ChatRequest) -> list[dict[str, Any]]:
+        """The one-turn conversation for ``request``: the PIL image first (if any), then the text."""
+        image = None
+        if request.image_path:
+            image = {"type": "image_pil", "image_pil": load_image(str(request.image_path), self.max_pixels)}
+        return user_turn(request, image)
+
+    def _run_batch(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
+        """One ``LLM.chat`` over the batch's conversations (same stage and params); results in order."""
+        start = time.perf_counter()
+        params = requests[0].params
+        sampling = self._vllm.SamplingParams(temperature=max(0.0, params.temperature), max_tokens=params.max_tokens)
+        conversations = [self.conversation(r) for r in requests]
+        outputs = self._llm.chat(conversations, sampling_params=sampling, use_tqdm=False)
+        if len(outputs) != len(requests):
+            raise RuntimeError(f"vLLM returned {len(outputs)} outputs for {len(requests)} conversations")
+        seconds = time.perf_counter() - start
+        self.prefix_cached_tokens += sum(int(getattr(o, "num_cached_tokens", 0) or 0) for o in outputs)
+        return [self._result(o, seconds) for o in outputs]
+
+    @staticmethod
+    def _result(output: Any, seconds: float) -> ChatResult:
+        completion = output.outputs[0]
+        return ChatResult(text=completion.text, input_tokens=len(output.prompt_token_ids or []),
+                          output_tokens=len(completion.token_ids), seconds=seconds, cost_cents=None)

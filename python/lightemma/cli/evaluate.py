@@ -1,0 +1,44 @@
+"""``lightemma evaluate RUN_DIR...``: the paper's Tables I and II from runs."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from lightemma.tables import FORMATS
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "evaluate",
+        help="score runs: FE, ADE/FDE per convention, time, cost, tokens (Tables I and II)",
+        description="Score run directories (or folders holding runs) and print the paper's Tables I and II.",
+    )
+    parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
+    parser.add_argument("--convention", default="lightemma", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention (default: lightemma, the paper's)")
+    parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
+    parser.add_argument("--format", default="md", choices=FORMATS, help="output format (default: md)")
+    parser.add_argument("--with-paper", action="store_true", help="print the paper's rows beside")
+    parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
+    parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout")
+    parser.set_defaults(func=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    from lightemma.evaluation import evaluate_runs, evaluation_tables
+    from lightemma.tables import render
+
+    evaluation = evaluate_runs(args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold)
+    for warning in evaluation.warnings:
+        print(f"lightemma evaluate: warning: {warning}", file=sys.stderr)
+    tables = evaluation_tables(evaluation, with_paper=args.with_paper)
+    text = render(tables, args.format, extra={"common": evaluation.common, "n_common": evaluation.n_common, "warnings": evaluation.warnings})
+    if args.output:
+        args.output.parent.mkdir(parents=True, exist_ok=True)
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return 0

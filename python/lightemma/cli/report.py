@@ -1,0 +1,44 @@
+"""``lightemma report RUN_DIR... --out DIR``: tables, figures and scenario analysis in one folder."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    parser = subparsers.add_parser(
+        "report",
+        help="write tables, figures and the scenario analysis of runs into one folder",
+        description="Evaluate runs and write Tables I/II, the bubble chart, scenario tables, the history-bias "
+        "figure and pictures of the frames where models disagree most into DIR, with an index.md.",
+    )
+    parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="report folder (created)")
+    parser.add_argument("--convention", default="all", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention(s) (default: all)")
+    parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
+    parser.add_argument("--no-paper", action="store_true", help="leave the paper's rows out of the tables and chart")
+    parser.add_argument("--top", type=int, default=5, metavar="N", help="pictures of the N frames where models disagree most (default: 5)")
+    parser.add_argument("--dataroot", metavar="DIR", help="dataset location for camera images, if not where the runs were made")
+    parser.add_argument("--frame", action="append", default=[], metavar="FRAME_ID", help="also draw this frame (repeatable)")
+    parser.add_argument("--no-pictures", action="store_true", help="skip per-frame pictures")
+    parser.set_defaults(func=run)
+    return parser
+
+
+def run(args: argparse.Namespace) -> int:
+    from lightemma.report import write_report
+
+    index = write_report(
+        args.run_dirs,
+        args.out,
+        convention=args.convention,
+        common=args.common,
+        with_paper=not args.no_paper,
+        top=args.top,
+        dataroot=args.dataroot,
+        pictures=not args.no_pictures,
+        frames=args.frame,
+    )
+    print(f"report written to {index}")
+    return 0

@@ -1,0 +1,100 @@
+"""``lightemma demo``: the whole benchmark on a fresh machine, no dataset and no keys needed.
+
+1. writes a small synthetic nuScenes-format dataset (every scenario kind:
+   cruising, braking at a red light, starting at green, turns, straight just
+   after a turn, …) under ``OUT/data``;
+2. runs the baselines (constant, constant velocity, oracle under Euler and
+   midpoint integration) through the ordinary run pipeline into ``OUT/runs``,
+   plus, for each API key that is set, one of the paper's models on a few frames;
+3. evaluates them and writes the report to ``OUT/report/index.md``.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+from lightemma.errors import UserError
+
+MARKER = ".lightemma-demo"
+VERSION = "v1.0-mini"
+# (model, integrator) pairs; the oracle twice, to show each integrator's error floor
+BASELINE_RUNS: tuple[tuple[str, str], ...] = (
+    ("baseline:constant", "euler"),
+    ("baseline:cv", "euler"),
+    ("baseline:oracle", "euler"),
+    ("baseline:oracle", "midpoint"),
+)
+# one paper model per provider, run only when its key is in the environment
+API_MODELS: tuple[tuple[str, str], ...] = (
+    ("OPENAI_API_KEY", "gpt-4o"),
+    ("ANTHROPIC_API_KEY", "claude-3.7-sonnet"),
+    ("GEMINI_API_KEY", "gemini-2.0-flash"),
+)
+
+
+@dataclass
+class DemoResult:
+    """Where the demo put things."""
+
+    out: Path
+    dataroot: Path
+    run_dirs: list[Path]
+    index: Path
+
+
+def _prepare(out: Path) -> None:
+    """Create ``out``, or clear the runs and report of an earlier demo there; never anything else."""
+    if out.exists() and any(out.iterdir()) and not (out / MARKER).exists():
+        raise UserError(f"{out} exists and is not a lightemma demo folder; choose another with --out")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / MARKER).write_text("written by `lightemma demo`; safe to delete\n", encoding="utf-8")
+    for name in ("runs", "report"):
+        shutil.rmtree(out / name, ignore_errors=True)
+
+
+def api_models(environ: os._Environ[str] | dict[str, str] | None = None) -> list[str]:
+    """The API models whose key is set (one per provider)."""
+    environ = os.environ if environ is None else environ
+    return [model for variable, model in API_MODELS if environ.get(variable)]
+
+
+def run_demo(
+    out: str | os.PathLike[str] = "lightemma-demo",
+    *,
+    scenes: int | None = None,
+    keyframes: int = 24,
+    use_api: bool = True,
+    api_limit: int = 12,
+    log: Callable[[str], None] = print,
+) -> DemoResult:
+    """Generate data, run baselines (and keyed API models), evaluate, report; see the module docstring."""
+    out = Path(out).resolve()
+    _prepare(out)
+    import lightemma
+    from lightemma.report import write_report
+    from lightemma.synth import KINDS, write_dataset
+
+    scenes = scenes or len(KINDS)
+    log(f"1/3 writing a synthetic dataset ({scenes} scenes × {keyframes} keyframes) to {out / 'data'}")
+    dataroot = Path(write_dataset(out / "data", scenes=scenes, seed=0, version=VERSION, keyframes=keyframes, images=True, sweeps=False, overwrite=True))
+    common = dict(dataroot=dataroot, version=VERSION, split="all", output=out / "runs", progress=False)
+    run_dirs = []
+    models = list(BASELINE_RUNS) + ([(m, "euler") for m in api_models()] if use_api else [])
+    for i, (model, method) in enumerate(models, start=1):
+        limit = api_limit if not model.startswith("baseline:") else None
+        log(f"2/3 run {i}/{len(models)}: {model} ({method})" + (f", first {limit} frames" if limit else ""))
+        try:
+            result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32, **common)
+        except UserError as exc:
+            if model.startswith("baseline:"):
+                raise
+            log(f"    skipped {model}: {exc}")
+            continue
+        run_dirs.append(Path(result.run_dir))
+    log(f"3/3 evaluating and writing the report to {out / 'report'}")
+    index = write_report([out / "runs"], out / "report", convention="all", with_paper=True, top=3)
+    return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index)

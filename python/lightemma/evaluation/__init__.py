@@ -1,0 +1,39 @@
+"""Evaluate runs: the paper's Tables I and II from run directories (SPEC §5, §6).
+
+>>> from lightemma.evaluation import evaluate_runs
+>>> ev = evaluate_runs(["runs/"], convention="all", common=True)
+>>> ev.accuracy_rows("lightemma")   # list of dicts, one per model
+"""
+
+from lightemma.evaluation.core import (
+    CONVENTION_NAMES,
+    Evaluation,
+    ModelResult,
+    columns,
+    common_frames,
+    evaluate_loaded,
+    evaluate_runs,
+    expand_run_dirs,
+)
+from lightemma.evaluation.loading import RunData, load_run, read_frame_records
+from lightemma.evaluation.manifest import RunInfo, run_info
+from lightemma.evaluation.tables import accuracy_table, efficiency_table, evaluation_tables
+
+__all__ = [
+    "CONVENTION_NAMES",
+    "Evaluation",
+    "ModelResult",
+    "RunData",
+    "RunInfo",
+    "accuracy_table",
+    "columns",
+    "common_frames",
+    "efficiency_table",
+    "evaluate_loaded",
+    "evaluate_runs",
+    "evaluation_tables",
+    "expand_run_dirs",
+    "load_run",
+    "read_frame_records",
+    "run_info",
+]

@@ -1,0 +1,55 @@
+"""Per-model accounting beside the metrics: format errors (SPEC §3) and efficiency (SPEC §6)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import numpy as np
+
+from lightemma.evaluation.loading import STATUS_CODES, UNKNOWN_STATUS, RunData
+
+
+def _pct(mask: np.ndarray) -> float | None:
+    return float(100.0 * mask.mean()) if mask.size else None
+
+
+def format_errors(run: RunData, rows: np.ndarray) -> dict[str, Any]:
+    """FE % (first answer not ``ok``) and FE corr % (first answer ``failed``) over ``rows``.
+
+    Frames whose first status is unknown are left out of both rates.
+    """
+    first = run.first_status[rows]
+    first = first[first != UNKNOWN_STATUS]
+    return {
+        "fe_pct": _pct(first != STATUS_CODES["ok"]),
+        "fe_corr_pct": _pct(first == STATUS_CODES["failed"]),
+        "failed_final": int((run.status[rows] == STATUS_CODES["failed"]).sum()),
+    }
+
+
+def _mean(values: np.ndarray) -> float | None:
+    known = values[np.isfinite(values)]
+    return float(known.mean()) if known.size else None
+
+
+def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
+    """Mean time, cost and tokens per frame over ``rows``; GPUs, run wall time, frames/s.
+
+    Cost is None when no frame's cost is known (local models, unknown prices);
+    ``cost_known_pct`` says how many frames the mean rests on.
+    """
+    cost = run.cost_cents[rows]
+    wall = run.info.wall_seconds
+    n_run = len(run)
+    return {
+        "seconds_per_frame": _mean(run.seconds[rows]),
+        "cost_cents_per_frame": _mean(cost),
+        "cost_known_pct": _pct(np.isfinite(cost)),
+        "input_tokens": _mean(run.input_tokens[rows]),
+        "output_tokens": _mean(run.output_tokens[rows]),
+        "gpus": run.info.gpus,
+        "run_wall_seconds": wall,
+        "frames_per_second": (n_run / wall) if wall and n_run and math.isfinite(wall) else None,
+        "concurrency": run.info.concurrency,
+    }

@@ -1,0 +1,257 @@
+"""Evaluate runs: per model, metrics through the Rust core plus FE and efficiency accounting.
+
+``evaluate_runs`` is the Python entry point; ``lightemma evaluate`` formats its
+result. Each model is scored on its own valid frames, or with ``common=True``
+on the frames valid for every model (SPEC §5). All frames of a model go to the
+core in one batched call per convention.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lightemma.errors import RunStoreError, UserError
+from lightemma.evaluation.accounting import efficiency, format_errors
+from lightemma.evaluation.loading import RunData, load_run
+from lightemma.evaluation.models import family_rank
+from lightemma.runs.store import find_run_dirs
+
+CONVENTION_NAMES: tuple[str, ...] = ("lightemma", "stp3", "uniad")
+METRIC_KEYS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde", "miss_rate")
+
+
+@dataclass
+class ModelResult:
+    """One run's row: identity, frames, metrics per convention, FE and efficiency accounting."""
+
+    label: str
+    model: str
+    family: str
+    generation: int | None
+    run_dir: Path
+    integrator: str
+    complete: bool
+    frames_in_run: int
+    frames_accounted: int  # frames behind FE and efficiency: all, or with --common those in every run
+    frames_evaluated: int  # frames behind the metrics
+    metrics: dict[str, dict[str, float]]  # convention -> metric -> value
+    accounting: dict[str, Any]  # fe_pct, fe_corr_pct, failed_final
+    efficiency: dict[str, Any]
+
+    def accuracy_row(self, convention: str) -> dict[str, Any]:
+        """A flat dict: model, family, frames, FE, FE corr, ADE 1s/2s/3s/avg, FDE, miss rate."""
+        return {
+            "model": self.label,
+            "family": self.family,
+            "convention": convention,
+            "frames": self.frames_evaluated,
+            "frames_in_run": self.frames_in_run,
+            "fe_pct": self.accounting["fe_pct"],
+            "fe_corr_pct": self.accounting["fe_corr_pct"],
+            **{key: self.metrics[convention][key] for key in METRIC_KEYS},
+        }
+
+    def efficiency_row(self) -> dict[str, Any]:
+        """A flat dict: model, family, time, cost, tokens, GPUs, run wall time, frames/s."""
+        return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self.efficiency}
+
+
+@dataclass
+class Evaluation:
+    """Everything ``lightemma evaluate`` prints; rows are plain dicts (DataFrame-friendly)."""
+
+    models: list[ModelResult]
+    conventions: tuple[str, ...]
+    common: bool
+    n_common: int | None
+    warnings: list[str] = field(default_factory=list)
+
+    def accuracy_rows(self, convention: str = "lightemma") -> list[dict[str, Any]]:
+        """Table II rows for one convention, one dict per model."""
+        if convention not in self.conventions:
+            raise UserError(f"convention {convention!r} was not evaluated (have {', '.join(self.conventions)})")
+        return [m.accuracy_row(convention) for m in self.models]
+
+    def efficiency_rows(self) -> list[dict[str, Any]]:
+        """Table I rows, one dict per model."""
+        return [m.efficiency_row() for m in self.models]
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-able summary: accuracy rows per convention, efficiency rows, warnings."""
+        return {
+            "common": self.common,
+            "n_common": self.n_common,
+            "accuracy": {c: self.accuracy_rows(c) for c in self.conventions},
+            "efficiency": self.efficiency_rows(),
+            "warnings": list(self.warnings),
+        }
+
+
+def columns(rows: Sequence[dict[str, Any]]) -> dict[str, list[Any]]:
+    """Rows (list of dicts) as a dict of columns, e.g. for ``pandas.DataFrame(columns(rows))``."""
+    keys: list[str] = []
+    for row in rows:
+        keys.extend(k for k in row if k not in keys)
+    return {k: [row.get(k) for row in rows] for k in keys}
+
+
+def expand_run_dirs(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
+    """Run directories named by ``paths`` (each a run dir or a folder holding runs), without repeats."""
+    found: list[Path] = []
+    for path in paths:
+        dirs = find_run_dirs(path)
+        if not dirs:
+            raise RunStoreError(f"{path} holds no lightemma run (no manifest.json at or below it)")
+        found.extend(d for d in dirs if d.resolve() not in {f.resolve() for f in found})
+    if not found:
+        raise UserError("no run directories given")
+    return found
+
+
+def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
+    names = CONVENTION_NAMES if convention == "all" else ((convention,) if isinstance(convention, str) else tuple(convention))
+    for name in names:
+        if name not in CONVENTION_NAMES:
+            raise UserError(f"unknown convention {name!r} (choose from {', '.join(CONVENTION_NAMES)} or all)")
+    return names
+
+
+def unique_labels(runs: list[RunData]) -> list[str]:
+    """Display labels, made distinct by integrator or run id where two runs share one."""
+    original = [r.info.label for r in runs]
+    labels = list(original)
+    for i, run in enumerate(runs):
+        clashes = [j for j, lab in enumerate(original) if lab == run.info.label]
+        if len(clashes) > 1:
+            integrators = {runs[j].info.integrator for j in clashes}
+            suffix = run.info.integrator if len(integrators) == len(clashes) else run.info.run_dir.name
+            labels[i] = f"{run.info.label} [{suffix}]"
+    return labels
+
+
+def frame_set_warning(runs: Sequence[RunData]) -> str | None:
+    """A warning when the runs do not all cover the same frames (None when they do)."""
+    if len(runs) < 2:
+        return None
+    sets = [set(r.frame_ids) for r in runs]
+    union, inter = set.union(*sets), set.intersection(*sets)
+    if len(union) == len(inter):
+        return None
+    return (
+        f"the runs cover different frame sets: {len(union) - len(inter)} of {len(union)} frames are not in every run; "
+        f"each model is scored on its own frames (pass --common to compare on the frames valid for every run)"
+    )
+
+
+def common_frames(runs: Sequence[RunData]) -> list[str]:
+    """Frame ids valid (scored) in every run, in the first run's order."""
+    valid_sets = [set(np.asarray(r.frame_ids, dtype=object)[r.valid].tolist()) for r in runs[1:]]
+    first = runs[0]
+    return [fid for fid, ok in zip(first.frame_ids, first.valid) if ok and all(fid in s for s in valid_sets)]
+
+
+SCORE_BLOCK = 1 << 16  # frames per core call: bounded copies, still one call per large batch
+
+
+def score(run: RunData, rows: np.ndarray, conventions: Sequence[str], miss_threshold: float) -> dict[str, dict[str, float]]:
+    """Metrics of ``rows`` of a run per convention through the Rust core.
+
+    Frames go to the core in blocks of :data:`SCORE_BLOCK` (one batched call per
+    block and convention) and the block results are combined frame-weighted,
+    which is exact for these means; memory for the copies stays bounded.
+    """
+    from lightemma import evaluate
+
+    if len(rows) == 0:
+        return {c: {key: None for key in METRIC_KEYS} for c in conventions}
+    sums = {c: dict.fromkeys(METRIC_KEYS, 0.0) for c in conventions}
+    for start in range(0, len(rows), SCORE_BLOCK):
+        block = rows[start : start + SCORE_BLOCK]
+        pred = np.ascontiguousarray(run.trajectory[block])
+        gt = np.ascontiguousarray(run.gt_positions[block])
+        for convention in conventions:
+            metrics = evaluate(pred, gt, convention=convention, miss_threshold=miss_threshold).to_dict()
+            for key in METRIC_KEYS:
+                sums[convention][key] += float(metrics[key]) * len(block)
+    return {c: {key: total / len(rows) for key, total in sums[c].items()} for c in conventions}
+
+
+def evaluate_loaded(
+    runs: Sequence[RunData],
+    *,
+    convention: str | Sequence[str] = "lightemma",
+    common: bool = False,
+    miss_threshold: float = 2.0,
+) -> Evaluation:
+    """Evaluate already loaded runs (see :func:`evaluate_runs`).
+
+    Metrics use each run's valid frames, or with ``common`` the frames valid for
+    every run; FE and efficiency accounting use all frames of a run, or with
+    ``common`` the frames present in every run.
+    """
+    conventions = _conventions(convention)
+    runs = sorted(runs, key=lambda r: (family_rank(r.info.family), r.info.generation or 99, r.info.label))
+    warnings = [w for r in runs for w in r.warnings]
+    shared: list[str] | None = None
+    present: set[str] | None = None
+    if common:
+        shared = common_frames(runs)
+        if not shared:
+            raise UserError("no frame is valid for every run; nothing to compare with --common")
+        present = set.intersection(*(set(r.frame_ids) for r in runs))
+    else:
+        note = frame_set_warning(runs)
+        if note:
+            warnings.append(note)
+    results = []
+    for run, label in zip(runs, unique_labels(runs)):
+        if shared is not None and present is not None:
+            index = run.index()
+            scored = np.fromiter((index[f] for f in shared), dtype=np.int64, count=len(shared))
+            rows = np.flatnonzero(np.fromiter((f in present for f in run.frame_ids), dtype=bool, count=len(run)))
+        else:
+            rows = np.arange(len(run))
+            scored = np.flatnonzero(run.valid)
+        results.append(
+            ModelResult(
+                label=label,
+                model=run.info.model,
+                family=run.info.family,
+                generation=run.info.generation,
+                run_dir=run.info.run_dir,
+                integrator=run.info.integrator,
+                complete=run.info.complete,
+                frames_in_run=len(run),
+                frames_accounted=len(rows),
+                frames_evaluated=len(scored),
+                metrics=score(run, scored, conventions, miss_threshold),
+                accounting=format_errors(run, rows),
+                efficiency=efficiency(run, rows),
+            )
+        )
+    return Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings)
+
+
+def evaluate_runs(
+    run_dirs: Iterable[str | os.PathLike[str]],
+    *,
+    convention: str | Sequence[str] = "lightemma",
+    common: bool = False,
+    miss_threshold: float = 2.0,
+) -> Evaluation:
+    """Evaluate run directories (or folders holding runs): Tables I and II as rows of dicts.
+
+    ``convention`` is one of ``lightemma``, ``stp3``, ``uniad``, a sequence of
+    them, or ``all``. ``common=True`` scores every model on the frames valid for
+    all of them. Unfinished runs are evaluated on their finished frames; corrupt
+    lines are skipped; both are reported in ``Evaluation.warnings``.
+    """
+    conventions = _conventions(convention)  # check the arguments before reading any run
+    runs = [load_run(d) for d in expand_run_dirs(run_dirs)]
+    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold)

@@ -1,0 +1,135 @@
+"""What evaluation reads from a run's manifest, defensively (missing keys are None).
+
+Manifests written by the run pipeline carry ``display_name``, ``model_info``
+(family, generation, GPUs), ``backend``, ``config`` (integrate method,
+concurrency), ``sessions`` (wall time of each run/resume) and ``dataset``;
+older or foreign manifests may lack any of them. The display name and family
+fall back to the paper's models (:mod:`lightemma.evaluation.models`) or the
+model string.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping
+from dataclasses import dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+from lightemma.evaluation.models import FAMILIES, infer_family, known_model
+from lightemma.runs.store import read_manifest
+
+
+@dataclass(frozen=True)
+class RunInfo:
+    """What a manifest says about a run; missing keys are None."""
+
+    run_dir: Path
+    model: str
+    label: str
+    family: str
+    generation: int | None
+    gpus: int | None
+    integrator: str
+    wall_seconds: float | None
+    concurrency: int | None
+    complete: bool
+    dataset: Mapping[str, Any] | None
+    manifest: Mapping[str, Any]
+
+
+def _get(mapping: Any, *keys: str) -> Any:
+    for key in keys:
+        if not isinstance(mapping, Mapping):
+            return None
+        mapping = mapping.get(key)
+    return mapping
+
+
+def _as_int(value: Any) -> int | None:
+    try:
+        return int(value) if value is not None else None
+    except (TypeError, ValueError):
+        return None
+
+
+def _parse_time(value: Any) -> datetime | None:
+    if not isinstance(value, str):
+        return None
+    try:
+        return datetime.fromisoformat(value.replace("Z", "+00:00"))
+    except ValueError:
+        return None
+
+
+def _wall_seconds(manifest: Mapping[str, Any]) -> float | None:
+    """Run wall time: the sum over sessions (a resumed run has several), else what the manifest says."""
+    sessions = manifest.get("sessions")
+    if isinstance(sessions, list):
+        walls = [s.get("wall_seconds") for s in sessions if isinstance(s, Mapping)]
+        if walls and all(isinstance(w, (int, float)) for w in walls) and sum(walls) > 0:
+            return float(sum(walls))
+    for value in (manifest.get("wall_seconds"), _get(manifest, "summary", "wall_seconds")):
+        if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
+            return float(value)
+    start, end = _parse_time(manifest.get("started_at")), _parse_time(manifest.get("finished_at"))
+    if start and end and end > start:
+        return (end - start).total_seconds()
+    return None
+
+
+def _integrator(manifest: Mapping[str, Any]) -> str:
+    for value in (
+        manifest.get("integrator"),
+        _get(manifest, "config", "integrate_method"),
+        _get(manifest, "params", "integrate_method"),
+        _get(manifest, "params", "integrator"),
+    ):
+        if isinstance(value, Mapping):
+            value = value.get("method")
+        if isinstance(value, str):
+            return value
+    return "euler"
+
+
+def _family(manifest: Mapping[str, Any], model: str, known: Any) -> str:
+    """Family in the spelling of :data:`FAMILIES` (manifests may say ``baseline`` or ``other``)."""
+    value = manifest.get("family") or _get(manifest, "model_info", "family")
+    if isinstance(value, str) and value:
+        return next((f for f in FAMILIES if f.lower() == value.lower()), value)
+    return known.family if known else infer_family(model)
+
+
+def _gpus(manifest: Mapping[str, Any]) -> int | None:
+    """GPUs the run used: the backend's report, else the registry's (0 means none: an API)."""
+    for value in (manifest.get("gpus"), _get(manifest, "backend", "gpus"), _get(manifest, "backend_info", "gpus"), _get(manifest, "model_info", "gpus")):
+        gpus = _as_int(value)
+        if gpus:
+            return gpus
+    return None
+
+
+def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None = None) -> RunInfo:
+    """Read what evaluation needs from a run's manifest, defensively."""
+    run_dir = Path(run_dir)
+    manifest = dict(manifest if manifest is not None else read_manifest(run_dir))
+    model = str(manifest.get("model") or run_dir.parent.name or "unknown")
+    known = known_model(model) if not model.startswith("baseline:") else None
+    label = manifest.get("display_name") or (known.display_name if known else model)
+    generation = _as_int(manifest.get("generation")) or _as_int(_get(manifest, "model_info", "generation"))
+    dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), Mapping) else None
+    return RunInfo(
+        run_dir=run_dir,
+        model=model,
+        label=str(label),
+        family=_family(manifest, model, known),
+        generation=generation or (known.generation if known else None),
+        gpus=_gpus(manifest),
+        integrator=_integrator(manifest),
+        wall_seconds=_wall_seconds(manifest),
+        concurrency=_as_int(manifest.get("concurrency")) or _as_int(_get(manifest, "config", "concurrency")),
+        complete=bool(manifest.get("finished_at")),
+        dataset=dataset,
+        manifest=manifest,
+    )

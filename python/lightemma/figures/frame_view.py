@@ -1,0 +1,189 @@
+"""Per-frame pictures (the paper's Fig. 3): the CAM_FRONT image with ground-truth and
+predicted trajectories projected through the calibration, a bird's-eye inset and the
+three stage texts; and a grid comparing several models on one frame."""
+
+from __future__ import annotations
+
+import textwrap
+from collections.abc import Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lightemma.figures._mpl import GT_COLOR, pred_color, pyplot
+from lightemma.figures.projection import densify, project
+
+STAGE_LABELS = (("scene", "1 · Scene"), ("intent", "2 · Intent"), ("answer", "3 · Actions"))
+
+
+@dataclass
+class Camera:
+    """What a picture needs from a frame: the image (H, W, 3) or None, and the calibration."""
+
+    image: np.ndarray | None
+    intrinsic: np.ndarray  # (3, 3)
+    extrinsic: np.ndarray  # (4, 4) ego-from-camera
+
+    @property
+    def size(self) -> tuple[int, int]:
+        """(width, height) of the image, or guessed from the principal point when there is none."""
+        if self.image is not None:
+            return self.image.shape[1], self.image.shape[0]
+        return int(round(2 * self.intrinsic[0, 2])), int(round(2 * self.intrinsic[1, 2]))
+
+
+def load_image(path: str | Path | None) -> np.ndarray | None:
+    """The RGB image at ``path`` as an array, or None when there is none or it is unreadable."""
+    if not path or not Path(path).is_file():
+        return None
+    from PIL import Image
+
+    try:
+        with Image.open(path) as img:
+            return np.asarray(img.convert("RGB"))
+    except OSError:
+        return None
+
+
+def camera_from_frame(frame: Any) -> Camera:
+    """A :class:`Camera` from a :class:`lightemma.Frame` (image_path, camera_intrinsic, camera_extrinsic)."""
+    return Camera(
+        image=load_image(getattr(frame, "image_path", None)),
+        intrinsic=np.asarray(frame.camera_intrinsic, dtype=np.float64),
+        extrinsic=np.asarray(frame.camera_extrinsic, dtype=np.float64),
+    )
+
+
+def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str, label: str, width: float) -> None:
+    line, _ = project(densify(trajectory), camera.intrinsic, camera.extrinsic)
+    ax.plot(line[:, 0], line[:, 1], color=color, linewidth=width, label=label, solid_capstyle="round")
+    points, visible = project(trajectory, camera.intrinsic, camera.extrinsic)
+    ax.scatter(points[visible, 0], points[visible, 1], s=width * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
+
+
+def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
+    """The camera view with the trajectories drawn on the ground; a grey canvas when there is no image."""
+    width, height = camera.size
+    if camera.image is not None:
+        ax.imshow(camera.image)
+    else:
+        ax.imshow(np.full((height, width, 3), 200, dtype=np.uint8))
+        ax.text(0.02, 0.96, "image not available", transform=ax.transAxes, color="0.3", va="top", fontsize=8)
+    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", 3.0)
+    for i, (label, trajectory) in enumerate(predictions.items()):
+        if np.isfinite(trajectory).all():
+            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, 2.2)
+    ax.set_xlim(0, width)
+    ax.set_ylim(height, 0)
+    ax.axis("off")
+
+
+def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
+    """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now."""
+    def plot(traj: np.ndarray, color: str, width: float, label: str) -> None:
+        pts = np.concatenate([np.zeros((1, 2)), traj])
+        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label)
+
+    plot(gt, GT_COLOR, 2.2, "ground truth")
+    for i, (label, trajectory) in enumerate(predictions.items()):
+        if np.isfinite(trajectory).all():
+            plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.6, label)
+    everything = np.concatenate([np.zeros((1, 2)), gt] + [t for t in predictions.values() if np.isfinite(t).all()])
+    reach = max(5.0, float(np.abs(everything).max()) * 1.1)
+    ax.set_xlim(-reach / 2, reach / 2)
+    ax.set_ylim(-reach * 0.1, reach)
+    ax.set_aspect("equal", adjustable="box")
+    ax.plot([0], [0], marker="^", color="black", markersize=6)
+    ax.set_facecolor("#f4f4f4")
+    ax.tick_params(labelsize=6)
+    ax.set_title("bird's-eye (m)", fontsize=7)
+
+
+def _camera_with_inset(ax: Any, camera: Camera | None, gt: np.ndarray, preds: Mapping[str, np.ndarray], colors: Mapping[str, str] | None, bounds: tuple[float, ...]) -> Any:
+    """Camera view with a BEV inset; without a camera the BEV fills the axes. Returns the inset (or None)."""
+    if camera is None:
+        draw_bev(ax, gt, preds, colors=colors)
+        return None
+    draw_camera(ax, camera, gt, preds, colors=colors)
+    inset = ax.inset_axes(bounds)
+    draw_bev(inset, gt, preds, colors=colors)
+    return inset
+
+
+def _stage_text(texts: Mapping[str, Any], limit: int) -> str:
+    blocks = []
+    for key, title in STAGE_LABELS:
+        value = " ".join(str(texts.get(key) or "—").split())
+        if len(value) > limit:
+            value = value[: limit - 1] + "…"
+        blocks.append(textwrap.fill(f"{title}: {value}", width=130))
+    return "\n\n".join(blocks)
+
+
+def frame_figure(
+    gt: np.ndarray,
+    predictions: Mapping[str, np.ndarray],
+    *,
+    camera: Camera | None = None,
+    texts: Mapping[str, Any] | None = None,
+    title: str | None = None,
+    text_limit: int = 420,
+) -> Any:
+    """One frame: camera view with trajectories, BEV inset, and (if given) the stage texts.
+
+    ``predictions`` maps a label to a (6, 2) trajectory in the ego frame;
+    ``texts`` holds ``scene``, ``intent`` and ``answer`` (the stage-3 answer).
+    Returns the matplotlib Figure (the first axes is the camera view).
+    """
+    plt = pyplot()
+    gt = np.asarray(gt, dtype=np.float64)
+    preds = {k: np.asarray(v, dtype=np.float64) for k, v in predictions.items()}
+    fig = plt.figure(figsize=(10, 7.8 if texts else 6.0))
+    if texts:
+        grid = fig.add_gridspec(2, 1, height_ratios=[3, 1.3], hspace=0.05, left=0.02, right=0.98, top=0.94, bottom=0.02)
+        ax = fig.add_subplot(grid[0])
+        text_ax = fig.add_subplot(grid[1])
+        text_ax.axis("off")
+        text_ax.text(0.0, 1.0, _stage_text(texts, text_limit), va="top", ha="left", fontsize=7.5, family="monospace", transform=text_ax.transAxes)
+    else:
+        ax = fig.add_axes((0.02, 0.02, 0.96, 0.90))
+    _camera_with_inset(ax, camera, gt, preds, None, (0.74, 0.50, 0.25, 0.48))
+    ax.legend(loc="lower left", fontsize=8, framealpha=0.8)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def model_grid(
+    gt: np.ndarray,
+    predictions: Mapping[str, np.ndarray],
+    *,
+    camera: Camera | None = None,
+    title: str | None = None,
+    ncols: int = 3,
+    errors: Mapping[str, float] | None = None,
+) -> Any:
+    """Several models on one frame: one panel per model (ground truth in each), BEV insets."""
+    plt = pyplot()
+    gt = np.asarray(gt, dtype=np.float64)
+    labels = list(predictions)
+    ncols = max(1, min(ncols, len(labels)))
+    nrows = max(1, -(-len(labels) // ncols))
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 2.9 * nrows + 0.5), squeeze=False)
+    for ax in axes.flat[len(labels):]:
+        ax.axis("off")
+    for i, (ax, label) in enumerate(zip(axes.flat, labels)):
+        pred = {label: np.asarray(predictions[label], dtype=np.float64)}
+        colors = {label: pred_color(i)}
+        inset = _camera_with_inset(ax, camera, gt, pred, colors, (0.70, 0.45, 0.29, 0.54))
+        error = (errors or {}).get(label)
+        ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=pred_color(i))
+        if inset is not None:
+            inset.set_title("")
+            inset.tick_params(labelsize=5)
+    if title:
+        fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    return fig

@@ -1,0 +1,186 @@
+"""``lightemma report``: tables, figures and the scenario analysis of runs in one folder.
+
+Layout of ``OUT``::
+
+    index.md                      links everything below, tables inline
+    tables/efficiency.{md,csv,tex}, tables/accuracy_<convention>.{md,csv,tex}
+    tables/scenarios.{md,csv}, tables/history_bias.{md,csv}, tables/evaluation.json
+    figures/bubble.{png,svg}, figures/history_bias.{png,svg}
+    figures/frames/<kind>_<frame>.{png,svg}     model grids and single-model pictures
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from lightemma.evaluation import Evaluation, RunData, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
+from lightemma.evaluation.core import unique_labels
+from lightemma.errors import UserError
+from lightemma.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
+
+
+
+def _slug(text: str) -> str:
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_") or "frame"
+
+
+class _Writer:
+    """Writes files under the report folder and collects the index's Markdown."""
+
+    def __init__(self, out: Path) -> None:
+        self.out = out
+        self.lines: list[str] = []
+
+    def rel(self, path: Path) -> str:
+        return path.relative_to(self.out).as_posix()
+
+    def table(self, table: Table, *, latex: bool = True) -> None:
+        base = self.out / "tables" / table.name
+        base.parent.mkdir(parents=True, exist_ok=True)
+        base.with_suffix(".md").write_text(to_markdown(table), encoding="utf-8")
+        base.with_suffix(".csv").write_text(to_csv(table), encoding="utf-8")
+        links = [f"[csv]({self.rel(base.with_suffix('.csv'))})"]
+        if latex:
+            base.with_suffix(".tex").write_text(to_latex(table), encoding="utf-8")
+            links.append(f"[LaTeX]({self.rel(base.with_suffix('.tex'))})")
+        self.lines += [to_markdown(table), " · ".join(links), ""]
+
+    def figure(self, fig: Any, stem: str, caption: str) -> Path:
+        from lightemma.figures import save_figure
+
+        png, svg = save_figure(fig, self.out / "figures" / stem)
+        self.lines += [f"![{caption}]({self.rel(png)})", f"*{caption}* ([svg]({self.rel(svg)}))", ""]
+        return png
+
+
+def _scenario_table(rows: list[dict[str, Any]], labels: Sequence[str]) -> Table:
+    def cell(value: Any) -> str:
+        return "-" if not value else f"{value['ade_avg']:.2f}"
+
+    columns = [Column("tag", "Tag"), Column("frames", "Frames")] + [Column(label, label, cell) for label in labels]
+    return Table("ADE avg by scenario tag", columns, rows, name="scenarios")
+
+
+def _bias_table(rows: list[dict[str, Any]]) -> Table:
+    columns = [
+        Column("model", "Model"),
+        Column("frames", "Moving frames"),
+        Column("slope_pred", "Slope pred/hist", fixed(2)),
+        Column("slope_true", "Slope true/hist", fixed(2)),
+        Column("after_turn_frames", "Straight-after-turn frames"),
+        Column("carry_pred", "Carried over (pred)", fixed(2)),
+        Column("carry_true", "Carried over (truth)", fixed(2)),
+    ]
+    return Table("History bias: predicted vs true curvature against the last history curvature", columns, rows, name="history_bias")
+
+
+def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any]) -> None:
+    """For each (kind, frame_id, caption): a grid of all models, and the worst model's picture with its texts."""
+    from lightemma.figures import frame_figure, model_grid
+    from lightemma.pictures import stage_texts
+
+    records = {id(run): read_frame_records(run.info.run_dir, [fid for _, fid, _ in picks]) for run in runs}
+    for kind, fid, caption in picks:
+        preds, errors, gt = {}, {}, None
+        for run, label in zip(runs, labels):
+            row = run.index().get(fid)
+            if row is None or not run.valid[row]:
+                continue
+            gt = run.gt_positions[row]
+            preds[label] = run.trajectory[row]
+            errors[label] = float(np.linalg.norm(run.trajectory[row] - gt, axis=1).mean())
+        if gt is None:
+            continue
+        w.lines.append(f"**{caption}** — frame `{fid}`")
+        w.lines.append("")
+        w.figure(model_grid(gt, preds, camera=cameras.get(fid), title=f"{fid}: {caption}", errors=errors), f"frames/{kind}_{_slug(fid)}_grid", f"all models on {fid}")
+        models = [lab for lab, run in zip(labels, runs) if lab in errors and run.info.family != "Baseline"] or list(errors)
+        worst = max(models, key=errors.get)  # stage texts of a baseline say nothing
+        run = runs[list(labels).index(worst)]
+        texts = stage_texts(records[id(run)].get(fid))
+        fig = frame_figure(gt, {worst: preds[worst]}, camera=cameras.get(fid), texts=texts, title=f"{fid}: {worst} (ADE {errors[worst]:.2f} m)")
+        w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
+
+
+def write_report(
+    run_dirs: Iterable[str | os.PathLike[str]],
+    out: str | os.PathLike[str],
+    *,
+    convention: str = "all",
+    common: bool = False,
+    with_paper: bool = True,
+    top: int = 5,
+    dataroot: str | None = None,
+    pictures: bool = True,
+    frames: Sequence[str] = (),
+) -> Path:
+    """Evaluate runs and write tables, figures and the scenario analysis into ``out``; returns ``index.md``.
+
+    ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases).
+    """
+    from lightemma.figures import bubble_chart, bubble_points, history_bias_figure
+    from lightemma.pictures import CameraSource
+    from lightemma.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
+
+    runs = [load_run(d, details=True) for d in expand_run_dirs(run_dirs)]
+    known = set().union(*(r.frame_ids for r in runs)) if runs else set()
+    missing = [fid for fid in frames if fid not in known]
+    if missing:
+        raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
+    evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common)
+    order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
+    runs.sort(key=lambda r: order[r.info.run_dir])
+    labels = unique_labels(runs)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    w = _Writer(out)
+    w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator |", "|---|---|---|---:|---|---|"]
+    w.lines += [f"| {m.label} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | {m.integrator} |" for m in evaluation.models]
+    w.lines.append("")
+    if evaluation.warnings:
+        w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]
+
+    w.lines += ["## Tables I and II", ""]
+    for table in evaluation_tables(evaluation, with_paper=with_paper):
+        w.table(table)
+    (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
+    w.lines += [f"All numbers as JSON: [tables/evaluation.json](tables/evaluation.json)", ""]
+
+    w.lines += ["## Fig. 1 — ADE by family and generation", ""]
+    main_convention = evaluation.conventions[0] if "lightemma" not in evaluation.conventions else "lightemma"
+    points = bubble_points(evaluation, convention=main_convention, with_paper=with_paper)
+    if any(p["ade_avg"] is not None for p in points):
+        caption = "ADE avg per model; bubble area ∝ time per frame; colour = family" + ("; hollow = the paper's" if with_paper else "")
+        w.figure(bubble_chart(points), "bubble", caption)
+    else:
+        w.lines += ["No model has a scored frame yet; no chart.", ""]
+
+    from lightemma.evaluation import common_frames
+
+    shared = common_frames(runs) if len(runs) > 1 else None
+    scope = f"the {len(shared)} frames valid for every run" if shared else "each run's valid frames"
+    w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
+    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels), latex=False)
+    w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
+    w.table(_bias_table(history_bias(runs)), latex=False)
+    w.figure(history_bias_figure(runs), "history_bias", "predicted and true future curvature against the last history curvature")
+
+    picks = [("frame", fid, "requested frame") for fid in frames]
+    picks += [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]
+    picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS)]
+    if pictures and picks:
+        source = CameraSource(dataroot)
+        cameras = source.cameras(runs, [fid for _, fid, _ in picks])
+        w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
+        w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
+        _frame_pictures(w, runs, labels, picks, cameras)
+    index = out / "index.md"
+    index.write_text("\n".join(w.lines) + "\n", encoding="utf-8")
+    return index

@@ -1,0 +1,260 @@
+"""Scenario analysis: tag frames from ground truth and history, score models per tag,
+measure history bias, and find the frames where models disagree most or all fail.
+
+Tags follow the failure cases of the paper's Section V (trajectory carried over
+from a finished turn, missed turns, stops, starts). They are computed from the
+run records alone — ground-truth positions (6, 2) and history actions (6, 2) —
+so they need no dataset:
+
+==========================  ===============================================================
+stopped                     now < 0.5 m/s and stays below 0.5 m/s for 3 s
+starting                    now < 0.5 m/s, at least 1 m/s at 3 s (Case 5)
+braking                     now ≥ 1 m/s, at least 2 m/s slower at 3 s (Cases 3, 4)
+accelerating                now ≥ 0.5 m/s, at least 2 m/s faster at 3 s
+turning_left / _right       heading at 3 s turned by more than 15° (Case 2)
+straight_after_left_turn    heading within 5° for 3 s while the last three history
+/ straight_after_right_turn curvatures include one beyond ±0.03 1/m (Case 1)
+cruising                    moving ≥ 1 m/s, straight, steady speed, no other tag
+==========================  ===============================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from lightemma.evaluation.core import unique_labels
+from lightemma.evaluation.loading import RunData
+
+DT = 0.5
+TAGS: tuple[str, ...] = (
+    "stopped",
+    "starting",
+    "braking",
+    "accelerating",
+    "turning_left",
+    "turning_right",
+    "straight_after_left_turn",
+    "straight_after_right_turn",
+    "cruising",
+)
+# tags whose worst frames illustrate the paper's failure cases
+CASE_TAGS: tuple[str, ...] = ("straight_after_right_turn", "straight_after_left_turn", "turning_left", "turning_right", "braking", "starting")
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    """The numbers behind the tags (SI units: m/s, rad, 1/m)."""
+
+    stopped_speed: float = 0.5
+    moving_speed: float = 1.0
+    speed_change: float = 2.0
+    turn_heading: float = np.deg2rad(15.0)
+    straight_heading: float = np.deg2rad(5.0)
+    turn_curvature: float = 0.03
+
+
+def _with_origin(positions: np.ndarray) -> np.ndarray:
+    positions = np.asarray(positions, dtype=np.float64)
+    return np.concatenate([np.zeros((len(positions), 1, 2)), positions], axis=1)
+
+
+def future_speeds(gt_positions: np.ndarray) -> np.ndarray:
+    """(N, 6) speeds of the segments origin→p1 … p5→p6."""
+    return np.linalg.norm(np.diff(_with_origin(gt_positions), axis=1), axis=2) / DT
+
+
+def heading_change(positions: np.ndarray, *, min_step: float = 0.05) -> np.ndarray:
+    """(N,) heading (rad, left positive) of the last moving segment of a trajectory from the origin."""
+    steps = np.diff(_with_origin(positions), axis=1)
+    lengths = np.linalg.norm(steps, axis=2)
+    out = np.zeros(len(steps))
+    for k in range(steps.shape[1]):
+        moving = lengths[:, k] > min_step
+        out[moving] = np.arctan2(steps[moving, k, 1], steps[moving, k, 0])
+    return out
+
+
+def menger_curvature(points: np.ndarray) -> np.ndarray:
+    """(N, K−2) signed three-point curvature of consecutive triples (left turn positive; 0 if degenerate)."""
+    a, b, c = points[:, :-2], points[:, 1:-1], points[:, 2:]
+    cross = (b[..., 0] - a[..., 0]) * (c[..., 1] - a[..., 1]) - (b[..., 1] - a[..., 1]) * (c[..., 0] - a[..., 0])
+    sides = np.linalg.norm(b - a, axis=-1) * np.linalg.norm(c - b, axis=-1) * np.linalg.norm(c - a, axis=-1)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        curvature = np.where(sides > 1e-9, 2.0 * cross / sides, 0.0)
+    return curvature
+
+
+def mean_curvature(positions: np.ndarray) -> np.ndarray:
+    """(N,) mean curvature along a trajectory from the origin (1/m)."""
+    return menger_curvature(_with_origin(positions)).mean(axis=1)
+
+
+def tag_frames(gt_positions: np.ndarray, history_actions: np.ndarray, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
+    """Boolean masks (N,) per tag in :data:`TAGS`; a frame may carry several tags or none."""
+    th = thresholds
+    history = np.asarray(history_actions, dtype=np.float64)
+    now = history[:, -1, 0]
+    recent_curv = history[:, -3:, 1]
+    speeds = future_speeds(gt_positions)
+    heading = heading_change(gt_positions)
+    moving = now >= th.moving_speed
+    straight = (np.abs(heading) < th.straight_heading) & (speeds.mean(axis=1) >= th.moving_speed)
+    tags = {
+        "stopped": (now < th.stopped_speed) & (speeds.max(axis=1) < th.stopped_speed),
+        "starting": (now < th.stopped_speed) & (speeds[:, -1] >= th.moving_speed),
+        "braking": moving & (speeds[:, -1] <= now - th.speed_change),
+        "accelerating": (now >= th.stopped_speed) & (speeds[:, -1] >= now + th.speed_change),
+        "turning_left": (heading > th.turn_heading) & (speeds.mean(axis=1) >= th.stopped_speed),
+        "turning_right": (heading < -th.turn_heading) & (speeds.mean(axis=1) >= th.stopped_speed),
+        "straight_after_left_turn": straight & (recent_curv.max(axis=1) > th.turn_curvature),
+        "straight_after_right_turn": straight & (recent_curv.min(axis=1) < -th.turn_curvature),
+    }
+    tagged = np.logical_or.reduce(list(tags.values()))
+    tags["cruising"] = moving & straight & (np.abs(speeds[:, -1] - now) < 1.0) & ~tagged
+    return {name: tags[name] for name in TAGS}
+
+
+def _require_history(run: RunData) -> np.ndarray:
+    if run.history_actions is None:
+        raise ValueError(f"{run.info.run_dir}: load the run with details=True for scenario analysis")
+    return run.history_actions
+
+
+def _rows_of(run: RunData, frame_ids: Sequence[str] | None) -> np.ndarray:
+    if frame_ids is None:
+        return np.flatnonzero(run.valid)
+    index = run.index()
+    return np.fromiter((index[f] for f in frame_ids), dtype=np.int64, count=len(frame_ids))
+
+
+def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None) -> list[dict[str, Any]]:
+    """One row per tag (and ``all``): frames and, per model, ADE avg / FDE / miss rate on them.
+
+    Each model is scored on its valid frames, or on ``frame_ids`` (e.g. the
+    common frames) when given; one batched core call per model and tag.
+    """
+    from lightemma import evaluate
+
+    labels = unique_labels(list(runs))
+    per_model = []
+    for run in runs:
+        rows = _rows_of(run, frame_ids)
+        masks = tag_frames(run.gt_positions[rows], _require_history(run)[rows])
+        per_model.append((run, rows, {"all": np.ones(len(rows), dtype=bool), **masks}))
+    out = []
+    for tag in ("all", *TAGS):
+        row: dict[str, Any] = {"tag": tag, "frames": int(per_model[0][2][tag].sum()) if per_model else 0}
+        for label, (run, rows, masks) in zip(labels, per_model):
+            chosen = rows[masks[tag]]
+            row[f"{label} frames"] = len(chosen)
+            if len(chosen):
+                m = evaluate(np.ascontiguousarray(run.trajectory[chosen]), np.ascontiguousarray(run.gt_positions[chosen]), convention=convention).to_dict()
+                row[label] = {"ade_avg": float(m["ade_avg"]), "fde": float(m["fde"]), "miss_rate": float(m["miss_rate"])}
+            else:
+                row[label] = None
+        out.append(row)
+    return out
+
+
+def _slope(x: np.ndarray, y: np.ndarray) -> float | None:
+    if len(x) < 2 or np.ptp(x) == 0:
+        return None
+    return float(np.polyfit(x, y, 1)[0])
+
+
+def curvature_samples(run: RunData, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
+    """Per valid moving frame: last history curvature, predicted and true mean future curvature,
+    and whether the frame goes straight just after a turn."""
+    history = _require_history(run)
+    rows = np.flatnonzero(run.valid & (history[:, -1, 0] >= thresholds.moving_speed))
+    k_hist = history[rows, -1, 1]
+    tags = tag_frames(run.gt_positions[rows], history[rows], thresholds)
+    after = (tags["straight_after_left_turn"] | tags["straight_after_right_turn"]) & (np.abs(k_hist) > 1e-6)
+    return {"history": k_hist, "pred": mean_curvature(run.trajectory[rows]), "true": mean_curvature(run.gt_positions[rows]), "after_turn": after}
+
+
+def history_bias(runs: Sequence[RunData], thresholds: Thresholds = Thresholds()) -> list[dict[str, Any]]:
+    """Per model: how far predicted curvature follows the last history curvature, against the truth.
+
+    ``slope_pred`` / ``slope_true``: least-squares slope of the predicted / true
+    mean future curvature on the last history curvature (moving frames).
+    ``carry_pred`` / ``carry_true``: on frames that go straight just after a
+    turn, the share of the last history curvature still present in the
+    prediction / the truth (1 = the turn carried on unchanged, 0 = straight).
+    """
+    out = []
+    for label, run in zip(unique_labels(list(runs)), runs):
+        k = curvature_samples(run, thresholds)
+        after = k["after_turn"]
+        sign = np.sign(k["history"][after])
+        scale = np.abs(k["history"][after]).mean() if after.any() else np.nan
+        out.append(
+            {
+                "model": label,
+                "frames": len(k["history"]),
+                "slope_pred": _slope(k["history"], k["pred"]),
+                "slope_true": _slope(k["history"], k["true"]),
+                "after_turn_frames": int(after.sum()),
+                "carry_pred": float((k["pred"][after] * sign).mean() / scale) if after.any() else None,
+                "carry_true": float((k["true"][after] * sign).mean() / scale) if after.any() else None,
+            }
+        )
+    return out
+
+
+def _shared_valid(runs: Sequence[RunData]) -> list[str]:
+    from lightemma.evaluation.core import common_frames
+
+    return common_frames(runs) if runs else []
+
+
+def disagreements(runs: Sequence[RunData], *, top: int = 5, exclude_baselines: bool = True) -> list[dict[str, Any]]:
+    """The ``top`` frames (valid in every compared run) whose predicted 3 s endpoints spread most.
+
+    Baselines are left out of the comparison when at least two other models
+    are present. Each entry: frame_id, spread (max pairwise endpoint distance,
+    m) and per-model FDE.
+    """
+    compared = [r for r in runs if r.info.family != "Baseline"] if exclude_baselines else list(runs)
+    if len(compared) < 2:
+        compared = list(runs)
+    if len(compared) < 2:
+        return []
+    labels = dict(zip(map(id, runs), unique_labels(list(runs))))
+    shared = _shared_valid(compared)
+    if not shared:
+        return []
+    rows = [_rows_of(r, shared) for r in compared]
+    ends = np.stack([r.trajectory[idx, -1] for r, idx in zip(compared, rows)])  # (M, F, 2)
+    spread = np.linalg.norm(ends[:, None] - ends[None, :], axis=-1).max(axis=(0, 1))
+    gt_end = compared[0].gt_positions[rows[0], -1]
+    order = np.argsort(-spread, kind="stable")[:top]
+    return [
+        {
+            "frame_id": shared[i],
+            "spread_m": float(spread[i]),
+            "fde": {labels[id(r)]: float(np.linalg.norm(ends[m, i] - gt_end[i])) for m, r in enumerate(compared)},
+        }
+        for i in order
+    ]
+
+
+def worst_frame_per_tag(runs: Sequence[RunData], tags: Sequence[str] = CASE_TAGS) -> list[dict[str, Any]]:
+    """For each tag, the frame (valid in every run) with the highest mean FDE over the models."""
+    shared = _shared_valid(runs)
+    if not shared:
+        return []
+    rows = [_rows_of(r, shared) for r in runs]
+    fde = np.stack([np.linalg.norm(r.trajectory[idx, -1] - r.gt_positions[idx, -1], axis=1) for r, idx in zip(runs, rows)]).mean(axis=0)
+    masks = tag_frames(runs[0].gt_positions[rows[0]], _require_history(runs[0])[rows[0]])
+    out = []
+    for tag in tags:
+        candidates = np.flatnonzero(masks[tag])
+        if len(candidates):
+            i = candidates[np.argmax(fde[candidates])]
+            out.append({"tag": tag, "frame_id": shared[i], "mean_fde": float(fde[i]), "frames_with_tag": len(candidates)})
+    return out

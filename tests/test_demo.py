@@ -1,0 +1,58 @@
+"""`lightemma demo`: synthetic dataset → baseline runs → evaluation → report, end to end, offline."""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import json
+
+import pytest
+
+from lightemma.cli import main
+from lightemma.demo import MARKER, api_models, run_demo
+from lightemma.errors import UserError
+
+
+@pytest.mark.slow
+def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys):
+    for variable in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY"):
+        monkeypatch.delenv(variable, raising=False)
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo", "--keyframes", "16"]) == 0
+    out = tmp_path / "lightemma-demo"
+    index = out / "report" / "index.md"
+    assert f"demo report: {index}" in capsys.readouterr().out
+    text = index.read_text()
+    # four baseline runs, every frame scored, the oracle's integrator floor visible
+    evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
+    rows = {r["model"]: r for r in evaluation["accuracy"]["lightemma"]}
+    assert len(rows) == 4 and all(r["frames"] > 0 and r["frames"] == r["frames_in_run"] for r in rows.values())
+    oracle = [r for name, r in rows.items() if "oracle" in name]
+    others = [r for name, r in rows.items() if "oracle" not in name]
+    assert len(oracle) == 2 and max(r["ade_avg"] for r in oracle) < min(r["ade_avg"] for r in others)
+    assert {r["fe_pct"] for r in rows.values()} == {0.0}  # baselines answer in the strict format
+    # pictures drawn with the synthetic camera images (no "no camera view" note)
+    assert "pictures have no camera view" not in text
+    assert list((out / "report" / "figures" / "frames").glob("*_grid.png"))
+    # a second demo into the same folder replaces the runs instead of piling them up
+    run_demo(out, scenes=2, keyframes=15, use_api=False, log=lambda message: None)
+    assert len(list((out / "runs").glob("*/*/manifest.json"))) == 4
+
+
+def test_demo_refuses_a_folder_it_did_not_make(tmp_path):
+    (tmp_path / "mine.txt").write_text("precious")
+    with pytest.raises(UserError, match="not a lightemma demo folder"):
+        run_demo(tmp_path, use_api=False, log=lambda message: None)
+    assert (tmp_path / "mine.txt").read_text() == "precious" and not (tmp_path / MARKER).exists()
+
+
+def test_api_models_follow_the_keys_that_are_set():
+    assert api_models({}) == []
+    assert api_models({"ANTHROPIC_API_KEY": "x", "GEMINI_API_KEY": "", "OPENAI_API_KEY": "y"}) == ["gpt-4o", "claude-3.7-sonnet"]
+
+
+def test_demo_rejects_too_few_keyframes(tmp_path, capsys):
+    assert main(["demo", "--out", str(tmp_path / "d"), "--keyframes", "10"]) == 2
+    assert "at least 15" in capsys.readouterr().err
