@@ -284,3 +284,15 @@ def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
     assert rec["attempts"][0]["error"] == "EmptyResponse" and rec["attempts"][0]["answer"] is None
     assert rec["input_tokens"] == 4000  # the empty answer's usage counts
     assert server.stages() == ["scene", "intent", "actions", "actions"]
+
+
+def test_baselines_run_through_the_same_chain_without_any_key(tmp_path, synth_root, monkeypatch):
+    for name in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY"):
+        monkeypatch.delenv(name, raising=False)
+    result = run("baseline:oracle", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False)
+    records = records_of(result)
+    assert len(records) == result.manifest["dataset"]["n_frames"] == 12
+    assert all(r["status"] == "ok" and [c["stage"] for c in r["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
+               for r in records.values())
+    assert result.manifest["backend"]["kind"] == "oracle" and result.manifest["model_info"]["family"] == "baseline"
+    assert result.summary["ade_avg"] < 0.5  # the oracle's own future actions, integrated
