@@ -35,8 +35,9 @@ class HFBackend:
     paper's way), ``batch_window`` (seconds to wait for a batch to fill),
     ``max_pixels`` (image-size cap: the processor's pixel budget for Qwen-style
     processors, a Pillow downscale before the processor otherwise), ``dtype``
-    (``auto``: bfloat16 on GPU, float32 on CPU), ``device`` (``cuda``/``cpu``;
-    default: cuda when available), ``device_map`` (default ``"auto"`` on GPU),
+    (``auto``: bfloat16 on GPU, float32 on CPU), ``device`` (``cuda``: all visible
+    GPUs, ``cuda:N``: one, or ``cpu``; default cuda when available), ``device_map``
+    (default ``"auto"`` for ``cuda``),
     ``attn_implementation`` and ``trust_remote_code`` (passed to transformers).
     """
 
@@ -61,7 +62,7 @@ class HFBackend:
         on_gpu = self.device.startswith("cuda")
         self.dtype = {"auto": torch.bfloat16 if on_gpu else torch.float32, "bfloat16": torch.bfloat16,
                       "float16": torch.float16, "float32": torch.float32}[dtype]
-        if device_map is None and on_gpu and device is None:
+        if device_map is None and self.device == "cuda":  # all visible GPUs; "cuda:N" pins one
             device_map = "auto"
         self._model, self._processor = self._load(transformers, model, device_map, attn_implementation, trust_remote_code)
         if device_map is None:
