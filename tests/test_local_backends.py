@@ -497,3 +497,23 @@ def test_a_batch_that_runs_out_of_gpu_memory_is_halved_until_it_fits(qwen2_vl, i
     assert sizes == [5, 2, 3, 1, 2]  # 5 -> 2 + 3 -> 2 + (1 + 2)
     assert backend.stats["oom_splits"] == 2 and backend.stats["batches"] == 1
     assert [(r.text, r.input_tokens, r.output_tokens) for r in got] == [(r.text, r.input_tokens, r.output_tokens) for r in alone]
+
+
+def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_identically(qwen2_vl, dataroot, tmp_path, capsys):
+    from lightemma.runs.store import FRAMES_FILE
+
+    args = ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES),
+            "--output", str(tmp_path), "--max-tokens", "6", "--max-attempts", "1", "--no-progress"]
+    assert cli_main(["run", "--backend", "hf", "--model", str(qwen2_vl), "--batch-size", "2", "--dtype", "float32", *args]) == 0
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    lines = (run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
+    dropped = {json.loads(line)["frame_id"]: json.loads(line) for line in lines[2:]}
+    (run_dir / FRAMES_FILE).write_text("".join(lines[:2]))
+    assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 0, capsys.readouterr().err
+    contents = read_run(run_dir)
+    assert len(contents.records) == N_FRAMES
+    assert contents.manifest["config"]["backend_options"] == {"batch_size": 2, "dtype": "float32"}
+    for frame_id, before in dropped.items():
+        again = contents.records[frame_id]
+        assert (again["scene_text"], again["intent_text"], again["answer"], again["input_tokens"]) == \
+            (before["scene_text"], before["intent_text"], before["answer"], before["input_tokens"])
