@@ -11,7 +11,8 @@ Process CPU includes litellm's per-call work (request building, logging,
 cost); lightemma's own share is measured separately by the same run over an
 in-process backend that answers instantly (``pipeline_cpu_ms_per_frame``).
 
-    python benches/bench_pipeline.py [--frames 3908] [--latency 1.0] [--concurrency 64] [--transport litellm|direct] [--json out.json]
+    python benches/bench_pipeline.py [--frames 3908] [--latency 1.0] [--concurrency 64] [--transport litellm|direct]
+                                        [--image-size 1600x900] [--json out.json]
 """
 
 from __future__ import annotations
@@ -116,6 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--concurrency", type=int, default=64)
     parser.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
                         help="litellm (default) or the direct aiohttp client for OpenAI-compatible servers")
+    parser.add_argument("--image-size", help="camera-sized JPEGs, e.g. 1600x900 (default: 8x8 images)")
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args(argv)
 
@@ -126,7 +128,9 @@ def main(argv: list[str] | None = None) -> int:
         with tempfile.TemporaryDirectory() as tmp:
             tmp = Path(tmp)
             (tmp / "img").mkdir()
-            frames = make_frames(tmp / "img", args.frames)
+            size = tuple(int(v) for v in args.image_size.lower().split("x")) if args.image_size else None
+            frames = make_frames(tmp / "img", args.frames, image_size=size)
+            image_kib = sum(os.path.getsize(f.image_path) for f in frames) / len(frames) / 1024
             # warm-up: imports, litellm's first-call setup (not timed)
             run("openai/bench-model", api_base=url, frames=frames[:2], output=tmp / "warm", concurrency=2, progress=False,
                 transport=args.transport)
@@ -150,6 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     figures = {
         "frames": args.frames,
         "transport": args.transport,
+        "image_kib": round(image_kib, 1),
         "latency_s": args.latency,
         "concurrency": args.concurrency,
         "wall_s": round(wall, 2),

@@ -16,7 +16,7 @@ Scripted per request, for tests and benchmarks of the API backend — no interne
 
 ``script`` may also be a list of replies (served in order, then :func:`default_reply`).
 A reply can be an HTTP error with headers (``Reply.error(429, retry_after=1)``),
-slow (``delay``), or cut off mid-body (``truncate=True``). Every request is
+slow (``delay``), cut off mid-body (``truncate=True``), or a connection reset (``reset=True``). Every request is
 recorded in ``server.requests`` (a :class:`Received`), thread-safely.
 
 Run as a script (``python tests/fake_openai.py --latency 1.0``) it serves the
@@ -29,6 +29,7 @@ import argparse
 import itertools
 import json
 import socket
+import struct
 import sys
 import threading
 import time
@@ -98,6 +99,7 @@ class Reply:
     delay: float = 0.0  # seconds to wait before answering
     headers: dict[str, str] = field(default_factory=dict)
     truncate: bool = False  # send half the body, then drop the connection
+    reset: bool = False  # drop the connection without answering (a connection reset)
     body: Any = None  # a raw JSON body to send instead of a completion
 
     @classmethod
@@ -196,6 +198,11 @@ class FakeOpenAIServer:
                 wait = server.latency + reply.delay
                 if wait > 0:
                     time.sleep(wait)
+                if reply.reset:
+                    self.connection.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+                    self.connection.close()  # RST instead of FIN
+                    self.close_connection = True
+                    return
                 payload = reply.body if reply.body is not None else _completion(req, reply)
                 data = json.dumps(payload).encode("utf-8")
                 try:

@@ -20,12 +20,28 @@ class MemFrame:
     gt_positions: np.ndarray
 
 
-def make_frames(directory: Path, n: int) -> list[MemFrame]:
-    """``n`` frames over two scenes, each with its own image (so a server can tell them apart)."""
+def _camera_like(width: int, height: int) -> np.ndarray:
+    """A gradient with mild noise: compresses like a CAM_FRONT photo (about 160 KiB at 1600×900)."""
+    rng = np.random.default_rng(0)
+    y, x = np.mgrid[0:height, 0:width]
+    base = np.stack([x * 255 // width, y * 255 // height, (x + y) * 255 // (width + height)], -1)
+    return np.clip(base + rng.integers(-8, 9, base.shape), 0, 255).astype(np.uint8)
+
+
+def make_frames(directory: Path, n: int, image_size: tuple[int, int] | None = None) -> list[MemFrame]:
+    """``n`` frames over two scenes, each with its own image (so a server can tell them apart).
+
+    Images are 8×8 unless ``image_size`` (width, height) asks for camera-sized ones.
+    """
     frames = []
+    photo = _camera_like(*image_size) if image_size else None
     for i in range(n):
         path = directory / f"cam{i}.jpg"
-        Image.new("RGB", (8, 8), (i * 20 % 256, 40, 90)).save(path, quality=95)
+        if photo is None:
+            Image.new("RGB", (8, 8), (i * 20 % 256, 40, 90)).save(path, quality=95)
+        else:
+            photo[:8, :8] = i % 256  # a distinct corner per frame
+            Image.fromarray(photo).save(path, quality=85)
         history = np.column_stack([np.full(6, 5.0 + 0.5 * i), np.zeros(6)])
         gt = np.column_stack([2.5 * np.arange(1, 7), np.zeros(6)])
         scene = f"scene-{i % 2:04d}"

@@ -56,8 +56,8 @@ def test_models_that_reject_temperature_0_get_none_sent(image):
 
 @pytest.mark.parametrize("first", [
     Reply.error(429, retry_after=0.3), Reply.error(500), Reply.error(503), Reply(content="x" * 400, truncate=True),
-    Reply(content="late", delay=1.5),
-], ids=["429-retry-after", "500", "503", "truncated-body", "timeout"])
+    Reply(content="late", delay=1.5), Reply(reset=True),
+], ids=["429-retry-after", "500", "503", "truncated-body", "timeout", "connection-reset"])
 @TRANSPORTS
 def test_transient_failures_are_retried_then_succeed(first, transport):
     with FakeOpenAIServer([first]) as server:
@@ -73,7 +73,8 @@ def test_transient_failures_are_retried_then_succeed(first, transport):
 @pytest.mark.parametrize(("reply", "error"), [
     (Reply.error(500), "InternalServerError"), (Reply.error(429), "RateLimitError"),
     (Reply(content="x" * 400, truncate=True), "APIConnectionError"), (Reply(content="late", delay=0.8), "Timeout"),
-], ids=["500", "429", "truncated", "timeout"])
+    (Reply(reset=True), "APIConnectionError"),
+], ids=["500", "429", "truncated", "timeout", "reset"])
 @TRANSPORTS
 def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, error, transport):
     with FakeOpenAIServer(lambda req: reply) as server:
@@ -96,7 +97,8 @@ def test_non_retryable_request_errors_fail_at_once(transport):
 def test_an_empty_answer_is_an_error_not_text(transport):
     with FakeOpenAIServer(lambda req: Reply(content="")) as server:
         result = ask(create_backend("openai/test-model", api_base=server.url, retry=RetryPolicy(max_retries=1, base=0.01), transport=transport))
-    assert result.error == "EmptyResponse" and result.text is None and len(server.requests) == 2
+    assert result.error == "EmptyResponse" and result.text is None
+    assert len(server.requests) == 1 and result.input_tokens == 1000  # not retried; its usage still counts
 
 
 @TRANSPORTS
@@ -215,3 +217,20 @@ def test_direct_transport_needs_an_openai_compatible_endpoint():
         create_backend("anthropic/claude-sonnet-4-6", api_base="http://127.0.0.1:9", transport="direct", api_key="x")
     with pytest.raises(UserError, match="unknown transport"):
         create_backend("openai/m", api_base="http://127.0.0.1:9/v1", transport="carrier-pigeon")
+
+
+def test_the_image_cache_reads_each_image_once_and_stays_within_its_byte_budget(tmp_path):
+    from lightemma.backends.api import _ImageCache
+
+    paths = []
+    for i in range(5):
+        path = tmp_path / f"{i}.png"
+        path.write_bytes(bytes([i]) * 300)  # same size each; the cache never decodes
+        paths.append(str(path))
+    one = len(_ImageCache().get(paths[0])[0])
+    cache = _ImageCache(max_bytes=3 * one)
+    first = cache.get(paths[0])
+    assert first[0].startswith("data:image/png;base64,") and cache.get(paths[0]) is first
+    for p in paths[1:]:
+        cache.get(p)
+    assert cache.bytes <= 3 * one and len(cache._items) == 3 and paths[0] not in cache._items

@@ -1,6 +1,5 @@
 """The three-stage chain and the runner, end to end against the loopback server."""
 
-import json
 import os
 
 import numpy as np
@@ -258,14 +257,30 @@ def test_cli_run_over_a_synthetic_dataset(tmp_path, synth_root):
         lightemma.frames.format_history(frames[0].history_actions) in r.text for r in server.requests)
 
 
-def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_root):
-    env = {"OPENAI_API_KEY": None}
+def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_root, capsys, monkeypatch):
     done = cli("run", "--model", "gpt-4o", "--dataroot", synth_root, "--version", "v1.0-mini", "--split", "all",
-               "--output", tmp_path, env=env)
+               "--output", tmp_path, env={"OPENAI_API_KEY": None})
     assert done.returncode == 2 and "OPENAI_API_KEY" in done.stderr and "Traceback" not in done.stderr
     assert not list(tmp_path.iterdir())
-    assert "OPENAI_API_KEY" in cli("run", "--model", "gpt-4o", "--dataroot", synth_root, env={"OPENAI_API_KEY": " "}).stderr
-    done = cli("run", "--retry-failed", "--model", "gpt-4o", "--dataroot", synth_root)
-    assert done.returncode == 2 and "--retry-failed needs --resume" in done.stderr
-    done = cli("run", "--resume", tmp_path, "--model", "gpt-4o")
-    assert done.returncode == 2 and "drop --model" in done.stderr
+    from lightemma.cli import main
+
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    assert main(["run", "--retry-failed", "--model", "gpt-4o", "--dataroot", str(synth_root)]) == 2
+    assert "--retry-failed needs --resume" in capsys.readouterr().err
+    assert main(["run", "--resume", str(tmp_path), "--model", "gpt-4o"]) == 2
+    assert "drop --model" in capsys.readouterr().err
+    assert main(["run", "--resume", str(tmp_path)]) == 2
+    assert "not a lightemma run directory" in capsys.readouterr().err
+
+
+def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
+    def per_frame(i, stage, n):
+        return Reply("") if (i == 0 and stage == "actions" and n == 1) else None
+
+    with FakeOpenAIServer(scripted(frames[:1], per_frame)) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames[:1], output=tmp_path, **FAST)
+    rec = records_of(result, frames[:1])[0]
+    assert (rec["first_status"], rec["status"], rec["n_attempts"]) == ("failed", "ok", 2)
+    assert rec["attempts"][0]["error"] == "EmptyResponse" and rec["attempts"][0]["answer"] is None
+    assert rec["input_tokens"] == 4000  # the empty answer's usage counts
+    assert server.stages() == ["scene", "intent", "actions", "actions"]

@@ -20,19 +20,13 @@ from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from lightemma._litellm import litellm
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import FATAL, RetryPolicy, error_class, retry_after_seconds, short_message
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import UserError
 from lightemma.registry import ModelInfo, price_per_token, resolve
-
-os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")  # never fetch the price list over the network
-
-import litellm  # noqa: E402  (after the environment default above)
-
-litellm.suppress_debug_info = True
-litellm.telemetry = False
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
@@ -90,10 +84,15 @@ def _secret_values() -> tuple[str, ...]:
 
 
 class _ImageCache:
-    """Base64 data URLs (and content digests) of recently used images, read once per frame."""
+    """Base64 data URLs (and content digests) of recently used images: each frame's image is read once.
 
-    def __init__(self, size: int = 512) -> None:
-        self.size = size
+    Bounded by total size (default 32 MiB of base64, about 150 CAM_FRONT images: enough for every frame
+    in flight at concurrency ≤ 128), least recently used out first.
+    """
+
+    def __init__(self, max_bytes: int = 32 << 20) -> None:
+        self.max_bytes = max_bytes
+        self.bytes = 0
         self._items: OrderedDict[str, tuple[str, str]] = OrderedDict()
 
     def get(self, path: str) -> tuple[str, str]:
@@ -106,8 +105,10 @@ class _ImageCache:
         mime = _MIME.get(os.path.splitext(path)[1].lower(), "image/jpeg")
         item = (f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}", hashlib.sha256(data).hexdigest())
         self._items[path] = item
-        if len(self._items) > self.size:
-            self._items.popitem(last=False)
+        self.bytes += len(item[0])
+        while self.bytes > self.max_bytes and len(self._items) > 1:
+            _, (url, _) = self._items.popitem(last=False)
+            self.bytes -= len(url)
         return item
 
 
@@ -238,10 +239,6 @@ class APIBackend:
                                   seconds=time.perf_counter() - start, retries=retries)
             self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0,
                                 (result.input_tokens or 0) + (result.output_tokens or 0))
-            if result.error == "EmptyResponse" and self.retry.should_retry(result.error, retries):
-                await asyncio.sleep(self.retry.delay(retries))
-                retries += 1
-                continue
             if key is not None and result.ok:
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
             return result

@@ -13,8 +13,10 @@ from dataclasses import dataclass
 # Retried: rate limits, server errors, timeouts, dropped or truncated connections.
 RETRYABLE = frozenset({
     "RateLimitError", "InternalServerError", "ServiceUnavailableError", "BadGatewayError", "Timeout",
-    "APITimeoutError", "APIConnectionError", "APIError", "EmptyResponse",
+    "APITimeoutError", "APIConnectionError", "APIError",
 })
+# Not retried here: an empty answer (e.g. every output token spent on reasoning) is the model's,
+# and repeating the same request mostly repeats it; the chain's re-ask handles it as a failed attempt.
 # Fatal for the whole run: retrying any frame cannot help (bad key, unknown model, bad parameters).
 FATAL = frozenset({"AuthenticationError", "PermissionDeniedError", "NotFoundError", "UnsupportedParamsError", "PaymentRequiredError"})
 
