@@ -508,6 +508,8 @@ def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_iden
     lines = (run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
     dropped = {json.loads(line)["frame_id"]: json.loads(line) for line in lines[2:]}
     (run_dir / FRAMES_FILE).write_text("".join(lines[:2]))
+    assert cli_main(["run", "--resume", str(run_dir), "--batch-size", "4", "--no-progress"]) == 2  # from the manifest only
+    assert "drop --batch-size" in capsys.readouterr().err
     assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 0, capsys.readouterr().err
     contents = read_run(run_dir)
     assert len(contents.records) == N_FRAMES

@@ -88,6 +88,7 @@ def main(args: argparse.Namespace) -> int:
     if args.resume:
         given = [flag for flag, value in (("--model", args.model), ("--dataroot", args.dataroot), ("--api-base", args.api_base),
                                           ("--scenes", args.scenes), ("--split", args.split), ("--limit", args.limit)) if value]
+        given += ["--" + name.replace("_", "-") for name in LOCAL_OPTIONS if getattr(args, name, None) is not None]
         if given:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
