@@ -518,3 +518,20 @@ def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_iden
         again = contents.records[frame_id]
         assert (again["scene_text"], again["intent_text"], again["answer"], again["input_tokens"]) == \
             (before["scene_text"], before["intent_text"], before["answer"], before["input_tokens"])
+
+
+def test_the_checkpoints_own_sampling_settings_do_not_change_greedy_answers(qwen2_vl, images, tmp_path):
+    import shutil
+
+    tuned = shutil.copytree(qwen2_vl, tmp_path / "tuned")
+    settings = json.loads((tuned / "generation_config.json").read_text())
+    settings.update(do_sample=True, temperature=0.7, top_k=3, top_p=0.5, repetition_penalty=3.0, no_repeat_ngram_size=1)
+    (tuned / "generation_config.json").write_text(json.dumps(settings))
+    requests = requests_for(images)[:3]
+    plain = answer(hf(qwen2_vl), requests, together=True)
+    backend = hf(tuned)
+    assert [r.text for r in answer(backend, requests, together=True)] == [r.text for r in plain]
+    assert backend.checkpoint_generation_config["repetition_penalty"] == 3.0  # it was read, and not used
+    assert "not used" in backend.info["decoding"]
+    # a repetition penalty or n-gram ban would have had something to act on: plain answers repeat tokens
+    assert any(len(set(r.text)) < len(r.text) for r in plain)
