@@ -112,6 +112,11 @@ def _mrope(dims: dict[str, int], **extra) -> dict[str, object]:
             **extra}
 
 
+def _vision_width(dims: dict[str, int]) -> int:
+    """The vision tower's width: 32, or 64 (head dimension 32) beside a language model wider than 64."""
+    return 32 if dims["hidden_size"] <= 64 else 64
+
+
 def _qwen_special_ids(tokenizer) -> dict[str, int]:
     image, video, start, end = _ids(tokenizer, "<|image_pad|>", "<|video_pad|>", "<|vision_start|>", "<|vision_end|>")
     return dict(image_token_id=image, video_token_id=video, vision_start_token_id=start, vision_end_token_id=end)
@@ -123,8 +128,8 @@ def _build_qwen2_vl(tokenizer, dims):
     patch = 8
     config = Qwen2VLConfig(
         text_config=_text(tokenizer, dims, rope_parameters=_mrope(dims)),
-        vision_config=dict(depth=1, embed_dim=32, hidden_size=dims["hidden_size"], num_heads=2, mlp_ratio=2, patch_size=patch,
-                           spatial_merge_size=2, temporal_patch_size=2),
+        vision_config=dict(depth=1, embed_dim=_vision_width(dims), hidden_size=dims["hidden_size"], num_heads=2, mlp_ratio=2,
+                           patch_size=patch, spatial_merge_size=2, temporal_patch_size=2),
         **_qwen_special_ids(tokenizer))
     return Qwen2VLForConditionalGeneration(config), patch
 
@@ -135,8 +140,9 @@ def _build_qwen2_5_vl(tokenizer, dims):
     patch = 8
     config = Qwen2_5_VLConfig(
         text_config=_text(tokenizer, dims, rope_parameters=_mrope(dims)),
-        vision_config=dict(depth=1, hidden_size=32, intermediate_size=64, num_heads=2, patch_size=patch,
-                           spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"], window_size=32,
+        vision_config=dict(depth=1, hidden_size=_vision_width(dims), intermediate_size=2 * _vision_width(dims), num_heads=2,
+                           patch_size=patch, spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"],
+                           window_size=32,
                            fullatt_block_indexes=[0]),
         **_qwen_special_ids(tokenizer))
     return Qwen2_5_VLForConditionalGeneration(config), patch
@@ -149,8 +155,8 @@ def _build_qwen3_vl(tokenizer, dims):
     config = Qwen3VLConfig(
         text_config=_text(tokenizer, dims, head_dim=dims["hidden_size"] // dims["heads"],
                           rope_parameters=_mrope(dims, mrope_interleaved=True)),
-        vision_config=dict(depth=1, hidden_size=32, intermediate_size=64, num_heads=2, patch_size=patch,
-                           spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"],
+        vision_config=dict(depth=1, hidden_size=_vision_width(dims), intermediate_size=2 * _vision_width(dims), num_heads=2,
+                           patch_size=patch, spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"],
                            num_position_embeddings=64, deepstack_visual_indexes=[0]),
         **_qwen_special_ids(tokenizer))
     return Qwen3VLForConditionalGeneration(config), patch

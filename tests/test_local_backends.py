@@ -12,7 +12,6 @@ import json
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -497,3 +496,42 @@ def test_a_batch_that_runs_out_of_gpu_memory_is_halved_until_it_fits(qwen2_vl, i
     assert sizes == [5, 2, 3, 1, 2]  # 5 -> 2 + 3 -> 2 + (1 + 2)
     assert backend.stats["oom_splits"] == 2 and backend.stats["batches"] == 1
     assert [(r.text, r.input_tokens, r.output_tokens) for r in got] == [(r.text, r.input_tokens, r.output_tokens) for r in alone]
+
+
+def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_identically(qwen2_vl, dataroot, tmp_path, capsys):
+    from lightemma.runs.store import FRAMES_FILE
+
+    args = ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES),
+            "--output", str(tmp_path), "--max-tokens", "6", "--max-attempts", "1", "--no-progress"]
+    assert cli_main(["run", "--backend", "hf", "--model", str(qwen2_vl), "--batch-size", "2", "--dtype", "float32", *args]) == 0
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    lines = (run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
+    dropped = {json.loads(line)["frame_id"]: json.loads(line) for line in lines[2:]}
+    (run_dir / FRAMES_FILE).write_text("".join(lines[:2]))
+    assert cli_main(["run", "--resume", str(run_dir), "--batch-size", "4", "--no-progress"]) == 2  # from the manifest only
+    assert "drop --batch-size" in capsys.readouterr().err
+    assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 0, capsys.readouterr().err
+    contents = read_run(run_dir)
+    assert len(contents.records) == N_FRAMES
+    assert contents.manifest["config"]["backend_options"] == {"batch_size": 2, "dtype": "float32"}
+    for frame_id, before in dropped.items():
+        again = contents.records[frame_id]
+        assert (again["scene_text"], again["intent_text"], again["answer"], again["input_tokens"]) == \
+            (before["scene_text"], before["intent_text"], before["answer"], before["input_tokens"])
+
+
+def test_the_checkpoints_own_sampling_settings_do_not_change_greedy_answers(qwen2_vl, images, tmp_path):
+    import shutil
+
+    tuned = shutil.copytree(qwen2_vl, tmp_path / "tuned")
+    settings = json.loads((tuned / "generation_config.json").read_text())
+    settings.update(do_sample=True, temperature=0.7, top_k=3, top_p=0.5, repetition_penalty=3.0, no_repeat_ngram_size=1)
+    (tuned / "generation_config.json").write_text(json.dumps(settings))
+    requests = requests_for(images)[:3]
+    plain = answer(hf(qwen2_vl), requests, together=True)
+    backend = hf(tuned)
+    assert [r.text for r in answer(backend, requests, together=True)] == [r.text for r in plain]
+    assert backend.checkpoint_generation_config["repetition_penalty"] == 3.0  # it was read, and not used
+    assert "not used" in backend.info["decoding"]
+    # a repetition penalty or n-gram ban would have had something to act on: plain answers repeat tokens
+    assert any(len(set(r.text)) < len(r.text) for r in plain)

@@ -257,17 +257,20 @@ def test_cli_run_over_a_synthetic_dataset(tmp_path, synth_root):
         lightemma.frames.format_history(frames[0].history_actions) in r.text for r in server.requests)
 
 
-def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_root):
-    env = {"OPENAI_API_KEY": None}
+def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_root, capsys, monkeypatch):
     done = cli("run", "--model", "gpt-4o", "--dataroot", synth_root, "--version", "v1.0-mini", "--split", "all",
-               "--output", tmp_path, env=env)
+               "--output", tmp_path, env={"OPENAI_API_KEY": None})
     assert done.returncode == 2 and "OPENAI_API_KEY" in done.stderr and "Traceback" not in done.stderr
     assert not list(tmp_path.iterdir())
-    assert "OPENAI_API_KEY" in cli("run", "--model", "gpt-4o", "--dataroot", synth_root, env={"OPENAI_API_KEY": " "}).stderr
-    done = cli("run", "--retry-failed", "--model", "gpt-4o", "--dataroot", synth_root)
-    assert done.returncode == 2 and "--retry-failed needs --resume" in done.stderr
-    done = cli("run", "--resume", tmp_path, "--model", "gpt-4o")
-    assert done.returncode == 2 and "drop --model" in done.stderr
+    from lightemma.cli import main
+
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    assert main(["run", "--retry-failed", "--model", "gpt-4o", "--dataroot", str(synth_root)]) == 2
+    assert "--retry-failed needs --resume" in capsys.readouterr().err
+    assert main(["run", "--resume", str(tmp_path), "--model", "gpt-4o"]) == 2
+    assert "drop --model" in capsys.readouterr().err
+    assert main(["run", "--resume", str(tmp_path)]) == 2
+    assert "not a lightemma run directory" in capsys.readouterr().err
 
 
 def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
@@ -281,3 +284,15 @@ def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
     assert rec["attempts"][0]["error"] == "EmptyResponse" and rec["attempts"][0]["answer"] is None
     assert rec["input_tokens"] == 4000  # the empty answer's usage counts
     assert server.stages() == ["scene", "intent", "actions", "actions"]
+
+
+def test_baselines_run_through_the_same_chain_without_any_key(tmp_path, synth_root, monkeypatch):
+    for name in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY"):
+        monkeypatch.delenv(name, raising=False)
+    result = run("baseline:oracle", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False)
+    records = records_of(result)
+    assert len(records) == result.manifest["dataset"]["n_frames"] == 12
+    assert all(r["status"] == "ok" and [c["stage"] for c in r["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
+               for r in records.values())
+    assert result.manifest["backend"]["kind"] == "oracle" and result.manifest["model_info"]["family"] == "baseline"
+    assert result.summary["ade_avg"] < 0.5  # the oracle's own future actions, integrated

@@ -127,7 +127,7 @@ def resolve(name: str) -> ModelInfo:
 
 def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
     """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
-    import litellm
+    from lightemma._litellm import litellm
 
     entry = litellm.model_cost.get(info.model_id) or litellm.model_cost.get(info.model_id.split("/", 1)[-1])
     if entry and entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:

@@ -20,19 +20,13 @@ from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from lightemma._litellm import litellm
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import FATAL, RetryPolicy, error_class, retry_after_seconds, short_message
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import UserError
 from lightemma.registry import ModelInfo, price_per_token, resolve
-
-os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")  # never fetch the price list over the network
-
-import litellm  # noqa: E402  (after the environment default above)
-
-litellm.suppress_debug_info = True
-litellm.telemetry = False
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
@@ -92,10 +86,11 @@ def _secret_values() -> tuple[str, ...]:
 class _ImageCache:
     """Base64 data URLs (and content digests) of recently used images: each frame's image is read once.
 
-    Bounded by total size (default 64 MiB, about 240 full-size CAM_FRONT images), least recently used out first.
+    Bounded by total size (default 32 MiB of base64, about 150 CAM_FRONT images: enough for every frame
+    in flight at concurrency ≤ 128), least recently used out first.
     """
 
-    def __init__(self, max_bytes: int = 64 << 20) -> None:
+    def __init__(self, max_bytes: int = 32 << 20) -> None:
         self.max_bytes = max_bytes
         self.bytes = 0
         self._items: OrderedDict[str, tuple[str, str]] = OrderedDict()

@@ -35,8 +35,9 @@ class HFBackend:
     paper's way), ``batch_window`` (seconds to wait for a batch to fill),
     ``max_pixels`` (image-size cap: the processor's pixel budget for Qwen-style
     processors, a Pillow downscale before the processor otherwise), ``dtype``
-    (``auto``: bfloat16 on GPU, float32 on CPU), ``device`` (``cuda``/``cpu``;
-    default: cuda when available), ``device_map`` (default ``"auto"`` on GPU),
+    (``auto``: bfloat16 on GPU, float32 on CPU), ``device`` (``cuda``: all visible
+    GPUs, ``cuda:N``: one, or ``cpu``; default cuda when available), ``device_map``
+    (default ``"auto"`` for ``cuda``),
     ``attn_implementation`` and ``trust_remote_code`` (passed to transformers).
     """
 
@@ -61,7 +62,7 @@ class HFBackend:
         on_gpu = self.device.startswith("cuda")
         self.dtype = {"auto": torch.bfloat16 if on_gpu else torch.float32, "bfloat16": torch.bfloat16,
                       "float16": torch.float16, "float32": torch.float32}[dtype]
-        if device_map is None and on_gpu and device is None:
+        if device_map is None and self.device == "cuda":  # all visible GPUs; "cuda:N" pins one
             device_map = "auto"
         self._model, self._processor = self._load(transformers, model, device_map, attn_implementation, trust_remote_code)
         if device_map is None:
@@ -94,6 +95,11 @@ class HFBackend:
             raise UserError(f"cannot load {model!r} as an image-text-to-text model with transformers "
                             f"{transformers.__version__}: {' '.join(str(exc).split())[:400]}") from None
         loaded.eval()
+        # Decode plainly: the checkpoint's sampling settings (top-k/top-p, repetition penalty, …) are not
+        # used, so that hf and vllm decode the same way; only its special token ids are kept.
+        self.checkpoint_generation_config = loaded.generation_config.to_diff_dict()
+        loaded.generation_config = transformers.GenerationConfig(
+            **{k: getattr(loaded.generation_config, k) for k in ("bos_token_id", "eos_token_id", "pad_token_id")})
         tokenizer = processor.tokenizer
         tokenizer.padding_side = "left"  # generation continues every row from its last real token
         if tokenizer.pad_token_id is None:
@@ -157,7 +163,8 @@ class HFBackend:
             "batching": "micro-batches of one stage, built around the oldest pending request; left padding",
             "max_pixels": self.max_pixels,
             "image_cap": self._image_cap,
-            "decoding": "greedy at temperature 0, else sampling at the given temperature",
+            "decoding": "greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
+                        "sampling settings (top-k/top-p, repetition penalty) are not used",
             "token_counting": token_counting(self.model_type),
             "seconds": "wall time of the batch the request ran in",
             "torch": torch.__version__,
@@ -206,15 +213,21 @@ class HFBackend:
         start = time.perf_counter()
         inputs = self._encode(requests)
         params = requests[0].params
-        sampling = {"do_sample": True, "temperature": params.temperature} if params.temperature > 0 else {"do_sample": False}
         with self._torch.inference_mode():
-            output = self._model.generate(**inputs, max_new_tokens=params.max_tokens, top_p=None, top_k=None,
-                                          pad_token_id=self._processor.tokenizer.pad_token_id, **sampling)
+            output = self._model.generate(**inputs, **self._decoding(params))
         prompt_len = inputs["input_ids"].shape[1]
         input_counts = inputs["attention_mask"].sum(dim=1).tolist()
         generated = output[:, prompt_len:].tolist()
         seconds = time.perf_counter() - start
         return [self._result(row, int(n_in), seconds) for row, n_in in zip(generated, input_counts)]
+
+    def _decoding(self, params: Any) -> dict[str, Any]:
+        """``generate`` arguments for ``params``: greedy at temperature 0, else pure temperature sampling."""
+        common = {"max_new_tokens": params.max_tokens, "eos_token_id": sorted(self._eos_ids),
+                  "pad_token_id": self._processor.tokenizer.pad_token_id}
+        if params.temperature > 0:
+            return {**common, "do_sample": True, "temperature": params.temperature, "top_k": 0, "top_p": 1.0}
+        return {**common, "do_sample": False}
 
     def _encode(self, requests: Sequence[ChatRequest]) -> Any:
         """Chat template + processor for a batch: padded tensors on the model's first device."""

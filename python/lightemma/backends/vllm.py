@@ -122,7 +122,8 @@ class VLLMBackend:
                         "prefix caching " + ("on" if self.enable_prefix_caching else "off"),
             "max_pixels": self.max_pixels,
             "image_cap": "Pillow downscale before vLLM's processor" if self.max_pixels else None,
-            "decoding": "greedy at temperature 0, else sampling at the given temperature",
+            "decoding": "greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
+                        "sampling settings (top-k/top-p, repetition penalty) are not used",
             "token_counting": token_counting(self.model_type) + " (vLLM's prompt_token_ids and output token_ids)",
             "seconds": "wall time of the LLM.chat call the request ran in",
             "vllm": getattr(self._vllm, "__version__", None),

@@ -44,7 +44,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     local.add_argument("--batch-size", type=int, help="requests per batched forward pass (default 8; 1 is the paper's way)")
     local.add_argument("--max-pixels", type=int, help="cap on image pixels (width × height) fed to the model")
     local.add_argument("--dtype", choices=("auto", "bfloat16", "float16", "float32"), help="weights dtype (default auto: bf16 on GPU, fp32 on CPU)")
-    local.add_argument("--device", help="hf: cuda or cpu (default cuda when present; device_map=auto over all GPUs)")
+    local.add_argument("--device", help="hf: cuda (all visible GPUs, device_map=auto), cuda:N or cpu (default cuda when present)")
     local.add_argument("--tensor-parallel-size", type=int, help="vllm: GPUs to shard the model over (default 1)")
     local.add_argument("--gpu-memory-utilization", type=float, help="vllm: share of GPU memory vLLM may use (default 0.9)")
     gen = p.add_argument_group("prompting")
@@ -88,6 +88,7 @@ def main(args: argparse.Namespace) -> int:
     if args.resume:
         given = [flag for flag, value in (("--model", args.model), ("--dataroot", args.dataroot), ("--api-base", args.api_base),
                                           ("--scenes", args.scenes), ("--split", args.split), ("--limit", args.limit)) if value]
+        given += ["--" + name.replace("_", "-") for name in LOCAL_OPTIONS if getattr(args, name, None) is not None]
         if given:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,

@@ -22,7 +22,7 @@ class Progress:
         self.failed += record["status"] == "failed"
         self.errors += sum(1 for a in record["attempts"] for c in a["calls"] if c["error"])
         self.cost_cents += record["cost_cents"] or 0.0
-        self._bar.set_postfix_str(f"failed={self.failed} errors={self.errors} cost={self.cost_cents / 100:.2f}$", refresh=False)
+        self._bar.set_postfix_str(f"failed={self.failed} errors={self.errors} cost=${self.cost_cents / 100:.2f}", refresh=False)
         self._bar.update(1)
 
     def close(self) -> None:
