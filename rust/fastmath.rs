@@ -48,7 +48,8 @@ pub fn in_fast_range(x: f64) -> bool {
 #[inline(always)]
 pub fn sin_cos_reduced(x: f64) -> (f64, f64) {
     // round to nearest with the 1.5·2^52 trick: `f64::round` is a libm call without SSE4.1
-    let j = (x * TWO_OVER_PI + ROUNDER) - ROUNDER;
+    let shifted = x * TWO_OVER_PI + ROUNDER;
+    let j = shifted - ROUNDER;
     let r = ((x - j * PIO2_1) - j * PIO2_2) - j * PIO2_3;
     let z = r * r;
     let s = r + r * z * (S1 + z * (S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)))));
@@ -58,7 +59,9 @@ pub fn sin_cos_reduced(x: f64) -> (f64, f64) {
         w + (((1.0 - w) - hz) + z * z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6))))));
     // quadrant without branches (headings change quadrant unpredictably):
     // odd quadrants swap (s, c) -> (c, -s); quadrants 2 and 3 negate both
-    let q = j as i64 as u64;
+    // j is an integer held in the low mantissa bits of `shifted` (two's complement
+    // modulo 2^51), so its quadrant is read from the bits without a conversion
+    let q = shifted.to_bits();
     let swap = 0_u64.wrapping_sub(q & 1);
     let flip = (q & 2) << 62;
     let (sb, cb, nsb) = (s.to_bits(), c.to_bits(), (-s).to_bits());
