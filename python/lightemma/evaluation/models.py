@@ -8,39 +8,31 @@ family inferred from the model string (``baseline:`` → Baseline, else Other).
 from __future__ import annotations
 
 import re
-from dataclasses import dataclass
+
+from lightemma.registry import PAPER_MODELS, ModelInfo
 
 # families in the order the paper lists them; Baseline and Other come last
 FAMILIES: tuple[str, ...] = ("GPT", "Claude", "Gemini", "Qwen", "LLaMA", "Baseline", "Other")
 
-
-@dataclass(frozen=True)
-class KnownModel:
-    """One of the paper's fifteen models: display name, family, generation (1..3) and id pattern."""
-
-    display_name: str
-    family: str
-    generation: int
-    pattern: str  # regex on the normalised model string (see _normalise)
-
-
-PAPER_MODELS: tuple[KnownModel, ...] = (
-    KnownModel("GPT-4o", "GPT", 1, r"gpt-4o"),
-    KnownModel("GPT-5.0", "GPT", 2, r"gpt-5(-0)?(?![-\d]*\d)"),
-    KnownModel("GPT-5.2", "GPT", 3, r"gpt-5-2"),
-    KnownModel("Claude-3.7-Sonnet", "Claude", 1, r"claude-3-7|3-7-sonnet"),
-    KnownModel("Claude-4.0-Sonnet", "Claude", 2, r"claude-sonnet-4(-0)?(?!-?\d)|claude-4(-0)?-sonnet"),
-    KnownModel("Claude-4.6-Sonnet", "Claude", 3, r"claude-sonnet-4-6|claude-4-6-sonnet"),
-    KnownModel("Gemini-2.0-Flash", "Gemini", 1, r"gemini-2-0-flash"),
-    KnownModel("Gemini-2.5-Flash", "Gemini", 2, r"gemini-2-5-flash"),
-    KnownModel("Gemini-3.0-Flash", "Gemini", 3, r"gemini-3(-0)?-flash"),
-    KnownModel("Qwen-2.0-VL-7B", "Qwen", 1, r"qwen-?2(-0)?-vl-7b"),
-    KnownModel("Qwen-2.5-VL-7B", "Qwen", 2, r"qwen-?2-5-vl-7b"),
-    KnownModel("Qwen-3.0-VL-8B", "Qwen", 3, r"qwen-?3(-0)?-vl-8b"),
-    KnownModel("LLaMA-3.2-11B", "LLaMA", 1, r"llama-3-2-11b"),
-    KnownModel("LLaMA-3.2-90B", "LLaMA", 2, r"llama-3-2-90b"),
-    KnownModel("LLaMA-4.0-17B-Scout", "LLaMA", 3, r"llama-4(-0)?-(17b-)?scout"),
-)
+# regex on the normalised model string (see _normalise) per registry key, so that
+# provider ids in any spelling (``openai/gpt-4o``, ``Qwen/Qwen2.5-VL-7B-Instruct``) are recognised
+_PATTERNS: dict[str, str] = {
+    "gpt-4o": r"gpt-4o",
+    "gpt-5.0": r"gpt-5(-0)?(?![-\d]*\d)",
+    "gpt-5.2": r"gpt-5-2",
+    "claude-3.7-sonnet": r"claude-3-7|3-7-sonnet",
+    "claude-4.0-sonnet": r"claude-sonnet-4(-0)?(?!-?\d)|claude-4(-0)?-sonnet",
+    "claude-4.6-sonnet": r"claude-sonnet-4-6|claude-4-6-sonnet",
+    "gemini-2.0-flash": r"gemini-2-0-flash",
+    "gemini-2.5-flash": r"gemini-2-5-flash",
+    "gemini-3.0-flash": r"gemini-3(-0)?-flash",
+    "qwen-2.0-vl-7b": r"qwen-?2(-0)?-vl-7b",
+    "qwen-2.5-vl-7b": r"qwen-?2-5-vl-7b",
+    "qwen-3.0-vl-8b": r"qwen-?3(-0)?-vl-8b",
+    "llama-3.2-11b": r"llama-3-2-11b",
+    "llama-3.2-90b": r"llama-3-2-90b",
+    "llama-4.0-17b-scout": r"llama-4(-0)?-(17b-)?scout",
+}
 
 _FAMILY_HINTS = (("baseline:", "Baseline"), ("gpt", "GPT"), ("claude", "Claude"), ("gemini", "Gemini"), ("qwen", "Qwen"), ("llama", "LLaMA"))
 
@@ -49,11 +41,11 @@ def _normalise(model: str) -> str:
     return re.sub(r"[._\s/:]+", "-", model.lower())
 
 
-def known_model(model: str) -> KnownModel | None:
-    """The paper model a model string names (``openai/gpt-4o`` → GPT-4o), or None."""
+def known_model(model: str) -> ModelInfo | None:
+    """The registry entry of the paper model a model string names (``openai/gpt-4o`` → GPT-4o), or None."""
     text = _normalise(model)
     for known in PAPER_MODELS:
-        if re.search(known.pattern, text):
+        if re.search(_PATTERNS[known.key], text):
             return known
     return None
 

@@ -59,7 +59,7 @@ ANOMALOUS: dict[str, tuple[str, ...]] = {
 
 
 def _family(model: str) -> str:
-    from lightemma.evaluation.models import PAPER_MODELS
+    from lightemma.registry import PAPER_MODELS
 
     return next(k.family for k in PAPER_MODELS if k.display_name == model)
 

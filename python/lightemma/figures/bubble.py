@@ -81,7 +81,7 @@ def bubble_points(evaluation: Any, *, convention: str = "lightemma", with_paper:
         for m in evaluation.models
     ]
     if with_paper:
-        from lightemma.evaluation.models import PAPER_MODELS
+        from lightemma.registry import PAPER_MODELS
         from lightemma.evaluation.paper import paper_accuracy_rows, paper_efficiency_rows
 
         times = {r["model"]: r["seconds_per_frame"] for r in paper_efficiency_rows()}
