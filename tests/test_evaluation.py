@@ -119,6 +119,16 @@ def test_models_ordered_by_family_and_labelled(tmp_path):
     assert [r["family"] for r in rows] == ["GPT", "GPT", "Gemini", "LLaMA", "Baseline"]
 
 
+def test_every_registry_id_of_a_paper_model_is_recognised():
+    from lightemma.evaluation.models import known_model
+    from lightemma.registry import PAPER_MODELS
+
+    for info in PAPER_MODELS:
+        for name in (info.key, info.display_name, info.model_id):
+            found = known_model(name)
+            assert found is not None and found.display_name == info.display_name, name
+
+
 def test_same_model_twice_is_told_apart_by_integrator(tmp_path):
     write_synthetic_run(tmp_path, "baseline:oracle", 5, manifest={"integrator": "euler"})
     write_synthetic_run(tmp_path, "baseline:oracle", 5, manifest={"integrator": {"method": "midpoint"}})

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import re
 
-from lightemma.registry import PAPER_MODELS, ModelInfo
+from lightemma.registry import PAPER_MODELS, ModelInfo, lookup
 
 # families in the order the paper lists them; Baseline and Other come last
 FAMILIES: tuple[str, ...] = ("GPT", "Claude", "Gemini", "Qwen", "LLaMA", "Baseline", "Other")
@@ -42,7 +42,14 @@ def _normalise(model: str) -> str:
 
 
 def known_model(model: str) -> ModelInfo | None:
-    """The registry entry of the paper model a model string names (``openai/gpt-4o`` → GPT-4o), or None."""
+    """The registry entry of the paper model a model string names (``openai/gpt-4o`` → GPT-4o), or None.
+
+    A registry key, display name or provider id is looked up as such; other
+    spellings are matched against the id patterns.
+    """
+    found = lookup(model)
+    if found in PAPER_MODELS:
+        return found
     text = _normalise(model)
     for known in PAPER_MODELS:
         if re.search(_PATTERNS[known.key], text):
