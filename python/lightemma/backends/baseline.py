@@ -19,6 +19,8 @@ from typing import Any
 import numpy as np
 
 from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.frames import format_history
+from lightemma.frames.geometry import round_like_python
 
 KINDS: tuple[str, ...] = ("constant", "cv", "oracle")
 STAGE_TEXTS = {
@@ -49,16 +51,9 @@ def baseline_actions(kind: str, frame: Any) -> np.ndarray:
     raise ValueError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
 
 
-def _number(value: float) -> str:
-    """A plain decimal with up to 6 places, never ``-0.0`` or a library repr."""
-    text = f"{float(value):.6f}".rstrip("0")
-    text = text + "0" if text.endswith(".") else text
-    return "0.0" if text == "-0.0" else text
-
-
 def format_actions(actions: np.ndarray) -> str:
-    """Six actions in the strict answer format ``[(v1, c1), (v2, c2), …]``."""
-    return "[" + ", ".join(f"({_number(v)}, {_number(c)})" for v, c in actions) + "]"
+    """Six actions in the strict answer format ``[(v1, c1), (v2, c2), …]``, plain decimals of up to 6 places."""
+    return format_history(round_like_python(actions, 6))
 
 
 class BaselineBackend:
