@@ -15,25 +15,10 @@ from typing import Any
 
 import numpy as np
 
+from lightemma import integrate
 from lightemma.runs.store import FRAMES_FILE, create_run_dir, update_manifest
 
 DT = 0.5
-
-
-def _roll_out(actions: np.ndarray) -> np.ndarray:
-    """Positions of (N, 6, 2) actions, Euler steps from the origin (data generation only)."""
-    n = actions.shape[0]
-    pos = np.zeros((n, 6, 2))
-    x = np.zeros(n)
-    y = np.zeros(n)
-    heading = np.zeros(n)
-    for k in range(6):
-        v, c = actions[:, k, 0], actions[:, k, 1]
-        x = x + v * np.cos(heading) * DT
-        y = y + v * np.sin(heading) * DT
-        heading = heading + c * v * DT
-        pos[:, k] = np.stack([x, y], axis=1)
-    return pos
 
 
 def make_record(
@@ -105,7 +90,7 @@ def synthetic_records(
         hist = np.stack([np.clip(v0[:, None] - acc[:, None] * steps[::-1], 0.0, None), np.repeat(curv[:, None] * 0.8, 6, 1)], axis=2)
         pred_act = gt_act + np.stack([rng.normal(0, noise, (n, 6)), rng.normal(0, noise * 0.01, (n, 6))], axis=2)
         pred_act[..., 0] = np.clip(pred_act[..., 0], 0.0, None)
-        gt, pred = _roll_out(gt_act), _roll_out(pred_act)
+        gt, pred = integrate(gt_act, method="euler"), integrate(pred_act, method="euler")
         u = rng.random(n)
         failed = rng.random(n) < fail_rate
         for i in range(n):
