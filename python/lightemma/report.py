@@ -18,8 +18,6 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from lightemma.evaluation import Evaluation, RunData, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
@@ -86,16 +84,20 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
     from lightemma.figures import frame_figure, model_grid
     from lightemma.pictures import stage_texts
 
+    from lightemma import displacement_errors
+
     records = {id(run): read_frame_records(run.info.run_dir, [fid for _, fid, _ in picks]) for run in runs}
+    indices = [run.index() for run in runs]
+    valid = [run.valid for run in runs]
     for kind, fid, caption in picks:
         preds, errors, gt = {}, {}, None
-        for run, label in zip(runs, labels):
-            row = run.index().get(fid)
-            if row is None or not run.valid[row]:
+        for run, label, index, ok in zip(runs, labels, indices, valid):
+            row = index.get(fid)
+            if row is None or not ok[row]:
                 continue
             gt = run.gt_positions[row]
             preds[label] = run.trajectory[row]
-            errors[label] = float(np.linalg.norm(run.trajectory[row] - gt, axis=1).mean())
+            errors[label] = float(displacement_errors(run.trajectory[row], gt).mean())
         if gt is None:
             continue
         w.lines.append(f"**{caption}** — frame `{fid}`")
