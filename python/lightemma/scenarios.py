@@ -186,24 +186,23 @@ def history_bias(runs: Sequence[RunData], thresholds: Thresholds = Thresholds())
     turn, the share of the last history curvature still present in the
     prediction / the truth (1 = the turn carried on unchanged, 0 = straight).
     """
-    out = []
-    for label, run in zip(unique_labels(list(runs)), runs):
-        k = curvature_samples(run, thresholds)
-        after = k["after_turn"]
-        sign = np.sign(k["history"][after])
-        scale = np.abs(k["history"][after]).mean() if after.any() else np.nan
-        out.append(
-            {
-                "model": label,
-                "frames": len(k["history"]),
-                "slope_pred": _slope(k["history"], k["pred"]),
-                "slope_true": _slope(k["history"], k["true"]),
-                "after_turn_frames": int(after.sum()),
-                "carry_pred": float((k["pred"][after] * sign).mean() / scale) if after.any() else None,
-                "carry_true": float((k["true"][after] * sign).mean() / scale) if after.any() else None,
-            }
-        )
-    return out
+    return [bias_row(label, curvature_samples(run, thresholds)) for label, run in zip(unique_labels(list(runs)), runs)]
+
+
+def bias_row(label: str, k: dict[str, np.ndarray]) -> dict[str, Any]:
+    """One :func:`history_bias` row from a run's :func:`curvature_samples`."""
+    after = k["after_turn"]
+    sign = np.sign(k["history"][after])
+    scale = np.abs(k["history"][after]).mean() if after.any() else np.nan
+    return {
+        "model": label,
+        "frames": len(k["history"]),
+        "slope_pred": _slope(k["history"], k["pred"]),
+        "slope_true": _slope(k["history"], k["true"]),
+        "after_turn_frames": int(after.sum()),
+        "carry_pred": float((k["pred"][after] * sign).mean() / scale) if after.any() else None,
+        "carry_true": float((k["true"][after] * sign).mean() / scale) if after.any() else None,
+    }
 
 
 def _shared_valid(runs: Sequence[RunData]) -> list[str]:

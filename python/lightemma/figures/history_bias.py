@@ -16,16 +16,16 @@ def history_bias_figure(runs: Sequence[Any], *, max_points: int = 4000) -> Any:
     curvature, with least-squares lines. Right: on frames going straight just after a turn, the
     share of the last history curvature carried into the prediction, and into the truth."""
     from lightemma.evaluation.core import unique_labels
-    from lightemma.scenarios import curvature_samples, history_bias
+    from lightemma.scenarios import bias_row, curvature_samples
 
     plt = pyplot()
     labels = unique_labels(list(runs))
-    stats = history_bias(runs)
+    samples = [curvature_samples(run) for run in runs]
+    stats = [bias_row(label, k) for label, k in zip(labels, samples)]
     fig, (scatter, bars) = plt.subplots(1, 2, figsize=(12, 4.8), gridspec_kw={"width_ratios": [1.4, 1]})
     rng = np.random.default_rng(0)
     truth_drawn = False
-    for i, (label, run, stat) in enumerate(zip(labels, runs, stats)):
-        k = curvature_samples(run)
+    for i, (label, k, stat) in enumerate(zip(labels, samples, stats)):
         if len(k["history"]) == 0:
             continue
         keep = rng.permutation(len(k["history"]))[:max_points]
