@@ -18,7 +18,7 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from lightemma.evaluation import Evaluation, RunData, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
+from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
 from lightemma.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
@@ -178,8 +178,6 @@ def write_report(
         w.figure(bubble_chart(points), "bubble", caption)
     else:
         w.lines += ["No model has a scored frame yet; no chart.", ""]
-
-    from lightemma.evaluation import common_frames
 
     shared = common_frames(runs) if len(runs) > 1 else None
     scope = f"the {len(shared)} frames valid for every run" if shared else "each run's valid frames"

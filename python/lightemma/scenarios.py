@@ -26,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.evaluation.core import unique_labels
+from lightemma.evaluation.core import common_frames, unique_labels
 from lightemma.evaluation.loading import RunData
 
 DT = 0.5
@@ -206,8 +206,6 @@ def bias_row(label: str, k: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def _shared_valid(runs: Sequence[RunData]) -> list[str]:
-    from lightemma.evaluation.core import common_frames
-
     return common_frames(runs) if runs else []
 
 
