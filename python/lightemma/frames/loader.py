@@ -70,13 +70,25 @@ WINDOWS = {"reference": 1, "full": 0}
 ON_MISSING_IMAGE = ("skip", "error", "keep")
 
 
+def _check_window(window: str) -> None:
+    if window not in WINDOWS:
+        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
+
+
+def _check_options(window: str, on_missing_image: str) -> None:
+    _check_window(window)
+    if on_missing_image not in ON_MISSING_IMAGE:
+        raise ValueError(
+            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
+        )
+
+
 def window_range(n_keyframes: int, window: str) -> range:
     """Current keyframe indices ``c`` of a scene with ``n_keyframes`` keyframes.
 
     ``reference`` (the paper): 7 … N−8, N−14 frames; ``full``: 7 … N−7, N−13 frames.
     """
-    if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
+    _check_window(window)
     last = n_keyframes - 1 - FUTURE - WINDOWS[window]
     return range(HISTORY, max(HISTORY, last + 1))
 
@@ -293,12 +305,7 @@ def extract_frames(
     on_missing_image: str = "skip",
 ) -> FrameSet:
     """Frames of the chosen scenes of an already loaded ``NuScenes`` (see :func:`load_frames`)."""
-    if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
-    if on_missing_image not in ON_MISSING_IMAGE:
-        raise ValueError(
-            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
-        )
+    _check_options(window, on_missing_image)
     dataroot = os.path.abspath(nusc.dataroot)
     by_name = {s["name"]: s for s in nusc.scene}
     split, names = resolve_scenes(by_name, nusc.version, split=split, scenes=scenes)
@@ -435,11 +442,6 @@ def load_frames(
 
     Frames are ordered by scene name, then keyframe.
     """
-    if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
-    if on_missing_image not in ON_MISSING_IMAGE:
-        raise ValueError(
-            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
-        )
+    _check_options(window, on_missing_image)  # before the slow table load
     nusc = load_tables(dataroot, version)
     return extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)
