@@ -355,17 +355,15 @@ def extract_frames(
         cur = np.concatenate(current_parts)
     else:
         xy, yaw, t, cur = np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # every step below is vectorised and also holds for no frames at all (F = 0)
     idx = cur[:, None] + np.arange(-HISTORY, FUTURE + 1)[None, :]  # (F, 14): c-7 … c+6
-    ego = geometry.to_ego_frame(xy[idx], xy[cur], yaw[cur]) if len(cur) else np.zeros((0, 14, 2))
-    ts = t[idx] if len(cur) else np.zeros((0, 14), np.int64)
+    ego = geometry.to_ego_frame(xy[idx], xy[cur], yaw[cur])
+    ts = t[idx]
     history_positions = ego[:, : HISTORY + 1]
     gt_positions = ego[:, HISTORY + 1 :]
-    if len(cur):
-        history_actions = geometry.postprocess_reference(geometry.raw_actions(ego[:, :8], ts[:, :8]))
-        gt_actions = geometry.raw_actions(ego[:, 6:14], ts[:, 6:14])
-    else:
-        history_actions = gt_actions = np.zeros((0, 6, 2))
-    ego_poses = np.stack([xy[cur, 0], xy[cur, 1], yaw[cur]], axis=-1) if len(cur) else np.zeros((0, 3))
+    history_actions = geometry.postprocess_reference(geometry.raw_actions(ego[:, :8], ts[:, :8]))
+    gt_actions = geometry.raw_actions(ego[:, 6:14], ts[:, 6:14])
+    ego_poses = np.stack([xy[cur, 0], xy[cur, 1], yaw[cur]], axis=-1)
     intr = np.stack([cs_cache[c][0] for c in meta["cs"]]) if meta["cs"] else np.zeros((0, 3, 3))
     extr = np.stack([cs_cache[c][1] for c in meta["cs"]]) if meta["cs"] else np.zeros((0, 4, 4))
 
@@ -375,7 +373,7 @@ def extract_frames(
         scene_tokens=meta["scene_tokens"],
         sample_tokens=meta["sample_tokens"],
         keyframe_indices=np.asarray(kf_index, dtype=np.int64),
-        timestamps=t[cur] if len(cur) else np.zeros(0, np.int64),
+        timestamps=t[cur],
         image_paths=meta["image_paths"],
         camera_intrinsics=intr,
         camera_extrinsics=extr,
