@@ -126,7 +126,7 @@ def _road(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, s_ego: float) -
 
 
 def _intersection(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None:
-    """Crossing road beyond the stop line, and the stop line itself."""
+    """Crossing road beyond the stop line (the stop line is drawn over the road, see render_frame)."""
     assert scn.light is not None
     x, y, yaw = scn.path.pose(scn.light.stop_s)
     h, n = _axes(yaw)
@@ -136,7 +136,6 @@ def _intersection(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None
     quad = np.stack([centre - half_w * h - half_l * n, centre + half_w * h - half_l * n,
                      centre + half_w * h + half_l * n, centre - half_w * h + half_l * n])
     view.polygon(draw, quad, ASPHALT)
-    _stop_line(draw, view, scn)
 
 
 def _traffic_light(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, t: float, width: int) -> None:
@@ -217,8 +216,9 @@ def render_frame(scn: Scenario, t: float, camera: Camera) -> Image.Image:
     draw = ImageDraw.Draw(img)
     if scn.light is not None:
         _intersection(draw, view, scn)
-    _road(draw, view, scn, float(scn.profile.s(t)))
-    if scn.light is not None and scn.light.stop_s - float(scn.profile.s(t)) > 1.0:
+    s_ego = float(scn.profile.s(t))
+    _road(draw, view, scn, s_ego)
+    if scn.light is not None and scn.light.stop_s - s_ego > 1.0:
         _stop_line(draw, view, scn)
     if scn.lead is not None:
         _lead(draw, view, scn, t)
@@ -228,7 +228,7 @@ def render_frame(scn: Scenario, t: float, camera: Camera) -> Image.Image:
 
 
 def _stop_line(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None:
-    """The stop line across the ego lane (drawn again over the road, which is drawn after the crossing)."""
+    """The stop line across the ego lane, drawn over the road surface."""
     assert scn.light is not None
     x, y, yaw = scn.path.pose(scn.light.stop_s)
     h, n = _axes(yaw)
