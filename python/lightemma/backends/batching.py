@@ -162,7 +162,8 @@ class MicroBatcher:
                 results = self._run_batch([p.request for p in live])
                 if len(results) != len(live):
                     raise RuntimeError(f"run_batch returned {len(results)} results for {len(live)} requests")
-            except Exception as exc:  # noqa: BLE001 - every request of the batch gets the error, none raises
+            except BaseException as exc:  # noqa: BLE001 - every request of the batch gets the error, none raises;
+                # even SystemExit: it would end this thread with the batch's futures never resolved
                 results = [error_result(exc, time.perf_counter() - start) for _ in live]
             elapsed = time.perf_counter() - start
             self.stats.batches += 1
