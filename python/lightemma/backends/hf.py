@@ -22,7 +22,7 @@ from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher
-from lightemma.backends.local import load_image, require, token_counting, user_turn
+from lightemma.backends.local import DECODING, check_options, load_image, require, token_counting, user_turn
 from lightemma.errors import UserError
 
 DTYPES = ("auto", "bfloat16", "float16", "float32")
@@ -49,10 +49,7 @@ class HFBackend:
                  trust_remote_code: bool = False) -> None:
         if dtype not in DTYPES:
             raise UserError(f"--dtype must be one of {', '.join(DTYPES)}, got {dtype!r}")
-        if max_pixels is not None and max_pixels < 1:
-            raise UserError(f"--max-pixels must be a positive number of pixels, got {max_pixels}")
-        if batch_size < 1:
-            raise UserError(f"--batch-size must be at least 1, got {batch_size}")
+        check_options(batch_size, max_pixels)
         torch = require("torch", "hf")
         transformers = require("transformers", "hf")
         self.model_id = model
@@ -163,8 +160,7 @@ class HFBackend:
             "batching": "micro-batches of one stage, built around the oldest pending request; left padding",
             "max_pixels": self.max_pixels,
             "image_cap": self._image_cap,
-            "decoding": "greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
-                        "sampling settings (top-k/top-p, repetition penalty) are not used",
+            "decoding": DECODING,
             "token_counting": token_counting(self.model_type),
             "seconds": "wall time of the batch the request ran in",
             "torch": torch.__version__,
