@@ -36,6 +36,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends.retry import short_message
 
 RunBatch = Callable[[Sequence[ChatRequest]], list[ChatResult]]
 
@@ -70,7 +71,7 @@ class _Pending:
 
 def error_result(exc: BaseException, seconds: float = 0.0) -> ChatResult:
     """A failed call as a result: the exception's class and a one-line message, never model text."""
-    message = " ".join(str(exc).split())[:300] or type(exc).__name__
+    message = short_message(exc) or type(exc).__name__
     return ChatResult(text=None, seconds=seconds, error=type(exc).__name__, error_message=message)
 
 

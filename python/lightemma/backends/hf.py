@@ -23,6 +23,7 @@ from typing import Any
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher
 from lightemma.backends.local import DECODING, check_options, load_image, require, token_counting, user_turn
+from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
 DTYPES = ("auto", "bfloat16", "float16", "float32")
@@ -90,7 +91,7 @@ class HFBackend:
             loaded = transformers.AutoModelForImageTextToText.from_pretrained(model, **kwargs)
         except (OSError, ValueError, KeyError) as exc:
             raise UserError(f"cannot load {model!r} as an image-text-to-text model with transformers "
-                            f"{transformers.__version__}: {' '.join(str(exc).split())[:400]}") from None
+                            f"{transformers.__version__}: {short_message(exc, 400)}") from None
         loaded.eval()
         # Decode plainly: the checkpoint's sampling settings (top-k/top-p, repetition penalty, …) are not
         # used, so that hf and vllm decode the same way; only its special token ids are kept.

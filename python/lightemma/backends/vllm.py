@@ -26,6 +26,7 @@ from typing import Any
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import MicroBatcher
 from lightemma.backends.local import DECODING, check_options, is_mllama, load_image, require, token_counting, user_turn
+from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
 DEFAULT_BATCH_SIZE = 64
@@ -79,7 +80,7 @@ class VLLMBackend:
         try:
             self._llm = self._vllm.LLM(model, **self.engine_kwargs)
         except (OSError, ValueError) as exc:
-            raise UserError(f"vLLM cannot load {model!r}: {' '.join(str(exc).split())[:400]}") from None
+            raise UserError(f"vLLM cannot load {model!r}: {short_message(exc, 400)}") from None
         self.model_type = self._engine_model_type()
         if is_mllama(model, self.model_type):
             raise UserError(MLLAMA_REFUSAL.format(model=model))
