@@ -189,12 +189,11 @@ class HFBackend:
         """
         with_image = [i for i, r in enumerate(requests) if r.image_path]
         if 0 < len(with_image) < len(requests):
-            results: list[ChatResult | None] = [None] * len(requests)
-            without = [i for i in range(len(requests)) if i not in set(with_image)]
+            without = [i for i, r in enumerate(requests) if not r.image_path]
+            results: dict[int, ChatResult] = {}
             for part in (with_image, without):
-                for i, result in zip(part, self._run_batch([requests[i] for i in part])):
-                    results[i] = result
-            return [r for r in results if r is not None]
+                results.update(zip(part, self._run_batch([requests[i] for i in part])))
+            return [results[i] for i in range(len(requests))]
         try:
             return self._generate(requests)
         except self._oom_error:
