@@ -10,6 +10,7 @@ few pixels so that a vision-language model can read it).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -104,13 +105,19 @@ def _axes(yaw: float) -> tuple[np.ndarray, np.ndarray]:
     return np.array([math.cos(yaw), math.sin(yaw), 0.0]), np.array([-math.sin(yaw), math.cos(yaw), 0.0])
 
 
+@functools.lru_cache(maxsize=8)
+def _sky(width: int, rows: int) -> Image.Image:
+    """The sky gradient above the horizon: the same for every image of a camera, so built once (read-only)."""
+    f = np.linspace(0.0, 1.0, rows)[:, None]
+    sky = np.stack([120 + 70 * f, 160 + 55 * f, 215 + 25 * f], axis=-1).astype(np.uint8)
+    return Image.fromarray(np.repeat(sky, width, axis=1))
+
+
 def _background(img: Image.Image, horizon: float) -> None:
     w, h = img.size
     hz = int(max(0, min(h, round(horizon))))
     if hz > 0:
-        f = np.linspace(0.0, 1.0, hz)[:, None]
-        sky = np.stack([120 + 70 * f, 160 + 55 * f, 215 + 25 * f], axis=-1).astype(np.uint8)
-        img.paste(Image.fromarray(np.repeat(sky, w, axis=1)), (0, 0))
+        img.paste(_sky(w, hz), (0, 0))
     ImageDraw.Draw(img).rectangle([0, hz, w, h], fill=GRASS)
 
 
