@@ -59,10 +59,12 @@ def vllm_missing(on_gpu: bool) -> str | None:
 def synthetic_frames(root: Path, n_frames: int, image_size: tuple[int, int]) -> Any:
     """``n_frames`` reference frames from synthetic scenes of 30 keyframes (16 frames each)."""
     from lightemma import load_frames
+    from lightemma.frames import window_range
     from lightemma.synth import write_dataset
 
-    scenes = -(-n_frames // 16)
-    write_dataset(root, scenes=scenes, keyframes=30, image_size=image_size, sweeps=False)
+    keyframes = 30
+    scenes = -(-n_frames // len(window_range(keyframes, "reference")))
+    write_dataset(root, scenes=scenes, keyframes=keyframes, image_size=image_size, sweeps=False)
     return load_frames(root, "v1.0-mini", split="all").head(n_frames)
 
 

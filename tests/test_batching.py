@@ -144,6 +144,30 @@ def test_a_failing_batch_gives_every_request_an_error_result_and_the_worker_goes
     assert second[0].text == "echo prompt 2"
 
 
+def test_a_batch_ending_its_thread_still_answers_its_requests():
+    """A BaseException (SystemExit from a library, say) ends the worker, but no request waits forever."""
+    calls = []
+
+    def run_batch(requests):
+        calls.append(len(requests))
+        if len(calls) == 1:
+            raise SystemExit("engine gone")
+        return [ChatResult(text="fine") for _ in requests]
+
+    batcher = MicroBatcher(run_batch, batch_size=2, batch_window=0.05)
+
+    async def main():
+        first = await asyncio.wait_for(batcher.submit([req(0), req(1)]), 5)
+        second = await asyncio.wait_for(batcher.submit([req(2)]), 5)  # a new worker takes over
+        await batcher.aclose()
+        return first, second
+
+    first, second = asyncio.run(main())
+    assert [r.error for r in first] == ["SystemExit", "SystemExit"]
+    assert "engine gone" in first[0].error_message
+    assert second[0].text == "fine"
+
+
 def test_a_run_batch_returning_the_wrong_number_of_results_is_an_error_not_a_misalignment():
     batcher = MicroBatcher(lambda rs: [ChatResult(text="only one")], batch_size=2, batch_window=0.2)
 

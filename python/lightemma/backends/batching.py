@@ -36,6 +36,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends.retry import short_message
 
 RunBatch = Callable[[Sequence[ChatRequest]], list[ChatResult]]
 
@@ -70,7 +71,7 @@ class _Pending:
 
 def error_result(exc: BaseException, seconds: float = 0.0) -> ChatResult:
     """A failed call as a result: the exception's class and a one-line message, never model text."""
-    message = " ".join(str(exc).split())[:300] or type(exc).__name__
+    message = short_message(exc) or type(exc).__name__
     return ChatResult(text=None, seconds=seconds, error=type(exc).__name__, error_message=message)
 
 
@@ -162,7 +163,8 @@ class MicroBatcher:
                 results = self._run_batch([p.request for p in live])
                 if len(results) != len(live):
                     raise RuntimeError(f"run_batch returned {len(results)} results for {len(live)} requests")
-            except Exception as exc:  # noqa: BLE001 - every request of the batch gets the error, none raises
+            except BaseException as exc:  # noqa: BLE001 - every request of the batch gets the error, none raises;
+                # even SystemExit: it would end this thread with the batch's futures never resolved
                 results = [error_result(exc, time.perf_counter() - start) for _ in live]
             elapsed = time.perf_counter() - start
             self.stats.batches += 1

@@ -22,7 +22,8 @@ from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher
-from lightemma.backends.local import load_image, require, token_counting, user_turn
+from lightemma.backends.local import DECODING, check_options, load_image, require, token_counting, user_turn
+from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
 DTYPES = ("auto", "bfloat16", "float16", "float32")
@@ -49,10 +50,7 @@ class HFBackend:
                  trust_remote_code: bool = False) -> None:
         if dtype not in DTYPES:
             raise UserError(f"--dtype must be one of {', '.join(DTYPES)}, got {dtype!r}")
-        if max_pixels is not None and max_pixels < 1:
-            raise UserError(f"--max-pixels must be a positive number of pixels, got {max_pixels}")
-        if batch_size < 1:
-            raise UserError(f"--batch-size must be at least 1, got {batch_size}")
+        check_options(batch_size, max_pixels)
         torch = require("torch", "hf")
         transformers = require("transformers", "hf")
         self.model_id = model
@@ -93,7 +91,7 @@ class HFBackend:
             loaded = transformers.AutoModelForImageTextToText.from_pretrained(model, **kwargs)
         except (OSError, ValueError, KeyError) as exc:
             raise UserError(f"cannot load {model!r} as an image-text-to-text model with transformers "
-                            f"{transformers.__version__}: {' '.join(str(exc).split())[:400]}") from None
+                            f"{transformers.__version__}: {short_message(exc, 400)}") from None
         loaded.eval()
         # Decode plainly: the checkpoint's sampling settings (top-k/top-p, repetition penalty, …) are not
         # used, so that hf and vllm decode the same way; only its special token ids are kept.
@@ -163,8 +161,7 @@ class HFBackend:
             "batching": "micro-batches of one stage, built around the oldest pending request; left padding",
             "max_pixels": self.max_pixels,
             "image_cap": self._image_cap,
-            "decoding": "greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
-                        "sampling settings (top-k/top-p, repetition penalty) are not used",
+            "decoding": DECODING,
             "token_counting": token_counting(self.model_type),
             "seconds": "wall time of the batch the request ran in",
             "torch": torch.__version__,
@@ -192,12 +189,11 @@ class HFBackend:
         """
         with_image = [i for i, r in enumerate(requests) if r.image_path]
         if 0 < len(with_image) < len(requests):
-            results: list[ChatResult | None] = [None] * len(requests)
-            without = [i for i in range(len(requests)) if i not in set(with_image)]
+            without = [i for i, r in enumerate(requests) if not r.image_path]
+            results: dict[int, ChatResult] = {}
             for part in (with_image, without):
-                for i, result in zip(part, self._run_batch([requests[i] for i in part])):
-                    results[i] = result
-            return [r for r in results if r is not None]
+                results.update(zip(part, self._run_batch([requests[i] for i in part])))
+            return [results[i] for i in range(len(requests))]
         try:
             return self._generate(requests)
         except self._oom_error:

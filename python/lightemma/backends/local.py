@@ -1,4 +1,5 @@
-"""What the local backends (``hf``, ``vllm``) share: the chat turn, image loading, imports, checkpoint facts.
+"""What the local backends (``hf``, ``vllm``) share: option checks, the chat turn, image loading, imports,
+checkpoint facts.
 
 Every stage of a frame is ONE user turn whose content is the image first, then
 the stage's text. The image goes first in every backend so that the prompt
@@ -29,6 +30,19 @@ def require(module: str, extra: str) -> Any:
     except ImportError as exc:
         raise UserError(f"the {extra} backend needs {module.split('.')[0]} ({exc}); install it with: "
                         f"pip install 'lightemma[{extra}]'") from None
+
+
+#: how both local backends decode (recorded in ``info``)
+DECODING = ("greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
+            "sampling settings (top-k/top-p, repetition penalty) are not used")
+
+
+def check_options(batch_size: int, max_pixels: int | None) -> None:
+    """The options both local backends take, checked with the CLI flag named."""
+    if max_pixels is not None and max_pixels < 1:
+        raise UserError(f"--max-pixels must be a positive number of pixels, got {max_pixels}")
+    if batch_size < 1:
+        raise UserError(f"--batch-size must be at least 1, got {batch_size}")
 
 
 def user_turn(request: ChatRequest, image_part: dict[str, Any] | None) -> list[dict[str, Any]]:

@@ -25,7 +25,8 @@ from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import MicroBatcher
-from lightemma.backends.local import is_mllama, load_image, require, token_counting, user_turn
+from lightemma.backends.local import DECODING, check_options, is_mllama, load_image, require, token_counting, user_turn
+from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
 DEFAULT_BATCH_SIZE = 64
@@ -59,10 +60,7 @@ class VLLMBackend:
             raise UserError(f"--tensor-parallel-size must be at least 1, got {tensor_parallel_size}")
         if not 0 < gpu_memory_utilization <= 1:
             raise UserError(f"--gpu-memory-utilization must be in (0, 1], got {gpu_memory_utilization}")
-        if max_pixels is not None and max_pixels < 1:
-            raise UserError(f"--max-pixels must be a positive number of pixels, got {max_pixels}")
-        if batch_size < 1:
-            raise UserError(f"--batch-size must be at least 1, got {batch_size}")
+        check_options(batch_size, max_pixels)
         self._vllm = vllm if vllm is not None else require("vllm", "vllm")
         self.model_id = model
         self.max_pixels = max_pixels
@@ -82,7 +80,7 @@ class VLLMBackend:
         try:
             self._llm = self._vllm.LLM(model, **self.engine_kwargs)
         except (OSError, ValueError) as exc:
-            raise UserError(f"vLLM cannot load {model!r}: {' '.join(str(exc).split())[:400]}") from None
+            raise UserError(f"vLLM cannot load {model!r}: {short_message(exc, 400)}") from None
         self.model_type = self._engine_model_type()
         if is_mllama(model, self.model_type):
             raise UserError(MLLAMA_REFUSAL.format(model=model))
@@ -122,8 +120,7 @@ class VLLMBackend:
                         "prefix caching " + ("on" if self.enable_prefix_caching else "off"),
             "max_pixels": self.max_pixels,
             "image_cap": "Pillow downscale before vLLM's processor" if self.max_pixels else None,
-            "decoding": "greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
-                        "sampling settings (top-k/top-p, repetition penalty) are not used",
+            "decoding": DECODING,
             "token_counting": token_counting(self.model_type) + " (vLLM's prompt_token_ids and output token_ids)",
             "seconds": "wall time of the LLM.chat call the request ran in",
             "vllm": getattr(self._vllm, "__version__", None),

@@ -53,6 +53,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
+    from lightemma.frames import window_range
     from lightemma.synth import write_dataset
 
     root = write_dataset(
@@ -67,7 +68,7 @@ def run(args: argparse.Namespace) -> int:
         overwrite=args.force,
         progress=sys.stderr.isatty(),
     )
-    frames = max(0, args.keyframes - 14) * args.scenes
+    frames = len(window_range(args.keyframes, "reference")) * args.scenes
     print(f"wrote {args.scenes} synthetic scenes ({args.keyframes} keyframes each) to {root}/{args.version}")
     print(
         f"load with: lightemma.load_frames({str(root)!r}, {args.version!r}, split='all')"

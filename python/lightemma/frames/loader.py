@@ -70,13 +70,25 @@ WINDOWS = {"reference": 1, "full": 0}
 ON_MISSING_IMAGE = ("skip", "error", "keep")
 
 
+def _check_window(window: str) -> None:
+    if window not in WINDOWS:
+        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
+
+
+def _check_options(window: str, on_missing_image: str) -> None:
+    _check_window(window)
+    if on_missing_image not in ON_MISSING_IMAGE:
+        raise ValueError(
+            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
+        )
+
+
 def window_range(n_keyframes: int, window: str) -> range:
     """Current keyframe indices ``c`` of a scene with ``n_keyframes`` keyframes.
 
     ``reference`` (the paper): 7 … N−8, N−14 frames; ``full``: 7 … N−7, N−13 frames.
     """
-    if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
+    _check_window(window)
     last = n_keyframes - 1 - FUTURE - WINDOWS[window]
     return range(HISTORY, max(HISTORY, last + 1))
 
@@ -293,12 +305,7 @@ def extract_frames(
     on_missing_image: str = "skip",
 ) -> FrameSet:
     """Frames of the chosen scenes of an already loaded ``NuScenes`` (see :func:`load_frames`)."""
-    if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
-    if on_missing_image not in ON_MISSING_IMAGE:
-        raise ValueError(
-            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
-        )
+    _check_options(window, on_missing_image)
     dataroot = os.path.abspath(nusc.dataroot)
     by_name = {s["name"]: s for s in nusc.scene}
     split, names = resolve_scenes(by_name, nusc.version, split=split, scenes=scenes)
@@ -348,17 +355,15 @@ def extract_frames(
         cur = np.concatenate(current_parts)
     else:
         xy, yaw, t, cur = np.zeros((0, 2)), np.zeros(0), np.zeros(0, np.int64), np.zeros(0, np.int64)
+    # every step below is vectorised and also holds for no frames at all (F = 0)
     idx = cur[:, None] + np.arange(-HISTORY, FUTURE + 1)[None, :]  # (F, 14): c-7 … c+6
-    ego = geometry.to_ego_frame(xy[idx], xy[cur], yaw[cur]) if len(cur) else np.zeros((0, 14, 2))
-    ts = t[idx] if len(cur) else np.zeros((0, 14), np.int64)
+    ego = geometry.to_ego_frame(xy[idx], xy[cur], yaw[cur])
+    ts = t[idx]
     history_positions = ego[:, : HISTORY + 1]
     gt_positions = ego[:, HISTORY + 1 :]
-    if len(cur):
-        history_actions = geometry.postprocess_reference(geometry.raw_actions(ego[:, :8], ts[:, :8]))
-        gt_actions = geometry.raw_actions(ego[:, 6:14], ts[:, 6:14])
-    else:
-        history_actions = gt_actions = np.zeros((0, 6, 2))
-    ego_poses = np.stack([xy[cur, 0], xy[cur, 1], yaw[cur]], axis=-1) if len(cur) else np.zeros((0, 3))
+    history_actions = geometry.postprocess_reference(geometry.raw_actions(ego[:, :8], ts[:, :8]))
+    gt_actions = geometry.raw_actions(ego[:, 6:14], ts[:, 6:14])
+    ego_poses = np.stack([xy[cur, 0], xy[cur, 1], yaw[cur]], axis=-1)
     intr = np.stack([cs_cache[c][0] for c in meta["cs"]]) if meta["cs"] else np.zeros((0, 3, 3))
     extr = np.stack([cs_cache[c][1] for c in meta["cs"]]) if meta["cs"] else np.zeros((0, 4, 4))
 
@@ -368,7 +373,7 @@ def extract_frames(
         scene_tokens=meta["scene_tokens"],
         sample_tokens=meta["sample_tokens"],
         keyframe_indices=np.asarray(kf_index, dtype=np.int64),
-        timestamps=t[cur] if len(cur) else np.zeros(0, np.int64),
+        timestamps=t[cur],
         image_paths=meta["image_paths"],
         camera_intrinsics=intr,
         camera_extrinsics=extr,
@@ -435,11 +440,6 @@ def load_frames(
 
     Frames are ordered by scene name, then keyframe.
     """
-    if window not in WINDOWS:
-        raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
-    if on_missing_image not in ON_MISSING_IMAGE:
-        raise ValueError(
-            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
-        )
+    _check_options(window, on_missing_image)  # before the slow table load
     nusc = load_tables(dataroot, version)
     return extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)

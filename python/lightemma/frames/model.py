@@ -89,37 +89,29 @@ class FrameSet:
     missing_images: list[str] = field(default_factory=list)
     skipped_scenes: list[str] = field(default_factory=list)
 
-    _ARRAYS = (
-        "keyframe_indices",
-        "timestamps",
-        "camera_intrinsics",
-        "camera_extrinsics",
-        "ego_poses",
-        "history_positions",
-        "history_actions",
-        "gt_positions",
-        "gt_actions",
-    )
+    #: stacked arrays and the shape of one frame's entry (the leading axis is the frame)
+    _ARRAYS = {
+        "keyframe_indices": (),
+        "timestamps": (),
+        "camera_intrinsics": (3, 3),
+        "camera_extrinsics": (4, 4),
+        "ego_poses": (3,),
+        "history_positions": (8, 2),
+        "history_actions": (6, 2),
+        "gt_positions": (6, 2),
+        "gt_actions": (6, 2),
+    }
+    _INTEGER_ARRAYS = ("keyframe_indices", "timestamps")
     _LISTS = ("frame_ids", "scene_names", "scene_tokens", "sample_tokens", "image_paths")
 
     def __post_init__(self) -> None:
         n = len(self.frame_ids)
-        shapes = {
-            "keyframe_indices": (n,),
-            "timestamps": (n,),
-            "camera_intrinsics": (n, 3, 3),
-            "camera_extrinsics": (n, 4, 4),
-            "ego_poses": (n, 3),
-            "history_positions": (n, 8, 2),
-            "history_actions": (n, 6, 2),
-            "gt_positions": (n, 6, 2),
-            "gt_actions": (n, 6, 2),
-        }
-        for name, shape in shapes.items():
+        for name, entry in self._ARRAYS.items():
+            shape = (n, *entry)
             arr = np.asarray(getattr(self, name))
             if arr.shape != shape:
                 raise ValueError(f"FrameSet.{name} has shape {arr.shape}, expected {shape}")
-            dtype = np.int64 if name in ("keyframe_indices", "timestamps") else np.float64
+            dtype = np.int64 if name in self._INTEGER_ARRAYS else np.float64
             object.__setattr__(self, name, _readonly(arr.astype(dtype, copy=False)))
         for name in self._LISTS:
             value = list(getattr(self, name))

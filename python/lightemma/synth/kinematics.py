@@ -50,7 +50,7 @@ class SpeedProfile:
         """Arc length travelled by time ``t`` (s ≥ 0; before t = 0 the start speed is extrapolated)."""
         t = np.asarray(t, dtype=np.float64)
         ts, ss, vs, accs = self._breaks()
-        i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 1)
+        i = _piece(ts, t)
         tau = t - ts[i]
         a = np.where(tau < 0, 0.0, accs[i])
         return ss[i] + vs[i] * tau + 0.5 * a * tau**2
@@ -59,7 +59,7 @@ class SpeedProfile:
         """Speed at time ``t``."""
         t = np.asarray(t, dtype=np.float64)
         ts, _, vs, accs = self._breaks()
-        i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 1)
+        i = _piece(ts, t)
         tau = t - ts[i]
         a = np.where(tau < 0, 0.0, accs[i])
         return np.maximum(vs[i] + a * tau, 0.0)
@@ -68,7 +68,7 @@ class SpeedProfile:
         """Acceleration at time ``t``."""
         t = np.asarray(t, dtype=np.float64)
         ts, _, _, accs = self._breaks()
-        i = np.clip(np.searchsorted(ts, t, side="right") - 1, 0, len(ts) - 1)
+        i = _piece(ts, t)
         return np.where(t < 0, 0.0, accs[i])
 
 
@@ -99,7 +99,7 @@ class Path:
         """``(..., 3)`` array of (x, y, yaw) at arc length(s) ``s``."""
         s = np.asarray(s, dtype=np.float64)
         ss, xs, ys, yaws, ks = self._starts()
-        i = np.clip(np.searchsorted(ss, s, side="right") - 1, 0, len(ss) - 1)
+        i = _piece(ss, s)
         ds = s - ss[i]
         k = np.where(s < 0, 0.0, ks[i])
         x, y, yaw = _advance(xs[i], ys[i], yaws[i], k, ds)
@@ -109,13 +109,21 @@ class Path:
         """Curvature at arc length(s) ``s`` (the segment's constant curvature)."""
         s = np.asarray(s, dtype=np.float64)
         ss, _, _, _, ks = self._starts()
-        i = np.clip(np.searchsorted(ss, s, side="right") - 1, 0, len(ss) - 1)
+        i = _piece(ss, s)
         return np.where(s < 0, 0.0, ks[i])
 
     @property
     def length(self) -> float:
         """Total length of the explicit segments."""
         return float(sum(length for length, _ in self.segments))
+
+
+def _piece(starts: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Index of the piece (phase or segment) holding each ``x``, given the pieces' sorted ``starts``.
+
+    Before the first start this is the first piece, after the last start the last one.
+    """
+    return np.clip(np.searchsorted(starts, x, side="right") - 1, 0, len(starts) - 1)
 
 
 def _advance(x, y, yaw, k, ds):

@@ -10,6 +10,7 @@ few pixels so that a vision-language model can read it).
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -99,13 +100,24 @@ def _strip(pose: np.ndarray, lo: float, hi: float) -> np.ndarray:
     return np.stack([right[:-1], right[1:], left[1:], left[:-1]], axis=1)
 
 
+def _axes(yaw: float) -> tuple[np.ndarray, np.ndarray]:
+    """Unit heading ``h`` and left normal ``n`` (in the ground plane) of a pose with ``yaw``."""
+    return np.array([math.cos(yaw), math.sin(yaw), 0.0]), np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+
+
+@functools.lru_cache(maxsize=8)
+def _sky(width: int, rows: int) -> Image.Image:
+    """The sky gradient above the horizon: the same for every image of a camera, so built once (read-only)."""
+    f = np.linspace(0.0, 1.0, rows)[:, None]
+    sky = np.stack([120 + 70 * f, 160 + 55 * f, 215 + 25 * f], axis=-1).astype(np.uint8)
+    return Image.fromarray(np.repeat(sky, width, axis=1))
+
+
 def _background(img: Image.Image, horizon: float) -> None:
     w, h = img.size
     hz = int(max(0, min(h, round(horizon))))
     if hz > 0:
-        f = np.linspace(0.0, 1.0, hz)[:, None]
-        sky = np.stack([120 + 70 * f, 160 + 55 * f, 215 + 25 * f], axis=-1).astype(np.uint8)
-        img.paste(Image.fromarray(np.repeat(sky, w, axis=1)), (0, 0))
+        img.paste(_sky(w, hz), (0, 0))
     ImageDraw.Draw(img).rectangle([0, hz, w, h], fill=GRASS)
 
 
@@ -121,28 +133,23 @@ def _road(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, s_ego: float) -
 
 
 def _intersection(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None:
-    """Crossing road beyond the stop line, and the stop line itself."""
+    """Crossing road beyond the stop line (the stop line is drawn over the road, see render_frame)."""
     assert scn.light is not None
     x, y, yaw = scn.path.pose(scn.light.stop_s)
-    h = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    h, n = _axes(yaw)
     base = np.array([x, y, 0.0])
     centre = base + scn.light.crossing * h
     half_w, half_l = 6.0, 60.0
     quad = np.stack([centre - half_w * h - half_l * n, centre + half_w * h - half_l * n,
                      centre + half_w * h + half_l * n, centre - half_w * h + half_l * n])
     view.polygon(draw, quad, ASPHALT)
-    stop = np.stack([base + RIGHT_EDGE * n, base + RIGHT_EDGE * n - 0.5 * h,
-                     base + CENTRE * n - 0.5 * h, base + CENTRE * n])
-    view.polygon(draw, stop, WHITE)
 
 
 def _traffic_light(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, t: float, width: int) -> None:
     assert scn.light is not None
     colour = scn.light_colour(t)
     x, y, yaw = scn.path.pose(scn.light.stop_s)
-    h = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    h, n = _axes(yaw)
     far = np.array([x, y, 0.0]) + (scn.light.crossing + 7.5) * h  # on the far side of the crossing
     pole_base = far + (RIGHT_EDGE - 2.5) * n
     pole_top = pole_base + np.array([0, 0, 6.0])
@@ -175,8 +182,7 @@ def _lead(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, t: float) -> No
     lead = scn.lead
     assert lead is not None
     x, y, yaw = scn.lead_pose(t)
-    h = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    h, n = _axes(yaw)
     c = np.array([x, y, 0.0])
     up = np.array([0.0, 0.0, 1.0])
     hl, hw = lead.length / 2, lead.width / 2
@@ -217,9 +223,10 @@ def render_frame(scn: Scenario, t: float, camera: Camera) -> Image.Image:
     draw = ImageDraw.Draw(img)
     if scn.light is not None:
         _intersection(draw, view, scn)
-    _road(draw, view, scn, float(scn.profile.s(t)))
-    if scn.light is not None and scn.light.stop_s - float(scn.profile.s(t)) > 1.0:
-        _intersection_stop_only(draw, view, scn)
+    s_ego = float(scn.profile.s(t))
+    _road(draw, view, scn, s_ego)
+    if scn.light is not None and scn.light.stop_s - s_ego > 1.0:
+        _stop_line(draw, view, scn)
     if scn.lead is not None:
         _lead(draw, view, scn, t)
     if scn.light is not None:
@@ -227,12 +234,11 @@ def render_frame(scn: Scenario, t: float, camera: Camera) -> Image.Image:
     return img
 
 
-def _intersection_stop_only(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None:
-    """Redraw the stop line over the road surface (the road is drawn after the crossing)."""
+def _stop_line(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None:
+    """The stop line across the ego lane, drawn over the road surface."""
     assert scn.light is not None
     x, y, yaw = scn.path.pose(scn.light.stop_s)
-    h = np.array([math.cos(yaw), math.sin(yaw), 0.0])
-    n = np.array([-math.sin(yaw), math.cos(yaw), 0.0])
+    h, n = _axes(yaw)
     base = np.array([x, y, 0.0])
     stop = np.stack([base + RIGHT_EDGE * n, base + RIGHT_EDGE * n - 0.5 * h,
                      base + CENTRE * n - 0.5 * h, base + CENTRE * n])

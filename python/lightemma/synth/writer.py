@@ -28,6 +28,7 @@ import numpy as np
 from PIL import Image
 
 from lightemma.errors import UserError
+from lightemma.frames.loader import TABLES
 from lightemma.synth.camera import Camera
 from lightemma.synth.render import render_frame
 from lightemma.synth.scenarios import Scenario, build_scenarios, sweep_times_us
@@ -86,9 +87,7 @@ def build_tables(
     scenarios: list[Scenario], *, seed: int, camera: Camera, sweeps: bool = True
 ) -> tuple[dict[str, list[dict]], list[tuple[str, float, Scenario]]]:
     """The 13 nuScenes tables for ``scenarios``, plus the images to draw as ``(filename, t, scenario)``."""
-    t: dict[str, list[dict]] = {name: [] for name in (
-        "category", "attribute", "visibility", "instance", "sensor", "calibrated_sensor", "ego_pose",
-        "log", "scene", "sample", "sample_data", "sample_annotation", "map")}
+    t: dict[str, list[dict]] = {name: [] for name in TABLES}
     images: list[tuple[str, float, Scenario]] = []
     cat_tokens = {name: token(seed, "category", name) for name, _ in CATEGORIES}
     attr_tokens = {name: token(seed, "attribute", name) for name, _ in ATTRIBUTES}
