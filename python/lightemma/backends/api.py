@@ -237,8 +237,9 @@ class APIBackend:
                     continue
                 return ChatResult(text=None, error=err, error_message=short_message(exc, secrets=self._secrets),
                                   seconds=time.perf_counter() - start, retries=retries)
-            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0,
-                                (result.input_tokens or 0) + (result.output_tokens or 0))
+            reported = [t for t in (result.input_tokens, result.output_tokens) if t is not None]
+            # usage the provider did not report is unknown, not zero: the estimate then stays taken
+            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0, sum(reported) if reported else None)
             if key is not None and result.ok:
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
             return result
