@@ -219,7 +219,7 @@ class APIBackend:
 
         retries = 0
         while True:
-            await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0)
+            await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL)
             try:
                 result = await self._send(messages, params, start, retries)
             except asyncio.CancelledError:
@@ -239,7 +239,7 @@ class APIBackend:
                                   seconds=time.perf_counter() - start, retries=retries)
             reported = [t for t in (result.input_tokens, result.output_tokens) if t is not None]
             # usage the provider did not report is unknown, not zero: the estimate then stays taken
-            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0, sum(reported) if reported else None)
+            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL, sum(reported) if reported else None)
             if key is not None and result.ok:
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
             return result
