@@ -151,6 +151,8 @@ class APIBackend:
             from lightemma.backends.openai_http import OpenAIHTTPClient
 
             self._http = OpenAIHTTPClient(api_base, self._api_key, self.timeout)
+            # the model name the server expects: the litellm provider prefix (openai/, hosted_vllm/, …) removed
+            self._wire_model = self.model.split("/", 1)[1] if "/" in self.model else self.model
         elif transport != "litellm":
             raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
 
@@ -269,11 +271,6 @@ class APIBackend:
             return ChatResult(text=None, input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost,
                               error="EmptyResponse", error_message=f"no answer text (finish_reason={finish})", retries=retries)
         return ChatResult(text=str(text), input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries)
-
-    @property
-    def _wire_model(self) -> str:
-        """The model name an OpenAI-compatible server expects (the litellm provider prefix removed)."""
-        return self.model.split("/", 1)[1] if "/" in self.model and _provider(self.model) in OPENAI_COMPATIBLE else self.model
 
     def _litellm_cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
         """Cost in US cents: what litellm priced the call at (its bundled list), else the registry price."""
