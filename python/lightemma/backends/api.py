@@ -22,6 +22,7 @@ from typing import Any
 
 from lightemma._litellm import litellm
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
+from lightemma.backends.local import user_turn
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import FATAL, RetryPolicy, error_class, retry_after_seconds, short_message
 from lightemma.cache import ResponseCache, request_key
@@ -199,16 +200,15 @@ class APIBackend:
 
     async def _call(self, req: ChatRequest) -> ChatResult:
         start = time.perf_counter()
-        content: list[dict[str, Any]] = []
+        image_part: dict[str, Any] | None = None
         digest = None
         if req.image_path:
             try:
                 url, digest = self._images.get(str(req.image_path))
             except OSError as exc:
                 return ChatResult(text=None, error="ImageReadError", error_message=short_message(exc), seconds=time.perf_counter() - start)
-            content.append({"type": "image_url", "image_url": {"url": url}})
-        content.append({"type": "text", "text": req.text})
-        messages = [{"role": "user", "content": content}]
+            image_part = {"type": "image_url", "image_url": {"url": url}}
+        messages = user_turn(req, image_part)
         params = self.effective_params(req.params)
 
         key = None
