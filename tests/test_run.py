@@ -182,6 +182,15 @@ def test_api_keys_never_appear_in_any_file_the_run_writes(tmp_path, frames, monk
         assert b"NEVERWRITE" not in path.read_bytes(), path
 
 
+def test_a_key_in_backend_options_is_refused_since_the_manifest_records_them(tmp_path, frames):
+    secret = "sk-proj-NEVERWRITE-abcdef0123456789"
+    with FakeOpenAIServer() as server:
+        with pytest.raises(UserError, match="api_key"):
+            run("openai/gpt-4o", api_base=server.url, frames=frames[:1], output=tmp_path / "out",
+                backend_options={"api_key": secret}, **FAST)
+    assert not (tmp_path / "out").exists() and not server.requests
+
+
 def test_a_missing_api_key_fails_before_any_work(tmp_path, frames, monkeypatch):
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
     with pytest.raises(UserError, match="OPENAI_API_KEY"):

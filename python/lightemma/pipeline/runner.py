@@ -212,6 +212,9 @@ def run(
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
     if frames is None and dataroot is None:
         raise UserError("give --dataroot (a nuScenes directory) or frames=...")
+    if backend_options and "api_key" in backend_options:
+        raise UserError("backend_options are recorded in the run manifest, so they cannot carry an api_key; "
+                        "set the provider's environment variable instead")
     info = resolve(model)
     config: dict[str, Any] = {
         "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
