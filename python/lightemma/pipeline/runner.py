@@ -223,6 +223,8 @@ def run(
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
     }
+    if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
+        config["prompt_set"] = os.fspath(Path(prompt_set).resolve())
     policy = _policy(config)  # validates reask / attempts / method before any work
     prompts = load_prompt_set(prompt_set)
     output = Path(output)
@@ -278,7 +280,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
         config["concurrency"] = concurrency
     recorded = manifest.get("prompt_set", {})
-    prompts = load_prompt_set(recorded.get("name", config["prompt_set"]))
+    prompts = load_prompt_set(config["prompt_set"])  # a shipped name or a file's path; the recorded name is the set's own
     if prompts.hash != recorded.get("hash"):
         raise UserError(f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
                         f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
