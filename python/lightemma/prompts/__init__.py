@@ -16,7 +16,6 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
-from functools import lru_cache
 from importlib import resources
 from typing import Any
 
@@ -75,9 +74,8 @@ def available_prompt_sets() -> list[str]:
     return sorted(p.name[: -len(".json")] for p in resources.files(__package__).iterdir() if p.name.endswith(".json"))
 
 
-@lru_cache(maxsize=None)
 def load_prompt_set(name: str = DEFAULT_PROMPT_SET) -> PromptSet:
-    """Load a shipped prompt set by name, or a prompt-set JSON file by path."""
+    """Load a shipped prompt set by name, or a prompt-set JSON file by path (read afresh each time: it may be edited)."""
     if name.endswith(".json"):
         origin = name
         try:
