@@ -19,10 +19,10 @@ from dataclasses import dataclass
 from importlib import resources
 from typing import Any
 
+from lightemma.backends.base import STAGES
 from lightemma.errors import UserError
 
 DEFAULT_PROMPT_SET = "lightemma-v1"
-STAGE_NAMES = ("scene", "intent", "actions")
 PLACEHOLDERS = {"scene": (), "intent": ("scene", "history"), "actions": ("scene", "history", "intent")}
 
 
@@ -47,9 +47,9 @@ class PromptSet:
         stages = data.get("stages")
         if not isinstance(data.get("name"), str) or not isinstance(stages, dict):
             raise UserError(f"{origin}: a prompt set needs a string 'name' and a 'stages' object")
-        missing = [s for s in STAGE_NAMES if not isinstance(stages.get(s), str)]
+        missing = [s for s in STAGES if not isinstance(stages.get(s), str)]
         if missing:
-            raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGE_NAMES)})")
+            raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGES)})")
         for stage, needed in PLACEHOLDERS.items():
             absent = [p for p in needed if "{" + p + "}" not in stages[stage]]
             if absent:
