@@ -282,6 +282,15 @@ def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_roo
     assert "not a lightemma run directory" in capsys.readouterr().err
 
 
+def test_cli_resume_refuses_limits_backend_and_cache_it_would_ignore(tmp_path, capsys, monkeypatch):
+    from lightemma.cli import main
+
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    for flags in (["--rpm", "10"], ["--tpm", "1000"], ["--backend", "api"], ["--cache"]):
+        assert main(["run", "--resume", str(tmp_path), *flags]) == 2
+        assert f"drop {flags[0]}" in capsys.readouterr().err
+
+
 def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
     def per_frame(i, stage, n):
         return Reply("") if (i == 0 and stage == "actions" and n == 1) else None
