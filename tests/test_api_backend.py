@@ -174,6 +174,19 @@ def test_rate_limiter_token_budget_and_settlement():
     assert fast < 0.05 and 0.2 <= slow < 1.0
 
 
+def test_a_call_without_reported_usage_keeps_its_token_reservation():
+    """Unknown usage is not zero usage: the estimate stays taken from the TPM bucket."""
+    from lightemma.backends.api import ESTIMATED_TOKENS_PER_CALL
+
+    no_usage = {"choices": [{"index": 0, "message": {"role": "assistant", "content": "a street"}, "finish_reason": "stop"}]}
+    with FakeOpenAIServer([Reply(body=no_usage)]) as server:
+        backend = create_backend("openai/m", api_base=server.url, retry=FAST, transport="direct", tpm=60_000)
+        result = ask(backend)
+    assert result.ok and (result.input_tokens, result.output_tokens) == (None, None)
+    level = backend.limiter.tokens.level  # refills at 1000 tokens/s; the call takes well under a second
+    assert level <= 60_000 - ESTIMATED_TOKENS_PER_CALL + 1000
+
+
 def test_server_pause_holds_every_caller():
     limiter = RateLimiter()
 

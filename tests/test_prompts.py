@@ -68,3 +68,15 @@ def test_a_custom_prompt_file_loads_and_unknown_names_list_the_known_ones(tmp_pa
     assert isinstance(ps, PromptSet) and ps.name == "mine" and ps.hash == content_hash(good)
     with pytest.raises(UserError, match=DEFAULT_PROMPT_SET):
         load_prompt_set("no-such-set")
+
+
+def test_a_prompt_file_is_read_afresh_on_each_load(tmp_path):
+    """An edited file is what the next run gets (and what a resume's hash guard compares), even in the same process."""
+    path = tmp_path / "mine.json"
+    first = {"name": "mine", "stages": {"scene": "s", "intent": "{scene} {history}", "actions": "{scene} {history} {intent}"}}
+    path.write_text(json.dumps(first))
+    assert load_prompt_set(str(path)).hash == content_hash(first)
+    edited = {**first, "stages": {**first["stages"], "scene": "describe the scene"}}
+    path.write_text(json.dumps(edited))
+    ps = load_prompt_set(str(path))
+    assert ps.hash == content_hash(edited) and ps.stages["scene"] == "describe the scene"

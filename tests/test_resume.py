@@ -135,6 +135,24 @@ def test_resume_refuses_a_changed_prompt_set(tmp_path):
         resume(first.run_dir, frames=frames, progress=False)
 
 
+def test_resume_of_a_run_with_a_prompt_set_file(tmp_path, monkeypatch):
+    from lightemma.prompts import load_prompt_set
+
+    shipped = load_prompt_set()
+    data = {"name": "my-prompts", "description": "", "stages": dict(shipped.stages)}
+    (tmp_path / "mine.json").write_text(json.dumps(data), encoding="utf-8")
+    frames = make_frames(tmp_path, 3)
+    monkeypatch.chdir(tmp_path)
+    with FakeOpenAIServer() as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, prompt_set="mine.json", **FAST)
+        path = first.run_dir / FRAMES_FILE
+        path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:2]))  # lost the last frame
+        monkeypatch.chdir(first.run_dir)  # resumed from elsewhere: the file is found all the same
+        result = resume(first.run_dir, frames=frames, progress=False)
+    assert result.frames_run == 1 and result.summary["frames"] == 3
+    assert result.manifest["prompt_set"]["name"] == "my-prompts"
+
+
 def test_resume_of_in_memory_frames_needs_them_and_a_foreign_dir_is_refused(tmp_path):
     frames = make_frames(tmp_path, 2)
     with FakeOpenAIServer() as server:

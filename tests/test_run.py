@@ -182,6 +182,15 @@ def test_api_keys_never_appear_in_any_file_the_run_writes(tmp_path, frames, monk
         assert b"NEVERWRITE" not in path.read_bytes(), path
 
 
+def test_a_key_in_backend_options_is_refused_since_the_manifest_records_them(tmp_path, frames):
+    secret = "sk-proj-NEVERWRITE-abcdef0123456789"
+    with FakeOpenAIServer() as server:
+        with pytest.raises(UserError, match="api_key"):
+            run("openai/gpt-4o", api_base=server.url, frames=frames[:1], output=tmp_path / "out",
+                backend_options={"api_key": secret}, **FAST)
+    assert not (tmp_path / "out").exists() and not server.requests
+
+
 def test_a_missing_api_key_fails_before_any_work(tmp_path, frames, monkeypatch):
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
     with pytest.raises(UserError, match="OPENAI_API_KEY"):
@@ -271,6 +280,15 @@ def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_roo
     assert "drop --model" in capsys.readouterr().err
     assert main(["run", "--resume", str(tmp_path)]) == 2
     assert "not a lightemma run directory" in capsys.readouterr().err
+
+
+def test_cli_resume_refuses_limits_backend_and_cache_it_would_ignore(tmp_path, capsys, monkeypatch):
+    from lightemma.cli import main
+
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    for flags in (["--rpm", "10"], ["--tpm", "1000"], ["--backend", "api"], ["--cache"]):
+        assert main(["run", "--resume", str(tmp_path), *flags]) == 2
+        assert f"drop {flags[0]}" in capsys.readouterr().err
 
 
 def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):

@@ -22,6 +22,7 @@ from typing import Any
 
 from lightemma._litellm import litellm
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
+from lightemma.backends.local import user_turn
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import FATAL, RetryPolicy, error_class, retry_after_seconds, short_message
 from lightemma.cache import ResponseCache, request_key
@@ -151,6 +152,8 @@ class APIBackend:
             from lightemma.backends.openai_http import OpenAIHTTPClient
 
             self._http = OpenAIHTTPClient(api_base, self._api_key, self.timeout)
+            # the model name the server expects: the litellm provider prefix (openai/, hosted_vllm/, …) removed
+            self._wire_model = self.model.split("/", 1)[1] if "/" in self.model else self.model
         elif transport != "litellm":
             raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
 
@@ -197,16 +200,15 @@ class APIBackend:
 
     async def _call(self, req: ChatRequest) -> ChatResult:
         start = time.perf_counter()
-        content: list[dict[str, Any]] = []
+        image_part: dict[str, Any] | None = None
         digest = None
         if req.image_path:
             try:
                 url, digest = self._images.get(str(req.image_path))
             except OSError as exc:
                 return ChatResult(text=None, error="ImageReadError", error_message=short_message(exc), seconds=time.perf_counter() - start)
-            content.append({"type": "image_url", "image_url": {"url": url}})
-        content.append({"type": "text", "text": req.text})
-        messages = [{"role": "user", "content": content}]
+            image_part = {"type": "image_url", "image_url": {"url": url}}
+        messages = user_turn(req, image_part)
         params = self.effective_params(req.params)
 
         key = None
@@ -219,7 +221,7 @@ class APIBackend:
 
         retries = 0
         while True:
-            await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0)
+            await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL)
             try:
                 result = await self._send(messages, params, start, retries)
             except asyncio.CancelledError:
@@ -237,8 +239,9 @@ class APIBackend:
                     continue
                 return ChatResult(text=None, error=err, error_message=short_message(exc, secrets=self._secrets),
                                   seconds=time.perf_counter() - start, retries=retries)
-            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL if self.limiter.tokens else 0,
-                                (result.input_tokens or 0) + (result.output_tokens or 0))
+            reported = [t for t in (result.input_tokens, result.output_tokens) if t is not None]
+            # usage the provider did not report is unknown, not zero: the estimate then stays taken
+            self.limiter.settle(ESTIMATED_TOKENS_PER_CALL, sum(reported) if reported else None)
             if key is not None and result.ok:
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
             return result
@@ -268,11 +271,6 @@ class APIBackend:
             return ChatResult(text=None, input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost,
                               error="EmptyResponse", error_message=f"no answer text (finish_reason={finish})", retries=retries)
         return ChatResult(text=str(text), input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries)
-
-    @property
-    def _wire_model(self) -> str:
-        """The model name an OpenAI-compatible server expects (the litellm provider prefix removed)."""
-        return self.model.split("/", 1)[1] if "/" in self.model and _provider(self.model) in OPENAI_COMPATIBLE else self.model
 
     def _litellm_cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
         """Cost in US cents: what litellm priced the call at (its bundled list), else the registry price."""

@@ -87,7 +87,9 @@ def main(args: argparse.Namespace) -> int:
     progress = not args.no_progress
     if args.resume:
         given = [flag for flag, value in (("--model", args.model), ("--dataroot", args.dataroot), ("--api-base", args.api_base),
-                                          ("--scenes", args.scenes), ("--split", args.split), ("--limit", args.limit)) if value]
+                                          ("--scenes", args.scenes), ("--split", args.split), ("--limit", args.limit),
+                                          ("--backend", args.backend), ("--rpm", args.rpm), ("--tpm", args.tpm),
+                                          ("--cache", args.cache)) if value is not None]
         given += ["--" + name.replace("_", "-") for name in LOCAL_OPTIONS if getattr(args, name, None) is not None]
         if given:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")

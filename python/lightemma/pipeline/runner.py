@@ -212,6 +212,9 @@ def run(
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
     if frames is None and dataroot is None:
         raise UserError("give --dataroot (a nuScenes directory) or frames=...")
+    if backend_options and "api_key" in backend_options:
+        raise UserError("backend_options are recorded in the run manifest, so they cannot carry an api_key; "
+                        "set the provider's environment variable instead")
     info = resolve(model)
     config: dict[str, Any] = {
         "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
@@ -220,6 +223,8 @@ def run(
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
     }
+    if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
+        config["prompt_set"] = os.fspath(Path(prompt_set).resolve())
     policy = _policy(config)  # validates reask / attempts / method before any work
     prompts = load_prompt_set(prompt_set)
     output = Path(output)
@@ -275,7 +280,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
         config["concurrency"] = concurrency
     recorded = manifest.get("prompt_set", {})
-    prompts = load_prompt_set(recorded.get("name", config["prompt_set"]))
+    prompts = load_prompt_set(config["prompt_set"])  # a shipped name or a file's path; the recorded name is the set's own
     if prompts.hash != recorded.get("hash"):
         raise UserError(f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
                         f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")

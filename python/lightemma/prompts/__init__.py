@@ -16,14 +16,13 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import dataclass
-from functools import lru_cache
 from importlib import resources
 from typing import Any
 
+from lightemma.backends.base import STAGES
 from lightemma.errors import UserError
 
 DEFAULT_PROMPT_SET = "lightemma-v1"
-STAGE_NAMES = ("scene", "intent", "actions")
 PLACEHOLDERS = {"scene": (), "intent": ("scene", "history"), "actions": ("scene", "history", "intent")}
 
 
@@ -48,9 +47,9 @@ class PromptSet:
         stages = data.get("stages")
         if not isinstance(data.get("name"), str) or not isinstance(stages, dict):
             raise UserError(f"{origin}: a prompt set needs a string 'name' and a 'stages' object")
-        missing = [s for s in STAGE_NAMES if not isinstance(stages.get(s), str)]
+        missing = [s for s in STAGES if not isinstance(stages.get(s), str)]
         if missing:
-            raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGE_NAMES)})")
+            raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGES)})")
         for stage, needed in PLACEHOLDERS.items():
             absent = [p for p in needed if "{" + p + "}" not in stages[stage]]
             if absent:
@@ -75,9 +74,8 @@ def available_prompt_sets() -> list[str]:
     return sorted(p.name[: -len(".json")] for p in resources.files(__package__).iterdir() if p.name.endswith(".json"))
 
 
-@lru_cache(maxsize=None)
 def load_prompt_set(name: str = DEFAULT_PROMPT_SET) -> PromptSet:
-    """Load a shipped prompt set by name, or a prompt-set JSON file by path."""
+    """Load a shipped prompt set by name, or a prompt-set JSON file by path (read afresh each time: it may be edited)."""
     if name.endswith(".json"):
         origin = name
         try:

@@ -38,18 +38,14 @@ FORMAT = "lightemma-run/1"
 
 
 def _to_jsonable(value: Any) -> Any:
-    """``json.dumps`` fallback: NumPy arrays and scalars become plain lists and numbers."""
-    if isinstance(value, np.ndarray):
-        return value.tolist()
-    if isinstance(value, np.generic):
-        return value.item()
+    """``json.dumps`` fallback for what :func:`_sanitize` leaves: paths become strings."""
     if isinstance(value, Path):
         return str(value)
     raise TypeError(f"object of type {type(value).__name__} is not JSON serializable")
 
 
 def _sanitize(value: Any) -> Any:
-    """Replace non-finite floats by ``None`` so that every line is strict JSON."""
+    """Plain lists and numbers for NumPy arrays and scalars, ``None`` for non-finite floats: strict JSON."""
     if isinstance(value, float):
         return value if math.isfinite(value) else None
     if isinstance(value, dict):
