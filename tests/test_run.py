@@ -291,6 +291,20 @@ def test_cli_resume_refuses_limits_backend_and_cache_it_would_ignore(tmp_path, c
         assert f"drop {flags[0]}" in capsys.readouterr().err
 
 
+def test_cli_resume_refuses_every_run_setting_even_one_given_at_its_default(tmp_path, capsys, monkeypatch):
+    from lightemma.cli import main
+    from lightemma.cli.run import RUN_DEFAULTS
+
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    for name, default in RUN_DEFAULTS.items():
+        flag = "--" + name.replace("_", "-")
+        assert main(["run", "--resume", str(tmp_path), flag, str(default)]) == 2
+        assert f"drop {flag}" in capsys.readouterr().err, flag
+    # what resume does take is not refused: the run directory itself is then checked
+    assert main(["run", "--resume", str(tmp_path), "--concurrency", "4", "--no-progress"]) == 2
+    assert "not a lightemma run directory" in capsys.readouterr().err
+
+
 def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
     def per_frame(i, stage, n):
         return Reply("") if (i == 0 and stage == "actions" and n == 1) else None

@@ -20,24 +20,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1)")
     data = p.add_argument_group("frames")
     data.add_argument("--dataroot", help="nuScenes directory")
-    data.add_argument("--version", default="v1.0-test", help="nuScenes version (default v1.0-test, the paper's set)")
+    data.add_argument("--version", help="nuScenes version (default v1.0-test, the paper's set)")
     data.add_argument("--split", help="scene split of the version (e.g. val for v1.0-trainval)")
     data.add_argument("--scenes", nargs="+", metavar="SCENE", help="explicit scene names")
-    data.add_argument("--window", choices=("reference", "full"), default="reference", help="frames per scene (SPEC §1)")
+    data.add_argument("--window", choices=("reference", "full"), help="frames per scene (SPEC §1)")
     data.add_argument("--limit", type=int, help="only the first N frames")
     ex = p.add_argument_group("execution")
     ex.add_argument("--concurrency", type=int, help="frames in flight at once (default 16; on --resume, the run's own)")
-    ex.add_argument("--output", default="runs", help="output directory (default ./runs)")
+    ex.add_argument("--output", help="output directory (default ./runs)")
     ex.add_argument("--resume", metavar="RUN_DIR", help="finish this run (everything else is read from its manifest)")
     ex.add_argument("--retry-failed", action="store_true", help="with --resume: also re-run frames that ended failed")
-    ex.add_argument("--timeout", type=float, default=120.0, help="per-call timeout in seconds (default 120)")
-    ex.add_argument("--max-retries", type=int, default=6, help="retries of 429/5xx/timeouts/dropped connections per call (default 6)")
-    ex.add_argument("--backoff", type=float, default=1.0, help="base of the exponential backoff in seconds (default 1)")
+    ex.add_argument("--timeout", type=float, help="per-call timeout in seconds (default 120)")
+    ex.add_argument("--max-retries", type=int, help="retries of 429/5xx/timeouts/dropped connections per call (default 6)")
+    ex.add_argument("--backoff", type=float, help="base of the exponential backoff in seconds (default 1)")
     ex.add_argument("--rpm", type=float, help="client-side limit: requests per minute")
     ex.add_argument("--tpm", type=float, help="client-side limit: tokens per minute")
     ex.add_argument("--cache", nargs="?", const=True, default=None, metavar="PATH",
                     help="SQLite response cache for temperature-0 requests (default path OUTPUT/cache.sqlite)")
-    ex.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
+    ex.add_argument("--transport", choices=("litellm", "direct"),
                     help="with --api-base: call the OpenAI-compatible server through litellm (default) or directly (less CPU per call)")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
     local = p.add_argument_group("local models (--backend hf | vllm)")
@@ -48,14 +48,30 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     local.add_argument("--tensor-parallel-size", type=int, help="vllm: GPUs to shard the model over (default 1)")
     local.add_argument("--gpu-memory-utilization", type=float, help="vllm: share of GPU memory vLLM may use (default 0.9)")
     gen = p.add_argument_group("prompting")
-    gen.add_argument("--prompt-set", default=DEFAULT_PROMPT_SET, help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
-    gen.add_argument("--temperature", type=float, default=0.0, help="sampling temperature where the provider allows it (default 0)")
-    gen.add_argument("--max-tokens", type=int, default=512, help="max output tokens per stage (default 512)")
-    gen.add_argument("--reask", choices=("actions", "chain"), default="actions", help="on a failed answer re-ask stage 3 (default) or the whole chain")
-    gen.add_argument("--max-attempts", type=int, default=5, help="attempts per frame in all (default 5)")
-    gen.add_argument("--integrate", choices=("euler", "midpoint"), default="euler", help="actions → trajectory (default euler, the paper's)")
+    gen.add_argument("--prompt-set", help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
+    gen.add_argument("--temperature", type=float, help="sampling temperature where the provider allows it (default 0)")
+    gen.add_argument("--max-tokens", type=int, help="max output tokens per stage (default 512)")
+    gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain")
+    gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
+    gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's)")
     p.set_defaults(func=main)
     return p
+
+
+# Run settings and their defaults. On the command line they default to None, so that
+# `--resume` can tell a setting that was given (and would be ignored) from one that was not.
+RUN_DEFAULTS: dict[str, object] = {
+    "version": "v1.0-test", "window": "reference", "output": "runs", "timeout": 120.0, "max_retries": 6,
+    "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
+    "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler",
+}
+# what `--resume` may be given: everything else comes from the run's manifest
+RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress"}
+
+
+def run_settings(args: argparse.Namespace) -> dict[str, object]:
+    """The run settings: what was given on the command line, else the defaults."""
+    return {name: default if getattr(args, name) is None else getattr(args, name) for name, default in RUN_DEFAULTS.items()}
 
 
 # option -> backends that take it
@@ -86,11 +102,8 @@ def main(args: argparse.Namespace) -> int:
 
     progress = not args.no_progress
     if args.resume:
-        given = [flag for flag, value in (("--model", args.model), ("--dataroot", args.dataroot), ("--api-base", args.api_base),
-                                          ("--scenes", args.scenes), ("--split", args.split), ("--limit", args.limit),
-                                          ("--backend", args.backend), ("--rpm", args.rpm), ("--tpm", args.tpm),
-                                          ("--cache", args.cache)) if value is not None]
-        given += ["--" + name.replace("_", "-") for name in LOCAL_OPTIONS if getattr(args, name, None) is not None]
+        given = sorted("--" + name.replace("_", "-") for name, value in vars(args).items()
+                       if name not in RESUME_OPTIONS and value is not None)
         if given:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
@@ -105,12 +118,15 @@ def main(args: argparse.Namespace) -> int:
         options = local_backend_options(args)
         # local backends batch across frames in flight: keep at least one batch's worth of frames going
         concurrency = args.concurrency or max(16, int(options.get("batch_size", 0)))
+        settings = run_settings(args)
         result = run(
-            args.model, dataroot=args.dataroot, version=args.version, split=args.split, scenes=args.scenes, window=args.window,
-            limit=args.limit, output=args.output, backend=args.backend, api_base=args.api_base, concurrency=concurrency,
-            temperature=args.temperature, max_tokens=args.max_tokens, reask=args.reask, max_attempts=args.max_attempts,
-            integrate_method=args.integrate, prompt_set=args.prompt_set, timeout=args.timeout, max_retries=args.max_retries,
-            backoff_base=args.backoff, rpm=args.rpm, tpm=args.tpm, cache=args.cache, transport=args.transport, progress=progress, log=stderr_log,
+            args.model, dataroot=args.dataroot, version=settings["version"], split=args.split, scenes=args.scenes,
+            window=settings["window"], limit=args.limit, output=settings["output"], backend=args.backend,
+            api_base=args.api_base, concurrency=concurrency, temperature=settings["temperature"],
+            max_tokens=settings["max_tokens"], reask=settings["reask"], max_attempts=settings["max_attempts"],
+            integrate_method=settings["integrate"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
+            max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
+            cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
             backend_options=options,
         )
     print(result.report())
