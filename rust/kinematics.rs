@@ -50,41 +50,30 @@ pub fn check_dt(dt: f64) -> CoreResult<()> {
 /// positions after each step (the origin is not included).
 #[inline]
 pub fn integrate_frame(actions: &[f64], dt: f64, method: Method, out: &mut [f64]) {
-    let (mut x, mut y, mut heading) = (0.0_f64, 0.0_f64, 0.0_f64);
-    for (action, pos) in actions.chunks_exact(2).zip(out.chunks_exact_mut(2)) {
-        let (v, kappa) = (action[0], action[1]);
-        let turn = kappa * v * dt;
-        let direction = match method {
-            Method::Euler => heading,
-            Method::Midpoint => heading + 0.5 * turn,
-        };
-        let (sin, cos) = fastmath::sin_cos(direction);
-        x += v * cos * dt;
-        y += v * sin * dt;
-        heading += turn;
-        pos[0] = x;
-        pos[1] = y;
-    }
+    integrate_lanes::<1>(actions, actions.len() / 2, dt, method, out);
 }
 
 /// Frames integrated in lockstep: their heading recurrences are independent, so
 /// interleaving them hides the latency of each step's `sin_cos`.
 const LANES: usize = 8;
 
-/// Integrate `LANES` consecutive frames of `steps` actions each, interleaved.
+/// Integrate `N` consecutive frames of `steps` actions each, interleaved (the one
+/// implementation of the scheme: a single frame is `N = 1`).
 #[inline(always)]
-fn integrate_lanes(actions: &[f64], steps: usize, dt: f64, method: Method, out: &mut [f64]) {
+fn integrate_lanes<const N: usize>(
+    actions: &[f64],
+    steps: usize,
+    dt: f64,
+    method: Method,
+    out: &mut [f64],
+) {
     let frame_len = 2 * steps;
-    let (mut x, mut y, mut heading) = ([0.0_f64; LANES], [0.0_f64; LANES], [0.0_f64; LANES]);
-    let (mut v, mut turn, mut sin, mut cos) = (
-        [0.0_f64; LANES],
-        [0.0_f64; LANES],
-        [0.0_f64; LANES],
-        [0.0_f64; LANES],
-    );
+    let (mut x, mut y, mut heading) = ([0.0_f64; N], [0.0_f64; N], [0.0_f64; N]);
+    let (mut v, mut turn, mut sin, mut cos) =
+        ([0.0_f64; N], [0.0_f64; N], [0.0_f64; N], [0.0_f64; N]);
     for k in 0..steps {
-        let mut direction = [0.0_f64; LANES];
-        for lane in 0..LANES {
+        let mut direction = [0.0_f64; N];
+        for lane in 0..N {
             let at = lane * frame_len + 2 * k;
             v[lane] = actions[at];
             turn[lane] = actions[at + 1] * v[lane] * dt;
@@ -94,15 +83,15 @@ fn integrate_lanes(actions: &[f64], steps: usize, dt: f64, method: Method, out: 
             };
         }
         // branch-free so that the lanes vectorise; rare out-of-range headings are redone
-        for lane in 0..LANES {
+        for lane in 0..N {
             (sin[lane], cos[lane]) = fastmath::sin_cos_reduced(direction[lane]);
         }
         if !direction.iter().all(|&d| fastmath::in_fast_range(d)) {
-            for lane in 0..LANES {
+            for lane in 0..N {
                 (sin[lane], cos[lane]) = fastmath::sin_cos(direction[lane]);
             }
         }
-        for lane in 0..LANES {
+        for lane in 0..N {
             x[lane] += v[lane] * cos[lane] * dt;
             y[lane] += v[lane] * sin[lane] * dt;
             heading[lane] += turn[lane];
@@ -118,7 +107,7 @@ fn integrate_lanes(actions: &[f64], steps: usize, dt: f64, method: Method, out: 
 fn integrate_groups(actions: &[f64], steps: usize, dt: f64, method: Method, out: &mut [f64]) {
     let group = LANES * 2 * steps;
     for (frames, pos) in actions.chunks_exact(group).zip(out.chunks_exact_mut(group)) {
-        integrate_lanes(frames, steps, dt, method, pos);
+        integrate_lanes::<LANES>(frames, steps, dt, method, pos);
     }
 }
 
