@@ -1,0 +1,47 @@
+"""The README's commands are the ones CI runs, and both install from the lock file."""
+
+from __future__ import annotations
+
+import re
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def _fenced_after(heading: str) -> list[str]:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index(heading)
+    block = re.search(r"```bash\n(.*?)```", text[start:], re.S)
+    assert block, f"no ```bash block after {heading!r} in README.md"
+    return [line.strip() for line in block.group(1).splitlines() if line.strip()]
+
+
+def test_readme_test_command_is_what_ci_runs() -> None:
+    (command,) = _fenced_after("## Test\n")
+    ci = (ROOT / ".ci" / "run").read_text(encoding="utf-8").splitlines()
+    assert command in [line.strip() for line in ci], f"README's test command {command!r} is not a line of .ci/run"
+    assert "-c constraints.txt" in command
+
+
+def test_readme_install_commands_use_the_lock() -> None:
+    for line in _fenced_after("## Install\n"):
+        if line.startswith("pip install") and "vllm" not in line:
+            assert "-c constraints.txt" in line, line
+
+
+def test_lock_pins_exactly_and_excludes_known_broken_releases() -> None:
+    pins = {}
+    for line in (ROOT / "constraints.txt").read_text(encoding="utf-8").splitlines():
+        m = re.match(r"^([A-Za-z0-9][A-Za-z0-9._-]*)==(\S+)", line)
+        if m:
+            pins[m.group(1).lower()] = m.group(2)
+        else:
+            assert not re.match(r"^[A-Za-z0-9]", line), f"constraints.txt line is not an exact pin: {line!r}"
+    for name in ("torch", "transformers", "litellm", "numpy", "nuscenes-devkit"):
+        assert name in pins, f"{name} is not pinned in constraints.txt"
+    assert pins["transformers"] != "5.24.0"
+    assert pins["litellm"] not in ("1.82.7", "1.82.8")
+    major, minor, patch = (int(x) for x in pins["litellm"].split(".")[:3])
+    assert (major, minor, patch) <= (1, 106, 2)
+    pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
+    assert "!=5.24.0" in pyproject and "!=1.82.7" in pyproject and "!=1.82.8" in pyproject
