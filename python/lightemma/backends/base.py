@@ -59,6 +59,12 @@ class ChatResult:
     error_message: str | None = None  # short, secret-free description
     cached: bool = False  # answered from the response cache
     retries: int = 0  # transport-level retries before this result
+    # Why generation stopped, as the provider said it ("stop", "length", "MAX_TOKENS", …); None when unknown.
+    finish_reason: str | None = None
+    # Of output_tokens, those spent on hidden reasoning (provider-reported); None when unknown.
+    reasoning_tokens: int | None = None
+    # Of input_tokens, those served from the provider's (or vLLM's) prefix cache; None when unknown.
+    cached_input_tokens: int | None = None
 
     @property
     def ok(self) -> bool:

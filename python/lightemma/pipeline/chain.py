@@ -64,6 +64,9 @@ def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
         "cost_cents": result.cost_cents,
         "cached": result.cached,
         "retries": result.retries,
+        "finish_reason": result.finish_reason,
+        "reasoning_tokens": result.reasoning_tokens,
+        "cached_input_tokens": result.cached_input_tokens,
     }
 
 
