@@ -74,6 +74,29 @@ def run_settings(args: argparse.Namespace) -> dict[str, object]:
     return {name: default if getattr(args, name) is None else getattr(args, name) for name, default in RUN_DEFAULTS.items()}
 
 
+# numeric options and the smallest value each takes (inclusive, or exclusive when marked ">")
+LIMITS: dict[str, tuple[float, bool]] = {
+    "concurrency": (1, False), "limit": (1, False), "max_attempts": (1, False), "max_tokens": (1, False),
+    "max_retries": (0, False), "backoff": (0, False), "temperature": (0, False), "timeout": (0, True),
+    "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
+    "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
+}
+
+
+def check_limits(args: argparse.Namespace) -> None:
+    """Refuse a numeric option below its range, naming the flag (before anything is loaded or sent)."""
+    from lightemma.errors import UserError
+
+    for name, (low, exclusive) in LIMITS.items():
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        if value != value or (value <= low if exclusive else value < low):  # NaN fails too
+            flag = "--" + name.replace("_", "-")
+            shown = f"greater than {low:g}" if exclusive else f"at least {low:g}"
+            raise UserError(f"{flag} must be {shown}, got {value:g}")
+
+
 # option -> backends that take it
 LOCAL_OPTIONS = {"batch_size": ("hf", "vllm"), "max_pixels": ("hf", "vllm"), "dtype": ("hf", "vllm"), "device": ("hf",),
                  "tensor_parallel_size": ("vllm",), "gpu_memory_utilization": ("vllm",)}
@@ -101,6 +124,7 @@ def main(args: argparse.Namespace) -> int:
     from lightemma.pipeline.runner import resume, run, stderr_log
 
     progress = not args.no_progress
+    check_limits(args)
     if args.resume:
         given = sorted("--" + name.replace("_", "-") for name, value in vars(args).items()
                        if name not in RESUME_OPTIONS and value is not None)
@@ -117,7 +141,7 @@ def main(args: argparse.Namespace) -> int:
             raise UserError("--dataroot is required (a nuScenes directory)")
         options = local_backend_options(args)
         # local backends batch across frames in flight: keep at least one batch's worth of frames going
-        concurrency = args.concurrency or max(16, int(options.get("batch_size", 0)))
+        concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0)))
         settings = run_settings(args)
         result = run(
             args.model, dataroot=args.dataroot, version=settings["version"], split=args.split, scenes=args.scenes,
