@@ -21,9 +21,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     data = p.add_argument_group("frames")
     data.add_argument("--dataroot", help="nuScenes directory")
     data.add_argument("--version", help="nuScenes version (default v1.0-test, the paper's set)")
-    data.add_argument("--split", help="scene split of the version (e.g. val for v1.0-trainval)")
+    data.add_argument("--split", help="scenes of the version: a devkit split (test, val, mini_val, …) or all; default test for "
+                      "v1.0-test, val for v1.0-trainval, all for v1.0-mini (docs/definitions.md#frames-and-windows)")
     data.add_argument("--scenes", nargs="+", metavar="SCENE", help="explicit scene names")
-    data.add_argument("--window", choices=("reference", "full"), help="frames per scene (SPEC §1)")
+    data.add_argument("--window", choices=("reference", "full"), help="reference (the paper: N-14 frames per scene, default) or full (N-13) "
+                      "(docs/definitions.md#frames-and-windows)")
     data.add_argument("--limit", type=int, help="only the first N frames")
     ex = p.add_argument_group("execution")
     ex.add_argument("--concurrency", type=int, help="frames in flight at once (default 16; on --resume, the run's own)")
@@ -51,9 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--prompt-set", help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
     gen.add_argument("--temperature", type=float, help="sampling temperature where the provider allows it (default 0)")
     gen.add_argument("--max-tokens", type=int, help="max output tokens per stage (default 512)")
-    gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain")
+    gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain (docs/definitions.md#re-asks)")
     gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
-    gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's)")
+    gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's; docs/definitions.md#integration)")
     p.set_defaults(func=main)
     return p
 
