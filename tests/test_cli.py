@@ -164,3 +164,11 @@ def _synth(tmp_path):
     from lightemma.synth import write_dataset
 
     return write_dataset(tmp_path / "synth", scenes=1, keyframes=15, image_size=(32, 18), sweeps=False)
+
+
+def test_resume_of_a_run_from_frames_in_memory_says_it_needs_python(synth_root, tmp_path, capsys):
+    frames = lightemma.load_frames(synth_root, "v1.0-mini").head(2)
+    run_dir = lightemma.run("baseline:cv", frames=frames, output=tmp_path, progress=False).run_dir
+    assert main(["run", "--resume", str(run_dir)]) == 2
+    assert one_error_line(capsys, "run").endswith(
+        "made from frames passed in memory, not from a dataset; resume it from Python: lightemma.resume(RUN_DIR, frames=FRAMES)")

@@ -91,7 +91,9 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
     """Load the frames a manifest's ``dataset`` describes (dataroot, version, split/scenes, window, limit)."""
     if not dataset.get("dataroot") or not dataset.get("version"):
-        raise UserError("this run was made from frames passed in memory; pass frames=... to resume it")
+        raise UserError("this run was made from frames passed in memory; pass frames=... to resume it",
+                        cli="this run was made from frames passed in memory, not from a dataset; resume it from "
+                        "Python: lightemma.resume(RUN_DIR, frames=FRAMES)")
     from lightemma import load_frames
 
     frames = load_frames(dataset["dataroot"], dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"),
