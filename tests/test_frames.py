@@ -397,9 +397,11 @@ def test_unknown_scene_is_named(small_root):
         load_frames(small_root, VERSION, scenes=["scene-9999"])
 
 
-def test_v1_0_mini_without_a_split_takes_all_of_its_scenes(small_root, fs):
+def test_v1_0_mini_without_a_split_takes_all_of_its_scenes(small_root, fs, caplog):
     # v1.0-mini is a trial set: by default every scene, not the 2-scene mini_val
-    default = load_frames(small_root, VERSION)
+    with caplog.at_level(logging.INFO, logger="lightemma.frames"):
+        default = load_frames(small_root, VERSION)
+    assert f"loaded {default.summary_line()}" in caplog.messages
     assert default.split == "all" and default.frame_ids == fs.frame_ids
     assert len(default.scenes) == SMALL["scenes"] == 8
     assert default.summary_line() == f"v1.0-mini, split all: 8 scenes, {8 * (SMALL['keyframes'] - 14)} frames, reference window"

@@ -447,4 +447,6 @@ def load_frames(
     """
     _check_options(window, on_missing_image)  # before the slow table load
     nusc = load_tables(dataroot, version)
-    return extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)
+    frames = extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)
+    log.info("loaded %s", frames.summary_line())
+    return frames
