@@ -77,18 +77,24 @@ struct Partial {
     misses: usize,
 }
 
+/// `mask`, when given, holds one entry per frame of the block; frames marked `false` are skipped.
 fn block_sums(
     pred: &[f64],
     gt: &[f64],
+    mask: Option<&[bool]>,
     windows: &[(usize, usize); 3],
     miss_threshold: f64,
 ) -> Partial {
     let mut acc = Partial::default();
     let mut e = [0.0_f64; HORIZON];
-    for (p, g) in pred
+    for (i, (p, g)) in pred
         .chunks_exact(2 * HORIZON)
         .zip(gt.chunks_exact(2 * HORIZON))
+        .enumerate()
     {
+        if mask.is_some_and(|m| !m[i]) {
+            continue;
+        }
         let mut worst = 0.0_f64;
         for k in 0..HORIZON {
             e[k] = distance(p[2 * k] - g[2 * k], p[2 * k + 1] - g[2 * k + 1]);
@@ -128,6 +134,39 @@ fn check_finite(values: &[f64], steps: usize, what: &'static str) -> CoreResult<
     }
 }
 
+/// Check the frames of `values` (`N × T × 2`) that `mask` keeps, naming the first offender.
+fn check_finite_masked(
+    values: &[f64],
+    steps: usize,
+    mask: &[bool],
+    what: &'static str,
+) -> CoreResult<()> {
+    let bad = |(frame, &keep): (&[f64], &bool)| keep && !frame.iter().all(|v| v.is_finite());
+    let first = if mask.len() >= PARALLEL_MIN_FRAMES {
+        values
+            .par_chunks_exact(2 * steps)
+            .zip(mask.par_iter())
+            .position_first(bad)
+    } else {
+        values
+            .chunks_exact(2 * steps)
+            .zip(mask.iter())
+            .position(bad)
+    };
+    match first {
+        None => Ok(()),
+        Some(frame) => {
+            let values = &values[frame * 2 * steps..(frame + 1) * 2 * steps];
+            let idx = values.iter().position(|v| !v.is_finite()).unwrap_or(0);
+            Err(CoreError::NonFinite {
+                what,
+                frame,
+                step: idx / 2,
+            })
+        }
+    }
+}
+
 /// Per-step Euclidean errors, `N × T`, written into `out`.
 pub fn displacement_errors(pred: &[f64], gt: &[f64], out: &mut [f64]) -> CoreResult<()> {
     if pred.len() != gt.len() || out.len() * 2 != pred.len() {
@@ -156,6 +195,19 @@ pub fn evaluate(
     convention: Convention,
     miss_threshold: f64,
 ) -> CoreResult<Summary> {
+    evaluate_masked(pred, gt, None, steps, convention, miss_threshold)
+}
+
+/// [`evaluate`] over the frames `mask` marks `true` (one entry per frame; `None`: all).
+/// Frames left out are neither checked nor counted: they may hold NaN (a failed parse).
+pub fn evaluate_masked(
+    pred: &[f64],
+    gt: &[f64],
+    mask: Option<&[bool]>,
+    steps: usize,
+    convention: Convention,
+    miss_threshold: f64,
+) -> CoreResult<Summary> {
     if steps != HORIZON {
         return Err(CoreError::Shape(format!(
             "metrics are defined on {HORIZON} steps (0.5 … 3.0 s), got T={steps}"
@@ -179,19 +231,47 @@ pub fn evaluate(
             "cannot evaluate an empty batch (0 frames)".to_owned(),
         ));
     }
-    check_finite(gt, steps, "ground truth")?;
-    check_finite(pred, steps, "prediction")?;
+    let kept = match mask {
+        None => {
+            check_finite(gt, steps, "ground truth")?;
+            check_finite(pred, steps, "prediction")?;
+            n
+        }
+        Some(m) => {
+            if m.len() != n {
+                return Err(CoreError::Shape(format!(
+                    "mask has {} entries for {n} frames; it needs one per frame",
+                    m.len()
+                )));
+            }
+            let kept = m.iter().filter(|&&k| k).count();
+            if kept == 0 {
+                return Err(CoreError::Shape(format!(
+                    "the mask keeps none of the {n} frames; nothing to evaluate"
+                )));
+            }
+            check_finite_masked(gt, steps, m, "ground truth")?;
+            check_finite_masked(pred, steps, m, "prediction")?;
+            kept
+        }
+    };
     let windows = [1, 2, 3].map(|s| convention.window(s));
     let block = FRAMES_PER_BLOCK * 2 * HORIZON;
+    // the mask entries of block b
+    let block_mask = |b: usize, p: &[f64]| {
+        mask.map(|m| &m[b * FRAMES_PER_BLOCK..b * FRAMES_PER_BLOCK + p.len() / (2 * HORIZON)])
+    };
     let partials: Vec<Partial> = if n >= PARALLEL_MIN_FRAMES {
         pred.par_chunks(block)
             .zip(gt.par_chunks(block))
-            .map(|(p, g)| block_sums(p, g, &windows, miss_threshold))
+            .enumerate()
+            .map(|(b, (p, g))| block_sums(p, g, block_mask(b, p), &windows, miss_threshold))
             .collect()
     } else {
         pred.chunks(block)
             .zip(gt.chunks(block))
-            .map(|(p, g)| block_sums(p, g, &windows, miss_threshold))
+            .enumerate()
+            .map(|(b, (p, g))| block_sums(p, g, block_mask(b, p), &windows, miss_threshold))
             .collect()
     };
     let mut sums = [0.0_f64; 5];
@@ -202,7 +282,7 @@ pub fn evaluate(
         }
         misses += partial.misses;
     }
-    let nf = n as f64;
+    let nf = kept as f64;
     Ok(Summary {
         ade_1s: sums[0] / nf,
         ade_2s: sums[1] / nf,
@@ -210,7 +290,7 @@ pub fn evaluate(
         ade_avg: sums[3] / nf,
         fde: sums[4] / nf,
         miss_rate: misses as f64 / nf,
-        n_frames: n,
+        n_frames: kept,
     })
 }
 
@@ -246,6 +326,61 @@ mod tests {
         assert_eq!(m.n_frames, 3);
         assert!((m.ade_avg - (0.0 + 1.0 + 0.5) / 3.0).abs() < 1e-12);
         assert!((m.miss_rate - 1.0 / 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn a_mask_leaves_frames_out_even_when_they_hold_nan() {
+        let (mut p, g) = batch(&[[1.0; 6], [5.0; 6], [3.0; 6]]);
+        p[12..24].fill(f64::NAN); // frame 1: a failed parse
+        let mask = [true, false, true];
+        let m = evaluate_masked(&p, &g, Some(&mask), 6, Convention::Lightemma, 2.0).unwrap();
+        assert_eq!(m.n_frames, 2);
+        assert_eq!((m.ade_avg, m.fde, m.miss_rate), (2.0, 2.0, 0.5));
+        // the same as evaluating the kept frames alone
+        let (kp, kg) = batch(&[[1.0; 6], [3.0; 6]]);
+        assert_eq!(
+            m,
+            evaluate(&kp, &kg, 6, Convention::Lightemma, 2.0).unwrap()
+        );
+        // all kept = no mask; a NaN in a kept frame is named by its index in the batch
+        let all = [true; 3];
+        let err = evaluate_masked(&p, &g, Some(&all), 6, Convention::Stp3, 2.0).unwrap_err();
+        assert_eq!(
+            err,
+            CoreError::NonFinite {
+                what: "prediction",
+                frame: 1,
+                step: 0
+            }
+        );
+        assert!(evaluate_masked(&p, &g, Some(&[true, false]), 6, Convention::Uniad, 2.0).is_err());
+        assert!(evaluate_masked(&p, &g, Some(&[false; 3]), 6, Convention::Uniad, 2.0).is_err());
+    }
+
+    #[test]
+    fn a_mask_over_many_blocks_matches_the_kept_frames_alone() {
+        // more frames than one block and than the parallel threshold: blocks and threads split the mask
+        let n = PARALLEL_MIN_FRAMES + 3 * FRAMES_PER_BLOCK + 7;
+        let errors: Vec<[f64; 6]> = (0..n).map(|i| [(i % 13) as f64 * 0.25; 6]).collect();
+        let mask: Vec<bool> = (0..n).map(|i| i % 3 != 1).collect();
+        let (mut p, g) = batch(&errors);
+        for (i, frame) in p.chunks_exact_mut(12).enumerate() {
+            if !mask[i] {
+                frame.fill(f64::NAN);
+            }
+        }
+        let kept: Vec<[f64; 6]> = errors
+            .iter()
+            .zip(&mask)
+            .filter(|(_, &k)| k)
+            .map(|(e, _)| *e)
+            .collect();
+        let (kp, kg) = batch(&kept);
+        let masked = evaluate_masked(&p, &g, Some(&mask), 6, Convention::Stp3, 2.0).unwrap();
+        let alone = evaluate(&kp, &kg, 6, Convention::Stp3, 2.0).unwrap();
+        assert_eq!(masked.n_frames, kept.len());
+        assert!((masked.ade_avg - alone.ade_avg).abs() < 1e-12);
+        assert!((masked.miss_rate - alone.miss_rate).abs() < 1e-12);
     }
 
     #[test]

@@ -3,7 +3,10 @@
 //! `ValueError` here, in one place.
 
 use numpy::ndarray::{Array1, Array2, Array3};
-use numpy::{IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArrayDyn, PyUntypedArrayMethods};
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArrayDyn,
+    PyUntypedArrayMethods,
+};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::pybacked::PyBackedStr;
@@ -138,20 +141,30 @@ fn displacement_errors<'py>(
     Ok(out.into_pyarray(py))
 }
 
-/// evaluate(pred, gt, convention, miss_threshold) -> (ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames)
+/// evaluate(pred, gt, convention, miss_threshold, mask) -> (ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames)
+///
+/// `mask`: optional C-contiguous bool array (N,); only frames marked true are checked and scored.
 #[pyfunction]
-#[pyo3(signature = (pred, gt, convention = "lightemma", miss_threshold = 2.0))]
+#[pyo3(signature = (pred, gt, convention = "lightemma", miss_threshold = 2.0, mask = None))]
 fn evaluate(
     py: Python<'_>,
     pred: PyReadonlyArrayDyn<'_, f64>,
     gt: PyReadonlyArrayDyn<'_, f64>,
     convention: &str,
     miss_threshold: f64,
+    mask: Option<PyReadonlyArray1<'_, bool>>,
 ) -> PyResult<(f64, f64, f64, f64, f64, f64, usize)> {
     let convention = metrics::Convention::from_name(convention)?;
     let (p, g, n, t) = paired_views(&pred, &gt)?;
+    let mask = mask
+        .as_ref()
+        .map(|m| {
+            m.as_slice()
+                .map_err(|_| PyValueError::new_err("mask must be C-contiguous"))
+        })
+        .transpose()?;
     let s = maybe_detach(py, n, || {
-        metrics::evaluate(p, g, t, convention, miss_threshold)
+        metrics::evaluate_masked(p, g, mask, t, convention, miss_threshold)
     })?;
     Ok((
         s.ade_1s,

@@ -11,7 +11,7 @@ import json
 import pytest
 
 from lightemma.cli import main
-from lightemma.demo import MARKER, api_models, run_demo
+from lightemma.demo import MARKER, api_models, run_demo, skipped_api_models, skipped_line
 from lightemma.errors import UserError
 
 
@@ -23,7 +23,12 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     assert main(["demo", "--keyframes", "15"]) == 0
     out = tmp_path / "lightemma-demo"
     index = out / "report" / "index.md"
-    assert f"demo report: {index}" in capsys.readouterr().out
+    captured = capsys.readouterr()
+    assert f"demo report: {index}" in captured.out
+    # no key set: one line says which paper models were skipped and how to run them
+    assert ("skipped paper models: gpt-4o (no key: set OPENAI_API_KEY), claude-3.7-sonnet (no key: set "
+            "ANTHROPIC_API_KEY), gemini-2.0-flash (no key: set GEMINI_API_KEY)\n") in captured.err
+    assert "frames: v1.0-mini, split all: 8 scenes, 8 frames, reference window" in captured.err
     text = index.read_text()
     # four baseline runs, every frame scored, the oracle's integrator floor visible
     evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
@@ -44,6 +49,7 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     with FakeOpenAIServer() as server:
         result = run_demo(out, scenes=1, keyframes=15, api_limit=1, api_base=server.url, log=lambda message: None)
         assert server.requests  # the model was asked
+    assert result.skipped == {"claude-3.7-sonnet": "no key: set ANTHROPIC_API_KEY", "gemini-2.0-flash": "no key: set GEMINI_API_KEY"}
     assert len(list((out / "runs").glob("*/*/manifest.json"))) == 5 == len(result.run_dirs)
     evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
     gpt = next(r for r in evaluation["accuracy"]["lightemma"] if r["model"] == "GPT-4o")
@@ -60,6 +66,17 @@ def test_demo_refuses_a_folder_it_did_not_make(tmp_path):
 def test_api_models_follow_the_keys_that_are_set():
     assert api_models({}) == []
     assert api_models({"ANTHROPIC_API_KEY": "x", "GEMINI_API_KEY": "", "OPENAI_API_KEY": "y"}) == ["gpt-4o", "claude-3.7-sonnet"]
+
+
+def test_skipped_models_name_the_missing_key_or_no_api():
+    env = {"ANTHROPIC_API_KEY": "x", "GEMINI_API_KEY": ""}
+    assert skipped_api_models(env) == {"gpt-4o": "no key: set OPENAI_API_KEY", "gemini-2.0-flash": "no key: set GEMINI_API_KEY"}
+    assert skipped_line(skipped_api_models(env)) == (
+        "skipped paper models: gpt-4o (no key: set OPENAI_API_KEY), gemini-2.0-flash (no key: set GEMINI_API_KEY)"
+    )
+    all_keys = {"OPENAI_API_KEY": "a", "ANTHROPIC_API_KEY": "b", "GEMINI_API_KEY": "c"}
+    assert skipped_api_models(all_keys) == {}
+    assert set(skipped_api_models(all_keys, use_api=False).values()) == {"--no-api"}
 
 
 def test_demo_rejects_too_few_keyframes(tmp_path, capsys):

@@ -17,6 +17,7 @@ import lightemma
 from frames_fixtures import make_small_dataset, read_table, reference_frames, small_copy, small_root  # noqa: F401
 from lightemma.errors import DatasetError
 from lightemma.frames import Frame, FrameSet, format_history, format_number, geometry, load_frames, window_range
+from lightemma.frames.model import summary_line
 from lightemma.synth import build_scenarios
 
 from frames_fixtures import SMALL
@@ -396,10 +397,34 @@ def test_unknown_scene_is_named(small_root):
         load_frames(small_root, VERSION, scenes=["scene-9999"])
 
 
-def test_default_split_of_mini_names_the_problem_on_synthetic_data(small_root):
+def test_v1_0_mini_without_a_split_takes_all_of_its_scenes(small_root, fs, caplog):
+    # v1.0-mini is a trial set: by default every scene, not the 2-scene mini_val
+    with caplog.at_level(logging.INFO, logger="lightemma.frames"):
+        default = load_frames(small_root, VERSION)
+    assert f"loaded {default.summary_line()}" in caplog.messages
+    assert default.split == "all" and default.frame_ids == fs.frame_ids
+    assert len(default.scenes) == SMALL["scenes"] == 8
+    assert default.summary_line() == f"v1.0-mini, split all: 8 scenes, {8 * (SMALL['keyframes'] - 14)} frames, reference window"
+
+
+def test_summary_line_names_subsets_limits_and_what_was_left_out(small_root, fs):
+    two = fs.select_scenes(fs.scenes[:2])
+    assert two.summary_line() == "v1.0-mini, split all: 2 scenes, 12 frames, reference window"
+    by_name = load_frames(small_root, VERSION, scenes=[fs.scenes[0]], window="full")
+    assert by_name.summary_line() == "v1.0-mini, scenes given by name: 1 scene, 7 frames, full window"
+    described = {**fs.describe(), "limit": 5, "n_frames": 5, "skipped_scenes": ["a"], "missing_images": ["x", "y"]}
+    assert summary_line(described) == (
+        "v1.0-mini, split all: 8 scenes, 5 frames, reference window (first 5 frames); "
+        "1 scene too short for a frame, skipped; 2 frames without an image file"
+    )
+    assert summary_line({"n_frames": 3, "window": "reference"}) == "3 frames passed in memory"
+
+
+def test_a_named_mini_split_on_synthetic_data_says_how_to_load_it(small_root):
     with pytest.raises(DatasetError, match="mini_val") as exc:
-        load_frames(small_root, VERSION)
+        load_frames(small_root, VERSION, split="mini_val")
     assert "split='all'" in str(exc.value)
+    assert "--split all" in exc.value.for_cli() and "split='all'" not in exc.value.for_cli()
 
 
 def test_unknown_split_lists_the_choices(small_root):
@@ -414,8 +439,9 @@ def test_split_of_another_version_says_which(small_root):
 
 def test_custom_version_needs_an_explicit_choice(tmp_path):
     root = make_small_dataset(tmp_path / "custom", scenes=2, version="v9-synth", images=False)
-    with pytest.raises(DatasetError, match="no default split"):
+    with pytest.raises(DatasetError, match="no default split") as exc:
         load_frames(root, "v9-synth")
+    assert "split='all'" in str(exc.value) and "--split all" in exc.value.for_cli()
     assert len(load_frames(root, "v9-synth", split="all", on_missing_image="keep")) == 2 * 6
 
 
@@ -434,10 +460,12 @@ def renamed_mini(small_copy):
 
 def test_default_split_and_named_splits_resolve_through_the_devkit(renamed_mini):
     root, splits = renamed_mini
-    fs = load_frames(root, VERSION)  # v1.0-mini defaults to mini_val
-    assert fs.split == "mini_val"
-    assert fs.scenes == sorted(splits["mini_val"])
-    assert len(fs) == 2 * (SMALL["keyframes"] - 14)
+    fs = load_frames(root, VERSION)  # v1.0-mini defaults to all 10 of its scenes (here 8)
+    assert fs.split == "all"
+    assert fs.scenes == sorted(splits["mini_val"] + splits["mini_train"][:6])
+    assert len(fs) == 8 * (SMALL["keyframes"] - 14)
+    val = load_frames(root, VERSION, split="mini_val")
+    assert val.scenes == sorted(splits["mini_val"]) and len(val) == 2 * (SMALL["keyframes"] - 14)
     with pytest.raises(DatasetError, match="2 of the 8 scenes of split 'mini_train'"):
         load_frames(root, VERSION, split="mini_train")
     one = load_frames(root, VERSION, split="mini_val", scenes=[splits["mini_val"][1]])

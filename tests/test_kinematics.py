@@ -140,3 +140,10 @@ def test_lockstep_batches_equal_single_frames_bit_for_bit(method):
     batch = lightemma.integrate(actions, method=method)
     for i, frame in enumerate(actions):
         np.testing.assert_array_equal(batch[i], lightemma.integrate(frame, method=method))
+
+
+def test_bool_actions_are_refused_with_their_dtype():
+    with pytest.raises(ValueError, match=r"actions must hold numbers, got dtype bool \(shape \(6, 2\)\)"):
+        lightemma.integrate(np.ones((6, 2), dtype=bool))
+    with pytest.raises(ValueError, match="got dtype bool"):
+        lightemma.integrate([[[True, False]] * 6])

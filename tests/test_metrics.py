@@ -111,3 +111,84 @@ def test_non_finite_values_name_frame_and_step():
     pred[3, 0, 0] = np.inf
     with pytest.raises(ValueError, match="prediction has a non-finite value .* at frame 3, step 0"):
         lightemma.evaluate(pred, np.zeros((4, 6, 2)))
+
+
+# --------------------------------------------------------------------------- mask
+
+
+@settings(max_examples=100, deadline=None)
+@given(pairs, st.sampled_from(sorted(WINDOWS)), st.data())
+def test_mask_scores_exactly_the_kept_frames(arrays, convention, data):
+    pred, gt = arrays
+    keep = np.array(data.draw(st.lists(st.booleans(), min_size=len(pred), max_size=len(pred))), dtype=bool)
+    if not keep.any():
+        keep[0] = True
+    pred = pred.copy()
+    pred[~keep] = np.nan  # what a failed parse integrates to
+    got = lightemma.evaluate(pred, gt, convention=convention, mask=keep).to_dict()
+    want = reference_metrics(pred[keep], gt[keep], convention)
+    for key, value in want.items():
+        assert got[key] == pytest.approx(value, rel=1e-12, abs=1e-12), key
+
+
+def test_mask_over_a_large_batch_matches_the_kept_frames():
+    rng = np.random.default_rng(2)
+    pred, gt = rng.normal(size=(2, 40_000, 6, 2))
+    keep = rng.random(40_000) < 0.7
+    pred[~keep] = np.nan
+    got = lightemma.evaluate(pred, gt, convention="uniad", mask=keep).to_dict()
+    for key, value in reference_metrics(pred[keep], gt[keep], "uniad").items():
+        assert got[key] == pytest.approx(value, rel=1e-9)
+
+
+def test_mask_with_parsed_answers_leaves_failed_ones_out():
+    answers = ["[(5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)]", "I cannot tell."]
+    parsed = lightemma.parse_actions(answers)
+    traj = lightemma.integrate(parsed.actions)
+    assert np.isnan(traj[1]).all()
+    gt = np.nan_to_num(traj)
+    with pytest.raises(ValueError, match="prediction has a non-finite value .* at frame 1"):
+        lightemma.evaluate(traj, gt)
+    m = lightemma.evaluate(traj, gt, mask=parsed.ok)
+    assert (m.n_frames, m.ade_avg) == (1, 0.0)
+
+
+def test_a_nan_in_a_kept_frame_is_still_named_by_its_batch_index():
+    pred = np.zeros((4, 6, 2))
+    pred[2, 3, 0] = np.nan
+    gt = np.zeros((4, 6, 2))
+    gt[0] = np.nan
+    with pytest.raises(ValueError, match="prediction has a non-finite value .* at frame 2, step 3"):
+        lightemma.evaluate(pred, gt, mask=[False, True, True, True])
+    assert lightemma.evaluate(pred, gt, mask=[False, True, False, True]).n_frames == 2
+
+
+@pytest.mark.parametrize(
+    ("mask", "message"),
+    [
+        ([1, 0, 1], r"mask must be a boolean array, got dtype int64"),
+        ([True, False], r"mask must have shape \(3,\), one entry per frame, got \(2,\)"),
+        (np.ones((3, 1), dtype=bool), r"mask must have shape \(3,\)"),
+        ([False, False, False], "keeps none of the 3 frames"),
+        (["yes", "no", "yes"], "mask must be a boolean array"),
+    ],
+)
+def test_bad_masks_are_value_errors(mask, message):
+    with pytest.raises(ValueError, match=message):
+        lightemma.evaluate(np.zeros((3, 6, 2)), np.zeros((3, 6, 2)), mask=mask)
+
+
+def test_single_frame_takes_a_scalar_mask():
+    assert lightemma.evaluate(np.zeros((6, 2)), np.ones((6, 2)), mask=True).n_frames == 1
+    with pytest.raises(ValueError, match="keeps none"):
+        lightemma.evaluate(np.zeros((6, 2)), np.ones((6, 2)), mask=np.bool_(False))
+
+
+@pytest.mark.parametrize("which", ["pred", "gt"])
+def test_bool_trajectories_are_refused_with_their_dtype(which):
+    arrays = {"pred": np.zeros((2, 6, 2)), "gt": np.zeros((2, 6, 2))}
+    arrays[which] = np.zeros((2, 6, 2), dtype=bool)
+    with pytest.raises(ValueError, match=f"{which} must hold numbers, got dtype bool"):
+        lightemma.evaluate(arrays["pred"], arrays["gt"])
+    with pytest.raises(ValueError, match=f"{which} must hold numbers, got dtype bool"):
+        lightemma.displacement_errors(arrays["pred"], arrays["gt"])

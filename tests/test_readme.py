@@ -45,3 +45,38 @@ def test_lock_pins_exactly_and_excludes_known_broken_releases() -> None:
     assert (major, minor, patch) <= (1, 106, 2)
     pyproject = (ROOT / "pyproject.toml").read_text(encoding="utf-8")
     assert "!=5.24.0" in pyproject and "!=1.82.7" in pyproject and "!=1.82.8" in pyproject
+
+
+def _python_block(heading: str) -> str:
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index(heading)
+    block = re.search(r"```python\n(.*?)```", text[start:], re.S)
+    assert block, f"no ```python block after {heading!r} in README.md"
+    return block.group(1)
+
+
+def test_readme_api_example_runs_as_written_with_a_failed_answer(capsys) -> None:
+    code = _python_block("## API in ten lines\n")
+    assert "mask=parsed.ok" in code
+    exec(compile(code, "README.md", "exec"), {"__name__": "readme"})  # noqa: S102 - the README's own example
+    out = capsys.readouterr().out
+    # one of the three answers fails to parse; the mask keeps it out of the metrics
+    assert out.startswith("['ok' 'corrected' 'failed'] 2 1.860 m {"), out
+    assert "'n_frames': 2" in out
+
+
+def test_readme_first_hour_commands_parse_with_the_cli() -> None:
+    import shlex
+
+    from lightemma.cli import build_parser
+
+    text = (ROOT / "README.md").read_text(encoding="utf-8")
+    start = text.index("## The first hour\n")
+    section = text[start : text.index("\n## ", start + 1)]
+    blocks = re.findall(r"```bash\n(.*?)```", section, re.S)
+    lines = [line.strip() for block in blocks for line in block.splitlines() if line.strip().startswith("lightemma ")]
+    assert len(lines) == 9, lines
+    parser = build_parser()
+    for line in lines:
+        argv = shlex.split(line.split("#", 1)[0])[1:]
+        parser.parse_args(argv)  # argparse exits (SystemExit) on an unknown flag or a bad choice

@@ -264,7 +264,9 @@ def test_cli_synth_writes_a_loadable_dataset(tmp_path, capsys):
     rc = main(["synth", str(out), "--scenes", "2", "--seed", "4", "--keyframes", "16", "--image-size", "160x90",
                "--no-sweeps"])
     assert rc == 0
-    assert "split='all'" in capsys.readouterr().out
+    out_text = capsys.readouterr().out
+    assert f"lightemma run --model baseline:cv --dataroot {out} --version {VERSION}\n" in out_text
+    assert "4 frames in the reference window" in out_text
     names = sorted(s["name"] for s in read_table(out, VERSION, "scene"))
     assert names == ["synth-0000-cruise", "synth-0001-accelerate"]
     from lightemma.frames import load_frames

@@ -18,7 +18,7 @@ def as_frames(value: Any, name: str) -> tuple[np.ndarray, bool]:
         array = np.asarray(value)
     except Exception as exc:  # ragged lists and the like
         raise ValueError(f"{name} cannot be turned into an array: {exc}") from None
-    if array.dtype == object or not (np.issubdtype(array.dtype, np.number) or array.dtype == np.bool_):
+    if array.dtype == object or not np.issubdtype(array.dtype, np.number):  # bool is not a number here
         raise ValueError(f"{name} must hold numbers, got dtype {array.dtype} (shape {array.shape})")
     if np.issubdtype(array.dtype, np.complexfloating):
         raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype}")
@@ -29,3 +29,19 @@ def as_frames(value: Any, name: str) -> tuple[np.ndarray, bool]:
         shown = array.shape[1:] if single else array.shape
         raise ValueError(f"{name} must have shape (N, T, 2) or (T, 2), got {shown}")
     return np.ascontiguousarray(array, dtype=np.float64), single
+
+
+def as_mask(value: Any, n: int, single: bool) -> np.ndarray:
+    """``value`` as a C-contiguous bool array (N,): one entry per frame, ``True`` = use the frame.
+
+    Only real booleans are accepted (0/1 integers would read as indices elsewhere in
+    NumPy); a single frame takes a scalar or a one-entry mask.
+    """
+    array = np.asarray(value)
+    if array.dtype != np.bool_:
+        raise ValueError(f"mask must be a boolean array, got dtype {array.dtype} (shape {array.shape})")
+    if single and array.ndim == 0:
+        array = array.reshape(1)
+    if array.shape != (n,):
+        raise ValueError(f"mask must have shape ({n},), one entry per frame, got {array.shape}")
+    return np.ascontiguousarray(array)

@@ -20,6 +20,10 @@ def displacement_errors(pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float6
     """Per-step Euclidean errors (N, T) of two C-contiguous (N, T, 2) arrays."""
 
 def evaluate(
-    pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float64], convention: str = "lightemma", miss_threshold: float = 2.0
+    pred: npt.NDArray[np.float64],
+    gt: npt.NDArray[np.float64],
+    convention: str = "lightemma",
+    miss_threshold: float = 2.0,
+    mask: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[float, float, float, float, float, float, int]:
-    """(ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames) over (N, 6, 2) arrays."""
+    """(ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames) over (N, 6, 2) arrays; only frames ``mask`` keeps."""

@@ -14,7 +14,7 @@ from __future__ import annotations
 import os
 import shutil
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from lightemma.errors import UserError
@@ -44,6 +44,7 @@ class DemoResult:
     dataroot: Path
     run_dirs: list[Path]
     index: Path
+    skipped: dict[str, str] = field(default_factory=dict)  # paper model -> why it did not run
 
 
 def _prepare(out: Path) -> None:
@@ -60,6 +61,19 @@ def api_models(environ: os._Environ[str] | dict[str, str] | None = None) -> list
     """The API models whose key is set (one per provider)."""
     environ = os.environ if environ is None else environ
     return [model for variable, model in API_MODELS if environ.get(variable)]
+
+
+def skipped_api_models(environ: os._Environ[str] | dict[str, str] | None = None, *, use_api: bool = True) -> dict[str, str]:
+    """The paper models the demo will not run, each with the reason (no key, or ``--no-api``)."""
+    environ = os.environ if environ is None else environ
+    if not use_api:
+        return {model: "--no-api" for _, model in API_MODELS}
+    return {model: f"no key: set {variable}" for variable, model in API_MODELS if not environ.get(variable)}
+
+
+def skipped_line(skipped: dict[str, str]) -> str:
+    """``skipped paper models: gpt-4o (no key: set OPENAI_API_KEY), …``"""
+    return "skipped paper models: " + ", ".join(f"{model} ({why})" for model, why in skipped.items())
 
 
 def run_demo(
@@ -79,6 +93,7 @@ def run_demo(
     out = Path(out).resolve()
     _prepare(out)
     import lightemma
+    from lightemma.frames.model import summary_line
     from lightemma.report import write_report
     from lightemma.synth import KINDS, write_dataset
 
@@ -88,6 +103,9 @@ def run_demo(
     common = dict(dataroot=dataroot, version=VERSION, split="all", output=out / "runs", progress=False)
     run_dirs = []
     models = list(BASELINE_RUNS) + ([(m, "euler") for m in api_models()] if use_api else [])
+    skipped = skipped_api_models(use_api=use_api)
+    if skipped:
+        log(skipped_line(skipped))
     for i, (model, method) in enumerate(models, start=1):
         limit = api_limit if not model.startswith("baseline:") else None
         log(f"2/3 run {i}/{len(models)}: {model} ({method})" + (f", first {limit} frames" if limit else ""))
@@ -98,8 +116,10 @@ def run_demo(
             if model.startswith("baseline:"):
                 raise
             log(f"    skipped {model}: {exc}")
+            skipped[model] = str(exc)
             continue
+        log(f"    frames: {summary_line(result.manifest['dataset'])}")
         run_dirs.append(Path(result.run_dir))
     log(f"3/3 evaluating and writing the report to {out / 'report'}")
     index = write_report([out / "runs"], out / "report", convention="all", with_paper=True, top=3)
-    return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index)
+    return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index, skipped=skipped)

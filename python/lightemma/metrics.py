@@ -8,7 +8,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from lightemma import _core
-from lightemma._arrays import as_frames
+from lightemma._arrays import as_frames, as_mask
 
 CONVENTIONS: tuple[str, ...] = tuple(_core.CONVENTIONS)
 
@@ -51,6 +51,9 @@ def _pair(pred: ArrayLike, gt: ArrayLike) -> tuple[np.ndarray, np.ndarray, bool]
 def displacement_errors(pred: ArrayLike, gt: ArrayLike) -> np.ndarray:
     """Euclidean error per frame and step: (N, T, 2) × 2 → (N, T); (T, 2) × 2 → (T,).
 
+    NaN in ``pred`` or ``gt`` (a failed parse) gives NaN errors for that step; nothing is
+    checked or averaged here, so no mask is needed.
+
     >>> import lightemma
     >>> lightemma.displacement_errors([[3.0, 4.0]], [[0.0, 0.0]]).tolist()
     [5.0]
@@ -60,17 +63,31 @@ def displacement_errors(pred: ArrayLike, gt: ArrayLike) -> np.ndarray:
     return out[0] if single else out
 
 
-def evaluate(pred: ArrayLike, gt: ArrayLike, *, convention: str = "lightemma", miss_threshold: float = 2.0) -> Metrics:
+def evaluate(
+    pred: ArrayLike,
+    gt: ArrayLike,
+    *,
+    convention: str = "lightemma",
+    miss_threshold: float = 2.0,
+    mask: ArrayLike | None = None,
+) -> Metrics:
     """Score predicted trajectories (N, 6, 2) against ground truth (N, 6, 2).
 
-    Raises ``ValueError`` naming the frame and step of any NaN/inf, and for an
-    empty batch, mismatched shapes or an unknown convention.
+    ``mask``: optional boolean array (N,); only frames marked ``True`` are checked and
+    scored, and ``n_frames`` counts them. Pass ``parsed.ok`` to leave out answers that
+    failed to parse (their actions, and so their trajectories, are NaN).
+
+    Raises ``ValueError`` naming the frame (its index in the batch) and step of any
+    NaN/inf in a scored frame, and for an empty batch (or a mask that keeps no frame),
+    mismatched shapes, a mask that is not boolean (N,), or an unknown convention.
+    Definitions: docs/definitions.md#metrics.
 
     >>> import numpy as np, lightemma
-    >>> gt = np.zeros((1, 6, 2)); pred = gt + [0.0, 1.0]
-    >>> lightemma.evaluate(pred, gt).ade_avg
+    >>> gt = np.zeros((2, 6, 2)); pred = gt + [0.0, 1.0]; pred[1] = np.nan
+    >>> lightemma.evaluate(pred, gt, mask=[True, False]).ade_avg
     1.0
     """
-    p, g, _ = _pair(pred, gt)
-    values = _core.evaluate(p, g, convention, float(miss_threshold))
+    p, g, single = _pair(pred, gt)
+    m = None if mask is None else as_mask(mask, p.shape[0], single)
+    values = _core.evaluate(p, g, convention, float(miss_threshold), m)
     return Metrics(*values, convention=convention, miss_threshold=float(miss_threshold))

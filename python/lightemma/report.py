@@ -140,12 +140,16 @@ def write_report(
 
     ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases);
     ``case_tags`` are the scenario tags whose worst frame is drawn (default
-    :data:`lightemma.scenarios.CASE_TAGS`; ``()`` for none).
+    :data:`lightemma.scenarios.CASE_TAGS`; ``()`` for none). A ``dataroot`` that is not a
+    folder raises :class:`~lightemma.errors.UserError` before any work.
     """
     from lightemma.figures import bubble_chart, bubble_points, history_bias_figure
     from lightemma.pictures import CameraSource
     from lightemma.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
 
+    if dataroot is not None and not os.path.isdir(dataroot):
+        what = "is not a folder" if os.path.exists(dataroot) else "does not exist"
+        raise UserError(f"dataroot {dataroot} {what}", cli=f"--dataroot {dataroot} {what}")
     runs = [load_run(d, details=True) for d in expand_run_dirs(run_dirs)]
     known = set().union(*(r.frame_ids for r in runs)) if runs else set()
     missing = [fid for fid in frames if fid not in known]

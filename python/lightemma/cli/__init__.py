@@ -6,8 +6,8 @@ subcommand and sets ``func`` (a callable taking the parsed namespace and
 returning an exit code) via ``parser.set_defaults(func=...)``.
 
 Errors meant for the user are raised as :class:`lightemma.errors.UserError`
-(or ``ValueError``/``FileNotFoundError``) and printed as one clear line, never
-as a traceback (set ``LIGHTEMMA_DEBUG=1`` to see the traceback).
+(or ``ValueError``/``OSError``) and printed as one clear line (a ``UserError``'s
+command-line wording when it has one), never as a traceback (set ``LIGHTEMMA_DEBUG=1`` to see the traceback).
 """
 
 from __future__ import annotations
@@ -49,10 +49,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("lightemma: interrupted", file=sys.stderr)
         return 130
-    except (UserError, ValueError, FileNotFoundError) as exc:
+    except (UserError, ValueError, OSError) as exc:
         if os.environ.get("LIGHTEMMA_DEBUG"):
             raise
-        print(f"lightemma {args.command}: error: {exc}", file=sys.stderr)
+        message = exc.for_cli() if isinstance(exc, UserError) else str(exc)
+        print(f"lightemma {args.command}: error: {message}", file=sys.stderr)
         return 2
 
 

@@ -16,7 +16,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         description="Score run directories (or folders holding runs) and print the paper's Tables I and II.",
     )
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
-    parser.add_argument("--convention", default="lightemma", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention (default: lightemma, the paper's)")
+    parser.add_argument("--convention", default="lightemma", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention (default: lightemma, the paper's; docs/definitions.md#metrics)")
     parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
     parser.add_argument("--format", default="md", choices=FORMATS, help="output format (default: md)")
     parser.add_argument("--with-paper", action="store_true", help="print the paper's rows beside")

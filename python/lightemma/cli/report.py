@@ -15,7 +15,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="report folder (created)")
-    parser.add_argument("--convention", default="all", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention(s) (default: all)")
+    parser.add_argument("--convention", default="all", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention(s) (default: all; docs/definitions.md#metrics)")
     parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
     parser.add_argument("--no-paper", action="store_true", help="leave the paper's rows out of the tables and chart")
     parser.add_argument("--top", type=int, default=5, metavar="N", help="pictures of the N frames where models disagree most (default: 5)")

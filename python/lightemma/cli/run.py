@@ -21,9 +21,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     data = p.add_argument_group("frames")
     data.add_argument("--dataroot", help="nuScenes directory")
     data.add_argument("--version", help="nuScenes version (default v1.0-test, the paper's set)")
-    data.add_argument("--split", help="scene split of the version (e.g. val for v1.0-trainval)")
+    data.add_argument("--split", help="scenes of the version: a devkit split (test, val, mini_val, …) or all; default test for "
+                      "v1.0-test, val for v1.0-trainval, all for v1.0-mini (docs/definitions.md#frames-and-windows)")
     data.add_argument("--scenes", nargs="+", metavar="SCENE", help="explicit scene names")
-    data.add_argument("--window", choices=("reference", "full"), help="frames per scene (SPEC §1)")
+    data.add_argument("--window", choices=("reference", "full"), help="reference (the paper: N-14 frames per scene, default) or full (N-13) "
+                      "(docs/definitions.md#frames-and-windows)")
     data.add_argument("--limit", type=int, help="only the first N frames")
     ex = p.add_argument_group("execution")
     ex.add_argument("--concurrency", type=int, help="frames in flight at once (default 16; on --resume, the run's own)")
@@ -51,9 +53,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--prompt-set", help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
     gen.add_argument("--temperature", type=float, help="sampling temperature where the provider allows it (default 0)")
     gen.add_argument("--max-tokens", type=int, help="max output tokens per stage (default 512)")
-    gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain")
+    gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain (docs/definitions.md#re-asks)")
     gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
-    gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's)")
+    gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's; docs/definitions.md#integration)")
     p.set_defaults(func=main)
     return p
 
@@ -72,6 +74,29 @@ RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "n
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
     """The run settings: what was given on the command line, else the defaults."""
     return {name: default if getattr(args, name) is None else getattr(args, name) for name, default in RUN_DEFAULTS.items()}
+
+
+# numeric options and the smallest value each takes (inclusive, or exclusive when marked ">")
+LIMITS: dict[str, tuple[float, bool]] = {
+    "concurrency": (1, False), "limit": (1, False), "max_attempts": (1, False), "max_tokens": (1, False),
+    "max_retries": (0, False), "backoff": (0, False), "temperature": (0, False), "timeout": (0, True),
+    "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
+    "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
+}
+
+
+def check_limits(args: argparse.Namespace) -> None:
+    """Refuse a numeric option below its range, naming the flag (before anything is loaded or sent)."""
+    from lightemma.errors import UserError
+
+    for name, (low, exclusive) in LIMITS.items():
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        if value != value or (value <= low if exclusive else value < low):  # NaN fails too
+            flag = "--" + name.replace("_", "-")
+            shown = f"greater than {low:g}" if exclusive else f"at least {low:g}"
+            raise UserError(f"{flag} must be {shown}, got {value:g}")
 
 
 # option -> backends that take it
@@ -101,6 +126,7 @@ def main(args: argparse.Namespace) -> int:
     from lightemma.pipeline.runner import resume, run, stderr_log
 
     progress = not args.no_progress
+    check_limits(args)
     if args.resume:
         given = sorted("--" + name.replace("_", "-") for name, value in vars(args).items()
                        if name not in RESUME_OPTIONS and value is not None)
@@ -117,7 +143,7 @@ def main(args: argparse.Namespace) -> int:
             raise UserError("--dataroot is required (a nuScenes directory)")
         options = local_backend_options(args)
         # local backends batch across frames in flight: keep at least one batch's worth of frames going
-        concurrency = args.concurrency or max(16, int(options.get("batch_size", 0)))
+        concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0)))
         settings = run_settings(args)
         result = run(
             args.model, dataroot=args.dataroot, version=settings["version"], split=args.split, scenes=args.scenes,

@@ -5,6 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
+DEFAULT_VERSION = "v1.0-mini"
+
 
 def _size(text: str) -> tuple[int, int]:
     try:
@@ -35,13 +37,14 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
             "the 13 tables, a placeholder map, CAM_FRONT keyframes (2 Hz) and sweeps (12 Hz) as JPEGs. "
             "Scenes cycle through: cruise, accelerate, brake-red-light, wait-then-go-green, "
             "stopped-behind-lead-green, left-turn, right-turn, straight-after-turn. "
-            "Load it with split='all' (or a scene list): the devkit's splits name real nuScenes scenes."
+            "As v1.0-mini (the default) it loads with all its scenes; under another --version name, "
+            "use --split all (or --scenes): the devkit's splits name real nuScenes scenes."
         ),
     )
     parser.add_argument("outdir", help="folder to write (dataroot)")
     parser.add_argument("--scenes", type=_positive, default=8, help="number of scenes (default 8)")
     parser.add_argument("--seed", type=int, default=0, help="random seed; same seed, same dataset (default 0)")
-    parser.add_argument("--version", default="v1.0-mini", help="version folder name (default v1.0-mini)")
+    parser.add_argument("--version", default=DEFAULT_VERSION, help=f"version folder name (default {DEFAULT_VERSION})")
     parser.add_argument("--keyframes", type=_positive, default=40, help="keyframes per scene (default 40)")
     parser.add_argument("--image-size", type=_size, default=(800, 450), metavar="WxH",
                         help="image size (default 800x450; nuScenes is 1600x900)")
@@ -69,9 +72,10 @@ def run(args: argparse.Namespace) -> int:
         progress=sys.stderr.isatty(),
     )
     frames = len(window_range(args.keyframes, "reference")) * args.scenes
-    print(f"wrote {args.scenes} synthetic scenes ({args.keyframes} keyframes each) to {root}/{args.version}")
-    print(
-        f"load with: lightemma.load_frames({str(root)!r}, {args.version!r}, split='all')"
-        f"  # {frames} frames in the reference window"
-    )
+    print(f"wrote {args.scenes} synthetic scenes ({args.keyframes} keyframes each, {frames} frames in the "
+          f"reference window) to {root}/{args.version}")
+    # v1.0-mini takes all of its scenes by default; any other version folder must say so
+    split = ("", "") if args.version == DEFAULT_VERSION else (" --split all", ", split='all'")
+    print(f"run a baseline on it: lightemma run --model baseline:cv --dataroot {root} --version {args.version}{split[0]}")
+    print(f"load it in Python:    lightemma.load_frames({str(root)!r}, {args.version!r}{split[1]})")
     return 0

@@ -46,8 +46,9 @@ TABLES = (
 #: versions whose scenes the devkit's hard-coded splits name
 KNOWN_VERSIONS = ("v1.0-test", "v1.0-trainval", "v1.0-mini")
 
-#: split used when neither ``split`` nor ``scenes`` is given (the paper uses all 150 test scenes)
-DEFAULT_SPLITS = {"v1.0-test": "test", "v1.0-trainval": "val", "v1.0-mini": "mini_val"}
+#: split used when neither ``split`` nor ``scenes`` is given: the paper's 150 test scenes, the 150
+#: held-out val scenes of trainval, and every scene of v1.0-mini (a 10-scene trial set, not a benchmark)
+DEFAULT_SPLITS = {"v1.0-test": "test", "v1.0-trainval": "val", "v1.0-mini": "all"}
 
 #: which version holds each predefined split's scenes (for error messages)
 SPLIT_VERSIONS = {
@@ -173,9 +174,12 @@ def default_split(version: str) -> str:
     try:
         return DEFAULT_SPLITS[version]
     except KeyError:
+        why = f"the devkit's splits only name scenes of {', '.join(KNOWN_VERSIONS)}"
         raise DatasetError(
             f"version {version!r} has no default split: pass split='all' to use every scene of it, "
-            f"or scenes=[...] (the devkit's splits only name scenes of {', '.join(KNOWN_VERSIONS)})"
+            f"or scenes=[...] ({why})",
+            cli=f"version {version!r} has no default split: add --split all to use every scene of it, "
+            f"or --scenes NAME ... ({why})",
         ) from None
 
 
@@ -188,7 +192,7 @@ def resolve_scenes(
 ) -> tuple[str | None, list[str]]:
     """Choose scene names: ``(split recorded, sorted scene names)``.
 
-    - neither given: the version's default split (``test``, ``val``, ``mini_val``);
+    - neither given: the version's default split (``test``, ``val``, ``all`` for v1.0-mini);
     - ``split``: a devkit split name, or ``"all"`` for every scene of the version;
     - ``scenes``: an explicit list (filters the split if both are given).
     """
@@ -212,12 +216,12 @@ def resolve_scenes(
             if absent:
                 where = SPLIT_VERSIONS.get(split)
                 hint = f"; split {split!r} belongs to version {where}" if where and where != version else ""
-                if any(s.startswith("synth-") for s in available_set):
-                    hint += "; a synthetic dataset is loaded with split='all' or an explicit scene list"
+                synthetic = any(s.startswith("synth-") for s in available_set)
                 shown = ", ".join(absent[:5]) + (f" and {len(absent) - 5} more" if len(absent) > 5 else "")
+                message = f"{len(absent)} of the {len(wanted)} scenes of split {split!r} are not in version {version}: {shown}{hint}"
                 raise DatasetError(
-                    f"{len(absent)} of the {len(wanted)} scenes of split {split!r} are not in version "
-                    f"{version}: {shown}{hint}"
+                    message + ("; a synthetic dataset is loaded with split='all' or an explicit scene list" if synthetic else ""),
+                    cli=message + ("; a synthetic dataset is loaded with --split all or --scenes NAME ..." if synthetic else ""),
                 )
             chosen = sorted(wanted)
     if scenes is not None:
@@ -430,16 +434,19 @@ def load_frames(
         version: ``v1.0-test`` (the paper), ``v1.0-trainval``, ``v1.0-mini`` or another folder name.
         split: a devkit split (``test``, ``val``, ``train``, ``mini_val``, …) or ``"all"`` for
             every scene of the version. With neither ``split`` nor ``scenes``: ``test`` for
-            v1.0-test, ``val`` for v1.0-trainval, ``mini_val`` for v1.0-mini; other versions
-            must say which scenes. Synthetic datasets use ``"all"`` or a scene list.
+            v1.0-test, ``val`` for v1.0-trainval, ``"all"`` (its 10 scenes) for v1.0-mini; other
+            versions must say which scenes. Synthetic datasets use ``"all"`` or a scene list.
         scenes: explicit scene names (within ``split`` if both are given).
         window: ``reference`` (the paper: c = 7 … N−8, N−14 frames per scene) or
             ``full`` (c = 7 … N−7, N−13 frames per scene).
         on_missing_image: ``skip`` (default: drop those frames, log and list them in
             ``missing_images``), ``error`` (raise), or ``keep`` (keep them, still listed).
 
-    Frames are ordered by scene name, then keyframe.
+    Frames are ordered by scene name, then keyframe. ``FrameSet.summary_line()`` says which
+    split, how many scenes and how many frames were taken.
     """
     _check_options(window, on_missing_image)  # before the slow table load
     nusc = load_tables(dataroot, version)
-    return extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)
+    frames = extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)
+    log.info("loaded %s", frames.summary_line())
+    return frames

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -230,3 +230,35 @@ class FrameSet:
             "missing_images": list(self.missing_images),
             "skipped_scenes": list(self.skipped_scenes),
         }
+
+    def summary_line(self) -> str:
+        """One line saying which split, how many scenes and frames this set took (see :func:`summary_line`)."""
+        return summary_line(self.describe())
+
+
+def _count(n: int, noun: str) -> str:
+    return f"{n:,} {noun}" + ("" if n == 1 else "s")
+
+
+def summary_line(described: Mapping[str, Any]) -> str:
+    """One line from a frame-set description (:meth:`FrameSet.describe`, a run manifest's ``dataset``).
+
+    ``v1.0-mini, split all: 10 scenes, 208 frames, reference window`` — plus the
+    scenes skipped as too short, the frames dropped for a missing image, and a
+    ``limit`` when the description has one.
+    """
+    n_frames = int(described.get("n_frames") or 0)
+    version = described.get("version")
+    if not version:
+        return f"{_count(n_frames, 'frame')} passed in memory"
+    split = described.get("split")
+    which = f"split {split}" if split else "scenes given by name"
+    scenes = described.get("scenes") or []
+    line = f"{version}, {which}: {_count(len(scenes), 'scene')}, {_count(n_frames, 'frame')}, {described.get('window') or 'reference'} window"
+    if described.get("limit"):
+        line += f" (first {_count(int(described['limit']), 'frame')})"
+    if described.get("skipped_scenes"):
+        line += f"; {_count(len(described['skipped_scenes']), 'scene')} too short for a frame, skipped"
+    if described.get("missing_images"):
+        line += f"; {_count(len(described['missing_images']), 'frame')} without an image file"
+    return line

@@ -27,6 +27,7 @@ from typing import Any
 
 from lightemma.backends import Backend, GenerationParams, backend_kind, create_backend
 from lightemma.errors import RunStoreError, UserError
+from lightemma.frames.model import summary_line
 from lightemma.pipeline.chain import ChainPolicy, run_frame
 from lightemma.pipeline.progress import Progress
 from lightemma.pipeline.summary import format_summary, summarize
@@ -90,7 +91,9 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
     """Load the frames a manifest's ``dataset`` describes (dataroot, version, split/scenes, window, limit)."""
     if not dataset.get("dataroot") or not dataset.get("version"):
-        raise UserError("this run was made from frames passed in memory; pass frames=... to resume it")
+        raise UserError("this run was made from frames passed in memory; pass frames=... to resume it",
+                        cli="this run was made from frames passed in memory, not from a dataset; resume it from "
+                        "Python: lightemma.resume(RUN_DIR, frames=FRAMES)")
     from lightemma import load_frames
 
     frames = load_frames(dataset["dataroot"], dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"),
@@ -257,6 +260,7 @@ def run(
         asyncio.run(instance.aclose())
         raise
     if log:
+        log(f"frames: {summary_line(manifest['dataset'])}")
         log(f"run directory: {run_dir}  ({len(frames)} frames, concurrency {concurrency})")
     return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
 
@@ -286,7 +290,10 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                         f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
     instance = _make_backend(config, run_dir.parent.parent)
     try:
-        dataset = config.get("dataset") or {}
+        dataset = dict(config.get("dataset") or {})
+        if dataset.get("split") is None and not dataset.get("scenes"):
+            # the split the run resolved when it started, not today's default for the version
+            dataset["split"] = (manifest.get("dataset") or {}).get("split")
         all_frames = _head(frames, dataset.get("limit")) if frames is not None else _load_frames(dataset)
         contents = read_run(run_dir)
         for warning in contents.warnings():
@@ -298,6 +305,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         asyncio.run(instance.aclose())
         raise
     if log:
+        log(f"frames: {summary_line(_describe(all_frames, dataset))}")
         log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run")
     return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo), log)
 

@@ -264,8 +264,14 @@ def write_dataset(
         raise UserError(f"invalid version folder name {version!r}")
     root = Path(outdir).expanduser().resolve()
     table_root = root / version
+    blocker = next((p for p in (root, *root.parents) if p.exists()), None)
+    if blocker is not None and not blocker.is_dir():
+        raise UserError(f"cannot write a dataset to {root}: {blocker} is a file, not a folder")
+    if table_root.exists() and not table_root.is_dir():
+        raise UserError(f"cannot write version {version} to {root}: {table_root} is a file, not a folder")
     if table_root.exists() and any(table_root.iterdir()) and not overwrite:
-        raise UserError(f"{table_root} already exists; pass overwrite=True (CLI: --force) to replace it")
+        raise UserError(f"{table_root} already exists; pass overwrite=True to replace it",
+                        cli=f"{table_root} already exists; add --force to replace it")
     camera = Camera(int(image_size[0]), int(image_size[1]))
     scenarios = build_scenarios(scenes, seed=seed, keyframes=keyframes)
     tables, todo = build_tables(scenarios, seed=seed, camera=camera, sweeps=sweeps)
