@@ -55,7 +55,7 @@ class RunData:
     bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
     warnings: list[str] = field(default_factory=list)
     parse: ParseDefinition = field(default_factory=ParseDefinition)  # how the statuses and actions were read
-    rescored: bool = False  # True when ``parse`` differs from the run's own and the answers were parsed again
+    rescored: bool = False  # True when the stored answers were parsed again (a definition was asked for)
 
     def __len__(self) -> int:
         return len(self.frame_ids)
@@ -179,9 +179,9 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
     """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
 
     ``details=True`` also keeps history and predicted actions (for scenario
-    analysis). ``parse`` re-scores the stored answers under another definition
-    (:mod:`lightemma.evaluation.rescore`); by default the run's own is used
-    (``paper`` for imported runs). Corrupt lines, a truncated tail, records
+    analysis). ``parse`` re-scores the stored answers under that definition
+    (:mod:`lightemma.evaluation.rescore`); by default the run's recorded
+    statuses stand (parsed ``paper`` for imported runs). Corrupt lines, a truncated tail, records
     without usable ground truth and an unfinished run are counted and described
     in ``warnings``. Raises :class:`RunStoreError` for a missing, unreadable or
     foreign directory.
@@ -198,7 +198,7 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
     try:
         with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
             records = iter_records(run_dir, counts=counts)
-            for record in records if definition == own else rescored(records, definition):
+            for record in records if parse is None else rescored(records, definition):
                 gt = record.get("gt_positions")
                 if type(gt) is not list or len(gt) != 6:
                     bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
@@ -258,7 +258,7 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         duplicates=duplicates,
         bad_records=bad,
         parse=definition,
-        rescored=definition != own,
+        rescored=parse is not None,
     )
     data.warnings = _warnings(data)
     return data

@@ -360,6 +360,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
     if final.exists():
         raise UserError(f"{final} exists but was not imported from {folder.path}; move it away and import again")
     prices = _prices(info)
+    created = [d for d in (model_dir, *model_dir.parents) if not d.exists()]  # removed again if no run comes of it
     model_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.", suffix=".partial", dir=model_dir))
     try:
@@ -392,6 +393,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         result.frames, result.files_skipped, result.frames_skipped = len(seen), len(files_skipped), frames_skipped
         if not seen:
             shutil.rmtree(tmp)
+            _remove_empty(created)
             result.outcome = "nothing to import"
             return result
         manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
@@ -402,7 +404,17 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         return result
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        _remove_empty(created)
         raise
+
+
+def _remove_empty(folders: list[Path]) -> None:
+    """Remove the folders an import created (innermost first) where they are still empty."""
+    for folder in folders:
+        try:
+            folder.rmdir()
+        except OSError:
+            return
 
 
 def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os.PathLike[str] = "runs", *,
