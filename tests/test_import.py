@@ -122,7 +122,7 @@ def test_stage_texts_round_trip_through_the_references_lines(text):
 
 
 def test_importing_the_same_folder_again_writes_nothing(tmp_path, results, capsys):
-    assert main(["import", str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--quiet"]) == 0
+    assert main(["import", str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--quiet", "--jobs", "2"]) == 0
     before = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").rglob("*")}
     capsys.readouterr()
     assert main(["import", str(tmp_path / "results" / "gpt-4o"), str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--quiet"]) == 0
@@ -158,7 +158,7 @@ def test_a_failure_mid_import_leaves_no_run(tmp_path, results, monkeypatch, erro
 
 
 def test_bad_files_and_frames_are_named_in_one_line_each_and_never_scored(tmp_path, results, capsys):
-    assert main(["import", str(tmp_path / "results"), "--output", str(tmp_path / "runs")]) == 0
+    assert main(["import", str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--jobs", "1"]) == 0
     captured = capsys.readouterr()
     warnings = [line for line in captured.err.splitlines() if line]
     assert all(line.startswith("lightemma import: warning: ") for line in warnings)
@@ -223,3 +223,13 @@ def test_the_fixture_prompt_set_is_a_valid_prompt_set():
     from lightemma.prompts import PromptSet
 
     assert PromptSet.from_dict(PROMPT_SET).name == "fixture-reference"
+
+
+def test_parallel_import_writes_the_same_runs_and_warnings(tmp_path, results):
+    serial, warned = [], []
+    one = import_reference([tmp_path / "results"], tmp_path / "one", warn=serial.append, jobs=1)
+    two = import_reference([tmp_path / "results"], tmp_path / "two", warn=warned.append, jobs=2)
+    assert [r.model for r in one] == [r.model for r in two] and serial == warned
+    for a, b in zip(one, two):
+        assert a.run_dir.name == b.run_dir.name
+        assert (a.run_dir / "frames.jsonl").read_bytes() == (b.run_dir / "frames.jsonl").read_bytes()

@@ -16,7 +16,11 @@ Anything not in the registry is taken as a litellm model string
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import json
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 from lightemma.errors import UserError
@@ -181,11 +185,30 @@ def reference_model(name: str) -> ModelInfo | None:
     return found if found is not None and found.in_paper else None
 
 
-def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
-    """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
+_PRICE_LIST = "model_prices_and_context_window_backup.json"  # the list litellm loads with LITELLM_LOCAL_MODEL_COST_MAP
+
+
+@functools.lru_cache(maxsize=1)
+def bundled_price_list() -> dict[str, Any]:
+    """litellm's bundled price list (``litellm.model_cost`` as lightemma loads it), read without importing litellm.
+
+    Importing litellm takes seconds; the list is one JSON file inside the
+    package. Falls back to ``litellm.model_cost`` where the file is not found.
+    """
+    spec = importlib.util.find_spec("litellm")
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        path = Path(folder) / _PRICE_LIST
+        if path.is_file():
+            return json.loads(path.read_bytes())
     from lightemma._litellm import litellm
 
-    entry = litellm.model_cost.get(info.model_id) or litellm.model_cost.get(info.model_id.split("/", 1)[-1])
+    return litellm.model_cost
+
+
+def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
+    """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
+    prices = bundled_price_list()
+    entry = prices.get(info.model_id) or prices.get(info.model_id.split("/", 1)[-1])
     if entry and entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
         return float(entry["input_cost_per_token"]), float(entry["output_cost_per_token"])
     if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:

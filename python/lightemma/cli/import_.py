@@ -22,19 +22,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--output", type=Path, default=Path("runs"), metavar="DIR", help="where the runs go (default: runs)")
     parser.add_argument("--dataset-kind", default="nuscenes", choices=["nuscenes", "synthetic"],
                         help="what the reference scripts ran on (default: nuscenes; recorded, shown by evaluate --with-paper)")
+    parser.add_argument("--jobs", type=int, metavar="N",
+                        help="model folders imported at once, each in its own process (default: one per folder, at most 4 and the CPUs)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
-    from lightemma.runs.importer import import_reference
+    from lightemma.runs.importer import default_jobs, import_reference
+    from lightemma.runs.reference import find_model_folders
 
     def warn(line: str) -> None:
         print(f"lightemma import: warning: {line}", file=sys.stderr, flush=True)
 
+    jobs = args.jobs if args.jobs is not None else default_jobs(sum(len(find_model_folders(s)) for s in args.sources))
     results = import_reference(args.sources, args.output, dataset_kind=args.dataset_kind, warn=warn,
-                               progress=not args.quiet and sys.stderr.isatty())
+                               progress=not args.quiet and sys.stderr.isatty(), jobs=jobs)
     for result in results:
         print(result.describe())
     return 1 if any(r.outcome == "nothing to import" for r in results) else 0

@@ -344,7 +344,8 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
     """Import one model folder into ``output``; see the module docstring. Returns what was done."""
     if dataset_kind not in DATASET_KINDS:
         raise UserError(f"--dataset-kind must be one of {', '.join(DATASET_KINDS)}, got {dataset_kind!r}")
-    metadata_model = _first_metadata_model(folder)
+    known = reference_model(folder.model_name)
+    metadata_model = None if known is not None else _first_metadata_model(folder)
     model, info = _model(folder, metadata_model)
     digest = source_hash(folder.files, folder.path)
     run_id = "ref-" + digest.split(":", 1)[1][:12]
@@ -378,6 +379,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                 _report_problems(scene, warn)
                 frames_skipped += len(scene.problems)
                 stamp = stamp or scene.timestamp
+                metadata_model = metadata_model or scene.metadata_model
                 lines = []
                 for record in _scene_records(scene, prices, warn):
                     if record["frame_id"] in seen:
@@ -417,14 +419,31 @@ def _remove_empty(folders: list[Path]) -> None:
             return
 
 
+def _import_quietly(folder: ModelFolder, output: str, dataset_kind: str) -> tuple[ImportResult, list[str]]:
+    """One folder in a worker process: its result and its warnings (printed by the parent, in order)."""
+    warnings: list[str] = []
+    return import_folder(folder, output, dataset_kind=dataset_kind, warn=warnings.append), warnings
+
+
+def default_jobs(folders: int) -> int:
+    """Worker processes for ``folders`` model folders: one per folder, at most the CPUs and at most 4 (memory)."""
+    return max(1, min(folders, os.cpu_count() or 1, 4))
+
+
 def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os.PathLike[str] = "runs", *,
-                     dataset_kind: str = "nuscenes", warn: Warn = lambda _: None, progress: bool = False) -> list[ImportResult]:
+                     dataset_kind: str = "nuscenes", warn: Warn = lambda _: None, progress: bool = False,
+                     jobs: int = 1) -> list[ImportResult]:
     """Import reference result folders (each a model folder or a folder holding several) into ``output``.
 
     Returns one :class:`ImportResult` per model folder. Skipped files and frames
-    are passed to ``warn`` (one line each). Raises :class:`UserError` when a
-    source holds no reference results.
+    are passed to ``warn`` (one line each). ``jobs`` > 1 imports that many model
+    folders at once in worker processes (see :func:`default_jobs`). Raises
+    :class:`UserError` when a source holds no reference results.
     """
+    if dataset_kind not in DATASET_KINDS:
+        raise UserError(f"--dataset-kind must be one of {', '.join(DATASET_KINDS)}, got {dataset_kind!r}")
+    if jobs < 1:
+        raise UserError(f"--jobs must be at least 1, got {jobs}")
     folders = [f for src in sources for f in find_model_folders(src)]
     if not folders:
         raise UserError("no source folder given")
@@ -437,6 +456,21 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
         warn(line)
 
     try:
-        return [import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1)) for f in folders]
+        if jobs == 1 or len(folders) == 1:
+            return [import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1)) for f in folders]
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor
+
+        results = []
+        context = multiprocessing.get_context("spawn")  # no fork of a process with threads (the progress bar's)
+        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context) as pool:
+            futures = [pool.submit(_import_quietly, f, os.fspath(output), dataset_kind) for f in folders]
+            for folder, future in zip(folders, futures):
+                result, warnings = future.result()
+                for line in warnings:
+                    say(line)
+                bar.update(len(folder.files))
+                results.append(result)
+        return results
     finally:
         bar.close()

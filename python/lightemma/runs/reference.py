@@ -152,8 +152,11 @@ def join_lines(value: Any) -> str | None:
     """A long text back from the reference's list of lines (joined with one space); a string is kept."""
     if isinstance(value, str):
         return value
-    if isinstance(value, list) and all(isinstance(line, str) for line in value):
-        return " ".join(value)
+    if isinstance(value, list):
+        try:
+            return " ".join(value)  # TypeError when an entry is not a string
+        except TypeError:
+            return None
     return None
 
 
@@ -203,8 +206,17 @@ def _is_number(value: Any) -> bool:
     return type(value) in (int, float) and math.isfinite(value)
 
 
+_NUMBER_TYPES = (int, float)
+
+
 def _pairs(value: Any, n: int, what: str) -> list[list[Any]]:
     """``n`` pairs of finite numbers, as given; :class:`_Bad` naming ``what`` otherwise."""
+    # fast path (x - x == 0 is False for NaN and ±inf; bool is not a number here)
+    if type(value) is list and len(value) == n and all(
+        type(p) is list and len(p) == 2 and type(p[0]) in _NUMBER_TYPES and type(p[1]) in _NUMBER_TYPES
+        and p[0] - p[0] == 0 and p[1] - p[1] == 0 for p in value
+    ):
+        return value
     if not isinstance(value, list):
         raise _Bad(f"{what} is {'missing' if value is None else type(value).__name__}, expected {n} pairs")
     if len(value) != n:
@@ -224,7 +236,7 @@ def _optional_pairs(container: Mapping[str, Any], key: str, n: int, what: str) -
 
 
 def _numbers(value: Any, n: int, what: str) -> list[Any]:
-    if not isinstance(value, list) or len(value) != n or not all(_is_number(v) for v in value):
+    if not (type(value) is list and len(value) == n and all(type(v) in _NUMBER_TYPES and v - v == 0 for v in value)):
         raise _Bad(f"{what} is not {n} finite numbers: {_short(value)}")
     return list(value)
 
