@@ -228,3 +228,29 @@ def test_with_paper_labels_runs_on_synthetic_data(tmp_path, capsys):
     assert main(["evaluate", str(root / "runs"), "--with-paper"]) == 0
     out = capsys.readouterr().out
     assert "| GPT-4o (synthetic data) |" in out and "| GPT-4o (paper) |" in out and "| Δ vs paper |" in out
+
+
+def test_reports_and_pictures_work_on_imported_runs(imported, tmp_path):
+    from PIL import Image
+
+    from lightemma.evaluation import load_run
+    from lightemma.pictures import CameraSource
+    from lightemma.report import write_report
+
+    results, runs = imported
+    run = load_run(runs["gpt-4o"])
+    fid = run.frame_ids[0]
+    record = read_run(runs["gpt-4o"]).records[fid]
+    image = tmp_path / "nuscenes" / "samples" / "CAM_FRONT" / record["image_name"]
+    image.parent.mkdir(parents=True)
+    Image.new("RGB", (64, 36), (10, 20, 30)).save(image)
+    source = CameraSource(str(tmp_path / "nuscenes"))
+    camera = source.cameras([run], [fid])[fid]
+    assert camera.image is not None and camera.image.shape == (36, 64, 3)
+    assert np.allclose(camera.intrinsic, record["camera_params"]["camera_intrinsic"])
+    assert np.allclose(camera.extrinsic[:3, 3], record["camera_params"]["translation"])
+    index = write_report([runs["gpt-4o"], runs["claude-3.7-sonnet"]], tmp_path / "report", frames=[fid], top=1,
+                         dataroot=str(tmp_path / "nuscenes"))
+    text = index.read_text()
+    assert "GPT-4o (paper)" in text and "| Δ vs paper |" in text
+    assert list((tmp_path / "report" / "figures" / "frames").glob("frame_*_grid.png"))
