@@ -1,6 +1,7 @@
 """`lightemma import`: reference result folders become runs — checked, lossless where it matters, idempotent, atomic."""
 
 import json
+import math
 import os
 from pathlib import Path
 
@@ -233,3 +234,16 @@ def test_parallel_import_writes_the_same_runs_and_warnings(tmp_path, results):
     for a, b in zip(one, two):
         assert a.run_dir.name == b.run_dir.name
         assert (a.run_dir / "frames.jsonl").read_bytes() == (b.run_dir / "frames.jsonl").read_bytes()
+
+
+def test_actions_too_large_to_integrate_are_named_and_never_scored(tmp_path):
+    huge = "[" + ", ".join([f"({'9' * 308}, 0)"] * 6) + "]"  # a Python literal: the paper's rules read it as ok
+    rng = np.random.default_rng(2)
+    write_scene(tmp_path / "res" / "gpt-4o", "scene-0001", [make_frame(rng, "scene-0001", i, answer=huge if i == 0 else None) for i in range(3)])
+    warnings = []
+    (result,) = import_reference([tmp_path / "res"], tmp_path / "runs", warn=warnings.append)
+    assert any("non-finite positions" in w and "frame 0" in w for w in warnings)
+    rec = next(r for r in read_run(result.run_dir).records.values() if r["source"]["frame_index"] == 0)
+    assert rec["status"] == "ok" and rec["trajectory"] is None
+    (row,) = evaluate_runs([result.run_dir]).accuracy_rows()
+    assert row["frames"] == 2 and math.isfinite(row["ade_avg"])

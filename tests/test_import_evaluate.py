@@ -156,7 +156,8 @@ def test_parse_rescores_stored_answers_and_says_so(imported, capsys):
         assert row["ade_avg"] == pytest.approx(expected.ade_avg) and row["fde"] == pytest.approx(expected.fde)
     assert main(["evaluate", str(run_dir), "--parse", "strict", "--format", "json"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["parse"] == {"mode": "strict"} and doc["tables"][1]["rows"][0]["parse"] == "strict"
+    assert doc["parse"] == {"mode": "strict", "speed_range": [-10.0, 50.0], "max_abs_curvature": 1.0}
+    assert doc["tables"][1]["rows"][0]["parse"] == "strict"
     assert main(["evaluate", str(run_dir)]) == 0 and "| paper |" in capsys.readouterr().out  # an imported run's own
 
 

@@ -33,7 +33,12 @@ _BLOCK = 2048  # records re-parsed per parser call
 
 @dataclass(frozen=True)
 class ParseDefinition:
-    """How answers are read: a parse mode plus, for ``lenient``/``strict``, plausibility limits (None: the parser's defaults)."""
+    """How answers are read: a parse mode plus, for ``lenient``/``strict``, the plausibility limits.
+
+    Limits left out take the parser's defaults (:data:`lightemma.actions.DEFAULT_SPEED_RANGE`,
+    :data:`~lightemma.actions.DEFAULT_MAX_ABS_CURVATURE`) and are recorded as such; the
+    paper's rules have none.
+    """
 
     mode: str = "lenient"
     speed_range: tuple[float, float] | None = None
@@ -42,8 +47,18 @@ class ParseDefinition:
     def __post_init__(self) -> None:
         if self.mode not in PARSE_MODES:
             raise UserError(f"unknown parse mode {self.mode!r} (choose from {', '.join(PARSE_MODES)})")
-        if self.mode == "paper" and (self.speed_range is not None or self.max_abs_curvature is not None):
-            raise UserError("--speed-range and --max-curvature apply to lenient and strict parsing; the paper's rules have no plausibility limits")
+        if self.mode == "paper":
+            if self.speed_range is not None or self.max_abs_curvature is not None:
+                raise UserError("--speed-range and --max-curvature apply to lenient and strict parsing; the paper's rules have no plausibility limits")
+        else:
+            from lightemma.actions import DEFAULT_MAX_ABS_CURVATURE, DEFAULT_SPEED_RANGE
+
+            if self.speed_range is None:
+                object.__setattr__(self, "speed_range", DEFAULT_SPEED_RANGE)
+            if self.max_abs_curvature is None:
+                object.__setattr__(self, "max_abs_curvature", DEFAULT_MAX_ABS_CURVATURE)
+            object.__setattr__(self, "speed_range", (float(self.speed_range[0]), float(self.speed_range[1])))
+            object.__setattr__(self, "max_abs_curvature", float(self.max_abs_curvature))
         if self.speed_range is not None:
             lo, hi = self.speed_range
             if not lo < hi:
@@ -69,11 +84,15 @@ class ParseDefinition:
         return out
 
     def label(self) -> str:
-        """Short text for tables: ``paper``, ``lenient``, ``strict v∈[-10, 50] |κ|≤1``."""
+        """Short text for tables: ``paper``, ``lenient``; limits only where not the defaults (``strict v∈[0, 30] |κ|≤0.5``)."""
+        if self.mode == "paper":
+            return "paper"
+        from lightemma.actions import DEFAULT_MAX_ABS_CURVATURE, DEFAULT_SPEED_RANGE
+
         extra = []
-        if self.speed_range is not None:
+        if self.speed_range != DEFAULT_SPEED_RANGE:
             extra.append(f"v∈[{self.speed_range[0]:g}, {self.speed_range[1]:g}]")
-        if self.max_abs_curvature is not None:
+        if self.max_abs_curvature != DEFAULT_MAX_ABS_CURVATURE:
             extra.append(f"|κ|≤{self.max_abs_curvature:g}")
         return " ".join([self.mode, *extra])
 

@@ -261,7 +261,12 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
         for j, i in enumerate(received):
             parses[i] = (str(parsed.status[j]), str(parsed.reason[j]), str(parsed.failure[j]))
             if ok[j]:
-                actions[i], trajectories[i] = parsed.actions[j].tolist(), paths[j].tolist()
+                actions[i] = parsed.actions[j].tolist()
+                if not np.isfinite(paths[j]).all():  # numbers so large that the positions overflow
+                    warn(f"{scene.path}: frame {frames[i].frame_index}: its actions integrate to non-finite positions; "
+                         "recorded without a trajectory, never scored")
+                    continue
+                trajectories[i] = paths[j].tolist()
                 theirs = frames[i].reference_trajectory
                 if parsed.status[j] == "ok" and _is_6x2(theirs):
                     gap = float(np.abs(np.asarray(theirs, dtype=np.float64) - paths[j]).max())
