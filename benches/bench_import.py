@@ -15,7 +15,7 @@ each in a fresh subprocess so that peak RSS is clean:
 Usage::
 
     python benches/bench_import.py                          # 13 models x 3,908 frames
-    python benches/bench_import.py --models 2 --keep /tmp/b  # smaller, keep the files
+    python benches/bench_import.py --models 2 --keep /tmp/b  # smaller, keep the files (reused next time)
 """
 
 from __future__ import annotations
@@ -146,10 +146,16 @@ def main() -> int:
     args = parser.parse_args()
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench-import-"))
     try:
-        start = time.perf_counter()
-        frames, megabytes = write_results(root / "results", args.models)
-        print(f"wrote {args.models} model folder(s) x {frames} frames ({SCENES} scene files each), {megabytes:.0f} MB, "
-              f"in {time.perf_counter() - start:.0f} s")
+        for old in root.glob("runs*"):
+            shutil.rmtree(old)
+        if (root / "results").is_dir():  # --keep of an earlier run: reuse its folders
+            megabytes = sum(f.stat().st_size for f in (root / "results").rglob("*.json")) / 1e6
+            print(f"reusing {root / 'results'} ({megabytes:.0f} MB)")
+        else:
+            start = time.perf_counter()
+            frames, megabytes = write_results(root / "results", args.models)
+            print(f"wrote {args.models} model folder(s) x {frames} frames ({SCENES} scene files each), {megabytes:.0f} MB, "
+                  f"in {time.perf_counter() - start:.0f} s")
         base = measure("baseline", root, root)["maxrss_mb"]
         print(f"baseline process (python + numpy + lightemma): {base:.0f} MB RSS; load average {os.getloadavg()[0]:.1f} on {os.cpu_count()} CPUs")
         for mode in ("import", "import-serial", "again", "evaluate"):
