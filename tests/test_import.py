@@ -247,3 +247,14 @@ def test_actions_too_large_to_integrate_are_named_and_never_scored(tmp_path):
     assert rec["status"] == "ok" and rec["trajectory"] is None
     (row,) = evaluate_runs([result.run_dir]).accuracy_rows()
     assert row["frames"] == 2 and math.isfinite(row["ade_avg"])
+
+
+def test_a_stored_trajectory_that_disagrees_with_the_answer_is_reported(tmp_path):
+    rng = np.random.default_rng(4)
+    frames = [make_frame(rng, "scene-0001", i) for i in range(3)]
+    frames[2]["predictions"]["trajectory"][5][0] += 0.5  # the file's own integration differs from its answer's
+    write_scene(tmp_path / "res" / "gpt-4o", "scene-0001", frames)
+    warnings = []
+    import_reference([tmp_path / "res"], tmp_path / "runs", warn=warnings.append)
+    (line,) = warnings
+    assert "scene-0001.json: 1 frame(s) whose stored predictions.trajectory differs" in line and "0.5 m" in line
