@@ -5,7 +5,7 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use lightemma_core::kinematics::{integrate_batch, Method};
 use lightemma_core::metrics::{evaluate, Convention};
-use lightemma_core::parse::{parse_batch, Mode};
+use lightemma_core::parse::{parse_batch, Limits, Mode};
 
 /// Deterministic pseudo-random actions (xorshift), `n` frames of 6 steps.
 fn actions(n: usize) -> Vec<f64> {
@@ -45,7 +45,7 @@ fn kernels(c: &mut Criterion) {
         });
         let texts = answers(n);
         group.bench_with_input(BenchmarkId::new("parse_lenient", n), &texts, |b, t| {
-            b.iter(|| parse_batch(black_box(t), 6, Mode::Lenient).unwrap())
+            b.iter(|| parse_batch(black_box(t), 6, Mode::Lenient, &Limits::DEFAULT).unwrap())
         });
         group.finish();
     }

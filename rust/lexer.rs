@@ -74,7 +74,9 @@ pub fn tokenize(text: &str, out: &mut Vec<Token>, scratch: &mut String) {
         if (signed || !prev_word) && starts_number(bytes, num_start) {
             let end = scan_number(bytes, num_start);
             let glued = text[end..].chars().next().is_some_and(is_word_char);
-            if !glued && is_label(bytes, end, at_line_start && !signed) {
+            if !glued
+                && (is_label(bytes, end, at_line_start && !signed) || describes_horizon(text, end))
+            {
                 out.push(Token {
                     kind: Kind::Other,
                     pos: start,
@@ -156,6 +158,47 @@ fn is_label(bytes: &[u8], end: usize, list_position: bool) -> bool {
         Some(b'/') => bytes.get(end + 1).is_some_and(u8::is_ascii_alphabetic),
         _ => false,
     }
+}
+
+/// Words that make the number before them prose about the horizon, not an action:
+/// `3 seconds`, `0.5 s`, `6 steps`, `6 pairs`.
+const HORIZON_WORDS: &[&str] = &[
+    "s",
+    "sec",
+    "secs",
+    "second",
+    "seconds",
+    "step",
+    "steps",
+    "timestep",
+    "timesteps",
+    "action",
+    "actions",
+    "pair",
+    "pairs",
+    "frame",
+    "frames",
+    "hz",
+    "ms",
+];
+
+/// Whether the number ending at `end` is followed (after spaces) by a horizon word.
+fn describes_horizon(text: &str, end: usize) -> bool {
+    let rest = text[end..].trim_start_matches([' ', '\t']);
+    // at most the longest horizon word plus one character is looked at
+    let mut word_end = None;
+    for (i, c) in rest.char_indices().take(10) {
+        if !is_word_char(c) {
+            word_end = Some(i);
+            break;
+        }
+    }
+    let word = match word_end {
+        Some(i) => &rest[..i],
+        None if rest.chars().nth(9).is_none() => rest,
+        None => return false,
+    };
+    HORIZON_WORDS.iter().any(|w| w.eq_ignore_ascii_case(word))
 }
 
 fn starts_number(bytes: &[u8], i: usize) -> bool {
@@ -258,6 +301,14 @@ mod tests {
         assert_eq!(nums("c1 = 0.01 1/m, v = 3 m/s"), vec![0.01, 3.0]);
         // a fraction ending a sentence mid-line is still a number
         assert_eq!(nums("speed 5. then 4.5"), vec![5.0, 4.5]);
+    }
+
+    #[test]
+    fn numbers_describing_the_horizon_are_not_numbers() {
+        assert_eq!(
+            nums("Over the next 3 seconds at 0.5 s steps (6 steps): 5.0 0.01 6 pairs 2 Hz 4 sx"),
+            vec![5.0, 0.01, 4.0]
+        );
     }
 
     #[test]

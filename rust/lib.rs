@@ -1,6 +1,7 @@
 //! lightemma's numeric and text kernels.
 //!
-//! * [`parse`] (with [`lexer`]): a model's stage-3 answer → (speed, curvature) actions;
+//! * [`parse`] (with [`lexer`], [`paper`], [`json`]): a model's stage-3 answer → (speed, curvature)
+//!   actions, a status, a failure kind and a reason;
 //! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
 //! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
 //! * [`error`]: the one error type, mapped to Python's `ValueError` in `python.rs`.
@@ -9,8 +10,10 @@
 
 pub mod error;
 pub mod fastmath;
+pub mod json;
 pub mod kinematics;
 pub mod lexer;
 pub mod metrics;
+pub mod paper;
 pub mod parse;
 mod python;

@@ -1,24 +1,28 @@
-//! Parsing a model's stage-3 answer into `n` (speed, curvature) actions (SPEC §3).
+//! Parsing a model's stage-3 answer into `n` (speed, curvature) actions.
 //!
 //! * **strict**: after trimming, the whole answer is `[(v, c), …]` with exactly
 //!   `n` pairs of finite plain numbers (round or square inner brackets).
-//! * **lenient**: the first `n` bracketed pairs anywhere in the answer; failing
-//!   that, the first `2n` standalone numbers.
+//! * **lenient**: the strict format, else the actions found in the answer's
+//!   structure (see [`crate::lenient`]).
+//! * **paper**: the paper's own FE / FE corr rules (see [`crate::paper`]).
+//! * **json**: a provider's structured output `{"actions": [[v, c], …]}` (see [`crate::json`]).
 //!
-//! Every answer gets a [`Status`] and, unless `Ok`, a short reason.
+//! Strict, lenient and json answers then pass a plausibility gate ([`Limits`]).
+//! Every answer gets a [`Status`], a [`Failure`] kind and, unless plainly `Ok`, a short reason.
 
 use crate::error::{CoreError, CoreResult};
 use crate::lexer::{tokenize, Kind, Token};
+use crate::{json, paper};
 
 /// How an answer parsed.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 #[repr(u8)]
 pub enum Status {
-    /// The strict format was met.
+    /// The strict format was met (in paper mode: the paper's literal rule).
     Ok = 0,
-    /// Only the lenient parser found the actions.
+    /// Only the lenient reading found the actions (paper mode: the digit-run rule).
     Corrected = 1,
-    /// No actions could be found (or some were not finite).
+    /// No usable actions.
     Failed = 2,
 }
 
@@ -32,20 +36,45 @@ impl Status {
     }
 }
 
-/// Which parsers to try.
+/// Why an answer failed (`None` when it did not).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u8)]
+pub enum Failure {
+    None = 0,
+    /// The answer ends inside the list, a pair or a reasoning block.
+    Truncated = 1,
+    /// Read fine, but a speed or curvature is outside the [`Limits`].
+    Implausible = 2,
+    /// Everything else: no list, malformed pairs, non-finite values, empty answers.
+    Format = 3,
+}
+
+impl Failure {
+    pub const NAMES: &'static [&'static str] = &["", "truncated", "implausible", "format"];
+
+    pub fn as_str(self) -> &'static str {
+        Self::NAMES[self as usize]
+    }
+}
+
+/// Which rules to apply.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Mode {
     Strict,
     Lenient,
+    Paper,
+    Json,
 }
 
 impl Mode {
-    pub const NAMES: &'static [&'static str] = &["strict", "lenient"];
+    pub const NAMES: &'static [&'static str] = &["strict", "lenient", "paper", "json"];
 
     pub fn from_name(name: &str) -> CoreResult<Self> {
         match name {
             "strict" => Ok(Mode::Strict),
             "lenient" => Ok(Mode::Lenient),
+            "paper" => Ok(Mode::Paper),
+            "json" => Ok(Mode::Json),
             _ => Err(CoreError::UnknownName {
                 kind: "parse mode",
                 name: name.to_owned(),
@@ -55,10 +84,108 @@ impl Mode {
     }
 }
 
+/// Plausibility limits: speeds in `speed` (m/s, inclusive), `|curvature| <= curvature` (1/m).
+/// `None` disables a limit. Paper mode never applies them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Limits {
+    pub speed: Option<(f64, f64)>,
+    pub curvature: Option<f64>,
+}
+
+impl Limits {
+    /// [−10, 50] m/s and |κ| ≤ 1 /m (a turning radius of at least 1 m).
+    pub const DEFAULT: Limits = Limits {
+        speed: Some((-10.0, 50.0)),
+        curvature: Some(1.0),
+    };
+    pub const NONE: Limits = Limits {
+        speed: None,
+        curvature: None,
+    };
+
+    /// Checked limits: finite, `lo < hi`, `curvature > 0`.
+    pub fn new(speed: Option<(f64, f64)>, curvature: Option<f64>) -> CoreResult<Self> {
+        if let Some((lo, hi)) = speed {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(CoreError::Argument(format!(
+                    "speed_range must be two finite numbers (lo, hi) with lo < hi, got ({lo}, {hi})"
+                )));
+            }
+        }
+        if let Some(k) = curvature {
+            if !(k.is_finite() && k > 0.0) {
+                return Err(CoreError::Argument(format!(
+                    "max_abs_curvature must be a finite number > 0, got {k}"
+                )));
+            }
+        }
+        Ok(Limits { speed, curvature })
+    }
+
+    /// The first value outside the limits, as a reason naming its step.
+    fn check(&self, values: &[f64]) -> Option<String> {
+        for (step, pair) in values.chunks_exact(2).enumerate() {
+            let (v, c) = (pair[0], pair[1]);
+            if let Some((lo, hi)) = self.speed {
+                if !(lo..=hi).contains(&v) {
+                    return Some(format!(
+                        "speed {v} at step {} outside [{lo}, {hi}] m/s",
+                        step + 1
+                    ));
+                }
+            }
+            if let Some(k) = self.curvature {
+                if c.abs() > k {
+                    return Some(format!(
+                        "curvature {c} at step {} outside [-{k}, {k}] 1/m",
+                        step + 1
+                    ));
+                }
+            }
+        }
+        None
+    }
+}
+
+/// The outcome for one answer besides its values.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Outcome {
+    pub status: Status,
+    pub failure: Failure,
+    pub reason: String,
+}
+
+impl Outcome {
+    fn ok() -> Self {
+        Outcome {
+            status: Status::Ok,
+            failure: Failure::None,
+            reason: String::new(),
+        }
+    }
+
+    fn corrected(reason: String) -> Self {
+        Outcome {
+            status: Status::Corrected,
+            failure: Failure::None,
+            reason,
+        }
+    }
+
+    fn failed(failure: Failure, reason: String) -> Self {
+        Outcome {
+            status: Status::Failed,
+            failure,
+            reason,
+        }
+    }
+}
+
 /// The outcome for one answer: `values` holds `2n` numbers (v1, c1, v2, c2, …) unless failed.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Parsed {
     pub status: Status,
+    pub failure: Failure,
     pub values: Option<Vec<f64>>,
     pub reason: String,
 }
@@ -75,47 +202,125 @@ impl Parser {
         Self::default()
     }
 
-    /// Parse one answer for `n` actions. `values` is written into `out` (length `2n`,
-    /// NaN where failed); the status and reason are returned.
+    /// Parse one answer for `n` actions. The values are written into `out` (length `2n`,
+    /// NaN where failed).
     pub fn parse_into(
         &mut self,
         text: &str,
         n: usize,
         mode: Mode,
+        limits: &Limits,
         out: &mut [f64],
-    ) -> (Status, String) {
+    ) -> Outcome {
         debug_assert_eq!(out.len(), 2 * n);
+        let outcome = match mode {
+            Mode::Paper => self.paper(text, n, out),
+            Mode::Json => match json::parse(text, n, out) {
+                Ok(()) => gate(Outcome::ok(), limits, out),
+                Err(e) => Outcome::failed(
+                    if e.truncated {
+                        Failure::Truncated
+                    } else {
+                        Failure::Format
+                    },
+                    e.reason,
+                ),
+            },
+            Mode::Strict | Mode::Lenient => self.strict_or_lenient(text, n, mode, out),
+        };
+        let outcome = match (outcome.status, mode) {
+            (Status::Failed, _) => outcome,
+            (_, Mode::Paper | Mode::Json) => outcome,
+            _ => gate(outcome, limits, out),
+        };
+        if outcome.status == Status::Failed {
+            out.fill(f64::NAN);
+        }
+        outcome
+    }
+
+    fn paper(&mut self, text: &str, n: usize, out: &mut [f64]) -> Outcome {
+        let outcome = match paper::parse(text, n, out, &mut self.scratch) {
+            paper::PaperOutcome::Literal => Outcome::ok(),
+            paper::PaperOutcome::DigitRuns { why, found } => Outcome::corrected(format!(
+                "not a Python list of {n} (v, c) tuples ({} at position {}); took the first {} of {found} numbers",
+                why.why,
+                why.pos,
+                2 * n
+            )),
+            paper::PaperOutcome::Failed { why, found } => {
+                return Outcome::failed(
+                    Failure::Format,
+                    format!(
+                        "not a Python list of {n} (v, c) tuples ({} at position {}), and only {found} number(s) for {} values",
+                        why.why,
+                        why.pos,
+                        2 * n
+                    ),
+                )
+            }
+        };
+        finite(outcome, out)
+    }
+
+    fn strict_or_lenient(&mut self, text: &str, n: usize, mode: Mode, out: &mut [f64]) -> Outcome {
         tokenize(text, &mut self.tokens, &mut self.scratch);
         if self.tokens.is_empty() {
-            out.fill(f64::NAN);
-            return (Status::Failed, "empty answer".to_owned());
+            return Outcome::failed(Failure::Format, "empty answer".to_owned());
         }
         let strict_err = match strict(&self.tokens, text, n, out) {
-            Ok(()) => return (Status::Ok, String::new()),
+            Ok(()) => return finite(Outcome::ok(), out),
             Err(reason) => reason,
         };
         if mode == Mode::Strict {
-            out.fill(f64::NAN);
-            return (Status::Failed, strict_err);
+            return Outcome::failed(Failure::Format, strict_err);
         }
         match lenient(&self.tokens, n, out) {
-            Ok(()) => (Status::Corrected, strict_err),
-            Err(reason) => {
-                out.fill(f64::NAN);
-                (Status::Failed, reason)
-            }
+            Ok(()) => finite(Outcome::corrected(strict_err), out),
+            Err(reason) => Outcome::failed(Failure::Format, reason),
         }
     }
 
     /// Convenience wrapper returning a [`Parsed`].
-    pub fn parse(&mut self, text: &str, n: usize, mode: Mode) -> Parsed {
+    pub fn parse(&mut self, text: &str, n: usize, mode: Mode, limits: &Limits) -> Parsed {
         let mut values = vec![f64::NAN; 2 * n];
-        let (status, reason) = self.parse_into(text, n, mode, &mut values);
+        let o = self.parse_into(text, n, mode, limits, &mut values);
         Parsed {
-            status,
-            values: (status != Status::Failed).then_some(values),
-            reason,
+            status: o.status,
+            failure: o.failure,
+            values: (o.status != Status::Failed).then_some(values),
+            reason: o.reason,
         }
+    }
+}
+
+/// Fail an outcome whose values are not all finite.
+fn finite(outcome: Outcome, values: &[f64]) -> Outcome {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => outcome,
+        Some(idx) => Outcome::failed(
+            Failure::Format,
+            format!(
+                "action {} has a non-finite {}",
+                idx / 2 + 1,
+                if idx % 2 == 0 { "speed" } else { "curvature" }
+            ),
+        ),
+    }
+}
+
+/// Fail a parsed outcome whose values are outside `limits`.
+fn gate(outcome: Outcome, limits: &Limits, values: &[f64]) -> Outcome {
+    if outcome.status == Status::Failed {
+        return outcome;
+    }
+    let outcome = finite(outcome, values);
+    if outcome.status == Status::Failed {
+        return outcome;
+    }
+    match limits.check(values) {
+        None => outcome,
+        Some(reason) => Outcome::failed(Failure::Implausible, reason),
     }
 }
 
@@ -238,7 +443,7 @@ fn lenient(tokens: &[Token], n: usize, out: &mut [f64]) -> Result<(), String> {
         }
     }
     if pairs == n {
-        return check_finite(out);
+        return Ok(());
     }
     let mut count = 0;
     for t in tokens {
@@ -246,7 +451,7 @@ fn lenient(tokens: &[Token], n: usize, out: &mut [f64]) -> Result<(), String> {
             out[count] = value;
             count += 1;
             if count == 2 * n {
-                return check_finite(out);
+                return Ok(());
             }
         }
     }
@@ -280,36 +485,31 @@ fn pair_at(tokens: &[Token], i: usize) -> Option<(f64, f64, usize)> {
     }
 }
 
-fn check_finite(values: &[f64]) -> Result<(), String> {
-    match values.iter().position(|v| !v.is_finite()) {
-        None => Ok(()),
-        Some(idx) => Err(format!(
-            "action {} has a non-finite {}",
-            idx / 2 + 1,
-            if idx % 2 == 0 { "speed" } else { "curvature" }
-        )),
-    }
-}
+/// A parsed batch: values (`N × n × 2`, NaN where failed), status and failure codes, reasons.
+pub type Batch = (Vec<f64>, Vec<u8>, Vec<u8>, Vec<String>);
 
-/// Parse a batch: values (`N × n × 2`, NaN where failed), status codes and reasons.
+/// Parse a batch of answers.
 pub fn parse_batch<S: AsRef<str>>(
     texts: &[S],
     n: usize,
     mode: Mode,
-) -> CoreResult<(Vec<f64>, Vec<u8>, Vec<String>)> {
+    limits: &Limits,
+) -> CoreResult<Batch> {
     if n == 0 {
         return Err(CoreError::Argument("n must be at least 1".to_owned()));
     }
     let mut values = vec![f64::NAN; texts.len() * 2 * n];
     let mut status = Vec::with_capacity(texts.len());
+    let mut failure = Vec::with_capacity(texts.len());
     let mut reasons = Vec::with_capacity(texts.len());
     let mut parser = Parser::new();
     for (text, out) in texts.iter().zip(values.chunks_exact_mut(2 * n)) {
-        let (s, r) = parser.parse_into(text.as_ref(), n, mode, out);
-        status.push(s as u8);
-        reasons.push(r);
+        let o = parser.parse_into(text.as_ref(), n, mode, limits, out);
+        status.push(o.status as u8);
+        failure.push(o.failure as u8);
+        reasons.push(o.reason);
     }
-    Ok((values, status, reasons))
+    Ok((values, status, failure, reasons))
 }
 
 #[cfg(test)]
@@ -321,7 +521,7 @@ mod tests {
     ];
 
     fn run(text: &str, mode: Mode) -> Parsed {
-        Parser::new().parse(text, 6, mode)
+        Parser::new().parse(text, 6, mode, &Limits::DEFAULT)
     }
 
     #[test]
@@ -430,18 +630,20 @@ mod tests {
 
     #[test]
     fn batch_layout_and_unknown_mode() {
-        let (values, status, reasons) = parse_batch(
+        let (values, status, failure, reasons) = parse_batch(
             &["[(1,2),(3,4),(5,6),(7,8),(9,10),(11,12)]", "nope"],
             6,
             Mode::Lenient,
+            &Limits::NONE,
         )
         .unwrap();
+        assert_eq!(failure, vec![0, 3]);
         assert_eq!(values.len(), 24);
         assert_eq!(values[11], 12.0);
         assert!(values[12].is_nan());
         assert_eq!(status, vec![0, 2]);
         assert!(reasons[0].is_empty() && !reasons[1].is_empty());
         assert!(Mode::from_name("fuzzy").is_err());
-        assert!(parse_batch(&["x"], 0, Mode::Lenient).is_err());
+        assert!(parse_batch(&["x"], 0, Mode::Lenient, &Limits::NONE).is_err());
     }
 }

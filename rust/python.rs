@@ -10,6 +10,7 @@ use numpy::{
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::pybacked::PyBackedStr;
+use pyo3::types::{PyList, PyString};
 
 use crate::error::CoreError;
 use crate::{kinematics, metrics, parse};
@@ -57,30 +58,73 @@ fn shape_to_3d(data: Vec<f64>, n: usize, t: usize) -> PyResult<Array3<f64>> {
     Array3::from_shape_vec((n, t, 2), data).map_err(|e| PyValueError::new_err(e.to_string()))
 }
 
-/// What `parse_actions` returns: actions, status codes, reasons.
+/// What `parse_actions` returns: actions, status codes, failure codes, reasons.
 type ParsedBatch<'py> = (
     Bound<'py, PyArray3<f64>>,
+    Bound<'py, PyArray1<u8>>,
     Bound<'py, PyArray1<u8>>,
     Vec<String>,
 );
 
-/// parse_actions(texts, n, mode) -> (actions (N, n, 2), status codes (N,), reasons)
+/// An answer's text: borrowed from the Python string, or a lossy copy when the
+/// string holds lone surrogates (which have no UTF-8 form).
+enum Text {
+    Backed(PyBackedStr),
+    Lossy(String),
+}
+
+impl AsRef<str> for Text {
+    fn as_ref(&self) -> &str {
+        match self {
+            Text::Backed(s) => s,
+            Text::Lossy(s) => s,
+        }
+    }
+}
+
+/// The texts of a list of str; a non-str item is a `ValueError` naming it.
+fn texts_of(list: &Bound<'_, PyList>) -> PyResult<Vec<Text>> {
+    let mut texts = Vec::with_capacity(list.len());
+    for (i, item) in list.iter().enumerate() {
+        let s = item.cast_into::<PyString>().map_err(|e| {
+            let type_name = e
+                .into_inner()
+                .get_type()
+                .name()
+                .map_or_else(|_| "?".to_owned(), |n| n.to_string());
+            PyValueError::new_err(format!("texts must be str: item {i} is {type_name}"))
+        })?;
+        texts.push(match PyBackedStr::try_from(s.clone()) {
+            Ok(backed) => Text::Backed(backed),
+            Err(_) => Text::Lossy(s.to_string_lossy().into_owned()),
+        });
+    }
+    Ok(texts)
+}
+
+/// parse_actions(texts, n, mode, speed_range, max_abs_curvature)
+///     -> (actions (N, n, 2), status codes (N,), failure codes (N,), reasons)
 #[pyfunction]
-#[pyo3(signature = (texts, n = 6, mode = "lenient"))]
+#[pyo3(signature = (texts, n = 6, mode = "lenient", speed_range = Some((-10.0, 50.0)), max_abs_curvature = Some(1.0)))]
 fn parse_actions<'py>(
     py: Python<'py>,
-    texts: Vec<PyBackedStr>,
+    texts: &Bound<'py, PyList>,
     n: usize,
     mode: &str,
+    speed_range: Option<(f64, f64)>,
+    max_abs_curvature: Option<f64>,
 ) -> PyResult<ParsedBatch<'py>> {
     let mode = parse::Mode::from_name(mode)?;
+    let limits = parse::Limits::new(speed_range, max_abs_curvature)?;
+    let texts = texts_of(texts)?;
     let count = texts.len();
-    let (values, status, reasons) =
-        maybe_detach(py, count, || parse::parse_batch(&texts, n, mode))?;
+    let (values, status, failure, reasons) =
+        maybe_detach(py, count, || parse::parse_batch(&texts, n, mode, &limits))?;
     let values = shape_to_3d(values, count, n)?;
     Ok((
         values.into_pyarray(py),
         Array1::from(status).into_pyarray(py),
+        Array1::from(failure).into_pyarray(py),
         reasons,
     ))
 }
@@ -186,6 +230,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add("METHODS", kinematics::Method::NAMES.to_vec())?;
     m.add("CONVENTIONS", metrics::Convention::NAMES.to_vec())?;
     m.add("PARSE_MODES", parse::Mode::NAMES.to_vec())?;
+    m.add("PARSE_FAILURES", parse::Failure::NAMES.to_vec())?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

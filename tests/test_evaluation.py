@@ -214,12 +214,15 @@ def test_cli_markdown_layout_with_paper(two_runs, capsys):
     text = capsys.readouterr().out
     lines = text.splitlines()
     header = next(i for i, line in enumerate(lines) if line.startswith("| Model | Frames | FE (%)"))
-    assert lines[header] == "| Model | Frames | FE (%) | FE corr (%) | ADE 1s (m) | ADE 2s (m) | ADE 3s (m) | ADE avg (m) | FDE (m) | Miss (%) |"
-    body = lines[header + 2 : header + 2 + 17]
-    assert body[0].startswith("| GPT-4o | ") and body[1].startswith("| baseline:cv | ")
-    assert "| GPT-4o (paper) | 3908 | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - |" in body
+    assert lines[header] == "| Model | Frames | FE (%) | FE corr (%) | ADE 1s (m) | ADE 2s (m) | ADE 3s (m) | ADE avg (m) | FDE (m) | Miss (%) | Parse |"
+    body = lines[header + 2 : header + 2 + 19]
+    # the run, then the paper's row of its model, then the difference; then the baseline; then the other paper rows
+    assert body[0].startswith("| GPT-4o (synthetic data) | ") and body[0].endswith("| lenient |")  # synthetic records
+    assert body[1] == "| GPT-4o (paper) | 3908 | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
+    assert body[2].startswith("| Δ vs paper | - | ") and body[3].startswith("| baseline:cv (synthetic data) | ")
+    assert body[4].startswith("| GPT-5.0 (paper) | ") and len([b for b in body if "(paper)" in b]) == 15
     assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | 402 | - | - | - | 3908 |" in text
-    assert all(len(line.split("|")) == 12 for line in body)
+    assert all(len(line.split("|")) == 13 for line in body)
 
 
 def test_csv_latex_json_formats(two_runs, capsys):

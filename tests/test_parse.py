@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 import pytest
@@ -65,14 +66,91 @@ def test_ok_mask_and_len():
     ("kwargs", "message"),
     [
         ({"texts": [1, 2]}, "item 0 is int"),
-        ({"texts": None}, "str or a sequence of str"),
+        ({"texts": ["ok", None]}, "item 1 is NoneType"),
+        ({"texts": ("a", b"b")}, "item 1 is bytes"),
+        ({"texts": None}, "str or an iterable of str, got NoneType"),
+        ({"texts": b"[(1, 2)]"}, "got bytes"),
+        ({"texts": 5}, "got int"),
+        ({"texts": np.zeros(3)}, "array of str, got dtype float64"),
+        ({"texts": np.array([["a"], ["b"]])}, "1-D array of str, got shape (2, 1)"),
+        ({"texts": np.array(["a", 3], dtype=object)}, "item 1 is int"),
         ({"texts": "x", "n": 0}, "n must be a positive integer"),
-        ({"texts": "x", "mode": "fuzzy"}, "unknown parse mode \"fuzzy\"; expected one of: strict, lenient"),
+        ({"texts": "x", "n": True}, "n must be a positive integer"),
+        ({"texts": "x", "mode": "fuzzy"}, "unknown parse mode \"fuzzy\"; expected one of: strict, lenient, paper, json"),
+        ({"texts": "x", "mode": None}, "mode must be one of"),
+        ({"texts": "x", "speed_range": (50, -10)}, "lo < hi"),
+        ({"texts": "x", "speed_range": (0, float("nan"))}, "lo < hi"),
+        ({"texts": "x", "speed_range": (0, float("inf"))}, "finite"),
+        ({"texts": "x", "speed_range": 50}, "speed_range must be (lo, hi)"),
+        ({"texts": "x", "speed_range": ("a", "b")}, "two numbers"),
+        ({"texts": "x", "max_abs_curvature": 0}, "max_abs_curvature must be a finite number > 0"),
+        ({"texts": "x", "max_abs_curvature": -1.0}, "max_abs_curvature must be a finite number > 0"),
+        ({"texts": "x", "max_abs_curvature": "1"}, "max_abs_curvature must be a number"),
+        ({"texts": "x", "max_abs_curvature": True}, "max_abs_curvature must be a number"),
     ],
 )
 def test_bad_arguments_raise_value_error(kwargs, message):
-    with pytest.raises(ValueError, match=message.replace("(", r"\(")):
+    with pytest.raises(ValueError, match=re.escape(message)):
         lightemma.parse_actions(**kwargs)
+
+
+EXACT = "[(5.0, 0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]"
+
+
+def test_texts_may_be_any_iterable_or_a_numpy_array_of_str():
+    want = lightemma.parse_actions([EXACT, "nope"])
+    for texts in ((EXACT, "nope"), iter([EXACT, "nope"]), np.array([EXACT, "nope"]), np.array([EXACT, "nope"], dtype=object),
+                  {EXACT: 1, "nope": 2}.keys(), [np.str_(EXACT), "nope"]):
+        got = lightemma.parse_actions(texts)
+        assert got.status.tolist() == want.status.tolist() == ["ok", "failed"]
+        np.testing.assert_array_equal(got.actions, want.actions)
+
+
+def test_lone_surrogates_do_not_raise():
+    parsed = lightemma.parse_actions(["\ud800" + EXACT, "\udfff"])
+    assert parsed.status.tolist() == ["corrected", "failed"]
+
+
+def test_failure_kinds():
+    parsed = lightemma.parse_actions([EXACT, "", "no actions here", EXACT.replace("7.5", "75.0"), EXACT.replace("nan", "x").replace("0.003", "nan")])
+    assert parsed.failure.tolist() == ["", "format", "format", "implausible", "format"]
+    assert parsed.reason[3] == "speed 75 at step 6 outside [-10, 50] m/s"
+    assert parsed.failure.dtype.kind == "U" and parsed.status.dtype.kind == "U"
+
+
+def test_plausibility_limits_are_options():
+    fast = EXACT.replace("7.5", "60.0")
+    sharp = EXACT.replace("-0.02", "-1.5")
+    assert lightemma.parse_actions([fast, sharp]).failure.tolist() == ["implausible", "implausible"]
+    assert lightemma.parse_actions(sharp).reason[0] == "curvature -1.5 at step 3 outside [-1, 1] 1/m"
+    off = lightemma.parse_actions([fast, sharp], speed_range=None, max_abs_curvature=None)
+    assert off.status.tolist() == ["ok", "ok"]
+    assert off.actions[0, 5, 0] == 60.0 and off.actions[1, 2, 1] == -1.5
+    # limits are inclusive, and can be tightened
+    assert lightemma.parse_actions(fast, speed_range=(0, 60)).status[0] == "ok"
+    assert lightemma.parse_actions(EXACT, speed_range=(0, 7)).reason[0] == "speed 7.5 at step 6 outside [0, 7] m/s"
+    assert lightemma.parse_actions(EXACT, max_abs_curvature=0.01).failure[0] == "implausible"
+    # the gate applies in strict and json modes too, never in paper mode
+    assert lightemma.parse_actions(fast, mode="strict").failure[0] == "implausible"
+    assert lightemma.parse_actions(fast, mode="paper").status[0] == "ok"
+
+
+def test_plausibility_record():
+    from lightemma.actions import plausibility
+
+    assert plausibility() == {"speed_range": [-10.0, 50.0], "max_abs_curvature": 1.0}
+    assert plausibility(None, None) == {"speed_range": None, "max_abs_curvature": None}
+    assert plausibility((0, 30), 0.5) == {"speed_range": [0.0, 30.0], "max_abs_curvature": 0.5}
+    with pytest.raises(ValueError, match="lo < hi"):
+        plausibility((5, 5))
+
+
+def test_json_mode():
+    obj = '{"actions": [[5.0, 0.01], [5.5, 0.0], [6.0, -0.02], [6.5, 0.0], [7.0, 0.0], [7.5, 0.003]]}'
+    parsed = lightemma.parse_actions([obj, "```json\n" + obj + "\n```", obj[:-10], EXACT, obj.replace("5.5", "+5.5")], mode="json")
+    assert parsed.status.tolist() == ["ok", "ok", "failed", "failed", "failed"]
+    assert parsed.failure.tolist() == ["", "", "truncated", "format", "format"]
+    np.testing.assert_array_equal(parsed.actions[0], lightemma.parse_actions(EXACT).actions[0])
 
 
 def test_empty_batch():
@@ -90,12 +168,12 @@ def test_hostile_inputs_finish_and_fail_cleanly():
         "\x00\ufffd\u202e" * 1000,
         "-" * 100_000 + "1",
         "1e" + "9" * 10_000,
-        ", ".join(["(1, 2)"] * 100_000),  # far more pairs than needed: the first six are taken
+        ", ".join(["(1, 0.2)"] * 100_000),  # far more pairs than needed: the first six are taken
     ]
     parsed = lightemma.parse_actions(hostile)
     assert parsed.status[:-1].tolist() == ["failed"] * (len(hostile) - 1)
     assert parsed.status[-1] == "corrected"
-    np.testing.assert_array_equal(parsed.actions[-1], np.tile([1.0, 2.0], (6, 1)))
+    np.testing.assert_array_equal(parsed.actions[-1], np.tile([1.0, 0.2], (6, 1)))
 
 
 finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
@@ -105,9 +183,13 @@ finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinit
 @given(st.lists(st.tuples(finite, finite), min_size=6, max_size=6))
 def test_round_trip_of_the_exact_format(pairs):
     text = "[" + ", ".join(f"({v!r}, {c!r})" for v, c in pairs) + "]"
-    parsed = lightemma.parse_actions(text, mode="strict")
+    parsed = lightemma.parse_actions(text, mode="strict", speed_range=None, max_abs_curvature=None)
     assert parsed.status[0] == "ok", parsed.reason[0]
     np.testing.assert_array_equal(parsed.actions[0], np.array(pairs))
+    # with the default limits: failed as implausible exactly when a value is outside them
+    gated = lightemma.parse_actions(text, mode="strict")
+    outside = any(not -10 <= v <= 50 or abs(c) > 1 for v, c in pairs)
+    assert gated.failure[0] == ("implausible" if outside else ""), gated.reason[0]
 
 
 @settings(max_examples=300, deadline=None)
@@ -117,7 +199,7 @@ def test_pairs_survive_prose_around_them(pairs, before, after):
     clean = str.maketrans("", "", "()[]0123456789.-+\u2212eEnNiIfF")
     before, after = before.translate(clean), after.translate(clean)
     text = before + " [" + ", ".join(f"({v!r}, {c!r})" for v, c in pairs) + "] " + after
-    parsed = lightemma.parse_actions(text)
+    parsed = lightemma.parse_actions(text, speed_range=None, max_abs_curvature=None)
     assert parsed.status[0] in ("ok", "corrected")
     np.testing.assert_array_equal(parsed.actions[0], np.array(pairs))
 

@@ -120,3 +120,15 @@ def test_openai_compatible_endpoint_needs_no_key(monkeypatch):
     assert require_api_key("openai/served-model", "http://127.0.0.1:9/v1")
     monkeypatch.setenv("OPENAI_API_KEY", "sk-local-123456789")
     assert require_api_key("openai/served-model", "http://127.0.0.1:9/v1") == "sk-local-123456789"
+
+
+def test_prices_come_from_litellms_bundled_list_without_importing_it():
+    from lightemma.registry import PAPER_MODELS, bundled_price_list
+
+    bundled = bundled_price_list()
+    assert all(bundled.get(k) == v for k, v in litellm.model_cost.items())  # the same list litellm loads offline
+    for m in PAPER_MODELS:
+        if m.backend == "api":
+            entry = litellm.model_cost.get(m.model_id) or litellm.model_cost.get(m.model_id.split("/", 1)[-1])
+            if entry:
+                assert price_per_token(m) == (entry["input_cost_per_token"], entry["output_cost_per_token"])

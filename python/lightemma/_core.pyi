@@ -6,12 +6,18 @@ import numpy.typing as npt
 __version__: str
 METHODS: list[str]
 CONVENTIONS: list[str]
-PARSE_MODES: list[str]
+PARSE_MODES: list[str]  # strict, lenient, paper, json
+PARSE_FAILURES: list[str]  # failure codes 0..3: "", truncated, implausible, format
 
 def parse_actions(
-    texts: list[str], n: int = 6, mode: str = "lenient"
-) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8], list[str]]:
-    """Parse answers: actions (N, n, 2) with NaN where failed, status codes (0 ok, 1 corrected, 2 failed), reasons."""
+    texts: list[str],
+    n: int = 6,
+    mode: str = "lenient",
+    speed_range: tuple[float, float] | None = (-10.0, 50.0),
+    max_abs_curvature: float | None = 1.0,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8], npt.NDArray[np.uint8], list[str]]:
+    """Parse answers: actions (N, n, 2) with NaN where failed, status codes (0 ok, 1 corrected, 2 failed),
+    failure codes (indices into PARSE_FAILURES), reasons. Non-str items and bad limits raise ValueError."""
 
 def integrate(actions: npt.NDArray[np.float64], dt: float = 0.5, method: str = "euler") -> npt.NDArray[np.float64]:
     """Integrate C-contiguous (N, T, 2) actions into (N, T, 2) positions."""

@@ -1,16 +1,25 @@
-"""Parsing a model's stage-3 answer into (speed, curvature) actions (SPEC §3)."""
+"""Parsing a model's stage-3 answer into (speed, curvature) actions.
+
+The rules of each mode, with worked examples, are in ``docs/parsing.md``.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable
 from dataclasses import dataclass
+from numbers import Real
 
 import numpy as np
 
 from lightemma import _core
 
 STATUSES = ("ok", "corrected", "failed")
+FAILURES = tuple(_core.PARSE_FAILURES)  # "", "truncated", "implausible", "format"
+MODES = tuple(_core.PARSE_MODES)  # strict, lenient, paper, json
+DEFAULT_SPEED_RANGE = (-10.0, 50.0)
+DEFAULT_MAX_ABS_CURVATURE = 1.0
 _STATUS_NAMES = np.array(STATUSES)
+_FAILURE_NAMES = np.array(FAILURES)
 
 
 @dataclass(frozen=True)
@@ -19,14 +28,22 @@ class ParsedActions:
 
     Attributes:
         actions: float64 array (N, n, 2) of (speed m/s, curvature 1/m); NaN where failed.
-        status: array of ``"ok"`` (strict format met), ``"corrected"`` (only the
-            lenient parser found them) or ``"failed"``, one per answer.
-        reason: why each answer was not ``"ok"`` (``""`` when it was).
+        status: array of ``"ok"`` (the strict format, or in paper mode the paper's
+            literal rule), ``"corrected"`` (found only by the lenient reading, or by
+            the paper's digit-run rule) or ``"failed"``, one per answer.
+        reason: one str per answer: ``""`` when plainly ok; otherwise what happened
+            (``"took the last of 2 candidate lists"``, ``"expression evaluated"``,
+            ``"speed 5254 at step 1 outside [-10, 50] m/s"``, ``"truncated"``, …).
+        failure: array of str, one per answer: ``""`` unless failed, else
+            ``"truncated"`` (the answer ends inside the list), ``"implausible"``
+            (a value outside the plausibility limits) or ``"format"`` (everything
+            else, including empty answers and non-finite values).
     """
 
     actions: np.ndarray
     status: np.ndarray
     reason: list[str]
+    failure: np.ndarray
 
     def __len__(self) -> int:
         return len(self.reason)
@@ -37,26 +54,109 @@ class ParsedActions:
         return self.status != "failed"
 
 
-def parse_actions(texts: str | Sequence[str], *, n: int = 6, mode: str = "lenient") -> ParsedActions:
-    """Parse model answers into ``n`` (speed, curvature) actions each.
+def _as_list_of_str(texts: object) -> list:
+    """``texts`` as a list for the core, which checks every item is a str."""
+    if isinstance(texts, str):
+        return [texts]
+    if isinstance(texts, np.ndarray):
+        if texts.ndim != 1:
+            raise ValueError(f"texts must be a 1-D array of str, got shape {texts.shape}")
+        if texts.dtype.kind not in "UO":
+            raise ValueError(f"texts must be an array of str, got dtype {texts.dtype}")
+        return texts.tolist()
+    if isinstance(texts, list):
+        return texts
+    if isinstance(texts, (bytes, bytearray, memoryview)) or not isinstance(texts, Iterable):
+        raise ValueError(f"texts must be a str or an iterable of str, got {type(texts).__name__}")
+    return list(texts)
 
-    ``mode="strict"`` accepts only ``[(v1, c1), …, (vn, cn)]`` and nothing else;
-    ``mode="lenient"`` (the default) also finds the first ``n`` bracketed pairs
-    anywhere in the text, or failing that the first ``2n`` standalone numbers.
-    The parser never raises for a bad answer: it reports ``"failed"`` with a reason.
+
+def _limit_pair(speed_range: object) -> tuple[float, float] | None:
+    if speed_range is None:
+        return None
+    try:
+        lo, hi = speed_range  # type: ignore[misc]
+    except (TypeError, ValueError):
+        raise ValueError(f"speed_range must be (lo, hi) in m/s or None, got {speed_range!r}") from None
+    if not all(isinstance(x, Real) and not isinstance(x, bool) for x in (lo, hi)):
+        raise ValueError(f"speed_range must be two numbers (lo, hi) in m/s, got {speed_range!r}")
+    return float(lo), float(hi)
+
+
+def _limit_value(max_abs_curvature: object) -> float | None:
+    if max_abs_curvature is None:
+        return None
+    if not isinstance(max_abs_curvature, Real) or isinstance(max_abs_curvature, bool):
+        raise ValueError(f"max_abs_curvature must be a number (1/m) or None, got {max_abs_curvature!r}")
+    return float(max_abs_curvature)
+
+
+def parse_actions(
+    texts: str | Iterable[str] | np.ndarray,
+    *,
+    n: int = 6,
+    mode: str = "lenient",
+    speed_range: tuple[float, float] | None = DEFAULT_SPEED_RANGE,
+    max_abs_curvature: float | None = DEFAULT_MAX_ABS_CURVATURE,
+) -> ParsedActions:
+    """Parse model answers into ``n`` (speed m/s, curvature 1/m) actions each.
+
+    Modes (rules and worked examples in ``docs/parsing.md``):
+
+    - ``"strict"``: the whole answer is ``[(v1, c1), …, (vn, cn)]`` and nothing else.
+    - ``"lenient"`` (the default): the strict format is ``ok``; otherwise reasoning
+      blocks (``<think>…</think>``) are dropped and the **last complete** list of
+      ``n`` bracketed pairs is taken (``corrected``); a text without bracketed pairs
+      may give exactly ``2n`` standalone numbers. Malformed pairs, cut-off lists and
+      ambiguous texts are ``failed`` with a reason — never re-paired or guessed.
+    - ``"paper"``: the paper's own rules, to reproduce its FE / FE corr columns: ``ok``
+      when the answer is a Python literal list of ``n`` tuples of 2 numbers; else
+      ``corrected`` when at least ``2n`` numbers are found as maximal runs of digits,
+      ``-`` and ``.`` of the form ``-?digits(.digits)?`` (the first ``2n`` are taken);
+      else ``failed``. No plausibility gate.
+    - ``"json"``: the answer is the JSON object ``{"actions": [[v, c], …]}`` (a
+      provider's structured output; surrounding whitespace and a code fence allowed).
+
+    Outside paper mode, answers with a speed outside ``speed_range`` (m/s, inclusive)
+    or ``|curvature| > max_abs_curvature`` (1/m) are ``failed`` as ``"implausible"``;
+    ``None`` disables either limit.
+
+    Args:
+        texts: one str, any iterable of str, or a 1-D NumPy array of str (dtype ``U``
+            or ``object``).
+        n: actions per answer (6 in the paper).
+
+    Returns:
+        :class:`ParsedActions` with ``actions`` (N, n, 2), ``status``, ``reason`` and
+        ``failure``. A bad answer never raises: it is ``failed`` with a reason.
+
+    Raises:
+        ValueError: ``texts`` is not text (the message names the first bad item), ``n``
+            is not a positive int, ``mode`` is unknown, or a limit is malformed (not
+            finite, ``lo >= hi``, curvature limit ``<= 0``).
 
     >>> import lightemma
     >>> p = lightemma.parse_actions("Actions: [(5.0, 0.0), (5.2, 0.01), (5.4, 0.01), (5.5, 0.0), (5.5, 0.0), (5.6, 0.0)]")
     >>> p.status[0], p.actions[0, 1].tolist()
     ('corrected', [5.2, 0.01])
     """
-    if isinstance(texts, str):
-        texts = [texts]
-    elif not isinstance(texts, Sequence) or not all(isinstance(t, str) for t in texts):
-        bad = next((i for i, t in enumerate(texts) if not isinstance(t, str)), None) if isinstance(texts, Sequence) else None
-        where = f" (item {bad} is {type(texts[bad]).__name__})" if bad is not None else ""
-        raise ValueError(f"texts must be a str or a sequence of str{where}")
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
         raise ValueError(f"n must be a positive integer, got {n!r}")
-    actions, codes, reasons = _core.parse_actions(list(texts), n, mode)
-    return ParsedActions(actions=actions, status=_STATUS_NAMES[codes], reason=reasons)
+    if not isinstance(mode, str):
+        raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+    speed = _limit_pair(speed_range)
+    curvature = _limit_value(max_abs_curvature)
+    items = _as_list_of_str(texts)
+    actions, codes, failures, reasons = _core.parse_actions(items, n, mode, speed, curvature)
+    return ParsedActions(actions=actions, status=_STATUS_NAMES[codes], reason=reasons, failure=_FAILURE_NAMES[failures])
+
+
+def plausibility(speed_range: object = DEFAULT_SPEED_RANGE, max_abs_curvature: object = DEFAULT_MAX_ABS_CURVATURE) -> dict:
+    """The plausibility limits as a run manifest records them: ``{"speed_range": [lo, hi] | None,
+    "max_abs_curvature": k | None}``.
+
+    Raises ValueError for malformed limits, exactly as :func:`parse_actions` does.
+    """
+    parse_actions([], speed_range=speed_range, max_abs_curvature=max_abs_curvature)  # validates
+    speed = _limit_pair(speed_range)
+    return {"speed_range": None if speed is None else list(speed), "max_abs_curvature": _limit_value(max_abs_curvature)}

@@ -9,10 +9,14 @@ the reason is kept for the report.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping
+from pathlib import Path
 from typing import Any
 
-from lightemma.evaluation.loading import RunData
-from lightemma.figures.frame_view import Camera, camera_from_frame
+import numpy as np
+
+from lightemma.evaluation.loading import RunData, read_frame_records
+from lightemma.figures.frame_view import Camera, camera_from_frame, load_image
+from lightemma.frames.geometry import extrinsic_matrix
 
 
 class CameraSource:
@@ -45,14 +49,43 @@ class CameraSource:
             self._frames.setdefault(frame.frame_id, frame)
 
     def cameras(self, runs: Iterable[RunData], frame_ids: Iterable[str]) -> dict[str, Camera | None]:
-        """frame id → Camera (or None when its dataset could not be read)."""
-        for run in runs:
-            self._load(run.info.dataset)
+        """frame id → Camera (or None when its dataset could not be read).
+
+        Imported runs carry each frame's calibration and image name in their
+        records; their images are looked for under ``dataroot``
+        (``samples/CAM_FRONT/<image name>``), else at the path the reference stored.
+        """
+        frame_ids = list(frame_ids)
         out: dict[str, Camera | None] = {}
+        for run in runs:
+            if run.info.imported:
+                wanted = [fid for fid in frame_ids if out.get(fid) is None]
+                for fid, record in read_frame_records(run.info.run_dir, wanted).items():
+                    out[fid] = self._from_record(record)
+            else:
+                self._load(run.info.dataset)
         for fid in frame_ids:
             frame = self._frames.get(fid)
-            out[fid] = camera_from_frame(frame) if frame is not None else None
+            if frame is not None:
+                out[fid] = camera_from_frame(frame)
+            out.setdefault(fid, None)
         return out
+
+    def _from_record(self, record: Mapping[str, Any]) -> Camera | None:
+        """The camera of an imported record (calibration as the reference stored it), or None."""
+        params = record.get("camera_params")
+        if not isinstance(params, Mapping):
+            return None
+        candidates = []
+        if self.dataroot and record.get("image_name"):
+            candidates.append(Path(self.dataroot) / "samples" / "CAM_FRONT" / str(record["image_name"]))
+        if record.get("image_path"):
+            candidates.append(Path(str(record["image_path"])))
+        path = next((c for c in candidates if c.is_file()), None)
+        if path is None:
+            self.problems.append("images of imported runs not found; pass --dataroot (the nuScenes folder holding samples/CAM_FRONT)")
+        return Camera(image=load_image(path), intrinsic=np.asarray(params["camera_intrinsic"], dtype=np.float64),
+                      extrinsic=extrinsic_matrix(params["translation"], params["rotation"]))
 
 
 def stage_texts(record: Mapping[str, Any] | None) -> dict[str, str]:

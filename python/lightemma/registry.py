@@ -16,7 +16,11 @@ Anything not in the registry is taken as a litellm model string
 
 from __future__ import annotations
 
+import functools
+import importlib.util
+import json
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Any
 
 from lightemma.errors import UserError
@@ -125,11 +129,86 @@ def resolve(name: str) -> ModelInfo:
     return ModelInfo(key=name, display_name=name, family="other", generation=0, model_id=name, backend="api", in_paper=False)
 
 
-def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
-    """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
+# Model names the LightEMMA reference scripts use for their result folders
+# (``<results>/<name>/output/*.json``, also ``metadata.model``) -> registry key.
+# The older script versions used short names (``claude-3.7``, ``gemini-2.0``,
+# ``qwen2.5-7b``); ``gemini-2.5`` meant Gemini 2.5 *Pro* there, which is not a
+# paper row, so it is left unmapped. Names not listed stay as they are.
+REFERENCE_NAMES: dict[str, str] = {
+    "gpt-4o": "gpt-4o",
+    "gpt-5": "gpt-5.0",
+    "gpt-5.0": "gpt-5.0",
+    "gpt-5.2": "gpt-5.2",
+    "claude-3.7": "claude-3.7-sonnet",
+    "claude-3.7-sonnet": "claude-3.7-sonnet",
+    "claude-4": "claude-4.0-sonnet",
+    "claude-4.0": "claude-4.0-sonnet",
+    "claude-4-sonnet": "claude-4.0-sonnet",
+    "claude-4.0-sonnet": "claude-4.0-sonnet",
+    "claude-sonnet-4": "claude-4.0-sonnet",
+    "claude-4.6": "claude-4.6-sonnet",
+    "claude-4.6-sonnet": "claude-4.6-sonnet",
+    "claude-sonnet-4.6": "claude-4.6-sonnet",
+    "gemini-2.0": "gemini-2.0-flash",
+    "gemini-2.0-flash": "gemini-2.0-flash",
+    "gemini-2.5-flash": "gemini-2.5-flash",
+    "gemini-3-flash": "gemini-3.0-flash",
+    "gemini-3.0-flash": "gemini-3.0-flash",
+    "qwen-2-7b": "qwen-2.0-vl-7b",
+    "qwen-2.0-7b": "qwen-2.0-vl-7b",
+    "qwen2-7b": "qwen-2.0-vl-7b",
+    "qwen2.0-7b": "qwen-2.0-vl-7b",
+    "qwen-2.5-7b": "qwen-2.5-vl-7b",
+    "qwen2.5-7b": "qwen-2.5-vl-7b",
+    "qwen-3-8b": "qwen-3.0-vl-8b",
+    "qwen-3.0-8b": "qwen-3.0-vl-8b",
+    "qwen3-8b": "qwen-3.0-vl-8b",
+    "qwen3.0-8b": "qwen-3.0-vl-8b",
+    "llama-3.2-11b": "llama-3.2-11b",
+    "llama-3.2-90b": "llama-3.2-90b",
+    "llama-4-scout": "llama-4.0-17b-scout",
+    "llama-4.0-scout": "llama-4.0-17b-scout",
+    "llama-4-17b-scout": "llama-4.0-17b-scout",
+    "llama-4.0-17b-scout": "llama-4.0-17b-scout",
+}
+
+
+def reference_model(name: str) -> ModelInfo | None:
+    """The registry entry a reference-script model name maps to (:data:`REFERENCE_NAMES`), else None.
+
+    Registry keys and display names are accepted too (``GPT-4o``, ``qwen-2.5-vl-7b``).
+    """
+    key = REFERENCE_NAMES.get(_norm(name))
+    if key is not None:
+        return _INDEX[key]
+    found = lookup(name)
+    return found if found is not None and found.in_paper else None
+
+
+_PRICE_LIST = "model_prices_and_context_window_backup.json"  # the list litellm loads with LITELLM_LOCAL_MODEL_COST_MAP
+
+
+@functools.lru_cache(maxsize=1)
+def bundled_price_list() -> dict[str, Any]:
+    """litellm's bundled price list (``litellm.model_cost`` as lightemma loads it), read without importing litellm.
+
+    Importing litellm takes seconds; the list is one JSON file inside the
+    package. Falls back to ``litellm.model_cost`` where the file is not found.
+    """
+    spec = importlib.util.find_spec("litellm")
+    for folder in (spec.submodule_search_locations or []) if spec else []:
+        path = Path(folder) / _PRICE_LIST
+        if path.is_file():
+            return json.loads(path.read_bytes())
     from lightemma._litellm import litellm
 
-    entry = litellm.model_cost.get(info.model_id) or litellm.model_cost.get(info.model_id.split("/", 1)[-1])
+    return litellm.model_cost
+
+
+def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
+    """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
+    prices = bundled_price_list()
+    entry = prices.get(info.model_id) or prices.get(info.model_id.split("/", 1)[-1])
     if entry and entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
         return float(entry["input_cost_per_token"]), float(entry["output_cost_per_token"])
     if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:

@@ -56,6 +56,7 @@ ACCURACY_COLUMNS: tuple[Column, ...] = (
     Column("ade_avg", "ADE avg (m)", fixed(2)),
     Column("fde", "FDE (m)", fixed(2)),
     Column("miss_rate", "Miss (%)", _percent),
+    Column("parse", "Parse"),
 )
 
 EFFICIENCY_COLUMNS: tuple[Column, ...] = (
@@ -87,9 +88,14 @@ def _cells(table: Table) -> list[list[str]]:
         marked = set(row.get("anomalous") or ())
         cells = []
         for col in table.columns:
-            cell = col.fmt(row.get(col.key))
+            value = row.get(col.key)
+            cell = col.fmt(value)
+            if row.get("source") == "diff" and isinstance(value, (int, float)) and value > 0 and cell != "-":
+                cell = "+" + cell  # a difference row: signed
             if col.key == "model" and row.get("source") == "paper":
                 cell += " (paper)"
+            if col.key == "model" and row.get("note"):
+                cell += f" ({row['note']})"
             if col.key in marked:
                 cell += "†"
             cells.append(cell)

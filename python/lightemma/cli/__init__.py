@@ -19,7 +19,10 @@ import sys
 from collections.abc import Sequence
 
 # subcommand modules, in the order `lightemma --help` lists them
-SUBCOMMANDS: list[str] = ["demo", "synth", "run", "evaluate", "report"]
+SUBCOMMANDS: list[str] = ["demo", "synth", "run", "import", "evaluate", "report", "prompts"]
+
+
+MODULES: dict[str, str] = {"import": "import_"}  # subcommand -> module where the name is a Python keyword
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -32,7 +35,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"lightemma {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name in SUBCOMMANDS:
-        importlib.import_module(f"lightemma.cli.{name}").add_parser(subparsers)
+        importlib.import_module(f"lightemma.cli.{MODULES.get(name, name)}").add_parser(subparsers)
     return parser
 
 

@@ -19,22 +19,40 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--convention", default="lightemma", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention (default: lightemma, the paper's; docs/definitions.md#metrics)")
     parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
     parser.add_argument("--format", default="md", choices=FORMATS, help="output format (default: md)")
-    parser.add_argument("--with-paper", action="store_true", help="print the paper's rows beside")
+    parser.add_argument("--with-paper", action="store_true", help="put each run beside the paper's row of its model, with the difference")
+    parser.add_argument("--parse", choices=["lenient", "strict", "paper"],
+                        help="re-score every run's stored answers under this definition (default: each run's own; paper for imported runs)")
+    parser.add_argument("--speed-range", type=float, nargs=2, metavar=("LO", "HI"), help="with --parse lenient|strict: plausible speeds, m/s")
+    parser.add_argument("--max-curvature", type=float, metavar="K", help="with --parse lenient|strict: largest plausible |curvature|, 1/m")
     parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout")
     parser.set_defaults(func=run)
     return parser
 
 
+def _parse_definition(args: argparse.Namespace):  # -> ParseDefinition | None
+    from lightemma.errors import UserError
+    from lightemma.evaluation.rescore import ParseDefinition
+
+    if args.parse is None:
+        if args.speed_range is not None or args.max_curvature is not None:
+            raise UserError("--speed-range and --max-curvature need --parse lenient or --parse strict")
+        return None
+    return ParseDefinition(args.parse, tuple(args.speed_range) if args.speed_range else None, args.max_curvature)
+
+
 def run(args: argparse.Namespace) -> int:
     from lightemma.evaluation import evaluate_runs, evaluation_tables
     from lightemma.tables import render
 
-    evaluation = evaluate_runs(args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold)
+    parse = _parse_definition(args)
+    evaluation = evaluate_runs(args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold,
+                               parse=parse)
     for warning in evaluation.warnings:
         print(f"lightemma evaluate: warning: {warning}", file=sys.stderr)
     tables = evaluation_tables(evaluation, with_paper=args.with_paper)
-    text = render(tables, args.format, extra={"common": evaluation.common, "n_common": evaluation.n_common, "warnings": evaluation.warnings})
+    text = render(tables, args.format, extra={"common": evaluation.common, "n_common": evaluation.n_common, "warnings": evaluation.warnings,
+                                                "parse": parse.to_dict() if parse else "each run's own"})
     if args.output:
         args.output.parent.mkdir(parents=True, exist_ok=True)
         args.output.write_text(text, encoding="utf-8")

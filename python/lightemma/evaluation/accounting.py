@@ -36,9 +36,14 @@ def _mean(values: np.ndarray) -> float | None:
 def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
     """Mean time, cost and tokens per frame over ``rows``; GPUs, run wall time, frames/s.
 
+    For an imported run the means are over those of ``rows`` whose answer could
+    be read (not ``failed``): the reference's evaluation summed time and tokens
+    only over the frames it could score. ``frames`` says how many.
     Cost is None when no frame's cost is known (local models, unknown prices);
     ``cost_known_pct`` says how many frames the mean rests on.
     """
+    if run.info.imported:
+        rows = rows[run.valid[rows]]
     cost = run.cost_cents[rows]
     wall = run.info.wall_seconds
     n_run = len(run)
@@ -52,4 +57,5 @@ def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
         "run_wall_seconds": wall,
         "frames_per_second": (n_run / wall) if wall and n_run and math.isfinite(wall) else None,
         "concurrency": run.info.concurrency,
+        "frames": int(len(rows)),  # the frames the means rest on
     }

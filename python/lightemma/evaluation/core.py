@@ -20,6 +20,7 @@ from lightemma.errors import RunStoreError, UserError
 from lightemma.evaluation.accounting import efficiency, format_errors
 from lightemma.evaluation.loading import RunData, load_run
 from lightemma.evaluation.models import family_rank
+from lightemma.evaluation.rescore import ParseDefinition
 from lightemma.runs.store import find_run_dirs
 
 CONVENTION_NAMES: tuple[str, ...] = ("lightemma", "stp3", "uniad")
@@ -43,6 +44,8 @@ class ModelResult:
     metrics: dict[str, dict[str, float]]  # convention -> metric -> value
     accounting: dict[str, Any]  # fe_pct, fe_corr_pct, failed_final
     efficiency: dict[str, Any]
+    parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
+    dataset_kind: str | None = None  # "nuscenes", "synthetic" or None (from the manifest)
 
     def accuracy_row(self, convention: str) -> dict[str, Any]:
         """A flat dict: model, family, frames, FE, FE corr, ADE 1s/2s/3s/avg, FDE, miss rate."""
@@ -55,11 +58,14 @@ class ModelResult:
             "fe_pct": self.accounting["fe_pct"],
             "fe_corr_pct": self.accounting["fe_corr_pct"],
             **{key: self.metrics[convention][key] for key in METRIC_KEYS},
+            "parse": self.parse.get("label"),
+            "dataset_kind": self.dataset_kind,
         }
 
     def efficiency_row(self) -> dict[str, Any]:
         """A flat dict: model, family, time, cost, tokens, GPUs, run wall time, frames/s."""
-        return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self.efficiency}
+        return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self.efficiency,
+                "dataset_kind": self.dataset_kind}
 
 
 @dataclass
@@ -233,6 +239,8 @@ def evaluate_loaded(
                 metrics=score(run, scored, conventions, miss_threshold),
                 accounting=format_errors(run, rows),
                 efficiency=efficiency(run, rows),
+                parse={**run.parse.to_dict(), "label": run.parse.label(), "rescored": run.rescored},
+                dataset_kind=run.info.dataset_kind,
             )
         )
     return Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings)
@@ -244,14 +252,17 @@ def evaluate_runs(
     convention: str | Sequence[str] = "lightemma",
     common: bool = False,
     miss_threshold: float = 2.0,
+    parse: ParseDefinition | None = None,
 ) -> Evaluation:
     """Evaluate run directories (or folders holding runs): Tables I and II as rows of dicts.
 
     ``convention`` is one of ``lightemma``, ``stp3``, ``uniad``, a sequence of
     them, or ``all``. ``common=True`` scores every model on the frames valid for
-    all of them. Unfinished runs are evaluated on their finished frames; corrupt
-    lines are skipped; both are reported in ``Evaluation.warnings``.
+    all of them. ``parse`` re-scores every run's stored answers under that
+    definition (default: each run's own; ``paper`` for imported runs).
+    Unfinished runs are evaluated on their finished frames; corrupt lines are
+    skipped; both are reported in ``Evaluation.warnings``.
     """
     conventions = _conventions(convention)  # check the arguments before reading any run
-    runs = [load_run(d) for d in expand_run_dirs(run_dirs)]
+    runs = [load_run(d, parse=parse) for d in expand_run_dirs(run_dirs)]
     return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold)

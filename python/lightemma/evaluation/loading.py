@@ -24,6 +24,7 @@ import numpy as np
 
 from lightemma.errors import RunStoreError
 from lightemma.evaluation.manifest import RunInfo, run_info
+from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
 from lightemma.runs.store import RunContents, iter_records
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
@@ -53,6 +54,8 @@ class RunData:
     duplicates: int = 0
     bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
     warnings: list[str] = field(default_factory=list)
+    parse: ParseDefinition = field(default_factory=ParseDefinition)  # how the statuses and actions were read
+    rescored: bool = False  # True when the stored answers were parsed again (a definition was asked for)
 
     def __len__(self) -> int:
         return len(self.frame_ids)
@@ -172,16 +175,21 @@ def _gc_paused() -> Iterator[None]:
             gc.enable()
 
 
-def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunData:
+def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None) -> RunData:
     """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
 
     ``details=True`` also keeps history and predicted actions (for scenario
-    analysis). Corrupt lines, a truncated tail, records without usable ground
-    truth and an unfinished run are counted and described in ``warnings``.
-    Raises :class:`RunStoreError` for a missing, unreadable or foreign directory.
+    analysis). ``parse`` re-scores the stored answers under that definition
+    (:mod:`lightemma.evaluation.rescore`); by default the run's recorded
+    statuses stand (parsed ``paper`` for imported runs). Corrupt lines, a truncated tail, records
+    without usable ground truth and an unfinished run are counted and described
+    in ``warnings``. Raises :class:`RunStoreError` for a missing, unreadable or
+    foreign directory.
     """
     run_dir = Path(run_dir)
     info = run_info(run_dir)
+    own = recorded_parse(info.manifest)
+    definition = own if parse is None else parse
     counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
     columns = _Columns(details)
     seen: set[str] = set()
@@ -189,7 +197,8 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
     bad = duplicates = 0
     try:
         with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
-            for record in iter_records(run_dir, counts=counts):
+            records = iter_records(run_dir, counts=counts)
+            for record in records if parse is None else rescored(records, definition):
                 gt = record.get("gt_positions")
                 if type(gt) is not list or len(gt) != 6:
                     bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
@@ -248,6 +257,8 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
         truncated_tail=counts.truncated_tail,
         duplicates=duplicates,
         bad_records=bad,
+        parse=definition,
+        rescored=parse is not None,
     )
     data.warnings = _warnings(data)
     return data

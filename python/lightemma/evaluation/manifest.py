@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any
 
 from lightemma.evaluation.models import FAMILIES, infer_family, known_model
+from lightemma.frames.model import SYNTH_MARKER
 from lightemma.runs.store import read_manifest
 
 
@@ -37,6 +38,8 @@ class RunInfo:
     complete: bool
     dataset: Mapping[str, Any] | None
     manifest: Mapping[str, Any]
+    imported: bool = False  # made by `lightemma import` from the reference scripts' results
+    dataset_kind: str | None = None  # "nuscenes", "synthetic", or None when the manifest cannot tell
 
 
 def _get(mapping: Any, *keys: str) -> Any:
@@ -110,6 +113,26 @@ def _gpus(manifest: Mapping[str, Any]) -> int | None:
     return None
 
 
+def dataset_kind(manifest: Mapping[str, Any]) -> str | None:
+    """What data a run was made on: ``synthetic``, ``nuscenes``, or None when the manifest does not say.
+
+    The manifest's ``dataset.kind`` when recorded; else a dataroot holding the
+    synthetic dataset's marker file is ``synthetic``, any other dataroot
+    ``nuscenes``; runs of synthetic records (``backend.kind == "synthetic"``)
+    are ``synthetic``.
+    """
+    dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), Mapping) else {}
+    kind = dataset.get("kind")
+    if isinstance(kind, str) and kind:
+        return kind
+    if _get(manifest, "backend", "kind") == "synthetic":
+        return "synthetic"
+    dataroot = dataset.get("dataroot")
+    if isinstance(dataroot, str) and dataroot:
+        return "synthetic" if (Path(dataroot) / SYNTH_MARKER).is_file() else "nuscenes"
+    return None
+
+
 def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None = None) -> RunInfo:
     """Read what evaluation needs from a run's manifest, defensively."""
     run_dir = Path(run_dir)
@@ -132,4 +155,6 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
         complete=bool(manifest.get("finished_at")),
         dataset=dataset,
         manifest=manifest,
+        imported=bool(manifest.get("imported")),
+        dataset_kind=dataset_kind(manifest),
     )

@@ -7,6 +7,7 @@ The paper scores 3,908 v1.0-test frames with the ``lightemma`` convention.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import Any
 
 PAPER_FRAMES = 3908
@@ -99,7 +100,51 @@ def paper_accuracy_rows() -> list[dict[str, Any]]:
             "ade_avg": avg,
             "fde": fde,
             "miss_rate": None,
+            "parse": "paper",
             "source": "paper",
         }
         for model, (fe, fe_corr, a1, a2, a3, avg, fde) in _TABLE_II.items()
     ]
+
+
+ACCURACY_DIFF_KEYS: tuple[str, ...] = ("fe_pct", "fe_corr_pct", "ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde")
+EFFICIENCY_DIFF_KEYS: tuple[str, ...] = ("seconds_per_frame", "cost_cents_per_frame", "input_tokens", "output_tokens")
+DIFF_LABEL = "Δ vs paper"
+
+
+def paper_model_name(model: str) -> str | None:
+    """The paper's row name (display name) for a run's model string, via the registry; None when not a paper model."""
+    from lightemma.evaluation.models import known_model
+
+    known = known_model(model) if not model.startswith("baseline:") else None
+    return known.display_name if known is not None else None
+
+
+def beside_paper(models: Sequence[Any], rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], keys: Sequence[str]) -> list[dict[str, Any]]:
+    """Each run's row followed by the paper's row of the same model and a row of differences (run − paper).
+
+    ``models`` are the runs' :class:`~lightemma.evaluation.core.ModelResult` in
+    the order of ``rows``. Rows of runs made on synthetic data are marked
+    ``note: "synthetic data"``. Paper rows no run matched follow at the end, so
+    the paper's table stays complete. Differences are None where either cell is.
+    """
+    paper = {row["model"]: row for row in paper_rows}
+    used: set[str] = set()
+    out: list[dict[str, Any]] = []
+    for model, row in zip(models, rows):
+        row = dict(row)
+        if getattr(model, "dataset_kind", None) == "synthetic":
+            row["note"] = "synthetic data"
+        out.append(row)
+        name = paper_model_name(model.model)
+        if name is None or name not in paper:
+            continue
+        used.add(name)
+        ref = paper[name]
+        out.append(ref)
+        diff: dict[str, Any] = {"model": DIFF_LABEL, "family": row.get("family"), "source": "diff"}
+        for key in keys:
+            a, b = row.get(key), ref.get(key)
+            diff[key] = a - b if isinstance(a, (int, float)) and isinstance(b, (int, float)) else None
+        out.append(diff)
+    return out + [row for name, row in paper.items() if name not in used]

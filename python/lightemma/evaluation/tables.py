@@ -3,17 +3,24 @@
 from __future__ import annotations
 
 from lightemma.evaluation.core import Evaluation
-from lightemma.evaluation.paper import PAPER_CONVENTION, paper_accuracy_rows, paper_efficiency_rows
+from lightemma.evaluation.paper import (
+    ACCURACY_DIFF_KEYS,
+    EFFICIENCY_DIFF_KEYS,
+    PAPER_CONVENTION,
+    beside_paper,
+    paper_accuracy_rows,
+    paper_efficiency_rows,
+)
 from lightemma.tables import ACCURACY_COLUMNS, EFFICIENCY_COLUMNS, Table
 
 
 def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool = False) -> Table:
-    """Table II for one convention; the paper's rows appended when asked (``lightemma`` only)."""
+    """Table II for one convention; with the paper, each run beside the paper's row of its model (``lightemma`` only)."""
     rows = evaluation.accuracy_rows(convention)
     scope = f"{evaluation.n_common} frames valid for every run" if evaluation.common else "each run's valid frames"
     title = f"Accuracy — {convention} convention ({scope})"
     if with_paper and convention == PAPER_CONVENTION:
-        rows = rows + paper_accuracy_rows()
+        rows = beside_paper(evaluation.models, rows, paper_accuracy_rows(), ACCURACY_DIFF_KEYS)
     return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}")
 
 
@@ -21,7 +28,7 @@ def efficiency_table(evaluation: Evaluation, *, with_paper: bool = False) -> Tab
     """Table I (time, cost, tokens, GPUs) plus run wall time and frames/s."""
     rows = evaluation.efficiency_rows()
     if with_paper:
-        rows = rows + paper_efficiency_rows()
+        rows = beside_paper(evaluation.models, rows, paper_efficiency_rows(), EFFICIENCY_DIFF_KEYS)
     return Table("Efficiency — per frame, all attempts", EFFICIENCY_COLUMNS, rows, name="efficiency")
 
 

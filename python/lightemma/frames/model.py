@@ -4,11 +4,14 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from lightemma.errors import DatasetError
+
+SYNTH_MARKER = "lightemma-synth.json"  # written by lightemma.synth at the root of a synthetic dataset
 
 
 @dataclass(frozen=True, eq=False)
@@ -219,8 +222,11 @@ class FrameSet:
 
     # -- description -------------------------------------------------------
     def describe(self) -> dict[str, Any]:
-        """JSON-able provenance: dataroot, version, split, scenes, window, n_frames, …"""
+        """JSON-able provenance: kind (``synthetic`` for lightemma's synthetic dataset, else ``nuscenes``),
+        dataroot, version, split, scenes, window, n_frames, …"""
+        synthetic = bool(self.dataroot) and (Path(self.dataroot) / SYNTH_MARKER).is_file()
         return {
+            "kind": "synthetic" if synthetic else ("nuscenes" if self.dataroot else None),
             "dataroot": self.dataroot,
             "version": self.version,
             "split": self.split,

@@ -1,8 +1,10 @@
-"""Plain-decimal rendering of history actions for prompts (SPEC §1).
+"""Rendering history actions for prompts (SPEC §1, §2).
 
-Numbers are written as plain decimals (``4.512``), never as a library repr
-such as ``np.float64(4.512)`` and never in exponent notation; ``-0.0`` is
-written ``0.0``.
+``{history}``: pairs of plain decimals (``4.512``), never a library repr such
+as ``np.float64(4.512)`` and never in exponent notation; ``-0.0`` is written
+``0.0``. ``{speeds}`` / ``{curvatures}``: the two lists as the LightEMMA
+reference scripts printed them, Python's own ``repr`` of a list of floats
+(``[1.299, 1.845, 2.68]``, ``-0.0`` kept).
 """
 
 from __future__ import annotations
@@ -47,3 +49,38 @@ def format_history(actions: np.ndarray | Sequence[Sequence[float]]) -> str:
         raise ValueError(f"history actions must have shape (T, 2), got {arr.shape}")
     pairs = (f"({format_number(v)}, {format_number(c)})" for v, c in arr.tolist())
     return "[" + ", ".join(pairs) + "]"
+
+
+def format_python_list(values: np.ndarray | Sequence[float]) -> str:
+    """``values`` as Python prints a list of them: ``[1.299, -0.0, 0.012]`` (``repr`` of each number).
+
+    This is how the reference scripts put the history speeds and curvatures into
+    their prompts (``f"{prev_speed}"``): shortest round-tripping decimals,
+    ``-0.0`` kept, exponents for very small or large values (``1e-05``). NumPy
+    numbers are written as Python's (never ``np.float64(…)``); a Python ``int``
+    stays an ``int`` (the reference wrote a degenerate curvature as ``0``).
+    NaN and infinities raise ``ValueError``.
+    """
+    items = values.tolist() if isinstance(values, np.ndarray) else list(values)
+    out = []
+    for value in items:
+        if isinstance(value, np.generic):
+            value = value.item()
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ValueError(f"cannot render {value!r} as a number")
+        if isinstance(value, float) and not math.isfinite(value):
+            raise ValueError(f"cannot render non-finite number {value!r} in a prompt")
+        out.append(repr(value))
+    return "[" + ", ".join(out) + "]"
+
+
+def history_placeholders(actions: np.ndarray | Sequence[Sequence[float]]) -> dict[str, str]:
+    """The prompt placeholders of a frame's history actions (T, 2): ``history``, ``speeds``, ``curvatures``."""
+    rows = actions.tolist() if isinstance(actions, np.ndarray) else [list(row) for row in actions]
+    if any(len(row) != 2 for row in rows):
+        raise ValueError(f"history actions must have shape (T, 2), got rows of length {sorted({len(r) for r in rows})}")
+    return {
+        "history": format_history(np.asarray(rows, dtype=np.float64).reshape(-1, 2)),
+        "speeds": format_python_list([row[0] for row in rows]),
+        "curvatures": format_python_list([row[1] for row in rows]),
+    }

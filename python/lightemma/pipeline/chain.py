@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams
-from lightemma.frames import format_history
+from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet
 
 REASK_MODES = ("actions", "chain")
@@ -127,7 +127,7 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     Raises only what the backend raises as fatal (e.g. a rejected API key).
     """
     start = time.perf_counter()
-    history = format_history(frame.history_actions)
+    history = history_placeholders(frame.history_actions)  # {history}, {speeds}, {curvatures}
     image = str(frame.image_path) if getattr(frame, "image_path", None) else None
 
     async def ask(stage: str, text: str) -> ChatResult:
@@ -146,10 +146,10 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
         if scene is None:
             scene = attempt.record("scene", await ask("scene", prompts.render("scene")))
         if scene is not None and intent is None:
-            intent = attempt.record("intent", await ask("intent", prompts.render("intent", scene=scene, history=history)))
+            intent = attempt.record("intent", await ask("intent", prompts.render("intent", scene=scene, **history)))
         answer = None
         if scene is not None and intent is not None:
-            answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, history=history, intent=intent)))
+            answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, intent=intent, **history)))
         if answer is None:
             attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}"))
             continue

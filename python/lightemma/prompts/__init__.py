@@ -2,9 +2,13 @@
 
 A prompt set is a JSON file in this package (``<name>.json``) with a ``name``,
 a ``description`` and one template per stage (``scene``, ``intent``,
-``actions``; see SPEC §2). Templates use the placeholders ``{scene}``,
-``{history}`` and ``{intent}``; nothing else in them is special, so braces,
-brackets and parentheses in the wording are taken literally.
+``actions``). Templates use the placeholders ``{scene}``, ``{intent}`` and the
+history as ``{history}`` (pairs of plain decimals) and/or ``{speeds}`` and
+``{curvatures}`` (the two lists as the reference scripts printed them, see
+:func:`lightemma.frames.format_python_list`); nothing else in them is special,
+so braces, brackets and parentheses in the wording are taken literally. The
+intent and actions templates must carry the history: ``{history}``, or both
+``{speeds}`` and ``{curvatures}``.
 
 Every run records the prompt set's name and its content hash (SHA-256 of the
 canonical JSON of the file's content), so a result can always be traced to the
@@ -23,7 +27,10 @@ from lightemma.backends.base import STAGES
 from lightemma.errors import UserError
 
 DEFAULT_PROMPT_SET = "lightemma-v1"
+# placeholders each stage fills in; HISTORY_FORMS: one of these sets must appear where "history" is listed
 PLACEHOLDERS = {"scene": (), "intent": ("scene", "history"), "actions": ("scene", "history", "intent")}
+HISTORY_FORMS: tuple[tuple[str, ...], ...] = (("history",), ("speeds", "curvatures"))
+HISTORY_KEYS = ("history", "speeds", "curvatures")
 
 
 def content_hash(data: dict[str, Any]) -> str:
@@ -51,16 +58,25 @@ class PromptSet:
         if missing:
             raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGES)})")
         for stage, needed in PLACEHOLDERS.items():
-            absent = [p for p in needed if "{" + p + "}" not in stages[stage]]
+            template = stages[stage]
+            absent = [p for p in needed if p != "history" and "{" + p + "}" not in template]
+            if "history" in needed and not any(all("{" + p + "}" in template for p in form) for form in HISTORY_FORMS):
+                absent.append("history")
             if absent:
-                raise UserError(f"{origin}: the {stage!r} template lacks placeholder(s) {', '.join('{' + p + '}' for p in absent)}")
+                names = ", ".join("{history} (or {speeds} and {curvatures})" if p == "history" else "{" + p + "}" for p in absent)
+                raise UserError(f"{origin}: the {stage!r} template lacks placeholder(s) {names}")
         return cls(name=data["name"], description=str(data.get("description", "")), stages=dict(stages), hash=content_hash(data))
 
-    def render(self, stage: str, *, scene: str = "", history: str = "", intent: str = "") -> str:
-        """The text of ``stage`` with the earlier stages' texts and the history filled in."""
-        values = {"scene": scene, "history": history, "intent": intent}
+    def render(self, stage: str, *, scene: str = "", history: str = "", intent: str = "", speeds: str = "", curvatures: str = "") -> str:
+        """The text of ``stage`` with the earlier stages' texts and the history filled in.
+
+        ``history``, ``speeds`` and ``curvatures`` are the renderings of
+        :func:`lightemma.frames.history_placeholders`.
+        """
+        values = {"scene": scene, "history": history, "intent": intent, "speeds": speeds, "curvatures": curvatures}
         text = self.stages[stage]
-        for key in PLACEHOLDERS[stage]:
+        keys = [k for k in PLACEHOLDERS[stage] if k != "history"] + (list(HISTORY_KEYS) if "history" in PLACEHOLDERS[stage] else [])
+        for key in keys:
             text = text.replace("{" + key + "}", values[key].strip())
         return text
 

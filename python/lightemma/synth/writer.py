@@ -29,6 +29,7 @@ from PIL import Image
 
 from lightemma.errors import UserError
 from lightemma.frames.loader import TABLES
+from lightemma.frames.model import SYNTH_MARKER
 from lightemma.synth.camera import Camera
 from lightemma.synth.render import render_frame
 from lightemma.synth.scenarios import Scenario, build_scenarios, sweep_times_us
@@ -301,5 +302,5 @@ def write_dataset(
             for s in scenarios
         ],
     }
-    write_atomic(root / "lightemma-synth.json", json.dumps(info, indent=2).encode("utf-8"))
+    write_atomic(root / SYNTH_MARKER, json.dumps(info, indent=2).encode("utf-8"))
     return root
