@@ -198,7 +198,7 @@ def test_a_failed_call_stored_as_text_is_an_api_error_not_a_format_error(tmp_pat
     (result,) = import_reference([tmp_path / "res"], tmp_path / "runs")
     rec = next(r for r in read_run(result.run_dir).records.values() if r["source"]["frame_index"] == 1)
     call = rec["attempts"][0]["calls"][2]
-    assert rec["status"] == "failed" and rec["answer"] is None and rec["failure"] == "api"
+    assert rec["status"] == "failed" and rec["answer"] is None and rec["failure"] == "api_error"
     assert call["text"] is None and call["error"] == "ReferenceCallError" and call["error_message"] == CALL_FAILED
     assert result.summary["api_errors"] == 1 and result.summary["answers_received"] == 3 and result.summary["fe_percent"] == 0.0
 

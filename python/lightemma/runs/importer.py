@@ -174,7 +174,7 @@ def _record(frame: ReferenceFrame, source_file: str, parse: tuple[str, str, str]
         "cost_cents": _sum_known(c["cost_cents"] for c in calls),
     }
     if parse is None:  # the stage-3 call failed: no answer was received
-        status, reason, failure, answer, error = "failed", f"API error: {CALL_FAILURE}", "api", None, CALL_FAILURE
+        status, reason, failure, answer, error = "failed", f"API error: {CALL_FAILURE}", "api_error", None, CALL_FAILURE
     else:
         (status, reason, failure), answer, error = parse, frame.answer, None
     attempt = {"attempt": 1, "calls": calls, "answer": answer, "status": status, "reason": reason, "failure": failure,
@@ -230,7 +230,7 @@ class _Tally:
 
     def add(self, record: dict[str, Any]) -> None:
         self.status[record["status"]] += 1
-        if record["failure"] == "api":
+        if record["failure"] == "api_error":
             self.api_errors += 1
             return
         self.received += 1
