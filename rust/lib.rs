@@ -3,6 +3,7 @@
 //! * [`parse`] (with [`lexer`]): a model's stage-3 answer → (speed, curvature) actions;
 //! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
 //! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
+//! * [`stats`]: scene-level bootstrap intervals and sign-flip p-values (deterministic, parallel);
 //! * [`error`]: the one error type, mapped to Python's `ValueError` in `python.rs`.
 //!
 //! Everything but `python.rs` is plain Rust, tested with `cargo test` without Python.
@@ -14,3 +15,4 @@ pub mod lexer;
 pub mod metrics;
 pub mod parse;
 mod python;
+pub mod stats;
