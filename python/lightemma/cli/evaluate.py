@@ -21,20 +21,44 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--format", default="md", choices=FORMATS, help="output format (default: md)")
     parser.add_argument("--with-paper", action="store_true", help="print the paper's rows beside")
     parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
+    add_statistics_arguments(parser, pairwise_default=False)
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout")
     parser.set_defaults(func=run)
     return parser
+
+
+def add_statistics_arguments(parser: argparse.ArgumentParser, *, pairwise_default: bool) -> None:
+    """--pairwise / --no-pairwise, --resamples, --seed (shared with ``lightemma report``)."""
+    if pairwise_default:
+        parser.add_argument("--no-pairwise", dest="pairwise", action="store_false", help="skip the paired comparisons between runs")
+    else:
+        parser.add_argument("--pairwise", action="store_true", help="compare every pair of runs on their common frames (difference, interval, Holm-adjusted p)")
+    parser.add_argument("--resamples", type=int, default=10_000, metavar="N", help="scene-bootstrap resamples and sign-flip permutations (default: 10000; 0: no intervals)")
+    parser.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the resampling (default: 0)")
+
+
+def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, imported lazily
+    from lightemma.errors import UserError
+    from lightemma.stats import Resampling
+
+    try:
+        return Resampling(n_resamples=args.resamples, seed=args.seed)
+    except ValueError as exc:
+        raise UserError(str(exc).replace("n_resamples", "--resamples").replace("seed", "--seed")) from None
 
 
 def run(args: argparse.Namespace) -> int:
     from lightemma.evaluation import evaluate_runs, evaluation_tables
     from lightemma.tables import render
 
-    evaluation = evaluate_runs(args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold)
+    evaluation = evaluate_runs(
+        args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold, resampling=resampling_of(args), pairwise=args.pairwise
+    )
     for warning in evaluation.warnings:
         print(f"lightemma evaluate: warning: {warning}", file=sys.stderr)
     tables = evaluation_tables(evaluation, with_paper=args.with_paper)
-    text = render(tables, args.format, extra={"common": evaluation.common, "n_common": evaluation.n_common, "warnings": evaluation.warnings})
+    extra = {"common": evaluation.common, "n_common": evaluation.n_common, "resampling": evaluation.resampling.to_dict(), "warnings": evaluation.warnings}
+    text = render(tables, args.format, extra=extra)
     if args.output:
         args.output.parent.mkdir(parents=True, exist_ok=True)
         args.output.write_text(text, encoding="utf-8")
