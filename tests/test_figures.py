@@ -139,8 +139,9 @@ def test_history_bias_figure_is_drawn(tmp_path):
             hist = np.array([[8.0, k]] * 6)
             w.append(make_record(f"f{i}", straight, pred, history_actions=hist))
     fig = history_bias_figure([load_run(run_dir, details=True)])
-    scatter, bars = fig.axes
-    assert len(bars.patches) == 1 and bars.patches[0].get_height() == pytest.approx(1.0, rel=0.02)
+    scatter, slopes, bars = fig.axes
+    assert len(bars.patches) == 1 and bars.patches[0].get_width() == pytest.approx(1.0, rel=0.02)
+    assert [t.get_text() for t in slopes.get_yticklabels()] == ["m"]  # one slope with its interval per model
     (png,) = save_figure(fig, tmp_path / "bias", formats=("png",))
     img = pixels(png)
     assert near(img, rgb(GT_COLOR), 40).sum() > 100 and near(img, rgb(pred_color(0)), 40).sum() > 500
