@@ -49,6 +49,17 @@ impl SplitMix64 {
     pub fn below(&mut self, n: usize) -> usize {
         ((u128::from(self.next_u64()) * n as u128) >> 64) as usize
     }
+
+    /// Two draws uniform in `0..n` (`n` < 2^32) from one 64-bit output: multiply-shift on each
+    /// 32-bit half (bias below `n / 2^32`, under 1e-6 for any number of scenes a dataset has).
+    #[inline(always)]
+    pub fn two_below(&mut self, n: u32) -> (usize, usize) {
+        let x = self.next_u64();
+        let n = u64::from(n);
+        let lo = ((x & 0xFFFF_FFFF) * n) >> 32;
+        let hi = ((x >> 32) * n) >> 32;
+        (lo as usize, hi as usize)
+    }
 }
 
 /// Clusters of several rows: row `r` owns clusters `offsets[r] .. offsets[r + 1]`;
@@ -132,12 +143,71 @@ fn check_count(n: usize, what: &str) -> CoreResult<()> {
     Ok(())
 }
 
-/// The `q`-quantile of sorted values with linear interpolation (NumPy's default "linear").
-fn quantile_sorted(sorted: &[f64], q: f64) -> f64 {
-    let h = q * (sorted.len() - 1) as f64;
+/// The `q`-quantile of `values` with linear interpolation (NumPy's default "linear");
+/// reorders `values` (selection, not a full sort).
+fn quantile(values: &mut [f64], q: f64) -> f64 {
+    let h = q * (values.len() - 1) as f64;
     let lo = h.floor() as usize;
-    let hi = (lo + 1).min(sorted.len() - 1);
-    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+    let (_, &mut below, above) = values.select_nth_unstable_by(lo, f64::total_cmp);
+    let next = above
+        .iter()
+        .copied()
+        .min_by(f64::total_cmp)
+        .unwrap_or(below);
+    below + (h - lo as f64) * (next - below)
+}
+
+/// Clusters of one row packed as `[count, sum_0, …, sum_{m−1}]` each, for cache-friendly draws.
+fn packed(c: &Clusters<'_>, row: usize) -> Vec<f64> {
+    let m = c.metrics;
+    c.range(row)
+        .flat_map(|k| {
+            std::iter::once(c.counts[k]).chain(c.sums[k * m..(k + 1) * m].iter().copied())
+        })
+        .collect()
+}
+
+/// One resample's `Σ counts` and `Σ sums` (into `acc`, length `1 + m`) over `s` clusters drawn with replacement.
+#[inline(always)]
+fn draw_into(rng: &mut SplitMix64, table: &[f64], s: usize, acc: &mut [f64]) {
+    match acc.len() {
+        2 => draw_fixed::<2>(rng, table, s, acc),
+        3 => draw_fixed::<3>(rng, table, s, acc),
+        width => {
+            acc.iter_mut().for_each(|a| *a = 0.0);
+            for _ in 0..s {
+                let k = rng.below(s);
+                for (a, v) in acc.iter_mut().zip(&table[k * width..(k + 1) * width]) {
+                    *a += v;
+                }
+            }
+        }
+    }
+}
+
+/// [`draw_into`] for a fixed width (1 or 2 metrics): the accumulator lives in registers.
+#[inline(always)]
+fn draw_fixed<const W: usize>(rng: &mut SplitMix64, table: &[f64], s: usize, acc: &mut [f64]) {
+    let rows: &[[f64; W]] = {
+        let (head, _) = table.as_chunks::<W>();
+        head
+    };
+    let mut sum = [0.0_f64; W];
+    let mut add = |k: usize| {
+        let row = &rows[k];
+        for j in 0..W {
+            sum[j] += row[j];
+        }
+    };
+    for _ in 0..s / 2 {
+        let (a, b) = rng.two_below(s as u32);
+        add(a);
+        add(b);
+    }
+    if s % 2 == 1 {
+        add(rng.below(s));
+    }
+    acc.copy_from_slice(&sum);
 }
 
 /// The bootstrap estimates of one row: `n_resamples × metrics`, resample-major.
@@ -149,27 +219,19 @@ fn row_estimates(
     seed: u64,
 ) -> Vec<f64> {
     let m = c.metrics;
-    let range = c.range(row);
-    let (start, s) = (range.start, range.len());
+    let s = c.range(row).len();
+    let table = packed(c, row);
     let mut out = vec![0.0; n_resamples * m];
     out.par_chunks_mut(RESAMPLES_PER_TASK * m)
         .enumerate()
         .for_each(|(task, chunk)| {
-            let mut num = vec![0.0_f64; m];
+            let mut acc = vec![0.0_f64; 1 + m];
             for (i, est) in chunk.chunks_exact_mut(m).enumerate() {
                 let b = (task * RESAMPLES_PER_TASK + i) as u64;
                 let mut rng = SplitMix64::for_counter(seed, stream, b);
-                num.iter_mut().for_each(|x| *x = 0.0);
-                let mut den = 0.0;
-                for _ in 0..s {
-                    let k = start + rng.below(s);
-                    den += c.counts[k];
-                    for (x, v) in num.iter_mut().zip(&c.sums[k * m..(k + 1) * m]) {
-                        *x += v;
-                    }
-                }
-                for (e, x) in est.iter_mut().zip(&num) {
-                    *e = x / den;
+                draw_into(&mut rng, &table, s, &mut acc);
+                for (e, x) in est.iter_mut().zip(&acc[1..]) {
+                    *e = x / acc[0];
                 }
             }
         });
@@ -193,6 +255,12 @@ pub fn cluster_bootstrap(
     clusters.check()?;
     check_streams(streams, clusters.rows())?;
     check_count(n_resamples, "n_resamples")?;
+    if clusters.counts.len() >= u32::MAX as usize {
+        return Err(CoreError::Shape(format!(
+            "{} clusters: at most 2^32 − 1 are supported",
+            clusters.counts.len()
+        )));
+    }
     if !(confidence > 0.0 && confidence < 1.0) {
         return Err(CoreError::Argument(format!(
             "confidence must lie strictly between 0 and 1, got {confidence}"
@@ -213,9 +281,8 @@ pub fn cluster_bootstrap(
                 for (x, e) in column.iter_mut().zip(est.iter().skip(j).step_by(m)) {
                     *x = *e;
                 }
-                column.sort_unstable_by(f64::total_cmp);
-                out.push(quantile_sorted(&column, alpha / 2.0));
-                out.push(quantile_sorted(&column, 1.0 - alpha / 2.0));
+                out.push(quantile(&mut column, alpha / 2.0));
+                out.push(quantile(&mut column, 1.0 - alpha / 2.0));
             }
             out
         })
@@ -266,7 +333,8 @@ pub fn sign_flip_pvalues(
                     for block in d.chunks(64) {
                         let bits = rng.next_u64();
                         for (i, v) in block.iter().enumerate() {
-                            total += if (bits >> i) & 1 == 1 { *v } else { -*v };
+                            // flip the sign bit where the random bit is 1: branch-free
+                            total += f64::from_bits(v.to_bits() ^ (((bits >> i) & 1) << 63));
                         }
                     }
                     total.abs() >= observed - tolerance
@@ -315,11 +383,28 @@ mod tests {
 
     #[test]
     fn quantiles_interpolate_like_numpy() {
-        let x = [1.0, 2.0, 3.0, 4.0];
-        assert_eq!(quantile_sorted(&x, 0.0), 1.0);
-        assert_eq!(quantile_sorted(&x, 1.0), 4.0);
-        assert!((quantile_sorted(&x, 0.5) - 2.5).abs() < 1e-15);
-        assert!((quantile_sorted(&x, 0.025) - 1.075).abs() < 1e-12);
+        let q = |values: &[f64], p: f64| quantile(&mut values.to_vec(), p);
+        let x = [4.0, 2.0, 1.0, 3.0];
+        assert_eq!(q(&x, 0.0), 1.0);
+        assert_eq!(q(&x, 1.0), 4.0);
+        assert!((q(&x, 0.5) - 2.5).abs() < 1e-15);
+        assert!((q(&x, 0.025) - 1.075).abs() < 1e-12);
+        assert_eq!(q(&[7.0], 0.975), 7.0);
+    }
+
+    #[test]
+    fn paired_draws_are_uniform() {
+        let mut rng = SplitMix64::for_counter(3, 1, 0);
+        let mut hist = [0usize; 7];
+        for _ in 0..70_000 {
+            let (a, b) = rng.two_below(7);
+            hist[a] += 1;
+            hist[b] += 1;
+        }
+        assert!(
+            hist.iter().all(|&h| (19_400..20_600).contains(&h)),
+            "{hist:?}"
+        );
     }
 
     #[test]
