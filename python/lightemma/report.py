@@ -101,7 +101,8 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
     by_family: dict[str, list[str]] = {}
     for r in rows:
         ci = r["ci95"]
-        detail = f"{r['change']:+.3f} m" + (f" [{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "") + (f", p (Holm) {r['p_holm']:.3g}" if r["p_holm"] is not None else "")
+        p = r["p_holm"]
+        detail = f"{r['change']:+.3f} m" + (f" [{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "") + ("" if p is None else f", p (Holm) {p:.3f}" if p >= 0.001 else ", p (Holm) < 0.001")
         by_family.setdefault(r["family"], []).append(f"{r['model']} is **{r['verdict']}** than {r['predecessor']} ({detail})" if r["verdict"] != "not distinguishable" else f"{r['model']} is **not distinguishable** from {r['predecessor']} ({detail})")
     return [f"- **{family}**: " + "; ".join(parts) + "." for family, parts in by_family.items()]
 
@@ -193,7 +194,7 @@ def write_report(
     out.mkdir(parents=True, exist_ok=True)
     w = _Writer(out)
     w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator |", "|---|---|---|---:|---|---|"]
-    w.lines += [f"| {m.label} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | {m.integrator} |" for m in evaluation.models]
+    w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | {m.integrator} |" for m in evaluation.models]
     w.lines.append("")
     if evaluation.warnings:
         w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]
@@ -231,13 +232,13 @@ def write_report(
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
 
     shared = common_frames(runs) if len(runs) > 1 else None
-    scope = f"the {len(shared)} frames valid for every run" if shared else "each run's valid frames"
+    scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
     w.table(_bias_table(bias, flags), latex=False)
-    w.figure(history_bias_figure(runs, colors=colors, rows=bias), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
+    w.figure(history_bias_figure(runs, colors=colors, rows=bias, notes=flags), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
 
     picks = [("frame", fid, "requested frame") for fid in frames]
     picks += [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]

@@ -186,7 +186,7 @@ def frame_set_warning(runs: Sequence[RunData]) -> str | None:
         return None
     return (
         f"the runs cover different frame sets: {len(union) - len(inter)} of {len(union)} frames are not in every run; "
-        f"each model is scored on its own frames (pass --common to compare on the frames valid for every run)"
+        f"each model is scored on its own frames (pass --common to compare on the frames scored in every run)"
     )
 
 

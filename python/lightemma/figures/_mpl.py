@@ -25,7 +25,8 @@ FAMILY_COLORS = {
     "Baseline": "#6b6b6b",
     "Other": "#8c564b",
 }
-OTHER_COLORS = ("#8c564b", "#17becf", "#bcbd22", "#e377c2", "#1f77b4", "#ff7f0e", "#9467bd", "#d62728")
+# baselines and other models: distinct colours that show on camera images and are not a family's hue
+OTHER_COLORS = ("#17becf", "#bcbd22", "#e377c2", "#8c564b", "#9edae5", "#f7b6d2", "#c49c94", "#7f7f7f")
 PAPER_GENERATIONS = 3  # the paper's families have three generations each
 FORMATS = ("png", "svg")
 DPI = 150
@@ -79,9 +80,12 @@ def model_colors(models: Iterable[Mapping[str, Any] | Any]) -> dict[str, str]:
         if label not in {lab for group in members.values() for lab, _ in group}:
             members.setdefault(family, []).append((str(label), get(m, "generation")))
     out: dict[str, str] = {}
+    distinct = 0  # one running count over baselines and others, so that no two share a colour
     for family, group in members.items():
-        if family not in FAMILY_COLORS or family == "Other":
-            out.update((label, OTHER_COLORS[i % len(OTHER_COLORS)]) for i, (label, _) in enumerate(group))
+        if family not in FAMILY_COLORS or family in ("Other", "Baseline"):
+            for label, _ in group:
+                out[label] = OTHER_COLORS[distinct % len(OTHER_COLORS)]
+                distinct += 1
             continue
         gens = [g for _, g in group]
         by_generation = all(isinstance(g, int) and 1 <= g <= PAPER_GENERATIONS for g in gens)
@@ -97,7 +101,7 @@ def save_figure(fig: Any, stem: str | os.PathLike[str], *, formats: tuple[str, .
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     for fmt in formats:
-        path = stem.with_suffix(f".{fmt}")
+        path = stem.with_name(f"{stem.name}.{fmt}")  # not with_suffix: "Gemini-2.5-Flash" has a dot of its own
         fig.savefig(path, dpi=dpi)
         paths.append(path)
     pyplot().close(fig)

@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from lightemma.evaluation.models import family_rank
-from lightemma.figures._mpl import family_color, model_colors, pyplot
+from lightemma.figures._mpl import FAMILY_COLORS, family_color, model_colors, pyplot
 
 MAX_AREA = 1800.0  # points² of the slowest model's bubble
 MIN_AREA = 25.0
@@ -76,7 +76,12 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
     ax.set_ylabel("ADE avg (m) — lower is better")
     ax.grid(axis="y", alpha=0.3)
     families = list(dict.fromkeys(p.get("family", "Other") for p in shown))
-    handles = [plt.Line2D([], [], marker="o", linestyle="", color=family_color(f), markersize=8, label=f) for f in families]
+    def swatch(family: str) -> str:  # baselines and others have a colour per model: show the first one's
+        if family in ("Baseline", "Other") or family not in FAMILY_COLORS:
+            return next(colors[str(p["model"])] for p in shown if p.get("family", "Other") == family)
+        return family_color(family)
+
+    handles = [plt.Line2D([], [], marker="o", linestyle="", color=swatch(f), markersize=8, label=f) for f in families]
     handles.append(plt.Line2D([], [], linestyle="", label=f"area ∝ time/frame (max {slowest:.1f} s)"))
     if any(p.get("source") == "paper" for p in shown):
         handles.append(plt.Line2D([], [], marker="o", linestyle="", markerfacecolor="none", markeredgecolor="0.3", markersize=8, label="the paper's (value in italics)"))

@@ -60,7 +60,7 @@ def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str,
     line, _ = project(densify(trajectory), camera.intrinsic, camera.extrinsic)
     ax.plot(line[:, 0], line[:, 1], color=color, linewidth=width, label=label, solid_capstyle="round")
     points, visible = project(trajectory, camera.intrinsic, camera.extrinsic)
-    ax.scatter(points[visible, 0], points[visible, 1], s=width * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
+    ax.scatter(points[visible, 0], points[visible, 1], s=min(width, 3.0) * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
 
 
 def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
@@ -71,10 +71,10 @@ def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[st
     else:
         ax.imshow(np.full((height, width, 3), 200, dtype=np.uint8))
         ax.text(0.02, 0.96, "image not available", transform=ax.transAxes, color="0.3", va="top", fontsize=8)
-    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", 3.0)
+    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", 5.0)  # wide underneath: both stay visible where they coincide
     for i, (label, trajectory) in enumerate(predictions.items()):
         if np.isfinite(trajectory).all():
-            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, 2.2)
+            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, 2.0)
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
     ax.axis("off")
@@ -103,7 +103,7 @@ def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, 
         ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label, zorder=z)
 
     shown = {label: t for label, t in predictions.items() if np.isfinite(t).all()}
-    plot(gt, GT_COLOR, 3.0, "ground truth", 3)  # wide underneath: a prediction on top of it stays visible
+    plot(gt, GT_COLOR, 4.0, "ground truth", 3)  # wide underneath: a prediction on top of it stays visible
     for i, (label, trajectory) in enumerate(shown.items()):
         plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.5, label, 4)
     (x0, x1), (y0, y1) = bev_limits([gt, *shown.values()])
@@ -190,7 +190,7 @@ def model_grid(
     labels = list(predictions)
     ncols = max(1, min(ncols, len(labels)))
     nrows = max(1, -(-len(labels) // ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 2.9 * nrows + 0.5), squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.15 * nrows + 0.7), squeeze=False)
     for ax in axes.flat[len(labels):]:
         ax.axis("off")
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
@@ -206,7 +206,7 @@ def model_grid(
         fig.suptitle(title, fontsize=10)
     handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.5, label="ground truth")]
     handles += [plt.Line2D([], [], color=palette[label], linewidth=2.0, label=label) for label in labels]
-    fig.tight_layout(rect=(0, 0.06 if nrows > 1 else 0.1, 1, 1))
+    fig.tight_layout(rect=(0, 0.06 if nrows > 1 else 0.1, 1, 1), h_pad=1.6)
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8, frameon=False)
     return fig
 

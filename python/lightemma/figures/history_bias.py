@@ -18,7 +18,14 @@ def _limits(values: Sequence[np.ndarray], *, floor: float) -> tuple[float, float
     return -reach, reach
 
 
-def history_bias_figure(runs: Sequence[Any], *, colors: Mapping[str, str] | None = None, rows: Sequence[Mapping[str, Any]] | None = None, max_points: int = 2500) -> Any:
+def history_bias_figure(
+    runs: Sequence[Any],
+    *,
+    colors: Mapping[str, str] | None = None,
+    rows: Sequence[Mapping[str, Any]] | None = None,
+    notes: Mapping[str, str] | None = None,
+    max_points: int = 2500,
+) -> Any:
     """Three panels (see :func:`lightemma.scenarios.history_bias` for the definitions):
 
     * predicted (per model) and true mean future curvature against the last
@@ -30,7 +37,8 @@ def history_bias_figure(runs: Sequence[Any], *, colors: Mapping[str, str] | None
       curvature carried into the prediction, against the truth's (green line).
 
     ``rows``: the :func:`~lightemma.scenarios.history_bias` rows of ``runs`` when
-    already computed (the fits are the slow part).
+    already computed (the fits are the slow part); ``notes``: a flag after a
+    model's name (e.g. fewer than half of its frames scored).
     """
     from lightemma.evaluation.core import unique_labels
     from lightemma.scenarios import bias_row, curvature_samples, truth_samples
@@ -88,7 +96,8 @@ def history_bias_figure(runs: Sequence[Any], *, colors: Mapping[str, str] | None
             low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
             slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt="o", color=palette[label], capsize=3, zorder=3)
         slopes.set_yticks(y)
-        slopes.set_yticklabels([label for label, _ in fitted], fontsize=7)
+        slopes.set_yticklabels([label + (notes or {}).get(label, "") for label, _ in fitted], fontsize=7)
+        slopes.set_ylim(-1.8, len(fitted) - 0.4)  # an empty band at the bottom holds the legend
         slopes.legend(fontsize=7, loc="lower right", framealpha=0.9).set_zorder(20)
     else:
         slopes.text(0.5, 0.5, "too few moving frames for a slope", ha="center", va="center", transform=slopes.transAxes, color="0.4")
@@ -105,7 +114,10 @@ def history_bias_figure(runs: Sequence[Any], *, colors: Mapping[str, str] | None
         bars.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=4, label="turn goes on unchanged (1)")
         bars.axvline(0.0, color="0.6", linewidth=0.8, zorder=1)
         bars.set_yticks(y)
-        bars.set_yticklabels([f"{s['model']} (n={s['after_turn_frames']})" for s in with_turns], fontsize=7)
+        bars.set_yticklabels([f"{s['model']}{(notes or {}).get(s['model'], '')} (n={s['after_turn_frames']})" for s in with_turns], fontsize=7)
+        bars.set_ylim(-1.8, len(with_turns) - 0.4)  # an empty band at the bottom holds the legend
+        values = [s["carry_pred"] for s in with_turns] + [carried, 1.0]
+        bars.set_xlim(min(0.0, min(values)) - 0.08, max(values) + 0.08)
         bars.legend(fontsize=7, loc="lower right", framealpha=0.9).set_zorder(20)
     else:
         bars.text(0.5, 0.5, "no frame goes straight just after a turn", ha="center", va="center", transform=bars.transAxes, color="0.4")
