@@ -88,7 +88,7 @@ def generations_table(evaluation: Evaluation) -> Table:
 def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> list[Table]:
     """Efficiency first (Table I), then accuracy per evaluated convention (Table II), then the paired comparisons if computed."""
     tables = [efficiency_table(evaluation, with_paper=with_paper)] + [accuracy_table(evaluation, c, with_paper=with_paper) for c in evaluation.conventions]
-    if evaluation.pairwise is not None:
+    if evaluation.pairwise:  # computed, and at least two runs
         tables.append(pairwise_table(evaluation))
         if evaluation.generations():
             tables.append(generations_table(evaluation))
