@@ -4,6 +4,7 @@
 //!   actions, a status, a failure kind and a reason;
 //! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
 //! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
+//! * [`stats`]: scene-level bootstrap intervals and sign-flip p-values (deterministic, parallel);
 //! * [`error`]: the one error type, mapped to Python's `ValueError` in `python.rs`.
 //!
 //! Everything but `python.rs` is plain Rust, tested with `cargo test` without Python.
@@ -17,3 +18,4 @@ pub mod metrics;
 pub mod paper;
 pub mod parse;
 mod python;
+pub mod stats;

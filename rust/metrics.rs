@@ -2,6 +2,10 @@
 //!
 //! Per frame `e_k = ‖pred_k − gt_k‖`, k = 1..6 (0.5 … 3.0 s). Totals are
 //! frame-weighted means over the evaluated frames.
+//!
+//! "ADE avg" follows each convention's own papers: `lightemma` averages all six
+//! errors (equal to the mean of its three columns); `stp3` and `uniad` average
+//! their three columns, as ST-P3/VAD and UniAD print "Avg.".
 
 use rayon::prelude::*;
 
@@ -43,7 +47,7 @@ impl Convention {
     }
 
     /// The (first, last) step indices (0-based, inclusive) averaged for second `s` (1..=3).
-    fn window(self, s: usize) -> (usize, usize) {
+    pub fn window(self, s: usize) -> (usize, usize) {
         let last = 2 * s - 1;
         match self {
             Convention::Lightemma => (last - 1, last),
@@ -70,10 +74,39 @@ fn distance(dx: f64, dy: f64) -> f64 {
     (dx * dx + dy * dy).sqrt()
 }
 
+/// Values per frame, in this order: ADE 1s, ADE 2s, ADE 3s, ADE avg, FDE.
+pub const FRAME_VALUES: usize = 5;
+
+/// The per-frame values of one frame (`2 × HORIZON` numbers each) and its largest error.
+#[inline(always)]
+fn frame_values(
+    p: &[f64],
+    g: &[f64],
+    windows: &[(usize, usize); 3],
+    convention: Convention,
+) -> ([f64; FRAME_VALUES], f64) {
+    let mut e = [0.0_f64; HORIZON];
+    let mut worst = 0.0_f64;
+    for k in 0..HORIZON {
+        e[k] = distance(p[2 * k] - g[2 * k], p[2 * k + 1] - g[2 * k + 1]);
+        worst = worst.max(e[k]);
+    }
+    let mut out = [0.0_f64; FRAME_VALUES];
+    for (value, &(a, b)) in out.iter_mut().zip(windows.iter()) {
+        *value = e[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
+    }
+    out[3] = match convention {
+        Convention::Lightemma => e.iter().sum::<f64>() / HORIZON as f64,
+        Convention::Stp3 | Convention::Uniad => (out[0] + out[1] + out[2]) / 3.0,
+    };
+    out[4] = e[HORIZON - 1];
+    (out, worst)
+}
+
 /// Partial sums over a block of frames: ADE 1s/2s/3s, ADE avg and FDE sums, and misses.
 #[derive(Default, Clone, Copy)]
 struct Partial {
-    sums: [f64; 5],
+    sums: [f64; FRAME_VALUES],
     misses: usize,
 }
 
@@ -83,10 +116,10 @@ fn block_sums(
     gt: &[f64],
     mask: Option<&[bool]>,
     windows: &[(usize, usize); 3],
+    convention: Convention,
     miss_threshold: f64,
 ) -> Partial {
     let mut acc = Partial::default();
-    let mut e = [0.0_f64; HORIZON];
     for (i, (p, g)) in pred
         .chunks_exact(2 * HORIZON)
         .zip(gt.chunks_exact(2 * HORIZON))
@@ -95,16 +128,10 @@ fn block_sums(
         if mask.is_some_and(|m| !m[i]) {
             continue;
         }
-        let mut worst = 0.0_f64;
-        for k in 0..HORIZON {
-            e[k] = distance(p[2 * k] - g[2 * k], p[2 * k + 1] - g[2 * k + 1]);
-            worst = worst.max(e[k]);
+        let (values, worst) = frame_values(p, g, windows, convention);
+        for (sum, v) in acc.sums.iter_mut().zip(values) {
+            *sum += v;
         }
-        for (sum, &(a, b)) in acc.sums.iter_mut().zip(windows.iter()) {
-            *sum += e[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
-        }
-        acc.sums[3] += e.iter().sum::<f64>() / HORIZON as f64;
-        acc.sums[4] += e[HORIZON - 1];
         if worst > miss_threshold {
             acc.misses += 1;
         }
@@ -186,6 +213,78 @@ pub fn displacement_errors(pred: &[f64], gt: &[f64], out: &mut [f64]) -> CoreRes
     Ok(())
 }
 
+/// Check a batch of `N × steps × 2` predictions against ground truth of the same size:
+/// six steps, matching sizes, and (the frames `mask` keeps, all when `None`) finite values. Returns N.
+fn check_batch(pred: &[f64], gt: &[f64], steps: usize, mask: Option<&[bool]>) -> CoreResult<usize> {
+    if steps != HORIZON {
+        return Err(CoreError::Shape(format!(
+            "metrics are defined on {HORIZON} steps (0.5 … 3.0 s), got T={steps}"
+        )));
+    }
+    if pred.len() != gt.len() {
+        return Err(CoreError::Shape(format!(
+            "prediction ({} numbers) and ground truth ({} numbers) differ in size",
+            pred.len(),
+            gt.len()
+        )));
+    }
+    let n = pred.len() / (2 * steps);
+    match mask {
+        None => {
+            check_finite(gt, steps, "ground truth")?;
+            check_finite(pred, steps, "prediction")?;
+        }
+        Some(m) => {
+            if m.len() != n {
+                return Err(CoreError::Shape(format!(
+                    "mask has {} entries for {n} frames; it needs one per frame",
+                    m.len()
+                )));
+            }
+            check_finite_masked(gt, steps, m, "ground truth")?;
+            check_finite_masked(pred, steps, m, "prediction")?;
+        }
+    }
+    Ok(n)
+}
+
+/// Per-frame values under `convention`, `N × FRAME_VALUES` written into `out`:
+/// ADE 1s, ADE 2s, ADE 3s, ADE avg, FDE (the numbers whose frame-weighted means
+/// [`evaluate`] returns). An empty batch gives an empty result.
+pub fn frame_metrics(
+    pred: &[f64],
+    gt: &[f64],
+    steps: usize,
+    convention: Convention,
+    out: &mut [f64],
+) -> CoreResult<()> {
+    let n = check_batch(pred, gt, steps, None)?;
+    if out.len() != n * FRAME_VALUES {
+        return Err(CoreError::Shape(format!(
+            "output holds {} numbers, {n} frames need {}",
+            out.len(),
+            n * FRAME_VALUES
+        )));
+    }
+    let windows = [1, 2, 3].map(|s| convention.window(s));
+    let fill = |(p, o): (&[f64], &mut [f64]), g: &[f64]| {
+        o.copy_from_slice(&frame_values(p, g, &windows, convention).0);
+    };
+    let frame = 2 * HORIZON;
+    if n >= PARALLEL_MIN_FRAMES {
+        pred.par_chunks(frame)
+            .zip(out.par_chunks_mut(FRAME_VALUES))
+            .zip(gt.par_chunks(frame))
+            .for_each(|(po, g)| fill(po, g));
+    } else {
+        pred.chunks(frame)
+            .zip(out.chunks_mut(FRAME_VALUES))
+            .zip(gt.chunks(frame))
+            .for_each(|(po, g)| fill(po, g));
+    }
+    Ok(())
+}
+
 /// Aggregate `N × 6` trajectories under `convention`; a frame misses when any
 /// step's error exceeds `miss_threshold` metres.
 pub fn evaluate(
@@ -208,73 +307,46 @@ pub fn evaluate_masked(
     convention: Convention,
     miss_threshold: f64,
 ) -> CoreResult<Summary> {
-    if steps != HORIZON {
-        return Err(CoreError::Shape(format!(
-            "metrics are defined on {HORIZON} steps (0.5 … 3.0 s), got T={steps}"
-        )));
-    }
     if !(miss_threshold.is_finite() && miss_threshold >= 0.0) {
         return Err(CoreError::Argument(format!(
             "miss_threshold must be a non-negative number of metres, got {miss_threshold}"
         )));
     }
-    if pred.len() != gt.len() {
-        return Err(CoreError::Shape(format!(
-            "prediction ({} numbers) and ground truth ({} numbers) differ in size",
-            pred.len(),
-            gt.len()
-        )));
-    }
-    let n = pred.len() / (2 * steps);
+    let n = check_batch(pred, gt, steps, mask)?;
     if n == 0 {
         return Err(CoreError::Shape(
             "cannot evaluate an empty batch (0 frames)".to_owned(),
         ));
     }
-    let kept = match mask {
-        None => {
-            check_finite(gt, steps, "ground truth")?;
-            check_finite(pred, steps, "prediction")?;
-            n
-        }
-        Some(m) => {
-            if m.len() != n {
-                return Err(CoreError::Shape(format!(
-                    "mask has {} entries for {n} frames; it needs one per frame",
-                    m.len()
-                )));
-            }
-            let kept = m.iter().filter(|&&k| k).count();
-            if kept == 0 {
-                return Err(CoreError::Shape(format!(
-                    "the mask keeps none of the {n} frames; nothing to evaluate"
-                )));
-            }
-            check_finite_masked(gt, steps, m, "ground truth")?;
-            check_finite_masked(pred, steps, m, "prediction")?;
-            kept
-        }
-    };
+    let kept = mask.map_or(n, |m| m.iter().filter(|&&k| k).count());
+    if kept == 0 {
+        return Err(CoreError::Shape(format!(
+            "the mask keeps none of the {n} frames; nothing to evaluate"
+        )));
+    }
     let windows = [1, 2, 3].map(|s| convention.window(s));
     let block = FRAMES_PER_BLOCK * 2 * HORIZON;
     // the mask entries of block b
     let block_mask = |b: usize, p: &[f64]| {
         mask.map(|m| &m[b * FRAMES_PER_BLOCK..b * FRAMES_PER_BLOCK + p.len() / (2 * HORIZON)])
     };
+    let sums_of = |(b, (p, g)): (usize, (&[f64], &[f64]))| {
+        block_sums(p, g, block_mask(b, p), &windows, convention, miss_threshold)
+    };
     let partials: Vec<Partial> = if n >= PARALLEL_MIN_FRAMES {
         pred.par_chunks(block)
             .zip(gt.par_chunks(block))
             .enumerate()
-            .map(|(b, (p, g))| block_sums(p, g, block_mask(b, p), &windows, miss_threshold))
+            .map(sums_of)
             .collect()
     } else {
         pred.chunks(block)
             .zip(gt.chunks(block))
             .enumerate()
-            .map(|(b, (p, g))| block_sums(p, g, block_mask(b, p), &windows, miss_threshold))
+            .map(sums_of)
             .collect()
     };
-    let mut sums = [0.0_f64; 5];
+    let mut sums = [0.0_f64; FRAME_VALUES];
     let mut misses = 0_usize;
     for partial in &partials {
         for (total, part) in sums.iter_mut().zip(partial.sums) {
@@ -317,6 +389,52 @@ mod tests {
         assert_eq!((s.ade_1s, s.ade_2s, s.ade_3s), (1.5, 2.5, 3.5));
         let u = evaluate(&p, &g, 6, Convention::Uniad, 2.0).unwrap();
         assert_eq!((u.ade_1s, u.ade_2s, u.ade_3s), (2.0, 4.0, 6.0));
+    }
+
+    #[test]
+    fn ade_avg_is_the_mean_of_each_conventions_columns() {
+        let (p, g) = batch(&[
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+            [0.5, 0.0, 4.0, 1.0, 2.0, 9.0],
+        ]);
+        for convention in [Convention::Lightemma, Convention::Stp3, Convention::Uniad] {
+            let m = evaluate(&p, &g, 6, convention, 2.0).unwrap();
+            let columns = (m.ade_1s + m.ade_2s + m.ade_3s) / 3.0;
+            assert!((m.ade_avg - columns).abs() < 1e-12, "{convention:?}");
+        }
+        // one frame: stp3 (1.5 + 2.5 + 3.5) / 3 = 2.5, uniad (2 + 4 + 6) / 3 = 4, lightemma 21 / 6
+        let (p, g) = batch(&[[1.0, 2.0, 3.0, 4.0, 5.0, 6.0]]);
+        let avg = |c| evaluate(&p, &g, 6, c, 2.0).unwrap().ade_avg;
+        assert_eq!(avg(Convention::Stp3), 2.5);
+        assert_eq!(avg(Convention::Uniad), 4.0);
+        assert_eq!(avg(Convention::Lightemma), 3.5);
+    }
+
+    #[test]
+    fn frame_metrics_average_to_evaluate() {
+        let rows = [
+            [1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+            [0.5, 0.0, 4.0, 1.0, 2.0, 9.0],
+            [0.0; 6],
+        ];
+        let (p, g) = batch(&rows);
+        for convention in [Convention::Lightemma, Convention::Stp3, Convention::Uniad] {
+            let mut out = vec![0.0; 3 * FRAME_VALUES];
+            frame_metrics(&p, &g, 6, convention, &mut out).unwrap();
+            let m = evaluate(&p, &g, 6, convention, 2.0).unwrap();
+            let means: Vec<f64> = (0..FRAME_VALUES)
+                .map(|j| out.iter().skip(j).step_by(FRAME_VALUES).sum::<f64>() / 3.0)
+                .collect();
+            let want = [m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde];
+            for (got, want) in means.iter().zip(want) {
+                assert!((got - want).abs() < 1e-12, "{convention:?}");
+            }
+        }
+        let mut out = vec![0.0; 3 * FRAME_VALUES];
+        frame_metrics(&p, &g, 6, Convention::Uniad, &mut out).unwrap();
+        assert_eq!(&out[..5], &[2.0, 4.0, 6.0, 4.0, 6.0]);
+        assert!(frame_metrics(&p, &g, 6, Convention::Uniad, &mut out[..4]).is_err());
+        assert!(frame_metrics(&[], &[], 6, Convention::Uniad, &mut []).is_ok());
     }
 
     #[test]

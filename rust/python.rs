@@ -13,7 +13,7 @@ use pyo3::pybacked::PyBackedStr;
 use pyo3::types::{PyList, PyString};
 
 use crate::error::CoreError;
-use crate::{kinematics, metrics, parse};
+use crate::{kinematics, metrics, parse, stats};
 
 /// Batches at least this large run with the GIL released.
 const DETACH_MIN_FRAMES: usize = 2048;
@@ -221,12 +221,125 @@ fn evaluate(
     ))
 }
 
+/// frame_metrics(pred, gt, convention) -> (N, 5): ADE 1s, 2s, 3s, ADE avg, FDE per frame
+#[pyfunction]
+#[pyo3(signature = (pred, gt, convention = "lightemma"))]
+fn frame_metrics<'py>(
+    py: Python<'py>,
+    pred: PyReadonlyArrayDyn<'py, f64>,
+    gt: PyReadonlyArrayDyn<'py, f64>,
+    convention: &str,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let convention = metrics::Convention::from_name(convention)?;
+    let (p, g, n, t) = paired_views(&pred, &gt)?;
+    let out = maybe_detach(py, n, || {
+        let mut out = vec![0.0; n * metrics::FRAME_VALUES];
+        metrics::frame_metrics(p, g, t, convention, &mut out).map(|()| out)
+    })?;
+    let out = Array2::from_shape_vec((n, metrics::FRAME_VALUES), out)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok(out.into_pyarray(py))
+}
+
+/// Borrow a C-contiguous 1-D array.
+fn slice1<'a, T: numpy::Element>(
+    array: &'a PyReadonlyArray1<'_, T>,
+    name: &str,
+) -> PyResult<&'a [T]> {
+    array
+        .as_slice()
+        .map_err(|_| PyValueError::new_err(format!("{name} must be C-contiguous")))
+}
+
+/// Cluster sums (K, M), counts (K,) and row offsets (R + 1,) as a `stats::Clusters`.
+fn clusters_view<'a>(
+    sums: &'a PyReadonlyArrayDyn<'_, f64>,
+    counts: &'a PyReadonlyArray1<'_, f64>,
+    offsets: &'a [usize],
+) -> PyResult<stats::Clusters<'a>> {
+    let shape = sums.shape();
+    if shape.len() != 2 {
+        return Err(CoreError::Shape(format!(
+            "sums must have shape (clusters, metrics), got {shape:?}"
+        ))
+        .into());
+    }
+    let data = sums
+        .as_slice()
+        .map_err(|_| PyValueError::new_err("sums must be C-contiguous"))?;
+    Ok(stats::Clusters {
+        sums: data,
+        counts: slice1(counts, "counts")?,
+        offsets,
+        metrics: shape[1],
+    })
+}
+
+fn offsets_of(offsets: &PyReadonlyArray1<'_, i64>) -> PyResult<Vec<usize>> {
+    slice1(offsets, "offsets")?
+        .iter()
+        .map(|&o| {
+            usize::try_from(o).map_err(|_| {
+                PyValueError::new_err(format!("offsets must be non-negative, got {o}"))
+            })
+        })
+        .collect()
+}
+
+/// cluster_bootstrap(sums (K, M), counts (K,), offsets (R+1,), streams (R,), n_resamples, seed, confidence)
+/// -> (R, M, 2) percentile intervals of Σ sums / Σ counts over clusters drawn with replacement
+#[pyfunction]
+#[pyo3(signature = (sums, counts, offsets, streams, n_resamples = 10_000, seed = 0, confidence = 0.95))]
+#[allow(clippy::too_many_arguments)]
+fn cluster_bootstrap<'py>(
+    py: Python<'py>,
+    sums: PyReadonlyArrayDyn<'py, f64>,
+    counts: PyReadonlyArray1<'py, f64>,
+    offsets: PyReadonlyArray1<'py, i64>,
+    streams: PyReadonlyArray1<'py, u64>,
+    n_resamples: usize,
+    seed: u64,
+    confidence: f64,
+) -> PyResult<Bound<'py, PyArray3<f64>>> {
+    let offsets = offsets_of(&offsets)?;
+    let clusters = clusters_view(&sums, &counts, &offsets)?;
+    let streams = slice1(&streams, "streams")?;
+    let out =
+        py.detach(|| stats::cluster_bootstrap(&clusters, streams, n_resamples, seed, confidence))?;
+    let shape = (clusters.rows(), clusters.metrics, 2);
+    Ok(Array3::from_shape_vec(shape, out)
+        .map_err(|e| PyValueError::new_err(e.to_string()))?
+        .into_pyarray(py))
+}
+
+/// sign_flip_test(sums (K, 1), counts (K,), offsets (R+1,), streams (R,), n_permutations, seed) -> p-values (R,)
+#[pyfunction]
+#[pyo3(signature = (sums, counts, offsets, streams, n_permutations = 10_000, seed = 0))]
+fn sign_flip_test<'py>(
+    py: Python<'py>,
+    sums: PyReadonlyArrayDyn<'py, f64>,
+    counts: PyReadonlyArray1<'py, f64>,
+    offsets: PyReadonlyArray1<'py, i64>,
+    streams: PyReadonlyArray1<'py, u64>,
+    n_permutations: usize,
+    seed: u64,
+) -> PyResult<Bound<'py, PyArray1<f64>>> {
+    let offsets = offsets_of(&offsets)?;
+    let clusters = clusters_view(&sums, &counts, &offsets)?;
+    let streams = slice1(&streams, "streams")?;
+    let out = py.detach(|| stats::sign_flip_pvalues(&clusters, streams, n_permutations, seed))?;
+    Ok(Array1::from(out).into_pyarray(py))
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(parse_actions, m)?)?;
     m.add_function(wrap_pyfunction!(integrate, m)?)?;
     m.add_function(wrap_pyfunction!(displacement_errors, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(frame_metrics, m)?)?;
+    m.add_function(wrap_pyfunction!(cluster_bootstrap, m)?)?;
+    m.add_function(wrap_pyfunction!(sign_flip_test, m)?)?;
     m.add("METHODS", kinematics::Method::NAMES.to_vec())?;
     m.add("CONVENTIONS", metrics::Convention::NAMES.to_vec())?;
     m.add("PARSE_MODES", parse::Mode::NAMES.to_vec())?;

@@ -6,6 +6,7 @@ from __future__ import annotations
 import csv
 import io
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -43,11 +44,14 @@ def numpy_reference(run_dir: Path, convention: str, only: set[str] | None = None
         gt.append(rec["gt_positions"])
     err = np.sqrt(((np.array(pred) - np.array(gt)) ** 2).sum(-1))
     s1, s2, s3 = SLICES[convention]
+    columns = [err[:, s].mean(1) for s in (s1, s2, s3)]
+    # ADE avg: lightemma mean(e1..e6); stp3 and uniad the mean of their three columns (as those papers print "Avg.")
+    avg = err.mean(1) if convention == "lightemma" else np.mean(columns, axis=0)
     return {
-        "ade_1s": err[:, s1].mean(1).mean(),
-        "ade_2s": err[:, s2].mean(1).mean(),
-        "ade_3s": err[:, s3].mean(1).mean(),
-        "ade_avg": err.mean(),
+        "ade_1s": columns[0].mean(),
+        "ade_2s": columns[1].mean(),
+        "ade_3s": columns[2].mean(),
+        "ade_avg": avg.mean(),
         "fde": err[:, 5].mean(),
         "miss_rate": (err.max(1) > 2.0).mean(),
         "frames": len(err),
@@ -213,16 +217,22 @@ def test_cli_markdown_layout_with_paper(two_runs, capsys):
     assert main(["evaluate", str(a), str(b), "--with-paper", "--common"]) == 0
     text = capsys.readouterr().out
     lines = text.splitlines()
-    header = next(i for i, line in enumerate(lines) if line.startswith("| Model | Frames | FE (%)"))
-    assert lines[header] == "| Model | Frames | FE (%) | FE corr (%) | ADE 1s (m) | ADE 2s (m) | ADE 3s (m) | ADE avg (m) | FDE (m) | Miss (%) | Parse |"
-    body = lines[header + 2 : header + 2 + 19]
+    header = next(i for i, line in enumerate(lines) if line.startswith("| Model | Frames | Scored"))
+    assert lines[header] == (
+        "| Model | Frames | Scored | Failed | Implausible | API errors | FE (%) | FE corr (%) | ADE 1s (m) | ADE 2s (m) | ADE 3s (m) "
+        "| ADE avg (m) [95% CI] | FDE (m) [95% CI] | Miss (%) | Parse |"
+    )
+    body = lines[header + 2 : header + 2 + 18]
     # the run, then the paper's row of its model, then the difference; then the baseline; then the other paper rows
     assert body[0].startswith("| GPT-4o (synthetic data) | ") and body[0].endswith("| lenient |")  # synthetic records
-    assert body[1] == "| GPT-4o (paper) | 3908 | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
+    assert re.search(r"\| GPT-4o \(synthetic data\) \| \d+ \| \d+ \| \d+ \| 0 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \[[\d.]+, [\d.]+\] \| [\d.]+ \[[\d.]+, [\d.]+\] \|", body[0])
+    assert body[1] == "| GPT-4o (paper) | 3908 | - | - | - | - | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
     assert body[2].startswith("| Δ vs paper | - | ") and body[3].startswith("| baseline:cv (synthetic data) | ")
     assert body[4].startswith("| GPT-5.0 (paper) | ") and len([b for b in body if "(paper)" in b]) == 15
     assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | 402 | - | - | - | 3908 |" in text
-    assert all(len(line.split("|")) == 13 for line in body)
+    assert all(len(line.split("|")) == 17 for line in body)
+    assert lines[header + 2 + 18] == ""  # the table ends after the 18 rows (3 + the baseline + 14 other paper rows)
+    assert "95 % scene-level bootstrap interval (10000 resamples of scenes, seed 0)" in text
 
 
 def test_csv_latex_json_formats(two_runs, capsys):
@@ -233,13 +243,19 @@ def test_csv_latex_json_formats(two_runs, capsys):
     blocks = [blk for blk in csv_text.split("\n\n") if blk.strip()]
     assert len(blocks) == 4  # efficiency + three conventions
     rows = list(csv.reader(io.StringIO(blocks[1].split("\n", 1)[1])))
-    assert rows[0][:3] == ["Model", "Frames", "FE (%)"] and len(rows) == 3
-    assert float(rows[1][7]) == pytest.approx(ev.accuracy_rows("lightemma")[0]["ade_avg"], abs=0.005)
+    assert rows[0][:3] == ["Model", "Frames", "Scored"] and len(rows) == 3
+    col = rows[0].index("ADE avg (m)")
+    assert rows[0][col + 1 : col + 3] == ["ADE avg (m) CI low", "ADE avg (m) CI high"]
+    first = ev.accuracy_rows("lightemma")[0]
+    assert float(rows[1][col]) == pytest.approx(first["ade_avg"], abs=0.005)
+    assert [float(v) for v in rows[1][col + 1 : col + 3]] == pytest.approx(first["ade_avg_ci95"], abs=0.005)
     latex = render(tables, "latex")
     assert latex.count(r"\begin{tabular}") == 4 and r"FE (\%)" in latex and r"\textcent{}" in latex
     doc = json.loads(render(tables, "json", extra={"common": False}))
     assert [t["name"] for t in doc["tables"]] == ["efficiency", "accuracy_lightemma", "accuracy_stp3", "accuracy_uniad"]
     assert doc["tables"][1]["rows"][0]["ade_avg"] == ev.accuracy_rows("lightemma")[0]["ade_avg"]
+    low, high = doc["tables"][1]["rows"][0]["ade_avg_ci95"]
+    assert low < doc["tables"][1]["rows"][0]["ade_avg"] < high and len(doc["tables"][1]["rows"][0]["fde_ci95"]) == 2
     assert main(["evaluate", str(out), "--format", "json"]) == 0
     assert json.loads(capsys.readouterr().out)["tables"][0]["name"] == "efficiency"
 

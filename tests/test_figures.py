@@ -139,8 +139,79 @@ def test_history_bias_figure_is_drawn(tmp_path):
             hist = np.array([[8.0, k]] * 6)
             w.append(make_record(f"f{i}", straight, pred, history_actions=hist))
     fig = history_bias_figure([load_run(run_dir, details=True)])
-    scatter, bars = fig.axes
-    assert len(bars.patches) == 1 and bars.patches[0].get_height() == pytest.approx(1.0, rel=0.02)
+    scatter, slopes, bars = fig.axes
+    assert len(bars.patches) == 1 and bars.patches[0].get_width() == pytest.approx(1.0, rel=0.02)
+    assert [t.get_text() for t in slopes.get_yticklabels()] == ["m"]  # one slope with its interval per model
     (png,) = save_figure(fig, tmp_path / "bias", formats=("png",))
     img = pixels(png)
     assert near(img, rgb(GT_COLOR), 40).sum() > 100 and near(img, rgb(pred_color(0)), 40).sum() > 500
+
+
+def test_saved_as_150_dpi_png_and_svg_even_with_a_dot_in_the_name(tmp_path):
+    import matplotlib.pyplot as plt
+
+    fig = plt.figure(figsize=(4, 3))
+    png, svg = save_figure(fig, tmp_path / "frames" / "case_Gemini-2.5-Flash")
+    assert (png.name, svg.name) == ("case_Gemini-2.5-Flash.png", "case_Gemini-2.5-Flash.svg")
+    assert Image.open(png).size == (600, 450)  # 4 × 3 in at 150 dpi
+
+
+def test_birds_eye_view_holds_every_trajectory():
+    from lightemma.figures.frame_view import bev_limits
+
+    gt = np.stack([8.0 * STEPS, 0.0 * STEPS], axis=1)
+    turning = np.stack([6.0 * np.sin(STEPS / 1.5) * 3, -9.0 * (1 - np.cos(STEPS / 1.5))], axis=1)  # a hard right turn
+    behind = np.array([[-1.0, 0.5]] * 6)
+    (h0, h1), (v0, v1) = bev_limits([gt, turning, behind])
+    for traj in (gt, turning, behind, np.zeros((1, 2))):
+        assert np.all((h0 < -traj[:, 1]) & (-traj[:, 1] < h1)) and np.all((v0 < traj[:, 0]) & (traj[:, 0] < v1))
+    assert h1 - h0 == pytest.approx(v1 - v0)  # square: equal scale both ways
+
+
+def test_one_colour_per_model_everywhere():
+    from lightemma.figures._mpl import model_colors
+
+    models = [
+        {"model": "GPT-4o", "family": "GPT", "generation": 1},
+        {"model": "GPT-5.2", "family": "GPT", "generation": 3},
+        {"model": "Claude-3.7-Sonnet", "family": "Claude", "generation": 1},
+        {"model": "baseline:cv", "family": "Baseline"},
+        {"model": "baseline:constant", "family": "Baseline"},
+        {"model": "my-vlm", "family": "Other"},
+    ]
+    colors = model_colors(models)
+    assert len(set(colors.values())) == len(models)
+    assert GT_COLOR not in colors.values()
+    # the paper's GPT-4o row gets the run's colour; the colour does not depend on which other models are shown
+    assert model_colors([{"model": "GPT-4o", "family": "GPT", "generation": 1}])["GPT-4o"] == colors["GPT-4o"]
+    # a family reads as a family: both GPT shades share the hue
+    import colorsys
+
+    hue = lambda c: colorsys.rgb_to_hls(*(int(c[i : i + 2], 16) / 255 for i in (1, 3, 5)))[0]  # noqa: E731
+    assert hue(colors["GPT-4o"]) == pytest.approx(hue(colors["GPT-5.2"]), abs=0.02)
+
+
+def test_model_grid_uses_the_given_colours_and_has_a_legend(tmp_path):
+    gt = np.stack([6.0 * STEPS, 0.2 * STEPS**2], axis=1)
+    preds = {"A": gt + [0.0, 1.5], "B": gt + [0.0, -1.5]}
+    colors = {"A": "#7048c8", "B": "#17becf"}
+    fig = model_grid(gt, preds, camera=Camera(None, K, EXTRINSIC), colors=colors)
+    legend = fig.legends[0]
+    assert [t.get_text() for t in legend.get_texts()] == ["ground truth", "A", "B"]
+    (png,) = save_figure(fig, tmp_path / "grid", formats=("png",))
+    img = pixels(png)
+    for color in colors.values():
+        assert near(img, rgb(color)).sum() > 50, color
+
+
+def test_bubble_axis_and_intervals_come_from_the_points_shown(tmp_path):
+    points = [
+        {"model": "a", "family": "GPT", "generation": 1, "ade_avg": 1.1, "ade_avg_ci95": [1.0, 1.2], "seconds_per_frame": 3.0},
+        {"model": "b", "family": "GPT", "generation": 2, "ade_avg": 1.4, "ade_avg_ci95": [1.3, 1.6], "seconds_per_frame": 5.0, "note": " (only 40 % scored)"},
+        {"model": "a", "family": "GPT", "generation": 1, "ade_avg": 1.07, "seconds_per_frame": 12.0, "source": "paper"},
+    ]
+    fig = bubble_chart(points)
+    ax = fig.axes[0]
+    low, high = ax.get_ylim()
+    assert 0.5 < low < 1.0 and 1.6 < high < 2.2
+    assert [t.get_text() for t in ax.get_xticklabels()] == ["a", "b (only 40 % scored)"]  # the paper's row shares a's slot

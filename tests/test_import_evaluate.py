@@ -59,9 +59,17 @@ def usable(frame):
     return pairs(ego.get("gt_positions"), 6) and pairs(ego.get("obs_actions"), 6)
 
 
-def paper_tables(folder, prices=None):
-    """Table I and II values of one model folder, the way the paper computes them (lightemma convention)."""
-    fe = fe_corr = received = 0
+def implausible(actions):
+    """Outside lightemma's default plausibility limits: a speed outside [-10, 50] m/s or |curvature| > 1 /m."""
+    return any(not -10.0 <= v <= 50.0 or abs(c) > 1.0 for v, c in actions)
+
+
+def paper_tables(folder, prices=None, *, gate=False):
+    """Table I and II values of one model folder, the way the paper computes them (lightemma convention).
+
+    ``gate=True``: as lightemma evaluates by default, implausible actions are counted, not averaged
+    (time and tokens still over every frame the paper's rules could read)."""
+    fe = fe_corr = received = n_implausible = n_read = 0
     errors, seconds, inputs, outputs, costs = [], [], [], [], []
     for path in sorted((folder / "output").glob("*.json")):
         try:
@@ -77,18 +85,23 @@ def paper_tables(folder, prices=None):
             fe_corr += is_fe_corr
             if actions is None:
                 continue
-            pred, gt = euler(actions), frame["ego_info"]["gt_positions"]
-            errors.append([math.hypot(p[0] - g[0], p[1] - g[1]) for p, g in zip(pred, gt)])
+            n_read += 1
             if "time_usage" in frame:
                 seconds.append(sum(frame["time_usage"].values()))
                 inputs.append(sum(u["input"] for u in frame["token_usage"].values()))
                 outputs.append(sum(u["output"] for u in frame["token_usage"].values()))
                 if prices:
                     costs.append(100 * sum(u["input"] * prices[0] + u["output"] * prices[1] for u in frame["token_usage"].values()))
+            if gate and implausible(actions):
+                n_implausible += 1
+                continue
+            pred, gt = euler(actions), frame["ego_info"]["gt_positions"]
+            errors.append([math.hypot(p[0] - g[0], p[1] - g[1]) for p, g in zip(pred, gt)])
     e = np.array(errors)
     mean = lambda xs: sum(xs) / len(xs) if xs else None  # noqa: E731
     return {
         "frames": len(errors),
+        "implausible": n_implausible,
         "fe_pct": 100 * fe / received,
         "fe_corr_pct": 100 * fe_corr / received,
         "ade_1s": e[:, 0:2].mean(),
@@ -98,7 +111,7 @@ def paper_tables(folder, prices=None):
         "fde": e[:, 5].mean(),
         "miss_rate": (e.max(axis=1) > 2.0).mean(),
     }, {"seconds_per_frame": mean(seconds), "input_tokens": mean(inputs), "output_tokens": mean(outputs),
-        "cost_cents_per_frame": mean(costs), "frames": len(errors)}  # means over readable frames whose counts are known
+        "cost_cents_per_frame": mean(costs), "frames": n_read}  # means over readable frames whose counts are known
 
 
 @pytest.fixture(scope="module")
@@ -114,15 +127,25 @@ def test_import_then_evaluate_gives_exactly_the_papers_rules(imported, model):
     results, runs = imported
     info = lookup(model)
     prices = price_per_token(info) if info is not None and info.backend == "api" else None
+    # exactly the paper's rules: every answer they read is averaged, implausible or not
     accuracy, efficiency = paper_tables(results["models"][model], prices)
-    ev = evaluate_runs([runs[model]])
+    ev = evaluate_runs([runs[model]], keep_implausible=True)
     (row,) = ev.accuracy_rows("lightemma")
-    assert row["parse"] == "paper" and row["frames"] == accuracy["frames"]
+    assert row["parse"] == "paper" and row["frames"] == accuracy["frames"] and row["implausible"] == 0
     for key, expected in accuracy.items():
         assert row[key] == pytest.approx(expected, rel=1e-12, abs=1e-12), key
     (eff,) = ev.efficiency_rows()
     for key, expected in efficiency.items():
         assert eff[key] == (None if expected is None else pytest.approx(expected, rel=1e-12)), key
+    # by default the paper's FE columns stand, but implausible actions are counted and never averaged
+    gated, gated_efficiency = paper_tables(results["models"][model], prices, gate=True)
+    ev = evaluate_runs([runs[model]])
+    (row,) = ev.accuracy_rows("lightemma")
+    assert row["frames"] == gated["frames"] and row["implausible"] == gated["implausible"]
+    for key, expected in gated.items():
+        assert row[key] == pytest.approx(expected, rel=1e-12, abs=1e-12), key
+    (eff,) = ev.efficiency_rows()
+    assert eff["seconds_per_frame"] == pytest.approx(gated_efficiency["seconds_per_frame"], rel=1e-12)
 
 
 def test_the_fixtures_exercise_every_rule(imported):

@@ -20,11 +20,13 @@ WINDOWS = {  # 0-based inclusive step windows for 1 s, 2 s, 3 s
 def reference_metrics(pred, gt, convention, threshold=2.0):
     e = np.sqrt(((pred - gt) ** 2).sum(-1))
     ades = [e[:, a : b + 1].mean(1).mean() for a, b in WINDOWS[convention]]
+    # ADE avg: lightemma mean(e1..e6); stp3/uniad the mean of their three columns
+    avg = e.mean(1).mean() if convention == "lightemma" else np.mean(ades)
     return {
         "ade_1s": ades[0],
         "ade_2s": ades[1],
         "ade_3s": ades[2],
-        "ade_avg": e.mean(1).mean(),
+        "ade_avg": avg,
         "fde": e[:, -1].mean(),
         "miss_rate": (e.max(1) > threshold).mean(),
         "n_frames": len(e),
@@ -64,7 +66,23 @@ def test_known_values():
     assert (m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde, m.miss_rate, m.n_frames) == (1.5, 3.5, 5.5, 3.5, 6.0, 1.0, 1)
     assert lightemma.evaluate(pred, gt, convention="stp3").ade_2s == 2.5
     assert lightemma.evaluate(pred, gt, convention="uniad").ade_3s == 6.0
+    # "ADE avg" as each convention's papers print it: stp3 (1.5 + 2.5 + 3.5) / 3, uniad (2 + 4 + 6) / 3
+    assert lightemma.evaluate(pred, gt, convention="stp3").ade_avg == 2.5
+    assert lightemma.evaluate(pred, gt, convention="uniad").ade_avg == 4.0
     assert lightemma.evaluate(pred, gt, miss_threshold=6.0).miss_rate == 0.0
+
+
+@settings(max_examples=100, deadline=None)
+@given(pairs, st.sampled_from(sorted(WINDOWS)))
+def test_ade_avg_is_the_mean_of_the_columns_and_frame_metrics_agree(arrays, convention):
+    from lightemma.metrics import frame_metrics
+
+    pred, gt = arrays
+    m = lightemma.evaluate(pred, gt, convention=convention)
+    assert m.ade_avg == pytest.approx((m.ade_1s + m.ade_2s + m.ade_3s) / 3, rel=1e-12, abs=1e-12)
+    per_frame = frame_metrics(pred, gt, convention=convention)
+    assert per_frame.shape == (len(pred), 5)
+    np.testing.assert_allclose(per_frame.mean(0), [m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde], rtol=1e-12, atol=1e-12)
 
 
 def test_single_frame_errors():

@@ -47,9 +47,9 @@ def test_index_links_only_files_that_exist(report):
 def test_index_has_tables_scenarios_and_pictures(report):
     out, index, text = report
     assert "| GPT-4o |" in text and "| Gemini-2.0-Flash |" in text and "| GPT-4o (paper) |" in text
-    assert "frames valid for every run" in text
+    assert "frames scored in every run" in text
     assert "### ADE avg by scenario tag" in text and "| braking |" in text
-    assert re.search(r"per scenario tag, on the \d+ frames valid for every run", text)
+    assert re.search(r"per scenario tag, on the \d+ frames scored in every run", text)
     assert "History bias" in text
     assert "models disagree by" in text and "worst `braking` frame" in text
     # the dataset named in a manifest is not there: said once, pictures still drawn (bird's-eye only)

@@ -33,3 +33,32 @@ def evaluate(
     mask: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[float, float, float, float, float, float, int]:
     """(ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames) over (N, 6, 2) arrays; only frames ``mask`` keeps."""
+
+def frame_metrics(
+    pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float64], convention: str = "lightemma"
+) -> npt.NDArray[np.float64]:
+    """Per-frame (N, 5): ade_1s, ade_2s, ade_3s, ade_avg, fde over C-contiguous (N, 6, 2) arrays."""
+
+def cluster_bootstrap(
+    sums: npt.NDArray[np.float64],
+    counts: npt.NDArray[np.float64],
+    offsets: npt.NDArray[np.int64],
+    streams: npt.NDArray[np.uint64],
+    n_resamples: int = 10_000,
+    seed: int = 0,
+    confidence: float = 0.95,
+) -> npt.NDArray[np.float64]:
+    """Percentile intervals (R, M, 2) of Σ sums / Σ counts over clusters drawn with replacement.
+
+    sums (K, M) and counts (K,) per cluster; row r owns clusters offsets[r]:offsets[r+1];
+    streams (R,) key each row's random numbers. NaN for a row without clusters."""
+
+def sign_flip_test(
+    sums: npt.NDArray[np.float64],
+    counts: npt.NDArray[np.float64],
+    offsets: npt.NDArray[np.int64],
+    streams: npt.NDArray[np.uint64],
+    n_permutations: int = 10_000,
+    seed: int = 0,
+) -> npt.NDArray[np.float64]:
+    """Two-sided p-values (R,) that the mean of the clusters' summed differences (K, 1) is zero, by random sign flips."""

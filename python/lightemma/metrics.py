@@ -20,8 +20,10 @@ class Metrics:
     ``convention`` says how ``ade_1s``/``ade_2s``/``ade_3s`` are defined:
     ``lightemma`` (the paper's table: mean(e1, e2), mean(e3, e4), mean(e5, e6)),
     ``stp3`` (mean over the horizon up to that second) or ``uniad`` (e2, e4, e6).
-    ``ade_avg`` = mean(e1..e6), ``fde`` = e6, ``miss_rate`` = share of frames
-    whose largest error exceeds ``miss_threshold``.
+    ``ade_avg`` is the convention's own average: mean(e1..e6) under ``lightemma``
+    (equal to the mean of its three columns), the mean of the three columns under
+    ``stp3`` and ``uniad`` (as those papers print "Avg."). ``fde`` = e6,
+    ``miss_rate`` = share of frames whose largest error exceeds ``miss_threshold``.
     """
 
     ade_1s: float
@@ -91,3 +93,21 @@ def evaluate(
     m = None if mask is None else as_mask(mask, p.shape[0], single)
     values = _core.evaluate(p, g, convention, float(miss_threshold), m)
     return Metrics(*values, convention=convention, miss_threshold=float(miss_threshold))
+
+
+FRAME_METRICS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde")
+
+
+def frame_metrics(pred: ArrayLike, gt: ArrayLike, *, convention: str = "lightemma") -> np.ndarray:
+    """Per-frame values (N, 5) — the columns of :data:`FRAME_METRICS` — whose means :func:`evaluate` returns.
+
+    Used for intervals and paired comparisons, which need one value per frame.
+    Raises ``ValueError`` like :func:`evaluate`; an empty batch gives shape (0, 5).
+
+    >>> import numpy as np
+    >>> gt = np.zeros((1, 6, 2)); pred = gt + [0.0, 1.0]
+    >>> frame_metrics(pred, gt).tolist()
+    [[1.0, 1.0, 1.0, 1.0, 1.0]]
+    """
+    p, g, _ = _pair(pred, gt)
+    return _core.frame_metrics(p, g, convention)

@@ -55,6 +55,7 @@ class Thresholds:
     turn_heading: float = np.deg2rad(15.0)
     straight_heading: float = np.deg2rad(5.0)
     turn_curvature: float = 0.03
+    min_path: float = 2.0  # m: a future path shorter than this defines no curvature (history-bias analysis)
 
 
 def _with_origin(positions: np.ndarray) -> np.ndarray:
@@ -88,9 +89,26 @@ def menger_curvature(points: np.ndarray) -> np.ndarray:
     return curvature
 
 
+def path_length(positions: np.ndarray) -> np.ndarray:
+    """(N,) length (m) of a trajectory from the origin through its points."""
+    return np.linalg.norm(np.diff(_with_origin(positions), axis=1), axis=2).sum(axis=1)
+
+
 def mean_curvature(positions: np.ndarray) -> np.ndarray:
-    """(N,) mean curvature along a trajectory from the origin (1/m)."""
-    return menger_curvature(_with_origin(positions)).mean(axis=1)
+    """(N,) mean curvature along a trajectory from the origin (1/m), weighted by arc length.
+
+    Each three-point (Menger) curvature counts with the length of path around its
+    middle point (half of each adjacent segment), so the mean is about the heading
+    change divided by the distance travelled, and the near-zero segments of a
+    halting vehicle (whose jitter gives curvatures of ±100 1/m) weigh next to
+    nothing. 0 for a trajectory that does not move.
+    """
+    points = _with_origin(positions)
+    segments = np.linalg.norm(np.diff(points, axis=1), axis=2)
+    weights = (segments[:, :-1] + segments[:, 1:]) / 2.0
+    total = weights.sum(axis=1)
+    weighted = (menger_curvature(points) * weights).sum(axis=1)
+    return np.divide(weighted, total, out=np.zeros_like(total), where=total > 0)
 
 
 def tag_frames(gt_positions: np.ndarray, history_actions: np.ndarray, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
@@ -160,45 +178,104 @@ def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", f
     return out
 
 
-def _slope(x: np.ndarray, y: np.ndarray) -> float | None:
-    if len(x) < 2 or np.ptp(x) == 0:
+MAX_FIT_FRAMES = 1000  # Theil–Sen costs O(n² log n): larger samples are thinned (fixed seed) to this many frames
+
+
+def robust_slope(x: np.ndarray, y: np.ndarray, *, confidence: float = 0.95, max_frames: int = MAX_FIT_FRAMES) -> dict[str, Any] | None:
+    """Theil–Sen slope of y on x with its confidence interval (``scipy.stats.theilslopes``).
+
+    The median of the slopes between all pairs of points: a single point far off
+    (a curvature of 90 1/m) cannot move it. More than ``max_frames`` points are
+    thinned to a fixed-seed random sample of that size (the estimator is
+    quadratic). None with fewer than 3 points or no spread in x.
+    """
+    from scipy.stats import theilslopes
+
+    x, y = np.asarray(x, dtype=np.float64), np.asarray(y, dtype=np.float64)
+    if len(x) < 3 or np.ptp(x) == 0:
         return None
-    return float(np.polyfit(x, y, 1)[0])
+    if len(x) > max_frames:
+        keep = np.sort(np.random.default_rng(0).choice(len(x), max_frames, replace=False))
+        x, y = x[keep], y[keep]
+    with np.errstate(invalid="ignore"):  # heavy ties in x can leave no interval (NaN), said as None
+        fit = theilslopes(y, x, alpha=confidence)
+    ci = [float(fit.low_slope), float(fit.high_slope)]
+    return {"slope": float(fit.slope), "intercept": float(fit.intercept), "ci95": ci if all(np.isfinite(ci)) else None, "n": len(x)}
 
 
 def curvature_samples(run: RunData, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
-    """Per valid moving frame: last history curvature, predicted and true mean future curvature,
-    and whether the frame goes straight just after a turn."""
+    """Per scored moving frame whose true and predicted future paths are both ≥ ``min_path``:
+    last history curvature, predicted and true mean future curvature, and whether the
+    frame goes straight just after a turn. ``short_path`` counts the moving frames left
+    out because a path was too short to define a curvature."""
     history = _require_history(run)
-    rows = np.flatnonzero(run.valid & (history[:, -1, 0] >= thresholds.moving_speed))
+    moving = np.flatnonzero(run.valid & (history[:, -1, 0] >= thresholds.moving_speed))
+    long_enough = (path_length(run.gt_positions[moving]) >= thresholds.min_path) & (path_length(run.trajectory[moving]) >= thresholds.min_path)
+    rows = moving[long_enough]
     k_hist = history[rows, -1, 1]
     tags = tag_frames(run.gt_positions[rows], history[rows], thresholds)
     after = (tags["straight_after_left_turn"] | tags["straight_after_right_turn"]) & (np.abs(k_hist) > 1e-6)
-    return {"history": k_hist, "pred": mean_curvature(run.trajectory[rows]), "true": mean_curvature(run.gt_positions[rows]), "after_turn": after}
+    return {
+        "history": k_hist,
+        "pred": mean_curvature(run.trajectory[rows]),
+        "true": mean_curvature(run.gt_positions[rows]),
+        "after_turn": after,
+        "short_path": np.array(int((~long_enough).sum())),
+    }
+
+
+def truth_samples(run: RunData, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
+    """Last history curvature and true mean future curvature of every moving frame with a true path ≥ ``min_path``
+    (predictions not needed: the truth of a frame set, whatever the model)."""
+    history = _require_history(run)
+    usable = np.isfinite(run.gt_positions).all(axis=(1, 2)) & np.isfinite(history).all(axis=(1, 2))
+    rows = np.flatnonzero(usable & (history[:, -1, 0] >= thresholds.moving_speed))
+    rows = rows[path_length(run.gt_positions[rows]) >= thresholds.min_path]
+    return {"history": history[rows, -1, 1], "true": mean_curvature(run.gt_positions[rows])}
 
 
 def history_bias(runs: Sequence[RunData], thresholds: Thresholds = Thresholds()) -> list[dict[str, Any]]:
     """Per model: how far predicted curvature follows the last history curvature, against the truth.
 
-    ``slope_pred`` / ``slope_true``: least-squares slope of the predicted / true
-    mean future curvature on the last history curvature (moving frames).
-    ``carry_pred`` / ``carry_true``: on frames that go straight just after a
-    turn, the share of the last history curvature still present in the
-    prediction / the truth (1 = the turn carried on unchanged, 0 = straight).
+    On scored frames moving now (≥ 1 m/s) whose true and predicted 3 s paths are
+    both at least ``min_path`` (2 m) long — shorter paths define no curvature:
+    ``slope_pred`` / ``slope_true`` (with ``*_ci95``): Theil–Sen slope of the
+    predicted / true mean future curvature on the last history curvature;
+    ``sign_agree_pred`` / ``sign_agree_true``: on turning frames (|last history
+    curvature| ≥ ``turn_curvature``), the share whose future curvature has the
+    history's sign (the turn goes on); ``carry_pred`` / ``carry_true``: on frames
+    that go straight just after a turn, the share of the last history curvature
+    still present (1 = the turn carried on unchanged, 0 = straight).
     """
-    return [bias_row(label, curvature_samples(run, thresholds)) for label, run in zip(unique_labels(list(runs)), runs)]
+    return [bias_row(label, curvature_samples(run, thresholds), thresholds) for label, run in zip(unique_labels(list(runs)), runs)]
 
 
-def bias_row(label: str, k: dict[str, np.ndarray]) -> dict[str, Any]:
+def _share(mask: np.ndarray) -> float | None:
+    return float(mask.mean()) if mask.size else None
+
+
+def bias_row(label: str, k: dict[str, np.ndarray], thresholds: Thresholds = Thresholds()) -> dict[str, Any]:
     """One :func:`history_bias` row from a run's :func:`curvature_samples`."""
     after = k["after_turn"]
     sign = np.sign(k["history"][after])
     scale = np.abs(k["history"][after]).mean() if after.any() else np.nan
+    pred, true = robust_slope(k["history"], k["pred"]), robust_slope(k["history"], k["true"])
+    turning = np.abs(k["history"]) >= thresholds.turn_curvature
+    turn_sign = np.sign(k["history"][turning])
     return {
         "model": label,
         "frames": len(k["history"]),
-        "slope_pred": _slope(k["history"], k["pred"]),
-        "slope_true": _slope(k["history"], k["true"]),
+        "short_path_frames": int(k["short_path"]),
+        "slope_pred": pred and pred["slope"],
+        "slope_pred_ci95": pred and pred["ci95"],
+        "intercept_pred": pred and pred["intercept"],
+        "slope_true": true and true["slope"],
+        "slope_true_ci95": true and true["ci95"],
+        "intercept_true": true and true["intercept"],
+        "fit_frames": pred["n"] if pred else 0,
+        "turn_frames": int(turning.sum()),
+        "sign_agree_pred": _share(np.sign(k["pred"][turning]) == turn_sign),
+        "sign_agree_true": _share(np.sign(k["true"][turning]) == turn_sign),
         "after_turn_frames": int(after.sum()),
         "carry_pred": float((k["pred"][after] * sign).mean() / scale) if after.any() else None,
         "carry_true": float((k["true"][after] * sign).mean() / scale) if after.any() else None,

@@ -13,7 +13,7 @@ import io
 import json
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 FORMATS = ("md", "csv", "latex", "json")
@@ -38,23 +38,45 @@ def _text(value: Any) -> str:
 
 @dataclass(frozen=True)
 class Column:
-    """One table column: row key, header, cell formatter."""
+    """One table column: row key, header, cell formatter; ``ci`` names a row key holding
+    a [low, high] interval printed after the value (``1.07 [0.99, 1.15]``)."""
 
     key: str
     header: str
     fmt: Callable[[Any], str] = _text
+    ci: str | None = None
+
+
+def with_interval(value: Any, interval: Any, fmt: Callable[[Any], str]) -> str:
+    """``value [low, high]`` when the interval is two finite numbers, else the value alone."""
+    cell = fmt(value)
+    if isinstance(interval, (list, tuple)) and len(interval) == 2 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in interval):
+        cell += f" [{fmt(interval[0])}, {fmt(interval[1])}]"
+    return cell
+
+
+def coverage_note(scored_pct: float | None) -> str:
+    """The flag after the name of a model with fewer than half of its frames scored."""
+    return " (no frame scored)" if scored_pct is None else f" (only {scored_pct:.0f} % scored)"
+
+
+MODEL_KEYS = ("model", "model_a", "model_b", "predecessor")  # columns whose cells name a model
 
 
 ACCURACY_COLUMNS: tuple[Column, ...] = (
     Column("model", "Model"),
     Column("frames", "Frames"),
+    Column("scored", "Scored"),
+    Column("failed", "Failed"),
+    Column("implausible", "Implausible"),
+    Column("api_errors", "API errors"),
     Column("fe_pct", "FE (%)", fixed(2)),
     Column("fe_corr_pct", "FE corr (%)", fixed(2)),
     Column("ade_1s", "ADE 1s (m)", fixed(2)),
     Column("ade_2s", "ADE 2s (m)", fixed(2)),
     Column("ade_3s", "ADE 3s (m)", fixed(2)),
-    Column("ade_avg", "ADE avg (m)", fixed(2)),
-    Column("fde", "FDE (m)", fixed(2)),
+    Column("ade_avg", "ADE avg (m) [95% CI]", fixed(2), ci="ade_avg_ci95"),
+    Column("fde", "FDE (m) [95% CI]", fixed(2), ci="fde_ci95"),
     Column("miss_rate", "Miss (%)", _percent),
     Column("parse", "Parse"),
 )
@@ -80,18 +102,30 @@ class Table:
     columns: Sequence[Column]
     rows: list[dict[str, Any]]
     name: str = "table"  # file stem in reports
+    flags: dict[str, str] = field(default_factory=dict)  # model label -> note after its name (cells and headers)
+    notes: list[str] = field(default_factory=list)  # lines printed under the table (Markdown) or as comments
+
+    def headers(self) -> list[str]:
+        return [c.header + self.flags.get(c.header, "") for c in self.columns]
 
 
-def _cells(table: Table) -> list[list[str]]:
+def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
+    """Formatted cells; intervals inline (``1.07 [0.99, 1.15]``) or, with ``split_intervals``, in two cells of their own."""
     out = []
     for row in table.rows:
         marked = set(row.get("anomalous") or ())
         cells = []
         for col in table.columns:
+            if col.ci and split_intervals:
+                interval = row.get(col.ci) or (None, None)
+                cells += [col.fmt(row.get(col.key)), col.fmt(interval[0]), col.fmt(interval[1])]
+                continue
             value = row.get(col.key)
-            cell = col.fmt(value)
+            cell = with_interval(value, row.get(col.ci), col.fmt) if col.ci else col.fmt(value)
             if row.get("source") == "diff" and isinstance(value, (int, float)) and value > 0 and cell != "-":
                 cell = "+" + cell  # a difference row: signed
+            if col.key in MODEL_KEYS and row.get("source") not in ("paper", "diff"):
+                cell += table.flags.get(str(value), "")
             if col.key == "model" and row.get("source") == "paper":
                 cell += " (paper)"
             if col.key == "model" and row.get("note"):
@@ -105,18 +139,24 @@ def _cells(table: Table) -> list[list[str]]:
 
 def to_markdown(table: Table) -> str:
     """A GitHub-flavoured Markdown table under a ``###`` title."""
-    headers = [c.header for c in table.columns]
+    headers = table.headers()
     lines = [f"### {table.title}", "", "| " + " | ".join(headers) + " |", "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
     lines += ["| " + " | ".join(cells) + " |" for cells in _cells(table)]
+    if table.notes:
+        lines += [""] + table.notes
     return "\n".join(lines) + "\n"
 
 
 def to_csv(table: Table) -> str:
-    """CSV with a header row of the column headers (formatted cells)."""
+    """CSV with a header row of the column headers (formatted cells); an interval gets two columns of its own (low, high)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow([c.header for c in table.columns])
-    writer.writerows(_cells(table))
+    headers = []
+    for col, header in zip(table.columns, table.headers()):
+        base = header.split(" [")[0]
+        headers += [base, f"{base} CI low", f"{base} CI high"] if col.ci else [header]
+    writer.writerow(headers)
+    writer.writerows(_cells(table, split_intervals=True))
     return buf.getvalue()
 
 
@@ -131,7 +171,7 @@ def _latex_escape(text: str) -> str:
 def to_latex(table: Table) -> str:
     """A ``tabular`` in the style of the paper (``\\hline`` rules, model column left)."""
     spec = "l" + "c" * (len(table.columns) - 1)
-    lines = [f"% {table.title}", f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(c.header) for c in table.columns) + r" \\", r"\hline"]
+    lines = [f"% {table.title}", *(f"% {note}" for note in table.notes), f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(h) for h in table.headers()) + r" \\", r"\hline"]
     lines += [" & ".join(_latex_escape(cell) for cell in cells) + r" \\" for cells in _cells(table)]
     lines += [r"\hline", r"\end{tabular}"]
     return "\n".join(lines) + "\n"
@@ -147,7 +187,7 @@ def to_json(tables: Sequence[Table], extra: dict[str, Any] | None = None) -> str
     """All tables as one JSON document: raw (unformatted) row values keyed by table name."""
     doc: dict[str, Any] = dict(extra or {})
     doc["tables"] = [
-        {"name": t.name, "title": t.title, "rows": [{k: _jsonable(v) for k, v in row.items()} for row in t.rows]} for t in tables
+        {"name": t.name, "title": t.title, "rows": [{k: _jsonable(v) for k, v in row.items()} for row in t.rows], **({"notes": t.notes} if t.notes else {})} for t in tables
     ]
     return json.dumps(doc, indent=2, default=str) + "\n"
 

@@ -24,7 +24,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="re-score every run's stored answers under this definition (default: each run's own; paper for imported runs)")
     parser.add_argument("--speed-range", type=float, nargs=2, metavar=("LO", "HI"), help="with --parse lenient|strict: plausible speeds, m/s")
     parser.add_argument("--max-curvature", type=float, metavar="K", help="with --parse lenient|strict: largest plausible |curvature|, 1/m")
+    parser.add_argument("--keep-implausible", action="store_true",
+                        help="average implausible actions too (every answer the parse definition reads, as the paper's evaluation did; one can dominate a mean)")
     parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
+    add_statistics_arguments(parser, pairwise_default=False)
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout")
     parser.set_defaults(func=run)
     return parser
@@ -39,6 +42,24 @@ def _parse_definition(args: argparse.Namespace):  # -> ParseDefinition | None
             raise UserError("--speed-range and --max-curvature need --parse lenient or --parse strict")
         return None
     return ParseDefinition(args.parse, tuple(args.speed_range) if args.speed_range else None, args.max_curvature)
+def add_statistics_arguments(parser: argparse.ArgumentParser, *, pairwise_default: bool) -> None:
+    """--pairwise / --no-pairwise, --resamples, --seed (shared with ``lightemma report``)."""
+    if pairwise_default:
+        parser.add_argument("--no-pairwise", dest="pairwise", action="store_false", help="skip the paired comparisons between runs")
+    else:
+        parser.add_argument("--pairwise", action="store_true", help="compare every pair of runs on their common frames (difference, interval, Holm-adjusted p)")
+    parser.add_argument("--resamples", type=int, default=10_000, metavar="N", help="scene-bootstrap resamples and sign-flip permutations (default: 10000; 0: no intervals)")
+    parser.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the resampling (default: 0)")
+
+
+def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, imported lazily
+    from lightemma.errors import UserError
+    from lightemma.stats import Resampling
+
+    try:
+        return Resampling(n_resamples=args.resamples, seed=args.seed)
+    except ValueError as exc:
+        raise UserError(str(exc).replace("n_resamples", "--resamples").replace("seed", "--seed")) from None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -46,13 +67,18 @@ def run(args: argparse.Namespace) -> int:
     from lightemma.tables import render
 
     parse = _parse_definition(args)
-    evaluation = evaluate_runs(args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold,
-                               parse=parse)
+    evaluation = evaluate_runs(
+        args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold, parse=parse,
+        keep_implausible=args.keep_implausible,
+        resampling=resampling_of(args), pairwise=args.pairwise,
+    )
     for warning in evaluation.warnings:
         print(f"lightemma evaluate: warning: {warning}", file=sys.stderr)
     tables = evaluation_tables(evaluation, with_paper=args.with_paper)
-    text = render(tables, args.format, extra={"common": evaluation.common, "n_common": evaluation.n_common, "warnings": evaluation.warnings,
-                                                "parse": parse.to_dict() if parse else "each run's own"})
+    extra = {"common": evaluation.common, "n_common": evaluation.n_common, "parse": parse.to_dict() if parse else "each run's own",
+             "keep_implausible": args.keep_implausible,
+             "resampling": evaluation.resampling.to_dict(), "warnings": evaluation.warnings}
+    text = render(tables, args.format, extra=extra)
     if args.output:
         args.output.parent.mkdir(parents=True, exist_ok=True)
         args.output.write_text(text, encoding="utf-8")

@@ -10,8 +10,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser = subparsers.add_parser(
         "report",
         help="write tables, figures and the scenario analysis of runs into one folder",
-        description="Evaluate runs and write Tables I/II, the bubble chart, scenario tables, the history-bias "
-        "figure and pictures of the frames where models disagree most into DIR, with an index.md.",
+        description="Evaluate runs and write Tables I/II with scene-bootstrap intervals, the paired comparisons, the bubble "
+        "chart, scenario tables, the history-bias figure and pictures of the frames where models disagree most into DIR, with an index.md.",
     )
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
     parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="report folder (created)")
@@ -22,11 +22,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--dataroot", metavar="DIR", help="dataset location for camera images, if not where the runs were made")
     parser.add_argument("--frame", action="append", default=[], metavar="FRAME_ID", help="also draw this frame (repeatable)")
     parser.add_argument("--no-pictures", action="store_true", help="skip per-frame pictures")
+    from lightemma.cli.evaluate import add_statistics_arguments
+
+    add_statistics_arguments(parser, pairwise_default=True)
     parser.set_defaults(func=run)
     return parser
 
 
 def run(args: argparse.Namespace) -> int:
+    from lightemma.cli.evaluate import resampling_of
     from lightemma.report import write_report
 
     index = write_report(
@@ -39,6 +43,8 @@ def run(args: argparse.Namespace) -> int:
         dataroot=args.dataroot,
         pictures=not args.no_pictures,
         frames=args.frame,
+        pairwise=args.pairwise,
+        resampling=resampling_of(args),
     )
     print(f"report written to {index}")
     return 0

@@ -17,7 +17,7 @@ from lightemma.evaluation.core import (
 )
 from lightemma.evaluation.loading import RunData, load_run, read_frame_records
 from lightemma.evaluation.manifest import RunInfo, run_info
-from lightemma.evaluation.tables import accuracy_table, efficiency_table, evaluation_tables
+from lightemma.evaluation.tables import accuracy_table, efficiency_table, evaluation_tables, generations_table, pairwise_table
 
 __all__ = [
     "CONVENTION_NAMES",
@@ -33,7 +33,9 @@ __all__ = [
     "evaluate_runs",
     "evaluation_tables",
     "expand_run_dirs",
+    "generations_table",
     "load_run",
+    "pairwise_table",
     "read_frame_records",
     "run_info",
 ]

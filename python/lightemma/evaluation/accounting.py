@@ -42,8 +42,8 @@ def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
     Cost is None when no frame's cost is known (local models, unknown prices);
     ``cost_known_pct`` says how many frames the mean rests on.
     """
-    if run.info.imported:
-        rows = rows[run.valid[rows]]
+    if run.info.imported:  # read = not failed; implausible answers were read, and count here as they did there
+        rows = rows[run.status[rows] != STATUS_CODES["failed"]]
     cost = run.cost_cents[rows]
     wall = run.info.wall_seconds
     n_run = len(run)

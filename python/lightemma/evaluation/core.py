@@ -22,9 +22,11 @@ from lightemma.evaluation.loading import RunData, load_run
 from lightemma.evaluation.models import family_rank
 from lightemma.evaluation.rescore import ParseDefinition
 from lightemma.runs.store import find_run_dirs
+from lightemma.stats import Resampling
 
 CONVENTION_NAMES: tuple[str, ...] = ("lightemma", "stp3", "uniad")
 METRIC_KEYS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde", "miss_rate")
+LOW_COVERAGE = 0.5  # a model with fewer scored frames than this share is flagged in every table
 
 
 @dataclass
@@ -46,25 +48,46 @@ class ModelResult:
     efficiency: dict[str, Any]
     parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
     dataset_kind: str | None = None  # "nuscenes", "synthetic" or None (from the manifest)
+    outcomes: dict[str, int] = field(default_factory=dict)  # of the accounted frames: scored, failed, implausible, api_errors
+    intervals: dict[str, dict[str, list[float] | None]] = field(default_factory=dict)  # convention -> ade_avg/fde -> [low, high]
+
+    @property
+    def scored_pct(self) -> float | None:
+        """Share of the accounted frames that were scored, in %."""
+        return 100.0 * self.outcomes.get("scored", 0) / self.frames_accounted if self.frames_accounted else None
+
+    @property
+    def low_coverage(self) -> bool:
+        """Fewer than half of the frames scored: every table flags the model."""
+        pct = self.scored_pct
+        return pct is None or pct < 100.0 * LOW_COVERAGE
+
+    def _coverage(self) -> dict[str, Any]:
+        return {"scored_pct": self.scored_pct, "low_coverage": self.low_coverage}
 
     def accuracy_row(self, convention: str) -> dict[str, Any]:
-        """A flat dict: model, family, frames, FE, FE corr, ADE 1s/2s/3s/avg, FDE, miss rate."""
+        """A flat dict: model, family, frames, outcome counts, FE, FE corr, ADE 1s/2s/3s/avg, FDE, miss rate, intervals."""
+        ci = self.intervals.get(convention, {})
         return {
             "model": self.label,
             "family": self.family,
             "convention": convention,
             "frames": self.frames_evaluated,
             "frames_in_run": self.frames_in_run,
+            **{key: self.outcomes.get(key) for key in ("scored", "failed", "implausible", "api_errors")},
+            **self._coverage(),
             "fe_pct": self.accounting["fe_pct"],
             "fe_corr_pct": self.accounting["fe_corr_pct"],
             **{key: self.metrics[convention][key] for key in METRIC_KEYS},
             "parse": self.parse.get("label"),
             "dataset_kind": self.dataset_kind,
+            "ade_avg_ci95": ci.get("ade_avg"),
+            "fde_ci95": ci.get("fde"),
         }
 
     def efficiency_row(self) -> dict[str, Any]:
         """A flat dict: model, family, time, cost, tokens, GPUs, run wall time, frames/s."""
-        return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self.efficiency,
+        return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self._coverage(), **self.efficiency,
                 "dataset_kind": self.dataset_kind}
 
 
@@ -77,6 +100,19 @@ class Evaluation:
     common: bool
     n_common: int | None
     warnings: list[str] = field(default_factory=list)
+    resampling: Resampling = field(default_factory=Resampling)
+    pairwise: list[dict[str, Any]] | None = None  # see lightemma.evaluation.uncertainty.pairwise_ade
+
+    @property
+    def main_convention(self) -> str:
+        """The convention of figures and paired comparisons: ``lightemma`` when evaluated, else the first."""
+        return "lightemma" if "lightemma" in self.conventions else self.conventions[0]
+
+    def generations(self) -> list[dict[str, Any]]:
+        """Per family, each generation against its predecessor (needs ``pairwise``; empty without it)."""
+        from lightemma.evaluation.uncertainty import generation_verdicts
+
+        return generation_verdicts(self.models, self.pairwise or [])
 
     def accuracy_rows(self, convention: str = "lightemma") -> list[dict[str, Any]]:
         """Table II rows for one convention, one dict per model."""
@@ -90,13 +126,18 @@ class Evaluation:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able summary: accuracy rows per convention, efficiency rows, warnings."""
-        return {
+        out = {
             "common": self.common,
             "n_common": self.n_common,
+            "resampling": self.resampling.to_dict(),
             "accuracy": {c: self.accuracy_rows(c) for c in self.conventions},
             "efficiency": self.efficiency_rows(),
             "warnings": list(self.warnings),
         }
+        if self.pairwise is not None:
+            out["pairwise_ade"] = self.pairwise
+            out["generations"] = self.generations()
+        return out
 
 
 def columns(rows: Sequence[dict[str, Any]]) -> dict[str, list[Any]]:
@@ -151,7 +192,7 @@ def frame_set_warning(runs: Sequence[RunData]) -> str | None:
         return None
     return (
         f"the runs cover different frame sets: {len(union) - len(inter)} of {len(union)} frames are not in every run; "
-        f"each model is scored on its own frames (pass --common to compare on the frames valid for every run)"
+        f"each model is scored on its own frames (pass --common to compare on the frames scored in every run)"
     )
 
 
@@ -194,11 +235,13 @@ def evaluate_loaded(
     convention: str | Sequence[str] = "lightemma",
     common: bool = False,
     miss_threshold: float = 2.0,
+    resampling: Resampling = Resampling(),
+    pairwise: bool = False,
 ) -> Evaluation:
     """Evaluate already loaded runs (see :func:`evaluate_runs`).
 
-    Metrics use each run's valid frames, or with ``common`` the frames valid for
-    every run; FE and efficiency accounting use all frames of a run, or with
+    Metrics use each run's scored frames, or with ``common`` the frames scored in
+    every run; FE, efficiency and outcome counts use all frames of a run, or with
     ``common`` the frames present in every run.
     """
     conventions = _conventions(convention)
@@ -216,6 +259,7 @@ def evaluate_loaded(
         if note:
             warnings.append(note)
     results = []
+    entries: list[tuple[str, RunData, np.ndarray]] = []
     for run, label in zip(runs, unique_labels(runs)):
         if shared is not None and present is not None:
             index = run.index()
@@ -241,9 +285,23 @@ def evaluate_loaded(
                 efficiency=efficiency(run, rows),
                 parse={**run.parse.to_dict(), "label": run.parse.label(), "rescored": run.rescored},
                 dataset_kind=run.info.dataset_kind,
+                outcomes=run.outcomes(rows),
             )
         )
-    return Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings)
+        entries.append((label, run, scored))
+    return _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling), entries, shared, pairwise)
+
+
+def _with_uncertainty(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool) -> Evaluation:
+    """Scene-bootstrap intervals for every row and, when asked, the paired comparisons (docs/statistics.md)."""
+    from lightemma.evaluation.uncertainty import model_intervals, pairwise_ade
+
+    for result, intervals in zip(evaluation.models, model_intervals(entries, evaluation.conventions, evaluation.resampling)):
+        result.intervals = intervals
+    if pairwise:
+        runs, labels = [run for _, run, _ in entries], [label for label, _, _ in entries]
+        evaluation.pairwise = pairwise_ade(runs, labels, evaluation.main_convention, evaluation.resampling, only=set(shared) if shared is not None else None)
+    return evaluation
 
 
 def evaluate_runs(
@@ -253,16 +311,26 @@ def evaluate_runs(
     common: bool = False,
     miss_threshold: float = 2.0,
     parse: ParseDefinition | None = None,
+    resampling: Resampling = Resampling(),
+    pairwise: bool = False,
+    keep_implausible: bool = False,
 ) -> Evaluation:
     """Evaluate run directories (or folders holding runs): Tables I and II as rows of dicts.
 
     ``convention`` is one of ``lightemma``, ``stp3``, ``uniad``, a sequence of
-    them, or ``all``. ``common=True`` scores every model on the frames valid for
-    all of them. ``parse`` re-scores every run's stored answers under that
-    definition (default: each run's own; ``paper`` for imported runs).
-    Unfinished runs are evaluated on their finished frames; corrupt lines are
-    skipped; both are reported in ``Evaluation.warnings``.
+    them, or ``all``. ``common=True`` scores every model on the frames scored in
+    all of them. Only scored frames (not failed, not implausible) enter a mean;
+    each row counts frames scored / failed / implausible / lost to API errors and
+    carries scene-bootstrap intervals (``resampling``: resamples, seed,
+    confidence). ``pairwise=True`` adds every pair's paired comparison
+    (``Evaluation.pairwise``). ``parse`` re-scores every run's stored answers
+    under that definition (default: each run's own; ``paper`` for imported
+    runs). Actions outside the plausibility limits (the definition's, or the
+    defaults for ``paper``) are counted as implausible and never averaged;
+    ``keep_implausible=True`` averages every readable answer, as the paper's own
+    evaluation did. Unfinished runs are evaluated on their finished frames; corrupt lines
+    are skipped; both are reported in ``Evaluation.warnings``.
     """
     conventions = _conventions(convention)  # check the arguments before reading any run
-    runs = [load_run(d, parse=parse) for d in expand_run_dirs(run_dirs)]
-    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold)
+    runs = [load_run(d, parse=parse, keep_implausible=keep_implausible) for d in expand_run_dirs(run_dirs)]
+    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling, pairwise=pairwise)

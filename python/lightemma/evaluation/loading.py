@@ -24,6 +24,7 @@ import numpy as np
 
 from lightemma.errors import RunStoreError
 from lightemma.evaluation.manifest import RunInfo, run_info
+from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
 from lightemma.runs.store import RunContents, iter_records
 
@@ -49,6 +50,11 @@ class RunData:
     cost_cents: np.ndarray
     history_actions: np.ndarray | None = None  # (N, 6, 2) with details=True
     actions: np.ndarray | None = None  # (N, 6, 2) predicted, with details=True
+    failure: np.ndarray | None = None  # (N,) int8 code of outcomes.FAILURES: why a frame is not scored (0: it is)
+    scene_index: np.ndarray | None = None  # (N,) int32 into scene_names
+    scene_names: list[str] = field(default_factory=list)
+    caught_implausible: int = 0  # frames evaluation found implausible that the run had not marked
+    plausibility: Plausibility = field(default_factory=Plausibility)
     corrupt_lines: int = 0
     truncated_tail: bool = False
     duplicates: int = 0
@@ -62,9 +68,22 @@ class RunData:
 
     @property
     def valid(self) -> np.ndarray:
-        """Frames with a usable final prediction (not failed, finite trajectory) and usable ground truth."""
+        """Scored frames: a usable final prediction (not failed, not implausible, finite trajectory) and usable ground truth."""
         finite = np.isfinite(self.trajectory).all(axis=(1, 2)) & np.isfinite(self.gt_positions).all(axis=(1, 2))
-        return (self.status != STATUS_CODES["failed"]) & finite
+        ok = (self.status != STATUS_CODES["failed"]) & finite
+        return ok if self.failure is None else ok & (self.failure == 0)
+
+    def outcomes(self, rows: np.ndarray | None = None) -> dict[str, int]:
+        """Frames (of ``rows``, default all) scored / failed / implausible / lost to API errors."""
+        failure = self.failure if self.failure is not None else np.where(self.status == STATUS_CODES["failed"], FAILURE_CODES["format"], 0)
+        valid = self.valid
+        if rows is not None:
+            failure, valid = failure[rows], valid[rows]
+        return outcome_counts(failure, valid)
+
+    def scenes(self) -> np.ndarray:
+        """(N,) scene code per frame (for scene-level resampling); each frame its own scene when unknown."""
+        return self.scene_index if self.scene_index is not None else np.arange(len(self), dtype=np.int32)
 
     def index(self) -> dict[str, int]:
         """frame_id → row."""
@@ -114,27 +133,34 @@ class _Columns:
     """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows."""
 
     PAIRS = ("trajectory", "actions", "gt", "history")
-    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost")
-    DTYPES = {"status": np.int8, "first": np.int8}
+    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "failure", "scene", "gate")
+    DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "gate": bool}
 
-    def __init__(self, details: bool) -> None:
+    def __init__(self, details: bool, limits: Plausibility) -> None:
         self.details = details
+        self.limits = limits
         self.pending: dict[str, list[Any]] = {n: [] for n in self.NAMES}
         self.chunks: dict[str, list[np.ndarray]] = {n: [] for n in self.NAMES}
         self.rows = 0
         self.unintegrated: dict[int, Any] = {}  # row -> actions, for records lacking a trajectory
+        self.scenes: dict[str, int] = {}
 
     def add(self, record: Mapping[str, Any], gt: list[Any]) -> None:
         p = self.pending
         trajectory = record.get("trajectory")
         p["trajectory"].append(_NAN6x2 if trajectory is None else trajectory)
         actions = record.get("actions")
+        p["actions"].append(_NAN6x2 if actions is None else actions)  # judged against the limits at flush
         if self.details:
-            p["actions"].append(_NAN6x2 if actions is None else actions)
             history = record.get("history_actions")
             p["history"].append(_NAN6x2 if history is None else history)
         elif trajectory is None and actions is not None:
             self.unintegrated[self.rows] = actions
+        scene = record.get("scene_name")
+        if not isinstance(scene, str) or not scene:
+            scene = record["frame_id"].rpartition("/")[0] or record["frame_id"]
+        p["scene"].append(self.scenes.setdefault(scene, len(self.scenes)))
+        p["failure"].append(failure_code(record.get("failure")))
         p["gt"].append(gt)
         p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
         p["first"].append(STATUS_CODES.get(_first_status(record), UNKNOWN_STATUS))
@@ -153,6 +179,11 @@ class _Columns:
                     chunk = pairs_array(values)
                 else:
                     chunk = np.asarray(values, dtype=self.DTYPES.get(name, np.float64))
+                if name == "actions":
+                    self.chunks["gate"].append(implausible_actions(chunk, self.limits))
+                    if not self.details:
+                        values.clear()
+                        continue  # only the verdict is kept
                 self.chunks[name].append(chunk)
                 values.clear()
 
@@ -175,13 +206,16 @@ def _gc_paused() -> Iterator[None]:
             gc.enable()
 
 
-def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None) -> RunData:
+def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None,
+             keep_implausible: bool = False) -> RunData:
     """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
 
     ``details=True`` also keeps history and predicted actions (for scenario
     analysis). ``parse`` re-scores the stored answers under that definition
     (:mod:`lightemma.evaluation.rescore`); by default the run's recorded
-    statuses stand (parsed ``paper`` for imported runs). Corrupt lines, a truncated tail, records
+    statuses stand (parsed ``paper`` for imported runs). Actions outside the
+    plausibility limits are marked ``implausible`` and never scored, unless
+    ``keep_implausible`` (:func:`lightemma.evaluation.outcomes.plausibility_for`). Corrupt lines, a truncated tail, records
     without usable ground truth and an unfinished run are counted and described
     in ``warnings``. Raises :class:`RunStoreError` for a missing, unreadable or
     foreign directory.
@@ -191,7 +225,8 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
     own = recorded_parse(info.manifest)
     definition = own if parse is None else parse
     counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
-    columns = _Columns(details)
+    limits = plausibility_for(definition, keep_implausible=keep_implausible)
+    columns = _Columns(details, limits)
     seen: set[str] = set()
     frame_ids: list[str] = []  # one per kept record, in file order (duplicates included)
     bad = duplicates = 0
@@ -240,12 +275,14 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         actions = actions[order] if details else None
     gt = take("gt", (6, 2))
     bad += int((~np.isfinite(gt).all(axis=(1, 2))).sum())
+    status = take("status", ())
+    failure, caught = final_failure(take("failure", ()), status == STATUS_CODES["failed"], trajectory, take("gate", ()), limits)
     data = RunData(
         info=info,
         frame_ids=frame_ids,
         trajectory=trajectory,
         gt_positions=gt,
-        status=take("status", ()),
+        status=status,
         first_status=take("first", ()),
         seconds=take("seconds", ()),
         input_tokens=take("inp", ()),
@@ -259,6 +296,11 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         bad_records=bad,
         parse=definition,
         rescored=parse is not None,
+        failure=failure,
+        scene_index=take("scene", ()),
+        scene_names=list(columns.scenes),
+        caught_implausible=int(caught.sum()),
+        plausibility=limits,
     )
     data.warnings = _warnings(data)
     return data
@@ -274,6 +316,12 @@ def _warnings(data: RunData) -> list[str]:
         out.append(f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl")
     if data.bad_records:
         out.append(f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions)")
+    if data.caught_implausible:
+        lim = data.plausibility
+        out.append(
+            f"{where}: {data.caught_implausible} frame(s) answered outside the plausibility limits (speed {lim.min_speed:g} to "
+            f"{lim.max_speed:g} m/s, |curvature| ≤ {lim.max_curvature:g} 1/m) without being marked; counted as implausible, not scored"
+        )
     if not data.info.complete:
         out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
     if not data.frame_ids:

@@ -1,23 +1,35 @@
-"""Matplotlib set-up shared by the figure modules: headless backend, colours, saving."""
+"""Matplotlib set-up shared by the figure modules: headless backend, colours, saving.
+
+Colours: ground truth is always green; every model has **one colour everywhere**
+(bubble chart, history bias, frame pictures), a shade of its family's hue —
+older generations darker, newer lighter — so that a family reads as a family
+and each model stays recognisable. No model colour is green.
+"""
 
 from __future__ import annotations
 
+import colorsys
 import os
+from collections.abc import Iterable, Mapping
 from pathlib import Path
 from typing import Any
 
 GT_COLOR = "#2ca02c"  # ground truth is always green
 PRED_COLORS = ("#d62728", "#1f77b4", "#ff7f0e", "#9467bd", "#e377c2", "#8c564b", "#17becf", "#bcbd22", "#7f7f7f")
 FAMILY_COLORS = {
-    "GPT": "#10a37f",
-    "Claude": "#d97757",
-    "Gemini": "#4285f4",
-    "Qwen": "#7b4fd6",
-    "LLaMA": "#e0245e",
-    "Baseline": "#7f7f7f",
+    "GPT": "#d49b00",
+    "Claude": "#d9480f",
+    "Gemini": "#1f6fc4",
+    "Qwen": "#7048c8",
+    "LLaMA": "#d6246e",
+    "Baseline": "#6b6b6b",
     "Other": "#8c564b",
 }
+# baselines and other models: distinct colours that show on camera images and are not a family's hue
+OTHER_COLORS = ("#17becf", "#bcbd22", "#e377c2", "#8c564b", "#9edae5", "#f7b6d2", "#c49c94", "#7f7f7f")
+PAPER_GENERATIONS = 3  # the paper's families have three generations each
 FORMATS = ("png", "svg")
+DPI = 150
 
 
 def pyplot() -> Any:
@@ -40,13 +52,56 @@ def family_color(family: str) -> str:
     return FAMILY_COLORS.get(family, FAMILY_COLORS["Other"])
 
 
-def save_figure(fig: Any, stem: str | os.PathLike[str], *, formats: tuple[str, ...] = FORMATS, dpi: int = 100) -> list[Path]:
-    """Write ``fig`` as ``stem.png`` and ``stem.svg`` (by default), close it, return the paths."""
+def _shade(color: str, position: int, count: int) -> str:
+    """``color`` darker (position 0) to lighter (position count − 1), same hue."""
+    r, g, b = (int(color[i : i + 2], 16) / 255 for i in (1, 3, 5))
+    h, lightness, sat = colorsys.rgb_to_hls(r, g, b)
+    offset = 0.0 if count <= 1 else (position / (count - 1) - 0.5) * 0.3
+    r, g, b = colorsys.hls_to_rgb(h, min(0.78, max(0.22, lightness + offset)), sat)
+    return "#" + "".join(f"{round(255 * v):02x}" for v in (r, g, b))
+
+
+def model_colors(models: Iterable[Mapping[str, Any] | Any]) -> dict[str, str]:
+    """One colour per model label: its family's hue, shaded by generation (older darker).
+
+    ``models``: dicts or objects with ``label`` (or ``model``), ``family`` and
+    ``generation``, e.g. :class:`~lightemma.evaluation.ModelResult` or bubble-chart
+    points. Within a paper family the shade follows the generation (1–3), so a
+    run and the paper's row of the same model share a colour; other families
+    shade in the given order; models of family ``Other`` get distinct colours.
+    """
+    def get(m: Any, key: str) -> Any:
+        return m.get(key) if isinstance(m, Mapping) else getattr(m, key, None)
+
+    members: dict[str, list[tuple[str, Any]]] = {}
+    for m in models:
+        label = get(m, "label") or get(m, "model")
+        family = get(m, "family") or "Other"
+        if label not in {lab for group in members.values() for lab, _ in group}:
+            members.setdefault(family, []).append((str(label), get(m, "generation")))
+    out: dict[str, str] = {}
+    distinct = 0  # one running count over baselines and others, so that no two share a colour
+    for family, group in members.items():
+        if family not in FAMILY_COLORS or family in ("Other", "Baseline"):
+            for label, _ in group:
+                out[label] = OTHER_COLORS[distinct % len(OTHER_COLORS)]
+                distinct += 1
+            continue
+        gens = [g for _, g in group]
+        by_generation = all(isinstance(g, int) and 1 <= g <= PAPER_GENERATIONS for g in gens)
+        for i, (label, gen) in enumerate(group):
+            position, count = (gen - 1, PAPER_GENERATIONS) if by_generation else (i, len(group))
+            out[label] = _shade(FAMILY_COLORS[family], position, count)
+    return out
+
+
+def save_figure(fig: Any, stem: str | os.PathLike[str], *, formats: tuple[str, ...] = FORMATS, dpi: int = DPI) -> list[Path]:
+    """Write ``fig`` as ``stem.png`` (150 dpi) and ``stem.svg`` (by default), close it, return the paths."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)
     paths = []
     for fmt in formats:
-        path = stem.with_suffix(f".{fmt}")
+        path = stem.with_name(f"{stem.name}.{fmt}")  # not with_suffix: "Gemini-2.5-Flash" has a dot of its own
         fig.savefig(path, dpi=dpi)
         paths.append(path)
     pyplot().close(fig)

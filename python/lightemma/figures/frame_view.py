@@ -60,7 +60,7 @@ def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str,
     line, _ = project(densify(trajectory), camera.intrinsic, camera.extrinsic)
     ax.plot(line[:, 0], line[:, 1], color=color, linewidth=width, label=label, solid_capstyle="round")
     points, visible = project(trajectory, camera.intrinsic, camera.extrinsic)
-    ax.scatter(points[visible, 0], points[visible, 1], s=width * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
+    ax.scatter(points[visible, 0], points[visible, 1], s=min(width, 3.0) * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
 
 
 def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
@@ -71,31 +71,46 @@ def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[st
     else:
         ax.imshow(np.full((height, width, 3), 200, dtype=np.uint8))
         ax.text(0.02, 0.96, "image not available", transform=ax.transAxes, color="0.3", va="top", fontsize=8)
-    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", 3.0)
+    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", 5.0)  # wide underneath: both stay visible where they coincide
     for i, (label, trajectory) in enumerate(predictions.items()):
         if np.isfinite(trajectory).all():
-            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, 2.2)
+            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, 2.0)
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
     ax.axis("off")
 
 
-def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
-    """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now."""
-    def plot(traj: np.ndarray, color: str, width: float, label: str) -> None:
-        pts = np.concatenate([np.zeros((1, 2)), traj])
-        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label)
+def bev_limits(trajectories: list[np.ndarray], *, min_extent: float = 5.0, margin: float = 0.12) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Square (horizontal, vertical) limits of a bird's-eye view holding the origin and every point.
 
-    plot(gt, GT_COLOR, 2.2, "ground truth")
-    for i, (label, trajectory) in enumerate(predictions.items()):
-        if np.isfinite(trajectory).all():
-            plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.6, label)
-    everything = np.concatenate([np.zeros((1, 2)), gt] + [t for t in predictions.values() if np.isfinite(t).all()])
-    reach = max(5.0, float(np.abs(everything).max()) * 1.1)
-    ax.set_xlim(-reach / 2, reach / 2)
-    ax.set_ylim(-reach * 0.1, reach)
+    The view plots lateral −y to the right and forward x upward; the box is
+    centred on the points and padded by ``margin`` of its size.
+    """
+    points = np.concatenate([np.zeros((1, 2))] + [t for t in trajectories if np.isfinite(t).all()])
+    horizontal, vertical = -points[:, 1], points[:, 0]
+    half = max(min_extent, float(np.ptp(horizontal)), float(np.ptp(vertical))) * (0.5 + margin)
+    cx, cy = (horizontal.max() + horizontal.min()) / 2, (vertical.max() + vertical.min()) / 2
+    return (cx - half, cx + half), (cy - half, cy + half)
+
+
+def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
+    """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now.
+
+    The view is sized to hold the ground truth and every prediction.
+    """
+    def plot(traj: np.ndarray, color: str, width: float, label: str, z: float) -> None:
+        pts = np.concatenate([np.zeros((1, 2)), traj])
+        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label, zorder=z)
+
+    shown = {label: t for label, t in predictions.items() if np.isfinite(t).all()}
+    plot(gt, GT_COLOR, 4.0, "ground truth", 3)  # wide underneath: a prediction on top of it stays visible
+    for i, (label, trajectory) in enumerate(shown.items()):
+        plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.5, label, 4)
+    (x0, x1), (y0, y1) = bev_limits([gt, *shown.values()])
+    ax.set_xlim(x0, x1)
+    ax.set_ylim(y0, y1)
     ax.set_aspect("equal", adjustable="box")
-    ax.plot([0], [0], marker="^", color="black", markersize=6)
+    ax.plot([0], [0], marker="^", color="black", markersize=6, zorder=5)
     ax.set_facecolor("#f4f4f4")
     ax.tick_params(labelsize=6)
     ax.set_title("bird's-eye (m)", fontsize=7)
@@ -130,11 +145,13 @@ def frame_figure(
     texts: Mapping[str, Any] | None = None,
     title: str | None = None,
     text_limit: int = 420,
+    colors: Mapping[str, str] | None = None,
 ) -> Any:
     """One frame: camera view with trajectories, BEV inset, and (if given) the stage texts.
 
     ``predictions`` maps a label to a (6, 2) trajectory in the ego frame;
-    ``texts`` holds ``scene``, ``intent`` and ``answer`` (the stage-3 answer).
+    ``texts`` holds ``scene``, ``intent`` and ``answer`` (the stage-3 answer);
+    ``colors`` maps a label to its colour (the report's one colour per model).
     Returns the matplotlib Figure (the first axes is the camera view).
     """
     plt = pyplot()
@@ -149,8 +166,8 @@ def frame_figure(
         text_ax.text(0.0, 1.0, _stage_text(texts, text_limit), va="top", ha="left", fontsize=7.5, family="monospace", transform=text_ax.transAxes)
     else:
         ax = fig.add_axes((0.02, 0.02, 0.96, 0.90))
-    _camera_with_inset(ax, camera, gt, preds, None, (0.74, 0.50, 0.25, 0.48))
-    ax.legend(loc="lower left", fontsize=8, framealpha=0.8)
+    _camera_with_inset(ax, camera, gt, preds, colors, (0.74, 0.50, 0.25, 0.48))
+    _legend(ax, preds, colors, loc="lower left")
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
@@ -164,26 +181,39 @@ def model_grid(
     title: str | None = None,
     ncols: int = 3,
     errors: Mapping[str, float] | None = None,
+    colors: Mapping[str, str] | None = None,
 ) -> Any:
-    """Several models on one frame: one panel per model (ground truth in each), BEV insets."""
+    """Several models on one frame: one panel per model (ground truth in each), BEV insets,
+    and a legend (ground truth, each model in its colour)."""
     plt = pyplot()
     gt = np.asarray(gt, dtype=np.float64)
     labels = list(predictions)
     ncols = max(1, min(ncols, len(labels)))
     nrows = max(1, -(-len(labels) // ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 2.9 * nrows + 0.5), squeeze=False)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.15 * nrows + 0.7), squeeze=False)
     for ax in axes.flat[len(labels):]:
         ax.axis("off")
-    for i, (ax, label) in enumerate(zip(axes.flat, labels)):
+    palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
+    for ax, label in zip(axes.flat, labels):
         pred = {label: np.asarray(predictions[label], dtype=np.float64)}
-        colors = {label: pred_color(i)}
-        inset = _camera_with_inset(ax, camera, gt, pred, colors, (0.70, 0.45, 0.29, 0.54))
+        inset = _camera_with_inset(ax, camera, gt, pred, palette, (0.70, 0.45, 0.29, 0.54))
         error = (errors or {}).get(label)
-        ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=pred_color(i))
+        ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=palette[label])
         if inset is not None:
             inset.set_title("")
             inset.tick_params(labelsize=5)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
+    handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.5, label="ground truth")]
+    handles += [plt.Line2D([], [], color=palette[label], linewidth=2.0, label=label) for label in labels]
+    fig.tight_layout(rect=(0, 0.06 if nrows > 1 else 0.1, 1, 1), h_pad=1.6)
+    fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8, frameon=False)
     return fig
+
+
+def _legend(ax: Any, preds: Mapping[str, np.ndarray], colors: Mapping[str, str] | None, *, loc: str) -> None:
+    """Ground truth and each model in its colour (whether or not its line is in view)."""
+    plt = pyplot()
+    handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=3.0, label="ground truth")]
+    handles += [plt.Line2D([], [], color=(colors or {}).get(label, pred_color(i)), linewidth=2.2, label=label) for i, label in enumerate(preds)]
+    ax.legend(handles=handles, loc=loc, fontsize=8, framealpha=0.8)

@@ -3,7 +3,7 @@ the truth does? (the paper's Case 1, measured over all frames instead of one).""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -11,61 +11,117 @@ import numpy as np
 from lightemma.figures._mpl import GT_COLOR, pred_color, pyplot
 
 
-def history_bias_figure(runs: Sequence[Any], *, max_points: int = 4000) -> Any:
-    """Left: predicted (per model) and true mean future curvature against the last history
-    curvature, with least-squares lines. Right: on frames going straight just after a turn, the
-    share of the last history curvature carried into the prediction, and into the truth."""
+def _limits(values: Sequence[np.ndarray], *, floor: float) -> tuple[float, float]:
+    """A symmetric range holding the central 98 % of the values (outliers are clipped, not scaled to)."""
+    pooled = np.concatenate([v for v in values if len(v)]) if any(len(v) for v in values) else np.zeros(1)
+    reach = max(floor, float(np.quantile(np.abs(pooled), 0.98)) * 1.25)
+    return -reach, reach
+
+
+def history_bias_figure(
+    runs: Sequence[Any],
+    *,
+    colors: Mapping[str, str] | None = None,
+    rows: Sequence[Mapping[str, Any]] | None = None,
+    notes: Mapping[str, str] | None = None,
+    max_points: int = 2500,
+) -> Any:
+    """Three panels (see :func:`lightemma.scenarios.history_bias` for the definitions):
+
+    * predicted (per model) and true mean future curvature against the last
+      history curvature, with Theil–Sen lines, the identity line (the turn goes on
+      unchanged) and zero; axes span the central 98 % of the points;
+    * each model's Theil–Sen slope with its 95 % interval, against the truth's
+      (green band);
+    * on frames going straight just after a turn, the share of the last history
+      curvature carried into the prediction, against the truth's (green line).
+
+    ``rows``: the :func:`~lightemma.scenarios.history_bias` rows of ``runs`` when
+    already computed (the fits are the slow part); ``notes``: a flag after a
+    model's name (e.g. fewer than half of its frames scored).
+    """
     from lightemma.evaluation.core import unique_labels
-    from lightemma.scenarios import bias_row, curvature_samples
+    from lightemma.scenarios import bias_row, curvature_samples, truth_samples
 
     plt = pyplot()
     labels = unique_labels(list(runs))
+    palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
     samples = [curvature_samples(run) for run in runs]
-    stats = [bias_row(label, k) for label, k in zip(labels, samples)]
-    fig, (scatter, bars) = plt.subplots(1, 2, figsize=(12, 4.8), gridspec_kw={"width_ratios": [1.4, 1]})
+    stats = list(rows) if rows is not None else [bias_row(label, k) for label, k in zip(labels, samples)]
+    truth = truth_samples(runs[0]) if runs else {"history": np.zeros(0), "true": np.zeros(0)}
+    truth_fit = bias_row("truth", {"history": truth["history"], "pred": truth["true"], "true": truth["true"], "after_turn": np.zeros(len(truth["history"]), dtype=bool), "short_path": np.array(0)})
+    fig, (scatter, slopes, bars) = plt.subplots(1, 3, figsize=(16, 5.2), gridspec_kw={"width_ratios": [1.35, 1, 1]})
+
+    xlim = _limits([k["history"] for k in samples] + [truth["history"]], floor=0.05)
+    ylim = _limits([k["pred"] for k in samples] + [truth["true"]], floor=0.05)
     rng = np.random.default_rng(0)
-    truth_drawn = False
-    for i, (label, k, stat) in enumerate(zip(labels, samples, stats)):
-        if len(k["history"]) == 0:
-            continue
+    for label, k in zip(labels, samples):
         keep = rng.permutation(len(k["history"]))[:max_points]
-        if not truth_drawn:
-            scatter.scatter(k["history"][keep], k["true"][keep], s=8, color=GT_COLOR, alpha=0.5, zorder=3, label=f"truth (slope {_fmt(stat['slope_true'])})")
-            _fit_line(scatter, k["history"], k["true"], GT_COLOR, zorder=5)
-            truth_drawn = True
-        color = pred_color(i)
-        scatter.scatter(k["history"][keep], k["pred"][keep], s=8, color=color, alpha=0.35, label=f"{label} (slope {_fmt(stat['slope_pred'])})")
-        _fit_line(scatter, k["history"], k["pred"], color)
-    scatter.axhline(0, color="0.7", linewidth=0.8)
-    scatter.axvline(0, color="0.7", linewidth=0.8)
+        scatter.scatter(k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2)
+    keep = rng.permutation(len(truth["history"]))[:max_points]
+    scatter.scatter(truth["history"][keep], truth["true"][keep], s=7, color=GT_COLOR, alpha=0.45, linewidths=0, zorder=3)
+    xs = np.array(xlim)
+    scatter.plot(xs, xs, linestyle="--", color="0.35", linewidth=1.2, zorder=4, label="turn goes on unchanged (slope 1)")
+    few = len(labels) <= 4  # with many models the middle panel names them; the scatter shows their lines only
+    for label, stat in zip(labels, stats):
+        if stat["slope_pred"] is not None:
+            scatter.plot(xs, stat["slope_pred"] * xs + stat["intercept_pred"], color=palette[label], linewidth=1.6, zorder=5, label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None)
+    if not few:
+        scatter.plot([], [], color="0.3", linewidth=1.6, label="each model's fit (colours as in the middle panel)")
+    if truth_fit["slope_true"] is not None:
+        line = truth_fit["slope_true"] * xs + truth_fit["intercept_true"]
+        scatter.plot(xs, line, color="white", linewidth=4.5, zorder=6)
+        scatter.plot(xs, line, color=GT_COLOR, linewidth=2.6, zorder=7, label=f"truth: slope {truth_fit['slope_true']:.2f}")
+    scatter.axhline(0, color="0.75", linewidth=0.8, zorder=1)
+    scatter.axvline(0, color="0.75", linewidth=0.8, zorder=1)
+    scatter.set_xlim(xlim)
+    scatter.set_ylim(ylim)
     scatter.set_xlabel("last history curvature (1/m)")
     scatter.set_ylabel("mean future curvature, 0–3 s (1/m)")
-    scatter.set_title("predicted vs true curvature against history", fontsize=10)
-    if scatter.get_legend_handles_labels()[0]:
-        scatter.legend(fontsize=7, loc="upper left")
+    scatter.set_title("future against last history curvature (paths ≥ 2 m)", fontsize=10)
+    scatter.legend(fontsize=7, loc="upper left", framealpha=0.9).set_zorder(20)
+
+    fitted = [(label, s) for label, s in zip(labels, stats) if s["slope_pred"] is not None]
+    if fitted:
+        y = np.arange(len(fitted))[::-1]
+        if truth_fit["slope_true"] is not None:
+            band = truth_fit["slope_true_ci95"]
+            if band:
+                slopes.axvspan(band[0], band[1], color=GT_COLOR, alpha=0.25, zorder=1)
+            shown = f" [{band[0]:.2f}, {band[1]:.2f}]" if band else ""
+            slopes.axvline(truth_fit["slope_true"], color=GT_COLOR, linewidth=2.2, zorder=2, label=f"truth {truth_fit['slope_true']:.2f}{shown}")
+        slopes.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=2, label="turn goes on unchanged (1)")
+        slopes.axvline(0.0, color="0.75", linewidth=0.8, zorder=1)
+        for yi, (label, s) in zip(y, fitted):
+            low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
+            slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt="o", color=palette[label], capsize=3, zorder=3)
+        slopes.set_yticks(y)
+        slopes.set_yticklabels([label + (notes or {}).get(label, "") for label, _ in fitted], fontsize=7)
+        slopes.set_ylim(-1.8, len(fitted) - 0.4)  # an empty band at the bottom holds the legend
+        slopes.legend(fontsize=7, loc="lower right", framealpha=0.9).set_zorder(20)
+    else:
+        slopes.text(0.5, 0.5, "too few moving frames for a slope", ha="center", va="center", transform=slopes.transAxes, color="0.4")
+    slopes.set_xlabel("Theil–Sen slope, 95 % CI")
+    slopes.set_title("how much of the history curvature goes on", fontsize=10)
+
     with_turns = [s for s in stats if s["carry_pred"] is not None]
     if with_turns:
-        x = np.arange(len(with_turns))
-        bars.bar(x, [s["carry_pred"] for s in with_turns], color=[pred_color(labels.index(s["model"])) for s in with_turns])
-        truth = float(np.mean([s["carry_true"] for s in with_turns]))
-        bars.axhline(truth, color=GT_COLOR, linewidth=2, label=f"truth ({truth:.2f})")
-        bars.set_xticks(x)
-        bars.set_xticklabels([f"{s['model']}\n(n={s['after_turn_frames']})" for s in with_turns], rotation=30, ha="right", fontsize=7)
-        bars.legend(fontsize=8)
+        y = np.arange(len(with_turns))[::-1]
+        bars.barh(y, [s["carry_pred"] for s in with_turns], color=[palette[s["model"]] for s in with_turns], height=0.6, zorder=2)
+        carried = float(np.mean([s["carry_true"] for s in with_turns]))
+        bars.axvline(carried, color="white", linewidth=4.5, zorder=3)
+        bars.axvline(carried, color=GT_COLOR, linewidth=2.4, zorder=4, label=f"truth ({carried:.2f})")
+        bars.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=4, label="turn goes on unchanged (1)")
+        bars.axvline(0.0, color="0.6", linewidth=0.8, zorder=1)
+        bars.set_yticks(y)
+        bars.set_yticklabels([f"{s['model']}{(notes or {}).get(s['model'], '')} (n={s['after_turn_frames']})" for s in with_turns], fontsize=7)
+        bars.set_ylim(-1.8, len(with_turns) - 0.4)  # an empty band at the bottom holds the legend
+        values = [s["carry_pred"] for s in with_turns] + [carried, 1.0]
+        bars.set_xlim(min(0.0, min(values)) - 0.08, max(values) + 0.08)
+        bars.legend(fontsize=7, loc="lower right", framealpha=0.9).set_zorder(20)
     else:
         bars.text(0.5, 0.5, "no frame goes straight just after a turn", ha="center", va="center", transform=bars.transAxes, color="0.4")
-    bars.set_ylabel("history curvature carried over (share)")
+    bars.set_xlabel("history curvature carried over (share)")
     bars.set_title("straight just after a turn (Case 1)", fontsize=10)
     fig.tight_layout()
     return fig
-
-
-def _fmt(value: float | None) -> str:
-    return "-" if value is None else f"{value:.2f}"
-
-
-def _fit_line(ax: Any, x: np.ndarray, y: np.ndarray, color: str, zorder: float = 4) -> None:
-    if len(x) >= 2 and np.ptp(x) > 0:
-        slope, intercept = np.polyfit(x, y, 1)
-        xs = np.array([x.min(), x.max()])
-        ax.plot(xs, slope * xs + intercept, color=color, linewidth=1.8, zorder=zorder)
