@@ -19,7 +19,7 @@ import sys
 from collections.abc import Sequence
 
 # subcommand modules, in the order `lightemma --help` lists them
-SUBCOMMANDS: list[str] = ["demo", "synth", "run", "evaluate", "report"]
+SUBCOMMANDS: list[str] = ["demo", "synth", "run", "evaluate", "report", "models"]
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -52,7 +52,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (UserError, ValueError, FileNotFoundError) as exc:
         if os.environ.get("LIGHTEMMA_DEBUG"):
             raise
-        print(f"lightemma {args.command}: error: {exc}", file=sys.stderr)
+        print(f"lightemma {args.command}: error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # disk full, permissions, … met where no caller gave it context
+        if os.environ.get("LIGHTEMMA_DEBUG"):
+            raise
+        from lightemma.errors import os_error_line
+
+        print(f"lightemma {args.command}: error: {os_error_line(exc, 'read or write')}", file=sys.stderr)
         return 2
 
 
