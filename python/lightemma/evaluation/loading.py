@@ -24,7 +24,7 @@ import numpy as np
 
 from lightemma.errors import RunStoreError
 from lightemma.evaluation.manifest import RunInfo, run_info
-from lightemma.runs.store import RunContents, iter_records
+from lightemma.runs.store import RunContents, iter_records, read_frame_ids
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
@@ -52,6 +52,8 @@ class RunData:
     truncated_tail: bool = False
     duplicates: int = 0
     bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
+    foreign_records: int = 0  # records of frames outside the run's frame set (dropped)
+    foreign_example: str | None = None
     warnings: list[str] = field(default_factory=list)
 
     def __len__(self) -> int:
@@ -177,24 +179,32 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
 
     ``details=True`` also keeps history and predicted actions (for scenario
     analysis). Corrupt lines, a truncated tail, records without usable ground
-    truth and an unfinished run are counted and described in ``warnings``.
+    truth, records of frames outside the run's frame set (``frame_ids.txt``:
+    dropped) and an unfinished run are counted and described in ``warnings``.
     Raises :class:`RunStoreError` for a missing, unreadable or foreign directory.
     """
     run_dir = Path(run_dir)
     info = run_info(run_dir)
     counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
     columns = _Columns(details)
+    recorded_set = read_frame_ids(run_dir)
+    allowed = set(recorded_set) if recorded_set is not None else None
     seen: set[str] = set()
     frame_ids: list[str] = []  # one per kept record, in file order (duplicates included)
-    bad = duplicates = 0
+    bad = duplicates = foreign = 0
+    foreign_example = None
     try:
         with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
             for record in iter_records(run_dir, counts=counts):
+                fid = record["frame_id"]
+                if allowed is not None and fid not in allowed:
+                    foreign += 1  # not a frame of this run: scoring it would mix frame sets
+                    foreign_example = foreign_example or fid
+                    continue
                 gt = record.get("gt_positions")
                 if type(gt) is not list or len(gt) != 6:
                     bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
                     continue
-                fid = record["frame_id"]
                 if fid in seen:
                     duplicates += 1
                 else:
@@ -248,6 +258,8 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False) -> RunDa
         truncated_tail=counts.truncated_tail,
         duplicates=duplicates,
         bad_records=bad,
+        foreign_records=foreign,
+        foreign_example=foreign_example,
     )
     data.warnings = _warnings(data)
     return data
@@ -263,6 +275,9 @@ def _warnings(data: RunData) -> list[str]:
         out.append(f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl")
     if data.bad_records:
         out.append(f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions)")
+    if data.foreign_records:
+        out.append(f"{where}: dropped {data.foreign_records} record(s) whose frame id is not in the run's frame set "
+                   f"(frame_ids.txt), e.g. {data.foreign_example!r}")
     if not data.info.complete:
         out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
     if not data.frame_ids:
