@@ -14,6 +14,7 @@ from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import RETRYABLE, RetryPolicy, short_message
 from lightemma.cache import ResponseCache
 from lightemma.errors import UserError
+from lightemma.registry import DEFAULT_REASONING_BUDGET
 
 FAST = RetryPolicy(max_retries=3, base=0.01, cap=0.05)
 TRANSPORTS = pytest.mark.parametrize("transport", ["litellm", "direct"])
@@ -218,11 +219,14 @@ def test_native_provider_protocols_through_litellm(monkeypatch, image, model, va
     assert result.cost_cents == pytest.approx(cost)
     req = server.requests[-1]
     assert req.path.split("?")[0].endswith(path) and req.has_image and req.text == "describe"
+    # a reasoning model (Gemini 2.5) gets its reasoning budget on top of the answer's 512 tokens
+    expected = 512 + backend.reasoning_budget
+    assert backend.reasoning_budget == (DEFAULT_REASONING_BUDGET if "2.5" in model else 0)
     if req.protocol == "anthropic":
-        assert req.body["temperature"] == 0 and req.body["max_tokens"] == 512
+        assert req.body["temperature"] == 0 and req.body["max_tokens"] == expected
     else:
         config = req.body["generationConfig"]
-        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == 512, config
+        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == expected, config
 
 
 def test_direct_transport_needs_an_openai_compatible_endpoint():
