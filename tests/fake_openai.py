@@ -106,7 +106,7 @@ class Reply:
     body: Any = None  # a raw JSON body to send instead of a completion
     trickle: float = 0.0  # seconds between the body's bytes (0: all at once)
     finish_reason: str = "stop"  # "stop" or "length" (sent as end_turn/max_tokens, STOP/MAX_TOKENS natively)
-    reasoning_tokens: int | None = None  # reported in the usage block when set
+    reasoning_tokens: int | None = None  # of completion_tokens, those spent reasoning (reported when set)
     usage: bool = True  # False: the completion has no usage block
 
     @classmethod
@@ -135,10 +135,12 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
                "content": [{"type": "text", "text": reply.content}], "stop_reason": finish, "stop_sequence": None,
                "usage": {"input_tokens": reply.prompt_tokens, "output_tokens": reply.completion_tokens}}
     elif req.protocol == "gemini":
-        usage = {"promptTokenCount": reply.prompt_tokens, "candidatesTokenCount": reply.completion_tokens,
+        # Gemini counts thoughts apart from the answer's (candidates) tokens; the total holds both
+        thoughts = reply.reasoning_tokens or 0
+        usage = {"promptTokenCount": reply.prompt_tokens, "candidatesTokenCount": reply.completion_tokens - thoughts,
                  "totalTokenCount": reply.prompt_tokens + reply.completion_tokens}
         if reply.reasoning_tokens is not None:
-            usage["thoughtsTokenCount"] = reply.reasoning_tokens
+            usage["thoughtsTokenCount"] = thoughts
         out = {"candidates": [{"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": finish, "index": 0}],
                "usageMetadata": usage}
     else:

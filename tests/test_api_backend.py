@@ -229,6 +229,21 @@ def test_native_provider_protocols_through_litellm(monkeypatch, image, model, va
         assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == expected, config
 
 
+@pytest.mark.parametrize(("model", "variable", "reasoning"), [
+    ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", 300), ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", 0),
+    ("openai/m", None, 300)])
+def test_every_protocol_reports_why_generation_stopped_and_the_reasoning_tokens(monkeypatch, model, variable, reasoning):
+    if variable:
+        monkeypatch.setenv(variable, "native-test-key-0123456789")
+    replies = [Reply("cut off", finish_reason="length", completion_tokens=512, reasoning_tokens=reasoning or None),
+               Reply("whole", finish_reason="stop")]
+    with FakeOpenAIServer(replies) as server:
+        backend = create_backend(model, api_base=server.url if model.startswith("openai/") else server.root_url, retry=FAST)
+        cut, whole = ask(backend), ask(backend)
+    assert (cut.text, cut.finish_reason, cut.output_tokens, cut.reasoning_tokens) == ("cut off", "length", 512, reasoning)
+    assert (whole.text, whole.finish_reason) == ("whole", "stop")
+
+
 def test_direct_transport_needs_an_openai_compatible_endpoint():
     with pytest.raises(UserError, match="transport 'direct' needs --api-base"):
         create_backend("anthropic/claude-sonnet-4-6", api_base="http://127.0.0.1:9", transport="direct", api_key="x")

@@ -437,7 +437,10 @@ class APIBackend:
         if err == "RateLimitError":
             return RunFatalError(f"{what}{seen} after {self.retry.max_retries} retries each — rate limited; lower --concurrency "
                                  "or set --rpm / --tpm to the account's limits", cause="rate-limit", error=err)
-        if err in ("BadRequestError", "UnprocessableEntityError", "ContentPolicyViolationError", "ImageReadError"):
+        if err == "ImageReadError":
+            return RunFatalError(f"{what}{seen} — the frames' images cannot be read; check the dataset's samples/ folder",
+                                 cause="images", error=err)
+        if err in ("BadRequestError", "UnprocessableEntityError", "ContentPolicyViolationError"):
             return RunFatalError(f"{what}{seen} — every request is rejected the same way; fix what the message names "
                                  "(model, --max-tokens, images, the server)", cause="invalid-request", error=err)
         return RunFatalError(f"{what}{seen} — the provider keeps failing; try again later", cause="provider-error", error=err)

@@ -54,6 +54,8 @@ def markdown(table: list[dict[str, Any]]) -> str:
              "|---|---|---|---|---:|---:|---|---|"]
     for r in table:
         reasoning = f"yes (+{r['reasoning_budget']} output tokens)" if r["reasoning"] else "no"
+        if not r["reasoning"] and r["provider_id"].startswith("anthropic/"):
+            reasoning = "no (extended thinking not requested)"
         lines.append(f"| `{r['key']}` | {r['display_name']} | `{r['provider_id']}` | {r['backend']} | "
                      f"{_money(r['input_usd_per_mtok'])} | {_money(r['output_usd_per_mtok'])} | {r['price_source']} | {reasoning} |")
     lines.append("")
