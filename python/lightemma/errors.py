@@ -22,9 +22,10 @@ class RunFatalError(UserError):
 
     The run stops dispatching frames, lets the calls in flight finish, keeps what finished, and
     the CLI exits non-zero with one line naming the cause and the fix. ``cause`` is a short
-    kind (``authentication``, ``unknown-model``, ``invalid-request``, ``reasoning-budget``,
-    ``unreachable``, ``rate-limit``, ``provider-error``, ``empty-answers``, ``local-model``,
-    ``disk``); ``error`` is the error class recorded on the calls it ended, if any.
+    kind (``authentication``, ``billing``, ``unknown-model``, ``invalid-request``,
+    ``reasoning-budget``, ``empty-answers``, ``unreachable``, ``rate-limit``, ``provider-error``,
+    ``images``, ``local-model``, ``disk``); ``error`` is the error class recorded on the calls
+    it ended, if any.
     """
 
     def __init__(self, message: str, *, cause: str = "fatal", error: str | None = None) -> None:

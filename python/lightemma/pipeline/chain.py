@@ -144,7 +144,8 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
 
     ``frame`` needs ``frame_id``, ``scene_name``, ``sample_token``,
     ``image_path``, ``history_actions`` (6, 2) and ``gt_positions`` (6, 2).
-    Raises only what the backend raises as fatal (e.g. a rejected API key).
+    Raises only what the backend raises: :class:`~lightemma.errors.RunFatalError` when the run
+    cannot succeed (a rejected API key, the same failure on frame after frame).
     """
     start = time.perf_counter()
     history = format_history(frame.history_actions)
