@@ -517,3 +517,44 @@ def test_a_stopped_run_raises_run_stopped_from_python_too(tmp_path):
             run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 6), output=tmp_path, progress=False)
     assert info.value.cause == "authentication" and info.value.frames_run == 0
     assert read_run(info.value.run_dir).records == {} and np.isscalar(info.value.frames_run)
+
+
+def test_permission_denied_creating_the_run_directory_is_one_line_and_leaves_nothing(tmp_path, synth_root, capsys, monkeypatch):
+    def denied(*args, **kwargs):
+        raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / "out"))
+
+    monkeypatch.setattr(store.tempfile, "mkdtemp", denied)
+    with FakeOpenAIServer() as server:
+        code, _, errors = start(capsys, server, synth_root, tmp_path / "out")
+    assert code == 2 and len(errors) == 1 and "cannot create the run directory" in errors[0] and "permission denied" in errors[0]
+    assert store.find_run_dirs(tmp_path / "out") == []
+
+
+def test_a_malformed_pose_is_named_in_one_line_or_its_scene_left_out_of_the_run(tmp_path, synth_root, capsys):
+    import shutil
+
+    root = tmp_path / "data"
+    shutil.copytree(synth_root, root)
+    path = root / "v1.0-mini" / "ego_pose.json"
+    poses = json.loads(path.read_text())
+    frames = lightemma.load_frames(synth_root, "v1.0-mini", split="all")
+    first_scene = frames.scenes[0]
+    sample = frames[0].sample_token
+    (sd,) = [s for s in json.loads((root / "v1.0-mini" / "sample_data.json").read_text())
+             if s["sample_token"] == sample and s["is_key_frame"] and "CAM_FRONT" in s["filename"]]
+    (pose,) = [p for p in poses if p["token"] == sd["ego_pose_token"]]
+    pose["rotation"] = [0, 0, 0, 0]
+    path.write_text(json.dumps(poses))
+    with FakeOpenAIServer() as server:
+        args = ["--model", "openai/test-model", "--api-base", server.url, "--dataroot", root, "--version", "v1.0-mini",
+                "--split", "all", "--output", tmp_path / "out", "--no-progress"]
+        code, _, errors = run_cli(capsys, *args, "--on-bad-record", "error")
+        assert code == 2 and len(errors) == 1 and not (tmp_path / "out").exists() and not server.requests, errors
+        assert f"scene {first_scene}: ego_pose {pose['token']}: field rotation = [0, 0, 0, 0] has no rotation" in errors[0]
+        code, _, errors = run_cli(capsys, *args)  # the default: that scene is left out, with a warning
+        assert code == 0 and not errors
+    contents = read_run(only_run_dir(tmp_path / "out"))
+    kept = [f for f in frames.frame_ids if not f.startswith(first_scene + "/")]
+    assert sorted(contents.records) == sorted(kept) and len(server.requests) == 3 * len(kept)
+    dataset = contents.manifest["dataset"]
+    assert dataset["skipped_scenes"] == [first_scene] and pose["token"] in dataset["bad_records"][0]

@@ -85,7 +85,7 @@ class HFBackend:
                     "or spread the model over more GPUs (--device cuda)")
         return (f"transformers {self._transformers_version} cannot generate with {self.model_type}: "
                 f"{type(exc).__name__}: {short_message(exc)} — install the tested versions "
-                "(pip install -c constraints.txt 'lightemma[hf]') or try another transformers release")
+                "(pip install -c constraints.txt '.[hf]' in the lightemma checkout) or another transformers release")
 
     # -- loading ----------------------------------------------------------------------------------
 

@@ -13,7 +13,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="run a model over nuScenes frames (three-stage chain), crash-safe and resumable",
         description="Run a vision-language model over a frame set through the three-stage chain "
         "(scene → intent → actions). Records go to OUTPUT/<model>/<run_id>/frames.jsonl as frames finish; "
-        "an interrupted run is finished with --resume RUN_DIR.",
+        "an interrupted run is finished with --resume RUN_DIR. A run that cannot succeed (a rejected key, an unknown "
+        "model, the same failure on frame after frame) stops with one line naming the cause and the fix, keeping what "
+        "finished. Exit status: 0 done, 1 done without one valid frame, 2 stopped or refused.",
     )
     p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or baseline:constant|cv|oracle")
     p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")

@@ -239,10 +239,15 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"],
                      "pid": os.getpid()})
     _write_manifest(run_dir, sessions=sessions, finished_at=None)
+    try:
+        writer = RunWriter(run_dir)
+    except OSError as exc:
+        asyncio.run(backend.aclose())
+        raise RunStoreError(os_error_line(exc, "open the frame records") + f"; continue later with: lightemma run --resume {run_dir}") from None
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
     try:
-        with RunWriter(run_dir) as writer:
+        with writer:
             if todo:
                 outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar))
             else:
@@ -252,8 +257,6 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
         if log:
             log(f"interrupted; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
         raise
-    except OSError as exc:
-        raise RunStoreError(os_error_line(exc, "write to the run directory") + f"; continue later with: lightemma run --resume {run_dir}") from None
     finally:
         bar.close()
     wall = time.perf_counter() - start
