@@ -16,7 +16,10 @@ Scripted per request, for tests and benchmarks of the API backend — no interne
 
 ``script`` may also be a list of replies (served in order, then :func:`default_reply`).
 A reply can be an HTTP error with headers (``Reply.error(429, retry_after=1)``),
-slow (``delay``), cut off mid-body (``truncate=True``), or a connection reset (``reset=True``). Every request is
+slow (``delay``), cut off mid-body (``truncate=True``), a connection reset (``reset=True``), or a body
+trickled one byte every ``trickle`` seconds (a server that never stalls long enough for a read timeout).
+A completion says why it stopped (``finish_reason``: "stop" or "length", in each protocol's spelling),
+may report reasoning tokens (``reasoning_tokens``) or no usage at all (``usage=False``). Every request is
 recorded in ``server.requests`` (a :class:`Received`), thread-safely.
 
 Run as a script (``python tests/fake_openai.py --latency 1.0``) it serves the
@@ -101,6 +104,10 @@ class Reply:
     truncate: bool = False  # send half the body, then drop the connection
     reset: bool = False  # drop the connection without answering (a connection reset)
     body: Any = None  # a raw JSON body to send instead of a completion
+    trickle: float = 0.0  # seconds between the body's bytes (0: all at once)
+    finish_reason: str = "stop"  # "stop" or "length" (sent as end_turn/max_tokens, STOP/MAX_TOKENS natively)
+    reasoning_tokens: int | None = None  # of completion_tokens, those spent reasoning (reported when set)
+    usage: bool = True  # False: the completion has no usage block
 
     @classmethod
     def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
@@ -117,25 +124,42 @@ def default_reply(req: Received) -> Reply:
 Script = Callable[[Received], Reply] | Sequence[Reply]
 
 
+_FINISH = {"anthropic": {"stop": "end_turn", "length": "max_tokens"}, "gemini": {"stop": "STOP", "length": "MAX_TOKENS"}}
+
+
 def _completion(req: Received, reply: Reply) -> dict[str, Any]:
     """A successful answer in the request's protocol."""
+    finish = _FINISH.get(req.protocol, {}).get(reply.finish_reason, reply.finish_reason)
     if req.protocol == "anthropic":
-        return {"id": f"msg_{req.index}", "type": "message", "role": "assistant", "model": req.body.get("model", "fake"),
-                "content": [{"type": "text", "text": reply.content}], "stop_reason": "end_turn", "stop_sequence": None,
-                "usage": {"input_tokens": reply.prompt_tokens, "output_tokens": reply.completion_tokens}}
-    if req.protocol == "gemini":
-        return {"candidates": [{"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": "STOP", "index": 0}],
-                "usageMetadata": {"promptTokenCount": reply.prompt_tokens, "candidatesTokenCount": reply.completion_tokens,
-                                  "totalTokenCount": reply.prompt_tokens + reply.completion_tokens}}
-    return {
-        "id": f"chatcmpl-{req.index}",
-        "object": "chat.completion",
-        "created": int(time.time()),
-        "model": req.body.get("model", "fake"),
-        "choices": [{"index": 0, "message": {"role": "assistant", "content": reply.content}, "finish_reason": "stop"}],
-        "usage": {"prompt_tokens": reply.prompt_tokens, "completion_tokens": reply.completion_tokens,
-                  "total_tokens": reply.prompt_tokens + reply.completion_tokens},
-    }
+        out = {"id": f"msg_{req.index}", "type": "message", "role": "assistant", "model": req.body.get("model", "fake"),
+               "content": [{"type": "text", "text": reply.content}], "stop_reason": finish, "stop_sequence": None,
+               "usage": {"input_tokens": reply.prompt_tokens, "output_tokens": reply.completion_tokens}}
+    elif req.protocol == "gemini":
+        # Gemini counts thoughts apart from the answer's (candidates) tokens; the total holds both
+        thoughts = reply.reasoning_tokens or 0
+        usage = {"promptTokenCount": reply.prompt_tokens, "candidatesTokenCount": reply.completion_tokens - thoughts,
+                 "totalTokenCount": reply.prompt_tokens + reply.completion_tokens}
+        if reply.reasoning_tokens is not None:
+            usage["thoughtsTokenCount"] = thoughts
+        out = {"candidates": [{"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": finish, "index": 0}],
+               "usageMetadata": usage}
+    else:
+        usage = {"prompt_tokens": reply.prompt_tokens, "completion_tokens": reply.completion_tokens,
+                 "total_tokens": reply.prompt_tokens + reply.completion_tokens}
+        if reply.reasoning_tokens is not None:
+            usage["completion_tokens_details"] = {"reasoning_tokens": reply.reasoning_tokens}
+        out = {
+            "id": f"chatcmpl-{req.index}",
+            "object": "chat.completion",
+            "created": int(time.time()),
+            "model": req.body.get("model", "fake"),
+            "choices": [{"index": 0, "message": {"role": "assistant", "content": reply.content}, "finish_reason": finish}],
+            "usage": usage,
+        }
+    if not reply.usage:
+        for key in ("usage", "usageMetadata"):
+            out.pop(key, None)
+    return out
 
 
 class FakeOpenAIServer:
@@ -217,6 +241,13 @@ class FakeOpenAIServer:
                         self.wfile.flush()
                         self.connection.shutdown(socket.SHUT_RDWR)
                         self.close_connection = True
+                        return
+                    if reply.trickle > 0:
+                        self.wfile.flush()
+                        for i in range(len(data)):
+                            time.sleep(reply.trickle)
+                            self.wfile.write(data[i:i + 1])
+                            self.wfile.flush()
                         return
                     self.wfile.write(data)
                 except (BrokenPipeError, ConnectionResetError, OSError):

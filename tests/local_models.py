@@ -10,7 +10,11 @@ one or two layers, one vision block, 8-16 px patches) so that each model has a
 few hundred thousand parameters and generates in milliseconds on a CPU.
 
 The weights are random (seeded), so the models babble: that is what the tests
-want, to exercise format errors and re-asks.
+want, to exercise format errors and re-asks. Babble never ends before the output
+limit, so every answer is truncated; :func:`teach_to_answer` trains a tiny model
+for a few dozen steps to answer every prompt with one short sentence and an
+end-of-turn token, for tests that need answers that end (the chain through all
+three stages, batching per stage, resume).
 """
 
 from __future__ import annotations
@@ -247,4 +251,44 @@ def build_tiny_model(family: str, path: str | Path, *, seed: int = 0, hidden_siz
     path = Path(path)
     torch.manual_seed(seed)
     BUILDERS[family](path, {"hidden_size": hidden_size, "heads": heads})
+    return path
+
+
+def teach_to_answer(path: str | Path, answer: str = "Keep the lane.", *, prompts: list[str], image: str,
+                    steps: int = 50, lr: float = 6e-3, seed: int = 0) -> Path:
+    """Train the checkpoint at ``path`` (in place) to answer each of ``prompts`` with ``answer`` and its end token.
+
+    Teacher forcing on [image, prompt] user turns through the model's own processor and chat template; the loss
+    covers the answer tokens only. Fifty Adam steps make a tiny model end its answers (seconds on a CPU).
+    """
+    import torch
+    from PIL import Image
+    from transformers import AutoModelForImageTextToText, AutoProcessor
+
+    torch.manual_seed(seed)
+    path = Path(path)
+    processor = AutoProcessor.from_pretrained(path)
+    model = AutoModelForImageTextToText.from_pretrained(path, dtype=torch.float32)
+    end = model.generation_config.eos_token_id
+    end_token = processor.tokenizer.convert_ids_to_tokens(end[0] if isinstance(end, list) else end)
+    picture = [[Image.open(image).convert("RGB")]]
+    examples = []
+    for prompt in prompts:
+        turn = [{"role": "user", "content": [{"type": "image"}, {"type": "text", "text": prompt}]}]
+        chat = processor.apply_chat_template(turn, add_generation_prompt=True, tokenize=False)
+        n_prompt = processor(text=[chat], images=picture, return_tensors="pt")["input_ids"].shape[1]
+        inputs = dict(processor(text=[chat + answer + end_token], images=picture, return_tensors="pt"))
+        labels = inputs["input_ids"].clone()
+        labels[:, :n_prompt] = -100
+        examples.append((inputs, labels))
+    optimizer = torch.optim.Adam(model.parameters(), lr=lr)
+    model.train()
+    for step in range(steps):
+        inputs, labels = examples[step % len(examples)]
+        loss = model(**inputs, labels=labels).loss
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+    model.eval()
+    model.save_pretrained(path)
     return path

@@ -14,6 +14,7 @@ from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import RETRYABLE, RetryPolicy, short_message
 from lightemma.cache import ResponseCache
 from lightemma.errors import UserError
+from lightemma.registry import DEFAULT_REASONING_BUDGET
 
 FAST = RetryPolicy(max_retries=3, base=0.01, cap=0.05)
 TRANSPORTS = pytest.mark.parametrize("transport", ["litellm", "direct"])
@@ -218,11 +219,29 @@ def test_native_provider_protocols_through_litellm(monkeypatch, image, model, va
     assert result.cost_cents == pytest.approx(cost)
     req = server.requests[-1]
     assert req.path.split("?")[0].endswith(path) and req.has_image and req.text == "describe"
+    # a reasoning model (Gemini 2.5) gets its reasoning budget on top of the answer's 512 tokens
+    expected = 512 + backend.reasoning_budget
+    assert backend.reasoning_budget == (DEFAULT_REASONING_BUDGET if "2.5" in model else 0)
     if req.protocol == "anthropic":
-        assert req.body["temperature"] == 0 and req.body["max_tokens"] == 512
+        assert req.body["temperature"] == 0 and req.body["max_tokens"] == expected
     else:
         config = req.body["generationConfig"]
-        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == 512, config
+        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == expected, config
+
+
+@pytest.mark.parametrize(("model", "variable", "reasoning"), [
+    ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", 300), ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", 0),
+    ("openai/m", None, 300)])
+def test_every_protocol_reports_why_generation_stopped_and_the_reasoning_tokens(monkeypatch, model, variable, reasoning):
+    if variable:
+        monkeypatch.setenv(variable, "native-test-key-0123456789")
+    replies = [Reply("cut off", finish_reason="length", completion_tokens=512, reasoning_tokens=reasoning or None),
+               Reply("whole", finish_reason="stop")]
+    with FakeOpenAIServer(replies) as server:
+        backend = create_backend(model, api_base=server.url if model.startswith("openai/") else server.root_url, retry=FAST)
+        cut, whole = ask(backend), ask(backend)
+    assert (cut.text, cut.finish_reason, cut.output_tokens, cut.reasoning_tokens) == ("cut off", "length", 512, reasoning)
+    assert (whole.text, whole.finish_reason) == ("whole", "stop")
 
 
 def test_direct_transport_needs_an_openai_compatible_endpoint():

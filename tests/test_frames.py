@@ -588,3 +588,72 @@ def test_keyframe_timestamps_that_do_not_increase_are_named(small_copy):
     path.write_text(json.dumps(poses))
     with pytest.raises(DatasetError, match=f"scene {scenes[0]['name']}: keyframe timestamps do not increase"):
         load_frames(small_copy, VERSION, split="all")
+
+
+# --------------------------------------------------------------------------- unusable pose records
+
+
+def _keyframe_pose(root, scene_index: int, keyframe: int):
+    """(all ego poses, the pose record of a keyframe of the scene_index-th scene by name, that scene's name)."""
+    poses = json.loads((root / VERSION / "ego_pose.json").read_text())
+    scenes = sorted(json.loads((root / VERSION / "scene.json").read_text()), key=lambda s: s["name"])
+    samples = {s["token"]: s for s in read_table(root, VERSION, "sample")}
+    sds = {sd["sample_token"]: sd for sd in read_table(root, VERSION, "sample_data") if sd["is_key_frame"]}
+    token = scenes[scene_index]["first_sample_token"]
+    for _ in range(keyframe):
+        token = samples[token]["next"]
+    by_token = {p["token"]: p for p in poses}
+    return poses, by_token[sds[token]["ego_pose_token"]], scenes[scene_index]["name"]
+
+
+BAD_POSES = {
+    "zero quaternion": ("rotation", [0.0, 0.0, 0.0, 0.0], "has no rotation"),
+    "three-value quaternion": ("rotation", [1.0, 0.0, 0.0], "not a quaternion"),
+    "one-value translation": ("translation", [412.5], "needs at least 2"),
+    "NaN translation": ("translation", [float("nan"), 1.0, 0.0], "not finite"),
+    "text translation": ("translation", ["a", "b", "c"], "not a list of numbers"),
+    "NaN timestamp": ("timestamp", float("nan"), "not a finite whole number"),
+    "fractional timestamp": ("timestamp", 1.5e15 + 0.5, "not a finite whole number"),
+}
+
+
+@pytest.mark.parametrize("kind", list(BAD_POSES))
+def test_an_unusable_pose_is_named_by_table_token_and_field_and_its_scene_skipped(small_copy, fs, kind, caplog):
+    field, value, why = BAD_POSES[kind]
+    poses, pose, scene = _keyframe_pose(small_copy, 1, 9)
+    pose[field] = value
+    (small_copy / VERSION / "ego_pose.json").write_text(json.dumps(poses))  # NaN is written as the literal NaN
+    with caplog.at_level(logging.WARNING, logger="lightemma.frames"):
+        loaded = load_frames(small_copy, VERSION, split="all")
+    assert scene not in loaded.scenes and scene in loaded.skipped_scenes
+    assert len(loaded) == len(fs) - sum(1 for s in fs.scene_names if s == scene)
+    (note,) = loaded.bad_records
+    assert note.startswith(f"scene {scene}: ego_pose {pose['token']}: field {field} = ") and why in note
+    assert loaded.describe()["bad_records"] == [note]
+    assert any(pose["token"] in r.message and field in r.message for r in caplog.records)
+    # the other scenes are untouched
+    kept = fs.select_scenes(loaded.scenes)
+    np.testing.assert_array_equal(loaded.gt_positions, kept.gt_positions)
+    with pytest.raises(DatasetError) as info:
+        load_frames(small_copy, VERSION, split="all", on_bad_record="error")
+    message = str(info.value)
+    assert "\n" not in message and message.startswith(f"scene {scene}: ego_pose {pose['token']}: field {field}")
+    assert why in message and "on_bad_record='skip'" in message  # the Python API names the argument
+    assert "--on-bad-record skip" in info.value.for_cli()  # the command line names the flag
+
+
+def test_a_two_value_translation_and_an_unnormalised_quaternion_are_usable_poses(small_copy, fs):
+    poses = json.loads((small_copy / VERSION / "ego_pose.json").read_text())
+    for pose in poses:
+        pose["translation"] = pose["translation"][:2]
+        pose["rotation"] = [2.0 * q for q in pose["rotation"]]  # same rotation, norm 2
+    (small_copy / VERSION / "ego_pose.json").write_text(json.dumps(poses))
+    loaded = load_frames(small_copy, VERSION, split="all")
+    assert loaded.frame_ids == fs.frame_ids and not loaded.bad_records
+    np.testing.assert_allclose(loaded.gt_positions, fs.gt_positions, atol=1e-9)
+    np.testing.assert_allclose(loaded.history_actions, fs.history_actions, atol=1e-9)
+
+
+def test_on_bad_record_must_be_skip_or_error(small_root):
+    with pytest.raises(ValueError, match="on_bad_record"):
+        load_frames(small_root, VERSION, split="all", on_bad_record="ignore")

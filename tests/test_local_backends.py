@@ -8,6 +8,7 @@ never skipped. The ``vllm`` backend is tested here with an injected fake
 """
 
 import asyncio
+import functools
 import json
 import os
 import subprocess
@@ -15,9 +16,10 @@ import sys
 
 import numpy as np
 import pytest
-from local_models import FAMILIES, build_tiny_model
+from local_models import FAMILIES, build_tiny_model, teach_to_answer
 from PIL import Image
 
+import lightemma.frames
 import lightemma.synth
 from lightemma.backends.base import ChatRequest, GenerationParams
 from lightemma.cli import main as cli_main
@@ -57,6 +59,23 @@ def tiny(request, tmp_path_factory):
 @pytest.fixture(scope="module")
 def qwen2_vl(tmp_path_factory):
     return build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_single"))
+
+
+TAUGHT = "Keep the lane."
+
+
+@pytest.fixture(scope="module")
+def taught(tmp_path_factory, dataroot):
+    """A tiny Qwen2-VL taught to answer every stage's prompt with "Keep the lane." and its end-of-turn token."""
+    from lightemma.prompts import load_prompt_set
+
+    prompts = load_prompt_set()
+    frames = lightemma.load_frames(dataroot, "v1.0-mini", split="all")
+    history = lightemma.frames.format_history(frames[0].history_actions)
+    texts = [prompts.render("scene"), prompts.render("intent", scene=TAUGHT, history=history),
+             prompts.render("actions", scene=TAUGHT, history=history, intent=TAUGHT)]
+    path = build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_taught"))
+    return teach_to_answer(path, TAUGHT, prompts=texts, image=frames[0].image_path)
 
 
 @pytest.fixture(scope="module")
@@ -103,12 +122,14 @@ def hf(path, **options):
 # -- hf: the whole chain through `lightemma run` ------------------------------------------------------
 
 
-def test_lightemma_run_with_the_hf_backend_runs_the_three_stage_chain_and_fills_in_accounting(tiny, dataroot, tmp_path, capsys):
+def test_lightemma_run_with_the_hf_backend_records_truncated_babble_truthfully(tiny, dataroot, tmp_path, capsys):
+    """Random weights babble to the output limit: each scene text is cut off, recorded, and never passed on."""
     family, path = tiny
     code = cli_main(["run", "--backend", "hf", "--model", str(path), "--dataroot", str(dataroot), "--version", "v1.0-mini",
                      "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
                      "--max-tokens", str(MAX_TOKENS), "--max-attempts", str(MAX_ATTEMPTS), "--no-progress"])
-    assert code == 0, capsys.readouterr().err
+    out, err = capsys.readouterr()
+    assert code == 1 and "no valid frame" in err, err  # a run without one valid frame exits non-zero
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     contents = read_run(run_dir)
     manifest = contents.manifest
@@ -119,30 +140,50 @@ def test_lightemma_run_with_the_hf_backend_runs_the_three_stage_chain_and_fills_
     assert info["batch_size"] == 4 and "image" in info["token_counting"]
     assert manifest["config"]["backend_options"] == {"batch_size": 4}
     for record in contents.records.values():
-        # random weights babble: every answer is a format error, re-asked (stage 3 only) up to the bound
         assert (record["status"], record["first_status"], record["n_attempts"]) == ("failed", "failed", MAX_ATTEMPTS)
-        assert record["actions"] is None and record["trajectory"] is None
+        assert record["actions"] is None and record["trajectory"] is None and record["scene_text"] is None
+        # the cut-off scene text is asked again, never pasted into stage 2
+        assert [[c["stage"] for c in a["calls"]] for a in record["attempts"]] == [["scene"]] * MAX_ATTEMPTS
+        for attempt in record["attempts"]:
+            assert attempt["failure"] == "truncated" and attempt["reason"].startswith("truncated")
+            assert attempt["error"] is None and attempt["answer"] is None
+        calls = [c for a in record["attempts"] for c in a["calls"]]
+        assert all(c["finish_reason"] == "length" and c["output_tokens"] == MAX_TOKENS for c in calls)
+        assert all(isinstance(c["text"], str) and c["error"] is None for c in calls)
+        assert all(c["input_tokens"] > 0 and c["cost_cents"] is None and c["seconds"] > 0 for c in calls)
+        assert record["input_tokens"] == sum(c["input_tokens"] for c in calls)
+        assert record["output_tokens"] == MAX_TOKENS * MAX_ATTEMPTS and record["cost_cents"] is None
+    assert "failed 4" in out and f"{N_FRAMES * MAX_ATTEMPTS} truncated" in out
+
+
+def test_the_hf_chain_passes_each_finished_text_on_and_fills_in_accounting(taught, dataroot, tmp_path, capsys):
+    """A tiny model taught to end its answers goes through all three stages, then re-asks stage 3."""
+    code = cli_main(["run", "--backend", "hf", "--model", str(taught), "--dataroot", str(dataroot), "--version", "v1.0-mini",
+                     "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
+                     "--max-tokens", str(MAX_TOKENS), "--max-attempts", str(MAX_ATTEMPTS), "--no-progress"])
+    out, err = capsys.readouterr()
+    assert code == 1 and "no valid frame" in err, err  # "Keep the lane." is no list of actions
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    for record in read_run(run_dir).records.values():
+        assert (record["status"], record["first_status"], record["n_attempts"]) == ("failed", "failed", MAX_ATTEMPTS)
         stages = [[c["stage"] for c in a["calls"]] for a in record["attempts"]]
         assert stages == [["scene", "intent", "actions"]] + [["actions"]] * (MAX_ATTEMPTS - 1)
         calls = [c for a in record["attempts"] for c in a["calls"]]
+        assert all(c["text"] == TAUGHT and c["finish_reason"] == "stop" for c in calls)
         for attempt in record["attempts"]:
-            assert attempt["reason"] and attempt["answer"] == attempt["calls"][-1]["text"]
-        assert all(c["error"] is None and isinstance(c["text"], str) for c in calls)
-        assert all(c["input_tokens"] > 0 and 1 <= c["output_tokens"] <= MAX_TOKENS for c in calls)
-        assert all(c["cost_cents"] is None and c["seconds"] > 0 for c in calls)
+            assert attempt["reason"] and attempt["answer"] == TAUGHT and "failure" not in attempt
+        assert all(1 <= c["output_tokens"] <= MAX_TOKENS for c in calls)
         assert record["input_tokens"] == sum(c["input_tokens"] for c in calls)
         assert record["output_tokens"] == sum(c["output_tokens"] for c in calls)
-        assert record["cost_cents"] is None
         # stage 2's prompt carries stage 1's answer, so it is longer than stage 1's
         assert calls[1]["input_tokens"] > calls[0]["input_tokens"]
-        assert record["scene_text"] == calls[0]["text"]
-    assert "failed 4" in capsys.readouterr().out
+        assert record["scene_text"] == record["intent_text"] == TAUGHT
 
 
-def test_a_run_batches_each_stage_across_the_frames_in_flight(qwen2_vl, dataroot, tmp_path):
+def test_a_run_batches_each_stage_across_the_frames_in_flight(taught, dataroot, tmp_path):
     from lightemma.pipeline import run
 
-    result = run(str(qwen2_vl), backend="hf", dataroot=dataroot, version="v1.0-mini", split="all", limit=N_FRAMES,
+    result = run(str(taught), backend="hf", dataroot=dataroot, version="v1.0-mini", split="all", limit=N_FRAMES,
                  output=tmp_path, concurrency=N_FRAMES, max_tokens=MAX_TOKENS, max_attempts=2, progress=False,
                  backend_options={"batch_size": N_FRAMES, "batch_window": 2.0, "dtype": "float32"})
     records = list(read_run(result.run_dir).records.values())
@@ -256,6 +297,42 @@ def test_a_failed_batch_answers_each_request_with_an_error_not_text(qwen2_vl, im
     result = answer(hf(qwen2_vl), requests)[0]
     assert (result.ok, result.text, result.error) == (False, None, "UserError")
     assert "missing.jpg" in result.error_message
+
+
+def test_a_model_family_the_installed_transformers_cannot_generate_with_stops_the_run_in_one_line(
+        qwen2_vl, dataroot, tmp_path, capsys, monkeypatch):
+    """A library regression (every forward raises the same error) is one run-fatal line, not a failure per frame."""
+    import transformers
+    from transformers import Qwen2VLForConditionalGeneration
+
+    forwards = []
+    original = Qwen2VLForConditionalGeneration.forward
+
+    @functools.wraps(original)  # generate() reads forward's signature
+    def broken(self, *args, **kwargs):
+        forwards.append(1)
+        raise AttributeError("'MoeCausalLMOutputWithPast' object has no attribute 'image_outputs'")
+
+    monkeypatch.setattr(Qwen2VLForConditionalGeneration, "forward", broken)
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    args = ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES),
+            "--output", str(tmp_path), "--max-tokens", "4", "--max-attempts", "2", "--no-progress"]
+    code = cli_main(["run", "--backend", "hf", "--model", str(qwen2_vl), "--batch-size", "2", "--dtype", "float32", *args])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "error:" in line]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert (f"transformers {transformers.__version__} cannot generate with qwen2_vl: AttributeError: "
+            "'MoeCausalLMOutputWithPast' object has no attribute 'image_outputs'") in lines[0]
+    assert "--resume" in lines[0]
+    assert len(forwards) == 2  # two batches of two frames each, then nothing more
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    stopped = read_run(run_dir)
+    assert stopped.records == {} and not stopped.complete  # no frame marked failed for the library's fault
+    assert stopped.manifest["sessions"][-1]["stopped"]["cause"] == "local-model"
+    monkeypatch.setattr(Qwen2VLForConditionalGeneration, "forward", original)  # "after the fix"
+    assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 1  # random weights: no valid frame, but done
+    resumed = read_run(run_dir)
+    assert len(resumed.records) == N_FRAMES and resumed.complete and resumed.duplicates == 0
 
 
 def test_a_directory_that_is_not_a_checkpoint_is_a_user_error(tmp_path):
@@ -498,24 +575,26 @@ def test_a_batch_that_runs_out_of_gpu_memory_is_halved_until_it_fits(qwen2_vl, i
     assert [(r.text, r.input_tokens, r.output_tokens) for r in got] == [(r.text, r.input_tokens, r.output_tokens) for r in alone]
 
 
-def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_identically(qwen2_vl, dataroot, tmp_path, capsys):
+def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_identically(taught, dataroot, tmp_path, capsys):
     from lightemma.runs.store import FRAMES_FILE
 
     args = ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES),
-            "--output", str(tmp_path), "--max-tokens", "6", "--max-attempts", "1", "--no-progress"]
-    assert cli_main(["run", "--backend", "hf", "--model", str(qwen2_vl), "--batch-size", "2", "--dtype", "float32", *args]) == 0
+            "--output", str(tmp_path), "--max-tokens", str(MAX_TOKENS), "--max-attempts", "1", "--no-progress"]
+    # exit 1: "Keep the lane." is a format error, so no frame is valid; the chain runs all three stages
+    assert cli_main(["run", "--backend", "hf", "--model", str(taught), "--batch-size", "2", "--dtype", "float32", *args]) == 1
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     lines = (run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
     dropped = {json.loads(line)["frame_id"]: json.loads(line) for line in lines[2:]}
     (run_dir / FRAMES_FILE).write_text("".join(lines[:2]))
     assert cli_main(["run", "--resume", str(run_dir), "--batch-size", "4", "--no-progress"]) == 2  # from the manifest only
     assert "drop --batch-size" in capsys.readouterr().err
-    assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 0, capsys.readouterr().err
+    assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 1, capsys.readouterr().err
     contents = read_run(run_dir)
-    assert len(contents.records) == N_FRAMES
+    assert len(contents.records) == N_FRAMES and contents.complete
     assert contents.manifest["config"]["backend_options"] == {"batch_size": 2, "dtype": "float32"}
     for frame_id, before in dropped.items():
         again = contents.records[frame_id]
+        assert before["scene_text"] == before["intent_text"] == before["answer"] == TAUGHT
         assert (again["scene_text"], again["intent_text"], again["answer"], again["input_tokens"]) == \
             (before["scene_text"], before["intent_text"], before["answer"], before["input_tokens"])
 

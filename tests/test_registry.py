@@ -132,3 +132,45 @@ def test_prices_come_from_litellms_bundled_list_without_importing_it():
             entry = litellm.model_cost.get(m.model_id) or litellm.model_cost.get(m.model_id.split("/", 1)[-1])
             if entry:
                 assert price_per_token(m) == (entry["input_cost_per_token"], entry["output_cost_per_token"])
+
+
+def test_the_registry_knows_which_models_reason_and_agrees_with_litellm():
+    from lightemma.registry import DEFAULT_REASONING_BUDGET, reasoning_budget
+
+    reasoning = {m.display_name for m in PAPER_MODELS if m.reasoning}
+    assert reasoning == {"GPT-5.0", "GPT-5.2", "Gemini-2.5-Flash", "Gemini-3.0-Flash"}
+    for m in PAPER_MODELS:
+        assert reasoning_budget(m) == (DEFAULT_REASONING_BUDGET if m.reasoning else 0), m.display_name
+        entry = litellm.model_cost.get(m.model_id) or litellm.model_cost.get(m.model_id.split("/", 1)[-1]) or {}
+        if m.reasoning:  # where litellm's list knows the model, it says it reasons too
+            assert entry.get("supports_reasoning") in (True, None), m.model_id
+    # Claude reasons only with extended thinking, which is never requested: no budget, in the registry or ad hoc
+    assert reasoning_budget(resolve("anthropic/claude-3-7-sonnet-20250219")) == 0
+    assert reasoning_budget(resolve("o3")) == DEFAULT_REASONING_BUDGET  # an ad-hoc reasoning model, per litellm's list
+    assert reasoning_budget(resolve("gpt-4o-mini")) == 0
+
+
+def test_lightemma_models_lists_the_registry_with_prices_their_sources_and_reasoning(capsys):
+    import json
+
+    from lightemma.cli import main
+
+    assert main(["models", "--format", "json"]) == 0
+    rows = json.loads(capsys.readouterr().out)
+    by_key = {r["key"]: r for r in rows}
+    assert list(by_key) == [m.key for m in (*PAPER_MODELS, *BASELINES)]
+    assert by_key["gpt-4o"]["price_source"].startswith("litellm ") and by_key["gpt-4o"]["input_usd_per_mtok"] == pytest.approx(2.5)
+    assert by_key["claude-3.7-sonnet"]["price_source"].endswith("read 2026-11-22")
+    assert by_key["gpt-5.0"]["reasoning"] and not by_key["gpt-4o"]["reasoning"]
+    assert by_key["qwen-2.5-vl-7b"]["backend"] == "hf" and by_key["qwen-2.5-vl-7b"]["input_usd_per_mtok"] is None
+    for row in rows:  # the price lightemma charges is the one it lists
+        info = lookup(row["key"])
+        price = price_per_token(info)
+        if price is None:
+            assert row["input_usd_per_mtok"] is None
+        else:
+            assert price == pytest.approx((row["input_usd_per_mtok"] / 1e6, row["output_usd_per_mtok"] / 1e6))
+    assert main(["models"]) == 0
+    table = capsys.readouterr().out
+    assert "| `gpt-5.0` | GPT-5.0 | `gpt-5` | api |" in table and "yes (+8192 output tokens)" in table
+    assert "extended thinking not requested" in table

@@ -23,6 +23,11 @@ def lines_of(run_dir):
     return [json.loads(line) for line in (run_dir / FRAMES_FILE).read_text().splitlines()]
 
 
+def visible(paths, root):
+    """``paths`` outside hidden directories (a run directory is written in a hidden one, then renamed into place)."""
+    return [p for p in paths if not any(part.startswith(".") for part in p.relative_to(root).parts)]
+
+
 def wait_for_lines(path, n, timeout=30.0):
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
@@ -46,9 +51,9 @@ def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path, 
         proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             deadline = time.monotonic() + 60
-            while not list(out.rglob(FRAMES_FILE)) and time.monotonic() < deadline:
+            while not visible(out.rglob(FRAMES_FILE), out) and time.monotonic() < deadline:
                 time.sleep(0.02)
-            (frames_file,) = list(out.rglob(FRAMES_FILE))
+            (frames_file,) = visible(out.rglob(FRAMES_FILE), out)
             wait_for_lines(frames_file, 3)
             proc.send_signal(signal.SIGKILL)
             proc.wait(timeout=10)

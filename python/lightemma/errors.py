@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import errno
+
 
 class UserError(Exception):
     """Bad input or environment that the user can fix (names what and where).
@@ -26,3 +28,48 @@ class DatasetError(UserError, ValueError):
 
 class RunStoreError(UserError, ValueError):
     """An unreadable, foreign or inconsistent run directory."""
+
+
+class RunFatalError(UserError):
+    """A cause no retry or re-ask can fix (rejected key, unknown model, the same failure on frame after frame).
+
+    The run stops dispatching frames, lets the calls in flight finish, keeps what finished, and
+    the CLI exits non-zero with one line naming the cause and the fix. ``cause`` is a short
+    kind (``authentication``, ``billing``, ``unknown-model``, ``invalid-request``,
+    ``reasoning-budget``, ``empty-answers``, ``unreachable``, ``rate-limit``, ``provider-error``,
+    ``images``, ``local-model``, ``disk``); ``error`` is the error class recorded on the calls
+    it ended, if any.
+    """
+
+    def __init__(self, message: str, *, cause: str = "fatal", error: str | None = None) -> None:
+        super().__init__(message)
+        self.cause = cause
+        self.error = error
+
+
+class RunStopped(RunFatalError):
+    """A run that stopped for a run-fatal cause: what finished is saved in ``run_dir``; ``--resume`` continues it."""
+
+    def __init__(self, message: str, *, cause: str, error: str | None, run_dir: object, frames_run: int) -> None:
+        super().__init__(message, cause=cause, error=error)
+        self.run_dir = run_dir
+        self.frames_run = frames_run
+
+
+_OS_REASONS = {
+    errno.ENOSPC: "no space left on the device (the disk is full)",
+    errno.EDQUOT: "the disk quota is exhausted",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "permission denied",
+    errno.EROFS: "the file system is read-only",
+    errno.ENOTDIR: "a part of the path is a file, not a directory",
+    errno.EEXIST: "a file is in the way",
+    errno.EISDIR: "it is a directory",
+}
+
+
+def os_error_line(exc: OSError, doing: str) -> str:
+    """One line for an OS error met while ``doing`` something ("write frames.jsonl"): what, where, why."""
+    reason = _OS_REASONS.get(exc.errno or 0) or exc.strerror or str(exc)
+    where = f" {exc.filename}" if exc.filename else ""
+    return f"cannot {doing}{where}: {reason}"

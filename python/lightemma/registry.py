@@ -10,8 +10,18 @@ API ids were checked against litellm's bundled price list
 the entry carries the provider's list price itself, with where and when it was
 read (``price_source``, ``price_read``); litellm's price wins whenever it has one.
 
+Reasoning models (GPT-5.x, Gemini 2.5 and later) spend output tokens on hidden
+reasoning before the answer, and providers count those against the output limit:
+with the paper's 512 tokens per stage they can spend everything on reasoning and
+return no answer. Their entries carry ``reasoning_budget``, output tokens sent on top
+of ``--max-tokens`` so that the answer keeps its own room (the reasoning effort stays
+the provider's default, as the paper ran them). Claude models reason only with
+extended thinking, which lightemma does not request. A model outside the registry
+that litellm's list marks as reasoning gets :data:`DEFAULT_REASONING_BUDGET`.
+
 Anything not in the registry is taken as a litellm model string
 (``anthropic/…``, ``gemini/…``, ``openai/NAME`` with ``--api-base``, …).
+``lightemma models`` prints the registry.
 """
 
 from __future__ import annotations
@@ -28,6 +38,8 @@ from lightemma.errors import UserError
 ANTHROPIC_PRICES = "docs.anthropic.com/en/docs/about-claude/pricing (stored copy)"
 GOOGLE_PRICES = "ai.google.dev/gemini-api/docs/pricing (as quoted by morphllm.com/gemini-api-pricing, stored copy)"
 PRICE_READ = "2026-11-22"
+#: output tokens added to --max-tokens for a reasoning model's hidden reasoning
+DEFAULT_REASONING_BUDGET = 8192
 
 
 @dataclass(frozen=True)
@@ -50,6 +62,10 @@ class ModelInfo:
     # reasoning); False means "send no temperature, the provider default applies".
     supports_temperature: bool = True
     in_paper: bool = True
+    # Hidden reasoning before the answer (counted as output tokens by the provider), and the
+    # output tokens sent on top of --max-tokens for it; 0 for models that answer directly.
+    reasoning: bool = False
+    reasoning_budget: int = 0
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able form, recorded in run manifests."""
@@ -68,19 +84,20 @@ def _local(key: str, display: str, family: str, gen: int, checkpoint: str, gpus:
     return ModelInfo(key=key, display_name=display, family=family, generation=gen, model_id=checkpoint, backend="hf", gpus=gpus)
 
 
+_REASONS = dict(reasoning=True, reasoning_budget=DEFAULT_REASONING_BUDGET)
 _ANTHROPIC_SONNET = dict(input_usd_per_mtok=3.0, output_usd_per_mtok=15.0, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ)
 
 PAPER_MODELS: tuple[ModelInfo, ...] = (
     _api("gpt-4o", "GPT-4o", "GPT", 1, "gpt-4o"),
-    _api("gpt-5.0", "GPT-5.0", "GPT", 2, "gpt-5", supports_temperature=False),
-    _api("gpt-5.2", "GPT-5.2", "GPT", 3, "gpt-5.2", supports_temperature=False),
+    _api("gpt-5.0", "GPT-5.0", "GPT", 2, "gpt-5", supports_temperature=False, **_REASONS),
+    _api("gpt-5.2", "GPT-5.2", "GPT", 3, "gpt-5.2", supports_temperature=False, **_REASONS),
     _api("claude-3.7-sonnet", "Claude-3.7-Sonnet", "Claude", 1, "anthropic/claude-3-7-sonnet-20250219", **_ANTHROPIC_SONNET),
     _api("claude-4.0-sonnet", "Claude-4.0-Sonnet", "Claude", 2, "anthropic/claude-sonnet-4-20250514", **_ANTHROPIC_SONNET),
     _api("claude-4.6-sonnet", "Claude-4.6-Sonnet", "Claude", 3, "anthropic/claude-sonnet-4-6"),
     _api("gemini-2.0-flash", "Gemini-2.0-Flash", "Gemini", 1, "gemini/gemini-2.0-flash",
          input_usd_per_mtok=0.10, output_usd_per_mtok=0.40, price_source=GOOGLE_PRICES, price_read=PRICE_READ),
-    _api("gemini-2.5-flash", "Gemini-2.5-Flash", "Gemini", 2, "gemini/gemini-2.5-flash"),
-    _api("gemini-3.0-flash", "Gemini-3.0-Flash", "Gemini", 3, "gemini/gemini-3-flash-preview"),
+    _api("gemini-2.5-flash", "Gemini-2.5-Flash", "Gemini", 2, "gemini/gemini-2.5-flash", **_REASONS),
+    _api("gemini-3.0-flash", "Gemini-3.0-Flash", "Gemini", 3, "gemini/gemini-3-flash-preview", **_REASONS),
     _local("qwen-2.0-vl-7b", "Qwen-2.0-VL-7B", "Qwen", 1, "Qwen/Qwen2-VL-7B-Instruct", 1),
     _local("qwen-2.5-vl-7b", "Qwen-2.5-VL-7B", "Qwen", 2, "Qwen/Qwen2.5-VL-7B-Instruct", 1),
     _local("qwen-3.0-vl-8b", "Qwen-3.0-VL-8B", "Qwen", 3, "Qwen/Qwen3-VL-8B-Instruct", 1),
@@ -205,17 +222,80 @@ def bundled_price_list() -> dict[str, Any]:
     return litellm.model_cost
 
 
+def reasoning_budget(info: ModelInfo) -> int:
+    """Output tokens to send on top of ``--max-tokens`` for ``info``'s hidden reasoning (0: none).
+
+    The registry's own value for its models; for any other model string, :data:`DEFAULT_REASONING_BUDGET`
+    when litellm's bundled list marks it as reasoning (Anthropic models excepted: they reason only
+    with extended thinking, which lightemma does not request).
+    """
+    if info.reasoning or lookup(info.key) is not None:
+        return info.reasoning_budget
+    reasons = _litellm_entry(info.model_id).get("supports_reasoning") is True
+    return DEFAULT_REASONING_BUDGET if reasons and not _norm(info.model_id).startswith("anthropic/") else 0
+
+
+def _litellm_entry(model_id: str) -> dict[str, Any]:
+    """litellm's bundled price-list entry for ``model_id`` (with or without its provider prefix), or {}."""
+    prices = bundled_price_list()
+    entry = prices.get(model_id) or prices.get(model_id.split("/", 1)[-1])
+    return entry if isinstance(entry, dict) else {}
+
+
+def _litellm_version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("litellm")
+    except PackageNotFoundError:  # pragma: no cover - litellm is a dependency
+        return "?"
+
+
+def price(info: ModelInfo) -> dict[str, Any]:
+    """The price lightemma uses for ``info``: USD per million input/output tokens and where it comes from.
+
+    litellm's bundled price list wins when it has the model; else the registry's own provider price
+    (with its source and the date it was read); else unknown (``None`` prices: costs are recorded as null).
+    Local models and baselines cost nothing per token (``source`` says so).
+    """
+    if info.backend in ("hf", "vllm", "baseline"):
+        kind = "no model" if info.backend == "baseline" else "local model: GPUs, not tokens"
+        return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, "source": kind}
+    entry = _litellm_entry(info.model_id)
+    if entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
+        return {"input_usd_per_mtok": float(entry["input_cost_per_token"]) * 1e6,
+                "output_usd_per_mtok": float(entry["output_cost_per_token"]) * 1e6,
+                "source": f"litellm {_litellm_version()} bundled price list"}
+    if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:
+        return {"input_usd_per_mtok": info.input_usd_per_mtok, "output_usd_per_mtok": info.output_usd_per_mtok,
+                "source": f"{info.price_source}, read {info.price_read}"}
+    return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, "source": "unknown (costs recorded as null)"}
+
+
 def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
     """(input, output) USD per token: litellm's bundled price when it has one, else the registry's."""
-    prices = bundled_price_list()
-    entry = prices.get(info.model_id) or prices.get(info.model_id.split("/", 1)[-1])
-    if entry and entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
-        return float(entry["input_cost_per_token"]), float(entry["output_cost_per_token"])
-    if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:
-        return info.input_usd_per_mtok / 1e6, info.output_usd_per_mtok / 1e6
-    return None
+    if info.backend != "api":
+        return None
+    found = price(info)
+    if found["input_usd_per_mtok"] is None or found["output_usd_per_mtok"] is None:
+        return None
+    return found["input_usd_per_mtok"] / 1e6, found["output_usd_per_mtok"] / 1e6
 
 
 def list_models() -> list[dict[str, Any]]:
-    """The registry as plain dicts, in table order (paper models, then baselines)."""
-    return [m.to_dict() for m in MODELS]
+    """The registry as plain dicts, in table order (paper models, then baselines), each with its ``price``."""
+    return [{**m.to_dict(), "price": price(m)} for m in MODELS]
+
+
+def suggest(name: str, n: int = 3) -> list[str]:
+    """Registry names (and litellm model strings) close to a mistyped ``name``, best first."""
+    import difflib
+
+    from lightemma._litellm import litellm
+
+    keys = [m.key for m in MODELS]
+    found = difflib.get_close_matches(_norm(name), keys, n=n, cutoff=0.6)
+    if len(found) < n:
+        chat = [k for k, v in litellm.model_cost.items() if isinstance(v, dict) and v.get("mode") == "chat"]
+        found += [m for m in difflib.get_close_matches(name.strip(), chat, n=n, cutoff=0.75) if m not in found]
+    return found[:n]

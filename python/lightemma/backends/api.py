@@ -7,6 +7,14 @@ transient failures (429, 5xx, timeouts, dropped connections) are retried here
 with exponential backoff and jitter — litellm's own retries are switched off.
 A call that still fails returns a :class:`ChatResult` with the error class and
 a short, secret-free message; its text is never model text.
+
+Every call runs under lightemma's own deadline (``timeout``: connect to last
+byte, whatever the transport does with its read timeouts). Before the first
+call the model string is checked (litellm must know its provider). A failure no
+retry can fix raises :class:`~lightemma.errors.RunFatalError` with the cause and
+the fix: a rejected key or an unknown model at once, any other failure once
+:class:`~lightemma.backends.retry.FailureStreak` sees it on frame after frame.
+Usage a provider does not report stays unknown (None), never zero.
 """
 
 from __future__ import annotations
@@ -21,13 +29,22 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from lightemma._litellm import litellm
-from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
+from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams, is_truncated
 from lightemma.backends.local import user_turn
 from lightemma.backends.ratelimit import RateLimiter
-from lightemma.backends.retry import FATAL, RetryPolicy, error_class, retry_after_seconds, short_message
+from lightemma.backends.retry import (
+    FATAL,
+    CallDeadline,
+    FailureStreak,
+    RetryPolicy,
+    error_class,
+    failure_signature,
+    retry_after_seconds,
+    short_message,
+)
 from lightemma.cache import ResponseCache, request_key
-from lightemma.errors import UserError
-from lightemma.registry import ModelInfo, price_per_token, resolve
+from lightemma.errors import RunFatalError, UserError
+from lightemma.registry import ModelInfo, price_per_token, reasoning_budget, resolve, suggest
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
@@ -35,10 +52,14 @@ OPENAI_COMPATIBLE = ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "
 # The providers of the paper's API models; an empty variable counts as missing.
 PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
+# What a provider accepts per image, as base64 characters (what is sent), and the longest side in pixels.
+# Anthropic: 5 MB per image, 8000 px; OpenAI: 20 MB per image; Gemini: 20 MB per request (kept under).
+IMAGE_LIMITS: dict[str, tuple[int, int | None]] = {"anthropic": (5_000_000, 8000), "openai": (20_000_000, None),
+                                                   "gemini": (18_000_000, None), "vertex_ai": (18_000_000, None)}
+DEFAULT_IMAGE_LIMIT: tuple[int, int | None] = (20_000_000, None)
 
-
-class FatalBackendError(UserError):
-    """An error no retry can fix (bad key, unknown model, rejected parameter): the run stops."""
+#: kept for callers that caught the API backend's own fatal error class
+FatalBackendError = RunFatalError
 
 
 def litellm_model(info: ModelInfo, api_base: str | None) -> str:
@@ -72,6 +93,18 @@ def require_api_key(model: str, api_base: str | None = None) -> str | None:
     return None
 
 
+def check_model(model: str, name: str, api_base: str | None) -> str:
+    """The provider litellm routes ``model`` to, or a :class:`UserError` naming the model, close names and the fix."""
+    provider = _provider(model)
+    if provider is not None:
+        return provider
+    close = suggest(name)
+    hint = f"; did you mean {' or '.join(close)}?" if close else ""
+    how = (f"for a model served at --api-base, name it openai/{name}" if api_base
+           else "give a registry name (`lightemma models` lists them) or a litellm model string such as anthropic/claude-sonnet-4-6")
+    raise UserError(f"unknown model {name!r}: it is not in the registry and litellm cannot tell its provider{hint}; {how}")
+
+
 def _provider(model: str) -> str | None:
     try:
         return litellm.get_llm_provider(model)[1]
@@ -84,17 +117,85 @@ def _secret_values() -> tuple[str, ...]:
     return tuple(v for k, v in os.environ.items() if len(v) >= 8 and any(t in k.upper() for t in ("KEY", "TOKEN", "SECRET")))
 
 
+def _b64_len(n: int) -> int:
+    return 4 * ((n + 2) // 3)
+
+
+def fit_image(data: bytes, max_b64: int, max_side: int | None) -> tuple[bytes, dict[str, Any]]:
+    """``data`` re-encoded as JPEG to fit ``max_b64`` base64 characters and ``max_side`` pixels.
+
+    Lowers the JPEG quality first (90 → 50), then the size (×0.75 per step, at quality 80). Returns the
+    new bytes and what was done (original and new byte counts, quality, pixel size). Raises
+    ``OSError`` when the image cannot be decoded or made to fit.
+    """
+    import io
+
+    from PIL import Image, UnidentifiedImageError
+
+    try:
+        with Image.open(io.BytesIO(data)) as img:
+            image = img.convert("RGB")
+    except (UnidentifiedImageError, ValueError) as exc:
+        raise OSError(f"cannot decode the image to shrink it: {exc}") from None
+    original = image.size
+    if max_side and max(image.size) > max_side:
+        scale = max_side / max(image.size)
+        image = image.resize((max(1, int(image.width * scale)), max(1, int(image.height * scale))), Image.Resampling.LANCZOS)
+
+    def encode(img: Any, quality: int) -> bytes:
+        buffer = io.BytesIO()
+        img.save(buffer, format="JPEG", quality=quality)
+        return buffer.getvalue()
+
+    def report(img: Any, out: bytes, quality: int) -> dict[str, Any]:
+        return {"from_bytes": len(data), "to_bytes": len(out), "quality": quality, "size": list(img.size),
+                "original_size": list(original)}
+
+    for quality in (90, 80, 70, 60, 50):  # quality first: the picture keeps its resolution
+        out = encode(image, quality)
+        if _b64_len(len(out)) <= max_b64:
+            return out, report(image, out, quality)
+    while min(image.size) > 16:  # then size
+        image = image.resize((max(1, int(image.width * 0.75)), max(1, int(image.height * 0.75))), Image.Resampling.LANCZOS)
+        out = encode(image, 80)
+        if _b64_len(len(out)) <= max_b64:
+            return out, report(image, out, 80)
+    raise OSError(f"the image cannot be made to fit {max_b64} base64 characters")
+
+
 class _ImageCache:
     """Base64 data URLs (and content digests) of recently used images: each frame's image is read once.
 
-    Bounded by total size (default 32 MiB of base64, about 150 CAM_FRONT images: enough for every frame
-    in flight at concurrency ≤ 128), least recently used out first.
+    Images over the provider's limit (``max_b64`` base64 characters, ``max_side`` pixels) are re-encoded to
+    fit (:func:`fit_image`) and counted in ``reencoded`` (with the first few in ``examples``). Bounded by
+    total size (default 32 MiB of base64, about 150 CAM_FRONT images: enough for every frame in flight at
+    concurrency ≤ 128), least recently used out first.
     """
 
-    def __init__(self, max_bytes: int = 32 << 20) -> None:
+    def __init__(self, max_bytes: int = 32 << 20, *, max_b64: int | None = None, max_side: int | None = None) -> None:
         self.max_bytes = max_bytes
+        self.max_b64 = max_b64
+        self.max_side = max_side
         self.bytes = 0
+        self.reencoded = 0
+        self.examples: list[dict[str, Any]] = []
+        self._seen_reencoded: set[str] = set()
         self._items: OrderedDict[str, tuple[str, str]] = OrderedDict()
+
+    def _too_big(self, data: bytes) -> bool:
+        if self.max_b64 is not None and _b64_len(len(data)) > self.max_b64:
+            return True
+        if self.max_side:
+            import io
+
+            from PIL import Image
+
+            try:
+                with Image.open(io.BytesIO(data)) as img:  # reads the header only
+                    return max(img.size) > self.max_side
+            except Exception:  # noqa: BLE001 - undecodable: the provider will say so
+                return False
+        return False
 
     def get(self, path: str) -> tuple[str, str]:
         item = self._items.get(path)
@@ -104,6 +205,14 @@ class _ImageCache:
         with open(path, "rb") as fh:
             data = fh.read()
         mime = _MIME.get(os.path.splitext(path)[1].lower(), "image/jpeg")
+        if self._too_big(data):
+            data, done = fit_image(data, self.max_b64 or len(data) * 2, self.max_side)
+            mime = "image/jpeg"
+            if path not in self._seen_reencoded:  # counted once per image, however often it is re-read
+                self._seen_reencoded.add(path)
+                self.reencoded += 1
+                if len(self.examples) < 3:
+                    self.examples.append({"image": path, **done})
         item = (f"data:{mime};base64,{base64.b64encode(data).decode('ascii')}", hashlib.sha256(data).hexdigest())
         self._items[path] = item
         self.bytes += len(item[0])
@@ -130,16 +239,28 @@ class APIBackend:
         tpm: float | None = None,
         cache: ResponseCache | None = None,
         transport: str = "litellm",
+        max_image_bytes: int | None = None,
+        streak: FailureStreak | None = None,
     ) -> None:
         self.model_info = resolve(model) if isinstance(model, str) else model
         self.api_base = api_base
         self.model = litellm_model(self.model_info, api_base)
+        self.provider = check_model(self.model, self.model_info.key, api_base)  # before the key: a typo is the first thing to say
         self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base)
+        if not timeout or timeout <= 0:
+            raise UserError(f"--timeout must be a positive number of seconds, got {timeout}")
         self.timeout = float(timeout)
         self.retry = retry or RetryPolicy()
         self.limiter = RateLimiter(rpm=rpm, tpm=tpm)
         self.cache = cache
-        self._images = _ImageCache()
+        self.streak = streak or FailureStreak()
+        self.reasoning_budget = reasoning_budget(self.model_info)
+        limit_b64, max_side = IMAGE_LIMITS.get(self.provider, DEFAULT_IMAGE_LIMIT)
+        if max_image_bytes is not None:
+            if max_image_bytes < 1024:
+                raise UserError(f"max_image_bytes must be at least 1024, got {max_image_bytes}")
+            limit_b64 = int(max_image_bytes)
+        self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
         self._secrets = tuple(s for s in (*_secret_values(), self._api_key or "") if s and s != NO_KEY)
         self._price = price_per_token(self.model_info)
         self._litellm_prices = True  # switched off after litellm fails to price this model once
@@ -166,7 +287,7 @@ class APIBackend:
 
     def effective_params(self, params: GenerationParams) -> dict[str, Any]:
         """The decoding parameters actually sent (temperature omitted where the provider rejects it)."""
-        out: dict[str, Any] = {"max_tokens": params.max_tokens}
+        out: dict[str, Any] = {"max_tokens": params.max_tokens + self.reasoning_budget}
         if self._sends_temperature:
             out["temperature"] = params.temperature
         return out
@@ -184,13 +305,27 @@ class APIBackend:
             "cost": ("litellm's bundled price list, else the registry's provider price" if self.transport == "litellm"
                      else "price list × provider-reported tokens (litellm's bundled list, else the registry's)"),
             "temperature_sent": self._sends_temperature,
+            "reasoning": {"reasons": bool(self.reasoning_budget), "budget_tokens": self.reasoning_budget,
+                          "max_tokens_sent": "--max-tokens + budget_tokens (the answer keeps --max-tokens of room)"},
+            "finish_reason": "as the provider reported it (litellm normalises length / MAX_TOKENS / max_tokens to 'length')",
+            "image_limit": {"base64_chars": self._images.max_b64, "max_side_px": self._images.max_side,
+                            "over_it": "re-encoded as JPEG, quality 90 → 50, then ×0.75 in size, until it fits"},
             "timeout_s": self.timeout,
+            "deadline": "lightemma's own, per call: connect to last byte",
             "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap},
             "rate_limit": {"rpm": self.limiter.requests.capacity if self.limiter.requests else None,
                            "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None},
             "cache": str(self.cache.path) if self.cache else None,
             "gpus": 0,
         }
+
+    @property
+    def image_report(self) -> dict[str, Any] | None:
+        """Images re-encoded to fit the provider's limit so far (count and the first few), or None if none were."""
+        if not self._images.reencoded:
+            return None
+        return {"count": self._images.reencoded, "limit_base64_chars": self._images.max_b64,
+                "max_side_px": self._images.max_side, "examples": list(self._images.examples)}
 
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer every request concurrently, in order; failures come back as error results."""
@@ -206,7 +341,8 @@ class APIBackend:
             try:
                 url, digest = self._images.get(str(req.image_path))
             except OSError as exc:
-                return ChatResult(text=None, error="ImageReadError", error_message=short_message(exc), seconds=time.perf_counter() - start)
+                return self._observe(req, ChatResult(text=None, error="ImageReadError", error_message=short_message(exc),
+                                                     seconds=time.perf_counter() - start))
             image_part = {"type": "image_url", "image_url": {"url": url}}
         messages = user_turn(req, image_part)
         params = self.effective_params(req.params)
@@ -216,20 +352,25 @@ class APIBackend:
             key = request_key(self.model, self.api_base, params, req.text, digest)
             hit = self.cache.get(key)
             if hit is not None:
-                return ChatResult(text=hit["text"], input_tokens=hit["input_tokens"], output_tokens=hit["output_tokens"],
-                                  seconds=time.perf_counter() - start, cost_cents=0.0, cached=True)
+                return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],
+                                                     output_tokens=hit["output_tokens"], seconds=time.perf_counter() - start,
+                                                     cost_cents=0.0, cached=True))
 
         retries = 0
         while True:
             await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL)
             try:
-                result = await self._send(messages, params, start, retries)
+                async with asyncio.timeout(self.timeout):  # the whole call, connect to last byte, on every transport
+                    result = await self._send(messages, params, start, retries)
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - every provider error becomes a recorded error class
+                if isinstance(exc, TimeoutError):
+                    exc = CallDeadline(f"no complete answer within {self.timeout:g} s (connect to last byte)")
                 err = error_class(exc)
+                message = short_message(exc, secrets=self._secrets)
                 if err in FATAL:
-                    raise FatalBackendError(f"{self.model}: {err}: {short_message(exc, secrets=self._secrets)}") from None
+                    raise self._fatal(err, message) from None
                 if self.retry.should_retry(err, retries):
                     after = retry_after_seconds(exc)
                     if after:
@@ -237,21 +378,78 @@ class APIBackend:
                     await asyncio.sleep(self.retry.delay(retries, after))
                     retries += 1
                     continue
-                return ChatResult(text=None, error=err, error_message=short_message(exc, secrets=self._secrets),
-                                  seconds=time.perf_counter() - start, retries=retries)
+                return self._observe(req, ChatResult(text=None, error=err, error_message=message,
+                                                     seconds=time.perf_counter() - start, retries=retries))
             reported = [t for t in (result.input_tokens, result.output_tokens) if t is not None]
             # usage the provider did not report is unknown, not zero: the estimate then stays taken
             self.limiter.settle(ESTIMATED_TOKENS_PER_CALL, sum(reported) if reported else None)
-            if key is not None and result.ok:
+            if key is not None and result.ok and not is_truncated(result.finish_reason):
                 self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
-            return result
+            return self._observe(req, result)
+
+    def _observe(self, req: ChatRequest, result: ChatResult) -> ChatResult:
+        """Feed the call's outcome to the failure streak; raise :class:`RunFatalError` when the run cannot succeed."""
+        signature = None if result.ok else failure_signature(result.error or "Error", result.error_message)
+        frames = self.streak.observe(req.stage, req.frame_id, signature)
+        if frames is not None:
+            raise self._fatal(result.error or "Error", result.error_message or "", frames=frames, stage=req.stage)
+        return result
+
+    def _key_variables(self) -> str:
+        if self.api_base and self.provider in OPENAI_COMPATIBLE:
+            return f"OPENAI_API_KEY (sent to {self.api_base})"
+        names = PROVIDER_KEYS.get(self.provider or "")
+        return " or ".join(names) if names else "the provider's API key variable"
+
+    def _fatal(self, err: str, message: str, *, frames: int | None = None, stage: str | None = None) -> RunFatalError:
+        """The run-fatal error for ``err``: one line with what happened and what to do about it."""
+        where = f"--api-base {self.api_base}" if self.api_base else f"{self.provider or 'the provider'}"
+        seen = f" on {frames} frames in a row ({stage} stage), nothing succeeding in between" if frames else ""
+        what = f"{self.model}: {err}: {message}"
+        if err == "AuthenticationError":
+            return RunFatalError(f"{what} — the API key was rejected; set a valid key in {self._key_variables()}",
+                                 cause="authentication", error=err)
+        if err == "PermissionDeniedError":
+            return RunFatalError(f"{what} — the key may not use this model; check the key in {self._key_variables()} "
+                                 "and the account's access", cause="authentication", error=err)
+        if err == "PaymentRequiredError":
+            return RunFatalError(f"{what} — the provider account needs credit or billing", cause="billing", error=err)
+        if err == "NotFoundError":
+            fix = ("check --model (the name the server serves, as openai/NAME) and --api-base (it usually ends in /v1)"
+                   if self.api_base else "check --model; `lightemma models` lists the registry")
+            return RunFatalError(f"{what} — unknown model or endpoint; {fix}", cause="unknown-model", error=err)
+        if err == "UnsupportedParamsError":
+            return RunFatalError(f"{what} — the provider rejects a parameter lightemma sends "
+                                 f"({', '.join(self.effective_params(GenerationParams()))})", cause="invalid-request", error=err)
+        if err == "EmptyResponse" and "finish_reason=length" in message:
+            budget = f", of which {self.reasoning_budget} for reasoning" if self.reasoning_budget else ""
+            return RunFatalError(f"{self.model}: the model spent its whole output budget without answering (finish_reason "
+                                 f"length, no answer text){seen}; raise --max-tokens (each stage may now use --max-tokens"
+                                 f"{' + ' + str(self.reasoning_budget) if self.reasoning_budget else ''} output tokens{budget})",
+                                 cause="reasoning-budget", error=err)
+        if err == "EmptyResponse":
+            return RunFatalError(f"{what}{seen} — the model answers with no text; check the model and its server",
+                                 cause="empty-answers", error=err)
+        if err in ("APIConnectionError", "Timeout"):
+            fix = f"check {where} and the network" + (f", or raise --timeout (now {self.timeout:g} s)" if err == "Timeout" else "")
+            return RunFatalError(f"{what}{seen} after {self.retry.max_retries} retries each — cannot reach the model; {fix}",
+                                 cause="unreachable", error=err)
+        if err == "RateLimitError":
+            return RunFatalError(f"{what}{seen} after {self.retry.max_retries} retries each — rate limited; lower --concurrency "
+                                 "or set --rpm / --tpm to the account's limits", cause="rate-limit", error=err)
+        if err == "ImageReadError":
+            return RunFatalError(f"{what}{seen} — the frames' images cannot be read; check the dataset's samples/ folder",
+                                 cause="images", error=err)
+        if err in ("BadRequestError", "UnprocessableEntityError", "ContentPolicyViolationError"):
+            return RunFatalError(f"{what}{seen} — every request is rejected the same way; fix what the message names "
+                                 "(model, --max-tokens, images, the server)", cause="invalid-request", error=err)
+        return RunFatalError(f"{what}{seen} — the provider keeps failing; try again later", cause="provider-error", error=err)
 
     async def _send(self, messages: list[dict[str, Any]], params: dict[str, Any], start: float, retries: int) -> ChatResult:
         """One call over the configured transport; raises on a failed call."""
         if self._http is not None:
             data = await self._http.chat(self._wire_model, messages, params)
-            usage = data.get("usage") or {}
-            tin, tout = usage.get("prompt_tokens"), usage.get("completion_tokens")
+            tin, tout, reasoning = _usage(data.get("usage"))
             choice = (data.get("choices") or [{}])[0]
             text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
             cost = self._price_cost(tin, tout)
@@ -260,20 +458,27 @@ class APIBackend:
                 model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
                 timeout=self.timeout, num_retries=0, max_retries=0, **params,
             )
-            usage = getattr(response, "usage", None)
-            tin, tout = getattr(usage, "prompt_tokens", None), getattr(usage, "completion_tokens", None)
+            tin, tout, reasoning = _usage(getattr(response, "usage", None))
             choices = getattr(response, "choices", None) or [None]
             text = getattr(getattr(choices[0], "message", None), "content", None)
             finish = getattr(choices[0], "finish_reason", None)
             cost = self._litellm_cost(response, tin, tout)
         seconds = time.perf_counter() - start
+        finish = str(finish) if finish is not None else None
+        common = dict(input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries,
+                      finish_reason=finish, reasoning_tokens=reasoning)
         if not text or not str(text).strip():
-            return ChatResult(text=None, input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost,
-                              error="EmptyResponse", error_message=f"no answer text (finish_reason={finish})", retries=retries)
-        return ChatResult(text=str(text), input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries)
+            spent = f", {reasoning} reasoning tokens" if reasoning else ""
+            return ChatResult(text=None, error="EmptyResponse", error_message=f"no answer text (finish_reason={finish}{spent})", **common)
+        return ChatResult(text=str(text), **common)
 
     def _litellm_cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
-        """Cost in US cents: what litellm priced the call at (its bundled list), else the registry price."""
+        """Cost in US cents: what litellm priced the call at (its bundled list), else the registry price.
+
+        None when the provider reported no usage: litellm would price that as zero tokens.
+        """
+        if tin is None or tout is None:
+            return None
         usd = (getattr(response, "_hidden_params", None) or {}).get("response_cost")
         if usd is None and self._litellm_prices:
             try:
@@ -295,6 +500,25 @@ class APIBackend:
             await self._http.aclose()
         if self.cache is not None:
             self.cache.close()
+
+
+def _usage(usage: Any) -> tuple[int | None, int | None, int | None]:
+    """(input, output, reasoning) tokens from an OpenAI-style usage block (a dict or litellm's object).
+
+    A block that is missing, or says 0 input tokens (impossible for a non-empty prompt; litellm
+    fills a missing block with zeros), is unknown: (None, None, None).
+    """
+    def get(obj: Any, name: str) -> Any:
+        return obj.get(name) if isinstance(obj, Mapping) else getattr(obj, name, None)
+
+    if usage is None:
+        return None, None, None
+    tin, tout = get(usage, "prompt_tokens"), get(usage, "completion_tokens")
+    if not isinstance(tin, int) or tin <= 0 or not isinstance(tout, int) or tout < 0:
+        return None, None, None
+    details = get(usage, "completion_tokens_details")
+    reasoning = get(details, "reasoning_tokens") if details is not None else None
+    return tin, tout, reasoning if isinstance(reasoning, int) and reasoning >= 0 else None
 
 
 def _litellm_version() -> str | None:

@@ -23,6 +23,13 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 STAGES = ("scene", "intent", "actions")
+#: finish reasons that mean "cut off at the output-token limit" (OpenAI / litellm, Anthropic, Gemini spellings)
+TRUNCATED = frozenset({"length", "max_tokens", "max_output_tokens", "MAX_TOKENS"})
+
+
+def is_truncated(finish_reason: str | None) -> bool:
+    """True when a call's text was cut off at the output-token limit (``finish_reason`` length or the like)."""
+    return finish_reason in TRUNCATED
 
 
 @dataclass(frozen=True)

@@ -71,7 +71,8 @@ class BaselineBackend:
 
     def _answer(self, request: ChatRequest) -> ChatResult:
         if request.stage in STAGE_TEXTS:
-            return ChatResult(text=STAGE_TEXTS[request.stage], input_tokens=0, output_tokens=0, cost_cents=0.0)
+            return ChatResult(text=STAGE_TEXTS[request.stage], input_tokens=0, output_tokens=0, cost_cents=0.0,
+                              finish_reason="stop", reasoning_tokens=0)
         if request.stage != "actions":
             return ChatResult(text=None, error="ValueError", error_message=f"unknown stage {request.stage!r}")
         if request.frame is None:
@@ -80,7 +81,7 @@ class BaselineBackend:
             text = format_actions(baseline_actions(self.kind, request.frame))
         except ValueError as exc:
             return ChatResult(text=None, error="ValueError", error_message=str(exc))
-        return ChatResult(text=text, input_tokens=0, output_tokens=0, cost_cents=0.0)
+        return ChatResult(text=text, input_tokens=0, output_tokens=0, cost_cents=0.0, finish_reason="stop", reasoning_tokens=0)
 
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer every request, in order; a request it cannot answer gets an error result."""

@@ -21,9 +21,15 @@ stage 1 for a batch of frames, then stage 2, then stage 3, then re-asks.
 
 The batcher is loop-agnostic (results are handed back with
 ``call_soon_threadsafe`` to the loop that submitted them), so one backend can
-serve several ``asyncio.run`` sessions (a run, then a resume). It never raises
-for a request: if ``run_batch`` raises, each request of that batch gets a
-:class:`~lightemma.backends.base.ChatResult` carrying the error class and message.
+serve several ``asyncio.run`` sessions (a run, then a resume). If ``run_batch``
+raises, each request of that batch gets a
+:class:`~lightemma.backends.base.ChatResult` carrying the error class and message
+(a per-frame failure: the chain re-asks). When the *identical* exception (class
+and message) ends two consecutive batches holding at least two distinct frames,
+the model cannot generate at all (a library regression, a broken checkpoint):
+the batcher turns fatal, and that batch's requests, every queued one and every
+later ``submit`` raise :class:`~lightemma.errors.RunFatalError` with the line
+``describe_fatal`` makes of the exception.
 """
 
 from __future__ import annotations
@@ -37,8 +43,10 @@ from dataclasses import dataclass, field
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.retry import short_message
+from lightemma.errors import RunFatalError
 
 RunBatch = Callable[[Sequence[ChatRequest]], list[ChatResult]]
+DescribeFatal = Callable[[BaseException], str]
 
 DEFAULT_BATCH_WINDOW = 0.01  # seconds the worker waits for a batch to fill
 
@@ -79,7 +87,7 @@ class MicroBatcher:
     """Gather concurrently submitted requests into batches of ``batch_size`` run by one worker thread."""
 
     def __init__(self, run_batch: RunBatch, *, batch_size: int = 8, batch_window: float = DEFAULT_BATCH_WINDOW,
-                 name: str = "lightemma-batcher") -> None:
+                 name: str = "lightemma-batcher", describe_fatal: DescribeFatal | None = None) -> None:
         if batch_size < 1:
             raise ValueError(f"batch_size must be at least 1, got {batch_size}")
         if batch_window < 0:
@@ -93,6 +101,11 @@ class MicroBatcher:
         self._cond = threading.Condition()
         self._thread: threading.Thread | None = None
         self._closed = False
+        self._describe_fatal = describe_fatal or (lambda exc: f"{type(exc).__name__}: {short_message(exc)}")
+        self.fatal: RunFatalError | None = None  # set once the model is found unable to generate
+        self._failure: tuple[str, str] | None = None  # the exception that ended the last batch(es)
+        self._failure_batches = 0
+        self._failure_frames: set[str] = set()
 
     # -- the asyncio side -------------------------------------------------------------------------
 
@@ -103,6 +116,8 @@ class MicroBatcher:
         loop = asyncio.get_running_loop()
         pending = [_Pending(r, loop.create_future(), loop) for r in requests]
         with self._cond:
+            if self.fatal is not None:
+                raise self.fatal
             if self._closed:
                 raise RuntimeError("the backend is closed")
             self._queue.extend(pending)
@@ -158,26 +173,50 @@ class MicroBatcher:
             live = [p for p in batch if not p.future.cancelled()]
             if not live:
                 continue
+            if self.fatal is not None:
+                for p in live:
+                    self._resolve(p, self.fatal)
+                continue
             start = time.perf_counter()
             try:
                 results = self._run_batch([p.request for p in live])
                 if len(results) != len(live):
                     raise RuntimeError(f"run_batch returned {len(results)} results for {len(live)} requests")
+                self._failure, self._failure_batches, self._failure_frames = None, 0, set()
             except BaseException as exc:  # noqa: BLE001 - every request of the batch gets the error, none raises;
                 # even SystemExit: it would end this thread with the batch's futures never resolved
                 results = [error_result(exc, time.perf_counter() - start) for _ in live]
+                self._note_failure(exc, live)
             elapsed = time.perf_counter() - start
             self.stats.batches += 1
             self.stats.requests += len(live)
             self.stats.seconds += elapsed
             self.stats.sizes.append(len(live))
             for p, result in zip(live, results):
-                self._resolve(p, result)
+                self._resolve(p, self.fatal if self.fatal is not None else result)
+
+    def _note_failure(self, exc: BaseException, batch: list[_Pending]) -> None:
+        """Count consecutive batches ended by the identical exception; turn fatal at two batches, two frames."""
+        signature = (type(exc).__name__, short_message(exc))
+        if signature != self._failure:
+            self._failure, self._failure_batches, self._failure_frames = signature, 0, set()
+        self._failure_batches += 1
+        self._failure_frames.update(p.request.frame_id for p in batch)
+        if self._failure_batches >= 2 and len(self._failure_frames) >= 2:
+            try:
+                line = self._describe_fatal(exc)
+            except Exception:  # noqa: BLE001 - the description must not hide the failure
+                line = f"{signature[0]}: {signature[1]}"
+            self.fatal = RunFatalError(line, cause="local-model", error=signature[0])
 
     @staticmethod
-    def _resolve(p: _Pending, result: ChatResult) -> None:
+    def _resolve(p: _Pending, result: ChatResult | BaseException) -> None:
         def settle() -> None:
-            if not p.future.done():
+            if p.future.done():
+                return
+            if isinstance(result, BaseException):
+                p.future.set_exception(result)
+            else:
                 p.future.set_result(result)
 
         try:

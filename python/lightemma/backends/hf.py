@@ -74,8 +74,18 @@ class HFBackend:
         self._eos_ids = self._end_ids()
         self._oom_error = getattr(torch, "OutOfMemoryError", torch.cuda.OutOfMemoryError)
         self.oom_splits = 0  # batches halved after running out of GPU memory
+        self._transformers_version = transformers.__version__
         self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
-                                     name=f"lightemma-hf-{self.model_type}")
+                                     name=f"lightemma-hf-{self.model_type}", describe_fatal=self._describe_fatal)
+
+    def _describe_fatal(self, exc: BaseException) -> str:
+        """The one line for a model that fails every batch the same way."""
+        if isinstance(exc, self._oom_error):
+            return (f"{self.model_id}: out of GPU memory even for one request; lower --max-pixels, "
+                    "or spread the model over more GPUs (--device cuda)")
+        return (f"transformers {self._transformers_version} cannot generate with {self.model_type}: "
+                f"{type(exc).__name__}: {short_message(exc)} — install the tested versions "
+                "(pip install -c constraints.txt '.[hf]' in the lightemma checkout) or another transformers release")
 
     # -- loading ----------------------------------------------------------------------------------
 
@@ -237,8 +247,12 @@ class HFBackend:
         return inputs.to(self._model.device, dtype=self.dtype)
 
     def _result(self, row: list[int], input_tokens: int, seconds: float) -> ChatResult:
-        """One generated row: text up to the first end token; output tokens include that end token."""
+        """One generated row: text up to the first end token; output tokens include that end token.
+
+        A row without an end token stopped at ``max_new_tokens``: ``finish_reason`` "length" (else "stop").
+        """
         end = next((i for i, t in enumerate(row) if t in self._eos_ids), None)
         n_out = len(row) if end is None else end + 1
         text = self._processor.tokenizer.decode(row[:n_out if end is None else end], skip_special_tokens=True)
-        return ChatResult(text=text, input_tokens=input_tokens, output_tokens=n_out, seconds=seconds, cost_cents=None)
+        return ChatResult(text=text, input_tokens=input_tokens, output_tokens=n_out, seconds=seconds, cost_cents=None,
+                          finish_reason="length" if end is None else "stop")

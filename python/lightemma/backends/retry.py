@@ -1,7 +1,17 @@
-"""Which API errors to retry, and how long to wait: exponential backoff with full jitter.
+"""Which API errors to retry, how long to wait, and when a run cannot succeed.
 
 Errors are classified by class name (litellm maps every provider's errors onto
-the OpenAI exception classes), so this module needs no import of litellm.
+the OpenAI exception classes), so this module needs no import of litellm. Three
+kinds:
+
+* **transient** (:data:`RETRYABLE`: 429, 5xx, timeouts, dropped connections) —
+  retried here with exponential backoff and full jitter;
+* **per-frame** (anything else, e.g. one image rejected, an empty answer) — the
+  call fails, and the chain re-asks;
+* **run-fatal** — :data:`FATAL` classes at once (a rejected key, an unknown
+  model), or any failure that :class:`FailureStreak` sees repeat on frame after
+  frame with nothing succeeding in between (the same 400 on every request, a dead
+  endpoint, a reasoning budget that leaves no answer).
 """
 
 from __future__ import annotations
@@ -23,10 +33,22 @@ FATAL = frozenset({"AuthenticationError", "PermissionDeniedError", "NotFoundErro
 _SECRETISH = re.compile(r"(sk-[A-Za-z0-9_\-]{6,}|AIza[0-9A-Za-z_\-]{10,}|(?i:bearer)\s+\S+|(?i:api[_-]?key)[=:]\s*\S+)")
 
 
+# HTTP statuses whose meaning does not depend on the wording: litellm files some 401s under
+# BadRequestError when the provider words them unusually ("You didn't provide an API key").
+_BY_STATUS = {401: "AuthenticationError", 402: "PaymentRequiredError", 403: "PermissionDeniedError", 404: "NotFoundError"}
+
+
+class CallDeadline(Exception):
+    """A call that did not complete (connect to last byte) within lightemma's deadline; recorded as ``Timeout``."""
+
+
 def error_class(exc: BaseException) -> str:
-    """The error class recorded for an exception (litellm / OpenAI class name)."""
+    """The error class recorded for an exception (litellm / OpenAI class name; by HTTP status where it is decisive)."""
     name = type(exc).__name__
-    if name in ("TimeoutError", "ReadTimeout", "ConnectTimeout", "APITimeoutError"):
+    status = getattr(exc, "status_code", None) or getattr(exc, "status", None)
+    if isinstance(status, int) and status in _BY_STATUS:
+        return _BY_STATUS[status]
+    if name in ("TimeoutError", "ReadTimeout", "ConnectTimeout", "APITimeoutError", "CallDeadline"):
         return "Timeout"
     if name in ("InternalServerError", "APIError") and "Connection error" in str(exc):
         return "APIConnectionError"  # litellm files dropped/truncated connections under 500
@@ -81,3 +103,46 @@ class RetryPolicy:
         if retry_after is not None:
             wait = max(wait, min(retry_after, self.cap))
         return wait
+
+
+# Failures whose wording tells one cause from another (one image rejected vs. every request rejected).
+_WORDED = frozenset({"BadRequestError", "UnprocessableEntityError", "EmptyResponse", "ContentPolicyViolationError"})
+
+
+def failure_signature(error: str, message: str | None) -> tuple[str, str]:
+    """What makes two failures "the same": the error class, plus the message with digits masked for request errors."""
+    if error not in _WORDED or not message:
+        return (error, "")
+    text = re.sub(r"\d+", "#", " ".join(message.lower().split()))
+    return (error, text[:160])
+
+
+class FailureStreak:
+    """Notices a run that cannot succeed: the same failure on frame after frame, and nothing working.
+
+    Per stage, failures are grouped by :func:`failure_signature`; a success of that stage
+    clears its groups. A group that spans ``cold`` distinct frames while no call of any stage
+    has succeeded yet in this session (a typo'd model, a dead endpoint, a request every
+    provider call rejects), or ``warm`` distinct frames once something has worked (a key that
+    ran out, a server that went down), makes :meth:`observe` return the number of frames.
+    Re-asks of one frame count once, so a frame whose own image is rejected never stops a run.
+    """
+
+    def __init__(self, cold: int = 3, warm: int = 5) -> None:
+        if not 1 <= cold <= warm:
+            raise ValueError(f"need 1 <= cold <= warm, got cold={cold}, warm={warm}")
+        self.cold = cold
+        self.warm = warm
+        self.succeeded = False
+        self._groups: dict[str, dict[tuple[str, str], set[str]]] = {}
+
+    def observe(self, stage: str, frame_id: str, signature: tuple[str, str] | None) -> int | None:
+        """Record one call's outcome (``signature`` None = success); the streak's frame count when it is fatal."""
+        if signature is None:
+            self.succeeded = True
+            self._groups.pop(stage, None)
+            return None
+        frames = self._groups.setdefault(stage, {}).setdefault(signature, set())
+        frames.add(frame_id)
+        need = self.warm if self.succeeded else self.cold
+        return len(frames) if len(frames) >= need else None

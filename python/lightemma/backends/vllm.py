@@ -86,7 +86,12 @@ class VLLMBackend:
             raise UserError(MLLAMA_REFUSAL.format(model=model))
         self.prefix_cached_tokens = 0
         self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
-                                     name="lightemma-vllm")
+                                     name="lightemma-vllm", describe_fatal=self._describe_fatal)
+
+    def _describe_fatal(self, exc: BaseException) -> str:
+        """The one line for an engine that fails every batch the same way."""
+        return (f"vLLM {getattr(self._vllm, '__version__', '?')} cannot generate with {self.model_type}: "
+                f"{type(exc).__name__}: {short_message(exc)}")
 
     def _engine_model_type(self) -> str:
         """The checkpoint's ``model_type`` as the engine loaded it ("unknown" where it cannot be read)."""
@@ -160,5 +165,7 @@ class VLLMBackend:
     @staticmethod
     def _result(output: Any, seconds: float) -> ChatResult:
         completion = output.outputs[0]
+        finish = getattr(completion, "finish_reason", None)
         return ChatResult(text=completion.text, input_tokens=len(output.prompt_token_ids or []),
-                          output_tokens=len(completion.token_ids), seconds=seconds, cost_cents=None)
+                          output_tokens=len(completion.token_ids), seconds=seconds, cost_cents=None,
+                          finish_reason=str(finish) if finish is not None else None)

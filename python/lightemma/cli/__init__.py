@@ -19,7 +19,7 @@ import sys
 from collections.abc import Sequence
 
 # subcommand modules, in the order `lightemma --help` lists them
-SUBCOMMANDS: list[str] = ["demo", "synth", "run", "import", "evaluate", "report", "prompts"]
+SUBCOMMANDS: list[str] = ["demo", "synth", "run", "import", "evaluate", "report", "prompts", "models"]
 
 
 MODULES: dict[str, str] = {"import": "import_"}  # subcommand -> module where the name is a Python keyword
@@ -52,11 +52,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("lightemma: interrupted", file=sys.stderr)
         return 130
-    except (UserError, ValueError, OSError) as exc:
+    except (UserError, ValueError) as exc:
         if os.environ.get("LIGHTEMMA_DEBUG"):
             raise
         message = exc.for_cli() if isinstance(exc, UserError) else str(exc)
-        print(f"lightemma {args.command}: error: {message}", file=sys.stderr)
+        print(f"lightemma {args.command}: error: {' '.join(message.split())}", file=sys.stderr)
+        return 2
+    except OSError as exc:  # disk full, permissions, … met where no caller gave it context
+        if os.environ.get("LIGHTEMMA_DEBUG"):
+            raise
+        from lightemma.errors import os_error_line
+
+        message = os_error_line(exc, "read or write") if exc.errno else str(exc)
+        print(f"lightemma {args.command}: error: {' '.join(message.split())}", file=sys.stderr)
         return 2
 
 

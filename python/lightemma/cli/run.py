@@ -13,7 +13,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="run a model over nuScenes frames (three-stage chain), crash-safe and resumable",
         description="Run a vision-language model over a frame set through the three-stage chain "
         "(scene → intent → actions). Records go to OUTPUT/<model>/<run_id>/frames.jsonl as frames finish; "
-        "an interrupted run is finished with --resume RUN_DIR.",
+        "an interrupted run is finished with --resume RUN_DIR. A run that cannot succeed (a rejected key, an unknown "
+        "model, the same failure on frame after frame) stops with one line naming the cause and the fix, keeping what "
+        "finished. Exit status: 0 done, 1 done without one valid frame, 2 stopped or refused.",
     )
     p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or baseline:constant|cv|oracle")
     p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")
@@ -27,12 +29,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     data.add_argument("--window", choices=("reference", "full"), help="reference (the paper: N-14 frames per scene, default) or full (N-13) "
                       "(docs/definitions.md#frames-and-windows)")
     data.add_argument("--limit", type=int, help="only the first N frames")
+    data.add_argument("--on-bad-record", choices=("skip", "error"),
+                      help="a scene with an unusable pose or timestamp: skip it with a warning (default) or stop loading")
     ex = p.add_argument_group("execution")
     ex.add_argument("--concurrency", type=int, help="frames in flight at once (default 16; on --resume, the run's own)")
     ex.add_argument("--output", help="output directory (default ./runs)")
     ex.add_argument("--resume", metavar="RUN_DIR", help="finish this run (everything else is read from its manifest)")
     ex.add_argument("--retry-failed", action="store_true", help="with --resume: also re-run frames that ended failed")
-    ex.add_argument("--timeout", type=float, help="per-call timeout in seconds (default 120)")
+    ex.add_argument("--timeout", type=float, help="deadline per call in seconds, connect to last byte (default 120)")
     ex.add_argument("--max-retries", type=int, help="retries of 429/5xx/timeouts/dropped connections per call (default 6)")
     ex.add_argument("--backoff", type=float, help="base of the exponential backoff in seconds (default 1)")
     ex.add_argument("--rpm", type=float, help="client-side limit: requests per minute")
@@ -65,7 +69,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 RUN_DEFAULTS: dict[str, object] = {
     "version": "v1.0-test", "window": "reference", "output": "runs", "timeout": 120.0, "max_retries": 6,
     "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
-    "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler",
+    "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler", "on_bad_record": "skip",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress"}
@@ -153,7 +157,13 @@ def main(args: argparse.Namespace) -> int:
             integrate_method=settings["integrate"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
             cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
-            backend_options=options,
+            backend_options=options, on_bad_record=settings["on_bad_record"],
         )
     print(result.report())
+    summary = result.summary
+    if summary.get("frames") and not summary.get("ade_frames"):
+        reason = f" (last: {summary['top_failure']})" if summary.get("top_failure") else ""
+        stderr_log(f"error: no valid frame: all {summary['frames']} frame(s) of {result.run_dir} failed{reason}; "
+                   "see their records in frames.jsonl")
+        return 1
     return 0

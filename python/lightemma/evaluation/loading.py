@@ -26,7 +26,7 @@ from lightemma.errors import RunStoreError
 from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
-from lightemma.runs.store import RunContents, iter_records
+from lightemma.runs.store import RunContents, iter_records, read_frame_ids
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
@@ -59,6 +59,8 @@ class RunData:
     truncated_tail: bool = False
     duplicates: int = 0
     bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
+    foreign_records: int = 0  # records of frames outside the run's frame set (dropped)
+    foreign_example: str | None = None
     warnings: list[str] = field(default_factory=list)
     parse: ParseDefinition = field(default_factory=ParseDefinition)  # how the statuses and actions were read
     rescored: bool = False  # True when the stored answers were parsed again (a definition was asked for)
@@ -215,10 +217,11 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
     (:mod:`lightemma.evaluation.rescore`); by default the run's recorded
     statuses stand (parsed ``paper`` for imported runs). Actions outside the
     plausibility limits are marked ``implausible`` and never scored, unless
-    ``keep_implausible`` (:func:`lightemma.evaluation.outcomes.plausibility_for`). Corrupt lines, a truncated tail, records
-    without usable ground truth and an unfinished run are counted and described
-    in ``warnings``. Raises :class:`RunStoreError` for a missing, unreadable or
-    foreign directory.
+    ``keep_implausible`` (:func:`lightemma.evaluation.outcomes.plausibility_for`).
+    Corrupt lines, a truncated tail, records without usable ground truth,
+    records of frames outside the run's frame set (``frame_ids.txt``: dropped)
+    and an unfinished run are counted and described in ``warnings``. Raises
+    :class:`RunStoreError` for a missing, unreadable or foreign directory.
     """
     run_dir = Path(run_dir)
     info = run_info(run_dir)
@@ -227,18 +230,25 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
     counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
     limits = plausibility_for(definition, keep_implausible=keep_implausible)
     columns = _Columns(details, limits)
+    recorded_set = read_frame_ids(run_dir)
+    allowed = set(recorded_set) if recorded_set is not None else None
     seen: set[str] = set()
     frame_ids: list[str] = []  # one per kept record, in file order (duplicates included)
-    bad = duplicates = 0
+    bad = duplicates = foreign = 0
+    foreign_example = None
     try:
         with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
             records = iter_records(run_dir, counts=counts)
             for record in records if parse is None else rescored(records, definition):
+                fid = record["frame_id"]
+                if allowed is not None and fid not in allowed:
+                    foreign += 1  # not a frame of this run: scoring it would mix frame sets
+                    foreign_example = foreign_example or fid
+                    continue
                 gt = record.get("gt_positions")
                 if type(gt) is not list or len(gt) != 6:
                     bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
                     continue
-                fid = record["frame_id"]
                 if fid in seen:
                     duplicates += 1
                 else:
@@ -301,6 +311,8 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         scene_names=list(columns.scenes),
         caught_implausible=int(caught.sum()),
         plausibility=limits,
+        foreign_records=foreign,
+        foreign_example=foreign_example,
     )
     data.warnings = _warnings(data)
     return data
@@ -322,6 +334,9 @@ def _warnings(data: RunData) -> list[str]:
             f"{where}: {data.caught_implausible} frame(s) answered outside the plausibility limits (speed {lim.min_speed:g} to "
             f"{lim.max_speed:g} m/s, |curvature| ≤ {lim.max_curvature:g} 1/m) without being marked; counted as implausible, not scored"
         )
+    if data.foreign_records:
+        out.append(f"{where}: dropped {data.foreign_records} record(s) whose frame id is not in the run's frame set "
+                   f"(frame_ids.txt), e.g. {data.foreign_example!r}")
     if not data.info.complete:
         out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
     if not data.frame_ids:

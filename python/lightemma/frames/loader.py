@@ -69,6 +69,7 @@ FUTURE = 6  # keyframes after it (p_{c+1} … p_{c+6})
 #: window mode -> keyframes left unused at the end of a scene after the last gt keyframe
 WINDOWS = {"reference": 1, "full": 0}
 ON_MISSING_IMAGE = ("skip", "error", "keep")
+ON_BAD_RECORD = ("skip", "error")
 
 
 def _check_window(window: str) -> None:
@@ -76,12 +77,61 @@ def _check_window(window: str) -> None:
         raise ValueError(f"unknown window {window!r}; choose one of {', '.join(WINDOWS)}")
 
 
-def _check_options(window: str, on_missing_image: str) -> None:
+def _check_options(window: str, on_missing_image: str, on_bad_record: str = "skip") -> None:
     _check_window(window)
     if on_missing_image not in ON_MISSING_IMAGE:
         raise ValueError(
             f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
         )
+    if on_bad_record not in ON_BAD_RECORD:
+        raise ValueError(f"unknown on_bad_record {on_bad_record!r}; choose one of {', '.join(ON_BAD_RECORD)}")
+
+
+class BadRecordError(DatasetError):
+    """A table record whose value cannot be used (a pose that is not a pose); names table, token and field."""
+
+
+def _bad(table: str, token: str, field: str, value: Any, why: str) -> BadRecordError:
+    shown = repr(value)
+    shown = shown if len(shown) <= 80 else shown[:77] + "..."
+    return BadRecordError(f"{table} {token}: field {field} = {shown} {why}")
+
+
+def _translation(record: dict[str, Any], table: str, min_len: int) -> np.ndarray:
+    """The record's ``translation`` as finite floats (at least ``min_len`` of them)."""
+    value = record.get("translation")
+    try:
+        array = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise _bad(table, record.get("token", "?"), "translation", value, "is not a list of numbers") from None
+    if array.size < min_len:
+        raise _bad(table, record.get("token", "?"), "translation", value, f"has {array.size} value(s), needs at least {min_len}")
+    if not np.isfinite(array).all():
+        raise _bad(table, record.get("token", "?"), "translation", value, "is not finite")
+    return array
+
+
+def _rotation(record: dict[str, Any], table: str) -> np.ndarray:
+    """The record's ``rotation`` quaternion (w, x, y, z), normalised to unit length."""
+    value = record.get("rotation")
+    try:
+        q = np.asarray(value, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise _bad(table, record.get("token", "?"), "rotation", value, "is not a quaternion (w, x, y, z)") from None
+    if q.size != 4 or not np.isfinite(q).all():
+        raise _bad(table, record.get("token", "?"), "rotation", value, "is not a quaternion of 4 finite numbers (w, x, y, z)")
+    norm = float(np.linalg.norm(q))
+    if not norm > 1e-6:
+        raise _bad(table, record.get("token", "?"), "rotation", value, "has no rotation (norm 0): it cannot be normalised")
+    return q / norm
+
+
+def _timestamp(record: dict[str, Any], table: str) -> int:
+    """The record's ``timestamp`` (integer microseconds), which must be finite and whole."""
+    value = record.get("timestamp")
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or float(value) != int(value):
+        raise _bad(table, record.get("token", "?"), "timestamp", value, "is not a finite whole number of microseconds")
+    return int(value)
 
 
 def window_range(n_keyframes: int, window: str) -> range:
@@ -275,16 +325,20 @@ def _scene_keyframes(nusc: NuScenes, scene: dict[str, Any], cs_cache: dict[str, 
         cs_token = sd["calibrated_sensor_token"]
         if cs_token not in cs_cache:
             cs = nusc.get("calibrated_sensor", cs_token)
-            intrinsic = np.asarray(cs["camera_intrinsic"], dtype=np.float64)
-            if intrinsic.shape != (3, 3):
-                raise DatasetError(
-                    f"scene {name}: calibrated_sensor {cs_token} has no 3x3 camera_intrinsic for {CAMERA}"
-                )
-            cs_cache[cs_token] = (intrinsic, geometry.extrinsic_matrix(cs["translation"], cs["rotation"]))
+            try:
+                intrinsic = np.asarray(cs["camera_intrinsic"], dtype=np.float64)
+            except (TypeError, ValueError):
+                intrinsic = np.zeros(0)
+            if intrinsic.shape != (3, 3) or not np.isfinite(intrinsic).all():
+                raise _bad("calibrated_sensor", cs_token, "camera_intrinsic", cs.get("camera_intrinsic"),
+                           f"is not a finite 3x3 matrix (needed for {CAMERA})")
+            translation = _translation(cs, "calibrated_sensor", 3)
+            cs_cache[cs_token] = (intrinsic, geometry.extrinsic_matrix(translation, _rotation(cs, "calibrated_sensor")))
+        position = _translation(pose, "ego_pose", 2)
         tokens.append(token)
-        xy.append((pose["translation"][0], pose["translation"][1]))
-        quats.append(pose["rotation"])
-        times.append(int(pose["timestamp"]))
+        xy.append((position[0], position[1]))
+        quats.append(_rotation(pose, "ego_pose"))
+        times.append(_timestamp(pose, "ego_pose"))
         files.append(sd["filename"])
         cs_tokens.append(cs_token)
         token = sample["next"]
@@ -307,9 +361,10 @@ def extract_frames(
     scenes: Sequence[str] | None = None,
     window: str = "reference",
     on_missing_image: str = "skip",
+    on_bad_record: str = "skip",
 ) -> FrameSet:
     """Frames of the chosen scenes of an already loaded ``NuScenes`` (see :func:`load_frames`)."""
-    _check_options(window, on_missing_image)
+    _check_options(window, on_missing_image, on_bad_record)
     dataroot = os.path.abspath(nusc.dataroot)
     by_name = {s["name"]: s for s in nusc.scene}
     split, names = resolve_scenes(by_name, nusc.version, split=split, scenes=scenes)
@@ -319,10 +374,20 @@ def extract_frames(
     meta: dict[str, list] = {k: [] for k in ("frame_ids", "scene_names", "scene_tokens", "sample_tokens", "image_paths", "cs")}
     kf_index: list[int] = []
     skipped: list[str] = []
+    bad_records: list[str] = []
     used: list[str] = []
     offset = 0
     for name in names:
-        kf = _scene_keyframes(nusc, by_name[name], cs_cache)
+        try:
+            kf = _scene_keyframes(nusc, by_name[name], cs_cache)
+        except BadRecordError as exc:
+            if on_bad_record == "error":
+                raise BadRecordError(f"scene {name}: {exc} (pass on_bad_record='skip' to skip such scenes)",
+                                     cli=f"scene {name}: {exc} (pass --on-bad-record skip to skip such scenes)") from None
+            log.warning("scene %s skipped: %s", name, exc)
+            skipped.append(name)
+            bad_records.append(f"scene {name}: {exc}")
+            continue
         n = len(kf["sample_tokens"])
         if n >= 2 and np.any(np.diff(kf["t"]) <= 0):
             bad = int(np.argmax(np.diff(kf["t"]) <= 0))
@@ -392,6 +457,7 @@ def extract_frames(
         scenes=used,
         window=window,
         skipped_scenes=skipped,
+        bad_records=bad_records,
     )
     return _handle_missing_images(fs, on_missing_image)
 
@@ -426,6 +492,7 @@ def load_frames(
     scenes: Sequence[str] | None = None,
     window: str = "reference",
     on_missing_image: str = "skip",
+    on_bad_record: str = "skip",
 ) -> FrameSet:
     """Load the frames of a nuScenes version through the devkit (SPEC §1).
 
@@ -441,12 +508,20 @@ def load_frames(
             ``full`` (c = 7 … N−7, N−13 frames per scene).
         on_missing_image: ``skip`` (default: drop those frames, log and list them in
             ``missing_images``), ``error`` (raise), or ``keep`` (keep them, still listed).
+        on_bad_record: what to do with a scene holding a record that cannot be used — an
+            ``ego_pose`` or ``calibrated_sensor`` whose translation is not ≥ 2 finite numbers
+            (3 for a sensor), whose rotation is not a quaternion that normalises (4 finite
+            numbers, norm > 0), or whose timestamp is not a finite whole number: ``skip``
+            (default: the scene is left out with a warning naming table, token and field, and
+            listed in ``skipped_scenes`` and ``bad_records``) or ``error`` (raise
+            :class:`BadRecordError`, one line naming scene, table, token and field).
 
     Frames are ordered by scene name, then keyframe. ``FrameSet.summary_line()`` says which
     split, how many scenes and how many frames were taken.
     """
-    _check_options(window, on_missing_image)  # before the slow table load
+    _check_options(window, on_missing_image, on_bad_record)  # before the slow table load
     nusc = load_tables(dataroot, version)
-    frames = extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image)
+    frames = extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image,
+                            on_bad_record=on_bad_record)
     log.info("loaded %s", frames.summary_line())
     return frames

@@ -91,6 +91,8 @@ class FrameSet:
     window: str = "reference"
     missing_images: list[str] = field(default_factory=list)
     skipped_scenes: list[str] = field(default_factory=list)
+    # why scenes were skipped for an unusable record ("scene S: ego_pose TOKEN: field rotation = … has no rotation")
+    bad_records: list[str] = field(default_factory=list)
 
     #: stacked arrays and the shape of one frame's entry (the leading axis is the frame)
     _ARRAYS = {
@@ -193,6 +195,7 @@ class FrameSet:
             window=self.window,
             missing_images=[f for f in self.missing_images if f.split("/", 1)[0] in kept or f in kept_ids],
             skipped_scenes=list(self.skipped_scenes),
+            bad_records=list(self.bad_records),
         )
 
     def select(self, frame_ids: Iterable[str]) -> FrameSet:
@@ -235,6 +238,7 @@ class FrameSet:
             "n_frames": len(self),
             "missing_images": list(self.missing_images),
             "skipped_scenes": list(self.skipped_scenes),
+            "bad_records": list(self.bad_records),
         }
 
     def summary_line(self) -> str:

@@ -10,7 +10,12 @@ earlier stage that failed is redone first) or the whole chain
 
 An API error is never model text: a failed call ends its attempt with the
 error class recorded, and only texts of successful calls reach a prompt.
-Every call's tokens, time and cost count toward the frame (SPEC §3, §6).
+A text cut off at the output-token limit (``finish_reason`` length) is recorded
+but never passed on: a truncated scene or intent ends its attempt like a failed
+call (and is asked again), a truncated answer is ``failed`` with reason
+"truncated" (``failure: "truncated"`` on the attempt), unparsed.
+Every call's tokens, time and cost count toward the frame (SPEC §3, §6); a
+total is null when any of its calls did not report it.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams
+from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, is_truncated
 from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet
 
@@ -80,8 +85,9 @@ def _sum(values: list[Any], *, unknown_is_none: bool) -> Any:
 
 def _totals(calls: list[dict[str, Any]]) -> dict[str, Any]:
     return {
-        "input_tokens": _sum([c["input_tokens"] for c in calls], unknown_is_none=False),
-        "output_tokens": _sum([c["output_tokens"] for c in calls], unknown_is_none=False),
+        "input_tokens": _sum([c["input_tokens"] for c in calls], unknown_is_none=True),
+        "output_tokens": _sum([c["output_tokens"] for c in calls], unknown_is_none=True),
+        "reasoning_tokens": _sum([c.get("reasoning_tokens") for c in calls], unknown_is_none=True),
         "seconds": round(sum(c["seconds"] for c in calls), 4),
         "cost_cents": _sum([c["cost_cents"] for c in calls], unknown_is_none=True),
     }
@@ -94,13 +100,27 @@ class _Attempt:
         self.number = number
         self.calls: list[dict[str, Any]] = []
         self.error: str | None = None
+        self.truncated: str | None = None  # the stage whose text was cut off at the output-token limit
 
     def record(self, stage: str, result: ChatResult) -> str | None:
+        """The call's text for the next step, or None when it failed or was cut off (never passed on)."""
         self.calls.append(_call_record(stage, result))
         if not result.ok:
             self.error = result.error or "Error"
             return None
+        if is_truncated(result.finish_reason):
+            self.truncated = stage
+            return None
         return result.text
+
+    def finish_truncated(self) -> dict[str, Any]:
+        """This attempt, ended by a text cut off at the output-token limit: ``failed``, ``failure: "truncated"``."""
+        if self.truncated == "actions":
+            out = self.finish(self.calls[-1]["text"], "failed", "truncated")
+        else:
+            out = self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on")
+        out["failure"] = "truncated"
+        return out
 
     def finish(self, answer: str | None, status: str, reason: str) -> dict[str, Any]:
         return {"attempt": self.number, "calls": self.calls, "answer": answer, "status": status, "reason": reason,
@@ -124,7 +144,8 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
 
     ``frame`` needs ``frame_id``, ``scene_name``, ``sample_token``,
     ``image_path``, ``history_actions`` (6, 2) and ``gt_positions`` (6, 2).
-    Raises only what the backend raises as fatal (e.g. a rejected API key).
+    Raises only what the backend raises: :class:`~lightemma.errors.RunFatalError` when the run
+    cannot succeed (a rejected API key, the same failure on frame after frame).
     """
     start = time.perf_counter()
     history = history_placeholders(frame.history_actions)  # {history}, {speeds}, {curvatures}
@@ -151,7 +172,11 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
         if scene is not None and intent is not None:
             answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, intent=intent, **history)))
         if answer is None:
-            attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}"))
+            if attempt.truncated:
+                attempts.append(attempt.finish_truncated())
+                answer = attempts[-1]["answer"]
+            else:
+                attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}"))
             continue
         status, reason, parsed = _parse(answer)
         attempts.append(attempt.finish(answer, status, reason))
@@ -192,6 +217,7 @@ def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None,
         "call_seconds": totals["seconds"],
         "input_tokens": totals["input_tokens"],
         "output_tokens": totals["output_tokens"],
+        "reasoning_tokens": totals["reasoning_tokens"],
         "cost_cents": totals["cost_cents"],
         "cached": any(c["cached"] for c in calls),
         "cached_calls": sum(1 for c in calls if c["cached"]),

@@ -8,7 +8,16 @@ an interrupt, from its manifest alone, without redoing finished frames
 Frames run through :func:`lightemma.pipeline.chain.run_frame` on up to
 ``concurrency`` frames at once, for any backend; each record is appended to
 ``frames.jsonl`` as soon as its frame finishes, so a crash loses at most the
-frames in flight.
+frames in flight. A process holds the run directory's lock
+(:class:`~lightemma.runs.store.RunLock`) while it writes; a second one is refused.
+
+When the backend raises :class:`~lightemma.errors.RunFatalError` (a rejected key,
+the same failure on frame after frame, a model that cannot generate) or a record
+cannot be written (disk full), the run stops: no new frame and no new call
+starts, the calls in flight finish, frames that complete are written, frames
+cut off mid-chain are not (a resume redoes them), and :class:`~lightemma.errors.RunStopped`
+names the cause, the fix and the ``--resume`` command. A resume also redoes the
+frames that ended ``failed`` with the error that stopped the run.
 """
 
 from __future__ import annotations
@@ -25,15 +34,24 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
-from lightemma.backends import Backend, GenerationParams, backend_kind, create_backend
-from lightemma.errors import RunStoreError, UserError
+from lightemma.backends import Backend, ChatRequest, ChatResult, GenerationParams, backend_kind, create_backend
+from lightemma.errors import RunFatalError, RunStopped, RunStoreError, UserError, os_error_line
 from lightemma.frames.model import summary_line
 from lightemma.pipeline.chain import ChainPolicy, run_frame
 from lightemma.pipeline.progress import Progress
 from lightemma.pipeline.summary import format_summary, summarize
 from lightemma.prompts import DEFAULT_PROMPT_SET, PromptSet, load_prompt_set
 from lightemma.registry import resolve
-from lightemma.runs.store import RunWriter, create_run_dir, read_manifest, read_run, update_manifest
+from lightemma.runs.store import (
+    FRAMES_FILE,
+    RunLock,
+    RunWriter,
+    create_run_dir,
+    read_frame_ids,
+    read_manifest,
+    read_run,
+    update_manifest,
+)
 
 Log = Callable[[str], None]
 
@@ -97,8 +115,17 @@ def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
     from lightemma import load_frames
 
     frames = load_frames(dataset["dataroot"], dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"),
-                         window=dataset.get("window", "reference"))
+                         window=dataset.get("window", "reference"), on_bad_record=dataset.get("on_bad_record") or "skip")
     return _head(frames, dataset.get("limit"))
+
+
+def _require_frames(frames: Sequence[Any]) -> None:
+    """An empty frame set is an error (it would make an empty run), naming why it is empty where that is known."""
+    if len(frames):
+        return
+    skipped = list(getattr(frames, "skipped_scenes", []) or [])
+    why = f": every scene was skipped ({', '.join(skipped[:5])}{', …' if len(skipped) > 5 else ''}; see the warnings above)" if skipped else ""
+    raise UserError(f"no frames to run{why}; choose other scenes (--split, --scenes) or --window full")
 
 
 def _head(frames: Any, limit: int | None) -> Sequence[Any]:
@@ -114,19 +141,67 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
     return {**described, **{k: v for k, v in dataset.items() if v is not None}, "n_frames": len(frames)}
 
 
+class _Stopped(Exception):
+    """Raised into a frame's chain once the run has stopped: the frame is left unfinished (not written)."""
+
+
+class _Guard:
+    """The backend as the chain sees it during a session: once the run stops, no new call starts."""
+
+    def __init__(self, backend: Backend) -> None:
+        self.backend = backend
+        self.name = getattr(backend, "name", "backend")
+        self.stopped = False
+
+    @property
+    def info(self) -> Any:
+        return self.backend.info
+
+    async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
+        if self.stopped:
+            raise _Stopped
+        return await self.backend.generate(requests)
+
+    async def aclose(self) -> None:
+        await self.backend.aclose()
+
+
+@dataclass
+class _Outcome:
+    done: int = 0  # frames written in this session
+    stop: RunFatalError | None = None  # why the session stopped early, if it did
+
+
 async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
-                   concurrency: int, bar: Progress) -> int:
-    """Run every frame, ``concurrency`` at a time, appending each record as it finishes."""
+                   concurrency: int, bar: Progress) -> _Outcome:
+    """Run every frame, ``concurrency`` at a time, appending each record as it finishes; stop on a run-fatal cause."""
     iterator = iter(frames)
-    done = 0
+    guard = _Guard(backend)
+    outcome = _Outcome()
+
+    def halt(cause: RunFatalError) -> None:
+        if outcome.stop is None:
+            outcome.stop = cause
+        guard.stopped = True
 
     async def worker() -> None:
-        nonlocal done
         for frame in iterator:  # shared: each frame goes to exactly one worker
-            record = await run_frame(frame, backend, prompts, policy)
-            writer.append(record)
+            if guard.stopped:
+                return
+            try:
+                record = await run_frame(frame, guard, prompts, policy)
+            except _Stopped:
+                return  # cut off mid-chain by a stop: not written, so a resume runs it again
+            except RunFatalError as exc:
+                halt(exc)
+                return
+            try:
+                writer.append(record)
+            except OSError as exc:
+                halt(RunFatalError(os_error_line(exc, "write a frame record to"), cause="disk"))
+                return
             bar.update(record)
-            done += 1
+            outcome.done += 1
 
     tasks = [asyncio.create_task(worker()) for _ in range(max(1, min(concurrency, len(frames))))]
     try:
@@ -136,24 +211,50 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         await backend.aclose()
-    return done
+    return outcome
+
+
+def _in_set(records: dict[str, dict[str, Any]], frame_ids: list[str] | None) -> list[dict[str, Any]]:
+    """The records of frames in the run's frame set (all records for runs written without one)."""
+    if frame_ids is None:
+        return list(records.values())
+    allowed = set(frame_ids)
+    return [r for fid, r in records.items() if fid in allowed]
+
+
+def _write_manifest(run_dir: Path, **fields: Any) -> dict[str, Any]:
+    """update_manifest, with an OS failure (disk full, permissions) as one line that says what is safe."""
+    try:
+        return update_manifest(run_dir, **fields)
+    except OSError as exc:
+        raise RunStoreError(os_error_line(exc, "update the manifest in") + f"; the frames written so far are safe in "
+                            f"{run_dir / FRAMES_FILE}; after freeing space, continue with: lightemma run --resume {run_dir}") from None
 
 
 def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: dict[str, Any],
              progress: bool, kind: str, already: int, log: Log | None) -> RunResult:
-    """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume."""
+    """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume.
+
+    Raises :class:`RunStopped` (after saving the session) when the run stopped for a run-fatal cause.
+    """
     manifest = read_manifest(run_dir)
     sessions = list(manifest.get("sessions", []))
-    sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"]})
-    update_manifest(run_dir, sessions=sessions, finished_at=None)
+    sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"],
+                     "pid": os.getpid()})
+    _write_manifest(run_dir, sessions=sessions, finished_at=None)
+    try:
+        writer = RunWriter(run_dir)
+    except OSError as exc:
+        asyncio.run(backend.aclose())
+        raise RunStoreError(os_error_line(exc, "open the frame records") + f"; continue later with: lightemma run --resume {run_dir}") from None
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
     try:
-        with RunWriter(run_dir) as writer:
+        with writer:
             if todo:
-                done = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar))
+                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar))
             else:
-                done = 0
+                outcome = _Outcome()
                 asyncio.run(backend.aclose())
     except KeyboardInterrupt:
         if log:
@@ -163,10 +264,23 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
         bar.close()
     wall = time.perf_counter() - start
     contents = read_run(run_dir)
-    summary = summarize(contents.records.values(), wall_seconds=wall, frames_run=done)
-    sessions[-1].update(finished_at=_now(), frames_run=done, wall_seconds=round(wall, 3))
-    manifest = update_manifest(run_dir, sessions=sessions, finished_at=_now(), summary=summary)
-    return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=done)
+    summary = summarize(_in_set(contents.records, read_frame_ids(run_dir)), wall_seconds=wall, frames_run=outcome.done)
+    sessions[-1].update(finished_at=_now(), frames_run=outcome.done, wall_seconds=round(wall, 3))
+    images = getattr(backend, "image_report", None)
+    if images:
+        sessions[-1]["images_reencoded"] = images
+        if log:
+            log(f"{images['count']} image(s) were larger than the provider accepts and were re-encoded to fit "
+                "(see images_reencoded in the manifest)")
+    stop = outcome.stop
+    if stop is not None:
+        sessions[-1]["stopped"] = {"cause": stop.cause, "error": stop.error, "message": str(stop)}
+        _write_manifest(run_dir, sessions=sessions, summary=summary)
+        raise RunStopped(f"{stop} — the run stopped; {outcome.done} frame(s) finished in this session are saved in {run_dir}; "
+                         f"after the fix, continue with: lightemma run --resume {run_dir}",
+                         cause=stop.cause, error=stop.error, run_dir=run_dir, frames_run=outcome.done)
+    manifest = _write_manifest(run_dir, sessions=sessions, finished_at=_now(), summary=summary)
+    return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=outcome.done)
 
 
 def run(
@@ -189,6 +303,7 @@ def run(
     max_attempts: int = 5,
     integrate_method: str = "euler",
     prompt_set: str = DEFAULT_PROMPT_SET,
+    on_bad_record: str = "skip",
     timeout: float = 120.0,
     max_retries: int = 6,
     backoff_base: float = 1.0,
@@ -209,7 +324,12 @@ def run(
     ``scenes``/``window``; ``limit`` keeps the first N. ``cache=True`` keeps a
     response cache at ``<output>/cache.sqlite`` (or give a path). ``transport="direct"``
     talks to an OpenAI-compatible ``api_base`` without litellm (less CPU per call).
-    A missing API key raises :class:`~lightemma.errors.UserError` before any work.
+    ``on_bad_record`` (``skip`` or ``error``) is what loading does with a scene whose
+    pose or timestamp is invalid (see :func:`lightemma.load_frames`).
+
+    A missing API key, an unknown model or an empty frame set raises
+    :class:`~lightemma.errors.UserError` before any work. A run-fatal cause met while
+    running raises :class:`~lightemma.errors.RunStopped` once what finished is saved.
     """
     if concurrency < 1:
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -233,13 +353,15 @@ def run(
     output = Path(output)
     instance = _make_backend(config, output)
     dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
-               "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit}
+               "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit,
+               "on_bad_record": on_bad_record}
     config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
         if frames is None:
             frames = _load_frames(dataset)
         else:
             frames = _head(frames, limit)
+        _require_frames(frames)
         manifest = {
             "model": model,
             "display_name": info.display_name,
@@ -255,14 +377,16 @@ def run(
             "started_at": _now(),
             "finished_at": None,
         }
-        run_dir = create_run_dir(output, model, manifest)
+        run_dir = create_run_dir(output, model, manifest, frame_ids=[f.frame_id for f in frames])
+        lock = RunLock(run_dir).acquire()
     except BaseException:
         asyncio.run(instance.aclose())
         raise
     if log:
         log(f"frames: {summary_line(manifest['dataset'])}")
         log(f"run directory: {run_dir}  ({len(frames)} frames, concurrency {concurrency})")
-    return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
+    with lock:
+        return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
 
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
@@ -270,9 +394,13 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
-    records are appended; readers keep the last). The prompt set must be the
-    one the run started with (same content hash). ``frames`` is needed only
-    for runs started from in-memory frames.
+    records are appended; readers keep the last). Frames that ended ``failed``
+    with the error that stopped the previous session (a rejected key, …) are
+    re-run in any case: they failed for the run's cause, not their own. The
+    prompt set must be the one the run started with (same content hash), and
+    the frames loaded must be the run's frame set. ``frames`` is needed only
+    for runs started from in-memory frames. Another process writing the run
+    makes this raise :class:`~lightemma.errors.RunStoreError` (naming its PID).
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
@@ -288,26 +416,59 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     if prompts.hash != recorded.get("hash"):
         raise UserError(f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
                         f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
-    instance = _make_backend(config, run_dir.parent.parent)
-    try:
-        dataset = dict(config.get("dataset") or {})
-        if dataset.get("split") is None and not dataset.get("scenes"):
-            # the split the run resolved when it started, not today's default for the version
-            dataset["split"] = (manifest.get("dataset") or {}).get("split")
-        all_frames = _head(frames, dataset.get("limit")) if frames is not None else _load_frames(dataset)
-        contents = read_run(run_dir)
-        for warning in contents.warnings():
-            if log and "not finished" not in warning:
-                log(warning)
-        records = contents.records
-        todo = [f for f in all_frames if f.frame_id not in records or (retry_failed and records[f.frame_id].get("status") == "failed")]
-    except BaseException:
-        asyncio.run(instance.aclose())
-        raise
-    if log:
-        log(f"frames: {summary_line(_describe(all_frames, dataset))}")
-        log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run")
-    return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume", len(all_frames) - len(todo), log)
+    with RunLock(run_dir):  # before anything is read for the todo list: a second writer would redo the same frames
+        manifest = read_manifest(run_dir)  # as the last writer left it
+        instance = _make_backend(config, run_dir.parent.parent)
+        try:
+            dataset = dict(config.get("dataset") or {})
+            if dataset.get("split") is None and not dataset.get("scenes"):
+                # the split the run resolved when it started, not today's default for the version
+                dataset["split"] = (manifest.get("dataset") or {}).get("split")
+            all_frames = _head(frames, dataset.get("limit")) if frames is not None else _load_frames(dataset)
+            _same_frame_set(run_dir, all_frames)
+            contents = read_run(run_dir)
+            for warning in contents.warnings():
+                if log and "not finished" not in warning:
+                    log(warning)
+            records = contents.records
+            stopped_by = _stopped_error(manifest)
+
+            def redo(record: dict[str, Any]) -> bool:
+                failed = record.get("status") == "failed"
+                return failed and (retry_failed or (stopped_by is not None and record.get("error") == stopped_by))
+
+            todo = [f for f in all_frames if f.frame_id not in records or redo(records[f.frame_id])]
+            again = sum(1 for f in all_frames if f.frame_id in records and redo(records[f.frame_id]) and not retry_failed)
+        except BaseException:
+            asyncio.run(instance.aclose())
+            raise
+        if log:
+            log(f"frames: {summary_line(_describe(all_frames, dataset))}")
+            extra = f", of which {again} failed with {stopped_by}, the error that stopped the run" if again else ""
+            log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run{extra}")
+        return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume",
+                        len(all_frames) - len(todo), log)
+
+
+def _stopped_error(manifest: dict[str, Any]) -> str | None:
+    """The error class that stopped the last session, if it stopped for one."""
+    sessions = manifest.get("sessions") or []
+    last = sessions[-1] if sessions and isinstance(sessions[-1], dict) else {}
+    stopped = last.get("stopped")
+    return stopped.get("error") if isinstance(stopped, dict) else None
+
+
+def _same_frame_set(run_dir: Path, frames: Sequence[Any]) -> None:
+    """Refuse to resume over frames that are not the run's frame set (the dataset changed since)."""
+    recorded = read_frame_ids(run_dir)
+    if recorded is None:
+        return
+    now = {f.frame_id for f in frames}
+    before = set(recorded)
+    if now != before:
+        gone, new = len(before - now), len(now - before)
+        raise UserError(f"{run_dir}: the frames loaded now are not the run's frame set ({gone} of its {len(before)} frames "
+                        f"missing, {new} new): the dataset changed since the run started; start a new run instead of resuming")
 
 
 def _version() -> str:

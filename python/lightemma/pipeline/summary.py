@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Iterable, Mapping
 from typing import Any
 
 import numpy as np
+
+from lightemma.backends.base import is_truncated
 
 
 def _mean(values: list[float]) -> float | None:
@@ -49,12 +52,25 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         "attempts": sum(r.get("n_attempts", len(r.get("attempts", []))) for r in records),
         "api_errors": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", []) if c.get("error")),
         "cached_calls": sum(r.get("cached_calls", 0) for r in records),
+        # unknown stays unknown: frames whose tokens a provider did not (fully) report are left out of the means
+        "frames_tokens_unknown": sum(1 for r in records if r.get("input_tokens") is None or r.get("output_tokens") is None),
+        "mean_reasoning_tokens": _mean([r["reasoning_tokens"] for r in records if r.get("reasoning_tokens") is not None]),
+        "truncated_calls": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", [])
+                               if is_truncated(c.get("finish_reason"))),
+        "top_failure": _top_failure(records),
     }
     if wall_seconds is not None:
         summary["wall_seconds"] = wall_seconds
         summary["frames_run"] = frames_run
         summary["frames_per_second"] = (frames_run / wall_seconds) if frames_run and wall_seconds > 0 else None
     return summary
+
+
+def _top_failure(records: list[Mapping[str, Any]]) -> str | None:
+    """The most common reason the last attempt of a failed frame gives (None when no frame failed)."""
+    reasons = Counter(str((r.get("attempts") or [{}])[-1].get("reason") or r.get("error") or "unknown")
+                      for r in records if r.get("status") == "failed")
+    return reasons.most_common(1)[0][0] if reasons else None
 
 
 def _fmt(value: Any, spec: str, unit: str = "") -> str:
@@ -69,10 +85,13 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}",
         f"ADE avg       {_fmt(summary['ade_avg'], '.3f', ' m')}  over {summary['ade_frames']} frame(s)",
         f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}",
-        f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}",
+        f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}"
+        + (f" (of which reasoning {_fmt(summary['mean_reasoning_tokens'], '.0f')})" if summary.get("mean_reasoning_tokens") else "")
+        + (f"  ({summary['frames_tokens_unknown']} unknown)" if summary.get("frames_tokens_unknown") else ""),
         f"cost          {_fmt(summary['total_cost_cents'], '.2f', ' ¢')} total, {_fmt(summary['mean_cost_cents'], '.3f', ' ¢')}/frame"
         + (f"  ({summary['frames_cost_unknown']} frame(s) unpriced)" if summary["frames_cost_unknown"] else ""),
-        f"calls         {summary['attempts']} attempt(s), {summary['api_errors']} API error(s), {summary['cached_calls']} cached",
+        f"calls         {summary['attempts']} attempt(s), {summary['api_errors']} API error(s), {summary['cached_calls']} cached"
+        + (f", {summary['truncated_calls']} truncated" if summary.get("truncated_calls") else ""),
     ]
     if "wall_seconds" in summary:
         lines.append(f"wall time     {summary['wall_seconds']:.1f} s for {summary['frames_run']} frame(s), "

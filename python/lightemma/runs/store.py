@@ -5,7 +5,15 @@ A run directory is ``<output>/<model-slug>/<run-id>/`` holding
 * ``manifest.json`` — what was run (model, backend, parameters, prompt set and
   hash, dataset, lightemma version, …), always replaced atomically;
 * ``frames.jsonl`` — one whole JSON object per finished frame, appended as a
-  single ``write`` of a complete line and flushed.
+  single ``write`` of a complete line and flushed;
+* ``frame_ids.txt`` — the run's frame set, one frame id per line (what
+  evaluation scores: a record of another frame is dropped with a warning);
+* ``.lock`` (and ``.lock.pid``) — the OS file lock a writing process holds
+  (:class:`RunLock`), so that two processes never write one run.
+
+The directory is created whole: its files are written into a temporary
+directory beside it, which is then renamed into place, so a run directory
+never exists without its manifest.
 
 A crash can at worst leave a truncated last line. Readers ignore it (and say
 so); :class:`RunWriter` cuts it off before appending, so the file never holds
@@ -20,6 +28,7 @@ import math
 import os
 import re
 import secrets
+import shutil
 import tempfile
 import threading
 from collections.abc import Iterator, Mapping
@@ -30,10 +39,13 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.errors import RunStoreError
+from lightemma.errors import RunStoreError, os_error_line
 
 MANIFEST_FILE = "manifest.json"
 FRAMES_FILE = "frames.jsonl"
+FRAME_IDS_FILE = "frame_ids.txt"
+LOCK_FILE = ".lock"
+LOCK_PID_FILE = ".lock.pid"
 FORMAT = "lightemma-run/1"
 
 
@@ -92,17 +104,128 @@ def new_run_id(now: datetime | None = None) -> str:
     return f"{now.strftime('%Y%m%dT%H%M%SZ')}-{secrets.token_hex(3)}"
 
 
-def create_run_dir(output: str | os.PathLike[str], model: str, manifest: Mapping[str, Any], *, run_id: str | None = None) -> Path:
-    """Create ``<output>/<slug(model)>/<run_id>/`` with its manifest and an empty ``frames.jsonl``."""
-    run_dir = Path(output) / slugify(model) / (run_id or new_run_id())
+def _output_dir(path: Path) -> None:
+    """``mkdir -p path``, or a :class:`RunStoreError` saying in one line why it cannot be."""
+    for part in (path, *path.parents):
+        if part.exists() and not part.is_dir():
+            raise RunStoreError(f"cannot create the output directory {path}: {part} is a file, not a directory (choose another --output)")
     try:
-        run_dir.mkdir(parents=True, exist_ok=False)
-    except FileExistsError:
-        raise RunStoreError(f"run directory {run_dir} already exists; pass --resume {run_dir} to continue it") from None
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise RunStoreError(os_error_line(exc, "create the output directory") + " (choose another --output)") from None
+
+
+def create_run_dir(output: str | os.PathLike[str], model: str, manifest: Mapping[str, Any], *, run_id: str | None = None,
+                   frame_ids: list[str] | None = None) -> Path:
+    """Create ``<output>/<slug(model)>/<run_id>/`` with its manifest, an empty ``frames.jsonl`` and ``frame_ids.txt``.
+
+    All or nothing: the files are written into a temporary directory that is then renamed into place.
+    A disk that is full, a path that is a file, a directory without write permission: a one-line
+    :class:`RunStoreError`, and nothing left behind.
+    """
+    parent = Path(output) / slugify(model)
+    run_dir = parent / (run_id or new_run_id())
+    if run_dir.exists():
+        raise RunStoreError(f"run directory {run_dir} already exists; pass --resume {run_dir} to continue it")
+    _output_dir(parent)
     full = {"format": FORMAT, "run_id": run_dir.name, **manifest}
-    write_json_atomic(run_dir / MANIFEST_FILE, full)
-    (run_dir / FRAMES_FILE).touch()
+    tmp: Path | None = None
+    try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{run_dir.name}.", suffix=".tmp", dir=parent))
+        write_json_atomic(tmp / MANIFEST_FILE, full)
+        (tmp / FRAMES_FILE).touch()
+        if frame_ids is not None:
+            write_text_atomic(tmp / FRAME_IDS_FILE, "".join(f"{fid}\n" for fid in frame_ids))
+        os.rename(tmp, run_dir)
+        tmp = None
+    except OSError as exc:
+        raise RunStoreError(os_error_line(exc, "create the run directory") + f" (under {parent}); nothing was written") from None
+    finally:
+        if tmp is not None:
+            shutil.rmtree(tmp, ignore_errors=True)
     return run_dir
+
+
+def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
+    """Write ``text`` to ``path`` via a temporary file and ``os.replace``."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def read_frame_ids(run_dir: str | os.PathLike[str]) -> list[str] | None:
+    """The run's frame set from ``frame_ids.txt``, or None for runs written without one."""
+    path = Path(run_dir) / FRAME_IDS_FILE
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RunStoreError(f"{path} is unreadable: {exc}") from None
+    return [line for line in text.splitlines() if line]
+
+
+class RunLock:
+    """An OS file lock on a run directory for as long as this process writes it.
+
+    ``flock`` on ``<run_dir>/.lock`` (through the ``filelock`` package): the kernel releases
+    it when the process ends, however it ends, so a crash never leaves a stale lock. The
+    holder's PID is written beside it (``.lock.pid``) for the message a second writer gets:
+    a one-line :class:`RunStoreError` naming that PID. Use as a context manager.
+    """
+
+    def __init__(self, run_dir: str | os.PathLike[str]) -> None:
+        self.run_dir = Path(run_dir)
+        self._lock: Any = None
+
+    def acquire(self) -> RunLock:
+        from filelock import FileLock, Timeout
+
+        lock = FileLock(self.run_dir / LOCK_FILE, thread_local=False)
+        try:
+            lock.acquire(timeout=0)
+        except Timeout:
+            raise RunStoreError(f"{self.run_dir} is being written by another lightemma process (PID {self.holder() or 'unknown'}); "
+                                "wait for it to finish (or stop it) before running this again") from None
+        except OSError as exc:
+            raise RunStoreError(os_error_line(exc, "lock the run directory")) from None
+        self._lock = lock
+        try:
+            write_text_atomic(self.run_dir / LOCK_PID_FILE, f"{os.getpid()}\n")
+        except OSError:
+            pass  # the PID is only for messages; the lock itself holds
+        return self
+
+    def holder(self) -> int | None:
+        """The PID recorded by the process holding the lock (None if it cannot be read)."""
+        try:
+            return int((self.run_dir / LOCK_PID_FILE).read_text(encoding="utf-8").strip())
+        except (OSError, ValueError):
+            return None
+
+    def release(self) -> None:
+        if self._lock is None:
+            return
+        try:
+            (self.run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
+        except OSError:
+            pass
+        self._lock.release()
+        self._lock = None
+
+    def __enter__(self) -> RunLock:
+        return self if self._lock is not None else self.acquire()
+
+    def __exit__(self, *exc: object) -> None:
+        self.release()
 
 
 def read_manifest(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
@@ -210,7 +333,9 @@ def find_run_dirs(path: str | os.PathLike[str]) -> list[Path]:
         return [path]
     if not path.is_dir():
         raise RunStoreError(f"{path} does not exist")
-    return sorted(p.parent for p in path.glob(f"**/{MANIFEST_FILE}"))
+    # hidden directories are a run directory still being created (or one whose creation was cut off)
+    return sorted(p.parent for p in path.glob(f"**/{MANIFEST_FILE}")
+                  if not any(part.startswith(".") for part in p.parent.relative_to(path).parts))
 
 
 class RunWriter:
