@@ -214,12 +214,13 @@ def test_cli_markdown_layout_with_paper(two_runs, capsys):
     text = capsys.readouterr().out
     lines = text.splitlines()
     header = next(i for i, line in enumerate(lines) if line.startswith("| Model | Frames | FE (%)"))
-    assert lines[header] == "| Model | Frames | FE (%) | FE corr (%) | ADE 1s (m) | ADE 2s (m) | ADE 3s (m) | ADE avg (m) | FDE (m) | Miss (%) |"
+    assert lines[header] == ("| Model | Frames | FE (%) | FE corr (%) | API errors | ADE 1s (m) | ADE 2s (m) | ADE 3s (m) | ADE avg (m) "
+                             "| FDE (m) | Miss (%) |")
     body = lines[header + 2 : header + 2 + 17]
     assert body[0].startswith("| GPT-4o | ") and body[1].startswith("| baseline:cv | ")
-    assert "| GPT-4o (paper) | 3908 | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - |" in body
+    assert "| GPT-4o (paper) | 3908 | 7.78 | 0.08 | - | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - |" in body
     assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | 402 | - | - | - | 3908 |" in text
-    assert all(len(line.split("|")) == 12 for line in body)
+    assert all(len(line.split("|")) == 13 for line in body)
 
 
 def test_csv_latex_json_formats(two_runs, capsys):
@@ -231,7 +232,7 @@ def test_csv_latex_json_formats(two_runs, capsys):
     assert len(blocks) == 4  # efficiency + three conventions
     rows = list(csv.reader(io.StringIO(blocks[1].split("\n", 1)[1])))
     assert rows[0][:3] == ["Model", "Frames", "FE (%)"] and len(rows) == 3
-    assert float(rows[1][7]) == pytest.approx(ev.accuracy_rows("lightemma")[0]["ade_avg"], abs=0.005)
+    assert float(rows[1][rows[0].index("ADE avg (m)")]) == pytest.approx(ev.accuracy_rows("lightemma")[0]["ade_avg"], abs=0.005)
     latex = render(tables, "latex")
     assert latex.count(r"\begin{tabular}") == 4 and r"FE (\%)" in latex and r"\textcent{}" in latex
     doc = json.loads(render(tables, "json", extra={"common": False}))
@@ -322,3 +323,30 @@ def test_pairs_array_turns_bad_entries_into_nan():
     out = pairs_array([good, *bad])
     assert np.isfinite(out[0]).all() and not np.isfinite(out[1:]).all(axis=(1, 2)).any()
     assert pairs_array([]).shape == (0, 6, 2)
+
+
+def test_frames_with_only_api_errors_are_counted_apart_from_format_errors(tmp_path):
+    from lightemma.runs.records import answer_received, first_answer_status
+
+    run_dir = create_run_dir(tmp_path, "m", {"model": "m", "finished_at": "t"})
+    gt = np.zeros((6, 2))
+    api_error = make_record("f3", gt, None, status="failed", first_status=None)
+    api_error["attempts"] = [{"answer": None, "status": "failed", "failure": "api_error", "reason": "API error: X"}] * 2
+    legacy = make_record("f4", gt, None, status="failed")  # written before `failure` existed: first_status "failed"
+    legacy["attempts"] = [{"answer": None, "status": "failed", "reason": "API error: X"}]
+    late = make_record("f5", gt, np.ones((6, 2)), status="ok", first_status="failed")
+    late["attempts"] = [{"answer": None, "status": "failed", "failure": "api_error"},
+                        {"answer": "[(…)]", "status": "corrected", "failure": ""}]
+    with RunWriter(run_dir) as w:
+        w.append(make_record("f1", gt, np.ones((6, 2)), status="ok"))
+        w.append(make_record("f2", gt, None, status="failed"))
+        for rec in (api_error, legacy, late):
+            w.append(rec)
+    assert [answer_received(r) for r in (api_error, legacy, late)] == [False, False, True]
+    assert first_answer_status(late) == "corrected" and first_answer_status(api_error) is None
+    ev = evaluate_runs([run_dir])
+    row = ev.accuracy_rows()[0]
+    # over the three frames with an answer (ok, failed, corrected first): FE 2/3, FE corr 1/3
+    assert row["fe_pct"] == pytest.approx(100 * 2 / 3) and row["fe_corr_pct"] == pytest.approx(100 / 3)
+    assert row["api_error_frames"] == 2
+    assert ev.models[0].accounting["failed_final"] == 3

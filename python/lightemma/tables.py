@@ -50,6 +50,7 @@ ACCURACY_COLUMNS: tuple[Column, ...] = (
     Column("frames", "Frames"),
     Column("fe_pct", "FE (%)", fixed(2)),
     Column("fe_corr_pct", "FE corr (%)", fixed(2)),
+    Column("api_error_frames", "API errors"),  # frames with no answer received: not format errors
     Column("ade_1s", "ADE 1s (m)", fixed(2)),
     Column("ade_2s", "ADE 2s (m)", fixed(2)),
     Column("ade_3s", "ADE 3s (m)", fixed(2)),

@@ -41,11 +41,11 @@ class ModelResult:
     frames_accounted: int  # frames behind FE and efficiency: all, or with --common those in every run
     frames_evaluated: int  # frames behind the metrics
     metrics: dict[str, dict[str, float]]  # convention -> metric -> value
-    accounting: dict[str, Any]  # fe_pct, fe_corr_pct, failed_final
+    accounting: dict[str, Any]  # fe_pct, fe_corr_pct (over frames with an answer), failed_final, api_error_frames
     efficiency: dict[str, Any]
 
     def accuracy_row(self, convention: str) -> dict[str, Any]:
-        """A flat dict: model, family, frames, FE, FE corr, ADE 1s/2s/3s/avg, FDE, miss rate."""
+        """A flat dict: model, family, frames, FE, FE corr, API-error frames, ADE 1s/2s/3s/avg, FDE, miss rate."""
         return {
             "model": self.label,
             "family": self.family,
@@ -54,6 +54,7 @@ class ModelResult:
             "frames_in_run": self.frames_in_run,
             "fe_pct": self.accounting["fe_pct"],
             "fe_corr_pct": self.accounting["fe_corr_pct"],
+            "api_error_frames": self.accounting["api_error_frames"],
             **{key: self.metrics[convention][key] for key in METRIC_KEYS},
         }
 
