@@ -6,8 +6,8 @@
 //!   two values: numbers (`5.0`, `-0.02`, `3e-3`, `−0.02`), or a simple expression of
 //!   two numbers (`7.2-0.5`, `1/50`; evaluated, and the reason says so), separated by
 //!   `,` or `;` (or by spaces when there is no separator: `(5.0 0.01)`). Units (`m/s`,
-//!   `1/m`) are skipped. A JSON object with a speed key and a curvature key
-//!   (`{"v": 5.0, "c": 0.01}`) is a pair too, read by key.
+//!   `1/m`) are skipped. A group with one speed key and one curvature key
+//!   (`{"v": 5.0, "c": 0.01}`, `(v=5.0, c=0.01)`) is a pair too, read by key.
 //! * A group that looks numeric but is not two readable values — a fused number
 //!   (`3.7640.002`), leading zeros (`0001`), one or three values, stray symbols — is a
 //!   **bad pair**: if it belongs to the chosen list, the answer fails with a reason
@@ -300,7 +300,7 @@ impl Scan<'_> {
             let leaf = if frame.brace {
                 keyed_pair(inner, self.text, pos, end)
             } else {
-                classify(inner, pos, end)
+                classify(inner, self.text, pos, end)
             };
             match leaf {
                 Leaf::Pair(p) => {
@@ -385,7 +385,7 @@ impl Scan<'_> {
                 notes.push(format!("expression evaluated (pair {})", which.join(", ")));
             }
             if best.keyed {
-                notes.push("pairs read from JSON keys".to_owned());
+                notes.push("pairs read by their keys (speed, curvature)".to_owned());
             }
             if best.unicode {
                 notes.push("unicode minus read as '-'".to_owned());
@@ -453,7 +453,7 @@ impl Scan<'_> {
 }
 
 /// Classify a round or square group without nested groups.
-fn classify(inner: &[Token], pos: usize, end: usize) -> Leaf {
+fn classify(inner: &[Token], text: &str, pos: usize, end: usize) -> Leaf {
     let mut nums = 0;
     let mut seps = 0;
     let mut words = false;
@@ -480,8 +480,12 @@ fn classify(inner: &[Token], pos: usize, end: usize) -> Leaf {
             Kind::Open(_) | Kind::Close(_) => {}
         }
     }
-    if words || (label_words && nums > 0) {
+    if words {
         return Leaf::Prose;
+    }
+    if label_words && nums > 0 {
+        // `(v=5.0, c=0.01)`, `(v1: 5.0, κ1: 0.01)`: read by the keys, else prose
+        return keyed_pair(inner, text, pos, end);
     }
     if nums == 0 {
         return if symbols { Leaf::Prose } else { Leaf::Label };

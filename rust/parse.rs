@@ -709,7 +709,15 @@ mod tests {
             .collect();
         let p = lenient(&format!("[{}]", keyed.join(", ")));
         assert_eq!(p.values.unwrap(), SIX.to_vec());
-        assert!(p.reason.contains("JSON keys"), "{}", p.reason);
+        assert!(p.reason.contains("read by their keys"), "{}", p.reason);
+        let p = lenient(&format!(
+            "[{}]",
+            SIX.chunks(2)
+                .map(|p| format!("(c={}, v={})", p[1], p[0]))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
     }
 
     #[test]

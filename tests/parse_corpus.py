@@ -109,6 +109,9 @@ STRUCTURE = [
     case("json-keys-swapped", json.dumps([{"curvature": c, "speed": v} for v, c in E]), "corrected", E),
     case("json-keys-numbered", json.dumps([{f"v{i + 1}": v, f"k{i + 1}": c} for i, (v, c) in enumerate(C)]), "corrected", C),
     case("json-pretty", json.dumps({"actions": [[v, c] for v, c in A]}, indent=2), "corrected", A),
+    case("labelled-pairs", "[" + ", ".join(f"(v={v}, c={c})" for v, c in A) + "]", "corrected", A),
+    case("labelled-pairs-kappa", "\n".join(f"(v{i + 1}: {v} m/s, κ{i + 1}: {c} 1/m)" for i, (v, c) in enumerate(E)), "corrected", E),
+    case("labelled-pairs-time", "[" + ", ".join(f"(t={i / 2 + 0.5}, {v}, {c})" for i, (v, c) in enumerate(A)) + "]", "failed"),
     # kind 1: reasoning blocks and quoted history
     case("think-block", "<think>\nThe history is " + bracket(H) + ", a constant 3 m/s. The light ahead is green, so accelerate.\n</think>\n" + bracket(A), "corrected", A),
     case("think-block-qwen3", "<think>\nOkay, over the next 3 seconds at 0.5 s intervals I need 6 pairs. Past: " + bracket(H) + ".\n</think>\n\n" + bracket(C), "corrected", C),
