@@ -363,7 +363,7 @@ def test_plausibility_limits_are_run_settings_recorded_and_kept_by_resume(tmp_pa
         assert first["attempts"][0]["reason"] == "speed 5254 at step 1 outside [0, 40] m/s"
         assert (fast["status"], fast["failure"], fast["n_attempts"]) == ("failed", "implausible", 2)
         manifest = read_manifest(result.run_dir)
-        assert manifest["parse"] == {"mode": "lenient", "speed_range": [0.0, 40.0], "max_abs_curvature": 0.5}
+        assert manifest["params"]["parse"] == {"mode": "lenient", "speed_range": [0.0, 40.0], "max_abs_curvature": 0.5}
         assert result.summary["fe_corr_percent"] == 100.0
         # a resume parses with the run's own limits: the 45 m/s answers still fail
         again = resume(result.run_dir, retry_failed=True, frames=frames[:2], progress=False)
@@ -371,7 +371,7 @@ def test_plausibility_limits_are_run_settings_recorded_and_kept_by_resume(tmp_pa
     with FakeOpenAIServer(scripted(frames[:2], per_frame)) as server:
         plain = run("openai/test-model", api_base=server.url, frames=frames[1:2], output=tmp_path / "default", **FAST)
         assert records_of(plain, frames[1:2])[0]["status"] == "ok"  # 45 m/s is within the default [-10, 50]
-        assert read_manifest(plain.run_dir)["parse"]["speed_range"] == [-10.0, 50.0]
+        assert read_manifest(plain.run_dir)["params"]["parse"]["speed_range"] == [-10.0, 50.0]
 
 
 def test_runs_recorded_before_the_limits_resume_without_them():
@@ -397,6 +397,6 @@ def test_cli_plausibility_flags(tmp_path, synth_root, capsys, monkeypatch):
     assert "--max-curvature must be a finite number > 0" in capsys.readouterr().err
     assert main([*base, "--speed-range", "-5", "30", "--max-curvature", "0.25"]) == 0
     (run_dir,) = find_run_dirs(tmp_path)
-    assert read_manifest(run_dir)["parse"] == {"mode": "lenient", "speed_range": [-5.0, 30.0], "max_abs_curvature": 0.25}
+    assert read_manifest(run_dir)["params"]["parse"] == {"mode": "lenient", "speed_range": [-5.0, 30.0], "max_abs_curvature": 0.25}
     assert main(["run", "--resume", str(run_dir), "--max-curvature", "0.3"]) == 2
     assert "drop --max-curvature" in capsys.readouterr().err

@@ -56,14 +56,14 @@ class ChainPolicy:
         plausibility(self.speed_range, self.max_abs_curvature)  # ValueError for malformed limits
 
     def parse_record(self) -> dict[str, Any]:
-        """How answers are parsed, as the run manifest records it (``"parse"``)."""
+        """How answers are parsed, as the run manifest records it (``params.parse``)."""
         from lightemma.actions import plausibility
 
         return {"mode": "lenient", **plausibility(self.speed_range, self.max_abs_curvature)}
 
     def to_dict(self) -> dict[str, Any]:
         return {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
-                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method}
+                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "parse": self.parse_record()}
 
 
 def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:

@@ -215,7 +215,7 @@ def run(
     A missing API key raises :class:`~lightemma.errors.UserError` before any work.
     ``speed_range`` (m/s) and ``max_abs_curvature`` (1/m) are the parser's plausibility
     limits (None disables one; see :func:`lightemma.parse_actions`), recorded in the
-    manifest as ``"parse"`` and kept by a resume.
+    manifest as ``params.parse`` and kept by a resume.
     """
     if concurrency < 1:
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -255,7 +255,6 @@ def run(
             "backend": dict(instance.info),
             "config": config,
             "params": {**policy.to_dict(), "sent": instance.effective_params(policy.params) if hasattr(instance, "effective_params") else None},
-            "parse": policy.parse_record(),
             "prompt_set": prompts.describe(),
             "dataset": _describe(frames, dataset),
             "lightemma_version": _version(),
