@@ -764,6 +764,92 @@ mod tests {
     }
 
     #[test]
+    fn fuzz_fragments_in_every_mode() {
+        // deterministic xorshift over fragments that build brackets, numbers, tags and junk
+        const FRAGMENTS: &[&str] = &[
+            "(",
+            ")",
+            "[",
+            "]",
+            "{",
+            "}",
+            ",",
+            ";",
+            " ",
+            "\n",
+            "-",
+            "+",
+            "*",
+            "/",
+            ".",
+            "\u{2212}",
+            "e",
+            "0",
+            "1",
+            "5.0",
+            "0.01",
+            "0001",
+            "3.7640.002",
+            "nan",
+            "<think>",
+            "</think>",
+            "\u{25c1}think\u{25b7}",
+            "v1 =",
+            "m/s",
+            "1/m",
+            "\"v\": ",
+            "\"c\": ",
+            "3 seconds",
+            "1. ",
+            "1) ",
+            "\u{0}",
+            "κ",
+            "é",
+            "#",
+            "\\",
+            "0x1F",
+            "1_0",
+            "```",
+            "\r\n",
+            "\t",
+            "\x0c",
+        ];
+        let mut state = 0x2545_F491_4F6C_DD1D_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut parser = Parser::new();
+        let mut out = vec![0.0; 12];
+        for _ in 0..20_000 {
+            let len = (next() % 60) as usize;
+            let text: String = (0..len)
+                .map(|_| FRAGMENTS[(next() % FRAGMENTS.len() as u64) as usize])
+                .collect();
+            for mode in [Mode::Strict, Mode::Lenient, Mode::Paper, Mode::Json] {
+                let o = parser.parse_into(&text, 6, mode, &Limits::DEFAULT, &mut out);
+                assert_eq!(
+                    o.failure == Failure::None,
+                    o.status != Status::Failed,
+                    "{text:?}"
+                );
+                assert_eq!(
+                    o.reason.is_empty(),
+                    o.status == Status::Ok,
+                    "{text:?} {mode:?}"
+                );
+                if o.status == Status::Failed {
+                    assert!(out.iter().all(|v| v.is_nan()));
+                } else {
+                    assert!(out.iter().all(|v| v.is_finite()), "{text:?} {mode:?}");
+                }
+            }
+        }
+    }
+
+    #[test]
     fn batch_layout_and_unknown_mode() {
         let (values, status, failure, reasons) = parse_batch(
             &["[(1,2),(3,4),(5,6),(7,8),(9,10),(11,12)]", "nope"],
