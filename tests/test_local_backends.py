@@ -140,7 +140,9 @@ def test_lightemma_run_with_the_hf_backend_records_truncated_babble_truthfully(t
     assert info["batch_size"] == 4 and "image" in info["token_counting"]
     assert manifest["config"]["backend_options"] == {"batch_size": 4}
     for record in contents.records.values():
-        assert (record["status"], record["first_status"], record["n_attempts"]) == ("failed", "failed", MAX_ATTEMPTS)
+        # no stage-3 answer was ever received (every scene text was cut off): no first status, no format error
+        assert (record["status"], record["first_status"], record["n_attempts"]) == ("failed", None, MAX_ATTEMPTS)
+        assert record["failure"] == "truncated"
         assert record["actions"] is None and record["trajectory"] is None and record["scene_text"] is None
         # the cut-off scene text is asked again, never pasted into stage 2
         assert [[c["stage"] for c in a["calls"]] for a in record["attempts"]] == [["scene"]] * MAX_ATTEMPTS
@@ -171,7 +173,7 @@ def test_the_hf_chain_passes_each_finished_text_on_and_fills_in_accounting(taugh
         calls = [c for a in record["attempts"] for c in a["calls"]]
         assert all(c["text"] == TAUGHT and c["finish_reason"] == "stop" for c in calls)
         for attempt in record["attempts"]:
-            assert attempt["reason"] and attempt["answer"] == TAUGHT and "failure" not in attempt
+            assert attempt["reason"] and attempt["answer"] == TAUGHT and attempt["failure"] == "format"
         assert all(1 <= c["output_tokens"] <= MAX_TOKENS for c in calls)
         assert record["input_tokens"] == sum(c["input_tokens"] for c in calls)
         assert record["output_tokens"] == sum(c["output_tokens"] for c in calls)

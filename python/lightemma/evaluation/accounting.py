@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.evaluation.loading import STATUS_CODES, UNKNOWN_STATUS, RunData
+from lightemma.evaluation.loading import API_ERROR_STATUS, STATUS_CODES, RunData
 
 
 def _pct(mask: np.ndarray) -> float | None:
@@ -15,16 +15,20 @@ def _pct(mask: np.ndarray) -> float | None:
 
 
 def format_errors(run: RunData, rows: np.ndarray) -> dict[str, Any]:
-    """FE % (first answer not ``ok``) and FE corr % (first answer ``failed``) over ``rows``.
+    """FE % (first received answer not ``ok``) and FE corr % (first received answer ``failed``) over ``rows``.
 
-    Frames whose first status is unknown are left out of both rates.
+    Frames whose calls all failed at the provider (no answer received) are not format
+    errors: they are left out of both rates and counted as ``api_error_frames``. Frames
+    whose first status is unknown are left out too.
     """
     first = run.first_status[rows]
-    first = first[first != UNKNOWN_STATUS]
+    api_errors = int((first == API_ERROR_STATUS).sum())
+    first = first[first >= 0]
     return {
         "fe_pct": _pct(first != STATUS_CODES["ok"]),
         "fe_corr_pct": _pct(first == STATUS_CODES["failed"]),
         "failed_final": int((run.status[rows] == STATUS_CODES["failed"]).sum()),
+        "api_error_frames": api_errors,
     }
 
 

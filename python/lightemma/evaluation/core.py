@@ -44,7 +44,7 @@ class ModelResult:
     frames_accounted: int  # frames behind FE and efficiency: all, or with --common those in every run
     frames_evaluated: int  # frames behind the metrics
     metrics: dict[str, dict[str, float]]  # convention -> metric -> value
-    accounting: dict[str, Any]  # fe_pct, fe_corr_pct, failed_final
+    accounting: dict[str, Any]  # fe_pct, fe_corr_pct (over frames with an answer), failed_final, api_error_frames
     efficiency: dict[str, Any]
     parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
     dataset_kind: str | None = None  # "nuscenes", "synthetic" or None (from the manifest)

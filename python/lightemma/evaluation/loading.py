@@ -27,9 +27,11 @@ from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
 from lightemma.runs.store import RunContents, iter_records, read_frame_ids
+from lightemma.runs.records import answer_received, first_answer_status
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
+API_ERROR_STATUS = -2  # first_status of a frame whose calls all failed at the provider: no answer, not a format error
 _NAN6x2 = [[math.nan, math.nan]] * 6
 _CHUNK = 2048
 
@@ -43,7 +45,7 @@ class RunData:
     trajectory: np.ndarray  # (N, 6, 2), NaN where the run has no valid prediction
     gt_positions: np.ndarray  # (N, 6, 2)
     status: np.ndarray  # (N,) int8: 0 ok, 1 corrected, 2 failed, -1 unknown
-    first_status: np.ndarray  # (N,) int8
+    first_status: np.ndarray  # (N,) int8: status of the first received answer; -2 none received (API errors), -1 unknown
     seconds: np.ndarray  # (N,) float64, NaN unknown
     input_tokens: np.ndarray
     output_tokens: np.ndarray
@@ -97,15 +99,6 @@ _NUMERIC = (int, float)
 
 def _number(value: Any) -> float:
     return value if type(value) in _NUMERIC else math.nan  # exact types: bool is not a number here
-
-
-def _first_status(record: Mapping[str, Any]) -> Any:
-    first = record.get("first_status")
-    if first is None:
-        attempts = record.get("attempts")
-        if isinstance(attempts, list) and attempts and isinstance(attempts[0], Mapping):
-            first = attempts[0].get("status")
-    return first if first is not None else record.get("status")
 
 
 def pairs_array(values: list[Any]) -> np.ndarray:
@@ -162,10 +155,14 @@ class _Columns:
         if not isinstance(scene, str) or not scene:
             scene = record["frame_id"].rpartition("/")[0] or record["frame_id"]
         p["scene"].append(self.scenes.setdefault(scene, len(self.scenes)))
-        p["failure"].append(failure_code(record.get("failure")))
+        failure = record.get("failure")
+        if failure is None and record.get("status") == "failed" and not answer_received(record):
+            failure = "api_error"  # a record older than `failure`: failed without ever receiving an answer
+        p["failure"].append(failure_code(failure))
         p["gt"].append(gt)
         p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
-        p["first"].append(STATUS_CODES.get(_first_status(record), UNKNOWN_STATUS))
+        p["first"].append(STATUS_CODES.get(first_answer_status(record), UNKNOWN_STATUS) if answer_received(record)
+                          else API_ERROR_STATUS)
         p["seconds"].append(_number(record.get("seconds")))
         p["inp"].append(_number(record.get("input_tokens")))
         p["out"].append(_number(record.get("output_tokens")))

@@ -29,6 +29,7 @@ import numpy as np
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, is_truncated
 from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet
+from lightemma.runs.records import attempt_received
 
 REASK_MODES = ("actions", "chain")
 INTEGRATION_METHODS = ("euler", "midpoint")
@@ -36,12 +37,18 @@ INTEGRATION_METHODS = ("euler", "midpoint")
 
 @dataclass(frozen=True)
 class ChainPolicy:
-    """How a frame is asked and re-asked; recorded in the run manifest."""
+    """How a frame is asked and re-asked; recorded in the run manifest.
+
+    ``speed_range`` (m/s) and ``max_abs_curvature`` (1/m) are the parser's
+    plausibility limits (None disables one); see :func:`lightemma.parse_actions`.
+    """
 
     params: GenerationParams = field(default_factory=GenerationParams)
     reask: str = "actions"
     max_attempts: int = 5
     integrate_method: str = "euler"
+    speed_range: tuple[float, float] | None = (-10.0, 50.0)
+    max_abs_curvature: float | None = 1.0
 
     def __post_init__(self) -> None:
         if self.reask not in REASK_MODES:
@@ -50,10 +57,19 @@ class ChainPolicy:
             raise ValueError(f"max_attempts must be at least 1, got {self.max_attempts}")
         if self.integrate_method not in INTEGRATION_METHODS:
             raise ValueError(f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}")
+        from lightemma.actions import plausibility
+
+        plausibility(self.speed_range, self.max_abs_curvature)  # ValueError for malformed limits
+
+    def parse_record(self) -> dict[str, Any]:
+        """How answers are parsed, as the run manifest records it (``params.parse``)."""
+        from lightemma.actions import plausibility
+
+        return {"mode": "lenient", **plausibility(self.speed_range, self.max_abs_curvature)}
 
     def to_dict(self) -> dict[str, Any]:
         return {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
-                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method}
+                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "parse": self.parse_record()}
 
 
 def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
@@ -116,23 +132,23 @@ class _Attempt:
     def finish_truncated(self) -> dict[str, Any]:
         """This attempt, ended by a text cut off at the output-token limit: ``failed``, ``failure: "truncated"``."""
         if self.truncated == "actions":
-            out = self.finish(self.calls[-1]["text"], "failed", "truncated")
-        else:
-            out = self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on")
-        out["failure"] = "truncated"
-        return out
+            return self.finish(self.calls[-1]["text"], "failed", "truncated", "truncated")
+        return self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on",
+                           "truncated")
 
-    def finish(self, answer: str | None, status: str, reason: str) -> dict[str, Any]:
+    def finish(self, answer: str | None, status: str, reason: str, failure: str) -> dict[str, Any]:
         return {"attempt": self.number, "calls": self.calls, "answer": answer, "status": status, "reason": reason,
-                "error": self.error, **_totals(self.calls)}
+                "failure": failure, "error": self.error, **_totals(self.calls)}
 
 
-def _parse(answer: str) -> tuple[str, str, np.ndarray]:
-    """Lenient parse of one answer: (status, reason, actions (6, 2))."""
+def _parse(answer: str, policy: ChainPolicy) -> tuple[str, str, str, np.ndarray]:
+    """Lenient parse of one answer: (status, reason, failure kind, actions (6, 2))."""
     from lightemma import parse_actions
 
-    parsed = parse_actions([answer], n=6, mode="lenient")
-    return str(parsed.status[0]), str(parsed.reason[0]), np.asarray(parsed.actions[0], dtype=np.float64)
+    parsed = parse_actions([answer], n=6, mode="lenient", speed_range=policy.speed_range,
+                           max_abs_curvature=policy.max_abs_curvature)
+    return (str(parsed.status[0]), str(parsed.reason[0]), str(parsed.failure[0]),
+            np.asarray(parsed.actions[0], dtype=np.float64))
 
 
 def _as_list(value: Any) -> Any:
@@ -175,11 +191,14 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             if attempt.truncated:
                 attempts.append(attempt.finish_truncated())
                 answer = attempts[-1]["answer"]
+            elif attempt.error == "EmptyResponse" and attempt.calls[-1]["stage"] == "actions":
+                # the provider answered stage 3 with no text: a received answer that is empty, not an API error
+                attempts.append(attempt.finish(None, "failed", "empty answer (EmptyResponse)", "format"))
             else:
-                attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}"))
+                attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}", "api_error"))
             continue
-        status, reason, parsed = _parse(answer)
-        attempts.append(attempt.finish(answer, status, reason))
+        status, reason, failure, parsed = _parse(answer, policy)
+        attempts.append(attempt.finish(answer, status, reason, failure))
         if status != "failed":
             actions = parsed
             break
@@ -202,7 +221,9 @@ def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None,
         "scene_name": frame.scene_name,
         "sample_token": frame.sample_token,
         "status": last["status"],
-        "first_status": attempts[0]["status"],
+        "failure": last["failure"],
+        # FE counts the first stage-3 answer received: an API error or a text cut off before stage 3 gives none
+        "first_status": next((a["status"] for a in attempts if attempt_received(a)), None),
         "n_attempts": len(attempts),
         "attempts": attempts,
         "actions": _as_list(actions),

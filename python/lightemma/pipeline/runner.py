@@ -85,8 +85,12 @@ def _git_revision() -> str | None:
 
 
 def _policy(config: dict[str, Any]) -> ChainPolicy:
+    # runs recorded before the plausibility limits existed were parsed without them: a resume keeps it so
+    speed_range = config.get("speed_range")
     return ChainPolicy(params=GenerationParams(temperature=config["temperature"], max_tokens=config["max_tokens"]),
-                       reask=config["reask"], max_attempts=config["max_attempts"], integrate_method=config["integrate_method"])
+                       reask=config["reask"], max_attempts=config["max_attempts"], integrate_method=config["integrate_method"],
+                       speed_range=None if speed_range is None else tuple(speed_range),
+                       max_abs_curvature=config.get("max_abs_curvature"))
 
 
 def _make_backend(config: dict[str, Any], output: Path) -> Backend:
@@ -302,6 +306,8 @@ def run(
     reask: str = "actions",
     max_attempts: int = 5,
     integrate_method: str = "euler",
+    speed_range: tuple[float, float] | None = (-10.0, 50.0),
+    max_abs_curvature: float | None = 1.0,
     prompt_set: str = DEFAULT_PROMPT_SET,
     on_bad_record: str = "skip",
     timeout: float = 120.0,
@@ -330,6 +336,9 @@ def run(
     A missing API key, an unknown model or an empty frame set raises
     :class:`~lightemma.errors.UserError` before any work. A run-fatal cause met while
     running raises :class:`~lightemma.errors.RunStopped` once what finished is saved.
+    ``speed_range`` (m/s) and ``max_abs_curvature`` (1/m) are the parser's plausibility
+    limits (None disables one; see :func:`lightemma.parse_actions`), recorded in the
+    manifest as ``params.parse`` and kept by a resume.
     """
     if concurrency < 1:
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -342,6 +351,8 @@ def run(
     config: dict[str, Any] = {
         "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
+        "speed_range": None if speed_range is None else [float(x) for x in speed_range],
+        "max_abs_curvature": None if max_abs_curvature is None else float(max_abs_curvature),
         "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
