@@ -60,6 +60,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain (docs/definitions.md#re-asks)")
     gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
     gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's; docs/definitions.md#integration)")
+    gen.add_argument("--answer-format", choices=("text", "structured"),
+                     help="stage 3 answers as text (default, the paper's) or as JSON constrained by the provider's structured "
+                     "outputs / vLLM / xgrammar: no format errors (docs/run.md#structured-answers)")
+    gen.add_argument("--chain", choices=("independent", "conversation"),
+                     help="independent stages, each with the image (default, the paper's), or one conversation continued "
+                     "through stages 2 and 3, the image sent once (docs/run.md#request-variants-and-prompt-caching)")
     p.set_defaults(func=main)
     return p
 
@@ -70,6 +76,7 @@ RUN_DEFAULTS: dict[str, object] = {
     "version": "v1.0-test", "window": "reference", "output": "runs", "timeout": 120.0, "max_retries": 6,
     "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
     "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler", "on_bad_record": "skip",
+    "answer_format": "text", "chain": "independent",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress"}
@@ -158,6 +165,7 @@ def main(args: argparse.Namespace) -> int:
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
             cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
             backend_options=options, on_bad_record=settings["on_bad_record"],
+            chain=settings["chain"], answer_format=settings["answer_format"],
         )
     print(result.report())
     summary = result.summary
