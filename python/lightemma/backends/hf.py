@@ -191,8 +191,10 @@ class HFBackend:
 
     def structured_output(self) -> dict[str, Any]:
         """How stage 3 is constrained to the actions JSON schema (recorded in the manifest), or a UserError."""
-        xgrammar = require("xgrammar", "hf")
-        return {"mechanism": f"xgrammar {xgrammar.__version__} grammar of the JSON schema (no free whitespace), applied by "
+        require("xgrammar", "hf")
+        from importlib.metadata import version
+
+        return {"mechanism": f"xgrammar {version('xgrammar')} grammar of the JSON schema (no free whitespace), applied by "
                              "its transformers logits processor", "pair_count_enforced": True}
 
     def _logits_processors(self, requests: Sequence[ChatRequest]) -> list[Any]:
