@@ -147,6 +147,29 @@ def test_a_model_that_cannot_follow_a_schema_is_refused_before_the_run_starts(mo
     assert not server.requests and not (tmp_path / "py").exists() and not (tmp_path / "cli").exists()
 
 
+def test_which_paper_models_can_follow_the_schema(monkeypatch):
+    """As docs/run.md says: litellm's list refuses Gemini-2.0-Flash and Claude-3.7-Sonnet, accepts the other API rows."""
+    from lightemma.backends import create_backend
+    from lightemma.registry import PAPER_MODELS
+
+    for variable in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY"):
+        monkeypatch.setenv(variable, KEY)
+    accepted, refused = [], []
+    for info in PAPER_MODELS:
+        if info.backend != "api":
+            continue
+        backend = create_backend(info.key)
+        try:
+            mechanism = backend.structured_output()["mechanism"]
+            accepted.append((info.key, mechanism.split()[0]))
+        except UserError:
+            refused.append(info.key)
+    assert refused == ["claude-3.7-sonnet", "gemini-2.0-flash"]
+    assert accepted == [("gpt-4o", "response_format"), ("gpt-5.0", "response_format"), ("gpt-5.2", "response_format"),
+                        ("claude-4.0-sonnet", "Anthropic"), ("claude-4.6-sonnet", "Anthropic"),
+                        ("gemini-2.5-flash", "Gemini"), ("gemini-3.0-flash", "Gemini")]
+
+
 def test_a_baseline_answers_the_structured_schema_itself(tmp_path, frames):
     result = run("baseline:cv", frames=frames, output=tmp_path, answer_format="structured", progress=False)
     for frame, rec in zip(frames, [records(result)[f.frame_id] for f in frames]):

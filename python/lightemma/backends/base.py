@@ -14,6 +14,11 @@ accounting and run store.
 
 API errors are never model text: a failed call returns a :class:`ChatResult`
 with ``text=None`` and ``error`` set to an error class name.
+
+A backend that can constrain answers to a JSON schema (``--answer-format
+structured``) also has ``structured_output() -> dict``: how it does so (recorded
+in the manifest), or a :class:`~lightemma.errors.UserError` saying why it cannot;
+a backend without the method is refused for structured runs.
 """
 
 from __future__ import annotations
