@@ -61,11 +61,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
     gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's; docs/definitions.md#integration)")
     gen.add_argument("--answer-format", choices=("text", "structured"),
-                     help="stage 3 answers as text (default, the paper's) or as JSON constrained by the provider's structured "
-                     "outputs / vLLM / xgrammar: no format errors (docs/run.md#structured-answers)")
+                     help="stage 3 answers as text (default, the paper's) or as JSON constrained to a schema by the provider's "
+                     "structured outputs / vLLM / xgrammar; a model that cannot follow one is refused (docs/run.md#structured-answers)")
     gen.add_argument("--chain", choices=("independent", "conversation"),
                      help="independent stages, each with the image (default, the paper's), or one conversation continued "
-                     "through stages 2 and 3, the image sent once (docs/run.md#request-variants-and-prompt-caching)")
+                     "through stages 2 and 3, the image in its first turn (docs/run.md#request-variants-and-prompt-caching)")
     p.set_defaults(func=main)
     return p
 
