@@ -229,7 +229,7 @@ def test_cli_markdown_layout_with_paper(two_runs, capsys):
     assert body[1] == "| GPT-4o (paper) | 3908 | - | - | - | - | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
     assert body[2].startswith("| Δ vs paper | - | ") and body[3].startswith("| baseline:cv (synthetic data) | ")
     assert body[4].startswith("| GPT-5.0 (paper) | ") and len([b for b in body if "(paper)" in b]) == 15
-    assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | 402 | - | - | - | 3908 |" in text
+    assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | - | 402 | - | - | - | 3908 |" in text
     assert all(len(line.split("|")) == 17 for line in body)
     assert lines[header + 2 + 18] == ""  # the table ends after the 18 rows (3 + the baseline + 14 other paper rows)
     assert "95 % scene-level bootstrap interval (10000 resamples of scenes, seed 0)" in text

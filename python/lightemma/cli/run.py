@@ -65,6 +65,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                      help="plausible speeds in m/s; an answer outside fails as implausible (default -10 50)")
     gen.add_argument("--max-curvature", type=float, metavar="K",
                      help="plausible |curvature| in 1/m; an answer above fails as implausible (default 1)")
+    gen.add_argument("--answer-format", choices=("text", "structured"),
+                     help="stage 3 answers as text (default, the paper's) or as JSON constrained to a schema by the provider's "
+                     "structured outputs / vLLM / xgrammar; a model that cannot follow one is refused (docs/run.md#structured-answers)")
+    gen.add_argument("--chain", choices=("independent", "conversation"),
+                     help="independent stages, each with the image (default, the paper's), or one conversation continued "
+                     "through stages 2 and 3, the image in its first turn (docs/run.md#request-variants-and-prompt-caching)")
     p.set_defaults(func=main)
     return p
 
@@ -75,7 +81,7 @@ RUN_DEFAULTS: dict[str, object] = {
     "version": "v1.0-test", "window": "reference", "output": "runs", "timeout": 120.0, "max_retries": 6,
     "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
     "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler", "on_bad_record": "skip",
-    "speed_range": (-10.0, 50.0), "max_curvature": 1.0,
+    "speed_range": (-10.0, 50.0), "max_curvature": 1.0, "answer_format": "text", "chain": "independent",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress"}
@@ -170,6 +176,7 @@ def main(args: argparse.Namespace) -> int:
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
             cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
             backend_options=options, on_bad_record=settings["on_bad_record"],
+            chain=settings["chain"], answer_format=settings["answer_format"],
         )
     print(result.report())
     summary = result.summary

@@ -50,6 +50,7 @@ class RunData:
     input_tokens: np.ndarray
     output_tokens: np.ndarray
     cost_cents: np.ndarray
+    cached_input_tokens: np.ndarray | None = None  # (N,) float64 of input_tokens served from a prompt cache, NaN unknown
     history_actions: np.ndarray | None = None  # (N, 6, 2) with details=True
     actions: np.ndarray | None = None  # (N, 6, 2) predicted, with details=True
     failure: np.ndarray | None = None  # (N,) int8 code of outcomes.FAILURES: why a frame is not scored (0: it is)
@@ -128,7 +129,7 @@ class _Columns:
     """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows."""
 
     PAIRS = ("trajectory", "actions", "gt", "history")
-    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "failure", "scene", "gate")
+    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "cached", "failure", "scene", "gate")
     DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "gate": bool}
 
     def __init__(self, details: bool, limits: Plausibility) -> None:
@@ -167,6 +168,7 @@ class _Columns:
         p["inp"].append(_number(record.get("input_tokens")))
         p["out"].append(_number(record.get("output_tokens")))
         p["cost"].append(_number(record.get("cost_cents")))
+        p["cached"].append(_number(record.get("cached_input_tokens")))
         self.rows += 1
         if len(p["status"]) >= _CHUNK:
             self.flush()
@@ -295,6 +297,7 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         input_tokens=take("inp", ()),
         output_tokens=take("out", ()),
         cost_cents=take("cost", ()),
+        cached_input_tokens=take("cached", ()),
         history_actions=take("history", (6, 2)) if details else None,
         actions=actions if details else None,
         corrupt_lines=len(counts.corrupt_lines),

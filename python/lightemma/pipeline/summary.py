@@ -61,6 +61,7 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         # unknown stays unknown: frames whose tokens a provider did not (fully) report are left out of the means
         "frames_tokens_unknown": sum(1 for r in records if r.get("input_tokens") is None or r.get("output_tokens") is None),
         "mean_reasoning_tokens": _mean([r["reasoning_tokens"] for r in records if r.get("reasoning_tokens") is not None]),
+        "cached_input_percent": _cached_percent(records),
         "truncated_calls": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", [])
                                if is_truncated(c.get("finish_reason"))),
         "top_failure": _top_failure(records),
@@ -70,6 +71,13 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         summary["frames_run"] = frames_run
         summary["frames_per_second"] = (frames_run / wall_seconds) if frames_run and wall_seconds > 0 else None
     return summary
+
+
+def _cached_percent(records: list[Mapping[str, Any]]) -> float | None:
+    """100 × Σ cached input tokens ÷ Σ input tokens over the frames reporting both (None when none does)."""
+    both = [(r["cached_input_tokens"], r["input_tokens"]) for r in records
+            if r.get("cached_input_tokens") is not None and r.get("input_tokens")]
+    return 100.0 * sum(c for c, _ in both) / sum(t for _, t in both) if both else None
 
 
 def _top_failure(records: list[Mapping[str, Any]]) -> str | None:
@@ -95,6 +103,7 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}",
         f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}"
         + (f" (of which reasoning {_fmt(summary['mean_reasoning_tokens'], '.0f')})" if summary.get("mean_reasoning_tokens") else "")
+        + (f", {summary['cached_input_percent']:.1f} % of input from the prompt cache" if summary.get("cached_input_percent") else "")
         + (f"  ({summary['frames_tokens_unknown']} unknown)" if summary.get("frames_tokens_unknown") else ""),
         f"cost          {_fmt(summary['total_cost_cents'], '.2f', ' ¢')} total, {_fmt(summary['mean_cost_cents'], '.3f', ' ¢')}/frame"
         + (f"  ({summary['frames_cost_unknown']} frame(s) unpriced)" if summary["frames_cost_unknown"] else ""),
