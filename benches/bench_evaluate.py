@@ -1,6 +1,6 @@
 """Benchmark ``lightemma evaluate`` on large synthetic runs: time and peak memory.
 
-Writes synthetic runs of N frame records (SPEC §9 JSONL, ~2 kB a line with
+Writes synthetic runs of N frame records (JSONL as docs/definitions.md#run-records says, ~2 kB a line with
 short stage texts) and, each in a fresh subprocess so that peak RSS is clean,
 measures:
 

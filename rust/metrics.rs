@@ -1,4 +1,4 @@
-//! Displacement errors and their aggregation (SPEC §5).
+//! Displacement errors and their aggregation (docs/definitions.md#metrics).
 //!
 //! Per frame `e_k = ‖pred_k − gt_k‖`, k = 1..6 (0.5 … 3.0 s). Totals are
 //! frame-weighted means over the evaluated frames.

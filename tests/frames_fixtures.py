@@ -1,7 +1,7 @@
 """Helpers shared by test_frames.py and test_synth.py (imported explicitly, not a conftest).
 
 ``reference_frames`` is an independent, scalar, pure-Python reading of the raw
-nuScenes JSON tables following SPEC §1 word by word; the loader's vectorised
+nuScenes JSON tables following docs/definitions.md#frames-and-windows word by word; the loader's vectorised
 devkit-based output is compared against it.
 """
 

@@ -58,7 +58,7 @@ def test_number_format_is_plain():
 
 
 def test_oracle_shows_the_integrators_error_floor():
-    """GT actions integrated: Euler is biased on an arc (≈0.9 m at 3 s, SPEC §4), midpoint is not."""
+    """GT actions integrated: Euler is biased on an arc (≈0.9 m at 3 s, docs/definitions.md#integration), midpoint is not."""
     frame = arc_frame()
     (answer,) = ask(BaselineBackend("oracle"), frame, stages=("actions",))
     actions = lightemma.parse_actions([answer.text], mode="strict").actions

@@ -1,4 +1,4 @@
-"""Frames as SPEC §1 defines them, loaded through the real nuscenes-devkit from synthetic scenes."""
+"""Frames as docs/definitions.md#frames-and-windows defines them, loaded through the real nuscenes-devkit from synthetic scenes."""
 
 from __future__ import annotations
 

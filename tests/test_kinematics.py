@@ -12,7 +12,7 @@ import lightemma
 
 
 def reference_integrate(actions: np.ndarray, dt: float, method: str) -> np.ndarray:
-    """A plain NumPy transcription of SPEC §4, vectorised over frames."""
+    """A plain NumPy transcription of docs/definitions.md#integration, vectorised over frames."""
     n, t, _ = actions.shape
     out = np.zeros((n, t, 2))
     x = np.zeros(n)

@@ -15,7 +15,7 @@ from lightemma.prompts import load_prompt_set
 from lightemma.runs.store import FRAMES_FILE, read_run
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=5.0, progress=False)
-SPEC_FIELDS = {"frame_id", "scene_name", "sample_token", "status", "first_status", "attempts", "actions", "trajectory",
+RECORD_FIELDS = {"frame_id", "scene_name", "sample_token", "status", "first_status", "attempts", "actions", "trajectory",
                "gt_positions", "history_actions", "seconds", "input_tokens", "output_tokens", "cost_cents",
                "scene_text", "intent_text", "answer", "cached"}
 CORRECTED = "Sure! For the next 6 steps:\nv1 = 5.0, c1 = 0.0\nv2 = 5.0 c2 = 0.0\n5.0 0.0\n5.0 0.0\n5.0 0.0\n5.0 0.0"
@@ -54,7 +54,7 @@ def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames, transport):
     assert sorted(records) == sorted(f.frame_id for f in frames)
     assert server.stages().count("scene") == server.stages().count("intent") == server.stages().count("actions") == 8
     for frame, rec in zip(frames, records_of(result, frames)):
-        assert SPEC_FIELDS <= set(rec)
+        assert RECORD_FIELDS <= set(rec)
         assert (rec["status"], rec["first_status"], rec["n_attempts"]) == ("ok", "ok", 1)
         assert (rec["scene_text"], rec["intent_text"], rec["answer"]) == (SCENE_TEXT, INTENT_TEXT, GOOD_ACTIONS)
         assert np.allclose(rec["trajectory"], lightemma.integrate(np.array(rec["actions"]), method="euler"))

@@ -1,4 +1,4 @@
-"""Integrating (speed, curvature) actions into trajectories (SPEC §4)."""
+"""Integrating (speed, curvature) actions into trajectories (docs/definitions.md#integration)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Displacement errors and ADE/FDE under the three conventions (SPEC §5)."""
+"""Displacement errors and ADE/FDE under the three conventions (docs/definitions.md#metrics)."""
 
 from __future__ import annotations
 

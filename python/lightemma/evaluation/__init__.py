@@ -1,4 +1,4 @@
-"""Evaluate runs: the paper's Tables I and II from run directories (SPEC §5, §6).
+"""Evaluate runs: the paper's Tables I and II from run directories (docs/definitions.md#metrics, #efficiency).
 
 >>> from lightemma.evaluation import evaluate_runs
 >>> ev = evaluate_runs(["runs/"], convention="all", common=True)

@@ -1,4 +1,7 @@
-"""Per-model accounting beside the metrics: format errors (SPEC §3) and efficiency (SPEC §6)."""
+"""Per-model accounting beside the metrics: format errors and efficiency.
+
+Definitions: docs/definitions.md#format-errors and #efficiency.
+"""
 
 from __future__ import annotations
 

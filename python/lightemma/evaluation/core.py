@@ -2,7 +2,7 @@
 
 ``evaluate_runs`` is the Python entry point; ``lightemma evaluate`` formats its
 result. Each model is scored on its own valid frames, or with ``common=True``
-on the frames valid for every model (SPEC §5). All frames of a model go to the
+on the frames valid for every model (docs/definitions.md#metrics). All frames of a model go to the
 core in one batched call per convention.
 """
 

@@ -1,4 +1,4 @@
-"""Model names, families and generation order (SPEC §7), for labels and the bubble chart.
+"""Model names, families and generation order (the paper's Table I), for labels and the bubble chart.
 
 A run's manifest may carry ``display_name`` and ``family``; otherwise the paper's
 models are recognised from their API / checkpoint ids, and anything else gets a

@@ -32,7 +32,7 @@ import numpy as np
 FAILURES: tuple[str, ...] = ("", "format", "truncated", "implausible", "api_error")
 FAILURE_CODES: dict[str, int] = {name: code for code, name in enumerate(FAILURES)}
 NOT_RECORDED = -1  # the record has no failure field (older runs)
-DT = 0.5  # seconds per step (SPEC: actions at 0.5 s spacing)
+DT = 0.5  # seconds per step (docs/definitions.md#integration: actions at 0.5 s spacing)
 
 
 @dataclass(frozen=True)

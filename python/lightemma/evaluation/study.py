@@ -7,7 +7,7 @@ model) over synthetic scenes driven at 2 Hz with:
   frames whose ground-truth positions, with 1 cm of pose noise, give Menger
   curvatures of ±90 1/m — the trap of the history-bias analysis);
 * history actions computed from the noisy poses exactly as the frame loader does
-  (SPEC reference post-processing), ground truth in each frame's ego frame;
+  (the paper's post-processing, docs/definitions.md#history), ground truth in each frame's ego frame;
 * models whose errors have a known structure: a per-model error scale, a
   multiplicative scene difficulty shared by all models (lognormal, σ = ``scene_sd``)
   times a model-specific scene effect (lognormal, σ = ``model_scene_sd``), a

@@ -1,4 +1,4 @@
-"""Synthetic run directories in the SPEC §9 record format, for tests, benchmarks and docs.
+"""Synthetic run directories in the run-record format (docs/definitions.md#run-records), for tests, benchmarks and docs.
 
 Ground truth comes from random (speed, curvature) profiles; a "model" adds
 noise of a chosen size to the true actions, answers with a format error at a
@@ -37,7 +37,7 @@ def make_record(
     scene_name: str = "scene-0001",
     texts: Mapping[str, str] | None = None,
 ) -> dict[str, Any]:
-    """One ``frames.jsonl`` record (SPEC §9) with the given values and one attempt."""
+    """One ``frames.jsonl`` record (docs/definitions.md#run-records) with the given values and one attempt."""
     texts = dict(texts or {})
     first = first_status or status
     answer = texts.get("answer", "")

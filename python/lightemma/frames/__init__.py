@@ -1,4 +1,4 @@
-"""nuScenes frames as SPEC §1 defines them: loading, geometry, prompt rendering.
+"""nuScenes frames (docs/definitions.md#frames-and-windows): loading, geometry, prompt rendering.
 
 Public names: :func:`load_frames`, :class:`Frame`, :class:`FrameSet`,
 :func:`extract_frames`, :func:`load_tables`, :func:`format_number`,

@@ -1,4 +1,4 @@
-"""Closed-form frame geometry (SPEC §1): yaw, ego-frame transform, actions.
+"""Closed-form frame geometry (docs/definitions.md#frames-and-windows): yaw, ego-frame transform, actions.
 
 Everything here is vectorised NumPy over a leading batch axis, so the loader
 can compute all frames of a dataset in a handful of array operations.
@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-#: SPEC §1 reference post-processing thresholds
+#: the paper's post-processing thresholds of the history (docs/definitions.md#history)
 SPEED_ZERO_BELOW = 0.2  # m/s: speeds strictly below are set to 0
 CURVATURE_ZERO_ABOVE = 0.2  # 1/m: |curvature| strictly above is set to 0 (zeroed, not clipped)
 ROUND_DECIMALS = 3
@@ -103,7 +103,7 @@ def raw_actions(points: np.ndarray, timestamps_us: np.ndarray) -> np.ndarray:
     ``points`` ``(B, 8, 2)`` are ``p_0 … p_7`` and ``timestamps_us`` ``(B, 8)``.
     Action ``k`` (k = 1..6) is the speed of the segment ``p_k → p_{k+1}`` and the
     Menger curvature of ``(p_{k-1}, p_k, p_{k+1})``, both centred on keyframe ``k``.
-    With ``p_0 … p_7 = p_{c-7} … p_c`` these are the history actions of SPEC §1;
+    With ``p_0 … p_7 = p_{c-7} … p_c`` these are the history actions (docs/definitions.md#history);
     with ``p_{c-1} … p_{c+6}`` the ground-truth (future) actions.
     """
     points = np.asarray(points, dtype=np.float64)
@@ -122,7 +122,7 @@ def round_like_python(values: np.ndarray, ndigits: int = ROUND_DECIMALS) -> np.n
 
 
 def postprocess_reference(actions: np.ndarray) -> np.ndarray:
-    """SPEC §1 reference post-processing of ``(..., 2)`` (speed, curvature) actions.
+    """The paper's post-processing (docs/definitions.md#history) of ``(..., 2)`` (speed, curvature) actions.
 
     Speed < 0.2 m/s → 0; |curvature| > 0.2 → 0 (zeroed, not clipped); both
     thresholds apply to the unrounded values, then both are rounded to three

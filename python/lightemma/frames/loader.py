@@ -1,4 +1,4 @@
-"""Load frames from a nuScenes dataroot through ``nuscenes-devkit`` (SPEC §1).
+"""Load frames from a nuScenes dataroot through ``nuscenes-devkit`` (docs/definitions.md#frames-and-windows).
 
 Two steps, usable separately: :func:`load_tables` checks the dataroot and
 loads the devkit's ``NuScenes`` tables (the slow part, seconds to minutes on
@@ -494,7 +494,7 @@ def load_frames(
     on_missing_image: str = "skip",
     on_bad_record: str = "skip",
 ) -> FrameSet:
-    """Load the frames of a nuScenes version through the devkit (SPEC §1).
+    """Load the frames of a nuScenes version through the devkit (docs/definitions.md#frames-and-windows).
 
     Args:
         dataroot: folder holding ``<version>/`` (the tables), ``samples/``, ``maps/``.

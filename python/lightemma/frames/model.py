@@ -1,4 +1,4 @@
-"""Frame and FrameSet: the frames a run predicts on (SPEC §1, §8)."""
+"""Frame and FrameSet: the frames a run predicts on (docs/definitions.md#frames-and-windows)."""
 
 from __future__ import annotations
 
@@ -20,7 +20,7 @@ class Frame:
 
     Positions are in the ego frame of this keyframe (x forward, y left, metres);
     actions are (speed m/s, curvature 1/m) pairs at 0.5 s spacing, most recent
-    last. ``history_actions`` are post-processed as SPEC §1 "reference" says:
+    last. ``history_actions`` are post-processed as docs/definitions.md#history says:
     action k (k = 1..6) is the speed of segment c−7+k → c−6+k and the curvature
     of (c−8+k, c−7+k, c−6+k). ``gt_actions`` are the raw (unthresholded,
     unrounded) future actions by the same formulas shifted to the future: speed

@@ -1,4 +1,4 @@
-"""Rendering history actions for prompts (SPEC §1, §2).
+"""Rendering history actions for prompts (docs/definitions.md#frames-and-windows, #the-three-stages).
 
 ``{history}``: pairs of plain decimals (``4.512``), never a library repr such
 as ``np.float64(4.512)`` and never in exponent notation; ``-0.0`` is written

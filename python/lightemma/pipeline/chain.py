@@ -1,6 +1,6 @@
 """The three-stage chain for one frame, written once for every backend.
 
-scene description → driving intent → actions (SPEC §2), each one call with the
+scene description → driving intent → actions (docs/definitions.md#the-three-stages), each one call with the
 frame's image; each stage's text is pasted into the next. The stage-3 answer is
 parsed by the Rust core in lenient mode (``ok`` / ``corrected`` / ``failed``).
 A failed answer — or a call that failed with an API error after the backend's
@@ -14,7 +14,7 @@ A text cut off at the output-token limit (``finish_reason`` length) is recorded
 but never passed on: a truncated scene or intent ends its attempt like a failed
 call (and is asked again), a truncated answer is ``failed`` with reason
 "truncated" (``failure: "truncated"`` on the attempt), unparsed.
-Every call's tokens, time and cost count toward the frame (SPEC §3, §6); a
+Every call's tokens, time and cost count toward the frame (docs/definitions.md#format-errors, #efficiency); a
 total is null when any of its calls did not report it.
 
 Two request variants (:class:`ChainPolicy`): ``answer_format="structured"`` asks
@@ -188,7 +188,7 @@ def _as_list(value: Any) -> Any:
 
 
 async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy) -> dict[str, Any]:
-    """Run the chain on one frame and return its run record (SPEC §9).
+    """Run the chain on one frame and return its run record (docs/definitions.md#run-records).
 
     ``frame`` needs ``frame_id``, ``scene_name``, ``sample_token``,
     ``image_path``, ``history_actions`` (6, 2) and ``gt_positions`` (6, 2).

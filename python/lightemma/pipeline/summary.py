@@ -1,4 +1,7 @@
-"""Run summaries: statuses, format-error rates, ADE, time, tokens, cost, throughput (SPEC §3, §6)."""
+"""Run summaries: statuses, format-error rates, ADE, time, tokens, cost, throughput.
+
+Definitions: docs/definitions.md#format-errors and #efficiency.
+"""
 
 from __future__ import annotations
 

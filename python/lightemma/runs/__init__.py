@@ -1,4 +1,4 @@
-"""Run directories: ``manifest.json`` plus one JSON line per finished frame (SPEC §9)."""
+"""Run directories: ``manifest.json`` plus one JSON line per finished frame (docs/definitions.md#run-records)."""
 
 from lightemma.runs.store import (
     FRAMES_FILE,
