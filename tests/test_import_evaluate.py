@@ -224,7 +224,7 @@ def test_bad_parse_options_are_one_line_errors(imported, capsys):
     assert main(["evaluate", str(runs["gpt-4o"]), "--parse", "paper", "--max-curvature", "0.5"]) == 2
     assert "no plausibility limits" in capsys.readouterr().err
     assert main(["evaluate", str(runs["gpt-4o"]), "--speed-range", "0", "30"]) == 2
-    assert "need --parse lenient or --parse strict" in capsys.readouterr().err
+    assert "need --parse lenient, strict or json" in capsys.readouterr().err
     with pytest.raises(UserError, match="LO < HI"):
         ParseDefinition("strict", speed_range=(5.0, 1.0))
 

@@ -102,6 +102,26 @@ def test_a_structured_answer_outside_the_plausibility_limits_still_fails_and_is_
     assert [r.stage for r in server.requests] == ["scene", "intent", "actions", "actions"]
 
 
+def test_evaluate_re_scores_a_structured_run_under_json_with_tighter_limits(tmp_path, frames, capsys):
+    """``evaluate --parse json --speed-range`` re-reads the stored JSON answers: a tighter speed limit makes them implausible."""
+    with FakeOpenAIServer() as server:
+        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", answer_format="structured",
+                     **FAST)
+    top = max(v for v, _ in json.loads(GOOD_ACTIONS_JSON)["actions"])
+    rows = {}
+    for limit in (top + 1.0, top - 0.5):
+        assert cli_main(["evaluate", str(result.run_dir), "--parse", "json", "--speed-range", "-1", str(limit),
+                         "--format", "json", "--resamples", "0"]) == 0
+        rows[limit] = json.loads(capsys.readouterr().out)
+    loose, tight = ([t for t in rows[limit]["tables"] if t["name"] == "accuracy_lightemma"][0]["rows"][0]
+                    for limit in (top + 1.0, top - 0.5))
+    assert (loose["scored"], loose["implausible"], loose["fe_pct"]) == (len(frames), 0, 0.0)
+    assert loose["parse"] == f"json v∈[-1, {top + 1.0:g}]"
+    assert (tight["scored"], tight["implausible"], tight["fe_pct"], tight["ade_avg"]) == (0, len(frames), 100.0, None)
+    assert cli_main(["evaluate", str(result.run_dir), "--parse", "paper", "--speed-range", "0", "9"]) == 2
+    assert "apply to lenient, strict and json parsing" in capsys.readouterr().err
+
+
 def test_a_text_answer_to_a_structured_request_is_a_format_failure_not_read_leniently(tmp_path, frames):
     with FakeOpenAIServer(lambda req: Reply(GOOD_ACTIONS) if req.stage == "actions" else default_reply(req)) as server:
         result = run("openai/gpt-4o", api_base=server.url, frames=frames[:1], output=tmp_path, answer_format="structured",

@@ -206,7 +206,7 @@ def write_report(
         w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]
 
     if flags:
-        w.lines += [f"**Fewer than half of the frames scored** for {', '.join(flags)}: their numbers rest on the rest; every table flags them.", ""]
+        w.lines += [f"**Fewer than half of the frames scored** for {', '.join(flags)}: their numbers describe only the frames they managed; every table flags them.", ""]
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:

@@ -20,10 +20,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
     parser.add_argument("--format", default="md", choices=FORMATS, help="output format (default: md)")
     parser.add_argument("--with-paper", action="store_true", help="put each run beside the paper's row of its model, with the difference")
-    parser.add_argument("--parse", choices=["lenient", "strict", "paper"],
+    parser.add_argument("--parse", choices=["lenient", "strict", "paper", "json"],
                         help="re-score every run's stored answers under this definition (default: each run's own; paper for imported runs)")
-    parser.add_argument("--speed-range", type=float, nargs=2, metavar=("LO", "HI"), help="with --parse lenient|strict: plausible speeds, m/s")
-    parser.add_argument("--max-curvature", type=float, metavar="K", help="with --parse lenient|strict: largest plausible |curvature|, 1/m")
+    parser.add_argument("--speed-range", type=float, nargs=2, metavar=("LO", "HI"), help="with --parse lenient|strict|json: plausible speeds, m/s")
+    parser.add_argument("--max-curvature", type=float, metavar="K", help="with --parse lenient|strict|json: largest plausible |curvature|, 1/m")
     parser.add_argument("--keep-implausible", action="store_true",
                         help="average implausible actions too (every answer the parse definition reads, as the paper's evaluation did; one can dominate a mean)")
     parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
@@ -39,7 +39,7 @@ def _parse_definition(args: argparse.Namespace):  # -> ParseDefinition | None
 
     if args.parse is None:
         if args.speed_range is not None or args.max_curvature is not None:
-            raise UserError("--speed-range and --max-curvature need --parse lenient or --parse strict")
+            raise UserError("--speed-range and --max-curvature need --parse lenient, strict or json")
         return None
     return ParseDefinition(args.parse, tuple(args.speed_range) if args.speed_range else None, args.max_curvature)
 def add_statistics_arguments(parser: argparse.ArgumentParser, *, pairwise_default: bool) -> None:

@@ -49,7 +49,7 @@ class ParseDefinition:
             raise UserError(f"unknown parse mode {self.mode!r} (choose from {', '.join(PARSE_MODES)})")
         if self.mode == "paper":
             if self.speed_range is not None or self.max_abs_curvature is not None:
-                raise UserError("--speed-range and --max-curvature apply to lenient and strict parsing; the paper's rules have no plausibility limits")
+                raise UserError("--speed-range and --max-curvature apply to lenient, strict and json parsing; the paper's rules have no plausibility limits")
         else:
             from lightemma.actions import DEFAULT_MAX_ABS_CURVATURE, DEFAULT_SPEED_RANGE
 

@@ -23,7 +23,7 @@ def coverage_flags(evaluation: Evaluation) -> dict[str, str]:
 def _notes(evaluation: Evaluation, *, intervals: bool = False) -> list[str]:
     notes = []
     if coverage_flags(evaluation):
-        notes.append(f"Flagged: fewer than {100 * LOW_COVERAGE:.0f} % of the model's frames were scored; its numbers rest on the rest.")
+        notes.append(f"Flagged: fewer than {100 * LOW_COVERAGE:.0f} % of the model's frames were scored; its numbers describe only the frames it managed.")
     if intervals and evaluation.resampling.n_resamples:
         r = evaluation.resampling
         notes.append(
