@@ -7,7 +7,7 @@ import re
 
 import numpy as np
 import pytest
-from reference_fixtures import write_results
+from reference_fixtures import euler, write_results
 
 import lightemma
 from lightemma.cli import main
@@ -38,17 +38,6 @@ def paper_read(text):
     if len(numbers) < 12:
         return True, True, None
     return True, False, [numbers[i : i + 2] for i in range(0, 12, 2)]
-
-
-def euler(actions, dt=0.5):
-    x = y = heading = 0.0
-    out = []
-    for v, k in actions:
-        x += v * math.cos(heading) * dt
-        y += v * math.sin(heading) * dt
-        heading += k * v * dt
-        out.append((x, y))
-    return out
 
 
 def usable(frame):
