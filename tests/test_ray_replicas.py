@@ -444,3 +444,15 @@ async def _answer_and_stop(router, req):
         return await router.answer(req)
     finally:
         await router.stop()
+
+
+def test_vllm_pipeline_parallelism_passes_through_and_counts_its_gpus(dataroot, tmp_path, capsys):
+    from lightemma.backends.vllm import VLLMBackend
+
+    backend = VLLMBackend("Qwen/Qwen2.5-VL-7B-Instruct", vllm="fake_vllm", tensor_parallel_size=2, pipeline_parallel_size=2)
+    assert backend._llm.engine_kwargs["pipeline_parallel_size"] == 2 and backend._llm.engine_kwargs["tensor_parallel_size"] == 2
+    assert (backend.info["gpus"], backend.info["pipeline_parallel_size"]) == (4, 2)
+    asyncio.run(backend.aclose())
+    assert cli_main(["run", "--backend", "hf", "--model", "m", "--pipeline-parallel-size", "2",
+                     *frames_args(dataroot, tmp_path, 4)]) == 2
+    assert "--pipeline-parallel-size do(es) not apply to the hf backend" in capsys.readouterr().err
