@@ -55,11 +55,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     local.add_argument("--gpu-memory-utilization", type=float, help="vllm: share of GPU memory vLLM may use (default 0.9)")
     local.add_argument("--pipeline-parallel-size", type=int, help="vllm: GPUs to split the model's layers over (default 1)")
     ray = p.add_argument_group("replicas over Ray (--backend hf | vllm; pip install 'lightemma[ray]'; docs/local.md)")
-    ray.add_argument("--replicas", type=int, help="model replicas, each a Ray actor with its own GPU(s), frames spread across "
+    ray.add_argument("--replicas", type=int, metavar="N", help="model replicas, each a Ray actor with its own GPU(s), frames spread across "
                      "them (default 1: in this process, no Ray)")
     ray.add_argument("--ray-address", metavar="ADDRESS", help="join this running Ray cluster (auto, HOST:PORT, ray://HOST:PORT); "
                      "default: start a local Ray sized to the replicas")
-    ray.add_argument("--gpus-per-replica", type=float, help="hf: GPUs per replica (default 1 where the cluster has GPUs, else 0); "
+    ray.add_argument("--gpus-per-replica", type=float, metavar="G", help="hf: GPUs per replica (default 1 where the cluster has GPUs, else 0); "
                      "vllm uses --tensor-parallel-size × --pipeline-parallel-size")
     gen = p.add_argument_group("prompting")
     gen.add_argument("--prompt-set", help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
