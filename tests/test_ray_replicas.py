@@ -326,6 +326,16 @@ def test_a_replicas_run_fatal_finding_is_raised_on_the_driver():
     assert (caught.value.cause, caught.value.error) == ("local-model", "ValueError")
 
 
+def test_more_replicas_than_the_cluster_can_place_are_refused_at_once(ray_address, tiny, dataroot, tmp_path, capsys):
+    """The module's cluster has 2 CPUs and 2 GPUs: 3 one-GPU replicas, or 3 one-CPU ones, can never be placed."""
+    for extra, what in ((["--replicas", "3"], "needs 3 GPUs; the Ray cluster"),
+                        (["--replicas", "3", "--gpus-per-replica", "0"], "needs 3 CPUs; the Ray cluster")):
+        code = cli_main(["run", "--backend", "hf", "--model", str(tiny), *extra, *frames_args(dataroot, tmp_path / "out", 4)])
+        err = capsys.readouterr().err
+        assert code == 2 and what in err and f"{ray_address}) has 2" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
 # -- vLLM replicas: tensor parallel through a placement group --------------------------------------
 
 

@@ -341,7 +341,7 @@ class RayBackend:
                                     "use --backend hf for CPU replicas")
             else:
                 gpus = float(gpus_per_replica) if gpus_per_replica is not None else (1.0 if gpus_total >= 1 else 0.0)
-            self._check_resources(replicas, gpus, gpus_total)
+            self._check_resources(replicas, gpus, gpus_total, cpus=shards if sharded else 1)
             self.gpus_per_replica = gpus
             actor_options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": 1,
                                              "num_gpus": 0 if sharded else gpus}
@@ -418,12 +418,14 @@ class RayBackend:
         ray.init(address="local", num_cpus=cpus, object_store_memory=LOCAL_OBJECT_STORE_BYTES, **quiet)
         return True, {"cluster": "started locally", "address": _gcs_address(ray), "num_cpus": cpus}
 
-    def _check_resources(self, replicas: int, gpus: float, gpus_total: float) -> None:
+    def _check_resources(self, replicas: int, gpus: float, gpus_total: float, *, cpus: int) -> None:
         """Refuse at once what the cluster can never place (it would wait forever)."""
-        need = replicas * gpus
-        if need > gpus_total + 1e-9:
-            raise UserError(f"--replicas {replicas} × {gpus:g} GPU(s) per replica needs {need:g} GPUs; the Ray cluster "
-                            f"({self._cluster['address']}) has {gpus_total:g}")
+        cpus_total = float(self._ray.cluster_resources().get("CPU", 0))
+        for what, each, total in (("GPU", gpus, gpus_total), ("CPU", cpus, cpus_total)):
+            need = replicas * each
+            if need > total + 1e-9:
+                raise UserError(f"--replicas {replicas} × {each:g} {what}(s) per replica needs {need:g} {what}s; the Ray "
+                                f"cluster ({self._cluster['address']}) has {total:g}")
 
     def _placement(self, ray: Any, shards: int, *, pipeline: bool) -> Any:
         """A placement group for one sharded vLLM replica, as a scheduling strategy for its actor."""
