@@ -1,6 +1,6 @@
 //! lightemma's numeric and text kernels.
 //!
-//! * [`parse`] (with [`lexer`], [`paper`], [`json`]): a model's stage-3 answer → (speed, curvature)
+//! * [`parse`] (with [`lexer`], [`lenient`], [`paper`], [`json`]): a model's stage-3 answer → (speed, curvature)
 //!   actions, a status, a failure kind and a reason;
 //! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
 //! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
@@ -13,6 +13,7 @@ pub mod error;
 pub mod fastmath;
 pub mod json;
 pub mod kinematics;
+pub mod lenient;
 pub mod lexer;
 pub mod metrics;
 pub mod paper;

@@ -526,6 +526,9 @@ fn tuple(lx: &mut PyLexer<'_>, tok: Tok) -> Step<(f64, f64, Tok)> {
     }
     let (v, b) = signed_number(lx, tok)?;
     let (m, tok) = count_rpar(lx)?;
+    if tok == Tok::End {
+        return lx.fail("an unclosed list");
+    }
     if tok != Tok::Comma || m < b || m - b >= k {
         return lx.fail("a list item that is not a tuple of 2 numbers");
     }
@@ -535,6 +538,9 @@ fn tuple(lx: &mut PyLexer<'_>, tok: Tok) -> Step<(f64, f64, Tok)> {
     let (a2, tok) = count_lpar(lx, first)?;
     let (c, b2) = signed_number(lx, tok)?;
     let (m2, tok) = count_rpar(lx)?;
+    if tok == Tok::End {
+        return lx.fail("an unclosed list");
+    }
     let after = if m2 == a2 + b2 + t {
         tok
     } else if m2 == a2 + b2 && tok == Tok::Comma {

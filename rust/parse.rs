@@ -11,7 +11,8 @@
 //! Every answer gets a [`Status`], a [`Failure`] kind and, unless plainly `Ok`, a short reason.
 
 use crate::error::{CoreError, CoreResult};
-use crate::lexer::{tokenize, Kind, Token};
+use crate::lenient::{answer_ranges, Blocks, Lenient, Reading};
+use crate::lexer::{tokenize, tokenize_range, Kind, Token};
 use crate::{json, paper};
 
 /// How an answer parsed.
@@ -195,6 +196,8 @@ pub struct Parsed {
 pub struct Parser {
     tokens: Vec<Token>,
     scratch: String,
+    ranges: Vec<(usize, usize)>,
+    lenient: Lenient,
 }
 
 impl Parser {
@@ -264,20 +267,54 @@ impl Parser {
     }
 
     fn strict_or_lenient(&mut self, text: &str, n: usize, mode: Mode, out: &mut [f64]) -> Outcome {
-        tokenize(text, &mut self.tokens, &mut self.scratch);
+        let maybe_tags = tokenize(text, &mut self.tokens, &mut self.scratch);
         if self.tokens.is_empty() {
             return Outcome::failed(Failure::Format, "empty answer".to_owned());
         }
-        let strict_err = match strict(&self.tokens, text, n, out) {
-            Ok(()) => return finite(Outcome::ok(), out),
-            Err(reason) => reason,
+        let strict_err = match strict(&self.tokens, n, out) {
+            Ok(()) => return Outcome::ok(),
+            Err(e) => e,
         };
         if mode == Mode::Strict {
-            return Outcome::failed(Failure::Format, strict_err);
+            let reason = strict_err.message(&self.tokens, text, n);
+            return if strict_err.truncated {
+                Outcome::failed(Failure::Truncated, format!("truncated: {reason}"))
+            } else {
+                Outcome::failed(Failure::Format, reason)
+            };
         }
-        match lenient(&self.tokens, n, out) {
-            Ok(()) => finite(Outcome::corrected(strict_err), out),
-            Err(reason) => Outcome::failed(Failure::Format, reason),
+        let blocks = if maybe_tags {
+            answer_ranges(text, &mut self.ranges)
+        } else {
+            Blocks::default()
+        };
+        if blocks.unclosed {
+            return Outcome::failed(
+                Failure::Truncated,
+                "truncated: the answer ends inside a reasoning block".to_owned(),
+            );
+        }
+        if blocks.removed > 0 {
+            self.tokens.clear();
+            for &(start, end) in &self.ranges {
+                tokenize_range(text, start, end, &mut self.tokens, &mut self.scratch);
+            }
+        }
+        match self.lenient.read(&self.tokens, text, n, out) {
+            Reading::Found(mut notes) => {
+                if blocks.removed > 0 {
+                    notes.insert(0, "reasoning block removed".to_owned());
+                }
+                let reason = if notes.is_empty() {
+                    // the list is the whole answer: the strict error says what differs
+                    strict_err.message(&self.tokens, text, n)
+                } else {
+                    notes.join("; ")
+                };
+                Outcome::corrected(reason)
+            }
+            Reading::Truncated(reason) => Outcome::failed(Failure::Truncated, reason),
+            Reading::Failed(reason) => Outcome::failed(Failure::Format, reason),
         }
     }
 
@@ -324,6 +361,45 @@ fn gate(outcome: Outcome, limits: &Limits, values: &[f64]) -> Outcome {
     }
 }
 
+/// Why the strict grammar failed, at which token; formatted only when a reason is needed.
+#[derive(Debug, Clone, Copy)]
+enum StrictWhat {
+    NotList,
+    NoComma(usize),
+    NotPair(usize),
+    NonFinite(usize),
+    Unicode(usize),
+    MorePairs,
+    NoClose,
+    TextAfter,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct StrictError {
+    what: StrictWhat,
+    at: usize,
+    /// the answer ended before the list did
+    truncated: bool,
+}
+
+impl StrictError {
+    fn message(&self, tokens: &[Token], text: &str, n: usize) -> String {
+        let found = || describe(tokens, self.at, text);
+        match self.what {
+            StrictWhat::NotList => format!("not a bare list: expected '[' but found {}", found()),
+            StrictWhat::NoComma(k) => {
+                format!("expected ',' before pair {} but found {}", k + 1, found())
+            }
+            StrictWhat::NotPair(k) => format!("pair {} is not '(v, c)': found {}", k + 1, found()),
+            StrictWhat::NonFinite(k) => format!("pair {} has a non-finite number", k + 1),
+            StrictWhat::Unicode(k) => format!("pair {} uses a non-ASCII minus sign", k + 1),
+            StrictWhat::MorePairs => format!("more than {n} pairs"),
+            StrictWhat::NoClose => format!("expected ']' after pair {n} but found {}", found()),
+            StrictWhat::TextAfter => format!("text after the list: {}", found()),
+        }
+    }
+}
+
 fn closes(open: u8, close: u8) -> bool {
     matches!((open, close), (b'(', b')') | (b'[', b']'))
 }
@@ -339,69 +415,60 @@ fn describe(tokens: &[Token], i: usize, text: &str) -> String {
 }
 
 /// The strict grammar: `[` pair (`,` pair){n-1} `]` and nothing else.
-fn strict(tokens: &[Token], text: &str, n: usize, out: &mut [f64]) -> Result<(), String> {
-    if tokens.is_empty() {
-        return Err("empty answer".to_owned());
+fn strict(tokens: &[Token], n: usize, out: &mut [f64]) -> Result<(), StrictError> {
+    let fail = |what: StrictWhat, at: usize| StrictError {
+        what,
+        at,
+        truncated: at >= tokens.len(),
+    };
+    if tokens.first().map(|t| t.kind) != Some(Kind::Open(b'[')) {
+        return Err(fail(StrictWhat::NotList, 0));
     }
-    let mut i = 0;
-    if tokens[0].kind != Kind::Open(b'[') {
-        return Err(format!(
-            "not a bare list: expected '[' but found {}",
-            describe(tokens, 0, text)
-        ));
-    }
-    i += 1;
+    let mut i = 1;
     for k in 0..n {
         if k > 0 {
             if tokens.get(i).map(|t| t.kind) != Some(Kind::Comma) {
-                return Err(format!(
-                    "expected ',' before pair {} but found {}",
-                    k + 1,
-                    describe(tokens, i, text)
-                ));
+                return Err(fail(StrictWhat::NoComma(k), i));
             }
             i += 1;
         }
         let pair = match tokens.get(i..i + 5) {
-            Some(
-                &[Token {
-                    kind: Kind::Open(o),
-                    ..
-                }, Token {
-                    kind:
-                        Kind::Num {
-                            value: v,
-                            plain: pv,
-                        },
-                    ..
-                }, Token {
-                    kind: Kind::Comma, ..
-                }, Token {
-                    kind:
-                        Kind::Num {
-                            value: c,
-                            plain: pc,
-                        },
-                    ..
-                }, Token {
-                    kind: Kind::Close(cl),
-                    ..
-                }],
-            ) if closes(o, cl) => (v, pv, c, pc),
-            _ => {
-                return Err(format!(
-                    "pair {} is not '(v, c)': found {}",
-                    k + 1,
-                    describe(tokens, i, text)
-                ))
-            }
+            Some([a, b, c, d, e]) => match (a.kind, b.kind, c.kind, d.kind, e.kind) {
+                (
+                    Kind::Open(o),
+                    Kind::Num {
+                        value: v,
+                        plain: pv,
+                        ..
+                    },
+                    Kind::Comma,
+                    Kind::Num {
+                        value: c,
+                        plain: pc,
+                        ..
+                    },
+                    Kind::Close(cl),
+                ) if closes(o, cl) => Some((v, pv, c, pc)),
+                _ => None,
+            },
+            _ => None,
         };
-        let (v, pv, c, pc) = pair;
+        let Some((v, pv, c, pc)) = pair else {
+            // the answer may end inside this pair
+            let at = if tokens.len() < i + 5 {
+                tokens.len()
+            } else {
+                i
+            };
+            let mut e = fail(StrictWhat::NotPair(k), i);
+            e.truncated = at >= tokens.len();
+            return Err(e);
+        };
         if !(v.is_finite() && c.is_finite()) {
-            return Err(format!("pair {} has a non-finite number", k + 1));
+            return Err(fail(StrictWhat::NonFinite(k), i));
         }
         if !(pv && pc) {
-            return Err(format!("pair {} uses a non-ASCII minus sign", k + 1));
+            return Err(fail(StrictWhat::Unicode(k), i));
         }
         out[2 * k] = v;
         out[2 * k + 1] = c;
@@ -410,79 +477,14 @@ fn strict(tokens: &[Token], text: &str, n: usize, out: &mut [f64]) -> Result<(),
     match tokens.get(i).map(|t| t.kind) {
         Some(Kind::Close(b']')) => {}
         Some(Kind::Comma) if matches!(tokens.get(i + 1).map(|t| t.kind), Some(Kind::Open(_))) => {
-            return Err(format!("more than {n} pairs"));
+            return Err(fail(StrictWhat::MorePairs, i));
         }
-        _ => {
-            return Err(format!(
-                "expected ']' after pair {n} but found {}",
-                describe(tokens, i, text)
-            ))
-        }
+        _ => return Err(fail(StrictWhat::NoClose, i)),
     }
     if i + 1 < tokens.len() {
-        return Err(format!(
-            "text after the list: {}",
-            describe(tokens, i + 1, text)
-        ));
+        return Err(fail(StrictWhat::TextAfter, i + 1));
     }
     Ok(())
-}
-
-/// The lenient search: the first `n` bracketed pairs, else the first `2n` numbers.
-fn lenient(tokens: &[Token], n: usize, out: &mut [f64]) -> Result<(), String> {
-    let mut pairs = 0;
-    let mut i = 0;
-    while i < tokens.len() && pairs < n {
-        if let Some((v, c, len)) = pair_at(tokens, i) {
-            out[2 * pairs] = v;
-            out[2 * pairs + 1] = c;
-            pairs += 1;
-            i += len;
-        } else {
-            i += 1;
-        }
-    }
-    if pairs == n {
-        return Ok(());
-    }
-    let mut count = 0;
-    for t in tokens {
-        if let Kind::Num { value, .. } = t.kind {
-            out[count] = value;
-            count += 1;
-            if count == 2 * n {
-                return Ok(());
-            }
-        }
-    }
-    Err(format!(
-        "found {pairs} (v, c) pair(s) and {count} number(s); need {n} pairs or {} numbers",
-        2 * n
-    ))
-}
-
-/// A pair `(a, b)`, `[a; b]` or `(a b)` starting at token `i`: (a, b, tokens used).
-fn pair_at(tokens: &[Token], i: usize) -> Option<(f64, f64, usize)> {
-    if !matches!(tokens.get(i)?.kind, Kind::Open(_)) {
-        return None;
-    }
-    let a = match tokens.get(i + 1)?.kind {
-        Kind::Num { value, .. } => value,
-        _ => return None,
-    };
-    let mut j = i + 2;
-    if matches!(tokens.get(j)?.kind, Kind::Comma | Kind::Semicolon) {
-        j += 1;
-    }
-    let b = match tokens.get(j)?.kind {
-        Kind::Num { value, .. } => value,
-        _ => return None,
-    };
-    match tokens.get(j + 1)?.kind {
-        // mismatched closers (`(5, 0.1]`) are accepted: the pair is unambiguous
-        Kind::Close(_) => Some((a, b, j + 2 - i)),
-        _ => None,
-    }
 }
 
 /// A parsed batch: values (`N × n × 2`, NaN where failed), status and failure codes, reasons.
@@ -519,18 +521,26 @@ mod tests {
     const SIX: [f64; 12] = [
         5.0, 0.01, 5.5, 0.0, 6.0, -0.02, 6.5, 0.0, 7.0, 0.0, 7.5, 0.003,
     ];
+    const EXACT: &str =
+        "[(5.0, 0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]";
 
     fn run(text: &str, mode: Mode) -> Parsed {
         Parser::new().parse(text, 6, mode, &Limits::DEFAULT)
     }
 
+    fn lenient(text: &str) -> Parsed {
+        run(text, Mode::Lenient)
+    }
+
+    fn list(pairs: &[(&str, &str)]) -> String {
+        let inner: Vec<String> = pairs.iter().map(|(v, c)| format!("({v}, {c})")).collect();
+        format!("[{}]", inner.join(", "))
+    }
+
     #[test]
     fn strict_accepts_the_exact_format() {
-        let p = run(
-            "[(5.0, 0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]",
-            Mode::Lenient,
-        );
-        assert_eq!(p.status, Status::Ok);
+        let p = lenient(EXACT);
+        assert_eq!((p.status, p.failure), (Status::Ok, Failure::None));
         assert_eq!(p.values.unwrap(), SIX.to_vec());
         assert_eq!(p.reason, "");
     }
@@ -547,85 +557,303 @@ mod tests {
 
     #[test]
     fn prose_around_the_list_is_corrected() {
-        let p = run(
-            "Sure! Here are the actions: [(5.0, 0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]. Drive safely.",
-            Mode::Lenient,
-        );
+        let p = lenient(&format!(
+            "Sure! Here are the actions: {EXACT}. Drive safely."
+        ));
         assert_eq!(p.status, Status::Corrected);
-        assert!(p.reason.contains("expected '['"), "{}", p.reason);
+        assert_eq!(p.reason, "text around the list");
         assert_eq!(p.values.unwrap(), SIX.to_vec());
     }
 
     #[test]
     fn strict_mode_fails_what_lenient_corrects() {
-        let p = run(
-            "```\n[(5,0),(5,0),(5,0),(5,0),(5,0),(5,0)]\n```",
-            Mode::Strict,
-        );
-        assert_eq!(p.status, Status::Failed);
+        let p = run(&format!("```\n{EXACT}\n```"), Mode::Strict);
+        assert_eq!((p.status, p.failure), (Status::Failed, Failure::Format));
         assert!(p.values.is_none());
+    }
+
+    #[test]
+    fn strict_mode_reports_truncation() {
+        let p = run(&EXACT[..EXACT.len() - 9], Mode::Strict);
+        assert_eq!(p.failure, Failure::Truncated, "{}", p.reason);
+        assert!(p.reason.starts_with("truncated"));
     }
 
     #[test]
     fn labels_fall_back_to_numbers() {
         let text = "v1 = 5.0, c1 = 0.01\nv2 = 5.5, c2 = 0.0\nv3 = 6.0, c3 = -0.02\nv4 = 6.5, c4 = 0\nv5 = 7, c5 = 0\nv6 = 7.5, c6 = 0.003";
-        let p = run(text, Mode::Lenient);
+        let p = lenient(text);
         assert_eq!(p.status, Status::Corrected);
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        assert!(p.reason.contains("12 standalone numbers"), "{}", p.reason);
+    }
+
+    #[test]
+    fn kind_1_quoted_history_before_the_answer() {
+        let history = list(&[("3.0", "0.0"); 6]);
+        let p = lenient(&format!("Past actions: {history}. So: {EXACT}"));
+        assert_eq!(p.status, Status::Corrected);
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        assert!(
+            p.reason.contains("took the last of 2 candidate lists"),
+            "{}",
+            p.reason
+        );
+        let p = lenient(&format!(
+            "<think>The history {history} covers 3 seconds at 0.5 s.</think>\n{EXACT}"
+        ));
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        assert!(p.reason.contains("reasoning block removed"), "{}", p.reason);
+    }
+
+    #[test]
+    fn kind_2_self_correction_takes_the_last_list() {
+        let first = list(&[("8.0", "0.0"); 6]);
+        let p = lenient(&format!(
+            "{first}\nWait, that ignores the red light. Corrected: {EXACT}"
+        ));
         assert_eq!(p.values.unwrap(), SIX.to_vec());
     }
 
     #[test]
-    fn too_few_numbers_fail_with_counts() {
-        let p = run("[(5.0, 0.01), (5.5, 0.0)]", Mode::Lenient);
-        assert_eq!(p.status, Status::Failed);
+    fn kind_3_prose_numbers_are_not_actions() {
+        let text = "Over the next 3 seconds at 0.5 s steps:\nv1 = 5.0, c1 = 0.01\nv2 = 5.5, c2 = 0.0\nv3 = 6.0, c3 = -0.02\nv4 = 6.5, c4 = 0\nv5 = 7, c5 = 0\nv6 = 7.5, c6 = 0.003";
+        let p = lenient(text);
+        assert_eq!(p.values.unwrap(), SIX.to_vec(), "{}", p.reason);
+        // one number too many: fail rather than guess which
+        let p = lenient(&format!("Keep about 6.2 m/s.\n{text}"));
+        assert_eq!((p.status, p.failure), (Status::Failed, Failure::Format));
+        assert!(p.reason.contains("13 standalone"), "{}", p.reason);
+    }
+
+    #[test]
+    fn kind_4_arithmetic_is_evaluated() {
+        let p = lenient(&list(&[("7.2-0.5", "0.002"); 6]));
+        assert_eq!(p.status, Status::Corrected);
+        let v = p.values.unwrap();
+        assert!((v[0] - 6.7).abs() < 1e-12 && v[1] == 0.002);
         assert!(
-            p.reason.contains("found 2 (v, c) pair(s) and 4 number(s)"),
+            p.reason
+                .contains("expression evaluated (pair 1, 2, 3, 4, 5, 6)"),
             "{}",
             p.reason
         );
+        let p = lenient(&list(&[("5.0", "1/50"); 6]));
+        assert_eq!(p.values.unwrap()[..2], [5.0, 0.02]);
+    }
+
+    #[test]
+    fn kind_5_fused_numbers_fail_naming_the_pair() {
+        let p = lenient("[(3.7640.002)(4.0140.001)(4.2640.001)(4.5140.0)(4.7640.0)(5.0140.0)]");
+        assert_eq!((p.status, p.failure), (Status::Failed, Failure::Format));
+        assert!(p.reason.starts_with("pair 1 (3.7640.002)"), "{}", p.reason);
+        assert!(p.reason.contains("lost comma"), "{}", p.reason);
+    }
+
+    #[test]
+    fn kind_6_lost_decimal_points_fail() {
+        let p =
+            lenient("[(5254,0001),(5559,00005),(5864,0001),(6170,0001),(6475,0001),(6780,0001)]");
+        assert_eq!((p.status, p.failure), (Status::Failed, Failure::Format));
+        assert!(p.reason.contains("0001 has leading zeros"), "{}", p.reason);
+        let p = lenient(&list(&[("5254", "0.001"); 6]));
+        assert_eq!(p.failure, Failure::Implausible);
+        assert_eq!(p.reason, "speed 5254 at step 1 outside [-10, 50] m/s");
+    }
+
+    #[test]
+    fn kind_7_cut_off_answers_are_truncated() {
+        for text in [
+            "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.5, 0.0), (5.6, -0.0",
+            "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.5, 0.0), (5.6, -0.05)",
+            "(5.0, 0.0)\n(5.1, 0.0)\n(5.2, 0.0)\n(5.3, 0.0)\n(5.5, 0.0)\n(5.6, -0.0",
+            "<think>the light is red so",
+        ] {
+            let p = lenient(text);
+            assert_eq!(
+                (p.status, p.failure),
+                (Status::Failed, Failure::Truncated),
+                "{text}"
+            );
+            assert!(p.reason.starts_with("truncated"));
+        }
+        // a correction cut off after a complete list is truncated too
+        let p = lenient(&format!("{EXACT} Wait: [(5.0, 0.0), (5.1,"));
+        assert_eq!(p.failure, Failure::Truncated);
+        // a correction cut off inside a number's exponent is truncated too (`0.0e` lexes as a word)
+        for cut in ["[(0.000000e", "[(5.0, 1e-", "[(5.0e"] {
+            let p = lenient(&format!("{EXACT} {cut}"));
+            assert_eq!(p.failure, Failure::Truncated, "{cut}");
+        }
+        // an unclosed parenthesis of prose is not
+        let p = lenient(&format!("{EXACT} (this keeps the lane"));
+        assert_eq!(p.status, Status::Corrected);
+        let p = lenient(&format!("{EXACT} (see 2nd"));
+        assert_eq!(p.status, Status::Corrected);
+    }
+
+    #[test]
+    fn lists_of_other_lengths_are_not_candidates() {
+        let seven = "[(1,0),(2,0),(3,0),(4,0),(5,0),(6,0),(7,0)]";
+        let p = lenient(seven);
+        assert_eq!(p.status, Status::Failed);
+        assert!(p.reason.contains("found lists of 7 pairs"), "{}", p.reason);
+        let p = lenient(&format!(
+            "{EXACT} e.g. the first two [(5.0, 0.01), (5.5, 0.0)]"
+        ));
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+    }
+
+    #[test]
+    fn json_objects_are_read() {
+        let p = lenient(
+            r#"{"actions": [[5.0, 0.01], [5.5, 0.0], [6.0, -0.02], [6.5, 0.0], [7.0, 0.0], [7.5, 0.003]]}"#,
+        );
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        let keyed: Vec<String> = SIX
+            .chunks(2)
+            .map(|p| format!(r#"{{"curvature": {}, "speed": {}}}"#, p[1], p[0]))
+            .collect();
+        let p = lenient(&format!("[{}]", keyed.join(", ")));
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        assert!(p.reason.contains("read by their keys"), "{}", p.reason);
+        let p = lenient(&format!(
+            "[{}]",
+            SIX.chunks(2)
+                .map(|p| format!("(c={}, v={})", p[1], p[0]))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
     }
 
     #[test]
     fn non_finite_never_passes() {
-        let p = run(
-            "[(5.0, nan), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]",
-            Mode::Lenient,
-        );
-        assert_eq!(p.status, Status::Failed);
+        let p = lenient(&EXACT.replace("0.003", "nan"));
+        assert_eq!((p.status, p.failure), (Status::Failed, Failure::Format));
         assert!(p.reason.contains("non-finite curvature"), "{}", p.reason);
-        let p = run(
-            "[(1e999, 0), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]",
-            Mode::Lenient,
-        );
+        let p = lenient(&EXACT.replace("7.5", "1e999"));
         assert_eq!(p.status, Status::Failed);
-    }
-
-    #[test]
-    fn too_many_pairs_strict_fails_lenient_takes_first() {
-        let text = "[(1,0),(2,0),(3,0),(4,0),(5,0),(6,0),(7,0)]";
-        let p = run(text, Mode::Lenient);
-        assert_eq!(p.status, Status::Corrected);
-        assert!(p.reason.contains("more than 6 pairs"), "{}", p.reason);
-        assert_eq!(p.values.unwrap()[10], 6.0);
+        let p = lenient(&list(&[("5.0", "1/0"); 6]));
+        assert!(p.reason.contains("non-finite"), "{}", p.reason);
     }
 
     #[test]
     fn unicode_minus_is_corrected() {
-        let p = run(
-            "[(5.0, \u{2212}0.01), (5, 0), (5, 0), (5, 0), (5, 0), (5, 0)]",
-            Mode::Lenient,
-        );
+        let p = lenient(&EXACT.replace("-0.02", "\u{2212}0.02"));
         assert_eq!(p.status, Status::Corrected);
-        assert_eq!(p.values.unwrap()[1], -0.01);
+        assert_eq!(p.values.unwrap()[5], -0.02);
+        assert!(p.reason.contains("unicode minus"), "{}", p.reason);
+    }
+
+    #[test]
+    fn plausibility_gate_and_no_limits() {
+        let text = list(&[("60", "0"); 6]);
+        assert_eq!(lenient(&text).failure, Failure::Implausible);
+        let p = Parser::new().parse(&text, 6, Mode::Lenient, &Limits::NONE);
+        assert_eq!(p.status, Status::Ok);
+        assert!(Limits::new(Some((1.0, 1.0)), None).is_err());
+        assert!(Limits::new(None, Some(0.0)).is_err());
+        assert!(Limits::new(Some((f64::NAN, 1.0)), None).is_err());
     }
 
     #[test]
     fn hostile_inputs_terminate() {
         let digits = "9".repeat(1 << 20);
-        assert_eq!(run(&digits, Mode::Lenient).status, Status::Failed);
+        assert_eq!(lenient(&digits).status, Status::Failed);
         let nested = "[".repeat(100_000) + &"]".repeat(100_000);
-        assert_eq!(run(&nested, Mode::Lenient).status, Status::Failed);
-        assert_eq!(run("", Mode::Lenient).reason, "empty answer");
+        assert_eq!(lenient(&nested).status, Status::Failed);
+        let open = "(".repeat(100_000) + "1";
+        assert_eq!(lenient(&open).failure, Failure::Truncated);
+        assert_eq!(lenient("").reason, "empty answer");
+        let think = "<think>".repeat(10_000) + &"</think>".repeat(10_000);
+        assert_eq!(lenient(&think).status, Status::Failed);
+    }
+
+    #[test]
+    fn fuzz_fragments_in_every_mode() {
+        // deterministic xorshift over fragments that build brackets, numbers, tags and junk
+        const FRAGMENTS: &[&str] = &[
+            "(",
+            ")",
+            "[",
+            "]",
+            "{",
+            "}",
+            ",",
+            ";",
+            " ",
+            "\n",
+            "-",
+            "+",
+            "*",
+            "/",
+            ".",
+            "\u{2212}",
+            "e",
+            "0",
+            "1",
+            "5.0",
+            "0.01",
+            "0001",
+            "3.7640.002",
+            "nan",
+            "<think>",
+            "</think>",
+            "\u{25c1}think\u{25b7}",
+            "v1 =",
+            "m/s",
+            "1/m",
+            "\"v\": ",
+            "\"c\": ",
+            "3 seconds",
+            "1. ",
+            "1) ",
+            "\u{0}",
+            "κ",
+            "é",
+            "#",
+            "\\",
+            "0x1F",
+            "1_0",
+            "```",
+            "\r\n",
+            "\t",
+            "\x0c",
+        ];
+        let mut state = 0x2545_F491_4F6C_DD1D_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            state
+        };
+        let mut parser = Parser::new();
+        let mut out = vec![0.0; 12];
+        for _ in 0..20_000 {
+            let len = (next() % 60) as usize;
+            let text: String = (0..len)
+                .map(|_| FRAGMENTS[(next() % FRAGMENTS.len() as u64) as usize])
+                .collect();
+            for mode in [Mode::Strict, Mode::Lenient, Mode::Paper, Mode::Json] {
+                let o = parser.parse_into(&text, 6, mode, &Limits::DEFAULT, &mut out);
+                assert_eq!(
+                    o.failure == Failure::None,
+                    o.status != Status::Failed,
+                    "{text:?}"
+                );
+                assert_eq!(
+                    o.reason.is_empty(),
+                    o.status == Status::Ok,
+                    "{text:?} {mode:?}"
+                );
+                if o.status == Status::Failed {
+                    assert!(out.iter().all(|v| v.is_nan()));
+                } else {
+                    assert!(out.iter().all(|v| v.is_finite()), "{text:?} {mode:?}");
+                }
+            }
+        }
     }
 
     #[test]

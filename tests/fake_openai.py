@@ -22,6 +22,15 @@ A completion says why it stopped (``finish_reason``: "stop" or "length", in each
 may report reasoning tokens (``reasoning_tokens``) or no usage at all (``usage=False``). Every request is
 recorded in ``server.requests`` (a :class:`Received`), thread-safely.
 
+A request asking for a JSON schema (OpenAI ``response_format``, Anthropic ``output_format`` or litellm's
+``json_tool_call`` tool, Gemini's response schema) is answered with the actions as JSON by the default
+script (:attr:`Received.schema`); a forced tool call is answered as a ``tool_use`` block, as Anthropic does.
+
+``FakeOpenAIServer(count_tokens=True)`` counts each request's tokens instead of the script's fixed
+1000 / 50 (:class:`TokenCounter`: text ≈ 4 UTF-8 bytes per token, 4 per message, images by each
+provider's published rule from the image's pixel size), and ``prefix_cache=True`` also emulates the
+providers' prompt caches (:class:`PrefixCache`) and reports cached tokens in each protocol's spelling.
+
 Run as a script (``python tests/fake_openai.py --latency 1.0``) it serves the
 default script forever and prints its URL on the first line of stdout.
 """
@@ -29,8 +38,13 @@ default script forever and prints its URL on the first line of stdout.
 from __future__ import annotations
 
 import argparse
+import base64
+import dataclasses
+import hashlib
+import io
 import itertools
 import json
+import math
 import socket
 import struct
 import sys
@@ -54,6 +68,10 @@ class Received:
     headers: dict[str, str]  # names lower-cased
     body: dict[str, Any]
     index: int  # arrival order, from 0
+    counted: bool = False  # the server counted its tokens (count_tokens=True)
+    prompt_tokens: int | None = None  # as counted (count_tokens=True)
+    cached_tokens: int = 0  # as the emulated prefix cache served them (prefix_cache=True)
+    cache_write_tokens: int = 0
 
     @property
     def protocol(self) -> str:
@@ -82,13 +100,59 @@ class Received:
 
     @property
     def stage(self) -> str:
-        """Which stage of the chain this is, recognised from the prompt wording."""
+        """Which stage of the chain this is, recognised from the wording of the last user turn."""
         text = self.text
-        if "(v1, c1)" in text:
+        if "v1, c1" in text:  # "[(v1, c1), …]" or the JSON form "[[v1, c1], …]"
             return "actions"
         if "past 3 seconds" in text:
             return "intent"
         return "scene"
+
+    def messages(self) -> list[tuple[str, list[dict[str, Any]]]]:
+        """Every turn as (role, parts), whatever the protocol: roles ``system``/``user``/``assistant``; parts
+        ``{"kind": "text", "text": …}`` or ``{"kind": "image", "data": <base64>}``, with ``"cache": True`` on a
+        part that carries an Anthropic cache breakpoint."""
+        out: list[tuple[str, list[dict[str, Any]]]] = []
+        if self.protocol == "gemini":
+            system = self.body.get("systemInstruction") or self.body.get("system_instruction")
+            if system:
+                out.append(("system", [_gemini_part(p) for p in system.get("parts", [])]))
+            for turn in self.body.get("contents", []):
+                role = "assistant" if turn.get("role") == "model" else "user"
+                out.append((role, [_gemini_part(p) for p in turn.get("parts", [])]))
+            return out
+        system = self.body.get("system")
+        if system:
+            out.append(("system", [_part(p) for p in ([{"type": "text", "text": system}] if isinstance(system, str) else system)]))
+        for turn in self.body.get("messages", []):
+            content = turn.get("content", "")
+            parts = [{"type": "text", "text": content}] if isinstance(content, str) else content
+            out.append((turn.get("role", "user"), [_part(p) for p in parts]))
+        return out
+
+    @property
+    def schema(self) -> dict[str, Any] | None:
+        """The JSON schema the request asks the answer to follow (None when it asks for none)."""
+        body = self.body
+        if self.protocol == "openai":
+            fmt = body.get("response_format") or {}
+            return (fmt.get("json_schema") or {}).get("schema") if fmt.get("type") == "json_schema" else None
+        if self.protocol == "anthropic":
+            if isinstance(body.get("output_format"), dict):
+                return body["output_format"].get("schema")
+            tool = next((t for t in body.get("tools", []) if t.get("name") == JSON_TOOL), None)
+            return tool.get("input_schema") if tool else None
+        config = body.get("generationConfig") or {}
+        for key in ("responseJsonSchema", "responseSchema", "response_json_schema", "response_schema"):
+            if key in config:
+                return config[key]
+        return None
+
+    @property
+    def forced_tool(self) -> bool:
+        """An Anthropic request that forces litellm's JSON tool: the answer must come back as its ``tool_use``."""
+        choice = self.body.get("tool_choice") or {}
+        return self.protocol == "anthropic" and choice.get("name") == JSON_TOOL
 
 
 @dataclass
@@ -108,6 +172,8 @@ class Reply:
     finish_reason: str = "stop"  # "stop" or "length" (sent as end_turn/max_tokens, STOP/MAX_TOKENS natively)
     reasoning_tokens: int | None = None  # of completion_tokens, those spent reasoning (reported when set)
     usage: bool = True  # False: the completion has no usage block
+    cached_tokens: int = 0  # of prompt_tokens, read from the prompt cache (set by the server's PrefixCache)
+    cache_write_tokens: int = 0  # of prompt_tokens, written to the prompt cache (Anthropic)
 
     @classmethod
     def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
@@ -116,9 +182,158 @@ class Reply:
         return cls(status=status, headers=headers, delay=delay, body={"error": {"message": message, "type": kind, "code": kind}})
 
 
+GOOD_ACTIONS_JSON = json.dumps({"actions": [[5.0, 0.0], [5.2, 0.001], [5.4, 0.002], [5.6, 0.0], [5.8, -0.001], [6.0, 0.0]]})
+JSON_TOOL = "json_tool_call"  # the tool litellm forces for Anthropic models without native structured outputs
+
+
 def default_reply(req: Received) -> Reply:
-    """A well-behaved model: scene, intent and a well-formed action list."""
+    """A well-behaved model: scene, intent and a well-formed action list (JSON when the request asks for a schema)."""
+    if req.stage == "actions" and req.schema is not None:
+        return Reply(GOOD_ACTIONS_JSON)
     return Reply({"scene": SCENE_TEXT, "intent": INTENT_TEXT, "actions": GOOD_ACTIONS}[req.stage])
+
+
+def _part(part: dict[str, Any]) -> dict[str, Any]:
+    """An OpenAI or Anthropic content part, normalised (see :meth:`Received.messages`)."""
+    out: dict[str, Any]
+    if part.get("type") == "image_url":
+        url = part["image_url"]["url"] if isinstance(part.get("image_url"), dict) else part.get("image_url", "")
+        out = {"kind": "image", "data": url.split(",", 1)[-1]}
+    elif part.get("type") == "image":
+        out = {"kind": "image", "data": (part.get("source") or {}).get("data", "")}
+    else:
+        out = {"kind": "text", "text": str(part.get("text", ""))}
+    if part.get("cache_control"):
+        out["cache"] = True
+    return out
+
+
+def _gemini_part(part: dict[str, Any]) -> dict[str, Any]:
+    inline = part.get("inline_data") or part.get("inlineData")
+    if inline:
+        return {"kind": "image", "data": inline.get("data", "")}
+    return {"kind": "text", "text": str(part.get("text", ""))}
+
+
+class TokenCounter:
+    """Counts a request's tokens the way a benchmark needs: plausibly, cheaply, the same for every variant.
+
+    Text: one token per 4 UTF-8 bytes (rounded up), plus 4 tokens of role markers per message. Images, by each
+    provider's published rule for the decoded pixel size: OpenAI (high detail) fits the image in 2048 × 2048,
+    scales its short side to 768 and counts 85 + 170 per 512-pixel tile; Anthropic scales the long side to at
+    most 1568 and counts width × height / 750; Gemini counts 258 per 768-pixel tile (258 for an image within
+    384 × 384). A 1600 × 900 camera image: 1105 (OpenAI), 1844 (Anthropic), 1548 (Gemini).
+    """
+
+    MESSAGE_TOKENS = 4
+
+    def __init__(self) -> None:
+        self._sizes: dict[str, tuple[int, int]] = {}
+        self._lock = threading.Lock()
+
+    @staticmethod
+    def text(text: str) -> int:
+        return math.ceil(len(text.encode("utf-8")) / 4)
+
+    def image(self, data: str, protocol: str) -> int:
+        key = hashlib.sha256(data.encode("ascii", "replace")).hexdigest()
+        with self._lock:
+            size = self._sizes.get(key)
+        if size is None:
+            from PIL import Image
+
+            with Image.open(io.BytesIO(base64.b64decode(data))) as img:
+                size = img.size
+            with self._lock:
+                self._sizes[key] = size
+        return image_tokens(*size, protocol)
+
+
+def image_tokens(width: int, height: int, protocol: str) -> int:
+    """Input tokens of one ``width`` × ``height`` image under ``protocol``'s rule (see :class:`TokenCounter`)."""
+    if protocol == "anthropic":
+        scale = min(1.0, 1568 / max(width, height))
+        return math.ceil(round(width * scale) * round(height * scale) / 750)
+    if protocol == "gemini":
+        if width <= 384 and height <= 384:
+            return 258
+        return 258 * math.ceil(width / 768) * math.ceil(height / 768)
+    scale = min(1.0, 2048 / max(width, height))
+    w, h = width * scale, height * scale
+    scale = min(1.0, 768 / min(w, h))
+    w, h = w * scale, h * scale
+    return 85 + 170 * math.ceil(w / 512) * math.ceil(h / 512)
+
+
+@dataclass
+class _Block:
+    tokens: int
+    key: str  # digest of the prompt up to and including this block
+    cache: bool  # an Anthropic cache breakpoint ends here
+
+
+class PrefixCache:
+    """The providers' prompt caches, emulated (thread-safe), per protocol and model.
+
+    A request is a sequence of blocks (each message's role markers, then each of its parts); a cached prefix is
+    identified by the digest of everything up to a block boundary.
+
+    * OpenAI (automatic): the longest prefix of at least 1024 tokens that an earlier request also had is served
+      from the cache, counted in steps of 128 tokens; every prefix of every request is remembered.
+    * Gemini (implicit, 2.5 and later): the same, minimum 1024 tokens, counted exactly.
+    * Anthropic (explicit): only prefixes ending at a ``cache_control`` breakpoint are written; a request reads
+      the longest written prefix at or before its last breakpoint and writes the rest up to that breakpoint
+      (``cache_creation_input_tokens``), when that prefix is at least 1024 tokens long.
+
+    Entries never expire (a run's three requests of a frame come seconds apart, well within every provider's
+    five-minute lifetime).
+    """
+
+    MINIMUM = 1024
+
+    def __init__(self) -> None:
+        self._seen: set[tuple[str, str, str]] = set()
+        self._lock = threading.Lock()
+
+    def lookup(self, protocol: str, model: str, blocks: list[_Block]) -> tuple[int, int]:
+        """(cached, written) tokens of a request made of ``blocks``, remembering what it leaves in the cache."""
+        ends = list(itertools.accumulate(b.tokens for b in blocks))
+        with self._lock:
+            if protocol == "anthropic":
+                marks = [i for i, b in enumerate(blocks) if b.cache]
+                if not marks or ends[marks[-1]] < self.MINIMUM:
+                    return 0, 0
+                last = marks[-1]
+                hit = max((i for i in range(last + 1) if (protocol, model, blocks[i].key) in self._seen), default=None)
+                read = ends[hit] if hit is not None else 0
+                for i in marks:
+                    self._seen.add((protocol, model, blocks[i].key))
+                return read, ends[last] - read
+            hit = max((i for i, b in enumerate(blocks) if (protocol, model, b.key) in self._seen), default=None)
+            for b in blocks:
+                self._seen.add((protocol, model, b.key))
+        read = ends[hit] if hit is not None else 0
+        if read < self.MINIMUM:
+            return 0, 0
+        return (read // 128 * 128 if protocol == "openai" else read), 0
+
+
+def _blocks(req: Received, counter: TokenCounter) -> list[_Block]:
+    """The request as prompt-cache blocks (see :class:`PrefixCache`), in order."""
+    digest = hashlib.sha256(f"{req.protocol}|{req.body.get('model', '')}".encode())
+    blocks = []
+    for role, parts in req.messages():
+        digest.update(f"<{role}>".encode())
+        blocks.append(_Block(TokenCounter.MESSAGE_TOKENS, digest.hexdigest(), False))
+        for part in parts:
+            if part["kind"] == "image":
+                digest.update(b"<image>" + hashlib.sha256(part["data"].encode("ascii", "replace")).digest())
+                tokens = counter.image(part["data"], req.protocol)
+            else:
+                digest.update(b"<text>" + part["text"].encode("utf-8"))
+                tokens = TokenCounter.text(part["text"])
+            blocks.append(_Block(tokens, digest.hexdigest(), bool(part.get("cache"))))
+    return blocks
 
 
 Script = Callable[[Received], Reply] | Sequence[Reply]
@@ -131,9 +346,19 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
     """A successful answer in the request's protocol."""
     finish = _FINISH.get(req.protocol, {}).get(reply.finish_reason, reply.finish_reason)
     if req.protocol == "anthropic":
+        content: list[dict[str, Any]] = [{"type": "text", "text": reply.content}]
+        if req.forced_tool and reply.content is not None:
+            try:
+                content = [{"type": "tool_use", "id": f"toolu_{req.index}", "name": JSON_TOOL, "input": json.loads(reply.content)}]
+                finish = "tool_use" if reply.finish_reason == "stop" else finish
+            except json.JSONDecodeError:
+                pass  # not JSON: answered as text, as a model ignoring the tool would
+        # Anthropic's input_tokens leave out the tokens read from and written to the cache
+        usage = {"input_tokens": reply.prompt_tokens - reply.cached_tokens - reply.cache_write_tokens,
+                 "output_tokens": reply.completion_tokens, "cache_read_input_tokens": reply.cached_tokens,
+                 "cache_creation_input_tokens": reply.cache_write_tokens}
         out = {"id": f"msg_{req.index}", "type": "message", "role": "assistant", "model": req.body.get("model", "fake"),
-               "content": [{"type": "text", "text": reply.content}], "stop_reason": finish, "stop_sequence": None,
-               "usage": {"input_tokens": reply.prompt_tokens, "output_tokens": reply.completion_tokens}}
+               "content": content, "stop_reason": finish, "stop_sequence": None, "usage": usage}
     elif req.protocol == "gemini":
         # Gemini counts thoughts apart from the answer's (candidates) tokens; the total holds both
         thoughts = reply.reasoning_tokens or 0
@@ -141,6 +366,8 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
                  "totalTokenCount": reply.prompt_tokens + reply.completion_tokens}
         if reply.reasoning_tokens is not None:
             usage["thoughtsTokenCount"] = thoughts
+        if reply.cached_tokens:  # Gemini leaves zero counts out
+            usage["cachedContentTokenCount"] = reply.cached_tokens
         out = {"candidates": [{"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": finish, "index": 0}],
                "usageMetadata": usage}
     else:
@@ -148,6 +375,8 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
                  "total_tokens": reply.prompt_tokens + reply.completion_tokens}
         if reply.reasoning_tokens is not None:
             usage["completion_tokens_details"] = {"reasoning_tokens": reply.reasoning_tokens}
+        if reply.cached_tokens or req.counted:
+            usage["prompt_tokens_details"] = {"cached_tokens": reply.cached_tokens}
         out = {
             "id": f"chatcmpl-{req.index}",
             "object": "chat.completion",
@@ -165,10 +394,13 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
 class FakeOpenAIServer:
     """The loopback server; a context manager. ``url`` ends in ``/v1`` (an OpenAI ``api_base``)."""
 
-    def __init__(self, script: Script | None = None, *, latency: float = 0.0, host: str = "127.0.0.1", port: int = 0, record: bool = True) -> None:
+    def __init__(self, script: Script | None = None, *, latency: float = 0.0, host: str = "127.0.0.1", port: int = 0,
+                 record: bool = True, count_tokens: bool = False, prefix_cache: bool = False) -> None:
         self.latency = latency  # added to every reply's own delay
         self.requests: list[Received] = []
         self.record = record
+        self.counter = TokenCounter() if (count_tokens or prefix_cache) else None
+        self.cache = PrefixCache() if prefix_cache else None
         self._lock = threading.Lock()
         self._counter = itertools.count()
         if script is None:
@@ -218,7 +450,7 @@ class FakeOpenAIServer:
                 if server.record:
                     with server._lock:
                         server.requests.append(req)
-                reply = server._next(req)
+                reply = server._account(req, server._next(req))
                 wait = server.latency + reply.delay
                 if wait > 0:
                     time.sleep(wait)
@@ -254,6 +486,18 @@ class FakeOpenAIServer:
                     self.close_connection = True
 
         return Handler
+
+    def _account(self, req: Received, reply: Reply) -> Reply:
+        """The reply with the request's counted tokens and emulated cache hits (when the server counts them)."""
+        if self.counter is None or reply.status != 200 or reply.body is not None:
+            return reply
+        blocks = _blocks(req, self.counter)
+        cached, written = self.cache.lookup(req.protocol, str(req.body.get("model", "")), blocks) if self.cache else (0, 0)
+        req.counted, req.prompt_tokens = True, sum(b.tokens for b in blocks)
+        req.cached_tokens, req.cache_write_tokens = cached, written
+        completion = TokenCounter.text(reply.content or "") + (reply.reasoning_tokens or 0)
+        return dataclasses.replace(reply, prompt_tokens=req.prompt_tokens, completion_tokens=completion,
+                                   cached_tokens=cached, cache_write_tokens=written)
 
     def start(self) -> FakeOpenAIServer:
         self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)

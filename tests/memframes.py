@@ -59,7 +59,8 @@ class FrameIndex:
             self._by_url[f"data:image/jpeg;base64,{data}"] = i
 
     def __call__(self, req) -> int:
-        content = req.body["messages"][-1]["content"]
-        url = next(p["image_url"]["url"] for p in content if p["type"] == "image_url")
+        """The frame of an OpenAI-protocol request: its image is the first image part of its turns."""
+        parts = (p for m in req.body["messages"] if isinstance(m["content"], list) for p in m["content"])
+        url = next(p["image_url"]["url"] for p in parts if p["type"] == "image_url")
         return self._by_url[url]
 

@@ -229,7 +229,7 @@ def test_cli_markdown_layout_with_paper(two_runs, capsys):
     assert body[1] == "| GPT-4o (paper) | 3908 | - | - | - | - | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
     assert body[2].startswith("| Δ vs paper | - | ") and body[3].startswith("| baseline:cv (synthetic data) | ")
     assert body[4].startswith("| GPT-5.0 (paper) | ") and len([b for b in body if "(paper)" in b]) == 15
-    assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | 402 | - | - | - | 3908 |" in text
+    assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | - | 402 | - | - | - | 3908 |" in text
     assert all(len(line.split("|")) == 17 for line in body)
     assert lines[header + 2 + 18] == ""  # the table ends after the 18 rows (3 + the baseline + 14 other paper rows)
     assert "95 % scene-level bootstrap interval (10000 resamples of scenes, seed 0)" in text
@@ -341,3 +341,31 @@ def test_pairs_array_turns_bad_entries_into_nan():
     out = pairs_array([good, *bad])
     assert np.isfinite(out[0]).all() and not np.isfinite(out[1:]).all(axis=(1, 2)).any()
     assert pairs_array([]).shape == (0, 6, 2)
+
+
+def test_frames_with_only_api_errors_are_counted_apart_from_format_errors(tmp_path):
+    from lightemma.runs.records import answer_received, first_answer_status
+
+    run_dir = create_run_dir(tmp_path, "m", {"model": "m", "finished_at": "t"})
+    gt = np.zeros((6, 2))
+    api_error = make_record("f3", gt, None, status="failed", first_status=None)
+    api_error["attempts"] = [{"answer": None, "status": "failed", "failure": "api_error", "reason": "API error: X"}] * 2
+    legacy = make_record("f4", gt, None, status="failed")  # written before `failure` existed: first_status "failed"
+    legacy["attempts"] = [{"answer": None, "status": "failed", "reason": "API error: X"}]
+    late = make_record("f5", gt, np.ones((6, 2)), status="ok", first_status="failed")
+    late["attempts"] = [{"answer": None, "status": "failed", "failure": "api_error"},
+                        {"answer": "[(…)]", "status": "corrected", "failure": ""}]
+    with RunWriter(run_dir) as w:
+        w.append(make_record("f1", gt, np.ones((6, 2)), status="ok"))
+        w.append(make_record("f2", gt, None, status="failed"))
+        for rec in (api_error, legacy, late):
+            w.append(rec)
+    assert [answer_received(r) for r in (api_error, legacy, late)] == [False, False, True]
+    assert first_answer_status(late) == "corrected" and first_answer_status(api_error) is None
+    ev = evaluate_runs([run_dir])
+    row = ev.accuracy_rows()[0]
+    # over the three frames with an answer (ok, failed, corrected first): FE 2/3, FE corr 1/3
+    assert row["fe_pct"] == pytest.approx(100 * 2 / 3) and row["fe_corr_pct"] == pytest.approx(100 / 3)
+    assert row["api_errors"] == 2  # the frames that never received an answer, older records included
+    assert row["failed"] == 1  # f2: an answer that failed to parse
+    assert ev.models[0].accounting["failed_final"] == 3

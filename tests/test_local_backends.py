@@ -140,7 +140,9 @@ def test_lightemma_run_with_the_hf_backend_records_truncated_babble_truthfully(t
     assert info["batch_size"] == 4 and "image" in info["token_counting"]
     assert manifest["config"]["backend_options"] == {"batch_size": 4}
     for record in contents.records.values():
-        assert (record["status"], record["first_status"], record["n_attempts"]) == ("failed", "failed", MAX_ATTEMPTS)
+        # no stage-3 answer was ever received (every scene text was cut off): no first status, no format error
+        assert (record["status"], record["first_status"], record["n_attempts"]) == ("failed", None, MAX_ATTEMPTS)
+        assert record["failure"] == "truncated"
         assert record["actions"] is None and record["trajectory"] is None and record["scene_text"] is None
         # the cut-off scene text is asked again, never pasted into stage 2
         assert [[c["stage"] for c in a["calls"]] for a in record["attempts"]] == [["scene"]] * MAX_ATTEMPTS
@@ -171,7 +173,7 @@ def test_the_hf_chain_passes_each_finished_text_on_and_fills_in_accounting(taugh
         calls = [c for a in record["attempts"] for c in a["calls"]]
         assert all(c["text"] == TAUGHT and c["finish_reason"] == "stop" for c in calls)
         for attempt in record["attempts"]:
-            assert attempt["reason"] and attempt["answer"] == TAUGHT and "failure" not in attempt
+            assert attempt["reason"] and attempt["answer"] == TAUGHT and attempt["failure"] == "format"
         assert all(1 <= c["output_tokens"] <= MAX_TOKENS for c in calls)
         assert record["input_tokens"] == sum(c["input_tokens"] for c in calls)
         assert record["output_tokens"] == sum(c["output_tokens"] for c in calls)
@@ -378,12 +380,20 @@ def test_local_options_are_refused_for_an_api_model(dataroot, tmp_path, capsys):
 
 
 class FakeSamplingParams:
-    def __init__(self, *, temperature, max_tokens):
-        self.temperature, self.max_tokens = temperature, max_tokens
+    def __init__(self, *, temperature, max_tokens, structured_outputs=None):
+        self.temperature, self.max_tokens, self.structured_outputs = temperature, max_tokens, structured_outputs
+
+
+class FakeStructuredOutputsParams:
+    """Stands in for ``vllm.sampling_params.StructuredOutputsParams`` (vLLM >= 0.12)."""
+
+    def __init__(self, *, json=None, disable_any_whitespace=False):
+        self.json, self.disable_any_whitespace = json, disable_any_whitespace
 
 
 class FakeLLM:
-    """Stands in for ``vllm.LLM``: records what it is given; answers stage 3 badly in its first stage-3 chat call.
+    """Stands in for ``vllm.LLM``: records what it is given; answers stage 3 badly in its first stage-3 chat call
+    (as JSON when its sampling parameters carry structured outputs).
 
     Its token counts follow vLLM's: ``prompt_token_ids`` includes 100 image tokens when an image is given
     and ``num_cached_tokens`` is that image prefix from the second request of the same image on.
@@ -399,25 +409,27 @@ class FakeLLM:
 
     def chat(self, conversations, sampling_params=None, use_tqdm=True):
         self.calls.append((conversations, sampling_params, use_tqdm))
-        self.action_calls += any("(v1, c1)" in c[0]["content"][-1]["text"] for c in conversations)
+        self.action_calls += any("v1, c1" in c[-1]["content"][-1]["text"] for c in conversations)
         return [self._answer(c, sampling_params) for c in conversations]
 
     def _answer(self, conversation, sampling):
-        (turn,) = conversation
-        parts = turn["content"]
-        image = parts[0]["image_pil"] if parts[0]["type"] == "image_pil" else None
-        text = parts[-1]["text"]
+        first = conversation[0]["content"]
+        image = first[0]["image_pil"] if first[0]["type"] == "image_pil" else None
+        text = conversation[-1]["content"][-1]["text"]
         key = image.tobytes() if image is not None else b""
         cached = 100 if key in self.seen else 0
         self.seen.add(key)
-        if "(v1, c1)" in text:
+        if "v1, c1" in text:
             good = "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.4, 0.0), (5.5, 0.0)]"
+            if sampling.structured_outputs is not None:
+                good = json.dumps({"actions": [[5.0 + 0.1 * k, 0.0] for k in range(6)]})
             answer = "I would rather not say." if self.action_calls == 1 else good
         else:
             answer = f"A road seen in {image.size[0]}x{image.size[1]} pixels." if image else "No image."
         words = answer.split()[: sampling.max_tokens]
         completion = type("Completion", (), {"text": " ".join(words), "token_ids": list(range(len(words) + 1))})
-        prompt = list(range(len(text.split()) + (100 if image is not None else 0)))
+        n_words = sum(len(p["text"].split()) for turn in conversation for p in turn["content"] if p["type"] == "text")
+        prompt = list(range(n_words + (100 if image is not None else 0)))
         return type("RequestOutput", (), {"prompt_token_ids": prompt, "outputs": [completion], "num_cached_tokens": cached})
 
 
@@ -426,6 +438,8 @@ def fake_vllm(monkeypatch):
     """A stand-in ``vllm`` module (``LLM``, ``SamplingParams``), installed as ``sys.modules['vllm']``."""
     module = type(sys)("vllm")
     module.LLM, module.SamplingParams, module.__version__ = FakeLLM, FakeSamplingParams, "0.32.0-fake"
+    module.sampling_params = type(sys)("vllm.sampling_params")
+    module.sampling_params.StructuredOutputsParams = FakeStructuredOutputsParams
     FakeLLM.instances.clear()
     monkeypatch.setitem(sys.modules, "vllm", module)
     return module
@@ -614,3 +628,136 @@ def test_the_checkpoints_own_sampling_settings_do_not_change_greedy_answers(qwen
     assert "not used" in backend.info["decoding"]
     # a repetition penalty or n-gram ban would have had something to act on: plain answers repeat tokens
     assert any(len(set(r.text)) < len(r.text) for r in plain)
+
+
+# -- structured answers and the conversation chain on local backends ---------------------------------
+
+
+def structured_requests(images, max_tokens=200):
+    from lightemma.backends.structured import ACTIONS_SCHEMA
+
+    return [ChatRequest(text=f"Predict the next 6 actions as JSON, v1, c1 … ({i})", stage="actions", frame_id=f"f{i}",
+                        image_path=p, params=GenerationParams(max_tokens=max_tokens), response_schema=ACTIONS_SCHEMA)
+            for i, p in enumerate(images[:3])]
+
+
+def test_hf_answers_under_xgrammar_are_always_schema_valid_even_from_random_weights(tiny, images):
+    """Random weights, greedy: without the grammar the answers are babble; with it every answer is the actions
+    object, every number within the schema's bound, and parsing can fail only on plausibility, never on format."""
+    from dataclasses import replace
+
+    from lightemma import parse_actions
+    from lightemma.backends.structured import MAGNITUDE
+
+    family, path = tiny
+    requests = structured_requests(images)
+    backend = hf(path, batch_size=3)
+    constrained = answer(backend, requests)
+    free = answer(hf(path, batch_size=3), [replace(r, response_schema=None, params=GenerationParams(max_tokens=60)) for r in requests])
+    assert backend.structured_output()["mechanism"].startswith("xgrammar ")
+    for result in constrained:
+        assert result.ok and result.finish_reason == "stop", (family, result.text)
+        value = json.loads(result.text)
+        assert list(value) == ["actions"] and len(value["actions"]) == 6 and all(len(pair) == 2 for pair in value["actions"])
+        numbers = np.array(value["actions"], dtype=np.float64)
+        assert np.isfinite(numbers).all() and (np.abs(numbers) <= MAGNITUDE).all()
+        assert result.cached_input_tokens == 0  # transformers keeps no prefix cache
+    parsed = parse_actions([r.text for r in constrained], mode="json")
+    assert set(parsed.failure) <= {"", "implausible"}, (family, parsed.reason)
+    for k, (reason, failure, result) in enumerate(zip(parsed.reason, parsed.failure, constrained)):
+        if failure == "implausible":  # the reason names a value the model really wrote
+            assert reason.split()[1] in result.text, (reason, result.text)
+        else:  # read exactly as written
+            assert np.array_equal(parsed.actions[k], np.array(json.loads(result.text)["actions"], dtype=np.float64))
+    unconstrained = parse_actions([r.text or "" for r in free], mode="json")
+    assert set(unconstrained.failure) <= {"format", "truncated"} and "" not in set(unconstrained.failure)
+
+
+def test_hf_takes_conversations_through_the_chat_template(qwen2_vl, images):
+    """The conversation chain's requests: earlier turns as user/assistant messages, the image in the first only."""
+    first = ChatRequest(text="Describe the scene.", stage="scene", frame_id="f0", image_path=images[0],
+                        params=GenerationParams(max_tokens=4))
+    later = ChatRequest(text="What should the car do?", stage="intent", frame_id="f0", image_path=images[0],
+                        params=GenerationParams(max_tokens=4), turns=(("Describe the scene.", "A quiet road."),))
+    from lightemma.backends.local import conversation
+
+    backend = hf(qwen2_vl)
+    chats = [backend._processor.apply_chat_template(conversation(r, {"type": "image"}), add_generation_prompt=True, tokenize=False)
+             for r in (first, later)]
+    one, two = answer(backend, [first, later])
+    assert chats[1].startswith(chats[0].removesuffix("<|im_start|>assistant\n"))  # the first request is the later's prefix
+    assert chats[1].count("<|image_pad|>") == 1 and "<|im_start|>assistant\nA quiet road.<|im_end|>" in chats[1]
+    assert two.input_tokens > one.input_tokens + 5
+
+
+def test_lightemma_run_with_hf_and_structured_answers_records_schema_valid_answers(taught, dataroot, tmp_path, capsys):
+    from lightemma.backends.structured import MAGNITUDE
+
+    code = cli_main(["run", "--backend", "hf", "--model", str(taught), "--dataroot", str(dataroot), "--version", "v1.0-mini",
+                     "--split", "all", "--limit", "2", "--output", str(tmp_path), "--batch-size", "2",
+                     "--max-tokens", "160", "--max-attempts", "2", "--answer-format", "structured", "--no-progress"])
+    capsys.readouterr()
+    assert code in (0, 1)
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    contents = read_run(run_dir)
+    assert contents.manifest["structured_output"]["mechanism"].startswith("xgrammar")
+    answers = [a for r in contents.records.values() for a in r["attempts"] if a["answer"] is not None and
+               a["calls"][-1]["stage"] == "actions"]
+    assert answers
+    for attempt in answers:
+        value = json.loads(attempt["answer"])["actions"]
+        assert len(value) == 6 and np.all(np.abs(np.array(value, dtype=float)) <= MAGNITUDE)
+        assert attempt["status"] == "ok" or attempt["reason"].startswith(("speed", "curvature")), attempt["reason"]
+
+
+def test_vllm_passes_the_actions_schema_as_structured_outputs_on_stage_3_only(fake_vllm, dataroot, tmp_path, capsys):
+    from lightemma.backends.structured import ACTIONS_SCHEMA
+
+    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
+                     "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
+                     "--answer-format", "structured", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    (llm,) = FakeLLM.instances
+    for conversations, sampling, _ in llm.calls:
+        is_actions = "v1, c1" in conversations[0][-1]["content"][-1]["text"]
+        if is_actions:
+            assert isinstance(sampling.structured_outputs, FakeStructuredOutputsParams)
+            assert sampling.structured_outputs.json == ACTIONS_SCHEMA.as_dict() and sampling.structured_outputs.disable_any_whitespace
+        else:
+            assert sampling.structured_outputs is None
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    contents = read_run(run_dir)
+    assert "StructuredOutputsParams" in contents.manifest["structured_output"]["mechanism"]
+    for record in contents.records.values():
+        assert record["status"] == "ok" and json.loads(record["answer"])["actions"][0] == [5.0, 0.0]
+
+
+def test_vllm_conversation_chain_and_cached_tokens_per_call(fake_vllm, dataroot, tmp_path, capsys):
+    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
+                     "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
+                     "--chain", "conversation", "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    (llm,) = FakeLLM.instances
+    shapes = [[len(c) for c in conversations] for conversations, _, _ in llm.calls]
+    assert shapes == [[1] * 4, [3] * 4, [5] * 4, [5] * 4]  # scene, intent, actions, the re-asked actions
+    for conversations, _, _ in llm.calls:
+        for conversation in conversations:
+            kinds = [[p["type"] for p in turn["content"]] for turn in conversation]
+            assert kinds[0] == ["image_pil", "text"] and all(k == ["text"] for k in kinds[1:])
+            assert [t["role"] for t in conversation] == ["user", "assistant"] * (len(conversation) // 2) + ["user"]
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    first_calls = []
+    for record in read_run(run_dir).records.values():
+        calls = [c for a in record["attempts"] for c in a["calls"]]
+        # vLLM's num_cached_tokens per request: the image prefix once the frame's first request has been through
+        assert [c["cached_input_tokens"] for c in calls[1:]] == [100, 100, 100] and calls[0]["cached_input_tokens"] in (0, 100)
+        assert record["cached_input_tokens"] == sum(c["cached_input_tokens"] for c in calls) and record["status"] == "ok"
+        first_calls.append(calls[0]["cached_input_tokens"])
+    assert 0 in first_calls  # (frames whose image repeats an earlier frame's hit the cache from their first request)
+
+
+def test_vllm_without_structured_outputs_is_refused_for_structured_answers(fake_vllm, tmp_path):
+    del fake_vllm.sampling_params
+    backend = vllm_backend()
+    with pytest.raises(UserError, match="has no StructuredOutputsParams"):
+        backend.structured_output()

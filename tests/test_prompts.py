@@ -17,9 +17,16 @@ def test_default_set_is_shipped_as_package_data_and_hashed_over_its_content():
     raw = (resources.files("lightemma.prompts") / f"{DEFAULT_PROMPT_SET}.json").read_text(encoding="utf-8")
     data = json.loads(raw)
     ps = load_prompt_set()
+    variants = data.pop("variants")  # hashed apart: the set's hash covers the paper's chain, as before variants existed
     canonical = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     assert ps.hash == "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()
     assert set(ps.stages) == {"scene", "intent", "actions"}
+    settings = {"structured": ("independent", "structured"), "conversation": ("conversation", "text"),
+                "conversation+structured": ("conversation", "structured")}
+    assert set(variants) == set(settings)
+    for name, templates in variants.items():
+        canonical = json.dumps(templates, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
+        assert ps.select(*settings[name]).variant_hash == "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()
 
 
 def test_any_change_of_wording_changes_the_hash():

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from local_models import build_tiny_model
+from local_models import build_tiny_model, teach_to_answer
 from PIL import Image
 
 import lightemma.prompts
@@ -82,6 +82,22 @@ def prompts_of(dataroot):
 @pytest.fixture(scope="module")
 def tiny(tmp_path_factory):
     return build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl"))
+
+
+@pytest.fixture(scope="module")
+def taught(tmp_path_factory, dataroot):
+    """A tiny Qwen2-VL taught to answer the short-scene prompts with "Keep the lane." and its end-of-turn token
+    (so that its chains reach stage 3 instead of being cut off at stage 1)."""
+    from lightemma.prompts import load_prompt_set
+
+    prompts = load_prompt_set(str(prompts_of(dataroot)))
+    frame = lightemma.load_frames(dataroot, "v1.0-mini", split="all")[0]
+    history = lightemma.frames.format_history(frame.history_actions)
+    said = "Keep the lane."
+    texts = [prompts.render("scene"), prompts.render("intent", scene=said, history=history),
+             prompts.render("actions", scene=said, history=history, intent=said)]
+    path = build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_taught"))
+    return teach_to_answer(path, said, prompts=texts, image=frame.image_path)
 
 
 def frames_args(dataroot, output, limit, attempts=2):
@@ -334,6 +350,40 @@ def test_more_replicas_than_the_cluster_can_place_are_refused_at_once(ray_addres
         err = capsys.readouterr().err
         assert code == 2 and what in err and f"{ray_address}) has 2" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
+
+
+def test_structured_answers_run_through_replicas(ray_address, taught, dataroot, tmp_path, capsys):
+    """Each replica constrains stage 3 with its own xgrammar processor; the manifest says how, and the answers obey."""
+    code = cli_main(["run", "--backend", "hf", "--model", str(taught), "--batch-size", "4", "--dtype", "float32",
+                     "--replicas", "2", "--gpus-per-replica", "0", "--answer-format", "structured",
+                     *frames_args(dataroot, tmp_path, 4, attempts=1), "--max-tokens", "160"])
+    err = capsys.readouterr().err
+    assert code in (0, 1), err
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    contents = read_run(run_dir)
+    how = contents.manifest["structured_output"]
+    assert how["mechanism"].startswith("xgrammar") and how["replicas"] == "each of the 2 replicas constrains its own answers"
+    assert len(contents.records) == 4
+    stage3 = [a["answer"] for r in contents.records.values() for a in r["attempts"]
+              if a["answer"] is not None and a["calls"][-1]["stage"] == "actions"]
+    assert stage3
+    for answer in stage3:
+        assert len(json.loads(answer)["actions"]) == 6, answer
+
+
+def test_structured_answers_are_refused_before_any_run_when_a_replica_cannot_constrain(ray_address, tiny, dataroot, tmp_path,
+                                                                                       capsys, monkeypatch):
+    from lightemma.backends import ray as ray_backend
+
+    async def refuse(self):
+        return {"ok": False, "message": "--answer-format structured: xgrammar is not installed on this node"}
+
+    monkeypatch.setattr(ray_backend.ReplicaServer, "structured_output", refuse)
+    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--replicas", "2", "--gpus-per-replica", "0",
+                     "--answer-format", "structured", *frames_args(dataroot, tmp_path / "out", 4)])
+    err = capsys.readouterr().err
+    assert code == 2 and "xgrammar is not installed on this node" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists() or not list((tmp_path / "out").glob("*/*/records.jsonl"))
 
 
 # -- vLLM replicas: tensor parallel through a placement group --------------------------------------

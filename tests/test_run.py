@@ -109,7 +109,8 @@ def test_malformed_answers_are_reasked_and_counted_as_format_errors(tmp_path, fr
     recs = records_of(result, frames)
     assert (recs[0]["first_status"], recs[0]["status"], recs[0]["n_attempts"]) == ("failed", "ok", 2)
     assert [c["stage"] for c in recs[0]["attempts"][1]["calls"]] == ["actions"]  # stage 3 alone re-asked
-    assert recs[0]["attempts"][0]["answer"] == GARBAGE and "found" in recs[0]["attempts"][0]["reason"]
+    assert recs[0]["attempts"][0]["answer"] == GARBAGE and "standalone number" in recs[0]["attempts"][0]["reason"]
+    assert (recs[0]["attempts"][0]["failure"], recs[0]["attempts"][1]["failure"], recs[0]["failure"]) == ("format", "", "")
     assert (recs[1]["first_status"], recs[1]["status"], recs[1]["n_attempts"]) == ("corrected", "corrected", 1)
     assert recs[1]["attempts"][0]["reason"]
     assert (recs[2]["status"], recs[2]["n_attempts"], recs[2]["actions"], recs[2]["trajectory"]) == ("failed", 3, None, None)
@@ -147,14 +148,20 @@ def test_api_errors_fail_the_frame_never_the_run_and_never_leak_into_prompts(tmp
         result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_retries=2, max_attempts=2, **FAST)
     recs = records_of(result)
     bad, flaky = recs[frames[3].frame_id], recs[frames[4].frame_id]
-    assert (bad["status"], bad["first_status"], bad["error"], bad["n_attempts"]) == ("failed", "failed", "InternalServerError", 2)
+    # no answer was ever received: not a format error, counted apart
+    assert (bad["status"], bad["first_status"], bad["error"], bad["n_attempts"]) == ("failed", None, "InternalServerError", 2)
+    assert bad["failure"] == "api_error" and [a["failure"] for a in bad["attempts"]] == ["api_error", "api_error"]
     assert bad["attempts"][0]["calls"][-1]["text"] is None and bad["attempts"][0]["answer"] is None
     assert bad["attempts"][0]["calls"][-1]["retries"] == 2
     assert [c["stage"] for c in bad["attempts"][1]["calls"]] == ["intent"]  # the failed stage is redone, not stage 1
-    assert (flaky["status"], flaky["first_status"], flaky["n_attempts"]) == ("ok", "failed", 2)
+    # the first answer received is attempt 2's, which is ok
+    assert (flaky["status"], flaky["first_status"], flaky["n_attempts"], flaky["failure"]) == ("ok", "ok", 2, "")
     assert flaky["attempts"][0]["error"] == "ServiceUnavailableError"
     assert all(marker not in req.text and "Error" not in req.text for req in server.requests)
     assert result.summary["failed"] == 1 and result.summary["api_errors"] == 3
+    s = result.summary
+    assert (s["api_error_frames"], s["answered_frames"], s["fe_percent"], s["fe_corr_percent"]) == (1, len(frames) - 1, 0.0, 0.0)
+    assert "API errors only: 1" in result.report()
 
 
 def test_unknown_price_gives_null_cost(tmp_path, frames):
@@ -298,7 +305,8 @@ def test_cli_resume_refuses_every_run_setting_even_one_given_at_its_default(tmp_
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
     for name, default in RUN_DEFAULTS.items():
         flag = "--" + name.replace("_", "-")
-        assert main(["run", "--resume", str(tmp_path), flag, str(default)]) == 2
+        values = [str(v) for v in default] if isinstance(default, tuple) else [str(default)]
+        assert main(["run", "--resume", str(tmp_path), flag, *values]) == 2
         assert f"drop {flag}" in capsys.readouterr().err, flag
     # what resume does take is not refused: the run directory itself is then checked
     assert main(["run", "--resume", str(tmp_path), "--concurrency", "4", "--no-progress"]) == 2
@@ -314,6 +322,7 @@ def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
     rec = records_of(result, frames[:1])[0]
     assert (rec["first_status"], rec["status"], rec["n_attempts"]) == ("failed", "ok", 2)
     assert rec["attempts"][0]["error"] == "EmptyResponse" and rec["attempts"][0]["answer"] is None
+    assert rec["attempts"][0]["failure"] == "format"  # an empty answer was received: a format error, not an API error
     assert rec["input_tokens"] == 4000  # the empty answer's usage counts
     assert server.stages() == ["scene", "intent", "actions", "actions"]
 
@@ -328,3 +337,66 @@ def test_baselines_run_through_the_same_chain_without_any_key(tmp_path, synth_ro
                for r in records.values())
     assert result.manifest["backend"]["kind"] == "oracle" and result.manifest["model_info"]["family"] == "baseline"
     assert result.summary["ade_avg"] < 0.5  # the oracle's own future actions, integrated
+
+
+IMPLAUSIBLE = "[(5254, 0.001), (5559, 0.001), (5864, 0.001), (6170, 0.001), (6475, 0.001), (6780, 0.001)]"
+FAST_45 = "[(45.0, 0.0), (45.0, 0.0), (45.0, 0.0), (45.0, 0.0), (45.0, 0.0), (45.0, 0.0)]"
+
+
+def test_plausibility_limits_are_run_settings_recorded_and_kept_by_resume(tmp_path, frames):
+    from lightemma.pipeline import resume
+    from lightemma.runs.store import read_manifest
+
+    def per_frame(i, stage, n):
+        if stage == "actions" and i == 0 and n == 1:
+            return Reply(IMPLAUSIBLE)  # lost decimal points: implausible, re-asked
+        if stage == "actions" and i == 1:
+            return Reply(FAST_45)  # plausible by default, not under --speed-range 0 40
+        return None
+
+    with FakeOpenAIServer(scripted(frames[:2], per_frame)) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames[:2], output=tmp_path, max_attempts=2,
+                     speed_range=(0, 40), max_abs_curvature=0.5, **FAST)
+        first, fast = records_of(result, frames[:2])
+        assert (first["first_status"], first["status"]) == ("failed", "ok")
+        assert first["attempts"][0]["failure"] == "implausible"
+        assert first["attempts"][0]["reason"] == "speed 5254 at step 1 outside [0, 40] m/s"
+        assert (fast["status"], fast["failure"], fast["n_attempts"]) == ("failed", "implausible", 2)
+        manifest = read_manifest(result.run_dir)
+        assert manifest["params"]["parse"] == {"mode": "lenient", "speed_range": [0.0, 40.0], "max_abs_curvature": 0.5}
+        assert result.summary["fe_corr_percent"] == 100.0
+        # a resume parses with the run's own limits: the 45 m/s answers still fail
+        again = resume(result.run_dir, retry_failed=True, frames=frames[:2], progress=False)
+        assert records_of(again, frames[:2])[1]["failure"] == "implausible"
+    with FakeOpenAIServer(scripted(frames[:2], per_frame)) as server:
+        plain = run("openai/test-model", api_base=server.url, frames=frames[1:2], output=tmp_path / "default", **FAST)
+        assert records_of(plain, frames[1:2])[0]["status"] == "ok"  # 45 m/s is within the default [-10, 50]
+        assert read_manifest(plain.run_dir)["params"]["parse"]["speed_range"] == [-10.0, 50.0]
+
+
+def test_runs_recorded_before_the_limits_resume_without_them():
+    from lightemma.pipeline.runner import _policy
+
+    config = {"temperature": 0.0, "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate_method": "euler"}
+    policy = _policy(config)
+    assert (policy.speed_range, policy.max_abs_curvature) == (None, None)
+    assert policy.parse_record() == {"mode": "lenient", "speed_range": None, "max_abs_curvature": None}
+    assert _policy({**config, "speed_range": [0, 30], "max_abs_curvature": 0.2}).speed_range == (0, 30)
+
+
+def test_cli_plausibility_flags(tmp_path, synth_root, capsys, monkeypatch):
+    from lightemma.cli import main
+    from lightemma.runs.store import find_run_dirs, read_manifest
+
+    monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
+    base = ["run", "--model", "baseline:oracle", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
+            "--limit", "2", "--no-progress", "--output", str(tmp_path)]
+    assert main([*base, "--speed-range", "50", "-10"]) == 2
+    assert "lightemma run: error: --speed-range LO HI needs two finite numbers with LO < HI, got 50 -10" in capsys.readouterr().err
+    assert main([*base, "--max-curvature", "0"]) == 2
+    assert "--max-curvature must be a finite number > 0" in capsys.readouterr().err
+    assert main([*base, "--speed-range", "-5", "30", "--max-curvature", "0.25"]) == 0
+    (run_dir,) = find_run_dirs(tmp_path)
+    assert read_manifest(run_dir)["params"]["parse"] == {"mode": "lenient", "speed_range": [-5.0, 30.0], "max_abs_curvature": 0.25}
+    assert main(["run", "--resume", str(run_dir), "--max-curvature", "0.3"]) == 2
+    assert "drop --max-curvature" in capsys.readouterr().err

@@ -34,9 +34,13 @@ CREATE TABLE IF NOT EXISTS responses (
 """
 
 
-def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None) -> str:
-    """The cache key of one single-turn request."""
-    payload = json.dumps([model, api_base or "", params, text, image_digest or ""], sort_keys=True, separators=(",", ":"))
+def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None,
+                turns: tuple[tuple[str, str], ...] = ()) -> str:
+    """The cache key of one request: ``text`` after the earlier ``turns`` (a single-turn request keeps its old key)."""
+    parts: list[Any] = [model, api_base or "", params, text, image_digest or ""]
+    if turns:
+        parts.append([list(t) for t in turns])
+    payload = json.dumps(parts, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(payload.encode("utf-8")).hexdigest()
 
 

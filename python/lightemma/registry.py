@@ -58,6 +58,10 @@ class ModelInfo:
     output_usd_per_mtok: float | None = None
     price_source: str | None = None
     price_read: str | None = None
+    # Prompt-cache prices (USD per million tokens, same source) when litellm's list lacks the model:
+    # tokens read from the provider's prompt cache, and tokens written to it (Anthropic bills writes above input).
+    cache_read_usd_per_mtok: float | None = None
+    cache_write_usd_per_mtok: float | None = None
     # Some providers reject temperature 0 (gpt-5 family: only the default, 1, while
     # reasoning); False means "send no temperature, the provider default applies".
     supports_temperature: bool = True
@@ -85,7 +89,9 @@ def _local(key: str, display: str, family: str, gen: int, checkpoint: str, gpus:
 
 
 _REASONS = dict(reasoning=True, reasoning_budget=DEFAULT_REASONING_BUDGET)
-_ANTHROPIC_SONNET = dict(input_usd_per_mtok=3.0, output_usd_per_mtok=15.0, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ)
+# Sonnet 3.7 and 4: $3 input, $15 output, cache hits $0.30, 5-minute cache writes $3.75 per million tokens
+_ANTHROPIC_SONNET = dict(input_usd_per_mtok=3.0, output_usd_per_mtok=15.0, cache_read_usd_per_mtok=0.30,
+                         cache_write_usd_per_mtok=3.75, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ)
 
 PAPER_MODELS: tuple[ModelInfo, ...] = (
     _api("gpt-4o", "GPT-4o", "GPT", 1, "gpt-4o"),
@@ -258,18 +264,24 @@ def price(info: ModelInfo) -> dict[str, Any]:
     (with its source and the date it was read); else unknown (``None`` prices: costs are recorded as null).
     Local models and baselines cost nothing per token (``source`` says so).
     """
+    none = {"cache_read_usd_per_mtok": None, "cache_write_usd_per_mtok": None}
     if info.backend in ("hf", "vllm", "baseline"):
         kind = "no model" if info.backend == "baseline" else "local model: GPUs, not tokens"
-        return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, "source": kind}
+        return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, **none, "source": kind}
     entry = _litellm_entry(info.model_id)
     if entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
-        return {"input_usd_per_mtok": float(entry["input_cost_per_token"]) * 1e6,
-                "output_usd_per_mtok": float(entry["output_cost_per_token"]) * 1e6,
+        def per_mtok(key: str) -> float | None:
+            return float(entry[key]) * 1e6 if entry.get(key) is not None else None
+
+        return {"input_usd_per_mtok": per_mtok("input_cost_per_token"), "output_usd_per_mtok": per_mtok("output_cost_per_token"),
+                "cache_read_usd_per_mtok": per_mtok("cache_read_input_token_cost"),
+                "cache_write_usd_per_mtok": per_mtok("cache_creation_input_token_cost"),
                 "source": f"litellm {_litellm_version()} bundled price list"}
     if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:
         return {"input_usd_per_mtok": info.input_usd_per_mtok, "output_usd_per_mtok": info.output_usd_per_mtok,
+                "cache_read_usd_per_mtok": info.cache_read_usd_per_mtok, "cache_write_usd_per_mtok": info.cache_write_usd_per_mtok,
                 "source": f"{info.price_source}, read {info.price_read}"}
-    return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, "source": "unknown (costs recorded as null)"}
+    return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, **none, "source": "unknown (costs recorded as null)"}
 
 
 def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
@@ -280,6 +292,15 @@ def price_per_token(info: ModelInfo) -> tuple[float, float] | None:
     if found["input_usd_per_mtok"] is None or found["output_usd_per_mtok"] is None:
         return None
     return found["input_usd_per_mtok"] / 1e6, found["output_usd_per_mtok"] / 1e6
+
+
+def cache_price_per_token(info: ModelInfo) -> tuple[float | None, float | None]:
+    """(cache read, cache write) USD per token from the same source as :func:`price_per_token`; None where unknown."""
+    if info.backend != "api":
+        return None, None
+    found = price(info)
+    read, write = found["cache_read_usd_per_mtok"], found["cache_write_usd_per_mtok"]
+    return (None if read is None else read / 1e6), (None if write is None else write / 1e6)
 
 
 def list_models() -> list[dict[str, Any]]:

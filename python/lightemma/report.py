@@ -197,8 +197,10 @@ def write_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     w = _Writer(out)
-    w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator |", "|---|---|---|---:|---|---|"]
-    w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | {m.integrator} |" for m in evaluation.models]
+    w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format |",
+                "|---|---|---|---:|---|---|---|---|"]
+    w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | "
+                f"{m.integrator} | {m.chain} | {m.answer_format} |" for m in evaluation.models]
     w.lines.append("")
     if evaluation.warnings:
         w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]

@@ -86,6 +86,7 @@ EFFICIENCY_COLUMNS: tuple[Column, ...] = (
     Column("seconds_per_frame", "Time/frame (s)", fixed(1)),
     Column("cost_cents_per_frame", "Cost/frame (¢)", fixed(2)),
     Column("input_tokens", "Input tokens", fixed(0)),
+    Column("cached_pct", "Cached (%)", fixed(1)),
     Column("output_tokens", "Output tokens", fixed(0)),
     Column("gpus", "GPUs"),
     Column("run_wall_seconds", "Run wall (s)", fixed(1)),

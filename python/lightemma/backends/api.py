@@ -15,6 +15,18 @@ retry can fix raises :class:`~lightemma.errors.RunFatalError` with the cause and
 the fix: a rejected key or an unknown model at once, any other failure once
 :class:`~lightemma.backends.retry.FailureStreak` sees it on frame after frame.
 Usage a provider does not report stays unknown (None), never zero.
+
+Requests are laid out for provider prefix caches: every request of a frame starts
+with the same image (then the stage text, or the conversation's earlier turns),
+so OpenAI's and Gemini's automatic caches hit from a frame's second request on;
+for Anthropic, whose cache is explicit, the image part carries a cache breakpoint
+(``cache_control``), and so does the last part of a conversation request that a
+later stage extends. Cached input tokens are recorded per call as the provider
+reports them (OpenAI ``prompt_tokens_details.cached_tokens``, Anthropic
+``cache_read_input_tokens`` and ``cache_creation_input_tokens``, Gemini
+``cachedContentTokenCount``), and costs price them as the provider bills them
+(litellm's cost functions and bundled list; the registry's cache prices where
+litellm lacks the model).
 """
 
 from __future__ import annotations
@@ -26,11 +38,12 @@ import os
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from lightemma._litellm import litellm
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams, is_truncated
-from lightemma.backends.local import user_turn
+from lightemma.backends.local import conversation
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import (
     FATAL,
@@ -44,7 +57,15 @@ from lightemma.backends.retry import (
 )
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import RunFatalError, UserError
-from lightemma.registry import ModelInfo, price_per_token, reasoning_budget, resolve, suggest
+from lightemma.registry import (
+    ModelInfo,
+    _litellm_entry,
+    cache_price_per_token,
+    price_per_token,
+    reasoning_budget,
+    resolve,
+    suggest,
+)
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
@@ -57,6 +78,10 @@ ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provi
 IMAGE_LIMITS: dict[str, tuple[int, int | None]] = {"anthropic": (5_000_000, 8000), "openai": (20_000_000, None),
                                                    "gemini": (18_000_000, None), "vertex_ai": (18_000_000, None)}
 DEFAULT_IMAGE_LIMIT: tuple[int, int | None] = (20_000_000, None)
+# Providers whose usage block leaves out a cache count that is zero (Gemini omits zero fields; Anthropic's are
+# always there): a reported usage without one means no cached tokens, not unknown.
+ZERO_WHEN_ABSENT = ("anthropic", "gemini", "vertex_ai")
+CACHE_BREAKPOINT = {"type": "ephemeral"}  # Anthropic's cache_control (5-minute cache)
 
 #: kept for callers that caught the API backend's own fatal error class
 FatalBackendError = RunFatalError
@@ -263,6 +288,7 @@ class APIBackend:
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
         self._secrets = tuple(s for s in (*_secret_values(), self._api_key or "") if s and s != NO_KEY)
         self._price = price_per_token(self.model_info)
+        self._cache_price = cache_price_per_token(self.model_info)
         self._litellm_prices = True  # switched off after litellm fails to price this model once
         self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
         self.transport = transport
@@ -285,6 +311,33 @@ class APIBackend:
             return True
         return supported is None or param in supported
 
+    def structured_output(self) -> dict[str, Any]:
+        """How this model is constrained to a JSON schema (recorded in the manifest), or a :class:`UserError`.
+
+        An OpenAI-compatible server at ``--api-base`` gets ``response_format`` as sent (vLLM and SGLang
+        enforce it; a server that rejects it fails the first stage-3 calls, and the run stops with its
+        message). Any other model needs litellm's own word (``litellm.supports_response_schema``, from its
+        bundled list) that the provider constrains it: litellm would otherwise only paste the schema into
+        the prompt, which makes no answer format-proof.
+        """
+        if self.api_base and self.provider in OPENAI_COMPATIBLE:
+            return {"mechanism": "response_format json_schema (strict), enforced by the OpenAI-compatible server at "
+                                 f"{self.api_base}", "pair_count_enforced": True}
+        if not litellm.supports_response_schema(model=self.model):
+            raise UserError(f"--answer-format structured: litellm {_litellm_version()} does not mark {self.model} as able to "
+                            "follow a JSON schema (it would only paste the schema into the prompt); use --answer-format text "
+                            "or a model that supports structured outputs")
+        if self.provider == "anthropic":
+            native = _litellm_entry(self.model).get("supports_native_structured_output") is True
+            mechanism = ("Anthropic structured outputs (output_format json_schema, mapped by litellm)" if native else
+                         "Anthropic forced tool call (litellm's json_tool_call; the schema guides but is not grammar-enforced)")
+            return {"mechanism": mechanism, "pair_count_enforced": False,
+                    "note": "Anthropic accepts no minItems/maxItems: litellm moves the pair count into the schema's description"}
+        if self.provider in ("gemini", "vertex_ai"):
+            return {"mechanism": "Gemini response schema (responseMimeType application/json, mapped by litellm)",
+                    "pair_count_enforced": True}
+        return {"mechanism": "response_format json_schema (strict)", "pair_count_enforced": True}
+
     def effective_params(self, params: GenerationParams) -> dict[str, Any]:
         """The decoding parameters actually sent (temperature omitted where the provider rejects it)."""
         out: dict[str, Any] = {"max_tokens": params.max_tokens + self.reasoning_budget}
@@ -302,8 +355,15 @@ class APIBackend:
             "registry": self.model_info.to_dict(),
             "litellm_version": _litellm_version(),
             "token_counting": "provider-reported usage (prompt_tokens / completion_tokens)",
-            "cost": ("litellm's bundled price list, else the registry's provider price" if self.transport == "litellm"
-                     else "price list × provider-reported tokens (litellm's bundled list, else the registry's)"),
+            "cached_input_tokens": "provider-reported: OpenAI prompt_tokens_details.cached_tokens, Anthropic "
+                                   "cache_read_input_tokens (writes: cache_creation_input_tokens), Gemini cachedContentTokenCount",
+            "prompt_cache": ("cache_control breakpoint after the image (and at the end of a conversation request a later "
+                             "stage extends)" if self.provider == "anthropic" else
+                             "automatic prefix cache of the provider: every request of a frame starts with the same image"),
+            "cost": ("litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
+                     "else the registry's provider prices" if self.transport == "litellm" else
+                     "litellm.cost_per_token on the provider-reported tokens (cached tokens at the cached price), "
+                     "else the registry's provider prices"),
             "temperature_sent": self._sends_temperature,
             "reasoning": {"reasons": bool(self.reasoning_budget), "budget_tokens": self.reasoning_budget,
                           "max_tokens_sent": "--max-tokens + budget_tokens (the answer keeps --max-tokens of room)"},
@@ -344,12 +404,18 @@ class APIBackend:
                 return self._observe(req, ChatResult(text=None, error="ImageReadError", error_message=short_message(exc),
                                                      seconds=time.perf_counter() - start))
             image_part = {"type": "image_url", "image_url": {"url": url}}
-        messages = user_turn(req, image_part)
+        messages = conversation(req, image_part)
+        if self.provider == "anthropic":
+            _mark_cache_breakpoints(messages, image=image_part is not None, end=req.prefix_of_next)
         params = self.effective_params(req.params)
+        if req.response_schema is not None:
+            from lightemma.backends.structured import openai_response_format
+
+            params["response_format"] = openai_response_format(req.response_schema)
 
         key = None
         if self.cache is not None and params.get("temperature", None) == 0:
-            key = request_key(self.model, self.api_base, params, req.text, digest)
+            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns)
             hit = self.cache.get(key)
             if hit is not None:
                 return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],
@@ -449,35 +515,38 @@ class APIBackend:
         """One call over the configured transport; raises on a failed call."""
         if self._http is not None:
             data = await self._http.chat(self._wire_model, messages, params)
-            tin, tout, reasoning = _usage(data.get("usage"))
+            usage = _usage(data.get("usage"), self.provider)
             choice = (data.get("choices") or [{}])[0]
             text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
-            cost = self._price_cost(tin, tout)
+            cost = self._direct_cost(usage)
         else:
             response = await litellm.acompletion(
                 model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
                 timeout=self.timeout, num_retries=0, max_retries=0, **params,
             )
-            tin, tout, reasoning = _usage(getattr(response, "usage", None))
+            usage = _usage(getattr(response, "usage", None), self.provider)
             choices = getattr(response, "choices", None) or [None]
             text = getattr(getattr(choices[0], "message", None), "content", None)
             finish = getattr(choices[0], "finish_reason", None)
-            cost = self._litellm_cost(response, tin, tout)
+            cost = self._litellm_cost(response, usage)
         seconds = time.perf_counter() - start
         finish = str(finish) if finish is not None else None
-        common = dict(input_tokens=tin, output_tokens=tout, seconds=seconds, cost_cents=cost, retries=retries,
-                      finish_reason=finish, reasoning_tokens=reasoning)
+        common = dict(input_tokens=usage.input, output_tokens=usage.output, seconds=seconds, cost_cents=cost, retries=retries,
+                      finish_reason=finish, reasoning_tokens=usage.reasoning, cached_input_tokens=usage.cached,
+                      cache_write_tokens=usage.written)
+        reasoning = usage.reasoning
         if not text or not str(text).strip():
             spent = f", {reasoning} reasoning tokens" if reasoning else ""
             return ChatResult(text=None, error="EmptyResponse", error_message=f"no answer text (finish_reason={finish}{spent})", **common)
         return ChatResult(text=str(text), **common)
 
-    def _litellm_cost(self, response: Any, tin: int | None, tout: int | None) -> float | None:
-        """Cost in US cents: what litellm priced the call at (its bundled list), else the registry price.
+    def _litellm_cost(self, response: Any, usage: Usage) -> float | None:
+        """Cost in US cents: what litellm priced the call at (its bundled list, cached tokens at their price), else
+        the registry price.
 
         None when the provider reported no usage: litellm would price that as zero tokens.
         """
-        if tin is None or tout is None:
+        if usage.input is None or usage.output is None:
             return None
         usd = (getattr(response, "_hidden_params", None) or {}).get("response_cost")
         if usd is None and self._litellm_prices:
@@ -487,13 +556,37 @@ class APIBackend:
                 self._litellm_prices = False
         if usd:
             return float(usd) * 100.0
-        return self._price_cost(tin, tout)
+        return self._price_cost(usage)
 
-    def _price_cost(self, tin: int | None, tout: int | None) -> float | None:
-        """Cost in US cents from the per-token price (None when the price or the usage is unknown)."""
-        if self._price is not None and tin is not None and tout is not None:
-            return (tin * self._price[0] + tout * self._price[1]) * 100.0
-        return None
+    def _direct_cost(self, usage: Usage) -> float | None:
+        """Cost in US cents of a direct-transport call: ``litellm.cost_per_token`` on the reported tokens (cached
+        tokens at the cached price) when litellm's list has the model, else the registry price."""
+        if usage.input is None or usage.output is None:
+            return None
+        if self._litellm_prices:
+            try:
+                usd = sum(litellm.cost_per_token(model=self.model, prompt_tokens=usage.input, completion_tokens=usage.output,
+                                                 cache_read_input_tokens=usage.cached or 0,
+                                                 cache_creation_input_tokens=usage.written or 0))
+                return float(usd) * 100.0
+            except Exception:  # noqa: BLE001 - not in litellm's list: the registry's price below, and stop asking
+                self._litellm_prices = False
+        return self._price_cost(usage)
+
+    def _price_cost(self, usage: Usage) -> float | None:
+        """Cost in US cents from the registry's per-token prices, cached and cache-write tokens at theirs.
+
+        None when the price or the usage is unknown, or when cached tokens were reported whose price is unknown.
+        """
+        if self._price is None or usage.input is None or usage.output is None:
+            return None
+        (price_in, price_out), (price_read, price_write) = self._price, self._cache_price
+        read, written = usage.cached or 0, usage.written or 0
+        if (read and price_read is None) or (written and price_write is None):
+            return None
+        usd = (usage.input - read - written) * price_in + usage.output * price_out
+        usd += read * (price_read or 0.0) + written * (price_write or 0.0)
+        return usd * 100.0
 
     async def aclose(self) -> None:
         if self._http is not None:
@@ -502,23 +595,68 @@ class APIBackend:
             self.cache.close()
 
 
-def _usage(usage: Any) -> tuple[int | None, int | None, int | None]:
-    """(input, output, reasoning) tokens from an OpenAI-style usage block (a dict or litellm's object).
+@dataclass(frozen=True)
+class Usage:
+    """One call's tokens as the provider reported them; None = not reported (unknown, never zero).
+
+    ``input`` counts every prompt token, ``cached`` those read from the provider's prompt cache and
+    ``written`` those written to it (both included in ``input``); ``reasoning`` is of ``output``.
+    """
+
+    input: int | None = None
+    output: int | None = None
+    reasoning: int | None = None
+    cached: int | None = None
+    written: int | None = None
+
+
+def _count(value: Any) -> int | None:
+    return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else None
+
+
+def _usage(usage: Any, provider: str | None = None) -> Usage:
+    """The tokens of an OpenAI-style usage block (a dict or litellm's object, which normalises Anthropic's and
+    Gemini's: ``prompt_tokens`` includes cache reads and writes).
 
     A block that is missing, or says 0 input tokens (impossible for a non-empty prompt; litellm
-    fills a missing block with zeros), is unknown: (None, None, None).
+    fills a missing block with zeros), is unknown. Cache counts a provider left out are zero for
+    :data:`ZERO_WHEN_ABSENT` providers, unknown for the others (an OpenAI-compatible server may not say).
     """
     def get(obj: Any, name: str) -> Any:
         return obj.get(name) if isinstance(obj, Mapping) else getattr(obj, name, None)
 
     if usage is None:
-        return None, None, None
+        return Usage()
     tin, tout = get(usage, "prompt_tokens"), get(usage, "completion_tokens")
     if not isinstance(tin, int) or tin <= 0 or not isinstance(tout, int) or tout < 0:
-        return None, None, None
+        return Usage()
     details = get(usage, "completion_tokens_details")
-    reasoning = get(details, "reasoning_tokens") if details is not None else None
-    return tin, tout, reasoning if isinstance(reasoning, int) and reasoning >= 0 else None
+    reasoning = _count(get(details, "reasoning_tokens")) if details is not None else None
+    prompt_details = get(usage, "prompt_tokens_details")
+    cached = _count(get(prompt_details, "cached_tokens")) if prompt_details is not None else None
+    if cached is None:
+        cached = _count(get(usage, "cache_read_input_tokens"))
+    written = _count(get(usage, "cache_creation_input_tokens"))
+    if provider in ZERO_WHEN_ABSENT:
+        cached = 0 if cached is None else cached
+        written = 0 if written is None else written
+    return Usage(tin, tout, reasoning, cached, written)
+
+
+def _mark_cache_breakpoints(messages: list[dict[str, Any]], *, image: bool, end: bool) -> None:
+    """Anthropic cache breakpoints, in place (at most 3 of the 4 allowed).
+
+    After the image (the first part of the first turn): every request of a frame reads it. In a
+    conversation, also after the previous user turn (where the previous request ended and wrote its
+    prefix: Anthropic looks for cached prefixes only at or before a breakpoint), and, when a later
+    request extends this one (``end``), after its last part, so that the next request reads it all.
+    """
+    if image:
+        messages[0]["content"][0]["cache_control"] = dict(CACHE_BREAKPOINT)
+    if len(messages) >= 3:
+        messages[-3]["content"][-1]["cache_control"] = dict(CACHE_BREAKPOINT)
+    if end:
+        messages[-1]["content"][-1]["cache_control"] = dict(CACHE_BREAKPOINT)
 
 
 def _litellm_version() -> str | None:

@@ -14,6 +14,11 @@ accounting and run store.
 
 API errors are never model text: a failed call returns a :class:`ChatResult`
 with ``text=None`` and ``error`` set to an error class name.
+
+A backend that can constrain answers to a JSON schema (``--answer-format
+structured``) also has ``structured_output() -> dict``: how it does so (recorded
+in the manifest), or a :class:`~lightemma.errors.UserError` saying why it cannot;
+a backend without the method is refused for structured runs.
 """
 
 from __future__ import annotations
@@ -41,8 +46,37 @@ class GenerationParams:
 
 
 @dataclass(frozen=True)
+class ResponseSchema:
+    """A JSON schema the answer must match, enforced by the backend's constrained decoding.
+
+    ``schema`` is the canonical JSON text of the schema (hashable, so that requests sharing one can
+    share a batch); :meth:`as_dict` gives the object. ``name`` is what providers call it.
+    """
+
+    name: str
+    schema: str
+
+    @classmethod
+    def of(cls, name: str, schema: Mapping[str, Any]) -> ResponseSchema:
+        import json
+
+        return cls(name=name, schema=json.dumps(schema, sort_keys=True, separators=(",", ":")))
+
+    def as_dict(self) -> dict[str, Any]:
+        import json
+
+        return json.loads(self.schema)
+
+
+@dataclass(frozen=True)
 class ChatRequest:
-    """One stage of one frame: a single user turn of ``text`` plus the image (if any)."""
+    """One stage of one frame: the user turn ``text``, after the earlier ``turns`` of the conversation (if any).
+
+    The image (if any) goes first in the first user turn: in ``turns[0]`` when there are earlier turns,
+    else before ``text``. ``turns`` holds (user text, assistant text) exchanges, oldest first (the
+    ``conversation`` chain); it is empty for the paper's independent stages. ``response_schema`` asks for
+    an answer matching a JSON schema through the backend's structured-output mechanism.
+    """
 
     text: str
     stage: str  # one of STAGES
@@ -51,6 +85,11 @@ class ChatRequest:
     params: GenerationParams = field(default_factory=GenerationParams)
     # The frame itself, for backends that need no model (baselines) — never sent to a provider.
     frame: Any = None
+    turns: tuple[tuple[str, str], ...] = ()
+    response_schema: ResponseSchema | None = None
+    # A later request of the frame starts with this whole request (the conversation chain's stages 1 and 2):
+    # a backend with an explicit prompt cache (Anthropic) marks its end for caching.
+    prefix_of_next: bool = False
 
 
 @dataclass
@@ -72,6 +111,8 @@ class ChatResult:
     reasoning_tokens: int | None = None
     # Of input_tokens, those served from the provider's (or vLLM's) prefix cache; None when unknown.
     cached_input_tokens: int | None = None
+    # Of input_tokens, those written to the provider's prompt cache (Anthropic bills them above the input price).
+    cache_write_tokens: int | None = None
 
     @property
     def ok(self) -> bool:

@@ -8,7 +8,8 @@
 They run through the same three-stage chain, parser, accounting and run store
 as any model (``lightemma run --model baseline:cv``), so their runs have exactly
 the format of model runs: stages 1 and 2 get a fixed short text, stage 3 the
-six actions in the strict format ``[(v1, c1), …]``; zero tokens, zero cost.
+six actions in the strict format ``[(v1, c1), …]`` (or, asked for a response
+schema, the JSON object ``{"actions": [[v1, c1], …]}``); zero tokens, zero cost.
 """
 
 from __future__ import annotations
@@ -56,6 +57,13 @@ def format_actions(actions: np.ndarray) -> str:
     return format_history(round_like_python(actions, 6))
 
 
+def format_actions_json(actions: np.ndarray) -> str:
+    """Six actions as the structured answer ``{"actions": [[v1, c1], …]}``, plain decimals of up to 6 places."""
+    import json
+
+    return json.dumps({"actions": round_like_python(actions, 6).tolist()})
+
+
 class BaselineBackend:
     """A :class:`lightemma.backends.base.Backend` answering from the frame itself."""
 
@@ -78,10 +86,15 @@ class BaselineBackend:
         if request.frame is None:
             return ChatResult(text=None, error="ValueError", error_message=f"baseline needs the frame of {request.frame_id}")
         try:
-            text = format_actions(baseline_actions(self.kind, request.frame))
+            actions = baseline_actions(self.kind, request.frame)
+            text = format_actions(actions) if request.response_schema is None else format_actions_json(actions)
         except ValueError as exc:
             return ChatResult(text=None, error="ValueError", error_message=str(exc))
         return ChatResult(text=text, input_tokens=0, output_tokens=0, cost_cents=0.0, finish_reason="stop", reasoning_tokens=0)
+
+    def structured_output(self) -> dict[str, Any]:
+        """Baselines answer a response schema's JSON object themselves."""
+        return {"mechanism": "the baseline writes the JSON object itself", "pair_count_enforced": True}
 
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer every request, in order; a request it cannot answer gets an error result."""

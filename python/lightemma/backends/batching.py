@@ -12,7 +12,7 @@ many prompts at once, so :class:`MicroBatcher` sits between the two:
   call of ``run_batch`` and resolves each request's future with its result.
 
 Requests share a batch only when they are of the same stage and carry the same
-:class:`~lightemma.backends.base.GenerationParams`; when several stages are
+:class:`~lightemma.backends.base.GenerationParams` (and the same response schema, if any); when several stages are
 pending, the batch is built around the stage of the *oldest* pending request,
 and requests of other stages wait, in order, for a later batch. Because frames
 move through the chain in lockstep (all stage-1 requests arrive together, then
@@ -73,8 +73,8 @@ class _Pending:
     loop: asyncio.AbstractEventLoop
 
     @property
-    def key(self) -> tuple[str, object]:
-        return (self.request.stage, self.request.params)
+    def key(self) -> tuple[str, object, object]:
+        return (self.request.stage, self.request.params, self.request.response_schema)
 
 
 def error_result(exc: BaseException, seconds: float = 0.0) -> ChatResult:

@@ -9,7 +9,12 @@ Requests from the per-frame chains are gathered by a
 :class:`~lightemma.backends.batching.MicroBatcher` into batches of up to
 ``batch_size`` requests of one stage; one thread owns the model and runs one
 left-padded ``generate`` per batch. Decoding is greedy at temperature 0
-(sampling otherwise). Placement: bf16 and ``device_map="auto"`` across the
+(sampling otherwise). A stage-3 request of a structured run is decoded under
+xgrammar's grammar for the actions JSON schema (its transformers logits
+processor masks every token the schema does not allow, so the answer cannot
+break the format); multi-turn requests (the ``conversation`` chain) go through
+the model's chat template like single turns. transformers has no prefix cache
+across requests: every call's cached input tokens are 0. Placement: bf16 and ``device_map="auto"`` across the
 GPUs present; float32 on CPU. torch and transformers are imported when a
 backend is built, never when this module is imported.
 """
@@ -22,7 +27,7 @@ from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher
-from lightemma.backends.local import DECODING, check_options, load_image, require, token_counting, user_turn
+from lightemma.backends.local import DECODING, check_options, conversation, load_image, require, token_counting
 from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
@@ -74,6 +79,7 @@ class HFBackend:
         self._eos_ids = self._end_ids()
         self._oom_error = getattr(torch, "OutOfMemoryError", torch.cuda.OutOfMemoryError)
         self.oom_splits = 0  # batches halved after running out of GPU memory
+        self._grammars: dict[Any, Any] = {}  # ResponseSchema -> xgrammar CompiledGrammar
         self._transformers_version = transformers.__version__
         self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
                                      name=f"lightemma-hf-{self.model_type}", describe_fatal=self._describe_fatal)
@@ -173,6 +179,7 @@ class HFBackend:
             "image_cap": self._image_cap,
             "decoding": DECODING,
             "token_counting": token_counting(self.model_type),
+            "cached_input_tokens": "0: transformers keeps no prefix cache across requests",
             "seconds": "wall time of the batch the request ran in",
             "torch": torch.__version__,
             "transformers": transformers.__version__,
@@ -181,6 +188,31 @@ class HFBackend:
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer ``requests`` (in order) through the micro-batcher; a failed batch gives error results."""
         return await self._batcher.submit(requests)
+
+    def structured_output(self) -> dict[str, Any]:
+        """How stage 3 is constrained to the actions JSON schema (recorded in the manifest), or a UserError."""
+        require("xgrammar", "hf")
+        from importlib.metadata import version
+
+        return {"mechanism": f"xgrammar {version('xgrammar')} grammar of the JSON schema (no free whitespace), applied by "
+                             "its transformers logits processor", "pair_count_enforced": True}
+
+    def _logits_processors(self, requests: Sequence[ChatRequest]) -> list[Any]:
+        """The xgrammar logits processor for a batch with a response schema (one per ``generate``), else none."""
+        schema = requests[0].response_schema
+        if schema is None:
+            return []
+        xgr = require("xgrammar", "hf")
+        from xgrammar.contrib.hf import LogitsProcessor
+
+        compiled = self._grammars.get(schema)
+        if compiled is None:
+            tokenizer = self._processor.tokenizer
+            vocab = self._model.get_output_embeddings().weight.shape[0]  # logits width (may exceed the tokenizer's)
+            info = xgr.TokenizerInfo.from_huggingface(tokenizer, vocab_size=vocab, stop_token_ids=sorted(self._eos_ids))
+            compiled = xgr.GrammarCompiler(info).compile_json_schema(schema.schema, any_whitespace=False)
+            self._grammars[schema] = compiled
+        return [LogitsProcessor(compiled)]
 
     async def aclose(self) -> None:
         """Stop the worker thread and free the model's (GPU) memory."""
@@ -219,8 +251,10 @@ class HFBackend:
         start = time.perf_counter()
         inputs = self._encode(requests)
         params = requests[0].params
+        processors = self._logits_processors(requests)
+        extra = {"logits_processor": processors} if processors else {}
         with self._torch.inference_mode():
-            output = self._model.generate(**inputs, **self._decoding(params))
+            output = self._model.generate(**inputs, **self._decoding(params), **extra)
         prompt_len = inputs["input_ids"].shape[1]
         input_counts = inputs["attention_mask"].sum(dim=1).tolist()
         generated = output[:, prompt_len:].tolist()
@@ -239,7 +273,7 @@ class HFBackend:
         """Chat template + processor for a batch: padded tensors on the model's first device."""
         has_image = bool(requests[0].image_path)
         image_part = {"type": "image"} if has_image else None
-        texts = [self._processor.apply_chat_template(user_turn(r, image_part), add_generation_prompt=True, tokenize=False)
+        texts = [self._processor.apply_chat_template(conversation(r, image_part), add_generation_prompt=True, tokenize=False)
                  for r in requests]
         cap = self.max_pixels if self._image_cap and self._image_cap.startswith("Pillow") else None
         images = [[load_image(str(r.image_path), cap)] for r in requests] if has_image else None
@@ -255,4 +289,4 @@ class HFBackend:
         n_out = len(row) if end is None else end + 1
         text = self._processor.tokenizer.decode(row[:n_out if end is None else end], skip_special_tokens=True)
         return ChatResult(text=text, input_tokens=input_tokens, output_tokens=n_out, seconds=seconds, cost_cents=None,
-                          finish_reason="length" if end is None else "stop")
+                          finish_reason="length" if end is None else "stop", cached_input_tokens=0)

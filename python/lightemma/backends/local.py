@@ -1,11 +1,13 @@
 """What the local backends (``hf``, ``vllm``) share: option checks, the chat turn, image loading, imports,
 checkpoint facts.
 
-Every stage of a frame is ONE user turn whose content is the image first, then
-the stage's text. The image goes first in every backend so that the prompt
-prefix (template header + image) is identical across the three stages of a
-frame, which lets vLLM's prefix cache reuse it; the layout is the same for
-``hf`` so both backends see the same prompt.
+Every stage of a frame is one user turn whose content is the image first, then
+the stage's text (the paper's independent stages); in the ``conversation`` chain,
+the earlier stages come first as user/assistant turns, and the image is in the
+first user turn only. The image goes first in every backend so that the prompt
+prefix (template header + image) is identical across the three requests of a
+frame, which lets vLLM's prefix cache (and a provider's) reuse it; the layout is
+the same for ``hf``, ``vllm`` and the API backend so all see the same prompt.
 """
 
 from __future__ import annotations
@@ -45,11 +47,20 @@ def check_options(batch_size: int, max_pixels: int | None) -> None:
         raise UserError(f"--batch-size must be at least 1, got {batch_size}")
 
 
-def user_turn(request: ChatRequest, image_part: dict[str, Any] | None) -> list[dict[str, Any]]:
-    """The conversation for one request: a single user turn, ``image_part`` first (if any), then the text."""
-    content: list[dict[str, Any]] = [image_part] if image_part is not None else []
-    content.append({"type": "text", "text": request.text})
-    return [{"role": "user", "content": content}]
+def conversation(request: ChatRequest, image_part: dict[str, Any] | None) -> list[dict[str, Any]]:
+    """The messages of one request: its earlier turns (if any), then its user turn; ``image_part`` first in the first.
+
+    Every content is a list of parts (``{"type": "text", "text": …}``), so that a backend can mark a part
+    (Anthropic's cache breakpoints). A request without earlier turns is one user turn [image, text].
+    """
+    texts = [(role, text) for user, answer in request.turns for role, text in (("user", user), ("assistant", answer))]
+    texts.append(("user", request.text))
+    messages = []
+    for i, (role, text) in enumerate(texts):
+        content: list[dict[str, Any]] = [dict(image_part)] if i == 0 and image_part is not None else []
+        content.append({"type": "text", "text": text})
+        messages.append({"role": role, "content": content})
+    return messages
 
 
 def cap_pixels(width: int, height: int, max_pixels: int | None) -> tuple[int, int]:

@@ -132,6 +132,17 @@ class ReplicaServer:
         except RunFatalError as exc:
             return _Fatal(str(exc), exc.cause, exc.error)
 
+    async def structured_output(self) -> dict[str, Any]:
+        """How this replica's backend constrains answers to a JSON schema, or why it cannot (as data, never raised)."""
+        check = getattr(self._backend, "structured_output", None)
+        if check is None:
+            return {"ok": False, "message": f"--answer-format structured: the {getattr(self._backend, 'name', '?')} "
+                                            "backend cannot constrain answers to a JSON schema; use --answer-format text"}
+        try:
+            return {"ok": True, "how": check()}
+        except UserError as exc:
+            return {"ok": False, "message": str(exc)}
+
     async def stats(self) -> dict[str, Any] | None:
         """The backend's batching statistics (this incarnation of the replica)."""
         return dict(self._backend.stats) if self._backend is not None and hasattr(self._backend, "stats") else None
@@ -464,6 +475,15 @@ class RayBackend:
     def replica_report(self) -> dict[str, Any]:
         """Requests, frames, deaths, restarts and re-dispatches per replica in this session."""
         return {**self.router.report(), **({"batching": self._batching} if self._batching else {})}
+
+    def structured_output(self) -> dict[str, Any]:
+        """How every replica constrains stage 3 to the actions JSON schema (asked of each), or a :class:`UserError`."""
+        ray = self._ray
+        answers = ray.get([r.handle.structured_output.remote() for r in self.replicas])
+        refused = next((a for a in answers if not a["ok"]), None)
+        if refused is not None:
+            raise UserError(refused["message"])
+        return {**answers[0]["how"], "replicas": f"each of the {len(answers)} replicas constrains its own answers"}
 
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer ``requests`` (in order), each on its frame's replica; raises only :class:`RunFatalError`."""

@@ -4,9 +4,14 @@ Requests from the per-frame chains are gathered by the same
 :class:`~lightemma.backends.batching.MicroBatcher` as the ``hf`` backend (one
 stage per batch, default up to 64 requests) and answered by ONE ``LLM.chat``
 call over the batch's conversations; vLLM schedules them with continuous
-batching. Each conversation is one user turn with the image first
-(:mod:`lightemma.backends.local`), and prefix caching is on, so the template
-header and image of a frame are computed once and reused by its later stages.
+batching. Each conversation is one user turn with the image first (or, in the
+``conversation`` chain, the earlier turns with the image in the first;
+:mod:`lightemma.backends.local`), and prefix caching is on, so the template
+header and image of a frame are computed once and reused by its later stages;
+each call records the prompt tokens served from that cache (``num_cached_tokens``).
+A stage-3 request of a structured run is constrained to the actions JSON schema
+through vLLM's structured outputs (``SamplingParams(structured_outputs=
+StructuredOutputsParams(json=…))``, vLLM ≥ 0.12).
 
 Not supported by current vLLM (0.32): Llama-3.2-Vision (``mllama``); such
 models are refused with a pointer to ``--backend hf``. An OpenAI-compatible ``vllm serve`` server
@@ -25,7 +30,7 @@ from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.batching import MicroBatcher
-from lightemma.backends.local import DECODING, check_options, is_mllama, load_image, require, token_counting, user_turn
+from lightemma.backends.local import DECODING, check_options, conversation, is_mllama, load_image, require, token_counting
 from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
@@ -135,6 +140,7 @@ class VLLMBackend:
             "image_cap": "Pillow downscale before vLLM's processor" if self.max_pixels else None,
             "decoding": DECODING,
             "token_counting": token_counting(self.model_type) + " (vLLM's prompt_token_ids and output token_ids)",
+            "cached_input_tokens": "vLLM's num_cached_tokens per request (prefix cache hits)",
             "seconds": "wall time of the LLM.chat call the request ran in",
             "vllm": getattr(self._vllm, "__version__", None),
         }
@@ -150,18 +156,36 @@ class VLLMBackend:
 
     # -- one batch, on the worker thread ----------------------------------------------------------
 
+    def structured_output(self) -> dict[str, Any]:
+        """How stage 3 is constrained to the actions JSON schema (recorded in the manifest), or a UserError."""
+        params = getattr(getattr(self._vllm, "sampling_params", None), "StructuredOutputsParams", None)
+        if params is None:
+            raise UserError(f"--answer-format structured: vLLM {getattr(self._vllm, '__version__', '?')} has no "
+                            "StructuredOutputsParams (vLLM 0.12 or later has); use --answer-format text")
+        return {"mechanism": "vLLM structured outputs: SamplingParams(structured_outputs=StructuredOutputsParams("
+                             "json=schema, disable_any_whitespace=True)); vLLM picks the grammar engine (xgrammar by default)",
+                "pair_count_enforced": True}
+
     def conversation(self, request: ChatRequest) -> list[dict[str, Any]]:
-        """The one-turn conversation for ``request``: the PIL image first (if any), then the text."""
+        """The conversation for ``request``: earlier turns (if any), the PIL image first in the first user turn."""
         image = None
         if request.image_path:
             image = {"type": "image_pil", "image_pil": load_image(str(request.image_path), self.max_pixels)}
-        return user_turn(request, image)
+        return conversation(request, image)
+
+    def _sampling(self, request: ChatRequest) -> Any:
+        """vLLM sampling parameters of a batch like ``request``: its decoding, and its response schema if any."""
+        params = request.params
+        extra: dict[str, Any] = {}
+        if request.response_schema is not None:
+            extra["structured_outputs"] = self._vllm.sampling_params.StructuredOutputsParams(
+                json=request.response_schema.as_dict(), disable_any_whitespace=True)
+        return self._vllm.SamplingParams(temperature=max(0.0, params.temperature), max_tokens=params.max_tokens, **extra)
 
     def _run_batch(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
-        """One ``LLM.chat`` over the batch's conversations (same stage and params); results in order."""
+        """One ``LLM.chat`` over the batch's conversations (same stage, params and schema); results in order."""
         start = time.perf_counter()
-        params = requests[0].params
-        sampling = self._vllm.SamplingParams(temperature=max(0.0, params.temperature), max_tokens=params.max_tokens)
+        sampling = self._sampling(requests[0])
         conversations = [self.conversation(r) for r in requests]
         outputs = self._llm.chat(conversations, sampling_params=sampling, use_tqdm=False)
         if len(outputs) != len(requests):
@@ -174,6 +198,8 @@ class VLLMBackend:
     def _result(output: Any, seconds: float) -> ChatResult:
         completion = output.outputs[0]
         finish = getattr(completion, "finish_reason", None)
+        cached = getattr(output, "num_cached_tokens", None)
         return ChatResult(text=completion.text, input_tokens=len(output.prompt_token_ids or []),
                           output_tokens=len(completion.token_ids), seconds=seconds, cost_cents=None,
-                          finish_reason=str(finish) if finish is not None else None)
+                          finish_reason=str(finish) if finish is not None else None,
+                          cached_input_tokens=int(cached) if isinstance(cached, int) and cached >= 0 else None)

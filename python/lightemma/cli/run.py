@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 
 from lightemma.prompts import DEFAULT_PROMPT_SET
 
@@ -68,6 +69,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain (docs/definitions.md#re-asks)")
     gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
     gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's; docs/definitions.md#integration)")
+    gen.add_argument("--speed-range", nargs=2, type=float, metavar=("LO", "HI"),
+                     help="plausible speeds in m/s; an answer outside fails as implausible (default -10 50)")
+    gen.add_argument("--max-curvature", type=float, metavar="K",
+                     help="plausible |curvature| in 1/m; an answer above fails as implausible (default 1)")
+    gen.add_argument("--answer-format", choices=("text", "structured"),
+                     help="stage 3 answers as text (default, the paper's) or as JSON constrained to a schema by the provider's "
+                     "structured outputs / vLLM / xgrammar; a model that cannot follow one is refused (docs/run.md#structured-answers)")
+    gen.add_argument("--chain", choices=("independent", "conversation"),
+                     help="independent stages, each with the image (default, the paper's), or one conversation continued "
+                     "through stages 2 and 3, the image in its first turn (docs/run.md#request-variants-and-prompt-caching)")
     p.set_defaults(func=main)
     return p
 
@@ -78,6 +89,7 @@ RUN_DEFAULTS: dict[str, object] = {
     "version": "v1.0-test", "window": "reference", "output": "runs", "timeout": 120.0, "max_retries": 6,
     "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
     "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler", "on_bad_record": "skip",
+    "speed_range": (-10.0, 50.0), "max_curvature": 1.0, "answer_format": "text", "chain": "independent",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
@@ -161,16 +173,23 @@ def main(args: argparse.Namespace) -> int:
         replicas = args.replicas or 1
         concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0))) * replicas
         settings = run_settings(args)
+        lo, hi = settings["speed_range"]
+        if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+            raise UserError(f"--speed-range LO HI needs two finite numbers with LO < HI, got {lo:g} {hi:g}")
+        if not (math.isfinite(settings["max_curvature"]) and settings["max_curvature"] > 0):
+            raise UserError(f"--max-curvature must be a finite number > 0, got {settings['max_curvature']:g}")
         result = run(
             args.model, dataroot=args.dataroot, version=settings["version"], split=args.split, scenes=args.scenes,
             window=settings["window"], limit=args.limit, output=settings["output"], backend=args.backend,
             api_base=args.api_base, concurrency=concurrency, temperature=settings["temperature"],
             max_tokens=settings["max_tokens"], reask=settings["reask"], max_attempts=settings["max_attempts"],
-            integrate_method=settings["integrate"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
+            integrate_method=settings["integrate"], speed_range=tuple(settings["speed_range"]),
+            max_abs_curvature=settings["max_curvature"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
             cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
             backend_options=options, on_bad_record=settings["on_bad_record"],
             replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
+            chain=settings["chain"], answer_format=settings["answer_format"],
         )
     print(result.report())
     summary = result.summary

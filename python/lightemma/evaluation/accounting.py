@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.evaluation.loading import STATUS_CODES, UNKNOWN_STATUS, RunData
+from lightemma.evaluation.loading import API_ERROR_STATUS, STATUS_CODES, RunData
 
 
 def _pct(mask: np.ndarray) -> float | None:
@@ -15,16 +15,20 @@ def _pct(mask: np.ndarray) -> float | None:
 
 
 def format_errors(run: RunData, rows: np.ndarray) -> dict[str, Any]:
-    """FE % (first answer not ``ok``) and FE corr % (first answer ``failed``) over ``rows``.
+    """FE % (first received answer not ``ok``) and FE corr % (first received answer ``failed``) over ``rows``.
 
-    Frames whose first status is unknown are left out of both rates.
+    Frames whose calls all failed at the provider (no answer received) are not format
+    errors: they are left out of both rates and counted as ``api_error_frames``. Frames
+    whose first status is unknown are left out too.
     """
     first = run.first_status[rows]
-    first = first[first != UNKNOWN_STATUS]
+    api_errors = int((first == API_ERROR_STATUS).sum())
+    first = first[first >= 0]
     return {
         "fe_pct": _pct(first != STATUS_CODES["ok"]),
         "fe_corr_pct": _pct(first == STATUS_CODES["failed"]),
         "failed_final": int((run.status[rows] == STATUS_CODES["failed"]).sum()),
+        "api_error_frames": api_errors,
     }
 
 
@@ -40,7 +44,9 @@ def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
     be read (not ``failed``): the reference's evaluation summed time and tokens
     only over the frames it could score. ``frames`` says how many.
     Cost is None when no frame's cost is known (local models, unknown prices);
-    ``cost_known_pct`` says how many frames the mean rests on.
+    ``cost_known_pct`` says how many frames the mean rests on. ``cached_pct`` is the share
+    of input tokens served from a prompt cache (provider or vLLM prefix cache): Σ cached ÷
+    Σ input over the frames that report both (None when none does).
     """
     if run.info.imported:  # read = not failed; implausible answers were read, and count here as they did there
         rows = rows[run.status[rows] != STATUS_CODES["failed"]]
@@ -52,6 +58,7 @@ def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
         "cost_cents_per_frame": _mean(cost),
         "cost_known_pct": _pct(np.isfinite(cost)),
         "input_tokens": _mean(run.input_tokens[rows]),
+        "cached_pct": _cached_pct(run, rows),
         "output_tokens": _mean(run.output_tokens[rows]),
         "gpus": run.info.gpus,
         "run_wall_seconds": wall,
@@ -59,3 +66,12 @@ def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
         "concurrency": run.info.concurrency,
         "frames": int(len(rows)),  # the frames the means rest on
     }
+
+
+def _cached_pct(run: RunData, rows: np.ndarray) -> float | None:
+    """100 × Σ cached input tokens ÷ Σ input tokens over ``rows`` that report both; None when none does."""
+    if run.cached_input_tokens is None:
+        return None
+    cached, total = run.cached_input_tokens[rows], run.input_tokens[rows]
+    known = np.isfinite(cached) & np.isfinite(total) & (total > 0)
+    return float(100.0 * cached[known].sum() / total[known].sum()) if known.any() else None

@@ -44,12 +44,14 @@ class ModelResult:
     frames_accounted: int  # frames behind FE and efficiency: all, or with --common those in every run
     frames_evaluated: int  # frames behind the metrics
     metrics: dict[str, dict[str, float]]  # convention -> metric -> value
-    accounting: dict[str, Any]  # fe_pct, fe_corr_pct, failed_final
+    accounting: dict[str, Any]  # fe_pct, fe_corr_pct (over frames with an answer), failed_final, api_error_frames
     efficiency: dict[str, Any]
     parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
     dataset_kind: str | None = None  # "nuscenes", "synthetic" or None (from the manifest)
     outcomes: dict[str, int] = field(default_factory=dict)  # of the accounted frames: scored, failed, implausible, api_errors
     intervals: dict[str, dict[str, list[float] | None]] = field(default_factory=dict)  # convention -> ade_avg/fde -> [low, high]
+    chain: str = "independent"  # request variant (docs/run.md): independent stages or one conversation
+    answer_format: str = "text"  # stage-3 answers as text or structured JSON
 
     @property
     def scored_pct(self) -> float | None:
@@ -81,6 +83,8 @@ class ModelResult:
             **{key: self.metrics[convention][key] for key in METRIC_KEYS},
             "parse": self.parse.get("label"),
             "dataset_kind": self.dataset_kind,
+            "chain": self.chain,
+            "answer_format": self.answer_format,
             "ade_avg_ci95": ci.get("ade_avg"),
             "fde_ci95": ci.get("fde"),
         }
@@ -88,7 +92,7 @@ class ModelResult:
     def efficiency_row(self) -> dict[str, Any]:
         """A flat dict: model, family, time, cost, tokens, GPUs, run wall time, frames/s."""
         return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self._coverage(), **self.efficiency,
-                "dataset_kind": self.dataset_kind}
+                "dataset_kind": self.dataset_kind, "chain": self.chain, "answer_format": self.answer_format}
 
 
 @dataclass
@@ -169,15 +173,24 @@ def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
     return names
 
 
+def _variant_parts(info: Any) -> dict[str, str]:
+    """What tells runs of one model apart: integrator, chain, answer format (docs/run.md)."""
+    return {"integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format}
+
+
 def unique_labels(runs: list[RunData]) -> list[str]:
-    """Display labels, made distinct by integrator or run id where two runs share one."""
+    """Display labels, made distinct where two runs share one: by the variant settings that differ among them
+    (integrator, chain, answer format: ``GPT-4o [conversation, structured]``), else by run id."""
     original = [r.info.label for r in runs]
     labels = list(original)
     for i, run in enumerate(runs):
         clashes = [j for j, lab in enumerate(original) if lab == run.info.label]
         if len(clashes) > 1:
-            integrators = {runs[j].info.integrator for j in clashes}
-            suffix = run.info.integrator if len(integrators) == len(clashes) else run.info.run_dir.name
+            parts = [_variant_parts(runs[j].info) for j in clashes]
+            differing = [k for k in parts[0] if len({p[k] for p in parts}) > 1]
+            variants = {tuple(p[k] for k in differing) for p in parts}
+            own = _variant_parts(run.info)
+            suffix = ", ".join(own[k] for k in differing) if differing and len(variants) == len(clashes) else run.info.run_dir.name
             labels[i] = f"{run.info.label} [{suffix}]"
     return labels
 
@@ -286,6 +299,8 @@ def evaluate_loaded(
                 parse={**run.parse.to_dict(), "label": run.parse.label(), "rescored": run.rescored},
                 dataset_kind=run.info.dataset_kind,
                 outcomes=run.outcomes(rows),
+                chain=run.info.chain,
+                answer_format=run.info.answer_format,
             )
         )
         entries.append((label, run, scored))

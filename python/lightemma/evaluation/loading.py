@@ -27,9 +27,11 @@ from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
 from lightemma.runs.store import RunContents, iter_records, read_frame_ids
+from lightemma.runs.records import answer_received, first_answer_status
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
+API_ERROR_STATUS = -2  # first_status of a frame whose calls all failed at the provider: no answer, not a format error
 _NAN6x2 = [[math.nan, math.nan]] * 6
 _CHUNK = 2048
 
@@ -43,11 +45,12 @@ class RunData:
     trajectory: np.ndarray  # (N, 6, 2), NaN where the run has no valid prediction
     gt_positions: np.ndarray  # (N, 6, 2)
     status: np.ndarray  # (N,) int8: 0 ok, 1 corrected, 2 failed, -1 unknown
-    first_status: np.ndarray  # (N,) int8
+    first_status: np.ndarray  # (N,) int8: status of the first received answer; -2 none received (API errors), -1 unknown
     seconds: np.ndarray  # (N,) float64, NaN unknown
     input_tokens: np.ndarray
     output_tokens: np.ndarray
     cost_cents: np.ndarray
+    cached_input_tokens: np.ndarray | None = None  # (N,) float64 of input_tokens served from a prompt cache, NaN unknown
     history_actions: np.ndarray | None = None  # (N, 6, 2) with details=True
     actions: np.ndarray | None = None  # (N, 6, 2) predicted, with details=True
     failure: np.ndarray | None = None  # (N,) int8 code of outcomes.FAILURES: why a frame is not scored (0: it is)
@@ -99,15 +102,6 @@ def _number(value: Any) -> float:
     return value if type(value) in _NUMERIC else math.nan  # exact types: bool is not a number here
 
 
-def _first_status(record: Mapping[str, Any]) -> Any:
-    first = record.get("first_status")
-    if first is None:
-        attempts = record.get("attempts")
-        if isinstance(attempts, list) and attempts and isinstance(attempts[0], Mapping):
-            first = attempts[0].get("status")
-    return first if first is not None else record.get("status")
-
-
 def pairs_array(values: list[Any]) -> np.ndarray:
     """(n, 6, 2) float64 from a list of 6×2 nested lists; an entry that is mis-shaped or not numeric becomes NaN.
 
@@ -135,7 +129,7 @@ class _Columns:
     """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows."""
 
     PAIRS = ("trajectory", "actions", "gt", "history")
-    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "failure", "scene", "gate")
+    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "cached", "failure", "scene", "gate")
     DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "gate": bool}
 
     def __init__(self, details: bool, limits: Plausibility) -> None:
@@ -162,14 +156,19 @@ class _Columns:
         if not isinstance(scene, str) or not scene:
             scene = record["frame_id"].rpartition("/")[0] or record["frame_id"]
         p["scene"].append(self.scenes.setdefault(scene, len(self.scenes)))
-        p["failure"].append(failure_code(record.get("failure")))
+        failure = record.get("failure")
+        if failure is None and record.get("status") == "failed" and not answer_received(record):
+            failure = "api_error"  # a record older than `failure`: failed without ever receiving an answer
+        p["failure"].append(failure_code(failure))
         p["gt"].append(gt)
         p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
-        p["first"].append(STATUS_CODES.get(_first_status(record), UNKNOWN_STATUS))
+        p["first"].append(STATUS_CODES.get(first_answer_status(record), UNKNOWN_STATUS) if answer_received(record)
+                          else API_ERROR_STATUS)
         p["seconds"].append(_number(record.get("seconds")))
         p["inp"].append(_number(record.get("input_tokens")))
         p["out"].append(_number(record.get("output_tokens")))
         p["cost"].append(_number(record.get("cost_cents")))
+        p["cached"].append(_number(record.get("cached_input_tokens")))
         self.rows += 1
         if len(p["status"]) >= _CHUNK:
             self.flush()
@@ -298,6 +297,7 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         input_tokens=take("inp", ()),
         output_tokens=take("out", ()),
         cost_cents=take("cost", ()),
+        cached_input_tokens=take("cached", ()),
         history_actions=take("history", (6, 2)) if details else None,
         actions=actions if details else None,
         corrupt_lines=len(counts.corrupt_lines),

@@ -40,6 +40,13 @@ class RunInfo:
     manifest: Mapping[str, Any]
     imported: bool = False  # made by `lightemma import` from the reference scripts' results
     dataset_kind: str | None = None  # "nuscenes", "synthetic", or None when the manifest cannot tell
+    chain: str = "independent"  # request variant: independent stages (the paper's) or one conversation
+    answer_format: str = "text"  # stage-3 answers as text (the paper's) or structured JSON
+
+    @property
+    def variant(self) -> str:
+        """The request variant in words, e.g. ``independent, text`` (the paper's) or ``conversation, structured``."""
+        return f"{self.chain}, {self.answer_format}"
 
 
 def _get(mapping: Any, *keys: str) -> Any:
@@ -94,6 +101,14 @@ def _integrator(manifest: Mapping[str, Any]) -> str:
         if isinstance(value, str):
             return value
     return "euler"
+
+
+def _setting(manifest: Mapping[str, Any], key: str, default: str) -> str:
+    """A run setting from the config (else the recorded params), ``default`` for runs that predate it."""
+    for value in (_get(manifest, "config", key), _get(manifest, "params", key)):
+        if isinstance(value, str) and value:
+            return value
+    return default
 
 
 def _family(manifest: Mapping[str, Any], model: str, known: Any) -> str:
@@ -157,4 +172,6 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
         manifest=manifest,
         imported=bool(manifest.get("imported")),
         dataset_kind=dataset_kind(manifest),
+        chain=_setting(manifest, "chain", "independent"),
+        answer_format=_setting(manifest, "answer_format", "text"),
     )

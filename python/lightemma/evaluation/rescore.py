@@ -27,7 +27,7 @@ from typing import Any
 
 from lightemma.errors import UserError
 
-PARSE_MODES: tuple[str, ...] = ("lenient", "strict", "paper")
+PARSE_MODES: tuple[str, ...] = ("lenient", "strict", "paper", "json")  # json: structured runs record it
 _BLOCK = 2048  # records re-parsed per parser call
 
 

@@ -16,6 +16,15 @@ call (and is asked again), a truncated answer is ``failed`` with reason
 "truncated" (``failure: "truncated"`` on the attempt), unparsed.
 Every call's tokens, time and cost count toward the frame (SPEC §3, §6); a
 total is null when any of its calls did not report it.
+
+Two request variants (:class:`ChainPolicy`): ``answer_format="structured"`` asks
+stage 3 for the JSON object ``{"actions": [[v, c] × 6]}`` through the backend's
+constrained decoding and parses it with ``mode="json"`` (plausibility still
+applies); ``chain="conversation"`` sends stages 2 and 3 as one conversation
+continued (the image once, in the first user turn; the earlier stages' prompts
+and answers as turns). A stage-3 re-ask in a conversation resends the same
+conversation up to the stage-3 prompt — the failed answer is not shown to the
+model — exactly as an independent re-ask resends the same request.
 """
 
 from __future__ import annotations
@@ -26,9 +35,10 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, is_truncated
+from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, ResponseSchema, is_truncated
 from lightemma.frames import history_placeholders
-from lightemma.prompts import PromptSet
+from lightemma.prompts import ANSWER_FORMATS, CHAINS, PromptSet
+from lightemma.runs.records import attempt_received
 
 REASK_MODES = ("actions", "chain")
 INTEGRATION_METHODS = ("euler", "midpoint")
@@ -36,12 +46,20 @@ INTEGRATION_METHODS = ("euler", "midpoint")
 
 @dataclass(frozen=True)
 class ChainPolicy:
-    """How a frame is asked and re-asked; recorded in the run manifest."""
+    """How a frame is asked and re-asked; recorded in the run manifest.
+
+    ``speed_range`` (m/s) and ``max_abs_curvature`` (1/m) are the parser's
+    plausibility limits (None disables one); see :func:`lightemma.parse_actions`.
+    """
 
     params: GenerationParams = field(default_factory=GenerationParams)
     reask: str = "actions"
     max_attempts: int = 5
     integrate_method: str = "euler"
+    speed_range: tuple[float, float] | None = (-10.0, 50.0)
+    max_abs_curvature: float | None = 1.0
+    chain: str = "independent"  # or "conversation": stages 2 and 3 continue one conversation
+    answer_format: str = "text"  # or "structured": stage 3 constrained to the actions JSON schema
 
     def __post_init__(self) -> None:
         if self.reask not in REASK_MODES:
@@ -50,10 +68,37 @@ class ChainPolicy:
             raise ValueError(f"max_attempts must be at least 1, got {self.max_attempts}")
         if self.integrate_method not in INTEGRATION_METHODS:
             raise ValueError(f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}")
+        from lightemma.actions import plausibility
+
+        plausibility(self.speed_range, self.max_abs_curvature)  # ValueError for malformed limits
+        if self.chain not in CHAINS:
+            raise ValueError(f"chain must be one of {', '.join(CHAINS)}, got {self.chain!r}")
+        if self.answer_format not in ANSWER_FORMATS:
+            raise ValueError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {self.answer_format!r}")
+
+    @property
+    def parse_mode(self) -> str:
+        """How stage-3 answers are parsed: ``json`` for structured answers, else ``lenient``."""
+        return "json" if self.answer_format == "structured" else "lenient"
+
+    def response_schema(self, stage: str) -> ResponseSchema | None:
+        """The JSON schema ``stage``'s answer is constrained to (stage 3 of a structured run), else None."""
+        if stage != "actions" or self.answer_format != "structured":
+            return None
+        from lightemma.backends.structured import ACTIONS_SCHEMA
+
+        return ACTIONS_SCHEMA
+
+    def parse_record(self) -> dict[str, Any]:
+        """How answers are parsed, as the run manifest records it (``params.parse``)."""
+        from lightemma.actions import plausibility
+
+        return {"mode": self.parse_mode, **plausibility(self.speed_range, self.max_abs_curvature)}
 
     def to_dict(self) -> dict[str, Any]:
         return {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
-                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method}
+                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "chain": self.chain,
+                "answer_format": self.answer_format, "parse": self.parse_record()}
 
 
 def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
@@ -72,6 +117,7 @@ def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
         "finish_reason": result.finish_reason,
         "reasoning_tokens": result.reasoning_tokens,
         "cached_input_tokens": result.cached_input_tokens,
+        "cache_write_tokens": result.cache_write_tokens,
     }
 
 
@@ -88,6 +134,8 @@ def _totals(calls: list[dict[str, Any]]) -> dict[str, Any]:
         "input_tokens": _sum([c["input_tokens"] for c in calls], unknown_is_none=True),
         "output_tokens": _sum([c["output_tokens"] for c in calls], unknown_is_none=True),
         "reasoning_tokens": _sum([c.get("reasoning_tokens") for c in calls], unknown_is_none=True),
+        "cached_input_tokens": _sum([c.get("cached_input_tokens") for c in calls], unknown_is_none=True),
+        "cache_write_tokens": _sum([c.get("cache_write_tokens") for c in calls], unknown_is_none=True),
         "seconds": round(sum(c["seconds"] for c in calls), 4),
         "cost_cents": _sum([c["cost_cents"] for c in calls], unknown_is_none=True),
     }
@@ -116,23 +164,23 @@ class _Attempt:
     def finish_truncated(self) -> dict[str, Any]:
         """This attempt, ended by a text cut off at the output-token limit: ``failed``, ``failure: "truncated"``."""
         if self.truncated == "actions":
-            out = self.finish(self.calls[-1]["text"], "failed", "truncated")
-        else:
-            out = self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on")
-        out["failure"] = "truncated"
-        return out
+            return self.finish(self.calls[-1]["text"], "failed", "truncated", "truncated")
+        return self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on",
+                           "truncated")
 
-    def finish(self, answer: str | None, status: str, reason: str) -> dict[str, Any]:
+    def finish(self, answer: str | None, status: str, reason: str, failure: str) -> dict[str, Any]:
         return {"attempt": self.number, "calls": self.calls, "answer": answer, "status": status, "reason": reason,
-                "error": self.error, **_totals(self.calls)}
+                "failure": failure, "error": self.error, **_totals(self.calls)}
 
 
-def _parse(answer: str) -> tuple[str, str, np.ndarray]:
-    """Lenient parse of one answer: (status, reason, actions (6, 2))."""
+def _parse(answer: str, policy: ChainPolicy) -> tuple[str, str, str, np.ndarray]:
+    """Parse of one answer (lenient; json for structured answers): (status, reason, failure kind, actions (6, 2))."""
     from lightemma import parse_actions
 
-    parsed = parse_actions([answer], n=6, mode="lenient")
-    return str(parsed.status[0]), str(parsed.reason[0]), np.asarray(parsed.actions[0], dtype=np.float64)
+    parsed = parse_actions([answer], n=6, mode=policy.parse_mode, speed_range=policy.speed_range,
+                           max_abs_curvature=policy.max_abs_curvature)
+    return (str(parsed.status[0]), str(parsed.reason[0]), str(parsed.failure[0]),
+            np.asarray(parsed.actions[0], dtype=np.float64))
 
 
 def _as_list(value: Any) -> Any:
@@ -151,9 +199,14 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     history = history_placeholders(frame.history_actions)  # {history}, {speeds}, {curvatures}
     image = str(frame.image_path) if getattr(frame, "image_path", None) else None
 
-    async def ask(stage: str, text: str) -> ChatResult:
-        request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame)
+    async def ask(stage: str, text: str, turns: tuple[tuple[str, str], ...] = ()) -> ChatResult:
+        request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
+                              turns=turns, response_schema=policy.response_schema(stage),
+                              prefix_of_next=policy.chain == "conversation" and stage != "actions")
         return (await backend.generate([request]))[0]
+
+    def turns(*texts: str) -> tuple[tuple[str, str], ...]:
+        return _earlier_turns(policy, prompts, history, *texts)
 
     attempts: list[dict[str, Any]] = []
     scene: str | None = None
@@ -167,24 +220,36 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
         if scene is None:
             scene = attempt.record("scene", await ask("scene", prompts.render("scene")))
         if scene is not None and intent is None:
-            intent = attempt.record("intent", await ask("intent", prompts.render("intent", scene=scene, **history)))
+            intent = attempt.record("intent", await ask("intent", prompts.render("intent", scene=scene, **history), turns(scene)))
         answer = None
         if scene is not None and intent is not None:
-            answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, intent=intent, **history)))
+            answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, intent=intent, **history),
+                                                         turns(scene, intent)))
         if answer is None:
             if attempt.truncated:
                 attempts.append(attempt.finish_truncated())
                 answer = attempts[-1]["answer"]
+            elif attempt.error == "EmptyResponse" and attempt.calls[-1]["stage"] == "actions":
+                # the provider answered stage 3 with no text: a received answer that is empty, not an API error
+                attempts.append(attempt.finish(None, "failed", "empty answer (EmptyResponse)", "format"))
             else:
-                attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}"))
+                attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}", "api_error"))
             continue
-        status, reason, parsed = _parse(answer)
-        attempts.append(attempt.finish(answer, status, reason))
+        status, reason, failure, parsed = _parse(answer, policy)
+        attempts.append(attempt.finish(answer, status, reason, failure))
         if status != "failed":
             actions = parsed
             break
 
     return _frame_record(frame, attempts, scene, intent, answer, actions, policy, time.perf_counter() - start)
+
+
+def _earlier_turns(policy: ChainPolicy, prompts: PromptSet, history: dict[str, str], *texts: str) -> tuple[tuple[str, str], ...]:
+    """The (prompt, answer) turns before a stage in the conversation chain: scene, then intent (none when independent)."""
+    if policy.chain != "conversation":
+        return ()
+    prompts_sent = (prompts.render("scene"), prompts.render("intent", scene=texts[0], **history))
+    return tuple(zip(prompts_sent, texts))
 
 
 def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None, intent: str | None, answer: str | None,
@@ -202,7 +267,9 @@ def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None,
         "scene_name": frame.scene_name,
         "sample_token": frame.sample_token,
         "status": last["status"],
-        "first_status": attempts[0]["status"],
+        "failure": last["failure"],
+        # FE counts the first stage-3 answer received: an API error or a text cut off before stage 3 gives none
+        "first_status": next((a["status"] for a in attempts if attempt_received(a)), None),
         "n_attempts": len(attempts),
         "attempts": attempts,
         "actions": _as_list(actions),
@@ -218,6 +285,8 @@ def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None,
         "input_tokens": totals["input_tokens"],
         "output_tokens": totals["output_tokens"],
         "reasoning_tokens": totals["reasoning_tokens"],
+        "cached_input_tokens": totals["cached_input_tokens"],
+        "cache_write_tokens": totals["cache_write_tokens"],
         "cost_cents": totals["cost_cents"],
         "cached": any(c["cached"] for c in calls),
         "cached_calls": sum(1 for c in calls if c["cached"]),

@@ -85,8 +85,30 @@ def _git_revision() -> str | None:
 
 
 def _policy(config: dict[str, Any]) -> ChainPolicy:
+    # runs recorded before the plausibility limits existed were parsed without them: a resume keeps it so
+    speed_range = config.get("speed_range")
     return ChainPolicy(params=GenerationParams(temperature=config["temperature"], max_tokens=config["max_tokens"]),
-                       reask=config["reask"], max_attempts=config["max_attempts"], integrate_method=config["integrate_method"])
+                       reask=config["reask"], max_attempts=config["max_attempts"], integrate_method=config["integrate_method"],
+                       speed_range=None if speed_range is None else tuple(speed_range),
+                       max_abs_curvature=config.get("max_abs_curvature"), **_request_variant(config))
+
+
+def _request_variant(config: dict[str, Any]) -> dict[str, str]:
+    """The run's chain and answer format (runs recorded before they existed: the paper's, independent and text)."""
+    return {"chain": config.get("chain") or "independent", "answer_format": config.get("answer_format") or "text"}
+
+
+def _structured_output(backend: Backend, policy: ChainPolicy) -> dict[str, Any] | None:
+    """For a structured run, how the backend constrains stage 3 (for the manifest); a UserError when it cannot."""
+    if policy.answer_format != "structured":
+        return None
+    check = getattr(backend, "structured_output", None)
+    if check is None:
+        raise UserError(f"--answer-format structured: the {getattr(backend, 'name', 'chosen')} backend cannot constrain "
+                        "answers to a JSON schema; use --answer-format text")
+    from lightemma.backends.structured import ACTIONS_SCHEMA
+
+    return {**check(), "schema": ACTIONS_SCHEMA.as_dict(), "parse_mode": policy.parse_mode}
 
 
 def _make_backend(config: dict[str, Any], output: Path) -> Backend:
@@ -307,6 +329,10 @@ def run(
     reask: str = "actions",
     max_attempts: int = 5,
     integrate_method: str = "euler",
+    speed_range: tuple[float, float] | None = (-10.0, 50.0),
+    max_abs_curvature: float | None = 1.0,
+    chain: str = "independent",
+    answer_format: str = "text",
     prompt_set: str = DEFAULT_PROMPT_SET,
     on_bad_record: str = "skip",
     timeout: float = 120.0,
@@ -336,10 +362,17 @@ def run(
     pose or timestamp is invalid (see :func:`lightemma.load_frames`). ``replicas``,
     ``ray_address`` and ``gpus_per_replica`` run a local model (hf, vllm) as replicas over
     Ray (:mod:`lightemma.backends.ray`; docs/local.md).
+    ``chain`` (``independent``, the paper's, or ``conversation``) and ``answer_format``
+    (``text``, the paper's, or ``structured``: stage 3 constrained to a JSON schema) choose
+    the request variant (docs/run.md); a backend that cannot constrain its answers is a
+    :class:`~lightemma.errors.UserError` before any work.
 
     A missing API key, an unknown model or an empty frame set raises
     :class:`~lightemma.errors.UserError` before any work. A run-fatal cause met while
     running raises :class:`~lightemma.errors.RunStopped` once what finished is saved.
+    ``speed_range`` (m/s) and ``max_abs_curvature`` (1/m) are the parser's plausibility
+    limits (None disables one; see :func:`lightemma.parse_actions`), recorded in the
+    manifest as ``params.parse`` and kept by a resume.
     """
     if concurrency < 1:
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -352,15 +385,20 @@ def run(
     config: dict[str, Any] = {
         "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
-        "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
+        "speed_range": None if speed_range is None else [float(x) for x in speed_range],
+        "max_abs_curvature": None if max_abs_curvature is None else float(max_abs_curvature),
+        "chain": chain, "answer_format": answer_format, "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
         "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica,
     }
     if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
         config["prompt_set"] = os.fspath(Path(prompt_set).resolve())
-    policy = _policy(config)  # validates reask / attempts / method before any work
-    prompts = load_prompt_set(prompt_set)
+    try:
+        policy = _policy(config)  # validates reask / attempts / method / chain / answer format before any work
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
+    prompts = load_prompt_set(prompt_set).select(policy.chain, policy.answer_format)
     output = Path(output)
     instance = _make_backend(config, output)
     dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
@@ -368,6 +406,7 @@ def run(
                "on_bad_record": on_bad_record}
     config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
+        structured = _structured_output(instance, policy)
         if frames is None:
             frames = _load_frames(dataset)
         else:
@@ -381,6 +420,7 @@ def run(
             "config": config,
             "params": {**policy.to_dict(), "sent": instance.effective_params(policy.params) if hasattr(instance, "effective_params") else None},
             "prompt_set": prompts.describe(),
+            **({"structured_output": structured} if structured else {}),
             "dataset": _describe(frames, dataset),
             "lightemma_version": _version(),
             "git_revision": _git_revision(),
@@ -428,14 +468,18 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     placement = {"replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica}
     config.update({k: v for k, v in placement.items() if v is not None})
     recorded = manifest.get("prompt_set", {})
-    prompts = load_prompt_set(config["prompt_set"])  # a shipped name or a file's path; the recorded name is the set's own
-    if prompts.hash != recorded.get("hash"):
+    # a shipped name or a file's path (the recorded name is the set's own), as the run's variant uses it
+    prompts = load_prompt_set(config["prompt_set"]).select(**_request_variant(config))
+    if prompts.hash != recorded.get("hash") or prompts.variant_hash != recorded.get("variant_hash"):
+        run_hash, now_hash = ((recorded.get("hash"), prompts.hash) if prompts.hash != recorded.get("hash") else
+                              (recorded.get("variant_hash"), prompts.variant_hash))
         raise UserError(f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
-                        f"(run: {recorded.get('hash')}, now: {prompts.hash}); start a new run instead of resuming")
+                        f"(run: {run_hash}, now: {now_hash}); start a new run instead of resuming")
     with RunLock(run_dir):  # before anything is read for the todo list: a second writer would redo the same frames
         manifest = read_manifest(run_dir)  # as the last writer left it
         instance = _make_backend(config, run_dir.parent.parent)
         try:
+            _structured_output(instance, _policy(config))
             dataset = dict(config.get("dataset") or {})
             if dataset.get("split") is None and not dataset.get("scenes"):
                 # the split the run resolved when it started, not today's default for the version

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.backends.base import is_truncated
+from lightemma.runs.records import answer_received, first_answer_status
 
 
 def _mean(values: list[float]) -> float | None:
@@ -24,8 +25,11 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
     records = list(records)
     n = len(records)
     statuses = {s: sum(1 for r in records if r.get("status") == s) for s in ("ok", "corrected", "failed")}
-    first_not_ok = sum(1 for r in records if r.get("first_status") != "ok")
-    first_failed = sum(1 for r in records if r.get("first_status") == "failed")
+    # FE is over frames whose stage-3 answer was received; frames whose calls all failed at the provider are apart
+    received = [first_answer_status(r) for r in records if answer_received(r)]
+    first_not_ok = sum(1 for first in received if first != "ok")
+    first_failed = sum(1 for first in received if first == "failed")
+    m = len(received)
     costs = [r.get("cost_cents") for r in records]
     known_costs = [c for c in costs if c is not None]
     valid = [r for r in records if r.get("trajectory") is not None and r.get("gt_positions") is not None]
@@ -39,8 +43,10 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
     summary: dict[str, Any] = {
         "frames": n,
         **statuses,
-        "fe_percent": 100.0 * first_not_ok / n if n else None,
-        "fe_corr_percent": 100.0 * first_failed / n if n else None,
+        "fe_percent": 100.0 * first_not_ok / m if m else None,
+        "fe_corr_percent": 100.0 * first_failed / m if m else None,
+        "answered_frames": m,
+        "api_error_frames": n - m,
         "ade_avg": ade,
         "ade_frames": len(valid),
         "mean_seconds_per_frame": _mean([r["seconds"] for r in records if r.get("seconds") is not None]),
@@ -55,6 +61,7 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         # unknown stays unknown: frames whose tokens a provider did not (fully) report are left out of the means
         "frames_tokens_unknown": sum(1 for r in records if r.get("input_tokens") is None or r.get("output_tokens") is None),
         "mean_reasoning_tokens": _mean([r["reasoning_tokens"] for r in records if r.get("reasoning_tokens") is not None]),
+        "cached_input_percent": _cached_percent(records),
         "truncated_calls": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", [])
                                if is_truncated(c.get("finish_reason"))),
         "top_failure": _top_failure(records),
@@ -64,6 +71,13 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         summary["frames_run"] = frames_run
         summary["frames_per_second"] = (frames_run / wall_seconds) if frames_run and wall_seconds > 0 else None
     return summary
+
+
+def _cached_percent(records: list[Mapping[str, Any]]) -> float | None:
+    """100 × Σ cached input tokens ÷ Σ input tokens over the frames reporting both (None when none does)."""
+    both = [(r["cached_input_tokens"], r["input_tokens"]) for r in records
+            if r.get("cached_input_tokens") is not None and r.get("input_tokens")]
+    return 100.0 * sum(c for c, _ in both) / sum(t for _, t in both) if both else None
 
 
 def _top_failure(records: list[Mapping[str, Any]]) -> str | None:
@@ -82,11 +96,14 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
     lines = [title] if title else []
     lines += [
         f"frames        {summary['frames']}  (ok {summary['ok']}, corrected {summary['corrected']}, failed {summary['failed']})",
-        f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}",
+        f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}"
+        + (f"  (over {summary['answered_frames']} answered frame(s); API errors only: {summary['api_error_frames']})"
+           if summary.get("api_error_frames") else ""),
         f"ADE avg       {_fmt(summary['ade_avg'], '.3f', ' m')}  over {summary['ade_frames']} frame(s)",
         f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}",
         f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}"
         + (f" (of which reasoning {_fmt(summary['mean_reasoning_tokens'], '.0f')})" if summary.get("mean_reasoning_tokens") else "")
+        + (f", {summary['cached_input_percent']:.1f} % of input from the prompt cache" if summary.get("cached_input_percent") else "")
         + (f"  ({summary['frames_tokens_unknown']} unknown)" if summary.get("frames_tokens_unknown") else ""),
         f"cost          {_fmt(summary['total_cost_cents'], '.2f', ' ¢')} total, {_fmt(summary['mean_cost_cents'], '.3f', ' ¢')}/frame"
         + (f"  ({summary['frames_cost_unknown']} frame(s) unpriced)" if summary["frames_cost_unknown"] else ""),

@@ -13,13 +13,28 @@ intent and actions templates must carry the history: ``{history}``, or both
 Every run records the prompt set's name and its content hash (SHA-256 of the
 canonical JSON of the file's content), so a result can always be traced to the
 exact wording, and a resumed run refuses to continue under different wording.
+
+A set may also carry ``variants``: templates for the request variants of a run
+that replace some of the paper's stages —
+
+* ``structured`` (``--answer-format structured``): the actions template asks for
+  the JSON object ``{"actions": [[v, c], …]}`` instead of the bracketed list;
+* ``conversation`` (``--chain conversation``): stages 2 and 3 continue one
+  conversation, so their templates do not paste the earlier stages' texts
+  (those are the assistant turns before them); the intent template carries the
+  history, the actions template needs no placeholder;
+* ``conversation+structured``: both at once.
+
+The set's ``hash`` covers its name, description and stages (the paper's chain; a set
+without variants hashes as before variants existed); a run in a variant records the
+variant's name and ``variant_hash``, the hash of that variant's templates, too.
 """
 
 from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from importlib import resources
 from typing import Any
 
@@ -31,6 +46,21 @@ DEFAULT_PROMPT_SET = "lightemma-v1"
 PLACEHOLDERS = {"scene": (), "intent": ("scene", "history"), "actions": ("scene", "history", "intent")}
 HISTORY_FORMS: tuple[tuple[str, ...], ...] = (("history",), ("speeds", "curvatures"))
 HISTORY_KEYS = ("history", "speeds", "curvatures")
+CHAINS = ("independent", "conversation")
+ANSWER_FORMATS = ("text", "structured")
+VARIANTS = ("structured", "conversation", "conversation+structured")
+# placeholders each stage must carry in a conversation variant: the earlier stages' texts are turns, not pasted
+CONVERSATION_PLACEHOLDERS: dict[str, tuple[str, ...]] = {"scene": (), "intent": ("history",), "actions": ()}
+
+
+def variant_name(chain: str = "independent", answer_format: str = "text") -> str | None:
+    """The prompt-set variant a run with ``chain`` and ``answer_format`` uses (None: the paper's stages)."""
+    if chain not in CHAINS:
+        raise ValueError(f"chain must be one of {', '.join(CHAINS)}, got {chain!r}")
+    if answer_format not in ANSWER_FORMATS:
+        raise ValueError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {answer_format!r}")
+    parts = [p for p, on in (("conversation", chain == "conversation"), ("structured", answer_format == "structured")) if on]
+    return "+".join(parts) or None
 
 
 def content_hash(data: dict[str, Any]) -> str:
@@ -39,14 +69,49 @@ def content_hash(data: dict[str, Any]) -> str:
     return "sha256:" + hashlib.sha256(canonical.encode("utf-8")).hexdigest()
 
 
+def _check_placeholders(origin: str, where: str, stages: dict[str, str], required: dict[str, tuple[str, ...]]) -> None:
+    """Raise a :class:`UserError` naming the first template of ``stages`` that lacks a required placeholder."""
+    for stage, template in stages.items():
+        needed = required[stage]
+        absent = [p for p in needed if p != "history" and "{" + p + "}" not in template]
+        if "history" in needed and not any(all("{" + p + "}" in template for p in form) for form in HISTORY_FORMS):
+            absent.append("history")
+        if absent:
+            names = ", ".join("{history} (or {speeds} and {curvatures})" if p == "history" else "{" + p + "}" for p in absent)
+            raise UserError(f"{origin}: the {where}{stage!r} template lacks placeholder(s) {names}")
+
+
+def _variants(data: dict[str, Any], origin: str) -> dict[str, dict[str, str]]:
+    """The ``variants`` object of a prompt set's content, validated (empty when absent)."""
+    variants = data.get("variants", {})
+    if not isinstance(variants, dict):
+        raise UserError(f"{origin}: 'variants' must be an object of {', '.join(VARIANTS)}")
+    for name, stages in variants.items():
+        if name not in VARIANTS:
+            raise UserError(f"{origin}: unknown variant {name!r} (known: {', '.join(VARIANTS)})")
+        if not isinstance(stages, dict) or not stages or any(s not in STAGES or not isinstance(t, str) for s, t in stages.items()):
+            raise UserError(f"{origin}: variant {name!r} must map stage names ({', '.join(STAGES)}) to template strings")
+        required = CONVERSATION_PLACEHOLDERS if name.startswith("conversation") else PLACEHOLDERS
+        _check_placeholders(origin, f"{name} variant's ", stages, required)
+    return {name: dict(stages) for name, stages in variants.items()}
+
+
 @dataclass(frozen=True)
 class PromptSet:
-    """A named, hashed set of stage templates."""
+    """A named, hashed set of stage templates (with the variants' templates, if any).
+
+    ``stages`` are the templates a run uses: the paper's (``paper_stages``), or after
+    :meth:`select` those of a variant in their place.
+    """
 
     name: str
     description: str
     stages: dict[str, str]
     hash: str
+    variants: dict[str, dict[str, str]] = field(default_factory=dict)
+    variant: str | None = None  # the variant whose templates ``stages`` holds (None: the paper's)
+    variant_hash: str | None = None  # content hash of that variant's templates
+    paper_stages: dict[str, str] = field(default_factory=dict)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], *, origin: str = "prompt set") -> PromptSet:
@@ -57,15 +122,28 @@ class PromptSet:
         missing = [s for s in STAGES if not isinstance(stages.get(s), str)]
         if missing:
             raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGES)})")
-        for stage, needed in PLACEHOLDERS.items():
-            template = stages[stage]
-            absent = [p for p in needed if p != "history" and "{" + p + "}" not in template]
-            if "history" in needed and not any(all("{" + p + "}" in template for p in form) for form in HISTORY_FORMS):
-                absent.append("history")
-            if absent:
-                names = ", ".join("{history} (or {speeds} and {curvatures})" if p == "history" else "{" + p + "}" for p in absent)
-                raise UserError(f"{origin}: the {stage!r} template lacks placeholder(s) {names}")
-        return cls(name=data["name"], description=str(data.get("description", "")), stages=dict(stages), hash=content_hash(data))
+        _check_placeholders(origin, "", {s: stages[s] for s in STAGES}, PLACEHOLDERS)
+        variants = _variants(data, origin)
+        base = {k: v for k, v in data.items() if k != "variants"}  # the paper's chain: hashed as before variants existed
+        return cls(name=data["name"], description=str(data.get("description", "")), stages=dict(stages),
+                   hash=content_hash(base), variants=variants, paper_stages=dict(stages))
+
+    def select(self, chain: str = "independent", answer_format: str = "text") -> PromptSet:
+        """This set as a run with ``chain`` and ``answer_format`` uses it: the variant's templates in place.
+
+        Raises :class:`UserError` when the set has no templates for that variant.
+        """
+        name = variant_name(chain, answer_format)
+        paper = dict(self.paper_stages or self.stages)
+        if name is None:
+            return replace(self, stages=paper, variant=None, variant_hash=None, paper_stages=paper)
+        if name not in self.variants:
+            flags = " and ".join(f for f, on in (("--chain conversation", chain == "conversation"),
+                                                 ("--answer-format structured", answer_format == "structured")) if on)
+            raise UserError(f"prompt set {self.name!r} has no {name!r} variant, which {flags} needs; add its templates "
+                            "under \"variants\" (docs/run.md, Prompt sets)")
+        return replace(self, stages={**paper, **self.variants[name]}, variant=name,
+                       variant_hash=content_hash(self.variants[name]), paper_stages=paper)
 
     def render(self, stage: str, *, scene: str = "", history: str = "", intent: str = "", speeds: str = "", curvatures: str = "") -> str:
         """The text of ``stage`` with the earlier stages' texts and the history filled in.
@@ -81,8 +159,11 @@ class PromptSet:
         return text
 
     def describe(self) -> dict[str, str]:
-        """What a run manifest records about the prompt set."""
-        return {"name": self.name, "hash": self.hash}
+        """What a run manifest records about the prompt set (and the variant in use, if any)."""
+        out = {"name": self.name, "hash": self.hash}
+        if self.variant is not None:
+            out.update(variant=self.variant, variant_hash=str(self.variant_hash))
+        return out
 
 
 def available_prompt_sets() -> list[str]:

@@ -78,18 +78,8 @@ def dumps_line(record: Mapping[str, Any]) -> str:
 
 def write_json_atomic(path: str | os.PathLike[str], data: Mapping[str, Any]) -> None:
     """Write ``data`` as pretty JSON to ``path`` via a temporary file and ``os.replace``."""
-    path = Path(path)
     text = json.dumps(_sanitize(dict(data)), default=_to_jsonable, indent=2, allow_nan=False, ensure_ascii=False)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text + "\n")
-            fh.flush()
-            os.fsync(fh.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, text + "\n")
 
 
 def slugify(name: str) -> str:
