@@ -361,8 +361,8 @@ def test_without_torch_the_hf_backend_says_which_extra_to_install(monkeypatch):
 
 def test_importing_lightemma_and_the_local_backends_does_not_import_torch():
     code = ("import sys, lightemma, lightemma.backends, lightemma.backends.hf, lightemma.backends.vllm, "
-            "lightemma.backends.batching, lightemma.cli.run\n"
-            "heavy = sorted(m for m in ('torch', 'transformers', 'vllm') if m in sys.modules)\n"
+            "lightemma.backends.batching, lightemma.backends.ray, lightemma.cli.run, lightemma.pipeline.runner\n"
+            "heavy = sorted(m for m in ('torch', 'transformers', 'vllm', 'ray') if m in sys.modules)\n"
             "print(heavy)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"

@@ -43,19 +43,22 @@ class VLLMBackend:
     """A vLLM engine answering the chain's requests, one ``LLM.chat`` per micro-batch.
 
     Options: ``batch_size`` (requests per ``LLM.chat`` call, default 64),
-    ``batch_window``, ``tensor_parallel_size`` (GPUs to shard over, default 1),
+    ``batch_window``, ``tensor_parallel_size`` (GPUs to shard each layer over, default 1),
+    ``pipeline_parallel_size`` (GPUs to split the layers over, default 1; the engine uses
+    tensor × pipeline GPUs),
     ``gpu_memory_utilization`` (default 0.9), ``max_pixels`` (Pillow downscale
     of each image before vLLM's processor), ``dtype`` (``auto`` lets vLLM take
     the checkpoint's, i.e. bf16 for the paper's models), ``max_model_len``,
     ``seed``, ``enable_prefix_caching`` (default on), ``engine_options`` (more
-    ``vllm.LLM`` keyword arguments). ``vllm`` is the vllm module itself, for
-    tests that inject a stand-in.
+    ``vllm.LLM`` keyword arguments). ``vllm`` is the vllm module itself, or
+    the name of a module to import in its place, for tests that inject a stand-in.
     """
 
     name = "vllm"
 
     def __init__(self, model: str, *, batch_size: int = DEFAULT_BATCH_SIZE, batch_window: float = DEFAULT_BATCH_WINDOW,
-                 tensor_parallel_size: int = 1, gpu_memory_utilization: float = 0.9, max_pixels: int | None = None,
+                 tensor_parallel_size: int = 1, pipeline_parallel_size: int = 1, gpu_memory_utilization: float = 0.9,
+                 max_pixels: int | None = None,
                  dtype: str = "auto", max_model_len: int | None = None, seed: int = 0,
                  enable_prefix_caching: bool = True, engine_options: Mapping[str, Any] | None = None,
                  vllm: Any = None) -> None:
@@ -63,17 +66,21 @@ class VLLMBackend:
             raise UserError(MLLAMA_REFUSAL.format(model=model))
         if tensor_parallel_size < 1:
             raise UserError(f"--tensor-parallel-size must be at least 1, got {tensor_parallel_size}")
+        if pipeline_parallel_size < 1:
+            raise UserError(f"--pipeline-parallel-size must be at least 1, got {pipeline_parallel_size}")
         if not 0 < gpu_memory_utilization <= 1:
             raise UserError(f"--gpu-memory-utilization must be in (0, 1], got {gpu_memory_utilization}")
         check_options(batch_size, max_pixels)
-        self._vllm = vllm if vllm is not None else require("vllm", "vllm")
+        self._vllm = vllm if vllm is not None and not isinstance(vllm, str) else require(vllm or "vllm", "vllm")
         self.model_id = model
         self.max_pixels = max_pixels
         self.tensor_parallel_size = tensor_parallel_size
+        self.pipeline_parallel_size = pipeline_parallel_size
         self.gpu_memory_utilization = gpu_memory_utilization
         self.enable_prefix_caching = enable_prefix_caching
         self.engine_kwargs: dict[str, Any] = {
             "tensor_parallel_size": tensor_parallel_size,
+            **({"pipeline_parallel_size": pipeline_parallel_size} if pipeline_parallel_size > 1 else {}),
             "gpu_memory_utilization": gpu_memory_utilization,
             "dtype": dtype,
             "seed": seed,
@@ -119,8 +126,9 @@ class VLLMBackend:
             "backend": "vllm",
             "model": self.model_id,
             "model_type": self.model_type,
-            "gpus": self.tensor_parallel_size,
+            "gpus": self.tensor_parallel_size * self.pipeline_parallel_size,
             "tensor_parallel_size": self.tensor_parallel_size,
+            "pipeline_parallel_size": self.pipeline_parallel_size,
             "gpu_memory_utilization": self.gpu_memory_utilization,
             "dtype": engine.get("dtype"),
             "engine": engine,

@@ -54,6 +54,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     local.add_argument("--device", help="hf: cuda (all visible GPUs, device_map=auto), cuda:N or cpu (default cuda when present)")
     local.add_argument("--tensor-parallel-size", type=int, help="vllm: GPUs to shard the model over (default 1)")
     local.add_argument("--gpu-memory-utilization", type=float, help="vllm: share of GPU memory vLLM may use (default 0.9)")
+    local.add_argument("--pipeline-parallel-size", type=int, help="vllm: GPUs to split the model's layers over (default 1)")
+    ray = p.add_argument_group("replicas over Ray (--backend hf | vllm; pip install 'lightemma[ray]'; docs/local.md)")
+    ray.add_argument("--replicas", type=int, metavar="N", help="model replicas, each a Ray actor with its own GPU(s), frames spread across "
+                     "them (default 1: in this process, no Ray)")
+    ray.add_argument("--ray-address", metavar="ADDRESS", help="join this running Ray cluster (auto, HOST:PORT, ray://HOST:PORT); "
+                     "default: start a local Ray sized to the replicas")
+    ray.add_argument("--gpus-per-replica", type=float, metavar="G", help="hf: GPUs per replica (default 1 where the cluster has GPUs, else 0); "
+                     "vllm uses --tensor-parallel-size × --pipeline-parallel-size")
     gen = p.add_argument_group("prompting")
     gen.add_argument("--prompt-set", help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
     gen.add_argument("--temperature", type=float, help="sampling temperature where the provider allows it (default 0)")
@@ -84,7 +92,8 @@ RUN_DEFAULTS: dict[str, object] = {
     "speed_range": (-10.0, 50.0), "max_curvature": 1.0, "answer_format": "text", "chain": "independent",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
-RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress"}
+RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
+                  "replicas", "ray_address", "gpus_per_replica"}  # where the model runs, not what it is asked
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
@@ -98,6 +107,7 @@ LIMITS: dict[str, tuple[float, bool]] = {
     "max_retries": (0, False), "backoff": (0, False), "temperature": (0, False), "timeout": (0, True),
     "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
     "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
+    "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False),
 }
 
 
@@ -117,7 +127,7 @@ def check_limits(args: argparse.Namespace) -> None:
 
 # option -> backends that take it
 LOCAL_OPTIONS = {"batch_size": ("hf", "vllm"), "max_pixels": ("hf", "vllm"), "dtype": ("hf", "vllm"), "device": ("hf",),
-                 "tensor_parallel_size": ("vllm",), "gpu_memory_utilization": ("vllm",)}
+                 "tensor_parallel_size": ("vllm",), "gpu_memory_utilization": ("vllm",), "pipeline_parallel_size": ("vllm",)}
 
 
 def local_backend_options(args: argparse.Namespace) -> dict[str, object]:
@@ -149,7 +159,8 @@ def main(args: argparse.Namespace) -> int:
         if given:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
-                        concurrency=args.concurrency)
+                        concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
+                        gpus_per_replica=args.gpus_per_replica)
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")
@@ -158,8 +169,9 @@ def main(args: argparse.Namespace) -> int:
         if not args.dataroot:
             raise UserError("--dataroot is required (a nuScenes directory)")
         options = local_backend_options(args)
-        # local backends batch across frames in flight: keep at least one batch's worth of frames going
-        concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0)))
+        # local backends batch across frames in flight: keep at least one batch's worth of frames going (per replica)
+        replicas = args.replicas or 1
+        concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0))) * replicas
         settings = run_settings(args)
         lo, hi = settings["speed_range"]
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
@@ -176,6 +188,7 @@ def main(args: argparse.Namespace) -> int:
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
             cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
             backend_options=options, on_bad_record=settings["on_bad_record"],
+            replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
             chain=settings["chain"], answer_format=settings["answer_format"],
         )
     print(result.report())

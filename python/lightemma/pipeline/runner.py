@@ -125,7 +125,9 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
             retry=RetryPolicy(max_retries=config["max_retries"], base=config["backoff_base"], cap=config["backoff_cap"]),
             cache=ResponseCache(cache if os.path.isabs(cache) else output / cache) if cache else None,
         )
-    return create_backend(config["model"], backend=kind, api_base=config["api_base"], **options)
+    replicas = {"replicas": config.get("replicas") or 1, "ray_address": config.get("ray_address"),
+                "gpus_per_replica": config.get("gpus_per_replica")}
+    return create_backend(config["model"], backend=kind, api_base=config["api_base"], **replicas, **options)
 
 
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
@@ -288,6 +290,9 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     contents = read_run(run_dir)
     summary = summarize(_in_set(contents.records, read_frame_ids(run_dir)), wall_seconds=wall, frames_run=outcome.done)
     sessions[-1].update(finished_at=_now(), frames_run=outcome.done, wall_seconds=round(wall, 3))
+    replicas = getattr(backend, "replica_report", None)
+    if replicas:
+        sessions[-1]["replicas"] = replicas
     images = getattr(backend, "image_report", None)
     if images:
         sessions[-1]["images_reencoded"] = images
@@ -339,6 +344,9 @@ def run(
     cache: str | bool | None = None,
     transport: str = "litellm",
     backend_options: dict[str, Any] | None = None,
+    replicas: int = 1,
+    ray_address: str | None = None,
+    gpus_per_replica: float | None = None,
     progress: bool = True,
     log: Log | None = None,
 ) -> RunResult:
@@ -351,7 +359,9 @@ def run(
     response cache at ``<output>/cache.sqlite`` (or give a path). ``transport="direct"``
     talks to an OpenAI-compatible ``api_base`` without litellm (less CPU per call).
     ``on_bad_record`` (``skip`` or ``error``) is what loading does with a scene whose
-    pose or timestamp is invalid (see :func:`lightemma.load_frames`).
+    pose or timestamp is invalid (see :func:`lightemma.load_frames`). ``replicas``,
+    ``ray_address`` and ``gpus_per_replica`` run a local model (hf, vllm) as replicas over
+    Ray (:mod:`lightemma.backends.ray`; docs/local.md).
     ``chain`` (``independent``, the paper's, or ``conversation``) and ``answer_format``
     (``text``, the paper's, or ``structured``: stage 3 constrained to a JSON schema) choose
     the request variant (docs/run.md); a backend that cannot constrain its answers is a
@@ -380,6 +390,7 @@ def run(
         "chain": chain, "answer_format": answer_format, "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
+        "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica,
     }
     if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
         config["prompt_set"] = os.fspath(Path(prompt_set).resolve())
@@ -430,7 +441,8 @@ def run(
 
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
-           concurrency: int | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
+           concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
+           gpus_per_replica: float | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
@@ -441,6 +453,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     the frames loaded must be the run's frame set. ``frames`` is needed only
     for runs started from in-memory frames. Another process writing the run
     makes this raise :class:`~lightemma.errors.RunStoreError` (naming its PID).
+    ``concurrency``, ``replicas``, ``ray_address`` and ``gpus_per_replica`` replace the run's own
+    for this session (where the model runs, not what it is asked).
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
@@ -451,6 +465,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         if concurrency < 1:
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
         config["concurrency"] = concurrency
+    placement = {"replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica}
+    config.update({k: v for k, v in placement.items() if v is not None})
     recorded = manifest.get("prompt_set", {})
     # a shipped name or a file's path (the recorded name is the set's own), as the run's variant uses it
     prompts = load_prompt_set(config["prompt_set"]).select(**_request_variant(config))
