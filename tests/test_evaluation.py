@@ -299,6 +299,27 @@ def test_manifest_in_the_run_pipelines_shape(tmp_path):
     assert row["gpus"] is None and row["concurrency"] == 4
 
 
+def test_interrupted_session_makes_the_run_wall_time_unknown(tmp_path):
+    """A session killed or interrupted records no wall time; the last session's alone is not the run's.
+
+    Before: Table I showed the resumed session's 5 s as the run's wall time and 3 / 5 s as its
+    frames/s, although the first session also ran frames for an unknown time.
+    """
+    manifest = {
+        "model": "baseline:cv",
+        "sessions": [{"kind": "run", "started_at": "2026-01-01T00:00:00+00:00"},  # SIGKILLed: no wall time
+                     {"kind": "resume", "wall_seconds": 5.0, "frames_run": 2}],
+        "summary": {"wall_seconds": 5.0, "frames_run": 2},  # the last session's
+        "finished_at": "2026-01-01T00:01:00+00:00",
+    }
+    run_dir = create_run_dir(tmp_path, "baseline:cv", manifest)
+    with RunWriter(run_dir) as w:
+        for i in range(3):
+            w.append(make_record(f"f{i}", np.zeros((6, 2)), np.zeros((6, 2))))
+    row = evaluate_runs([run_dir]).efficiency_rows()[0]
+    assert row["run_wall_seconds"] is None and row["frames_per_second"] is None
+
+
 def test_block_scoring_equals_one_call(two_runs, monkeypatch):
     """Scoring in blocks (bounded memory) gives the same numbers as one call over all frames."""
     import lightemma.evaluation.core as core

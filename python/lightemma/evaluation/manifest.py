@@ -74,12 +74,18 @@ def _parse_time(value: Any) -> datetime | None:
 
 
 def _wall_seconds(manifest: Mapping[str, Any]) -> float | None:
-    """Run wall time: the sum over sessions (a resumed run has several), else what the manifest says."""
+    """Run wall time: the sum over sessions (a resumed run has several), else what the manifest says.
+
+    A session that records no wall time (killed, interrupted, or still running) makes the run's
+    wall time unknown (None): the last session's time, which the summary holds, is not the run's.
+    """
     sessions = manifest.get("sessions")
     if isinstance(sessions, list):
         walls = [s.get("wall_seconds") for s in sessions if isinstance(s, Mapping)]
-        if walls and all(isinstance(w, (int, float)) for w in walls) and sum(walls) > 0:
-            return float(sum(walls))
+        if walls:
+            if all(isinstance(w, (int, float)) and not isinstance(w, bool) for w in walls) and sum(walls) > 0:
+                return float(sum(walls))
+            return None
     for value in (manifest.get("wall_seconds"), _get(manifest, "summary", "wall_seconds")):
         if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
             return float(value)
