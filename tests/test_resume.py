@@ -166,3 +166,32 @@ def test_resume_of_in_memory_frames_needs_them_and_a_foreign_dir_is_refused(tmp_
         resume(first.run_dir, progress=False)
     with pytest.raises(UserError, match="not a lightemma run directory"):
         resume(tmp_path, progress=False)
+
+
+def test_ctrl_c_records_the_sessions_wall_time_so_the_resumed_run_has_one(tmp_path, monkeypatch):
+    """Ctrl-C saves the interrupted session's wall time: evaluate sums the sessions instead of showing '-'."""
+    import asyncio
+
+    from lightemma.evaluation import evaluate_runs
+    from lightemma.pipeline import runner
+
+    frames = make_frames(tmp_path, 3)
+
+    async def interrupted(*args, **kwargs):
+        await asyncio.sleep(0.2)
+        raise KeyboardInterrupt
+
+    with FakeOpenAIServer() as server:
+        with monkeypatch.context() as patch:
+            patch.setattr(runner, "_execute", interrupted)
+            with pytest.raises(KeyboardInterrupt):
+                run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
+        (run_dir,) = [p.parent for p in tmp_path.rglob("manifest.json")]
+        first = read_manifest(run_dir)["sessions"][0]
+        assert first["interrupted"] is True and first["wall_seconds"] >= 0.2
+        assert read_manifest(run_dir).get("finished_at") is None
+        resume(run_dir, frames=frames, progress=False)
+    sessions = read_manifest(run_dir)["sessions"]
+    row = evaluate_runs([run_dir]).efficiency_rows()[0]
+    assert row["run_wall_seconds"] == pytest.approx(sessions[0]["wall_seconds"] + sessions[1]["wall_seconds"])
+    assert row["frames_per_second"] == pytest.approx(3 / row["run_wall_seconds"])

@@ -281,6 +281,12 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
                 outcome = _Outcome()
                 asyncio.run(backend.aclose())
     except KeyboardInterrupt:
+        # the session's time is known: record it, so the run's wall time stays the sum of its sessions
+        sessions[-1].update(interrupted=True, wall_seconds=round(time.perf_counter() - start, 3))
+        try:
+            update_manifest(run_dir, sessions=sessions)
+        except OSError:
+            pass  # the frames are safe; the run's wall time will just be unknown
         if log:
             log(f"interrupted; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
         raise
