@@ -426,6 +426,17 @@ def test_a_frame_set_with_no_frames_is_an_error_not_an_empty_run(tmp_path, synth
     assert not (tmp_path / "out").exists()
 
 
+def test_a_frame_set_whose_images_are_all_missing_says_so(tmp_path, capsys):
+    """Not "choose other scenes or --window full": the frames exist, their CAM_FRONT images do not."""
+    tables_only = lightemma.synth.write_dataset(tmp_path / "tables", scenes=1, keyframes=15, images=False, sweeps=False)
+    code, _, errors = run_cli(capsys, "--model", "baseline:cv", "--dataroot", tables_only, "--version", "v1.0-mini",
+                              "--output", tmp_path / "out")
+    assert code == 2 and len(errors) == 1, errors
+    assert "no frames to run: the CAM_FRONT image of every frame (1) is missing" in errors[0], errors
+    assert "--window full" not in errors[0] and "samples/CAM_FRONT" in errors[0], errors
+    assert not (tmp_path / "out").exists()
+
+
 # -- evaluation reads only the run's frame set ------------------------------------------------------------------
 
 

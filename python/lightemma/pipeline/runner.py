@@ -148,6 +148,10 @@ def _require_frames(frames: Sequence[Any]) -> None:
     if len(frames):
         return
     skipped = list(getattr(frames, "skipped_scenes", []) or [])
+    missing = list(getattr(frames, "missing_images", []) or [])
+    if missing and not skipped:  # the frames exist; their images do not
+        raise UserError(f"no frames to run: the CAM_FRONT image of every frame ({len(missing)}) is missing (see the "
+                        "warning above); --dataroot must be the folder holding samples/CAM_FRONT/*.jpg")
     why = f": every scene was skipped ({', '.join(skipped[:5])}{', …' if len(skipped) > 5 else ''}; see the warnings above)" if skipped else ""
     raise UserError(f"no frames to run{why}; choose other scenes (--split, --scenes) or --window full")
 
