@@ -284,3 +284,18 @@ def test_cli_rejects_bad_arguments(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["synth", str(tmp_path / "x"), "--image-size", "big"])
     assert "800x450" in capsys.readouterr().err
+
+
+def test_cli_synth_says_when_its_dataset_cannot_be_run(tmp_path, capsys):
+    """Too few keyframes for a window, or no images: no hint to run a baseline that would find no frame."""
+    assert main(["synth", str(tmp_path / "short"), "--scenes", "1", "--keyframes", "14", "--no-sweeps",
+                 "--image-size", "32x18"]) == 0
+    out, err = capsys.readouterr()
+    assert "0 frames in the reference window" in out
+    assert err.startswith("lightemma synth: warning: a scene needs at least 15 keyframes") and "only --window full has frames (1)" in err
+    assert main(["synth", str(tmp_path / "shorter"), "--scenes", "1", "--keyframes", "5", "--no-images"]) == 0
+    out, err = capsys.readouterr()
+    assert "there is no frame to run" in err
+    assert main(["synth", str(tmp_path / "tables"), "--scenes", "1", "--keyframes", "15", "--no-images"]) == 0
+    out, err = capsys.readouterr()
+    assert "run a baseline" not in out and "on_missing_image='keep'" in out and err == ""

@@ -74,8 +74,17 @@ def run(args: argparse.Namespace) -> int:
     frames = len(window_range(args.keyframes, "reference")) * args.scenes
     print(f"wrote {args.scenes} synthetic scenes ({args.keyframes} keyframes each, {frames} frames in the "
           f"reference window) to {root}/{args.version}")
+    if not frames:
+        full = len(window_range(args.keyframes, "full")) * args.scenes
+        print(f"lightemma synth: warning: a scene needs at least 15 keyframes for a frame in the reference window "
+              f"(14 for --window full); with --keyframes {args.keyframes} "
+              + ("there is no frame to run" if not full else f"only --window full has frames ({full})"), file=sys.stderr)
     # v1.0-mini takes all of its scenes by default; any other version folder must say so
     split = ("", "") if args.version == DEFAULT_VERSION else (" --split all", ", split='all'")
+    if args.no_images:  # runs skip frames without their CAM_FRONT image: only the tables are of use
+        print(f"tables only (--no-images): runs need the images; load the frames in Python with "
+              f"lightemma.load_frames({str(root)!r}, {args.version!r}{split[1]}, on_missing_image='keep')")
+        return 0
     print(f"run a baseline on it: lightemma run --model baseline:cv --dataroot {root} --version {args.version}{split[0]}")
     print(f"load it in Python:    lightemma.load_frames({str(root)!r}, {args.version!r}{split[1]})")
     return 0
