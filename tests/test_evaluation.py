@@ -390,3 +390,15 @@ def test_frames_with_only_api_errors_are_counted_apart_from_format_errors(tmp_pa
     assert row["api_errors"] == 2  # the frames that never received an answer, older records included
     assert row["failed"] == 1  # f2: an answer that failed to parse
     assert ev.models[0].accounting["failed_final"] == 3
+
+
+def test_a_file_given_as_a_run_directory_is_named_as_a_file(two_runs, capsys):
+    """Before: 'RUN/frames.jsonl does not exist', of a file that exists."""
+    out, a, _ = two_runs
+    for path in (a / FRAMES_FILE, a / "manifest.json"):
+        assert main(["evaluate", str(path)]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"lightemma evaluate: error: {path} is a file, not a run directory; give the folder that holds "
+                       f"manifest.json ({a})"), err
+    assert main(["evaluate", str(out / "missing")]) == 2
+    assert capsys.readouterr().err.strip() == f"lightemma evaluate: error: {out / 'missing'} does not exist"

@@ -322,6 +322,9 @@ def find_run_dirs(path: str | os.PathLike[str]) -> list[Path]:
     if (path / MANIFEST_FILE).is_file():
         return [path]
     if not path.is_dir():
+        if path.exists():
+            raise RunStoreError(f"{path} is a file, not a run directory; give the folder that holds {MANIFEST_FILE} "
+                                f"({path.parent if path.name in (MANIFEST_FILE, FRAMES_FILE) else 'a run directory'})")
         raise RunStoreError(f"{path} does not exist")
     # hidden directories are a run directory still being created (or one whose creation was cut off)
     return sorted(p.parent for p in path.glob(f"**/{MANIFEST_FILE}")
