@@ -144,3 +144,12 @@ def test_a_frame_picked_twice_is_drawn_once():
 
     picks = [("disagree", "a", "spread"), ("case", "b", "worst braking"), ("case", "a", "worst starting")]
     assert _merge_picks(picks) == [("disagree", "a", "spread; worst starting"), ("case", "b", "worst braking")]
+
+
+def test_a_negative_top_is_an_error_not_every_frame_but_one(tmp_path, capsys):
+    """Before: --top -1 sliced [:-1] and drew every frame but one (828 files for 208 frames)."""
+    runs = tmp_path / "runs"
+    write_synthetic_run(runs, "openai/gpt-4o", 12)
+    assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--top", "-1", "--no-paper"]) == 2
+    assert capsys.readouterr().err.strip() == "lightemma report: error: --top must be 0 or more, got -1"
+    assert not (tmp_path / "rep").exists()

@@ -173,13 +173,15 @@ def write_report(
     :data:`lightemma.scenarios.CASE_TAGS`; ``()`` for none); ``pairwise`` compares
     every pair of runs (table, matrix figure, per-family generation verdicts);
     ``resampling`` sets the scene bootstrap (resamples, seed, confidence). A ``dataroot``
-    that is not a folder raises :class:`~lightemma.errors.UserError` before any work.
+    that is not a folder, or a negative ``top``, raises :class:`~lightemma.errors.UserError` before any work.
     """
     from lightemma.evaluation.tables import coverage_flags
     from lightemma.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
     from lightemma.pictures import CameraSource
     from lightemma.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
 
+    if isinstance(top, bool) or not isinstance(top, int) or top < 0:
+        raise UserError(f"top must be a whole number of frames, 0 or more, got {top!r}", cli=f"--top must be 0 or more, got {top!r}")
     if dataroot is not None and not os.path.isdir(dataroot):
         what = "is not a folder" if os.path.exists(dataroot) else "does not exist"
         raise UserError(f"dataroot {dataroot} {what}", cli=f"--dataroot {dataroot} {what}")
