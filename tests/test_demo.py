@@ -82,3 +82,12 @@ def test_skipped_models_name_the_missing_key_or_no_api():
 def test_demo_rejects_too_few_keyframes(tmp_path, capsys):
     assert main(["demo", "--out", str(tmp_path / "d"), "--keyframes", "10"]) == 2
     assert "at least 15" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("flag", "value"), [("--scenes", "0"), ("--scenes", "-2"), ("--api-limit", "0"), ("--api-limit", "-1")])
+def test_demo_refuses_a_count_below_one_before_any_work(tmp_path, capsys, flag, value):
+    """Before: --scenes 0 ran the default 8 scenes, and --api-limit 0 ran a keyed API model on every frame."""
+    out = tmp_path / "demo"
+    assert main(["demo", "--out", str(out), flag, value]) == 2
+    assert capsys.readouterr().err.strip() == f"lightemma demo: error: {flag} must be at least 1, got {value}"
+    assert not out.exists()

@@ -90,6 +90,11 @@ def run_demo(
 
     ``api_base`` sends the API models to another OpenAI-compatible server.
     """
+    if scenes is not None and (isinstance(scenes, bool) or not isinstance(scenes, int) or scenes < 1):
+        raise UserError(f"scenes must be at least 1 (or None: one per scenario kind), got {scenes!r}",
+                        cli=f"--scenes must be at least 1, got {scenes!r}")
+    if isinstance(api_limit, bool) or not isinstance(api_limit, int) or api_limit < 1:  # 0 would run every frame
+        raise UserError(f"api_limit must be at least 1 frame, got {api_limit!r}", cli=f"--api-limit must be at least 1, got {api_limit!r}")
     out = Path(out).resolve()
     _prepare(out)
     import lightemma
