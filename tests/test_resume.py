@@ -129,6 +129,16 @@ def test_retry_failed_reruns_only_failed_frames_and_the_last_record_wins(tmp_pat
     contents = read_run(first.run_dir)
     assert contents.duplicates == 2 and all(r["status"] == "ok" for r in contents.records.values())
     assert again.summary["failed"] == 0 and again.summary["ok"] == 6
+    # the retried frames keep their earlier attempts: FE still counts the first answer ever received ("no idea"),
+    # and the frame's calls, tokens and time include what the failed attempts spent
+    earlier = [r for r in read_jsonl_lines(first.run_dir) if r["status"] == "failed"]
+    for old in earlier:
+        new = contents.records[old["frame_id"]]
+        assert (new["first_status"], new["n_attempts"]) == ("failed", 3)
+        assert [a["attempt"] for a in new["attempts"]] == [1, 2, 3]
+        assert [a["status"] for a in new["attempts"]] == ["failed", "failed", "ok"] and new["attempts"][:2] == old["attempts"]
+        assert new["input_tokens"] > old["input_tokens"] and new["seconds"] >= old["seconds"]
+    assert again.summary["fe_corr_percent"] == pytest.approx(100 * 2 / 6)
 
 
 def test_resume_refuses_a_changed_prompt_set(tmp_path):
@@ -195,3 +205,10 @@ def test_ctrl_c_records_the_sessions_wall_time_so_the_resumed_run_has_one(tmp_pa
     row = evaluate_runs([run_dir]).efficiency_rows()[0]
     assert row["run_wall_seconds"] == pytest.approx(sessions[0]["wall_seconds"] + sessions[1]["wall_seconds"])
     assert row["frames_per_second"] == pytest.approx(3 / row["run_wall_seconds"])
+
+
+def read_jsonl_lines(run_dir):
+    """Every record line of a run, in the order written (duplicates included)."""
+    import json
+
+    return [json.loads(line) for line in (run_dir / "frames.jsonl").read_text().splitlines() if line.strip()]

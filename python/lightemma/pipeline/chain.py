@@ -30,6 +30,7 @@ model — exactly as an independent re-ask resends the same request.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -187,11 +188,17 @@ def _as_list(value: Any) -> Any:
     return None if value is None else np.asarray(value, dtype=np.float64).tolist()
 
 
-async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy) -> dict[str, Any]:
+async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy,
+                    earlier: Mapping[str, Any] | None = None) -> dict[str, Any]:
     """Run the chain on one frame and return its run record (docs/definitions.md#run-records).
 
     ``frame`` needs ``frame_id``, ``scene_name``, ``sample_token``,
     ``image_path``, ``history_actions`` (6, 2) and ``gt_positions`` (6, 2).
+    ``earlier`` is the frame's failed record from an earlier session (``--retry-failed``, or a
+    frame that failed with the error that stopped the run): its attempts come first in the new
+    record, numbered on, so FE still counts the first answer ever received and the frame's time,
+    tokens and cost include what the earlier attempts spent; up to ``max_attempts`` new attempts
+    are made.
     Raises only what the backend raises: :class:`~lightemma.errors.RunFatalError` when the run
     cannot succeed (a rejected API key, the same failure on frame after frame).
     """
@@ -208,12 +215,13 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     def turns(*texts: str) -> tuple[tuple[str, str], ...]:
         return _earlier_turns(policy, prompts, history, *texts)
 
+    before = [a for a in (earlier or {}).get("attempts") or () if isinstance(a, Mapping) and isinstance(a.get("calls"), list)]
     attempts: list[dict[str, Any]] = []
     scene: str | None = None
     intent: str | None = None
     actions = None
     answer: str | None = None
-    for number in range(1, policy.max_attempts + 1):
+    for number in range(len(before) + 1, len(before) + policy.max_attempts + 1):
         attempt = _Attempt(number)
         if policy.reask == "chain":
             scene = intent = None
@@ -241,7 +249,13 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             actions = parsed
             break
 
-    return _frame_record(frame, attempts, scene, intent, answer, actions, policy, time.perf_counter() - start)
+    seconds = time.perf_counter() - start + _number((earlier or {}).get("seconds"))
+    return _frame_record(frame, [*map(dict, before), *attempts], scene, intent, answer, actions, policy, seconds)
+
+
+def _number(value: Any) -> float:
+    """A recorded non-negative number, else 0 (an earlier record without the field)."""
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0 else 0.0
 
 
 def _earlier_turns(policy: ChainPolicy, prompts: PromptSet, history: dict[str, str], *texts: str) -> tuple[tuple[str, str], ...]:

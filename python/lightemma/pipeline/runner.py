@@ -28,7 +28,7 @@ import platform
 import subprocess
 import sys
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -201,8 +201,11 @@ class _Outcome:
 
 
 async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
-                   concurrency: int, bar: Progress) -> _Outcome:
-    """Run every frame, ``concurrency`` at a time, appending each record as it finishes; stop on a run-fatal cause."""
+                   concurrency: int, bar: Progress, earlier: Mapping[str, dict[str, Any]]) -> _Outcome:
+    """Run every frame, ``concurrency`` at a time, appending each record as it finishes; stop on a run-fatal cause.
+
+    ``earlier``: frame id -> the failed record a frame is run again after (its attempts are kept).
+    """
     iterator = iter(frames)
     guard = _Guard(backend)
     outcome = _Outcome()
@@ -217,7 +220,7 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             if guard.stopped:
                 return
             try:
-                record = await run_frame(frame, guard, prompts, policy)
+                record = await run_frame(frame, guard, prompts, policy, earlier.get(frame.frame_id))
             except _Stopped:
                 return  # cut off mid-chain by a stop: not written, so a resume runs it again
             except RunFatalError as exc:
@@ -260,8 +263,11 @@ def _write_manifest(run_dir: Path, **fields: Any) -> dict[str, Any]:
 
 
 def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: dict[str, Any],
-             progress: bool, kind: str, already: int, log: Log | None) -> RunResult:
+             progress: bool, kind: str, already: int, log: Log | None,
+             earlier: Mapping[str, dict[str, Any]] | None = None) -> RunResult:
     """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume.
+
+    ``earlier``: the failed records of frames run again (frame id -> record), whose attempts the new records keep.
 
     Raises :class:`RunStopped` (after saving the session) when the run stopped for a run-fatal cause.
     """
@@ -280,7 +286,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     try:
         with writer:
             if todo:
-                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar))
+                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar, earlier or {}))
             else:
                 outcome = _Outcome()
                 asyncio.run(backend.aclose())
@@ -516,8 +522,9 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
             log(f"frames: {summary_line(_describe(all_frames, dataset))}")
             extra = f", of which {again} failed with {stopped_by}, the error that stopped the run" if again else ""
             log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run{extra}")
+        earlier = {f.frame_id: records[f.frame_id] for f in todo if f.frame_id in records}
         return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume",
-                        len(all_frames) - len(todo), log)
+                        len(all_frames) - len(todo), log, earlier)
 
 
 def _stopped_error(manifest: dict[str, Any]) -> str | None:
