@@ -94,6 +94,17 @@ def test_run_refuses_an_option_out_of_range_by_its_flag(synth_root, tmp_path, ca
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.parametrize("model, backend", [("baseline:cv", None), ("Qwen/Qwen2.5-VL-7B-Instruct", "hf"),
+                                            ("qwen-2.5-vl-7b", "vllm")])
+def test_an_api_base_that_the_backend_would_ignore_is_refused(synth_root, tmp_path, capsys, model, backend):
+    extra = ["--backend", backend] if backend else []
+    assert main(["run", "--model", model, *extra, "--api-base", "http://127.0.0.1:9/v1", "--dataroot", str(synth_root),
+                 "--version", "v1.0-mini", "--output", str(tmp_path / "out"), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert "--api-base is for models behind an API" in err and len(err.strip().splitlines()) == 1, err
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_named_split_missing_from_synthetic_data_points_to_split_all(synth_root, tmp_path, capsys):
     assert main(["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini",
                  "--split", "mini_val", "--output", str(tmp_path)]) == 2
