@@ -458,6 +458,22 @@ def test_evaluate_drops_records_of_frames_outside_the_runs_frame_set(tmp_path, c
     assert "dropped 1 record(s)" in capsys.readouterr().err
 
 
+def test_evaluate_warns_when_a_finished_run_lost_records(tmp_path, capsys):
+    """A finished run whose frames.jsonl lost lines is scored on what is left, and says so (never silently)."""
+    from lightemma.evaluation import evaluate_runs
+
+    with FakeOpenAIServer() as server:
+        result = run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 4), output=tmp_path, progress=False)
+    assert not any("no record" in w for w in evaluate_runs([result.run_dir]).warnings)
+    lines = (result.run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
+    (result.run_dir / FRAMES_FILE).write_text("".join(lines[:3]))
+    evaluation = evaluate_runs([result.run_dir])
+    assert [w for w in evaluation.warnings if "1 of its 4 frames have no record in frames.jsonl" in w
+            and f"lightemma run --resume {result.run_dir}" in w], evaluation.warnings
+    assert cli_main(["evaluate", str(result.run_dir)]) == 0
+    assert "1 of its 4 frames have no record" in capsys.readouterr().err
+
+
 # -- the detectors themselves -----------------------------------------------------------------------------------
 
 

@@ -64,6 +64,7 @@ class RunData:
     bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
     foreign_records: int = 0  # records of frames outside the run's frame set (dropped)
     foreign_example: str | None = None
+    frame_set_size: int | None = None  # frames in the run's frame set (frame_ids.txt), None for runs without one
     warnings: list[str] = field(default_factory=list)
     parse: ParseDefinition = field(default_factory=ParseDefinition)  # how the statuses and actions were read
     rescored: bool = False  # True when the stored answers were parsed again (a definition was asked for)
@@ -313,6 +314,7 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         plausibility=limits,
         foreign_records=foreign,
         foreign_example=foreign_example,
+        frame_set_size=len(recorded_set) if recorded_set is not None else None,
     )
     data.warnings = _warnings(data)
     return data
@@ -339,6 +341,10 @@ def _warnings(data: RunData) -> list[str]:
                    f"(frame_ids.txt), e.g. {data.foreign_example!r}")
     if not data.info.complete:
         out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
+    elif data.frame_set_size is not None and len(data) + data.bad_records < data.frame_set_size:
+        missing = data.frame_set_size - len(data) - data.bad_records
+        out.append(f"{where}: the run is marked finished but {missing} of its {data.frame_set_size} frames have no record in "
+                   f"frames.jsonl (lines lost?); evaluating the {len(data)} recorded; lightemma run --resume {where} runs the rest")
     if not data.frame_ids:
         out.append(f"{where}: no frames to evaluate")
     return out
