@@ -183,3 +183,15 @@ def test_resume_of_a_run_from_frames_in_memory_says_it_needs_python(synth_root, 
     assert main(["run", "--resume", str(run_dir)]) == 2
     assert one_error_line(capsys, "run").endswith(
         "made from frames passed in memory, not from a dataset; resume it from Python: lightemma.resume(RUN_DIR, frames=FRAMES)")
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["run", "--concurrency", "x"], "lightemma run: error: argument --concurrency: invalid int value: 'x' (see lightemma run --help)"),
+    (["evaluate", "runs", "--format", "yaml"], "lightemma evaluate: error: argument --format: invalid choice: 'yaml'"),
+    (["frobnicate"], "lightemma: error: argument COMMAND: invalid choice: 'frobnicate'"),
+])
+def test_a_usage_error_is_one_line_naming_the_flag(argv, message, capsys):
+    with pytest.raises(SystemExit) as exit_:
+        main(argv)
+    err = capsys.readouterr().err
+    assert exit_.value.code == 2 and err.startswith(message) and len(err.strip().splitlines()) == 1, err

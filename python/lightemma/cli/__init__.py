@@ -25,10 +25,20 @@ SUBCOMMANDS: list[str] = ["demo", "synth", "run", "import", "evaluate", "report"
 MODULES: dict[str, str] = {"import": "import_"}  # subcommand -> module where the name is a Python keyword
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse, with a usage error as one line (the flag and what was wrong) instead of the whole usage block.
+
+    Subcommand parsers are of this class too (``add_subparsers`` makes them of the parent's class).
+    """
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     from lightemma import __version__
 
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="lightemma",
         description="Benchmark how well vision-language models drive (nuScenes, LightEMMA protocol).",
     )
