@@ -189,6 +189,12 @@ def test_resume_of_a_run_from_frames_in_memory_says_it_needs_python(synth_root, 
     (["run", "--concurrency", "x"], "lightemma run: error: argument --concurrency: invalid int value: 'x' (see lightemma run --help)"),
     (["evaluate", "runs", "--format", "yaml"], "lightemma evaluate: error: argument --format: invalid choice: 'yaml'"),
     (["frobnicate"], "lightemma: error: argument COMMAND: invalid choice: 'frobnicate'"),
+    # an unknown flag is named by the subcommand that got it, with that subcommand's help
+    (["run", "--bogus"], "lightemma run: error: unrecognized arguments: --bogus (see lightemma run --help)"),
+    (["models", "--bogus", "x"], "lightemma models: error: unrecognized arguments: --bogus x (see lightemma models --help)"),
+    (["prompts", "check", "set", "run", "extra"],
+     "lightemma prompts check: error: unrecognized arguments: extra (see lightemma prompts check --help)"),
+    (["--bogus"], "lightemma: error: unrecognized arguments: --bogus (see lightemma --help)"),
 ])
 def test_a_usage_error_is_one_line_naming_the_flag(argv, message, capsys):
     with pytest.raises(SystemExit) as exit_:

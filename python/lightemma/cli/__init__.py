@@ -35,6 +35,18 @@ class _Parser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
+class _SubParser(_Parser):
+    """A subcommand's parser: it names the arguments it does not know itself (with its own --help), rather
+    than leaving them to the top-level parser, which would blame ``lightemma`` (``add_subparsers`` of a
+    subcommand makes its own subcommands of this class too)."""
+
+    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+        namespace, extras = super().parse_known_args(args, namespace)
+        if extras:
+            self.error(f"unrecognized arguments: {' '.join(extras)}")
+        return namespace, extras
+
+
 def build_parser() -> argparse.ArgumentParser:
     from lightemma import __version__
 
@@ -43,7 +55,7 @@ def build_parser() -> argparse.ArgumentParser:
         description="Benchmark how well vision-language models drive (nuScenes, LightEMMA protocol).",
     )
     parser.add_argument("--version", action="version", version=f"lightemma {__version__}")
-    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
+    subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_SubParser)
     for name in SUBCOMMANDS:
         importlib.import_module(f"lightemma.cli.{MODULES.get(name, name)}").add_parser(subparsers)
     return parser
