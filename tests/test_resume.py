@@ -141,6 +141,37 @@ def test_retry_failed_reruns_only_failed_frames_and_the_last_record_wins(tmp_pat
     assert again.summary["fe_corr_percent"] == pytest.approx(100 * 2 / 6)
 
 
+def test_with_the_response_cache_a_reask_and_a_retry_reach_the_provider_not_the_cached_failure(tmp_path):
+    """A re-ask (attempt 2) and a --retry-failed pass (attempts 3, 4) are new questions: the cache never replays the
+    failed answer they are asked again for. A second identical run still replays every attempt from the cache."""
+    frames = make_frames(tmp_path, 1)
+    fixed = {"now": False}
+
+    def script(req):
+        if req.stage == "actions" and not fixed["now"]:
+            return Reply("no idea")
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "a", max_attempts=2, cache=True,
+                    **FAST)
+        asked = [r.stage for r in server.requests]
+        assert asked == ["scene", "intent", "actions", "actions"], asked  # the re-ask went to the server
+        assert first.summary["failed"] == 1 and first.summary["cached_calls"] == 0
+        fixed["now"] = True
+        again = resume(first.run_dir, retry_failed=True, frames=frames, progress=False)
+        assert [r.stage for r in server.requests[len(asked):]] == ["scene", "intent", "actions"]
+        sent = len(server.requests)
+        # the same run again, sharing the cache: both attempts are replayed, nothing is sent
+        replay = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "a", max_attempts=2,
+                     cache=tmp_path / "a" / "cache.sqlite", **FAST)
+        assert len(server.requests) == sent and replay.summary["failed"] == 1 and replay.summary["cached_calls"] == 4
+    (record,) = read_run(first.run_dir).records.values()
+    assert record["status"] == "ok" and [a["attempt"] for a in record["attempts"]] == [1, 2, 3]
+    assert [c["cached"] for a in record["attempts"] for c in a["calls"]] == [False] * 7
+    assert again.summary["ok"] == 1
+
+
 def test_resume_refuses_a_changed_prompt_set(tmp_path):
     frames = make_frames(tmp_path, 2)
     with FakeOpenAIServer() as server:

@@ -35,11 +35,17 @@ CREATE TABLE IF NOT EXISTS responses (
 
 
 def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None,
-                turns: tuple[tuple[str, str], ...] = ()) -> str:
-    """The cache key of one request: ``text`` after the earlier ``turns`` (a single-turn request keeps its old key)."""
+                turns: tuple[tuple[str, str], ...] = (), attempt: int = 1) -> str:
+    """The cache key of one request: ``text`` after the earlier ``turns`` (a single-turn request keeps its old key).
+
+    ``attempt`` > 1 (a re-ask) is part of the key: a re-ask must reach the provider, not replay the cached
+    answer it was asked again for; a first ask keeps its old key.
+    """
     parts: list[Any] = [model, api_base or "", params, text, image_digest or ""]
     if turns:
         parts.append([list(t) for t in turns])
+    if attempt > 1:
+        parts.append({"attempt": attempt})
     payload = json.dumps(parts, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(payload.encode("utf-8")).hexdigest()
 

@@ -415,7 +415,7 @@ class APIBackend:
 
         key = None
         if self.cache is not None and params.get("temperature", None) == 0:
-            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns)
+            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns, req.attempt)
             hit = self.cache.get(key)
             if hit is not None:
                 return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],

@@ -90,6 +90,9 @@ class ChatRequest:
     # A later request of the frame starts with this whole request (the conversation chain's stages 1 and 2):
     # a backend with an explicit prompt cache (Anthropic) marks its end for caching.
     prefix_of_next: bool = False
+    # Which attempt of the frame's chain this request belongs to (1 = the first ask; re-asks count on, also
+    # across --retry-failed passes): a re-ask is a new question to the provider, never a replay of a cached answer.
+    attempt: int = 1
 
 
 @dataclass

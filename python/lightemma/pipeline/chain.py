@@ -209,7 +209,7 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     async def ask(stage: str, text: str, turns: tuple[tuple[str, str], ...] = ()) -> ChatResult:
         request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
                               turns=turns, response_schema=policy.response_schema(stage),
-                              prefix_of_next=policy.chain == "conversation" and stage != "actions")
+                              prefix_of_next=policy.chain == "conversation" and stage != "actions", attempt=attempt.number)
         return (await backend.generate([request]))[0]
 
     def turns(*texts: str) -> tuple[tuple[str, str], ...]:
