@@ -21,7 +21,7 @@ from collections import Counter
 import numpy as np
 import pytest
 from fake_openai import GOOD_ACTIONS, SCENE_TEXT, FakeOpenAIServer, Reply, default_reply
-from memframes import make_frames
+from memframes import FrameIndex, make_frames
 
 import lightemma
 import lightemma.synth
@@ -277,6 +277,30 @@ def test_truncated_texts_are_recorded_asked_again_and_never_passed_on(tmp_path):
     assert result.summary["truncated_calls"] == 2 and "2 truncated" in result.report()
 
 
+def test_frames_cut_off_before_stage_3_are_not_reported_as_api_errors(tmp_path):
+    """Every scene text cut off: no stage-3 answer, no API error — the summary says which, as evaluate does."""
+    from lightemma.evaluation import evaluate_runs
+
+    frames = make_frames(tmp_path, 3)
+    index = FrameIndex(frames)
+
+    def script(req):
+        if index(req) == 0 and req.stage == "scene":
+            return Reply("a long, long scene descrip", finish_reason="length")
+        if index(req) == 1 and req.stage == "intent":
+            return Reply.error(500, "unavailable")
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_attempts=2, max_retries=0,
+                     backoff_base=0.01, progress=False)
+    s = result.summary
+    assert (s["answered_frames"], s["api_error_frames"], s["cut_off_frames"], s["api_errors"]) == (1, 1, 1, 2)
+    assert "(over 1 answered frame(s); API errors only: 1; cut off before stage 3: 1)" in result.report()
+    (row,) = evaluate_runs([result.run_dir]).accuracy_rows()
+    assert (row["api_errors"], row["failed"]) == (1, 1)
+
+
 def test_reasoning_models_get_room_for_the_answer_and_their_reasoning_tokens_are_recorded(tmp_path):
     from lightemma.registry import DEFAULT_REASONING_BUDGET
 
@@ -468,10 +492,10 @@ def test_evaluate_warns_when_a_finished_run_lost_records(tmp_path, capsys):
     lines = (result.run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
     (result.run_dir / FRAMES_FILE).write_text("".join(lines[:3]))
     evaluation = evaluate_runs([result.run_dir])
-    assert [w for w in evaluation.warnings if "1 of its 4 frames have no record in frames.jsonl" in w
+    assert [w for w in evaluation.warnings if "1 of its 4 frame(s) have no record in frames.jsonl" in w
             and f"lightemma run --resume {result.run_dir}" in w], evaluation.warnings
     assert cli_main(["evaluate", str(result.run_dir)]) == 0
-    assert "1 of its 4 frames have no record" in capsys.readouterr().err
+    assert "1 of its 4 frame(s) have no record" in capsys.readouterr().err
 
 
 # -- the detectors themselves -----------------------------------------------------------------------------------

@@ -79,8 +79,10 @@ def create_backend(model: str, *, backend: str | None = None, api_base: str | No
         raise UserError(f"--replicas, --ray-address and --gpus-per-replica are for local models (--backend hf or vllm); "
                         f"{model} runs on the {kind} backend")
     if api_base and kind != "api":
+        fix = ("drop --api-base: a baseline computes its answers itself" if kind == "baseline" else
+               f"drop --api-base to run the model here, or drop --backend {kind} to reach the server")
         raise UserError(f"--api-base is for models behind an API; {model} runs on the {kind} backend, which would "
-                        "ignore it (drop --api-base, or drop --backend to reach the server)")
+                        f"ignore it ({fix})")
     if kind == "baseline":
         cls = _load("lightemma.backends.baseline", "BaselineBackend", "")
         return cls(model.split(":", 1)[1] if ":" in model else model, **options)

@@ -343,7 +343,7 @@ def _warnings(data: RunData) -> list[str]:
         out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
     elif data.frame_set_size is not None and len(data) + data.bad_records < data.frame_set_size:
         missing = data.frame_set_size - len(data) - data.bad_records
-        out.append(f"{where}: the run is marked finished but {missing} of its {data.frame_set_size} frames have no record in "
+        out.append(f"{where}: the run is marked finished but {missing} of its {data.frame_set_size} frame(s) have no record in "
                    f"frames.jsonl (lines lost?); evaluating the {len(data)} recorded; lightemma run --resume {where} runs the rest")
     if not data.frame_ids:
         out.append(f"{where}: no frames to evaluate")

@@ -30,6 +30,9 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
     statuses = {s: sum(1 for r in records if r.get("status") == s) for s in ("ok", "corrected", "failed")}
     # FE is over frames whose stage-3 answer was received; frames whose calls all failed at the provider are apart
     received = [first_answer_status(r) for r in records if answer_received(r)]
+    # frames without any stage-3 answer: lost to API errors, or every attempt cut off before stage 3
+    unanswered = [r for r in records if not answer_received(r)]
+    api_error_frames = sum(1 for r in unanswered if r.get("failure", "api_error") == "api_error")
     first_not_ok = sum(1 for first in received if first != "ok")
     first_failed = sum(1 for first in received if first == "failed")
     m = len(received)
@@ -49,7 +52,8 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         "fe_percent": 100.0 * first_not_ok / m if m else None,
         "fe_corr_percent": 100.0 * first_failed / m if m else None,
         "answered_frames": m,
-        "api_error_frames": n - m,
+        "api_error_frames": api_error_frames,
+        "cut_off_frames": len(unanswered) - api_error_frames,
         "ade_avg": ade,
         "ade_frames": len(valid),
         "mean_seconds_per_frame": _mean([r["seconds"] for r in records if r.get("seconds") is not None]),
@@ -100,8 +104,7 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
     lines += [
         f"frames        {summary['frames']}  (ok {summary['ok']}, corrected {summary['corrected']}, failed {summary['failed']})",
         f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}"
-        + (f"  (over {summary['answered_frames']} answered frame(s); API errors only: {summary['api_error_frames']})"
-           if summary.get("api_error_frames") else ""),
+        + _unanswered(summary),
         f"ADE avg       {_fmt(summary['ade_avg'], '.3f', ' m')}  over {summary['ade_frames']} frame(s)",
         f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}",
         f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}"
@@ -117,3 +120,10 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         lines.append(f"wall time     {summary['wall_seconds']:.1f} s for {summary['frames_run']} frame(s), "
                      f"{_fmt(summary['frames_per_second'], '.2f', ' frames/s')}")
     return "\n".join(lines)
+
+
+def _unanswered(summary: Mapping[str, Any]) -> str:
+    """Why FE is over fewer frames than the run has: frames that received no stage-3 answer, by cause."""
+    api, cut = summary.get("api_error_frames") or 0, summary.get("cut_off_frames") or 0
+    causes = [*([f"API errors only: {api}"] if api else []), *([f"cut off before stage 3: {cut}"] if cut else [])]
+    return f"  (over {summary['answered_frames']} answered frame(s); {'; '.join(causes)})" if causes else ""
