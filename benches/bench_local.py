@@ -75,6 +75,24 @@ def tiny_checkpoint(root: Path) -> str:
     return str(build_tiny_model("qwen2_vl", root / "tiny-qwen2-vl"))
 
 
+def model_and_frames(args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, measures: str) -> tuple[str, Any, str]:
+    """The checkpoint (``--model``; else a tiny random-weight Qwen2-VL on CPU, Qwen2.5-VL-7B on GPU), the frames
+    (``--dataroot``; else synthetic ones) and a note for the table when the model is the tiny one."""
+    model, note = args.model, ""
+    if model is None and not on_gpu:
+        model = tiny_checkpoint(tmp_path)
+        note = f" — a tiny random-weight Qwen2-VL (~85k parameters) on CPU: measures {measures}, not a real model"
+    elif model is None:
+        model = "Qwen/Qwen2.5-VL-7B-Instruct"
+    if args.dataroot:
+        from lightemma import load_frames
+
+        frames = load_frames(args.dataroot, args.version, split=args.split).head(args.frames)
+    else:
+        frames = synthetic_frames(tmp_path / "synth", args.frames, (1600, 900) if on_gpu else (64, 48))
+    return model, frames, note
+
+
 def run_config(model: str, frames: Any, output: Path, *, backend: str, batch_size: int, max_tokens: int,
                max_attempts: int, options: dict[str, Any]) -> dict[str, Any]:
     """One benchmark row: the run's throughput and its answers (frame id -> stage texts)."""
@@ -131,19 +149,7 @@ def main(argv: list[str] | None = None) -> int:
         device += f", {threads} torch thread(s)"
     with tempfile.TemporaryDirectory(prefix="lightemma-bench-local-") as tmp:
         tmp_path = Path(tmp)
-        note = ""
-        model = args.model
-        if model is None and not on_gpu:
-            model = tiny_checkpoint(tmp_path)
-            note = " — a tiny random-weight Qwen2-VL (~85k parameters) on CPU: measures batching, not a real model"
-        elif model is None:
-            model = "Qwen/Qwen2.5-VL-7B-Instruct"
-        if args.dataroot:
-            from lightemma import load_frames
-
-            frames = load_frames(args.dataroot, args.version, split=args.split).head(args.frames)
-        else:
-            frames = synthetic_frames(tmp_path / "synth", args.frames, (1600, 900) if on_gpu else (64, 48))
+        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="batching")
         common = dict(max_tokens=args.max_tokens, max_attempts=args.max_attempts)
         hf_options = {"dtype": args.dtype}
         rows = [run_config(model, frames, tmp_path / "out", backend="hf", batch_size=1, options=hf_options, **common)]

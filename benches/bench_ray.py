@@ -36,7 +36,7 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from bench_local import device_name, synthetic_frames, tiny_checkpoint  # noqa: E402
+from bench_local import device_name, model_and_frames  # noqa: E402
 
 
 def run_row(model: str, frames: Any, output: Path, *, backend: str, replicas: int | None, address: str | None,
@@ -113,19 +113,7 @@ def main(argv: list[str] | None = None) -> int:
     address = ray.get_runtime_context().gcs_address
     with tempfile.TemporaryDirectory(prefix="lightemma-bench-ray-") as tmp:
         tmp_path = Path(tmp)
-        note = ""
-        model = args.model
-        if model is None and not on_gpu:
-            model = tiny_checkpoint(tmp_path)
-            note = " — a tiny random-weight Qwen2-VL (~85k parameters) on CPU: measures the replica machinery, not a real model"
-        elif model is None:
-            model = "Qwen/Qwen2.5-VL-7B-Instruct"
-        if args.dataroot:
-            from lightemma import load_frames
-
-            frames = load_frames(args.dataroot, args.version, split=args.split).head(args.frames)
-        else:
-            frames = synthetic_frames(tmp_path / "synth", args.frames, (1600, 900) if on_gpu else (64, 48))
+        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="the replica machinery")
         common = dict(backend=args.backend, address=address, batch_size=args.batch_size, max_tokens=args.max_tokens,
                       max_attempts=args.max_attempts, options={} if args.backend == "vllm" else {"dtype": args.dtype})
         rows = [] if args.no_in_process else [run_row(model, frames, tmp_path / "out", replicas=None, **common)]
