@@ -75,6 +75,19 @@ def tiny_checkpoint(root: Path) -> str:
     return str(build_tiny_model("qwen2_vl", root / "tiny-qwen2-vl"))
 
 
+def add_model_and_frames_arguments(ap: argparse.ArgumentParser, *, frames: int) -> None:
+    """The options :func:`model_and_frames` reads, and the chain settings every row of a local benchmark shares."""
+    ap.add_argument("--model", help="checkpoint or hub id (default: a real Qwen2.5-VL-7B on GPU, a tiny model on CPU)")
+    ap.add_argument("--dataroot", help="nuScenes directory (default: a synthetic set)")
+    ap.add_argument("--version", default="v1.0-mini")
+    ap.add_argument("--split", default="all")
+    ap.add_argument("--frames", type=int, default=frames)
+    ap.add_argument("--max-tokens", type=int, default=64, help="output tokens per stage (default 64)")
+    ap.add_argument("--max-attempts", type=int, default=1, help="attempts per frame (default 1: the same work for every row)")
+    ap.add_argument("--dtype", default="auto")
+    ap.add_argument("--json", action="store_true", help="print the rows as JSON too")
+
+
 def model_and_frames(args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, measures: str) -> tuple[str, Any, str]:
     """The checkpoint (``--model``; else a tiny random-weight Qwen2-VL on CPU, Qwen2.5-VL-7B on GPU), the frames
     (``--dataroot``; else synthetic ones) and a note for the table when the model is the tiny one."""
@@ -125,19 +138,11 @@ def table(rows: list[dict[str, Any]], device: str, model: str, note: str) -> str
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--model", help="checkpoint or hub id (default: a real Qwen2.5-VL-7B on GPU, a tiny model on CPU)")
-    ap.add_argument("--dataroot", help="nuScenes directory (default: a synthetic set)")
-    ap.add_argument("--version", default="v1.0-mini")
-    ap.add_argument("--split", default="all")
-    ap.add_argument("--frames", type=int, default=16)
+    add_model_and_frames_arguments(ap, frames=16)
     ap.add_argument("--batch-sizes", type=int, nargs="+", default=[8, 16])
-    ap.add_argument("--max-tokens", type=int, default=64, help="output tokens per stage (default 64)")
-    ap.add_argument("--max-attempts", type=int, default=1, help="attempts per frame (default 1: the same work for every row)")
-    ap.add_argument("--dtype", default="auto")
     ap.add_argument("--threads", type=int, help="torch intra-op threads (default: 1 on CPU, where the tiny model is "
                     "overhead-bound and more threads only add contention; torch's default on GPU)")
     ap.add_argument("--no-vllm", action="store_true")
-    ap.add_argument("--json", action="store_true", help="print the rows as JSON too")
     args = ap.parse_args(argv)
 
     device, on_gpu = device_name()

@@ -36,7 +36,7 @@ from typing import Any
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
-from bench_local import device_name, model_and_frames  # noqa: E402
+from bench_local import add_model_and_frames_arguments, device_name, model_and_frames  # noqa: E402
 
 
 def run_row(model: str, frames: Any, output: Path, *, backend: str, replicas: int | None, address: str | None,
@@ -81,20 +81,12 @@ def table(rows: list[dict[str, Any]], device: str, model: str, note: str) -> str
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--model", help="checkpoint or hub id (default: a real Qwen2.5-VL-7B on GPU, a tiny model on CPU)")
+    add_model_and_frames_arguments(ap, frames=32)
     ap.add_argument("--backend", choices=("hf", "vllm"), default="hf")
     ap.add_argument("--replicas", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--ray-address", help="join this Ray cluster (default: start a local Ray sized to the largest N)")
-    ap.add_argument("--dataroot", help="nuScenes directory (default: a synthetic set)")
-    ap.add_argument("--version", default="v1.0-mini")
-    ap.add_argument("--split", default="all")
-    ap.add_argument("--frames", type=int, default=32)
     ap.add_argument("--batch-size", type=int, default=8, help="requests per forward pass in each replica (default 8)")
-    ap.add_argument("--max-tokens", type=int, default=64, help="output tokens per stage (default 64)")
-    ap.add_argument("--max-attempts", type=int, default=1, help="attempts per frame (default 1: the same work for every row)")
-    ap.add_argument("--dtype", default="auto")
     ap.add_argument("--no-in-process", action="store_true", help="skip the in-process row (e.g. a model too big for this node)")
-    ap.add_argument("--json", action="store_true", help="print the rows as JSON too")
     args = ap.parse_args(argv)
 
     import ray

@@ -250,7 +250,7 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             break
 
     seconds = time.perf_counter() - start + _number((earlier or {}).get("seconds"))
-    return _frame_record(frame, [*map(dict, before), *attempts], scene, intent, answer, actions, policy, seconds)
+    return _frame_record(frame, [*before, *attempts], scene, intent, answer, actions, policy, seconds)
 
 
 def _number(value: Any) -> float:
