@@ -22,7 +22,7 @@ import time
 
 import numpy as np
 
-from lightemma.stats import Resampling, bootstrap_ci, cluster_sums, sign_flip_p
+from lightemma.evaluation.stats import Resampling, bootstrap_ci, cluster_sums, sign_flip_p
 
 MODELS, FRAMES, SCENES = 13, 3908, 150
 

@@ -17,7 +17,7 @@ from lightemma.errors import RunStoreError, UserError
 from lightemma.evaluation import columns, evaluate_runs, evaluation_tables, load_run
 from lightemma.evaluation.synthetic import make_record, write_synthetic_run
 from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir, update_manifest
-from lightemma.tables import render
+from lightemma.report.tables import render
 
 SLICES = {
     "lightemma": ([0, 1], [2, 3], [4, 5]),

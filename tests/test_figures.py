@@ -12,8 +12,8 @@ from PIL import Image
 
 from lightemma.evaluation import evaluate_runs, load_run
 from lightemma.evaluation.synthetic import write_synthetic_run
-from lightemma.figures import Camera, bubble_chart, bubble_points, frame_figure, history_bias_figure, model_grid, project, save_figure
-from lightemma.figures._mpl import GT_COLOR, family_color, pred_color
+from lightemma.report.figures import Camera, bubble_chart, bubble_points, frame_figure, history_bias_figure, model_grid, project, save_figure
+from lightemma.report.figures._mpl import GT_COLOR, family_color, pred_color
 
 # a nuScenes-like CAM_FRONT: 1600×900, f = 1266 px, 1.70 m ahead of the rear axle, 1.51 m up
 K = np.array([[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]])
@@ -157,7 +157,7 @@ def test_saved_as_150_dpi_png_and_svg_even_with_a_dot_in_the_name(tmp_path):
 
 
 def test_birds_eye_view_holds_every_trajectory():
-    from lightemma.figures.frame_view import bev_limits
+    from lightemma.report.figures.frame_view import bev_limits
 
     gt = np.stack([8.0 * STEPS, 0.0 * STEPS], axis=1)
     turning = np.stack([6.0 * np.sin(STEPS / 1.5) * 3, -9.0 * (1 - np.cos(STEPS / 1.5))], axis=1)  # a hard right turn
@@ -169,7 +169,7 @@ def test_birds_eye_view_holds_every_trajectory():
 
 
 def test_one_colour_per_model_everywhere():
-    from lightemma.figures._mpl import model_colors
+    from lightemma.report.figures._mpl import model_colors
 
     models = [
         {"model": "GPT-4o", "family": "GPT", "generation": 1},

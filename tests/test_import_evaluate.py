@@ -247,7 +247,7 @@ def test_reports_and_pictures_work_on_imported_runs(imported, tmp_path):
     from PIL import Image
 
     from lightemma.evaluation import load_run
-    from lightemma.pictures import CameraSource
+    from lightemma.report.pictures import CameraSource
     from lightemma.report import write_report
 
     results, runs = imported

@@ -85,7 +85,7 @@ def test_pictures_use_the_camera_of_the_runs_dataset(tmp_path):
     from lightemma.backends.baseline import baseline_actions
     from lightemma.evaluation import load_run
     from lightemma.evaluation.synthetic import make_record
-    from lightemma.pictures import CameraSource
+    from lightemma.report.pictures import CameraSource
     from lightemma.runs.store import RunWriter, create_run_dir
     from lightemma.synth import write_dataset
 
@@ -140,7 +140,7 @@ def test_requested_frames_are_drawn_and_unknown_ones_refused(tmp_path, capsys):
 
 
 def test_a_frame_picked_twice_is_drawn_once():
-    from lightemma.report import _merge_picks
+    from lightemma.report.writer import _merge_picks
 
     picks = [("disagree", "a", "spread"), ("case", "b", "worst braking"), ("case", "a", "worst starting")]
     assert _merge_picks(picks) == [("disagree", "a", "spread; worst starting"), ("case", "b", "worst braking")]

@@ -15,7 +15,7 @@ from lightemma.errors import UserError
 from lightemma.pipeline import run
 from lightemma.prompts import load_prompt_set
 from lightemma.runs.store import read_run
-from lightemma.stats import Resampling
+from lightemma.evaluation.stats import Resampling
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
 KEY = "native-test-key-0123456789"

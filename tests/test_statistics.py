@@ -16,8 +16,8 @@ from lightemma.evaluation import evaluate_runs, evaluation_tables, load_run
 from lightemma.evaluation.study import StudyModel, study_scenes, write_study
 from lightemma.evaluation.synthetic import make_record
 from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir
-from lightemma.stats import Resampling, bootstrap_ci, cluster_sums, holm, sign_flip_p
-from lightemma.tables import render
+from lightemma.evaluation.stats import Resampling, bootstrap_ci, cluster_sums, holm, sign_flip_p
+from lightemma.report.tables import render
 
 GARBAGE = "meta-llama/Llama-3.2-11B-Vision-Instruct"
 MODELS = [
@@ -71,7 +71,7 @@ def test_the_fixture_is_as_messy_as_real_runs(study, scenes):
     err = np.linalg.norm(np.array(garbage[0]["actions"])[:, 0]) if garbage[0]["actions"] else 0
     assert err > 1e11  # ADE ≈ 1e12 m
     # near-stationary frames: ground-truth curvature of tens to hundreds of 1/m
-    from lightemma.scenarios import menger_curvature, path_length, _with_origin
+    from lightemma.evaluation.scenarios import menger_curvature, path_length, _with_origin
 
     still = path_length(scenes.gt_positions) < 0.3
     assert still.sum() > 20
@@ -121,9 +121,9 @@ def test_the_low_coverage_flag_is_in_every_table(study):
 
 
 def test_figures_and_frame_picker_use_scored_frames_only(study, tmp_path):
-    from lightemma.figures import bubble_points
+    from lightemma.report.figures import bubble_points
     from lightemma.report import write_report
-    from lightemma.scenarios import disagreements, per_tag_metrics, worst_frame_per_tag
+    from lightemma.evaluation.scenarios import disagreements, per_tag_metrics, worst_frame_per_tag
 
     out, dirs = study
     runs = [load_run(d, details=True) for d in dirs.values()]
@@ -180,7 +180,7 @@ def test_plausibility_limits_come_from_the_runs_parse_definition(tmp_path):
 
 def test_robust_slope_is_positive_where_turns_continue(scenes):
     """The fixture's turns continue; near-stationary frames would drag least squares anywhere."""
-    from lightemma.scenarios import mean_curvature, path_length, robust_slope
+    from lightemma.evaluation.scenarios import mean_curvature, path_length, robust_slope
 
     moving = scenes.history_actions[:, -1, 0] >= 1.0
     x, y = scenes.history_actions[moving, -1, 1], mean_curvature(scenes.gt_positions[moving])
@@ -193,7 +193,7 @@ def test_robust_slope_is_positive_where_turns_continue(scenes):
 
 def test_history_bias_ignores_near_stop_frames_and_reports_sign_agreement(tmp_path):
     import lightemma
-    from lightemma.scenarios import history_bias
+    from lightemma.evaluation.scenarios import history_bias
 
     rng = np.random.default_rng(0)
     run_dir = create_run_dir(tmp_path, "m", {"model": "m", "finished_at": "t"})

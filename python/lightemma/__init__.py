@@ -12,6 +12,9 @@ pulls in heavy dependencies (nuscenes-devkit, litellm, torch) until used.
 from __future__ import annotations
 
 import importlib
+import importlib.abc
+import importlib.util
+import sys
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
@@ -37,6 +40,41 @@ _EXPORTS: dict[str, str] = {
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
+
+# Modules that moved into lightemma.report (presentation) and lightemma.evaluation (what a report
+# shows); their old import paths name the same module objects (never a second copy).
+_MOVED: dict[str, str] = {
+    "lightemma.figures": "lightemma.report.figures",
+    "lightemma.pictures": "lightemma.report.pictures",
+    "lightemma.tables": "lightemma.report.tables",
+    "lightemma.evaluation.tables": "lightemma.report.evaluation_tables",
+    "lightemma.scenarios": "lightemma.evaluation.scenarios",
+    "lightemma.stats": "lightemma.evaluation.stats",
+}
+
+
+class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Resolves an old module path (and its submodules) to the module at its new home."""
+
+    @staticmethod
+    def target(name: str) -> str | None:
+        for old, new in _MOVED.items():
+            if name == old or name.startswith(old + "."):
+                return new + name[len(old):]
+        return None
+
+    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
+        return importlib.util.spec_from_loader(name, self) if self.target(name) else None
+
+    def create_module(self, spec: Any) -> Any:
+        return importlib.import_module(self.target(spec.name))  # type: ignore[arg-type]
+
+    def exec_module(self, module: Any) -> None:
+        pass
+
+
+if not any(isinstance(f, _MovedModules) for f in sys.meta_path):
+    sys.meta_path.insert(0, _MovedModules())
 
 
 def __getattr__(name: str) -> Any:

@@ -6,7 +6,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from lightemma.tables import FORMATS
+from lightemma.report.tables import FORMATS
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -54,7 +54,7 @@ def add_statistics_arguments(parser: argparse.ArgumentParser, *, pairwise_defaul
 
 def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, imported lazily
     from lightemma.errors import UserError
-    from lightemma.stats import Resampling
+    from lightemma.evaluation.stats import Resampling
 
     try:
         return Resampling(n_resamples=args.resamples, seed=args.seed)
@@ -64,7 +64,7 @@ def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, impor
 
 def run(args: argparse.Namespace) -> int:
     from lightemma.evaluation import evaluate_runs, evaluation_tables
-    from lightemma.tables import render
+    from lightemma.report.tables import render
 
     parse = _parse_definition(args)
     evaluation = evaluate_runs(

@@ -17,7 +17,6 @@ from lightemma.evaluation.core import (
 )
 from lightemma.evaluation.loading import RunData, load_run, read_frame_records
 from lightemma.evaluation.manifest import RunInfo, run_info
-from lightemma.evaluation.tables import accuracy_table, efficiency_table, evaluation_tables, generations_table, pairwise_table
 
 __all__ = [
     "CONVENTION_NAMES",
@@ -39,3 +38,15 @@ __all__ = [
     "read_frame_records",
     "run_info",
 ]
+
+# The tables of an evaluation are built in lightemma.report.evaluation_tables (presentation); they stay
+# importable from here, lazily (that module imports this package).
+_TABLES = ("accuracy_table", "efficiency_table", "evaluation_tables", "generations_table", "pairwise_table")
+
+
+def __getattr__(name: str):  # noqa: ANN202
+    if name in _TABLES:
+        from lightemma.report import evaluation_tables
+
+        return getattr(evaluation_tables, name)
+    raise AttributeError(f"module 'lightemma.evaluation' has no attribute {name!r}")

@@ -22,7 +22,7 @@ from lightemma.evaluation.loading import RunData, load_run
 from lightemma.evaluation.models import family_rank
 from lightemma.evaluation.rescore import ParseDefinition
 from lightemma.runs.store import find_run_dirs
-from lightemma.stats import Resampling
+from lightemma.evaluation.stats import Resampling
 
 CONVENTION_NAMES: tuple[str, ...] = ("lightemma", "stp3", "uniad")
 METRIC_KEYS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde", "miss_rate")

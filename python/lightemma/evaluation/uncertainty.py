@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.evaluation.loading import RunData
-from lightemma.stats import Resampling, bootstrap_ci, holm, sign_flip_p
+from lightemma.evaluation.stats import Resampling, bootstrap_ci, holm, sign_flip_p
 
 INTERVAL_KEYS: tuple[str, ...] = ("ade_avg", "fde")
 _COLUMNS = (3, 4)  # ade_avg, fde in lightemma.metrics.FRAME_METRICS

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.figures._mpl import GT_COLOR, pred_color, pyplot
+from lightemma.report.figures._mpl import GT_COLOR, pred_color, pyplot
 
 
 def _limits(values: Sequence[np.ndarray], *, floor: float) -> tuple[float, float]:
@@ -26,7 +26,7 @@ def history_bias_figure(
     notes: Mapping[str, str] | None = None,
     max_points: int = 2500,
 ) -> Any:
-    """Three panels (see :func:`lightemma.scenarios.history_bias` for the definitions):
+    """Three panels (see :func:`lightemma.evaluation.scenarios.history_bias` for the definitions):
 
     * predicted (per model) and true mean future curvature against the last
       history curvature, with Theil–Sen lines, the identity line (the turn goes on
@@ -36,12 +36,12 @@ def history_bias_figure(
     * on frames going straight just after a turn, the share of the last history
       curvature carried into the prediction, against the truth's (green line).
 
-    ``rows``: the :func:`~lightemma.scenarios.history_bias` rows of ``runs`` when
+    ``rows``: the :func:`~lightemma.evaluation.scenarios.history_bias` rows of ``runs`` when
     already computed (the fits are the slow part); ``notes``: a flag after a
     model's name (e.g. fewer than half of its frames scored).
     """
     from lightemma.evaluation.core import unique_labels
-    from lightemma.scenarios import bias_row, curvature_samples, truth_samples
+    from lightemma.evaluation.scenarios import bias_row, curvature_samples, truth_samples
 
     plt = pyplot()
     labels = unique_labels(list(runs))

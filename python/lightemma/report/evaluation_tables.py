@@ -12,7 +12,7 @@ from lightemma.evaluation.paper import (
     paper_accuracy_rows,
     paper_efficiency_rows,
 )
-from lightemma.tables import ACCURACY_COLUMNS, EFFICIENCY_COLUMNS, Column, Table, coverage_note, fixed
+from lightemma.report.tables import ACCURACY_COLUMNS, EFFICIENCY_COLUMNS, Column, Table, coverage_note, fixed
 
 
 def coverage_flags(evaluation: Evaluation) -> dict[str, str]:

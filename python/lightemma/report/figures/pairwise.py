@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.figures._mpl import pyplot
+from lightemma.report.figures._mpl import pyplot
 
 
 def pairwise_figure(rows: Sequence[Mapping[str, Any]], labels: Sequence[str], *, notes: Mapping[str, str] | None = None, title: str | None = None) -> Any:

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.evaluation.loading import RunData, read_frame_records
-from lightemma.figures.frame_view import Camera, camera_from_frame, load_image
+from lightemma.report.figures.frame_view import Camera, camera_from_frame, load_image
 from lightemma.frames.geometry import extrinsic_matrix
 
 

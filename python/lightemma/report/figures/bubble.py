@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from lightemma.evaluation.models import family_rank
-from lightemma.figures._mpl import FAMILY_COLORS, family_color, model_colors, pyplot
+from lightemma.report.figures._mpl import FAMILY_COLORS, family_color, model_colors, pyplot
 
 MAX_AREA = 1800.0  # points² of the slowest model's bubble
 MIN_AREA = 25.0
@@ -103,7 +103,7 @@ def _interval(point: Mapping[str, Any]) -> list[float] | None:
 
 def bubble_points(evaluation: Any, *, convention: str = "lightemma", with_paper: bool = False) -> list[dict[str, Any]]:
     """Points for :func:`bubble_chart` from an :class:`~lightemma.evaluation.Evaluation` (scored frames only)."""
-    from lightemma.tables import coverage_note
+    from lightemma.report.tables import coverage_note
 
     points = [
         {

@@ -22,11 +22,12 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
+from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
-from lightemma.stats import Resampling
-from lightemma.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
+from lightemma.evaluation.stats import Resampling
+from lightemma.report.evaluation_tables import evaluation_tables
+from lightemma.report.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
 
 
 def _slug(text: str) -> str:
@@ -55,7 +56,7 @@ class _Writer:
         self.lines += [to_markdown(table), " · ".join(links), ""]
 
     def figure(self, fig: Any, stem: str, caption: str) -> Path:
-        from lightemma.figures import save_figure
+        from lightemma.report.figures import save_figure
 
         png, svg = save_figure(fig, self.out / "figures" / stem)
         self.lines += [f"![{caption}]({self.rel(png)})", f"*{caption}* ([svg]({self.rel(svg)}))", ""]
@@ -109,8 +110,8 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
 
 def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str]) -> None:
     """For each (kind, frame_id, caption): a grid of all models, and the worst model's picture with its texts."""
-    from lightemma.figures import frame_figure, model_grid
-    from lightemma.pictures import stage_texts
+    from lightemma.report.figures import frame_figure, model_grid
+    from lightemma.report.pictures import stage_texts
 
     from lightemma import displacement_errors
 
@@ -170,15 +171,15 @@ def write_report(
 
     ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases);
     ``case_tags`` are the scenario tags whose worst frame is drawn (default
-    :data:`lightemma.scenarios.CASE_TAGS`; ``()`` for none); ``pairwise`` compares
+    :data:`lightemma.evaluation.scenarios.CASE_TAGS`; ``()`` for none); ``pairwise`` compares
     every pair of runs (table, matrix figure, per-family generation verdicts);
     ``resampling`` sets the scene bootstrap (resamples, seed, confidence). A ``dataroot``
     that is not a folder, or a negative ``top``, raises :class:`~lightemma.errors.UserError` before any work.
     """
-    from lightemma.evaluation.tables import coverage_flags
-    from lightemma.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
-    from lightemma.pictures import CameraSource
-    from lightemma.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
+    from lightemma.report.evaluation_tables import coverage_flags
+    from lightemma.report.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
+    from lightemma.report.pictures import CameraSource
+    from lightemma.evaluation.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
 
     if isinstance(top, bool) or not isinstance(top, int) or top < 0:
         raise UserError(f"top must be a whole number of frames, 0 or more, got {top!r}", cli=f"--top must be 0 or more, got {top!r}")

@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.figures._mpl import GT_COLOR, pred_color, pyplot
-from lightemma.figures.projection import densify, project
+from lightemma.report.figures._mpl import GT_COLOR, pred_color, pyplot
+from lightemma.report.figures.projection import densify, project
 
 STAGE_LABELS = (("scene", "1 · Scene"), ("intent", "2 · Intent"), ("answer", "3 · Actions"))
 
