@@ -29,7 +29,7 @@ def report(tmp_path_factory):
     write_synthetic_run(runs, "gemini/gemini-2.0-flash", 60, seed=2, noise=0.8)
     write_synthetic_run(runs, "baseline:cv", 60, seed=3, noise=1.5, manifest={"dataset": {"dataroot": str(runs / "nowhere"), "version": "v1.0-mini", "split": "all"}})
     out = tmp_path_factory.mktemp("report")
-    index = write_report([runs], out, top=1, common=True)
+    index = write_report([runs], out, top=1, common=True, svg=True)
     return out, index, index.read_text()
 
 

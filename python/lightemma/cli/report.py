@@ -14,14 +14,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "chart, scenario tables, the history-bias figure and pictures of the frames where models disagree most into DIR, with an index.md.",
     )
     parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
-    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="report folder (created)")
+    parser.add_argument("--out", required=True, type=Path, metavar="DIR", help="report folder (written whole, then swapped in; an existing folder must be a lightemma report)")
     parser.add_argument("--convention", default="all", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention(s) (default: all; docs/definitions.md#metrics)")
     parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
     parser.add_argument("--no-paper", action="store_true", help="leave the paper's rows out of the tables and chart")
     parser.add_argument("--top", type=int, default=5, metavar="N", help="pictures of the N frames where models disagree most (default: 5)")
     parser.add_argument("--dataroot", metavar="DIR", help="dataset location for camera images, if not where the runs were made")
     parser.add_argument("--frame", action="append", default=[], metavar="FRAME_ID", help="also draw this frame (repeatable)")
-    parser.add_argument("--no-pictures", action="store_true", help="skip per-frame pictures")
+    parser.add_argument("--no-pictures", action="store_true", help="skip per-frame pictures and camera thumbnails (the HTML frame browser still draws bird's-eye views)")
+    parser.add_argument("--svg", action="store_true", help="also write every figure as SVG (PNG only by default)")
+    parser.add_argument("--force", action="store_true", help="replace DIR even when it holds something other than a lightemma report")
     from lightemma.cli.evaluate import add_statistics_arguments
 
     add_statistics_arguments(parser, pairwise_default=True)
@@ -45,6 +47,9 @@ def run(args: argparse.Namespace) -> int:
         frames=args.frame,
         pairwise=args.pairwise,
         resampling=resampling_of(args),
+        svg=args.svg,
+        force=args.force,
+        progress=True,
     )
-    print(f"report written to {index}")
+    print(f"report written to {index} (browse {index.with_name('index.html')})")
     return 0

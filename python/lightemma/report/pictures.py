@@ -48,12 +48,13 @@ class CameraSource:
         for frame in frames:
             self._frames.setdefault(frame.frame_id, frame)
 
-    def cameras(self, runs: Iterable[RunData], frame_ids: Iterable[str]) -> dict[str, Camera | None]:
+    def cameras(self, runs: Iterable[RunData], frame_ids: Iterable[str], *, load: bool = True) -> dict[str, Camera | None]:
         """frame id → Camera (or None when its dataset could not be read).
 
         Imported runs carry each frame's calibration and image name in their
         records; their images are looked for under ``dataroot``
         (``samples/CAM_FRONT/<image name>``), else at the path the reference stored.
+        With ``load=False`` no image is decoded (each Camera has its ``path``).
         """
         frame_ids = list(frame_ids)
         out: dict[str, Camera | None] = {}
@@ -61,17 +62,17 @@ class CameraSource:
             if run.info.imported:
                 wanted = [fid for fid in frame_ids if out.get(fid) is None]
                 for fid, record in read_frame_records(run.info.run_dir, wanted).items():
-                    out[fid] = self._from_record(record)
+                    out[fid] = self._from_record(record, load=load)
             else:
                 self._load(run.info.dataset)
         for fid in frame_ids:
             frame = self._frames.get(fid)
             if frame is not None:
-                out[fid] = camera_from_frame(frame)
+                out[fid] = camera_from_frame(frame, load=load)
             out.setdefault(fid, None)
         return out
 
-    def _from_record(self, record: Mapping[str, Any]) -> Camera | None:
+    def _from_record(self, record: Mapping[str, Any], *, load: bool = True) -> Camera | None:
         """The camera of an imported record (calibration as the reference stored it), or None."""
         params = record.get("camera_params")
         if not isinstance(params, Mapping):
@@ -84,8 +85,8 @@ class CameraSource:
         path = next((c for c in candidates if c.is_file()), None)
         if path is None:
             self.problems.append("images of imported runs not found; pass --dataroot (the nuScenes folder holding samples/CAM_FRONT)")
-        return Camera(image=load_image(path), intrinsic=np.asarray(params["camera_intrinsic"], dtype=np.float64),
-                      extrinsic=extrinsic_matrix(params["translation"], params["rotation"]))
+        return Camera(image=load_image(path) if load else None, intrinsic=np.asarray(params["camera_intrinsic"], dtype=np.float64),
+                      extrinsic=extrinsic_matrix(params["translation"], params["rotation"]), path=path)
 
 
 def stage_texts(record: Mapping[str, Any] | None) -> dict[str, str]:

@@ -37,9 +37,11 @@ def _slug(text: str) -> str:
 class _Writer:
     """Writes files under the report folder and collects the index's Markdown."""
 
-    def __init__(self, out: Path) -> None:
+    def __init__(self, out: Path, *, svg: bool = False) -> None:
         self.out = out
+        self.svg = svg
         self.lines: list[str] = []
+        self.figures: list[tuple[str, str]] = []  # (PNG relative to out, caption), for the HTML page
 
     def rel(self, path: Path) -> str:
         return path.relative_to(self.out).as_posix()
@@ -58,8 +60,10 @@ class _Writer:
     def figure(self, fig: Any, stem: str, caption: str) -> Path:
         from lightemma.report.figures import save_figure
 
-        png, svg = save_figure(fig, self.out / "figures" / stem)
-        self.lines += [f"![{caption}]({self.rel(png)})", f"*{caption}* ([svg]({self.rel(svg)}))", ""]
+        paths = save_figure(fig, self.out / "figures" / stem, formats=("png", "svg") if self.svg else ("png",))
+        png = paths[0]
+        self.lines += [f"![{caption}]({self.rel(png)})", f"*{caption}*" + (f" ([svg]({self.rel(paths[1])}))" if self.svg else ""), ""]
+        self.figures.append((self.rel(png), caption))
         return png
 
 
@@ -108,7 +112,7 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
     return [f"- **{family}**: " + "; ".join(parts) + "." for family, parts in by_family.items()]
 
 
-def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str]) -> None:
+def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str], *, progress: bool = False) -> None:
     """For each (kind, frame_id, caption): a grid of all models, and the worst model's picture with its texts."""
     from lightemma.report.figures import frame_figure, model_grid
     from lightemma.report.pictures import stage_texts
@@ -118,6 +122,10 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
     records = {id(run): read_frame_records(run.info.run_dir, [fid for _, fid, _ in picks]) for run in runs}
     indices = [run.index() for run in runs]
     valid = [run.valid for run in runs]
+    if progress:
+        from tqdm import tqdm
+
+        picks = tqdm(picks, desc="frame pictures", unit="frame", leave=False)
     for kind, fid, caption in picks:
         preds, errors, gt = {}, {}, None
         for run, label, index, ok in zip(runs, labels, indices, valid):
@@ -152,6 +160,61 @@ def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]
     return list(merged.values())
 
 
+REPORT_MARKER = ".lightemma-report"  # in every report folder: a folder without it is not overwritten without force
+
+
+def _is_report(folder: Path) -> bool:
+    """True when ``folder`` holds a lightemma report (its marker, or an index.md that lightemma wrote)."""
+    if (folder / REPORT_MARKER).is_file():
+        return True
+    index = folder / "index.md"
+    try:
+        with open(index, encoding="utf-8") as fh:
+            return fh.readline().strip() == "# lightemma report"
+    except (OSError, UnicodeDecodeError):
+        return False
+
+
+def _check_target(out: Path, force: bool) -> None:
+    """Refuse (UserError) an ``out`` that is a file, or a non-empty folder that is not a lightemma report, unless ``force``."""
+    if not out.exists() and not out.is_symlink():
+        return
+    if not out.is_dir():
+        raise UserError(f"report folder {out} is a file, not a folder", cli=f"--out {out} is a file, not a folder")
+    if force or _is_report(out) or not any(out.iterdir()):
+        return
+    raise UserError(f"{out} is not empty and holds no lightemma report: refusing to overwrite it (force=True to replace it)",
+                    cli=f"--out {out} is not empty and holds no lightemma report: refusing to overwrite it (--force replaces it)")
+
+
+def _swap_in(tmp: Path, out: Path) -> None:
+    """Put the finished report ``tmp`` at ``out`` whole: the old folder is moved aside, then removed."""
+    import shutil
+
+    old = None
+    if out.exists():
+        old = out.with_name(f".{out.name}.old-{os.getpid()}")
+        if old.exists():
+            shutil.rmtree(old)
+        os.rename(out, old)
+    try:
+        os.rename(tmp, out)
+    except OSError:
+        if old is not None:
+            os.rename(old, out)  # put the old report back
+        raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _drop_empty_runs(runs: list[RunData]) -> tuple[list[RunData], list[str]]:
+    """Runs with no scored frame, left out (with a warning naming each) when another run has one."""
+    empty = [r for r in runs if not r.valid.any()]
+    if not empty or len(empty) == len(runs):
+        return runs, []
+    return [r for r in runs if r.valid.any()], [f"left out {r.info.run_dir}: no scored frame (an empty or aborted run)" for r in empty]
+
+
 def write_report(
     run_dirs: Iterable[str | os.PathLike[str]],
     out: str | os.PathLike[str],
@@ -166,41 +229,126 @@ def write_report(
     case_tags: Sequence[str] | None = None,
     pairwise: bool = True,
     resampling: Resampling = Resampling(),
+    svg: bool = False,
+    force: bool = False,
+    progress: bool = False,
 ) -> Path:
-    """Evaluate runs and write tables, figures and the scenario analysis into ``out``; returns ``index.md``.
+    """Evaluate runs and write tables, figures, the scenario analysis and ``index.html`` into ``out``; returns ``index.md``.
 
     ``frames`` adds pictures of chosen frame ids (e.g. to redraw the paper's Fig. 3 cases);
     ``case_tags`` are the scenario tags whose worst frame is drawn (default
     :data:`lightemma.evaluation.scenarios.CASE_TAGS`; ``()`` for none); ``pairwise`` compares
     every pair of runs (table, matrix figure, per-family generation verdicts);
-    ``resampling`` sets the scene bootstrap (resamples, seed, confidence). A ``dataroot``
-    that is not a folder, or a negative ``top``, raises :class:`~lightemma.errors.UserError` before any work.
-    """
-    from lightemma.report.evaluation_tables import coverage_flags
-    from lightemma.report.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
-    from lightemma.report.pictures import CameraSource
-    from lightemma.evaluation.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
+    ``resampling`` sets the scene bootstrap (resamples, seed, confidence); ``svg`` also writes
+    every figure as SVG (PNG only by default); ``progress`` shows progress bars (tqdm, on stderr).
 
+    The report is written into a hidden folder beside ``out`` and swapped in whole when done: a
+    killed report leaves the old one intact. An ``out`` that is a non-empty folder holding no
+    lightemma report is refused unless ``force``. Runs without a scored frame are left out (with
+    a warning) when another run has one. A ``dataroot`` that is not a folder, or a negative ``top``,
+    raises :class:`~lightemma.errors.UserError` before any work.
+    """
+    import shutil
+
+    out = Path(out)
     if isinstance(top, bool) or not isinstance(top, int) or top < 0:
         raise UserError(f"top must be a whole number of frames, 0 or more, got {top!r}", cli=f"--top must be 0 or more, got {top!r}")
     if dataroot is not None and not os.path.isdir(dataroot):
         what = "is not a folder" if os.path.exists(dataroot) else "does not exist"
         raise UserError(f"dataroot {dataroot} {what}", cli=f"--dataroot {dataroot} {what}")
-    runs = [load_run(d, details=True) for d in expand_run_dirs(run_dirs)]
+    _check_target(out, force)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
+    if tmp.exists():
+        shutil.rmtree(tmp)
+    tmp.mkdir()
+    try:
+        _write(tmp, run_dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
+               frames=frames, case_tags=case_tags, pairwise=pairwise, resampling=resampling, svg=svg, progress=progress)
+        (tmp / REPORT_MARKER).write_text(json.dumps({"written_by": "lightemma report"}) + "\n", encoding="utf-8")
+        _swap_in(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return out / "index.md"
+
+
+class _Steps:
+    """The report's long steps as one progress bar (tqdm on stderr), or nothing."""
+
+    def __init__(self, enabled: bool, total: int) -> None:
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, desc="report", unit="step", leave=False)
+
+    def step(self, what: str) -> None:
+        if self.bar is not None:
+            self.bar.set_postfix_str(what, refresh=False)
+            self.bar.update(1)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _runs_table(evaluation: Evaluation, flags: dict[str, str]) -> Table:
+    rows = [{"model": m.label, "family": m.family, "run": str(m.run_dir), "frames": m.frames_in_run, "complete": "yes" if m.complete else "no",
+             "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format} for m in evaluation.models]
+    columns = [Column("model", "Model"), Column("family", "Family"), Column("run", "Run"), Column("frames", "Frames"), Column("complete", "Finished"),
+               Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format")]
+    return Table("Runs", columns, rows, name="runs", flags=flags)
+
+
+def _write(
+    out: Path,
+    run_dirs: Iterable[str | os.PathLike[str]],
+    *,
+    convention: str,
+    common: bool,
+    with_paper: bool,
+    top: int,
+    dataroot: str | None,
+    pictures: bool,
+    frames: Sequence[str],
+    case_tags: Sequence[str] | None,
+    pairwise: bool,
+    resampling: Resampling,
+    svg: bool,
+    progress: bool,
+) -> None:
+    import html as html_escape
+
+    from lightemma.evaluation.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
+    from lightemma.report.evaluation_tables import coverage_flags
+    from lightemma.report.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
+    from lightemma.report.html import write_html
+    from lightemma.report.pictures import CameraSource
+
+    dirs = expand_run_dirs(run_dirs)
+    steps = _Steps(progress, total=len(dirs) + 7)
+    runs = []
+    for d in dirs:
+        runs.append(load_run(d, details=True))
+        steps.step(f"loaded {Path(d).name}")
+    runs, skipped = _drop_empty_runs(runs)
     known = set().union(*(r.frame_ids for r in runs)) if runs else set()
     missing = [fid for fid in frames if fid not in known]
     if missing:
         raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
     evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1)
+    evaluation.warnings[:0] = skipped
+    steps.step("evaluated")
     order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
     runs.sort(key=lambda r: order[r.info.run_dir])
     labels = unique_labels(runs)
     colors = model_colors(evaluation.models)
     flags = coverage_flags(evaluation)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    w = _Writer(out)
-    w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format |",
+    w = _Writer(out, svg=svg)
+    html_tables: list[Table] = [_runs_table(evaluation, flags)]
+    w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
+                "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format |",
                 "|---|---|---|---:|---|---|---|---|"]
     w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | "
                 f"{m.integrator} | {m.chain} | {m.answer_format} |" for m in evaluation.models]
@@ -216,6 +364,7 @@ def write_report(
         if table.name in ("pairwise_ade", "generations"):
             continue
         w.table(table)
+        html_tables.append(table)
     (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
     w.lines += [f"All numbers as JSON: [tables/evaluation.json](tables/evaluation.json)", ""]
 
@@ -237,28 +386,44 @@ def write_report(
         for table in tables:
             if table.name in ("pairwise_ade", "generations"):
                 w.table(table)
+                html_tables.append(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
 
     shared = common_frames(runs) if len(runs) > 1 else None
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
-    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags), latex=False)
+    steps.step("tables and charts")
+    html_tables.append(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags))
+    w.table(html_tables[-1], latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
-    w.table(_bias_table(bias, flags), latex=False)
+    html_tables.append(_bias_table(bias, flags))
+    w.table(html_tables[-1], latex=False)
     w.figure(history_bias_figure(runs, colors=colors, rows=bias, notes=flags), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
 
     picks = [("frame", fid, "requested frame") for fid in frames]
     picks += [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]
     picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS if case_tags is None else case_tags)]
     picks = _merge_picks(picks)
+    steps.step("scenario analysis")
+    source = CameraSource(dataroot)
     if pictures and picks:
-        source = CameraSource(dataroot)
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
         w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
-        _frame_pictures(w, runs, labels, picks, cameras, colors)
+        _frame_pictures(w, runs, labels, picks, cameras, colors, progress=progress)
+    steps.step("frame pictures")
     index = out / "index.md"
     index.write_text("\n".join(w.lines) + "\n", encoding="utf-8")
-    return index
+
+    texts = {label: {fid: (r.get("scene_text") or "", r.get("intent_text") or "", r.get("answer") or "") for fid, r in read_frame_records(run.info.run_dir, run.frame_ids).items()}
+             for label, run in zip(labels, runs)}
+    steps.step("stage texts")
+    all_ids = list(dict.fromkeys(fid for run in runs for fid in run.frame_ids))
+    html_cameras = source.cameras(runs, all_ids, load=False) if pictures else {}
+    intro = "".join(f'<p class="note">{html_escape.escape(x)}</p>' for x in [*evaluation.warnings, *dict.fromkeys(source.problems)])
+    write_html(out, title="lightemma report", intro_html=intro, tables=html_tables, figures=w.figures, runs=runs, labels=labels,
+               colors=colors, texts=texts, cameras=html_cameras, progress=progress)
+    steps.step("index.html")
+    steps.close()

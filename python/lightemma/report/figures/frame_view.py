@@ -18,13 +18,20 @@ from lightemma.report.figures.projection import densify, project
 STAGE_LABELS = (("scene", "1 · Scene"), ("intent", "2 · Intent"), ("answer", "3 · Actions"))
 
 
+MAX_IMAGE_PIXELS = 40_000_000  # an image larger than this (nuScenes CAM_FRONT: 1.44 M) is not decoded
+
+
 @dataclass
 class Camera:
-    """What a picture needs from a frame: the image (H, W, 3) or None, and the calibration."""
+    """What a picture needs from a frame: the image (H, W, 3) or None, and the calibration.
+
+    ``path`` is where the image lies (read later, e.g. for a thumbnail, when ``image`` was not loaded).
+    """
 
     image: np.ndarray | None
     intrinsic: np.ndarray  # (3, 3)
     extrinsic: np.ndarray  # (4, 4) ego-from-camera
+    path: Path | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -34,25 +41,53 @@ class Camera:
         return int(round(2 * self.intrinsic[0, 2])), int(round(2 * self.intrinsic[1, 2]))
 
 
-def load_image(path: str | Path | None) -> np.ndarray | None:
-    """The RGB image at ``path`` as an array, or None when there is none or it is unreadable."""
+def open_image(path: str | Path | None, *, max_pixels: int = MAX_IMAGE_PIXELS) -> Any:
+    """The PIL image at ``path`` (header read, pixels not yet decoded), or None when there is none,
+    it is unreadable, or it has more than ``max_pixels`` pixels (a decompression bomb is never decoded)."""
     if not path or not Path(path).is_file():
         return None
     from PIL import Image
 
     try:
-        with Image.open(path) as img:
+        img = Image.open(path)
+    except (OSError, ValueError, Image.DecompressionBombError):
+        return None
+    width, height = img.size
+    if width * height > max_pixels or width <= 0 or height <= 0:
+        img.close()
+        return None
+    return img
+
+
+def load_image(path: str | Path | None, *, max_pixels: int = MAX_IMAGE_PIXELS, width: int | None = None) -> np.ndarray | None:
+    """The RGB image at ``path`` as an array (H, W, 3) uint8, or None when there is none, it is
+    unreadable or larger than ``max_pixels``; with ``width``, scaled down to about that width
+    (JPEGs are decoded at a reduced size directly)."""
+    img = open_image(path, max_pixels=max_pixels)
+    if img is None:
+        return None
+    from PIL import Image
+
+    try:
+        with img:
+            if width and img.width > width:
+                height = max(1, round(img.height * width / img.width))
+                img.draft("RGB", (width, height))
+                return np.asarray(img.convert("RGB").resize((width, height), Image.BILINEAR))
             return np.asarray(img.convert("RGB"))
-    except OSError:
+    except (OSError, ValueError, Image.DecompressionBombError):
         return None
 
 
-def camera_from_frame(frame: Any) -> Camera:
-    """A :class:`Camera` from a :class:`lightemma.Frame` (image_path, camera_intrinsic, camera_extrinsic)."""
+def camera_from_frame(frame: Any, *, load: bool = True) -> Camera:
+    """A :class:`Camera` from a :class:`lightemma.Frame` (image_path, camera_intrinsic, camera_extrinsic);
+    with ``load=False`` the image is left on disk (``path`` set)."""
+    path = getattr(frame, "image_path", None)
     return Camera(
-        image=load_image(getattr(frame, "image_path", None)),
+        image=load_image(path) if load else None,
         intrinsic=np.asarray(frame.camera_intrinsic, dtype=np.float64),
         extrinsic=np.asarray(frame.camera_extrinsic, dtype=np.float64),
+        path=Path(path) if path else None,
     )
 
 

@@ -1,0 +1,207 @@
+"""`index.html` in a real browser (Debian's headless Chromium through selenium and the system chromedriver).
+
+The page is opened from file:// (no server): a table is sorted, frames are filtered, a frame view is
+opened; the DOM is checked, the console must have logged no error, and a screenshot is kept in the
+test's tmp folder.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+import numpy as np
+import pytest
+
+from lightemma.evaluation.synthetic import write_synthetic_run
+from lightemma.report import write_report
+
+CHROMEDRIVER = "/usr/bin/chromedriver"
+
+
+def _chromium() -> str | None:
+    return shutil.which("chromium") or shutil.which("chromium-browser")
+
+
+@pytest.fixture(scope="module")
+def browser():
+    if not (os.path.exists(CHROMEDRIVER) and _chromium()):
+        pytest.fail("chromium and chromium-driver are needed (apt-get install -y chromium chromium-driver; .ci/run installs them)")
+    os.environ["SE_AVOID_STATS"] = "true"  # Selenium Manager would phone home otherwise
+    from selenium import webdriver
+    from selenium.webdriver.chrome.service import Service
+
+    options = webdriver.ChromeOptions()
+    options.binary_location = _chromium()
+    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,1000", "--allow-file-access-from-files"):
+        options.add_argument(arg)
+    options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
+    driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
+    driver.set_page_load_timeout(60)
+    yield driver
+    driver.quit()
+
+
+@pytest.fixture(scope="module")
+def html_report(tmp_path_factory):
+    runs = tmp_path_factory.mktemp("runs")
+    write_synthetic_run(runs, "openai/gpt-4o", 90, seed=1, noise=0.3)
+    write_synthetic_run(runs, "gemini/gemini-2.0-flash", 90, seed=2, noise=0.9)
+    write_synthetic_run(runs, "baseline:cv", 90, seed=3, noise=1.5)
+    out = tmp_path_factory.mktemp("report") / "rep"
+    write_report([runs], out, top=1, common=True, case_tags=())
+    return out, runs
+
+
+def _tagged(runs, tag):
+    """Frame ids carrying ``tag`` by lightemma.evaluation.scenarios.tag_frames (all synthetic runs share one truth)."""
+    from lightemma.evaluation import load_run
+    from lightemma.evaluation.scenarios import tag_frames
+
+    run = load_run(next(p.parent for p in sorted(runs.rglob("manifest.json"))), details=True)
+    mask = tag_frames(run.gt_positions, run.history_actions)[tag]
+    return [fid for fid, m in zip(run.frame_ids, mask) if m]
+
+
+def _wait(driver, predicate, timeout=15):
+    from selenium.webdriver.support.ui import WebDriverWait
+
+    return WebDriverWait(driver, timeout).until(lambda d: predicate(d))
+
+
+def _errors(driver):
+    return [e for e in driver.get_log("browser") if e["level"] in ("SEVERE", "ERROR")]
+
+
+def test_html_report_is_self_contained(html_report):
+    html_report, _ = html_report
+    page = (html_report / "index.html").read_text()
+    assert "http://" not in page.replace("http://www.w3.org/2000/svg", "") and "https://" not in page
+    assert (html_report / "index.md").read_text().count("(index.html)") == 1
+    data = (html_report / "html" / "data.js").read_text()
+    assert data.startswith("LE.data(") and data.rstrip().endswith(");")
+    payload = json.loads(data[len("LE.data("):data.rindex(")")])
+    assert sorted(m["label"] for m in payload["models"]) == ["GPT-4o", "Gemini-2.0-Flash", "baseline:cv"]
+    assert len(payload["ids"]) == 90 and len(payload["gt"]) == 90 * 12 and len(payload["pred"]) == 3
+    assert all(len(a) == 90 for a in payload["ade"])
+
+
+def test_html_report_in_a_browser(browser, html_report, tmp_path):
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    html_report, runs = html_report
+    d = browser
+    d.get((html_report / "index.html").as_uri())
+    _wait(d, lambda d: d.execute_script("return window.LE && window.LE.ready === true"))
+
+    # sort the accuracy table by ADE avg, both ways: the numbers come out ordered
+    table = d.find_element(By.CSS_SELECTOR, "#table-accuracy_lightemma table")
+    headers = table.find_elements(By.TAG_NAME, "th")
+    col = next(i for i, h in enumerate(headers) if h.text.startswith("ADE avg"))
+
+    def column():
+        cells = [r.find_elements(By.TAG_NAME, "td")[col] for r in table.find_elements(By.CSS_SELECTOR, "tbody tr")]
+        return [float(c.get_attribute("data-sort")) for c in cells if c.get_attribute("data-sort") is not None]
+
+    headers[col].click()
+    up = column()
+    assert len(up) >= 3 and up == sorted(up) and headers[col].get_attribute("aria-sort") == "ascending"
+    headers[col].click()
+    assert column() == sorted(up, reverse=True)
+
+    # a model's name links to its frames, worst first
+    link = table.find_element(By.CSS_SELECTOR, "tbody tr a.frames-link")
+    model_label = link.text
+    link.click()
+    _wait(d, lambda d: d.find_element(By.ID, "frames-view").is_displayed())
+    assert Select(d.find_element(By.ID, "f-sort")).first_selected_option.get_attribute("value") == "worst"
+    cards = d.find_elements(By.CSS_SELECTOR, "#grid .card")
+    assert len(cards) >= 10
+    ades = [float(c.text.split("ADE ")[1].split(" m")[0]) for c in cards if "ADE " in c.text]
+    assert ades == sorted(ades, reverse=True) and model_label.startswith(Select(d.find_element(By.ID, "f-model")).first_selected_option.text)
+
+    # filter: a scenario tag and an error band; every card shown matches, the count says how many
+    d.get((html_report / "index.html").as_uri() + "#frames")
+    _wait(d, lambda d: d.find_element(By.ID, "frames-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#grid .card"))
+    total = len(d.find_elements(By.CSS_SELECTOR, "#grid .card"))
+    Select(d.find_element(By.ID, "f-tag")).select_by_value("braking")
+    _wait(d, lambda d: "tag=braking" in d.current_url)
+    braking = d.execute_script("return LE.lastList.list")
+    shown_ids = d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")
+    assert 0 < len(braking) < 90 and shown_ids == _tagged(runs, "braking")
+    count = d.find_element(By.ID, "frame-count").text
+    assert count.startswith(f"{len(braking)} of 90 frames")
+    Select(d.find_element(By.ID, "f-dis")).select_by_value("1")
+    _wait(d, lambda d: "dis=1" in d.current_url)
+    narrowed = d.execute_script("return LE.lastList.list")
+    assert set(narrowed) <= set(braking)
+    assert len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) == min(len(narrowed), 60) <= total
+    # thumbnails are drawn as they scroll into view: the first ones hold a bird's-eye plot
+    _wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#grid .card .thumb svg polyline.gt"))
+
+    # open a frame view: camera panel, BEV with ground truth and every scored model, metrics and stage texts
+    first = d.find_element(By.CSS_SELECTOR, "#grid .card")
+    fid = first.find_element(By.CSS_SELECTOR, ".id").text
+    first.click()
+    _wait(d, lambda d: d.find_element(By.ID, "frame-view").is_displayed())
+    _wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#texts .model-texts"))
+    assert d.find_element(By.ID, "frame-title").text == fid
+    assert len(d.find_elements(By.CSS_SELECTOR, "#frame-view .bev svg polyline.gt")) == 1
+    assert len(d.find_elements(By.CSS_SELECTOR, "#frame-view .bev svg polyline.pred")) >= 2
+    rows = d.find_elements(By.CSS_SELECTOR, "#frame-metrics tbody tr")
+    assert len(rows) == 3
+    texts = d.find_elements(By.CSS_SELECTOR, "#texts .model-texts")
+    assert len(texts) == 3 and "the road ahead is clear" in texts[0].text and "3 · Answer" in texts[0].text
+    # the stage-3 answer of the first model is the one in its record
+    answer = texts[0].find_elements(By.TAG_NAME, "dd")[2].text
+    assert answer.startswith("[(") and answer.endswith(")]")
+    # next/previous walk the filtered list
+    if len(narrowed) > 1:
+        d.find_element(By.ID, "next").click()
+        _wait(d, lambda d: d.find_element(By.ID, "frame-title").text != fid)
+
+    shot = tmp_path / "frame_view.png"
+    d.save_screenshot(str(shot))
+    assert shot.stat().st_size > 10_000
+    assert _errors(d) == []
+
+
+def test_html_frame_view_draws_the_camera_image_with_projected_paths(browser, tmp_path):
+    """Runs on a synthetic nuScenes dataset: thumbnails are camera images, the frame view projects every path."""
+    import lightemma
+    from lightemma.backends.baseline import baseline_actions
+    from lightemma.evaluation.synthetic import make_record
+    from lightemma.runs.store import RunWriter, create_run_dir
+    from lightemma.synth import write_dataset
+    from selenium.webdriver.common.by import By
+
+    root = write_dataset(tmp_path / "data", scenes=3, keyframes=15, image_size=(320, 180), sweeps=False)
+    frames = lightemma.load_frames(root, "v1.0-mini", split="all")
+    run_dirs = []
+    for kind in ("constant", "cv"):
+        run_dir = create_run_dir(tmp_path / "runs", f"baseline:{kind}", {"model": f"baseline:{kind}", "dataset": frames.describe(), "finished_at": "t"})
+        with RunWriter(run_dir) as w:
+            for frame in frames:
+                actions = baseline_actions(kind, frame)
+                w.append(make_record(frame.frame_id, frame.gt_positions, lightemma.integrate(actions), actions=actions, history_actions=frame.history_actions))
+        run_dirs.append(run_dir)
+    out = tmp_path / "report"
+    write_report(run_dirs, out, top=1, convention="lightemma", case_tags=())
+    images = sorted((out / "html" / "images").glob("*.jpg"))
+    assert len(images) == len(frames)
+    d = browser
+    d.get(out.joinpath("index.html").as_uri() + "#frames")
+    _wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#grid .card .thumb img"))
+    d.find_elements(By.CSS_SELECTOR, "#grid .card")[-1].click()
+    _wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#camera svg#projection polyline.gt"))
+    assert d.execute_script("return document.querySelector('#camera img').naturalWidth") == 320
+    assert len(d.find_elements(By.CSS_SELECTOR, "#camera svg#projection polyline.pred")) == 2
+    points = d.find_element(By.CSS_SELECTOR, "#camera svg#projection polyline.gt").get_attribute("points").split()
+    uv = np.array([[float(v) for v in p.split(",")] for p in points])
+    assert len(uv) >= 3 and (uv[:, 0] >= -50).all() and (uv[:, 1] > 180 / 2).all()  # on the ground: below the horizon
+    d.save_screenshot(str(tmp_path / "camera_view.png"))
+    assert _errors(d) == []
