@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 import re
+from glob import escape as glob_escape
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -207,6 +208,27 @@ def _swap_in(tmp: Path, out: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def _remove_stale(out: Path) -> None:
+    """Hidden folders left beside ``out`` by a report that was killed (its process is gone)."""
+    import shutil
+
+    for kind in ("partial", "old"):
+        for path in out.parent.glob(f".{glob_escape(out.name)}.{kind}-*"):
+            pid = path.name.rsplit("-", 1)[-1]
+            if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+                shutil.rmtree(path, ignore_errors=True)
+
+
 def _drop_empty_runs(runs: list[RunData]) -> tuple[list[RunData], list[str]]:
     """Runs with no scored frame, left out (with a warning naming each) when another run has one."""
     empty = [r for r in runs if not r.valid.any()]
@@ -258,6 +280,7 @@ def write_report(
         raise UserError(f"dataroot {dataroot} {what}", cli=f"--dataroot {dataroot} {what}")
     _check_target(out, force)
     out.parent.mkdir(parents=True, exist_ok=True)
+    _remove_stale(out)
     tmp = out.with_name(f".{out.name}.partial-{os.getpid()}")
     if tmp.exists():
         shutil.rmtree(tmp)
