@@ -51,7 +51,7 @@ def test_index_has_tables_scenarios_and_pictures(report):
     assert "### ADE avg by scenario tag" in text and "| braking |" in text
     assert re.search(r"per scenario tag, on the \d+ frames scored in every run", text)
     assert "History bias" in text
-    assert "models disagree by" in text and "worst `braking` frame" in text
+    assert "models shown disagree by" in text and "worst `braking` frame" in text
     # the dataset named in a manifest is not there: said once, pictures still drawn (bird's-eye only)
     assert "pictures have no camera view" in text
     grids = sorted((out / "figures" / "frames").glob("*_grid.png"))

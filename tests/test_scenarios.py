@@ -54,11 +54,11 @@ def test_mean_curvature_of_an_arc():
 
 
 def write_run(tmp_path, model, frames):
-    """frames: list of (frame_id, gt, pred, history)."""
+    """frames: list of (frame_id, gt, pred, history[, scene name])."""
     run_dir = create_run_dir(tmp_path, model, {"model": model, "finished_at": "t"})
     with RunWriter(run_dir) as w:
-        for fid, gt, pred, hist in frames:
-            w.append(make_record(fid, gt, pred, history_actions=hist))
+        for fid, gt, pred, hist, *scene in frames:
+            w.append(make_record(fid, gt, pred, history_actions=hist, scene_name=scene[0] if scene else "scene-0001"))
     return load_run(run_dir, details=True)
 
 
@@ -98,15 +98,31 @@ def test_history_bias_separates_carry_over_from_straight(tmp_path):
 
 def test_disagreement_and_worst_frames(tmp_path):
     gt, hist = CASES["cruising"]
-    frames_a = [(f"f{i}", gt, gt, hist) for i in range(5)]
-    frames_b = [(f"f{i}", gt, gt + [0.0, 0.5 * i], hist) for i in range(5)]
-    frames_b[2] = ("f2", gt, gt + [0.0, 9.0], hist)  # the big disagreement
+    frames_a = [(f"f{i}", gt, gt, hist, f"scene-{i}") for i in range(5)]
+    frames_b = [(f"f{i}", gt, gt + [0.0, 0.5 * i], hist, f"scene-{i}") for i in range(5)]
+    frames_b[2] = ("f2", gt, gt + [0.0, 9.0], hist, "scene-2")  # the big disagreement
     a, b = write_run(tmp_path, "a", frames_a), write_run(tmp_path, "b", frames_b)
     top = disagreements([a, b], top=2)
     assert [t["frame_id"] for t in top] == ["f2", "f4"]
     assert top[0]["spread_m"] == pytest.approx(9.0) and top[0]["fde"] == {"a": 0.0, "b": pytest.approx(9.0)}
     worst = worst_frame_per_tag([a, b], tags=("cruising",))
     assert worst == [{"tag": "cruising", "frame_id": "f2", "mean_fde": pytest.approx(4.5), "frames_with_tag": 5}]
+
+
+def test_disagreements_pick_distinct_scenes_a_minimum_spread_and_name_the_models(tmp_path):
+    """Before: five consecutive keyframes of one scene, and frames where the models agree ("disagree by 0.0 m")."""
+    gt, hist = CASES["cruising"]
+    spreads = [6.0, 5.0, 4.0, 0.4, 0.0, 3.0]
+    scenes = ["s1", "s1", "s1", "s2", "s3", "s4"]
+    frames_a = [(f"f{i}", gt, gt, hist, sc) for i, sc in enumerate(scenes)]
+    frames_b = [(f"f{i}", gt, gt + [0.0, d], hist, sc) for i, (d, sc) in enumerate(zip(spreads, scenes))]
+    a, b = write_run(tmp_path, "a", frames_a), write_run(tmp_path, "b", frames_b)
+    cv = write_run(tmp_path, "baseline:cv", [(f"f{i}", gt, gt + [0.0, -20.0], hist, sc) for i, sc in enumerate(scenes)])
+    top = disagreements([a, b, cv], top=5)
+    assert [t["frame_id"] for t in top] == ["f0", "f5"]  # one per scene; s2 and s3 agree within 1 m
+    assert [t["scene"] for t in top] == ["s1", "s4"] and all(t["spread_m"] >= 1.0 for t in top)
+    assert all(t["models"] == ["a", "b"] for t in top)  # the baseline is not compared: not counted in the number
+    assert top[0]["spread_m"] == pytest.approx(6.0)
 
 
 def test_scenarios_need_history(tmp_path):

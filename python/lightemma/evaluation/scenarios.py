@@ -234,6 +234,30 @@ def truth_samples(run: RunData, thresholds: Thresholds = Thresholds()) -> dict[s
     return {"history": history[rows, -1, 1], "true": mean_curvature(run.gt_positions[rows])}
 
 
+def truth_over_runs(runs: Sequence[RunData], thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
+    """:func:`truth_samples` over every frame of any of ``runs`` (each frame once, the first run's record),
+    with ``after_turn``: the frames going straight just after a turn. The truth of the frames shown,
+    whatever frames each run covers."""
+    seen: set[str] = set()
+    gt, hist = [], []
+    for run in runs:
+        history = _require_history(run)
+        rows = [i for i, fid in enumerate(run.frame_ids) if fid not in seen]
+        seen.update(run.frame_ids)
+        gt.append(run.gt_positions[rows])
+        hist.append(history[rows])
+    if not gt:
+        return {"history": np.zeros(0), "true": np.zeros(0), "after_turn": np.zeros(0, dtype=bool)}
+    gt_all, hist_all = np.concatenate(gt), np.concatenate(hist)
+    usable = np.isfinite(gt_all).all(axis=(1, 2)) & np.isfinite(hist_all).all(axis=(1, 2))
+    rows = np.flatnonzero(usable & (hist_all[:, -1, 0] >= thresholds.moving_speed))
+    rows = rows[path_length(gt_all[rows]) >= thresholds.min_path]
+    k_hist = hist_all[rows, -1, 1]
+    tags = tag_frames(gt_all[rows], hist_all[rows], thresholds)
+    after = (tags["straight_after_left_turn"] | tags["straight_after_right_turn"]) & (np.abs(k_hist) > 1e-6)
+    return {"history": k_hist, "true": mean_curvature(gt_all[rows]), "after_turn": after}
+
+
 def history_bias(runs: Sequence[RunData], thresholds: Thresholds = Thresholds()) -> list[dict[str, Any]]:
     """Per model: how far predicted curvature follows the last history curvature, against the truth.
 
@@ -286,12 +310,25 @@ def _shared_valid(runs: Sequence[RunData]) -> list[str]:
     return common_frames(runs) if runs else []
 
 
-def disagreements(runs: Sequence[RunData], *, top: int = 5, exclude_baselines: bool = True) -> list[dict[str, Any]]:
-    """The ``top`` frames (valid in every compared run) whose predicted 3 s endpoints spread most.
+MIN_SPREAD = 1.0  # m: frames whose models' 3 s endpoints lie closer than this are not "disagreements"
+
+
+def _scene_of(run: RunData, rows: np.ndarray, frame_ids: Sequence[str]) -> list[str]:
+    """Scene name per row (the run's scene index), else the frame id up to its last ``/``."""
+    if run.scene_index is not None and run.scene_names:
+        names = run.scene_names
+        return [names[s] if 0 <= s < len(names) else fid.rsplit("/", 1)[0] for s, fid in zip(run.scene_index[rows].tolist(), frame_ids)]
+    return [fid.rsplit("/", 1)[0] for fid in frame_ids]
+
+
+def disagreements(runs: Sequence[RunData], *, top: int = 5, exclude_baselines: bool = True, min_spread: float = MIN_SPREAD) -> list[dict[str, Any]]:
+    """The ``top`` frames (valid in every compared run) whose predicted 3 s endpoints spread most,
+    at most one per scene and each spread at least ``min_spread`` metres.
 
     Baselines are left out of the comparison when at least two other models
-    are present. Each entry: frame_id, spread (max pairwise endpoint distance,
-    m) and per-model FDE.
+    are present. Each entry: frame_id, scene, spread (max pairwise endpoint
+    distance among ``models``, m), ``models`` (the labels compared — draw
+    exactly these beside the number) and per-model FDE.
     """
     compared = [r for r in runs if r.info.family != "Baseline"] if exclude_baselines else list(runs)
     if len(compared) < 2:
@@ -306,15 +343,23 @@ def disagreements(runs: Sequence[RunData], *, top: int = 5, exclude_baselines: b
     ends = np.stack([r.trajectory[idx, -1] for r, idx in zip(compared, rows)])  # (M, F, 2)
     spread = np.linalg.norm(ends[:, None] - ends[None, :], axis=-1).max(axis=(0, 1))
     gt_end = compared[0].gt_positions[rows[0], -1]
-    order = np.argsort(-spread, kind="stable")[:top]
-    return [
-        {
+    scenes = _scene_of(compared[0], rows[0], shared)
+    out: list[dict[str, Any]] = []
+    seen: set[str] = set()
+    for i in np.argsort(-spread, kind="stable"):
+        if len(out) >= top or spread[i] < min_spread:
+            break
+        if scenes[i] in seen:
+            continue
+        seen.add(scenes[i])
+        out.append({
             "frame_id": shared[i],
+            "scene": scenes[i],
             "spread_m": float(spread[i]),
+            "models": [labels[id(r)] for r in compared],
             "fde": {labels[id(r)]: float(np.linalg.norm(ends[m, i] - gt_end[i])) for m, r in enumerate(compared)},
-        }
-        for i in order
-    ]
+        })
+    return out
 
 
 def worst_frame_per_tag(runs: Sequence[RunData], tags: Sequence[str] = CASE_TAGS) -> list[dict[str, Any]]:

@@ -113,8 +113,10 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
     return [f"- **{family}**: " + "; ".join(parts) + "." for family, parts in by_family.items()]
 
 
-def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str], *, progress: bool = False) -> None:
-    """For each (kind, frame_id, caption): a grid of all models, and the worst model's picture with its texts."""
+def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str], *,
+                    shown: dict[str, Sequence[str]] | None = None, progress: bool = False) -> None:
+    """For each (kind, frame_id, caption): a grid of the models (those of ``shown[frame_id]`` when given — the
+    models a caption's number was measured on — else all), and the worst model's picture with its texts."""
     from lightemma.report.figures import frame_figure, model_grid
     from lightemma.report.pictures import stage_texts
 
@@ -131,7 +133,7 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
         preds, errors, gt = {}, {}, None
         for run, label, index, ok in zip(runs, labels, indices, valid):
             row = index.get(fid)
-            if row is None or not ok[row]:
+            if row is None or not ok[row] or (shown and fid in shown and label not in shown[fid]):
                 continue
             gt = run.gt_positions[row]
             preds[label] = run.trajectory[row]
@@ -426,7 +428,8 @@ def _write(
     w.figure(history_bias_figure(runs, colors=colors, rows=bias, notes=flags), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
 
     picks = [("frame", fid, "requested frame") for fid in frames]
-    picks += [("disagree", d["frame_id"], f"models disagree by {d['spread_m']:.1f} m at 3 s") for d in disagreements(runs, top=top)]
+    spread = disagreements(runs, top=top)
+    picks += [("disagree", d["frame_id"], f"the {len(d['models'])} models shown disagree by {d['spread_m']:.1f} m at 3 s" + ("" if len(d["models"]) == len(runs) else " (baselines not compared)")) for d in spread]
     picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS if case_tags is None else case_tags)]
     picks = _merge_picks(picks)
     steps.step("scenario analysis")
@@ -435,7 +438,7 @@ def _write(
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
         w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
-        _frame_pictures(w, runs, labels, picks, cameras, colors, progress=progress)
+        _frame_pictures(w, runs, labels, picks, cameras, colors, shown={d["frame_id"]: d["models"] for d in spread}, progress=progress)
     steps.step("frame pictures")
     index = out / "index.md"
     index.write_text("\n".join(w.lines) + "\n", encoding="utf-8")

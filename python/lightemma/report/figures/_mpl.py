@@ -22,11 +22,11 @@ FAMILY_COLORS = {
     "Gemini": "#1f6fc4",
     "Qwen": "#7048c8",
     "LLaMA": "#d6246e",
-    "Baseline": "#6b6b6b",
-    "Other": "#8c564b",
+    "Baseline": "#17becf",  # cyan: every baseline is a shade of it
+    "Other": "#7f7f7f",
 }
-# baselines and other models: distinct colours that show on camera images and are not a family's hue
-OTHER_COLORS = ("#17becf", "#bcbd22", "#e377c2", "#8c564b", "#9edae5", "#f7b6d2", "#c49c94", "#7f7f7f")
+# models of no known family: distinct colours that show on camera images and are no family's hue (no pink, brown, green)
+OTHER_COLORS = ("#7f7f7f", "#3d3d3d", "#a39e7a", "#b5b5b5", "#5f6b7a", "#8a7f99")
 PAPER_GENERATIONS = 3  # the paper's families have three generations each
 FORMATS = ("png", "svg")
 DPI = 150
@@ -52,12 +52,12 @@ def family_color(family: str) -> str:
     return FAMILY_COLORS.get(family, FAMILY_COLORS["Other"])
 
 
-def _shade(color: str, position: int, count: int) -> str:
-    """``color`` darker (position 0) to lighter (position count − 1), same hue."""
+def _shade(color: str, position: int, count: int, extra: float = 0.0) -> str:
+    """``color`` darker (position 0) to lighter (position count − 1), same hue; ``extra`` shifts the lightness."""
     r, g, b = (int(color[i : i + 2], 16) / 255 for i in (1, 3, 5))
     h, lightness, sat = colorsys.rgb_to_hls(r, g, b)
     offset = 0.0 if count <= 1 else (position / (count - 1) - 0.5) * 0.3
-    r, g, b = colorsys.hls_to_rgb(h, min(0.78, max(0.22, lightness + offset)), sat)
+    r, g, b = colorsys.hls_to_rgb(h, min(0.8, max(0.2, lightness + offset + extra)), sat)
     return "#" + "".join(f"{round(255 * v):02x}" for v in (r, g, b))
 
 
@@ -80,18 +80,24 @@ def model_colors(models: Iterable[Mapping[str, Any] | Any]) -> dict[str, str]:
         if label not in {lab for group in members.values() for lab, _ in group}:
             members.setdefault(family, []).append((str(label), get(m, "generation")))
     out: dict[str, str] = {}
-    distinct = 0  # one running count over baselines and others, so that no two share a colour
+    others = 0  # one running count over models of no known family, so that no two share a colour
     for family, group in members.items():
-        if family not in FAMILY_COLORS or family in ("Other", "Baseline"):
+        if family not in FAMILY_COLORS or family == "Other":
             for label, _ in group:
-                out[label] = OTHER_COLORS[distinct % len(OTHER_COLORS)]
-                distinct += 1
+                out[label] = OTHER_COLORS[others % len(OTHER_COLORS)]
+                others += 1
             continue
         gens = [g for _, g in group]
-        by_generation = all(isinstance(g, int) and 1 <= g <= PAPER_GENERATIONS for g in gens)
+        by_generation = family != "Baseline" and all(isinstance(g, int) and 1 <= g <= PAPER_GENERATIONS for g in gens)
+        seen: dict[int, int] = {}
         for i, (label, gen) in enumerate(group):
-            position, count = (gen - 1, PAPER_GENERATIONS) if by_generation else (i, len(group))
-            out[label] = _shade(FAMILY_COLORS[family], position, count)
+            if by_generation:
+                # two runs of one generation (variants of one model): the second one lighter, the third darker, …
+                k = seen[gen] = seen.get(gen, -1) + 1
+                extra = 0.0 if k == 0 else (0.1 * ((k + 1) // 2)) * (1 if k % 2 else -1)
+                out[label] = _shade(FAMILY_COLORS[family], gen - 1, PAPER_GENERATIONS, extra)
+            else:
+                out[label] = _shade(FAMILY_COLORS[family], i, len(group))
     return out
 
 

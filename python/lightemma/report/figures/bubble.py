@@ -77,7 +77,7 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
     ax.grid(axis="y", alpha=0.3)
     families = list(dict.fromkeys(p.get("family", "Other") for p in shown))
     def swatch(family: str) -> str:  # baselines and others have a colour per model: show the first one's
-        if family in ("Baseline", "Other") or family not in FAMILY_COLORS:
+        if family == "Other" or family not in FAMILY_COLORS:
             return next(colors[str(p["model"])] for p in shown if p.get("family", "Other") == family)
         return family_color(family)
 

@@ -1,5 +1,5 @@
 """Per-frame pictures (the paper's Fig. 3): the CAM_FRONT image with ground-truth and
-predicted trajectories projected through the calibration, a bird's-eye inset and the
+predicted trajectories projected through the calibration, a bird's-eye view beside it and the
 three stage texts; and a grid comparing several models on one frame."""
 
 from __future__ import annotations
@@ -91,28 +91,39 @@ def camera_from_frame(frame: Any, *, load: bool = True) -> Camera:
     )
 
 
-def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str, label: str, width: float) -> None:
+GT_WIDTH = 1.4  # ground truth: a thin dashed line drawn on top, so that a prediction under it shows through the gaps
+GT_DASHES = (3.0, 3.0)
+PRED_WIDTH = 2.6
+
+
+def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str, label: str, width: float, *, truth: bool = False) -> None:
     line, _ = project(densify(trajectory), camera.intrinsic, camera.extrinsic)
-    ax.plot(line[:, 0], line[:, 1], color=color, linewidth=width, label=label, solid_capstyle="round")
+    style = {"dashes": GT_DASHES, "zorder": 6} if truth else {"zorder": 4}
+    ax.plot(line[:, 0], line[:, 1], color=color, linewidth=width, label=label, solid_capstyle="round", **style)
     points, visible = project(trajectory, camera.intrinsic, camera.extrinsic)
-    ax.scatter(points[visible, 0], points[visible, 1], s=min(width, 3.0) * 9, color=color, edgecolors="white", linewidths=0.6, zorder=3)
+    ax.scatter(points[visible, 0], points[visible, 1], s=9 if truth else 14, color=color, edgecolors="white", linewidths=0.6, zorder=7 if truth else 5)
 
 
 def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
-    """The camera view with the trajectories drawn on the ground; a grey canvas when there is no image."""
+    """The camera view with the trajectories drawn on the ground; a plain grey background (no
+    image drawn: it costs nothing) when there is no image."""
     width, height = camera.size
     if camera.image is not None:
         ax.imshow(camera.image)
     else:
-        ax.imshow(np.full((height, width, 3), 200, dtype=np.uint8))
+        ax.add_patch(pyplot().Rectangle((0, 0), width, height, facecolor="#c8c8c8", edgecolor="none", zorder=0))
         ax.text(0.02, 0.96, "image not available", transform=ax.transAxes, color="0.3", va="top", fontsize=8)
-    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", 5.0)  # wide underneath: both stay visible where they coincide
     for i, (label, trajectory) in enumerate(predictions.items()):
         if np.isfinite(trajectory).all():
-            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, 2.0)
+            _draw_projected(ax, camera, trajectory, (colors or {}).get(label, pred_color(i)), label, PRED_WIDTH)
+    _draw_projected(ax, camera, gt, GT_COLOR, "ground truth", GT_WIDTH, truth=True)
     ax.set_xlim(0, width)
     ax.set_ylim(height, 0)
-    ax.axis("off")
+    ax.set_aspect("equal")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    for spine in ax.spines.values():
+        spine.set_visible(False)
 
 
 def bev_limits(trajectories: list[np.ndarray], *, min_extent: float = 5.0, margin: float = 0.12) -> tuple[tuple[float, float], tuple[float, float]]:
@@ -128,19 +139,20 @@ def bev_limits(trajectories: list[np.ndarray], *, min_extent: float = 5.0, margi
     return (cx - half, cx + half), (cy - half, cy + half)
 
 
-def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
-    """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now.
+def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None, units: bool = True) -> None:
+    """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now; axes in metres.
 
-    The view is sized to hold the ground truth and every prediction.
+    The view is sized to hold the ground truth and every prediction; the ground
+    truth is a thin dashed line on top (a prediction under it shows through).
     """
-    def plot(traj: np.ndarray, color: str, width: float, label: str, z: float) -> None:
+    def plot(traj: np.ndarray, color: str, width: float, label: str, z: float, **style: Any) -> None:
         pts = np.concatenate([np.zeros((1, 2)), traj])
-        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label, zorder=z)
+        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label, zorder=z, **style)
 
     shown = {label: t for label, t in predictions.items() if np.isfinite(t).all()}
-    plot(gt, GT_COLOR, 4.0, "ground truth", 3)  # wide underneath: a prediction on top of it stays visible
     for i, (label, trajectory) in enumerate(shown.items()):
-        plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.5, label, 4)
+        plot(trajectory, (colors or {}).get(label, pred_color(i)), 1.8, label, 4)
+    plot(gt, GT_COLOR, GT_WIDTH, "ground truth", 6, dashes=GT_DASHES)
     (x0, x1), (y0, y1) = bev_limits([gt, *shown.values()])
     ax.set_xlim(x0, x1)
     ax.set_ylim(y0, y1)
@@ -148,18 +160,10 @@ def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, 
     ax.plot([0], [0], marker="^", color="black", markersize=6, zorder=5)
     ax.set_facecolor("#f4f4f4")
     ax.tick_params(labelsize=6)
+    if units:
+        ax.set_xlabel("lateral (m), left −y → right", fontsize=6, labelpad=1)
+        ax.set_ylabel("forward x (m)", fontsize=6, labelpad=1)
     ax.set_title("bird's-eye (m)", fontsize=7)
-
-
-def _camera_with_inset(ax: Any, camera: Camera | None, gt: np.ndarray, preds: Mapping[str, np.ndarray], colors: Mapping[str, str] | None, bounds: tuple[float, ...]) -> Any:
-    """Camera view with a BEV inset; without a camera the BEV fills the axes. Returns the inset (or None)."""
-    if camera is None:
-        draw_bev(ax, gt, preds, colors=colors)
-        return None
-    draw_camera(ax, camera, gt, preds, colors=colors)
-    inset = ax.inset_axes(bounds)
-    draw_bev(inset, gt, preds, colors=colors)
-    return inset
 
 
 def _stage_text(texts: Mapping[str, Any], limit: int) -> str:
@@ -182,7 +186,7 @@ def frame_figure(
     text_limit: int = 420,
     colors: Mapping[str, str] | None = None,
 ) -> Any:
-    """One frame: camera view with trajectories, BEV inset, and (if given) the stage texts.
+    """One frame: camera view with trajectories, the bird's-eye view beside it, and (if given) the stage texts.
 
     ``predictions`` maps a label to a (6, 2) trajectory in the ego frame;
     ``texts`` holds ``scene``, ``intent`` and ``answer`` (the stage-3 answer);
@@ -192,17 +196,21 @@ def frame_figure(
     plt = pyplot()
     gt = np.asarray(gt, dtype=np.float64)
     preds = {k: np.asarray(v, dtype=np.float64) for k, v in predictions.items()}
-    fig = plt.figure(figsize=(10, 7.8 if texts else 6.0))
+    fig = plt.figure(figsize=(11, 7.4 if texts else 4.6))
+    grid = fig.add_gridspec(2 if texts else 1, 1, height_ratios=[3, 1.6] if texts else [1], hspace=0.08, left=0.03, right=0.98, top=0.93, bottom=0.02 if texts else 0.08)
+    if camera is not None:
+        # camera view and bird's-eye view side by side: the BEV never covers the image
+        top = grid[0].subgridspec(1, 2, width_ratios=[1.9, 1], wspace=0.12)
+        ax, bev = fig.add_subplot(top[0]), fig.add_subplot(top[1])
+        draw_camera(ax, camera, gt, preds, colors=colors)
+    else:
+        ax = bev = fig.add_subplot(grid[0])
+    draw_bev(bev, gt, preds, colors=colors)
+    _legend(ax, preds, colors, loc="lower left")
     if texts:
-        grid = fig.add_gridspec(2, 1, height_ratios=[3, 1.3], hspace=0.05, left=0.02, right=0.98, top=0.94, bottom=0.02)
-        ax = fig.add_subplot(grid[0])
         text_ax = fig.add_subplot(grid[1])
         text_ax.axis("off")
         text_ax.text(0.0, 1.0, _stage_text(texts, text_limit), va="top", ha="left", fontsize=7.5, family="monospace", transform=text_ax.transAxes)
-    else:
-        ax = fig.add_axes((0.02, 0.02, 0.96, 0.90))
-    _camera_with_inset(ax, camera, gt, preds, colors, (0.74, 0.50, 0.25, 0.48))
-    _legend(ax, preds, colors, loc="lower left")
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
@@ -218,30 +226,37 @@ def model_grid(
     errors: Mapping[str, float] | None = None,
     colors: Mapping[str, str] | None = None,
 ) -> Any:
-    """Several models on one frame: one panel per model (ground truth in each), BEV insets,
-    and a legend (ground truth, each model in its colour)."""
+    """Several models on one frame: one panel per model (ground truth in each) — the camera view
+    with the bird's-eye view (axes in metres) beside it, never over it — and a legend (ground
+    truth, each model in its colour)."""
     plt = pyplot()
     gt = np.asarray(gt, dtype=np.float64)
     labels = list(predictions)
     ncols = max(1, min(ncols, len(labels)))
     nrows = max(1, -(-len(labels) // ncols))
-    fig, axes = plt.subplots(nrows, ncols, figsize=(4.6 * ncols, 3.15 * nrows + 0.7), squeeze=False)
-    for ax in axes.flat[len(labels):]:
-        ax.axis("off")
+    with_camera = camera is not None
+    panel_w = 6.4 if with_camera else 3.2
+    fig = plt.figure(figsize=(panel_w * ncols, 3.0 * nrows + 0.9))
+    outer = fig.add_gridspec(nrows, ncols, left=0.03, right=0.99, top=0.93 if title else 0.97, bottom=0.1 if nrows == 1 else 0.06, wspace=0.12, hspace=0.35)
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
-    for ax, label in zip(axes.flat, labels):
+    for k, label in enumerate(labels):
+        cell = outer[k // ncols, k % ncols]
         pred = {label: np.asarray(predictions[label], dtype=np.float64)}
-        inset = _camera_with_inset(ax, camera, gt, pred, palette, (0.70, 0.45, 0.29, 0.54))
+        if with_camera:
+            # the camera view and the bird's-eye view beside it: the BEV never covers the image
+            inner = cell.subgridspec(1, 2, width_ratios=[1.78, 1], wspace=0.28)
+            cam_ax, bev_ax = fig.add_subplot(inner[0]), fig.add_subplot(inner[1])
+            draw_camera(cam_ax, camera, gt, pred, colors=palette)
+        else:
+            cam_ax = bev_ax = fig.add_subplot(cell)
+        draw_bev(bev_ax, gt, pred, colors=palette)
+        bev_ax.set_title("bird's-eye (m)" if with_camera else "", fontsize=6)
         error = (errors or {}).get(label)
-        ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=palette[label])
-        if inset is not None:
-            inset.set_title("")
-            inset.tick_params(labelsize=5)
+        cam_ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=palette[label])
     if title:
         fig.suptitle(title, fontsize=10)
-    handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.5, label="ground truth")]
+    handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.0, dashes=GT_DASHES, label="ground truth")]
     handles += [plt.Line2D([], [], color=palette[label], linewidth=2.0, label=label) for label in labels]
-    fig.tight_layout(rect=(0, 0.06 if nrows > 1 else 0.1, 1, 1), h_pad=1.6)
     fig.legend(handles=handles, loc="lower center", ncol=min(len(handles), 7), fontsize=8, frameon=False)
     return fig
 
@@ -249,6 +264,6 @@ def model_grid(
 def _legend(ax: Any, preds: Mapping[str, np.ndarray], colors: Mapping[str, str] | None, *, loc: str) -> None:
     """Ground truth and each model in its colour (whether or not its line is in view)."""
     plt = pyplot()
-    handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=3.0, label="ground truth")]
+    handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.0, dashes=GT_DASHES, label="ground truth")]
     handles += [plt.Line2D([], [], color=(colors or {}).get(label, pred_color(i)), linewidth=2.2, label=label) for i, label in enumerate(preds)]
     ax.legend(handles=handles, loc=loc, fontsize=8, framealpha=0.8)

@@ -41,16 +41,19 @@ def history_bias_figure(
     model's name (e.g. fewer than half of its frames scored).
     """
     from lightemma.evaluation.core import unique_labels
-    from lightemma.evaluation.scenarios import bias_row, curvature_samples, truth_samples
+    from lightemma.evaluation.scenarios import bias_row, curvature_samples, truth_over_runs
 
     plt = pyplot()
     labels = unique_labels(list(runs))
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
     samples = [curvature_samples(run) for run in runs]
     stats = list(rows) if rows is not None else [bias_row(label, k) for label, k in zip(labels, samples)]
-    truth = truth_samples(runs[0]) if runs else {"history": np.zeros(0), "true": np.zeros(0)}
-    truth_fit = bias_row("truth", {"history": truth["history"], "pred": truth["true"], "true": truth["true"], "after_turn": np.zeros(len(truth["history"]), dtype=bool), "short_path": np.array(0)})
-    fig, (scatter, slopes, bars) = plt.subplots(1, 3, figsize=(16, 5.2), gridspec_kw={"width_ratios": [1.35, 1, 1]})
+    # the truth of every frame any run covers (not only the first run's): its line never depends on run order or coverage
+    truth = truth_over_runs(runs)
+    truth_fit = bias_row("truth", {"history": truth["history"], "pred": truth["true"], "true": truth["true"], "after_turn": truth["after_turn"], "short_path": np.array(0)})
+    n = max(1, len(labels))
+    height = max(4.6, 1.9 + 0.3 * n)  # every model gets a readable row in the two right panels
+    fig, (scatter, slopes, bars) = plt.subplots(1, 3, figsize=(16, height), gridspec_kw={"width_ratios": [1.35, 1, 1]}, layout="constrained")
 
     xlim = _limits([k["history"] for k in samples] + [truth["history"]], floor=0.05)
     ylim = _limits([k["pred"] for k in samples] + [truth["true"]], floor=0.05)
@@ -81,47 +84,48 @@ def history_bias_figure(
     scatter.set_title("future against last history curvature (paths ≥ 2 m)", fontsize=10)
     scatter.legend(fontsize=7, loc="upper left", framealpha=0.9).set_zorder(20)
 
-    fitted = [(label, s) for label, s in zip(labels, stats) if s["slope_pred"] is not None]
-    if fitted:
-        y = np.arange(len(fitted))[::-1]
-        if truth_fit["slope_true"] is not None:
-            band = truth_fit["slope_true_ci95"]
-            if band:
-                slopes.axvspan(band[0], band[1], color=GT_COLOR, alpha=0.25, zorder=1)
-            shown = f" [{band[0]:.2f}, {band[1]:.2f}]" if band else ""
-            slopes.axvline(truth_fit["slope_true"], color=GT_COLOR, linewidth=2.2, zorder=2, label=f"truth {truth_fit['slope_true']:.2f}{shown}")
-        slopes.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=2, label="turn goes on unchanged (1)")
-        slopes.axvline(0.0, color="0.75", linewidth=0.8, zorder=1)
-        for yi, (label, s) in zip(y, fitted):
-            low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
-            slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt="o", color=palette[label], capsize=3, zorder=3)
-        slopes.set_yticks(y)
-        slopes.set_yticklabels([label + (notes or {}).get(label, "") for label, _ in fitted], fontsize=7)
-        slopes.set_ylim(-1.8, len(fitted) - 0.4)  # an empty band at the bottom holds the legend
-        slopes.legend(fontsize=7, loc="lower right", framealpha=0.9).set_zorder(20)
-    else:
-        slopes.text(0.5, 0.5, "too few moving frames for a slope", ha="center", va="center", transform=slopes.transAxes, color="0.4")
+    # every model has a row in both panels (a model without a value says why, in its row)
+    y = np.arange(n)[::-1]
+    names = [label + (notes or {}).get(label, "") for label in labels]
+    if truth_fit["slope_true"] is not None:
+        band = truth_fit["slope_true_ci95"]
+        if band:
+            slopes.axvspan(band[0], band[1], color=GT_COLOR, alpha=0.25, zorder=1)
+        shown = f" [{band[0]:.2f}, {band[1]:.2f}]" if band else ""
+        slopes.axvline(truth_fit["slope_true"], color=GT_COLOR, linewidth=2.2, zorder=2, label=f"truth {truth_fit['slope_true']:.2f}{shown}")
+    slopes.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=2, label="turn goes on unchanged (1)")
+    slopes.axvline(0.0, color="0.75", linewidth=0.8, zorder=1)
+    for yi, label, s in zip(y, labels, stats):
+        if s["slope_pred"] is None:
+            slopes.text(0.5, yi, "too few moving frames for a slope", transform=slopes.get_yaxis_transform(), ha="center", va="center", fontsize=7, color="0.45")
+            continue
+        low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
+        slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt="o", color=palette[label], capsize=3, zorder=3)
+    slopes.set_yticks(y)
+    slopes.set_yticklabels(names, fontsize=7)
+    slopes.set_ylim(-0.6, n - 0.4)
     slopes.set_xlabel("Theil–Sen slope, 95 % CI")
     slopes.set_title("how much of the history curvature goes on", fontsize=10)
+    slopes.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.07), ncol=2, framealpha=0.9, borderaxespad=0.0)
 
-    with_turns = [s for s in stats if s["carry_pred"] is not None]
-    if with_turns:
-        y = np.arange(len(with_turns))[::-1]
-        bars.barh(y, [s["carry_pred"] for s in with_turns], color=[palette[s["model"]] for s in with_turns], height=0.6, zorder=2)
-        carried = float(np.mean([s["carry_true"] for s in with_turns]))
+    carried = truth_fit["carry_true"]  # on the frames going straight just after a turn, over every frame shown
+    values = [1.0, 0.0] + ([carried] if carried is not None else [])
+    for yi, label, s in zip(y, labels, stats):
+        if s["carry_pred"] is None:
+            bars.text(0.02, yi, "no frame straight just after a turn", transform=bars.get_yaxis_transform(), ha="left", va="center", fontsize=7, color="0.45")
+            continue
+        bars.barh([yi], [s["carry_pred"]], color=palette[label], height=0.6, zorder=2)
+        values.append(s["carry_pred"])
+    if carried is not None:
         bars.axvline(carried, color="white", linewidth=4.5, zorder=3)
-        bars.axvline(carried, color=GT_COLOR, linewidth=2.4, zorder=4, label=f"truth ({carried:.2f})")
-        bars.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=4, label="turn goes on unchanged (1)")
-        bars.axvline(0.0, color="0.6", linewidth=0.8, zorder=1)
-        bars.set_yticks(y)
-        bars.set_yticklabels([f"{s['model']}{(notes or {}).get(s['model'], '')} (n={s['after_turn_frames']})" for s in with_turns], fontsize=7)
-        bars.set_ylim(-1.8, len(with_turns) - 0.4)  # an empty band at the bottom holds the legend
-        values = [s["carry_pred"] for s in with_turns] + [carried, 1.0]
-        bars.set_xlim(min(0.0, min(values)) - 0.08, max(values) + 0.08)
-        bars.legend(fontsize=7, loc="lower right", framealpha=0.9).set_zorder(20)
-    else:
-        bars.text(0.5, 0.5, "no frame goes straight just after a turn", ha="center", va="center", transform=bars.transAxes, color="0.4")
+        bars.axvline(carried, color=GT_COLOR, linewidth=2.4, zorder=4, label=f"truth ({carried:.2f}, n={truth_fit['after_turn_frames']})")
+    bars.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=4, label="turn goes on unchanged (1)")
+    bars.axvline(0.0, color="0.6", linewidth=0.8, zorder=1)
+    bars.set_yticks(y)
+    bars.set_yticklabels([f"{name} (n={s['after_turn_frames']})" for name, s in zip(names, stats)], fontsize=7)
+    bars.set_ylim(-0.6, n - 0.4)
+    bars.set_xlim(min(0.0, min(values)) - 0.08, max(values) + 0.08)
+    bars.legend(fontsize=7, loc="lower center", bbox_to_anchor=(0.5, 1.07), ncol=2, framealpha=0.9, borderaxespad=0.0)
     bars.set_xlabel("history curvature carried over (share)")
     bars.set_title("straight just after a turn (Case 1)", fontsize=10)
-    fig.tight_layout()
     return fig

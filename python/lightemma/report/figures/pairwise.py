@@ -31,7 +31,8 @@ def pairwise_figure(rows: Sequence[Mapping[str, Any]], labels: Sequence[str], *,
         significant[a, b] = significant[b, a] = bool(row.get("significant"))
     reach = float(np.nanmax(np.abs(diff))) if np.isfinite(diff).any() else 1.0
     size = max(4.5, 0.55 * n + 2.5)
-    fig, ax = plt.subplots(figsize=(size + 1.2, size))
+    # constrained layout keeps the title, the tick labels and the colourbar label inside the figure and apart
+    fig, ax = plt.subplots(figsize=(max(7.0, size + 1.6), size + 0.6), layout="constrained")
     image = ax.imshow(np.where(significant, diff, np.nan), cmap="RdBu_r", vmin=-reach, vmax=reach)
     pale = np.where(np.isfinite(diff) & ~significant, 1.3, np.nan)
     ax.imshow(pale, cmap="Greys", vmin=0.0, vmax=10.0)  # not significant: a pale grey cell
@@ -50,7 +51,6 @@ def pairwise_figure(rows: Sequence[Mapping[str, Any]], labels: Sequence[str], *,
     ax.set_xlabel("column model")
     ax.set_ylabel("row model")
     bar = fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03)
-    bar.set_label("ADE avg, row − column (m); < 0: row better")
-    ax.set_title(title or "Paired ADE avg differences on common frames\ncoloured with * : significant after Holm; grey: not distinguishable", fontsize=10)
-    fig.tight_layout()
+    bar.set_label("ADE avg, row − column (m)\n< 0: the row model is better", fontsize=8)
+    fig.suptitle(title or "Paired ADE avg differences on common frames\ncoloured with *: significant after Holm; grey: not distinguishable", fontsize=10)
     return fig
