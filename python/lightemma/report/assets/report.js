@@ -66,6 +66,7 @@
   LE.data = function (data) {
     D = data;
     setupFilters();
+    LE.readyAt = performance.now(); // ms since navigation started
     LE.ready = true;
     route();
   };
