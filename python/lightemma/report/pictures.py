@@ -48,20 +48,23 @@ class CameraSource:
         for frame in frames:
             self._frames.setdefault(frame.frame_id, frame)
 
-    def cameras(self, runs: Iterable[RunData], frame_ids: Iterable[str], *, load: bool = True) -> dict[str, Camera | None]:
+    def cameras(self, runs: Iterable[RunData], frame_ids: Iterable[str], *, load: bool = True,
+                records: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Camera | None]:
         """frame id → Camera (or None when its dataset could not be read).
 
         Imported runs carry each frame's calibration and image name in their
         records; their images are looked for under ``dataroot``
         (``samples/CAM_FRONT/<image name>``), else at the path the reference stored.
-        With ``load=False`` no image is decoded (each Camera has its ``path``).
+        With ``load=False`` no image is decoded (each Camera has its ``path``); ``records`` (frame id →
+        its ``camera_params``, ``image_name``, ``image_path``) spares reading imported runs again.
         """
         frame_ids = list(frame_ids)
         out: dict[str, Camera | None] = {}
         for run in runs:
             if run.info.imported:
                 wanted = [fid for fid in frame_ids if out.get(fid) is None]
-                for fid, record in read_frame_records(run.info.run_dir, wanted).items():
+                found = {fid: records[fid] for fid in wanted if fid in records} if records is not None else read_frame_records(run.info.run_dir, wanted)
+                for fid, record in found.items():
                     out[fid] = self._from_record(record, load=load)
             else:
                 self._load(run.info.dataset)

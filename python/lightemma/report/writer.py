@@ -274,7 +274,8 @@ def write_report(
     """
     import shutil
 
-    out = Path(out)
+    given = Path(out)
+    out = Path(os.path.abspath(given))  # "." has no name to put a hidden folder beside
     if isinstance(top, bool) or not isinstance(top, int) or top < 0:
         raise UserError(f"top must be a whole number of frames, 0 or more, got {top!r}", cli=f"--top must be 0 or more, got {top!r}")
     if dataroot is not None and not os.path.isdir(dataroot):
@@ -295,7 +296,7 @@ def write_report(
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    return out / "index.md"
+    return given / "index.md"
 
 
 class _Steps:
@@ -443,11 +444,17 @@ def _write(
     index = out / "index.md"
     index.write_text("\n".join(w.lines) + "\n", encoding="utf-8")
 
-    texts = {label: {fid: (r.get("scene_text") or "", r.get("intent_text") or "", r.get("answer") or "") for fid, r in read_frame_records(run.info.run_dir, run.frame_ids).items()}
-             for label, run in zip(labels, runs)}
+    texts: dict[str, dict[str, tuple[str, str, str]]] = {}
+    calibrations: dict[str, dict[str, Any]] = {}  # imported runs: the fields a camera needs, read in the same pass
+    for label, run in zip(labels, runs):
+        own = texts[label] = {}
+        for fid, r in read_frame_records(run.info.run_dir, run.frame_ids).items():
+            own[fid] = (r.get("scene_text") or "", r.get("intent_text") or "", r.get("answer") or "")
+            if run.info.imported and pictures and fid not in calibrations:
+                calibrations[fid] = {k: r.get(k) for k in ("camera_params", "image_name", "image_path")}
     steps.step("stage texts")
     all_ids = list(dict.fromkeys(fid for run in runs for fid in run.frame_ids))
-    html_cameras = source.cameras(runs, all_ids, load=False) if pictures else {}
+    html_cameras = source.cameras(runs, all_ids, load=False, records=calibrations) if pictures else {}
     intro = "".join(f'<p class="note">{html_escape.escape(x)}</p>' for x in [*evaluation.warnings, *dict.fromkeys(source.problems)])
     write_html(out, title="lightemma report", intro_html=intro, tables=html_tables, figures=w.figures, runs=runs, labels=labels,
                colors=colors, texts=texts, cameras=html_cameras, progress=progress)
