@@ -140,6 +140,18 @@ def test_html_report_in_a_browser(browser, html_report, tmp_path):
     narrowed = d.execute_script("return LE.lastList.list")
     assert set(narrowed) <= set(braking)
     assert len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) == min(len(narrowed), 60) <= total
+    # an error band of one model, and a failure kind: the lists are exactly the frames data.js says
+    payload = json.loads((html_report / "html" / "data.js").read_text()[len("LE.data("):-3])
+    d.get((html_report / "index.html").as_uri() + "#frames?model=0&band=0")
+    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'model=0&band=0'"))
+    banded = d.execute_script("return LE.lastList.list")
+    assert banded == [j for j, a in enumerate(payload["ade"][0]) if a is not None and a < 1.0] and banded
+    failed = [j for j in range(90) if any(f[j] == payload["failures"].index("format") for f in payload["fail"])]
+    d.get((html_report / "index.html").as_uri() + "#frames?fail=format")
+    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'fail=format'"))
+    assert d.execute_script("return LE.lastList.list") == failed
+    d.get((html_report / "index.html").as_uri() + "#frames?tag=braking&dis=1")
+    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'tag=braking&dis=1'"))
     # thumbnails are drawn as they scroll into view: the first ones hold a bird's-eye plot
     _wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#grid .card .thumb svg polyline.gt"))
 
