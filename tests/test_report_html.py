@@ -217,3 +217,16 @@ def test_html_frame_view_draws_the_camera_image_with_projected_paths(browser, tm
     assert len(uv) >= 3 and (uv[:, 0] >= -50).all() and (uv[:, 1] > 180 / 2).all()  # on the ground: below the horizon
     d.save_screenshot(str(tmp_path / "camera_view.png"))
     assert _errors(d) == []
+
+
+def test_a_new_column_needs_no_html_change():
+    """Tables are drawn from Table.columns: a column another part adds (e.g. a safety metric) appears, sortable."""
+    from lightemma.report.html import table_html
+    from lightemma.report.tables import Column, Table, fixed
+
+    table = Table("Safety", [Column("model", "Model"), Column("collision_pct", "Collision (%)", fixed(2))],
+                  [{"model": "GPT-4o", "collision_pct": 0.512}, {"model": "CV", "collision_pct": None}], name="safety")
+    page = table_html(table, {"model:GPT-4o": "#frames?model=0&sort=worst"})
+    assert '<section class="table" id="table-safety">' in page and ">Collision (%)</th>" in page
+    assert '<td data-sort="0.512">0.51</td>' in page and "<td>-</td>" in page
+    assert '<a href="#frames?model=0&amp;sort=worst" class="frames-link">GPT-4o</a>' in page

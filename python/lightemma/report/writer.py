@@ -43,6 +43,7 @@ class _Writer:
         self.svg = svg
         self.lines: list[str] = []
         self.figures: list[tuple[str, str]] = []  # (PNG relative to out, caption), for the HTML page
+        self.tables: list[Table] = []  # every table written, in order: the HTML page shows them all
 
     def rel(self, path: Path) -> str:
         return path.relative_to(self.out).as_posix()
@@ -57,6 +58,7 @@ class _Writer:
             base.with_suffix(".tex").write_text(to_latex(table), encoding="utf-8")
             links.append(f"[LaTeX]({self.rel(base.with_suffix('.tex'))})")
         self.lines += [to_markdown(table), " · ".join(links), ""]
+        self.tables.append(table)
 
     def figure(self, fig: Any, stem: str, caption: str) -> Path:
         from lightemma.report.figures import save_figure
@@ -372,7 +374,6 @@ def _write(
     colors = model_colors(evaluation.models)
     flags = coverage_flags(evaluation)
     w = _Writer(out, svg=svg)
-    html_tables: list[Table] = [_runs_table(evaluation, flags)]
     w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
                 "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format |",
                 "|---|---|---|---:|---|---|---|---|"]
@@ -390,7 +391,6 @@ def _write(
         if table.name in ("pairwise_ade", "generations"):
             continue
         w.table(table)
-        html_tables.append(table)
     (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
     w.lines += [f"All numbers as JSON: [tables/evaluation.json](tables/evaluation.json)", ""]
 
@@ -412,7 +412,6 @@ def _write(
         for table in tables:
             if table.name in ("pairwise_ade", "generations"):
                 w.table(table)
-                html_tables.append(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
 
@@ -420,12 +419,10 @@ def _write(
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     steps.step("tables and charts")
-    html_tables.append(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags))
-    w.table(html_tables[-1], latex=False)
+    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
-    html_tables.append(_bias_table(bias, flags))
-    w.table(html_tables[-1], latex=False)
+    w.table(_bias_table(bias, flags), latex=False)
     w.figure(history_bias_figure(runs, colors=colors, rows=bias, notes=flags), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
 
     picks = [("frame", fid, "requested frame") for fid in frames]
@@ -456,7 +453,7 @@ def _write(
     all_ids = list(dict.fromkeys(fid for run in runs for fid in run.frame_ids))
     html_cameras = source.cameras(runs, all_ids, load=False, records=calibrations) if pictures else {}
     intro = "".join(f'<p class="note">{html_escape.escape(x)}</p>' for x in [*evaluation.warnings, *dict.fromkeys(source.problems)])
-    write_html(out, title="lightemma report", intro_html=intro, tables=html_tables, figures=w.figures, runs=runs, labels=labels,
+    write_html(out, title="lightemma report", intro_html=intro, tables=[_runs_table(evaluation, flags), *w.tables], figures=w.figures, runs=runs, labels=labels,
                colors=colors, texts=texts, cameras=html_cameras, progress=progress)
     steps.step("index.html")
     steps.close()
