@@ -129,14 +129,14 @@ def test_html_report_in_a_browser(browser, html_report, tmp_path):
     _wait(d, lambda d: d.find_element(By.ID, "frames-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#grid .card"))
     total = len(d.find_elements(By.CSS_SELECTOR, "#grid .card"))
     Select(d.find_element(By.ID, "f-tag")).select_by_value("braking")
-    _wait(d, lambda d: "tag=braking" in d.current_url)
+    _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "tag=braking")
     braking = d.execute_script("return LE.lastList.list")
     shown_ids = d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")
     assert 0 < len(braking) < 90 and shown_ids == _tagged(runs, "braking")
     count = d.find_element(By.ID, "frame-count").text
     assert count.startswith(f"{len(braking)} of 90 frames")
     Select(d.find_element(By.ID, "f-dis")).select_by_value("1")
-    _wait(d, lambda d: "dis=1" in d.current_url)
+    _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "tag=braking&dis=1")
     narrowed = d.execute_script("return LE.lastList.list")
     assert set(narrowed) <= set(braking)
     assert len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) == min(len(narrowed), 60) <= total
@@ -228,5 +228,5 @@ def test_a_new_column_needs_no_html_change():
                   [{"model": "GPT-4o", "collision_pct": 0.512}, {"model": "CV", "collision_pct": None}], name="safety")
     page = table_html(table, {"model:GPT-4o": "#frames?model=0&sort=worst"})
     assert '<section class="table" id="table-safety">' in page and ">Collision (%)</th>" in page
-    assert '<td data-sort="0.512">0.51</td>' in page and "<td>-</td>" in page
+    assert '<td data-sort="0.512" class="num">0.51</td>' in page and '<td class="num">-</td>' in page
     assert '<a href="#frames?model=0&amp;sort=worst" class="frames-link">GPT-4o</a>' in page

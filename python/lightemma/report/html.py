@@ -163,14 +163,16 @@ def _sort_key(value: Any) -> Any:
 
 def table_html(table: Table, links: Mapping[str, str]) -> str:
     """One :class:`Table` as a sortable HTML table; ``links`` maps a cell's model label or tag to a frame-browser query."""
-    head = "".join(f'<th scope="col" data-col="{k}">{html.escape(h)}</th>' for k, h in enumerate(table.headers()))
+    numeric = [any(_sort_key(row.get(col.key)) is not None for row in table.rows) for col in table.columns]  # right-aligned
+    num = ' class="num"'
+    head = "".join(f'<th scope="col" data-col="{k}"{num if numeric[k] else ""}>{html.escape(h)}</th>' for k, h in enumerate(table.headers()))
     body = []
     for row, cells in zip(table.rows, _cells(table)):
         tds = []
-        for col, cell in zip(table.columns, cells):
+        for k, (col, cell) in enumerate(zip(table.columns, cells)):
             value = row.get(col.key)
             sort = _sort_key(value)
-            attr = "" if sort is None else f' data-sort="{sort!r}"'
+            attr = ("" if sort is None else f' data-sort="{sort!r}"') + (num if numeric[k] else "")
             text = html.escape(cell)
             target = None
             if row.get("source") not in ("paper", "diff") and (col.key in MODEL_KEYS or col.key == "tag"):
