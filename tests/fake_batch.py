@@ -278,9 +278,12 @@ def _anthropic_results(server: FakeBatchServer, batch: FakeBatch) -> bytes:
 def _gemini_operation(server: FakeBatchServer, batch: FakeBatch, *, peek: bool = False) -> dict[str, Any]:
     ended = batch.polls >= server.steps and not peek
     state = {"completed": "BATCH_STATE_SUCCEEDED", "expired": "BATCH_STATE_EXPIRED", "failed": "BATCH_STATE_FAILED"}
+    end_state = batch.end_state
+    if end_state == "completed" and any(cid in server.expire for cid, _ in batch.requests):
+        end_state = "expired"  # Gemini expires a batch as a whole: the requests it did not reach get no response
     meta = {"@type": "type.googleapis.com/google.ai.generativelanguage.v1main.GenerateContentBatch", "name": batch.id,
             "displayName": batch.metadata.get("displayName"), "model": f"models/{batch.metadata.get('model')}",
-            "state": state[batch.end_state] if ended else ("BATCH_STATE_PENDING" if batch.polls == 0 else "BATCH_STATE_RUNNING")}
+            "state": state[end_state] if ended else ("BATCH_STATE_PENDING" if batch.polls == 0 else "BATCH_STATE_RUNNING")}
     out: dict[str, Any] = {"name": batch.id, "metadata": meta, "done": ended}
     if ended and batch.end_state == "failed":
         out["error"] = {"code": 400, "message": "invalid model"}

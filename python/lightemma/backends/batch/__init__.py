@@ -42,6 +42,8 @@ from lightemma.errors import RunFatalError, UserError
 
 __all__ = ["BatchBackend", "BatchJournal", "adapter_for", "BATCH_PROVIDERS"]
 
+#: seconds without a new request after which the queued requests go out as one wave
+IDLE_SECONDS = 0.5
 #: providers with a batch interface (``openai`` also covers OpenAI-compatible servers at --api-base)
 BATCH_PROVIDERS = ("openai", "anthropic", "gemini")
 
@@ -87,7 +89,7 @@ class BatchBackend:
     wants_all_frames = True  # the runner puts every frame in flight: a wave holds one stage of every pending frame
 
     def __init__(self, model: str, *, api_base: str | None = None, timeout: float = 120.0, poll_seconds: float = 30.0,
-                 poll_cap: float = 600.0, idle_seconds: float = 0.5, max_resubmits: int = 2,
+                 poll_cap: float = 600.0, idle_seconds: float | None = None, max_resubmits: int = 2,
                  adapter: BatchAdapter | None = None, retry: Any = None) -> None:
         from lightemma.backends.api import APIBackend, IMAGE_LIMITS, DEFAULT_IMAGE_LIMIT, _ImageCache
         from lightemma.backends.retry import RetryPolicy
@@ -101,7 +103,7 @@ class BatchBackend:
         if poll_seconds <= 0 or poll_cap <= 0:
             raise UserError(f"--batch-poll must be greater than 0, got {poll_seconds:g}")
         self.poll_seconds, self.poll_cap = float(poll_seconds), max(float(poll_cap), float(poll_seconds))
-        self.idle_seconds = idle_seconds
+        self.idle_seconds = IDLE_SECONDS if idle_seconds is None else idle_seconds
         self.max_resubmits = max_resubmits
         self.retry = retry or RetryPolicy(max_retries=8, base=1.0, cap=60.0)
         limit_b64, max_side = IMAGE_LIMITS.get(self.provider or "", DEFAULT_IMAGE_LIMIT)

@@ -1,0 +1,221 @@
+"""``lightemma run --batch``: the chain through each provider's batch endpoints, emulated on 127.0.0.1 (tests/fake_batch.py).
+
+Waves, custom ids, results in shuffled order, partial failures, expiry, a batch rejected as a whole, the
+journal, and a run killed mid-poll then resumed without a new batch for what was already submitted.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+import lightemma.backends.batch as batch_module
+from fake_batch import FakeBatchServer
+from lightemma.backends.batch.journal import BatchJournal
+from lightemma.errors import RunStopped, UserError
+from lightemma.pipeline.runner import resume, run
+from lightemma.runs.store import read_run
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(autouse=True)
+def _fast(monkeypatch):
+    monkeypatch.setattr(batch_module, "IDLE_SECONDS", 0.05)
+    monkeypatch.setenv("OPENAI_API_KEY", "sk-test-openai")
+    monkeypatch.setenv("ANTHROPIC_API_KEY", "sk-ant-test")
+    monkeypatch.setenv("GEMINI_API_KEY", "gm-test-key")
+
+
+def _run(synth_root, tmp_path, model, **kw):
+    kw.setdefault("sample", 4)
+    return run(model, dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path / "runs", batch=True,
+               batch_poll=0.01, progress=False, **kw)
+
+
+def _records(run_dir):
+    return read_run(run_dir).records
+
+
+def _journal_lines(run_dir):
+    return [json.loads(line) for line in (Path(run_dir) / "batches.jsonl").read_text().splitlines()]
+
+
+def _stage_of(server, custom_id):
+    """The stage a request of the fake server asked for, from its custom id."""
+    from fake_openai import Received
+
+    for batch in server.batches.values():
+        for cid, body in batch.requests:
+            if cid == custom_id:
+                path = {"openai": "/v1/chat/completions", "anthropic": "/v1/messages",
+                        "gemini": "/v1beta/models/m:generateContent"}[batch.protocol]
+                return Received(path=path, headers={}, body=body, index=0).stage
+    raise KeyError(custom_id)
+
+
+def test_openai_batch_runs_three_waves_at_batch_price_with_shuffled_results(tmp_path, synth_root):
+    with FakeBatchServer(steps=3, shuffle=True, seed=7) as server:
+        result = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url)
+    records = _records(result.run_dir)
+    assert len(records) == 4 and all(r["status"] == "ok" for r in records.values())
+    # one wave per stage: every frame's stage 1 in the first batch, stage 2 in the second, stage 3 in the third
+    assert server.created == 3
+    stages = [{_stage_of(server, cid) for cid, _ in b.requests} for b in server.batches.values()]
+    assert stages == [{"scene"}, {"intent"}, {"actions"}]
+    # shuffled results are matched by custom id: each frame got its own stage's text
+    for rec in records.values():
+        texts = [c["text"] for c in rec["attempts"][0]["calls"]]
+        assert texts[0].startswith("A two-lane") and texts[1].startswith("The ego vehicle") and texts[2].startswith("[(5.0")
+    # OpenAI's batch price is half its list price: 1000 in, 50 out per call at $1.25 / $5 per M tokens
+    call = next(iter(records.values()))["attempts"][0]["calls"][0]
+    assert call["cost_cents"] == pytest.approx((1000 * 1.25 + 50 * 5.0) / 1e6 * 100)
+    manifest = json.loads((result.run_dir / "manifest.json").read_text())
+    assert manifest["config"]["batch"] is True and manifest["backend"]["mode"] == "batch"
+    report = manifest["sessions"][-1]["batch"]
+    assert report["batches_created"] == 3 and report["waves"] == 3 and len(report["turnaround_s"]) == 3
+    events = [e["event"] for e in _journal_lines(result.run_dir)]
+    assert events == ["submitting", "submitted", "completed"] * 3
+    # the gpt-4o batch body: max_completion_tokens, the model's own name
+    body = next(iter(server.batches.values())).requests[0][1]
+    assert body["model"] == "gpt-4o" and "max_completion_tokens" in body and "max_tokens" not in body
+
+
+def test_a_failed_request_is_reasked_in_a_later_wave_and_an_expired_one_resubmitted(tmp_path, synth_root):
+    with FakeBatchServer(steps=1) as probe:  # learn the custom ids of the first wave
+        first = _run(synth_root, tmp_path / "probe", "openai/gpt-4o", api_base=probe.url)
+    first_wave = [cid for cid, _ in next(iter(probe.batches.values())).requests]
+    failing, expiring = first_wave[0], first_wave[1]
+    with FakeBatchServer(steps=1, fail={failing: "image could not be decoded"}, expire={expiring}) as server:
+        result = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url)
+    records = _records(result.run_dir)
+    assert all(r["status"] == "ok" for r in records.values())
+    failed = [r for r in records.values() if r["n_attempts"] == 2]
+    assert len(failed) == 1  # the errored request was an API error of attempt 1; attempt 2 succeeded
+    assert failed[0]["attempts"][0]["calls"][0]["error"] == "BatchRequestError"
+    assert "image could not be decoded" in failed[0]["attempts"][0]["calls"][0]["error_message"]
+    # the expired request was sent again under a new custom id, without costing an attempt
+    resent = [cid for b in server.batches.values() for cid, _ in b.requests if cid == expiring + "-r1"]
+    assert resent and sum(1 for r in records.values() if r["n_attempts"] == 1) == 3
+    manifest = json.loads((result.run_dir / "manifest.json").read_text())
+    assert manifest["sessions"][-1]["batch"]["requests_resubmitted"] == 1
+    assert first.run_dir != result.run_dir
+
+
+def test_a_batch_rejected_as_a_whole_stops_the_run_with_its_reason(tmp_path, synth_root):
+    with FakeBatchServer(steps=1, batch_state="failed") as server:
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url)
+    assert stopped.value.cause == "batch-failed"
+    assert "line 1: bad model" in str(stopped.value) and "--resume" in str(stopped.value)
+    assert server.created == 1  # not resubmitted wave after wave
+
+
+@pytest.mark.parametrize("model, env", [("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE"),
+                                        ("gemini/gemini-2.5-flash", "GEMINI_API_BASE")])
+def test_anthropic_and_gemini_batches_with_partial_failure_and_expiry(tmp_path, synth_root, monkeypatch, model, env):
+    with FakeBatchServer(steps=1) as probe:
+        monkeypatch.setenv(env, probe.root)
+        _run(synth_root, tmp_path / "probe", model)
+    first_wave = [cid for cid, _ in next(iter(probe.batches.values())).requests]
+    with FakeBatchServer(steps=2, fail={first_wave[0]: "overloaded request"}, expire={first_wave[1]}) as server:
+        monkeypatch.setenv(env, server.root)
+        result = _run(synth_root, tmp_path, model)
+    records = _records(result.run_dir)
+    assert len(records) == 4 and all(r["status"] == "ok" for r in records.values())
+    protocols = {b.protocol for b in server.batches.values()}
+    assert protocols == {model.split("/")[0]}
+    errored = [r for r in records.values() if r["n_attempts"] == 2]
+    assert len(errored) == 1 and "overloaded request" in errored[0]["attempts"][0]["calls"][0]["error_message"]
+    assert any(cid == first_wave[1] + "-r1" for b in server.batches.values() for cid, _ in b.requests)
+    # the image went in the provider's own shape
+    body = next(iter(server.batches.values())).requests[0][1]
+    parts = body["messages"][0]["content"] if "messages" in body else body["contents"][0]["parts"]
+    assert any(p.get("type") == "image" or "inline_data" in p for p in parts)
+    rec = next(iter(records.values()))
+    call = rec["attempts"][-1]["calls"][-1]
+    price = {"anthropic": (1.5, 7.5), "gemini": (0.15, 1.25)}[model.split("/")[0]]
+    assert call["cost_cents"] == pytest.approx((1000 * price[0] + 50 * price[1]) / 1e6 * 100)
+
+
+def test_batch_is_refused_for_local_models_and_structured_answers_off_openai(tmp_path, synth_root):
+    with pytest.raises(UserError, match="--batch is for models behind a provider's API"):
+        _run(synth_root, tmp_path, "baseline:cv")
+    with pytest.raises(UserError, match="only\\s+to OpenAI"):
+        _run(synth_root, tmp_path, "anthropic/claude-sonnet-4-6", answer_format="structured")
+
+
+def test_the_journal_ignores_a_torn_last_line_and_refuses_damage(tmp_path):
+    journal = BatchJournal.open(tmp_path)
+    journal.submitting("t1", ["a", "b"])
+    journal.submitted("t1", "batch_1", ["a", "b"])
+    with open(journal.path, "ab") as fh:
+        fh.write(b'{"event":"submitting","tok')  # killed mid-write
+    again = BatchJournal.open(tmp_path)
+    assert again.by_custom_id == {"a": "batch_1", "b": "batch_1"} and not again.unconfirmed
+    journal.path.write_text('not json\n{"event":"submitting","token":"t","custom_ids":[]}\n')
+    with pytest.raises(UserError, match="damaged"):
+        BatchJournal.open(tmp_path)
+
+
+def test_an_interrupted_submission_is_found_by_its_token_not_resubmitted(tmp_path, synth_root, monkeypatch):
+    """Killed between the provider creating a batch and the journal naming it: the resume finds it by its token."""
+    calls = {"n": 0}
+    original = BatchJournal.submitted
+
+    def killed_once(self, token, batch_id, custom_ids):
+        calls["n"] += 1
+        if calls["n"] == 1:
+            raise KeyboardInterrupt  # the process dies right after the provider created the batch
+        return original(self, token, batch_id, custom_ids)
+
+    monkeypatch.setattr(BatchJournal, "submitted", killed_once)
+    with FakeBatchServer(steps=1) as server:
+        with pytest.raises(KeyboardInterrupt):
+            _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url)
+        run_dir = next((tmp_path / "runs").glob("*/*"))
+        assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting"] and server.created == 1
+        resume(run_dir, progress=False)
+    assert server.created == 3  # the first batch was found by its token; only stages 2 and 3 were submitted
+    assert all(r["status"] == "ok" for r in _records(run_dir).values())
+
+
+def _cli(*args: str) -> list[str]:
+    return [sys.executable, "-m", "lightemma", "run", *args]
+
+
+def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, synth_root):
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "OPENAI_API_KEY": "sk-test-openai",
+           "LITELLM_LOCAL_MODEL_COST_MAP": "True"}
+    with FakeBatchServer(steps=10**6, shuffle=True, seed=3) as server:  # the first batch never ends while the run lives
+        proc = subprocess.Popen(_cli("--model", "openai/gpt-4o", "--api-base", server.url, "--dataroot", str(synth_root),
+                                     "--version", "v1.0-mini", "--split", "all", "--sample", "4", "--batch",
+                                     "--batch-poll", "0.2", "--output", str(tmp_path / "runs"), "--no-progress"),
+                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        deadline = time.monotonic() + 90
+        while time.monotonic() < deadline and server.polls < 2:
+            time.sleep(0.1)
+        assert server.polls >= 2, proc.communicate(timeout=5)
+        proc.send_signal(signal.SIGKILL)  # mid-poll
+        proc.wait(timeout=10)
+        run_dir = next((tmp_path / "runs").glob("*/*"))
+        assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting", "submitted"]
+        assert server.created == 1 and _records(run_dir) == {}
+        server.steps = server.polls + 1  # the provider finishes the batch now
+        done = subprocess.run(_cli("--resume", str(run_dir), "--no-progress"), env=env, capture_output=True, text=True,
+                              timeout=120)
+    assert done.returncode == 0, done.stderr
+    first = next(iter(server.batches.values()))
+    assert server.created == 3  # the first batch polled again, never resubmitted; stages 2 and 3 new
+    assert [b.id for b in server.batches.values()][0] == first.id
+    records = _records(run_dir)
+    assert len(records) == 4 and all(r["status"] == "ok" for r in records.values())
+    manifest = json.loads((run_dir / "manifest.json").read_text())
+    assert manifest["sessions"][-1]["batch"]["batches_resumed"] == 1
