@@ -209,9 +209,7 @@ def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, syn
         assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting", "submitted"]
         assert server.created == 1 and _records(run_dir) == {}
         server.steps = server.polls + 1  # the provider finishes the batch now
-        done = subprocess.run(_cli("--resume", str(run_dir), "--no-progress"), env=env, capture_output=True, text=True,
-                              timeout=120)
-    assert done.returncode == 0, done.stderr
+        resume(run_dir, progress=False)  # in this process: the same code as `lightemma run --resume`, one start-up less
     first = next(iter(server.batches.values()))
     assert server.created == 3  # the first batch polled again, never resubmitted; stages 2 and 3 new
     assert [b.id for b in server.batches.values()][0] == first.id
@@ -219,3 +217,24 @@ def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, syn
     assert len(records) == 4 and all(r["status"] == "ok" for r in records.values())
     manifest = json.loads((run_dir / "manifest.json").read_text())
     assert manifest["sessions"][-1]["batch"]["batches_resumed"] == 1
+
+
+def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
+    from lightemma.evaluation import efficiency_table, evaluate_runs
+    from lightemma.tables import to_markdown
+
+    with FakeBatchServer(steps=1) as server:
+        batch = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, name="half-price")
+    assert "time/frame    n/a (batch mode" in batch.report()
+    normal = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path / "runs",
+                 progress=False, sample=4, name="reference ego")
+    table = to_markdown(efficiency_table(evaluate_runs([batch.run_dir, normal.run_dir])))
+    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[1:-1]] for line in table.splitlines()
+            if line.startswith("| ") and "Model" not in line}
+    header = [c.strip() for c in next(line for line in table.splitlines() if "Model" in line).split("|")[1:-1]]
+    assert set(rows) == {"openai/gpt-4o [half-price]", "Baseline (constant velocity) [reference ego]"}
+    batch_row = dict(zip(header, rows["openai/gpt-4o [half-price]"]))
+    assert batch_row["Time/frame (s)"] == "n/a" and batch_row["Batch turnaround (s)"] not in ("-", "n/a")
+    other = dict(zip(header, rows["Baseline (constant velocity) [reference ego]"]))
+    assert other["Time/frame (s)"] != "n/a" and other["Batch turnaround (s)"] == "-"
+    assert "Batch runs" in table

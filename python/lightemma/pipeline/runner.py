@@ -363,6 +363,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     batches = getattr(backend, "batch_report", None)
     if batches:
         sessions[-1]["batch"] = batches
+        summary.update(batch=True, batch_turnaround_s=batches.get("turnaround_s_mean"))
     images = getattr(backend, "image_report", None)
     if images:
         sessions[-1]["images_reencoded"] = images
