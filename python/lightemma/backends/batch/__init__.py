@@ -330,6 +330,7 @@ class BatchBackend:
         items = journal.saved_results(bid)
         batch = journal.batches[bid]
         state = batch.state
+        ended_now = items is None  # polled to its end in this session (its turnaround is this session's to report)
         if items is None:
             delay = self.poll_seconds
             while True:
@@ -347,7 +348,7 @@ class BatchBackend:
             journal.save_results(bid, items, status.provider_state, turnaround)
             state = status.provider_state
         turnaround = journal.batches[bid].turnaround_s
-        if turnaround is not None and not resumed:
+        if turnaround is not None and ended_now:
             self.report["turnaround_s"].append(float(turnaround))
         never_ran = str(state).lower() in ("expired", "cancelled", "canceled", "batch_state_expired", "batch_state_cancelled")
         by_id = {str(i.get("custom_id")): i for i in items}
