@@ -16,6 +16,8 @@ from pathlib import Path
 
 import pytest
 
+import lightemma
+
 import lightemma.backends.batch as batch_module
 from fake_batch import FakeBatchServer
 from lightemma.backends.batch.journal import BatchJournal
@@ -238,3 +240,24 @@ def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
     other = dict(zip(header, rows["Baseline (constant velocity) [reference ego]"]))
     assert other["Time/frame (s)"] != "n/a" and other["Batch turnaround (s)"] == "-"
     assert "Batch runs" in table
+
+
+def test_max_cost_in_batch_mode_admits_whole_frames_and_a_resume_submits_only_the_rest(tmp_path, synth_root):
+    from lightemma.pipeline.runner import estimate_run
+    from lightemma.runs.store import read_frame_ids
+
+    with FakeBatchServer(steps=1) as server:
+        probe = _run(synth_root, tmp_path / "probe", "openai/gpt-4o", api_base=server.url)
+    frames = lightemma.load_frames(synth_root, "v1.0-mini", split="all").select(read_frame_ids(probe.run_dir))
+    per_frame = estimate_run("openai/gpt-4o", frames=frames).batch_cost_cents / 4  # the estimate's batch cost of one frame
+    with FakeBatchServer(steps=1) as server:
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, max_cost_cents=2.5 * per_frame)
+        assert stopped.value.cause == "budget"
+        run_dir = stopped.value.run_dir
+        records = _records(run_dir)
+        assert len(records) == 2 and all(r["status"] == "ok" for r in records.values())  # two whole frames, all 3 stages
+        assert [len(b.requests) for b in server.batches.values()] == [2, 2, 2]
+        resume(run_dir, progress=False, max_cost_cents=100 * per_frame)
+    assert len(_records(run_dir)) == 4
+    assert [len(b.requests) for b in server.batches.values()] == [2, 2, 2, 2, 2, 2]  # only the two frames not yet run

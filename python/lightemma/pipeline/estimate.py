@@ -152,27 +152,46 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
 
 
 class Budget:
-    """``--max-cost``: calls start only while what was spent, what calls in flight may spend and the next call's
-    expected cost stay within ``limit_cents``. ``spent_cents`` starts at what the run's records already cost."""
+    """``--max-cost``: a frame starts only while what was spent, what the frames in flight are expected to spend
+    and its own whole chain's expected cost (three calls) stay within ``limit_cents``; a call beyond the chain
+    it reserved (a re-ask) needs room of its own. ``spent_cents`` starts at what the run's records already cost.
+    """
+
+    CHAIN_CALLS = 3
 
     def __init__(self, limit_cents: float, per_call_cents: float, spent_cents: float = 0.0) -> None:
         self.limit_cents = float(limit_cents)
         self.per_call_cents = float(per_call_cents)
         self.spent_cents = float(spent_cents)
         self.reserved_cents = 0.0
+        self._held: dict[str, int] = {}  # frame id -> calls of its chain reserved and not yet made
 
-    def reserve(self, calls: int) -> float | None:
-        """Reserve the expected cost of ``calls`` calls; None (nothing reserved) when that would pass the limit."""
-        need = self.per_call_cents * calls
-        if self.spent_cents + self.reserved_cents + need > self.limit_cents:
+    def _room(self, calls: int) -> bool:
+        return self.spent_cents + self.reserved_cents + self.per_call_cents * calls <= self.limit_cents
+
+    def reserve(self, frame_id: str, first_call: bool) -> float | None:
+        """Reserve one call of ``frame_id`` (its first call reserves the whole chain); the cents now held for
+        this call, or None (nothing reserved) when it does not fit."""
+        held = self._held.get(frame_id, 0)
+        if held > 0:
+            self._held[frame_id] = held - 1
+            return self.per_call_cents
+        calls = self.CHAIN_CALLS if first_call and frame_id not in self._held else 1
+        if not self._room(calls):
             return None
-        self.reserved_cents += need
-        return need
+        self.reserved_cents += self.per_call_cents * calls
+        self._held[frame_id] = calls - 1
+        return self.per_call_cents
 
     def settle(self, reserved: float, spent: float) -> None:
+        """A call ended: its reservation is released, what it cost is spent."""
         self.reserved_cents -= reserved
         self.spent_cents += spent
 
+    def release(self, frame_id: str) -> None:
+        """A frame ended: the calls of its chain it did not make are released."""
+        self.reserved_cents -= self.per_call_cents * self._held.pop(frame_id, 0)
+
     def message(self) -> str:
-        return (f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent, and the next call (about "
-                f"{self.per_call_cents:.3f} ¢) would pass the limit")
+        return (f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent and {self.reserved_cents:.2f} ¢ in flight; "
+                f"the next frame (about {self.CHAIN_CALLS * self.per_call_cents:.3f} ¢) would pass the limit")

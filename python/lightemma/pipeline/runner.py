@@ -201,14 +201,16 @@ class _Stopped(Exception):
 class _Guard:
     """The backend as the chain sees it during a session: once the run stops, no new call starts.
 
-    With a ``budget`` (``--max-cost``), a call starts only while it fits (:class:`~lightemma.pipeline.estimate.Budget`);
-    the first that does not stops the run (cause ``budget``), resumable.
+    With a ``budget`` (``--max-cost``), a frame starts only while its chain fits
+    (:class:`~lightemma.pipeline.estimate.Budget`); the first that does not stops the run (cause ``budget``,
+    resumable): no new frame starts, the frames in flight finish.
     """
 
     def __init__(self, backend: Backend, budget: Any = None) -> None:
         self.backend = backend
         self.name = getattr(backend, "name", "backend")
         self.stopped = False
+        self.admitting = True  # False once the budget is spent: frames in flight go on, no new frame starts
         self.budget = budget
 
     @property
@@ -220,9 +222,13 @@ class _Guard:
             raise _Stopped
         if self.budget is None:
             return await self.backend.generate(requests)
-        reserved = self.budget.reserve(len(requests))
-        if reserved is None:
-            raise RunFatalError(self.budget.message(), cause="budget")
+        reserved = 0.0
+        for req in requests:
+            held = self.budget.reserve(req.frame_id, first_call=req.stage == "scene" and req.attempt == 1)
+            if held is None:
+                self.budget.settle(reserved, 0.0)
+                raise RunFatalError(self.budget.message(), cause="budget")
+            reserved += held
         spent = 0.0
         try:
             results = await self.backend.generate(requests)
@@ -230,6 +236,10 @@ class _Guard:
             return results
         finally:
             self.budget.settle(reserved, spent)
+
+    def frame_done(self, frame_id: str) -> None:
+        if self.budget is not None:
+            self.budget.release(frame_id)
 
     async def aclose(self) -> None:
         await self.backend.aclose()
@@ -254,11 +264,14 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
     def halt(cause: RunFatalError) -> None:
         if outcome.stop is None:
             outcome.stop = cause
-        guard.stopped = True
+        if cause.cause == "budget":
+            guard.admitting = False  # the spending limit: the frames in flight finish, no new one starts
+        else:
+            guard.stopped = True
 
     async def worker() -> None:
         for frame in iterator:  # shared: each frame goes to exactly one worker
-            if guard.stopped:
+            if guard.stopped or not guard.admitting:
                 return
             try:
                 record = await run_frame(frame, guard, prompts, policy, earlier.get(frame.frame_id))
@@ -267,6 +280,8 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             except RunFatalError as exc:
                 halt(exc)
                 return
+            finally:
+                guard.frame_done(frame.frame_id)
             try:
                 writer.append(record)
             except OSError as exc:
