@@ -261,3 +261,18 @@ def test_max_cost_in_batch_mode_admits_whole_frames_and_a_resume_submits_only_th
         resume(run_dir, progress=False, max_cost_cents=100 * per_frame)
     assert len(_records(run_dir)) == 4
     assert [len(b.requests) for b in server.batches.values()] == [2, 2, 2, 2, 2, 2]  # only the two frames not yet run
+
+
+def test_a_wave_is_split_within_the_providers_limits(tmp_path, synth_root, monkeypatch):
+    from lightemma.backends.batch.openai import OpenAIBatches
+
+    monkeypatch.setattr(OpenAIBatches, "max_requests", 3)
+    with FakeBatchServer(steps=1) as server:
+        result = _run(synth_root, tmp_path / "n", "openai/gpt-4o", api_base=server.url)
+    assert [len(b.requests) for b in server.batches.values()] == [3, 1, 3, 1, 3, 1]
+    assert all(r["status"] == "ok" for r in _records(result.run_dir).values())
+    monkeypatch.setattr(OpenAIBatches, "max_requests", 50_000)
+    monkeypatch.setattr(OpenAIBatches, "max_bytes", 1)  # every entry is larger: one request per batch
+    with FakeBatchServer(steps=1) as server:
+        _run(synth_root, tmp_path / "b", "openai/gpt-4o", api_base=server.url, sample=2)
+    assert [len(b.requests) for b in server.batches.values()] == [1] * 6

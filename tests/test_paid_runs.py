@@ -171,3 +171,16 @@ def test_a_run_name_is_recorded_and_checked(synth_root, tmp_path):
     with pytest.raises(UserError, match="--name"):
         run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, name="a\nb")
     assert lookup("gpt-4o") is not None
+
+
+def test_lightemma_models_shows_batch_prices(capsys):
+    from lightemma.cli import main
+
+    assert main(["models", "--format", "json"]) == 0
+    rows = {r["key"]: r for r in json.loads(capsys.readouterr().out)}
+    assert rows["gpt-4o"]["batch_input_usd_per_mtok"] == pytest.approx(1.25)
+    assert rows["claude-3.7-sonnet"]["batch_output_usd_per_mtok"] == pytest.approx(7.5)
+    assert "batch-processing" in rows["claude-3.7-sonnet"]["batch_price_source"]
+    assert rows["qwen-2.5-vl-7b"]["batch_price_source"] is None
+    assert main(["models"]) == 0
+    assert "| --batch $ in / out |" in capsys.readouterr().out
