@@ -15,7 +15,16 @@ import json
 import os
 from typing import Any
 
-from lightemma.backends.batch.base import ENDED, PENDING, BatchHTTPError, BatchStatus, item_result, split_data_url
+from lightemma.backends.batch.base import (
+    ENDED,
+    PENDING,
+    BatchHTTPError,
+    BatchStatus,
+    count,
+    http_call,
+    item_result,
+    split_data_url,
+)
 
 VERSION = "2023-06-01"
 
@@ -60,18 +69,7 @@ class AnthropicBatches:
         return {"custom_id": custom_id, "params": params}
 
     async def _request(self, method: str, url: str, **kw: Any) -> Any:
-        import httpx
-
-        try:
-            response = await self._client.request(method, url, **kw)
-        except httpx.HTTPError as exc:
-            raise BatchHTTPError(0, f"{type(exc).__name__}: {exc}") from None
-        if response.status_code >= 400:
-            try:
-                message = response.json().get("error", {}).get("message") or response.text[:300]
-            except ValueError:
-                message = response.text[:300]
-            raise BatchHTTPError(response.status_code, str(message))
+        response = await http_call(self._client, method, url, **kw)
         return response
 
     async def submit(self, entries: list[dict[str, Any]], token: str) -> str:
@@ -87,7 +85,7 @@ class AnthropicBatches:
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         url = status.handle.get("results_url") or f"{self.base}/v1/messages/batches/{batch_id}/results"
         if not str(url).startswith(self.base + "/"):  # the key goes only to the base the user chose
-            raise BatchHTTPError(0, f"results_url {url!r} is not under {self.base}; not sending the key there")
+            raise BatchHTTPError(0, f"results_url {url!r} is not under {self.base}; not sending the key there", answer=True)
         text = (await self._request("GET", url)).text
         out = []
         for line in text.splitlines():
@@ -116,12 +114,8 @@ def _message_result(custom_id: str, message: dict[str, Any]) -> dict[str, Any]:
     """An Anthropic message as an item result: input tokens include cache reads and writes (as litellm counts them)."""
     usage = message.get("usage") or {}
 
-    def count(name: str) -> int | None:
-        value = usage.get(name)
-        return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else None
-
-    base, out_tokens = count("input_tokens"), count("output_tokens")
-    read, written = count("cache_read_input_tokens") or 0, count("cache_creation_input_tokens") or 0
+    base, out_tokens = count(usage, "input_tokens"), count(usage, "output_tokens")
+    read, written = count(usage, "cache_read_input_tokens") or 0, count(usage, "cache_creation_input_tokens") or 0
     total = None if base is None else base + read + written
     text = "".join(b.get("text", "") for b in message.get("content") or [] if b.get("type") == "text")
     kw = dict(finish_reason=message.get("stop_reason"), input_tokens=total if total else None,

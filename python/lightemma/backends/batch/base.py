@@ -20,14 +20,15 @@ PENDING, ENDED, FAILED = "pending", "ended", "failed"
 class BatchHTTPError(Exception):
     """A provider's batch endpoint answered with an error (``status`` 0: no answer at all)."""
 
-    def __init__(self, status: int, message: str) -> None:
+    def __init__(self, status: int, message: str, *, answer: bool = False) -> None:
         super().__init__(f"HTTP {status}: {message}" if status else message)
         self.status = status
+        self.answer = answer  # the provider answered, with something lightemma must not use (not worth a retry)
 
     @property
     def transient(self) -> bool:
         """Worth retrying: a dropped connection, a rate limit, a server error."""
-        return self.status == 0 or self.status == 429 or self.status >= 500
+        return not self.answer and (self.status == 0 or self.status == 429 or self.status >= 500)
 
     @property
     def auth(self) -> bool:
@@ -56,6 +57,29 @@ def item_result(custom_id: str, *, text: str | None = None, finish_reason: str |
     return {"custom_id": custom_id, "text": text, "finish_reason": finish_reason, "input_tokens": input_tokens,
             "output_tokens": output_tokens, "reasoning_tokens": reasoning_tokens, "cached_input_tokens": cached_input_tokens,
             "cache_write_tokens": cache_write_tokens, "error": error, "error_message": error_message, "resubmit": resubmit}
+
+
+async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
+    """One request on an ``httpx.AsyncClient``; the response, or :class:`BatchHTTPError` with the provider's message."""
+    import httpx
+
+    try:
+        response = await client.request(method, url, **kw)
+    except httpx.HTTPError as exc:
+        raise BatchHTTPError(0, f"{type(exc).__name__}: {exc}") from None
+    if response.status_code >= 400:
+        try:
+            message = response.json().get("error", {}).get("message") or response.text[:300]
+        except (ValueError, AttributeError):
+            message = response.text[:300]
+        raise BatchHTTPError(response.status_code, str(message))
+    return response
+
+
+def count(usage: dict[str, Any], name: str) -> int | None:
+    """A token count a provider reported: a non-negative int, else None (unknown, never zero)."""
+    value = usage.get(name)
+    return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else None
 
 
 def entry_bytes(entry: Any) -> int:

@@ -15,7 +15,17 @@ from __future__ import annotations
 import os
 from typing import Any
 
-from lightemma.backends.batch.base import ENDED, FAILED, PENDING, BatchHTTPError, BatchStatus, item_result, split_data_url
+from lightemma.backends.batch.base import (
+    ENDED,
+    FAILED,
+    PENDING,
+    BatchHTTPError,
+    BatchStatus,
+    count,
+    http_call,
+    item_result,
+    split_data_url,
+)
 
 TERMINAL = {"BATCH_STATE_SUCCEEDED": ENDED, "BATCH_STATE_EXPIRED": ENDED, "BATCH_STATE_CANCELLED": ENDED,
             "BATCH_STATE_FAILED": FAILED}
@@ -56,18 +66,7 @@ class GeminiBatches:
         return {"request": {"contents": contents, "generationConfig": config}, "metadata": {"key": custom_id}}
 
     async def _request(self, method: str, url: str, **kw: Any) -> Any:
-        import httpx
-
-        try:
-            response = await self._client.request(method, url, **kw)
-        except httpx.HTTPError as exc:
-            raise BatchHTTPError(0, f"{type(exc).__name__}: {exc}") from None
-        if response.status_code >= 400:
-            try:
-                message = response.json().get("error", {}).get("message") or response.text[:300]
-            except ValueError:
-                message = response.text[:300]
-            raise BatchHTTPError(response.status_code, str(message))
+        response = await http_call(self._client, method, url, **kw)
         return response.json()
 
     async def submit(self, entries: list[dict[str, Any]], token: str) -> str:
@@ -75,7 +74,7 @@ class GeminiBatches:
         data = await self._request("POST", f"{self.base}/v1beta/models/{self.model}:batchGenerateContent", json=body)
         name = data.get("name") or (data.get("metadata") or {}).get("name")
         if not name:
-            raise BatchHTTPError(0, "the batch was created without a name in the answer")
+            raise BatchHTTPError(0, "the batch was created without a name in the answer", answer=True)
         return str(name)
 
     async def status(self, batch_id: str) -> BatchStatus:
@@ -94,7 +93,7 @@ class GeminiBatches:
         for row in rows:
             cid = (row.get("metadata") or {}).get("key")
             if not cid:
-                raise BatchHTTPError(0, f"batch {batch_id}: a response without its request's metadata key; cannot match it")
+                raise BatchHTTPError(0, f"batch {batch_id}: a response without its request's metadata key; cannot match it", answer=True)
             if "error" in row:
                 err = row["error"] or {}
                 out.append(item_result(str(cid), error="BatchRequestError", error_message=f"{err.get('code')}: {err.get('message')}"))
@@ -117,18 +116,14 @@ def _response_result(custom_id: str, response: dict[str, Any]) -> dict[str, Any]
     """A GenerateContentResponse as an item result: output = candidates + thoughts (as litellm counts them)."""
     usage = response.get("usageMetadata") or {}
 
-    def count(name: str) -> int | None:
-        value = usage.get(name)
-        return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else None
-
-    prompt, answer = count("promptTokenCount"), count("candidatesTokenCount")
-    thoughts = count("thoughtsTokenCount")
+    prompt, answer = count(usage, "promptTokenCount"), count(usage, "candidatesTokenCount")
+    thoughts = count(usage, "thoughtsTokenCount")
     known = bool(prompt) and answer is not None
     candidate = (response.get("candidates") or [{}])[0]
     text = "".join(p.get("text", "") for p in (candidate.get("content") or {}).get("parts") or [] if not p.get("thought"))
     kw = dict(finish_reason=candidate.get("finishReason"), input_tokens=prompt if known else None,
               output_tokens=(answer + (thoughts or 0)) if known else None, reasoning_tokens=thoughts if known else None,
-              cached_input_tokens=(count("cachedContentTokenCount") or 0) if known else None,
+              cached_input_tokens=(count(usage, "cachedContentTokenCount") or 0) if known else None,
               cache_write_tokens=0 if known else None)
     if not text.strip():
         return item_result(custom_id, error="EmptyResponse", error_message=f"no answer text (finish_reason={kw['finish_reason']})", **kw)
