@@ -17,7 +17,9 @@ from :func:`fake_openai.default_reply` (or ``script(Received) -> Reply``) in eac
 shuffled order (``shuffle``, seeded). ``fail`` (custom id → message) answers those requests with an error;
 ``expire`` (a set of custom ids) leaves them unprocessed, as an expired batch does; ``batch_state`` forces a
 whole batch's end state (``"failed"`` with a validation error, ``"expired"``). Every created batch is in
-``server.batches``; ``server.created`` counts them.
+``server.batches``; ``server.created`` counts them. ``require_key`` answers 401 to any request whose key
+header (``Authorization``, ``x-api-key``, ``x-goog-api-key``) does not hold that key; ``server.keys`` records
+the key headers seen.
 """
 
 from __future__ import annotations
@@ -51,8 +53,9 @@ class FakeBatchServer:
 
     def __init__(self, script: Callable[[Received], Reply] | None = None, *, steps: int = 2, shuffle: bool = True,
                  seed: int = 0, fail: dict[str, str] | None = None, expire: set[str] | None = None,
-                 batch_state: str | None = None) -> None:
+                 batch_state: str | None = None, require_key: str | None = None) -> None:
         self.script = script or default_reply
+        self.require_key = require_key  # answer 401 to a request whose key header does not hold it
         self.steps = steps
         self.shuffle = shuffle
         self.rng = random.Random(seed)
@@ -63,6 +66,7 @@ class FakeBatchServer:
         self.files: dict[str, bytes] = {}
         self.created = 0
         self.polls = 0
+        self.keys: list[str] = []
         self.lock = threading.Lock()
         self._server = ThreadingHTTPServer(("127.0.0.1", 0), self._handler())
         self._thread = threading.Thread(target=self._server.serve_forever, daemon=True)
@@ -143,9 +147,20 @@ class FakeBatchServer:
             def _body(self) -> bytes:
                 return self.rfile.read(int(self.headers.get("Content-Length") or 0))
 
+            def _refused(self) -> bool:
+                key = " ".join(self.headers.get(h, "") for h in ("Authorization", "x-api-key", "x-goog-api-key")).strip()
+                with server.lock:
+                    server.keys.append(key)
+                if server.require_key is not None and server.require_key not in key:
+                    self._send(401, {"error": {"type": "authentication_error", "message": "invalid x-api-key"}})
+                    return True
+                return False
+
             def do_POST(self) -> None:  # noqa: N802
                 path = self.path.split("?")[0]
                 raw = self._body()
+                if self._refused():
+                    return
                 if path == "/v1/files":
                     content = _multipart_file(raw, self.headers.get("Content-Type", ""))
                     with server.lock:
@@ -172,6 +187,8 @@ class FakeBatchServer:
 
             def do_GET(self) -> None:  # noqa: N802
                 path = self.path.split("?")[0]
+                if self._refused():
+                    return
                 if path == "/v1/batches":
                     return self._send(200, {"object": "list", "data": [_openai_batch(server, b, None, peek=True)
                                                                       for b in server.batches.values() if b.protocol == "openai"],

@@ -276,3 +276,21 @@ def test_a_wave_is_split_within_the_providers_limits(tmp_path, synth_root, monke
     with FakeBatchServer(steps=1) as server:
         _run(synth_root, tmp_path / "b", "openai/gpt-4o", api_base=server.url, sample=2)
     assert [len(b.requests) for b in server.batches.values()] == [1] * 6
+
+
+@pytest.mark.parametrize("model, env, variable", [("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE", "ANTHROPIC_API_KEY"),
+                                                  ("gemini/gemini-2.5-flash", "GEMINI_API_BASE", "GEMINI_API_KEY")])
+def test_a_rejected_key_stops_the_batch_run_at_once_and_journals_nothing_as_pending(tmp_path, synth_root, monkeypatch,
+                                                                                   model, env, variable):
+    with FakeBatchServer(steps=1, require_key="the-right-key") as server:
+        monkeypatch.setenv(env, server.root)
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, model)
+        assert stopped.value.cause == "authentication" and "rejected the key" in str(stopped.value)
+        assert server.created == 0 and len(server.keys) == 1  # one refused call, no retries
+        assert os.environ[variable] in server.keys[0]  # the key went in the provider's own header
+        run_dir = stopped.value.run_dir
+        assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting", "abandoned"]
+        monkeypatch.setenv(variable, "the-right-key")
+        resume(run_dir, progress=False)
+    assert len(_records(run_dir)) == 4 and server.created == 3

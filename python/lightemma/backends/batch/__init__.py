@@ -311,9 +311,10 @@ class BatchBackend:
         journal.submitting(token, ids)  # before the provider is asked: an interrupted submission can be found
         try:
             bid = await self._call(lambda: self.adapter.submit(entries, token), "create a batch")
-        except RunFatalError:
-            journal.abandoned(token, "the provider refused the batch")
-            raise
+        except RunFatalError as exc:
+            if 400 <= getattr(exc, "http_status", 0) < 500:  # refused: nothing was created
+                journal.abandoned(token, f"the provider refused the batch: {exc}")
+            raise  # else it may exist: a resume looks it up by its token
         journal.submitted(token, bid, ids)  # before the first poll
         self.report["batches_created"] += 1
         self.report["requests_submitted"] += len(ids)
@@ -384,8 +385,11 @@ class BatchBackend:
                     continue
                 where = f"{self.adapter.provider} batch API"
                 if exc.auth:
-                    raise RunFatalError(f"{self.api.model}: cannot {what}: {exc} — the {where} rejected the key",
-                                        cause="authentication", error="AuthenticationError") from None
-                raise RunFatalError(f"{self.api.model}: cannot {what}: {exc} ({where}"
-                                    f"{f', after {tries} retries' if tries else ''})", cause="batch-api",
-                                    error="BatchAPIError") from None
+                    fatal = RunFatalError(f"{self.api.model}: cannot {what}: {exc} — the {where} rejected the key",
+                                          cause="authentication", error="AuthenticationError")
+                else:
+                    fatal = RunFatalError(f"{self.api.model}: cannot {what}: {exc} ({where}"
+                                          f"{f', after {tries} retries' if tries else ''})", cause="batch-api",
+                                          error="BatchAPIError")
+                fatal.http_status = exc.status  # type: ignore[attr-defined]
+                raise fatal from None
