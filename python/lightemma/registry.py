@@ -19,6 +19,11 @@ the provider's default, as the paper ran them). Claude models reason only with
 extended thinking, which lightemma does not request. A model outside the registry
 that litellm's list marks as reasoning gets :data:`DEFAULT_REASONING_BUDGET`.
 
+Batch prices (``lightemma run --batch``, :func:`batch_price`) come from litellm's bundled
+``*_cost_per_token_batches`` where it has them, else from the registry's own entries (with their
+source), else the list price at the providers' 50 % batch discount. :func:`image_tokens` gives each
+provider's published image-token rule (:data:`IMAGE_TOKEN_RULES`), which ``--estimate`` uses.
+
 Anything not in the registry is taken as a litellm model string
 (``anthropic/…``, ``gemini/…``, ``openai/NAME`` with ``--api-base``, …).
 ``lightemma models`` prints the registry.

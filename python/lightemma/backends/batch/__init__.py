@@ -123,6 +123,10 @@ class BatchBackend:
         """Journal this run's batches in ``run_dir`` (reading what an earlier session journaled)."""
         self.journal = BatchJournal.open(run_dir)
         self.log = log
+        done = sum(1 for b in self.journal.batches.values() if b.results is not None)
+        if log and self.journal.batches:
+            log(f"batch journal: {len(self.journal.batches)} batch(es) submitted earlier ({done} with saved results); "
+                "their requests are answered from them, not submitted again")
 
     def structured_output(self) -> dict[str, Any]:
         if self.provider != "openai" and not self.api.api_base:
@@ -348,6 +352,10 @@ class BatchBackend:
             turnaround = max(0.0, time.time() - batch.submitted_at) if batch.submitted_at else None
             journal.save_results(bid, items, status.provider_state, turnaround)
             state = status.provider_state
+            if self.log:
+                failed = sum(1 for i in items if i.get("error"))
+                self.log(f"batch {bid}: {status.provider_state} after {turnaround or 0:.0f} s, {len(items)} result(s)"
+                         f"{f', {failed} with an error' if failed else ''}")
         turnaround = journal.batches[bid].turnaround_s
         if turnaround is not None and ended_now:
             self.report["turnaround_s"].append(float(turnaround))
