@@ -150,6 +150,8 @@ def test_anthropic_and_gemini_batches_with_partial_failure_and_expiry(tmp_path, 
 def test_batch_is_refused_for_local_models_and_structured_answers_off_openai(tmp_path, synth_root):
     with pytest.raises(UserError, match="--batch is for models behind a provider's API"):
         _run(synth_root, tmp_path, "baseline:cv")
+    with pytest.raises(UserError, match="--cache, --rpm do\\(es\\) not apply to --batch"):
+        _run(synth_root, tmp_path, "openai/gpt-4o", api_base="http://127.0.0.1:9/v1", cache=True, rpm=10)
     with pytest.raises(UserError, match="only\\s+to OpenAI"):
         _run(synth_root, tmp_path, "anthropic/claude-sonnet-4-6", answer_format="structured")
 

@@ -119,6 +119,10 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
     if config.get("batch"):
         if kind != "api":
             raise UserError(f"--batch is for models behind a provider's API; {config['model']} runs on the {kind} backend")
+        ignored = [flag for flag, key in (("--cache", "cache"), ("--rpm", "rpm"), ("--tpm", "tpm")) if config.get(key)]
+        if ignored:
+            raise UserError(f"{', '.join(ignored)} do(es) not apply to --batch (the provider paces a batch itself, and the "
+                            "run's batch journal keeps every result); drop them or drop --batch")
         from lightemma.backends.batch import BatchBackend
 
         return BatchBackend(config["model"], api_base=config["api_base"], timeout=config["timeout"],
