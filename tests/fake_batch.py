@@ -16,7 +16,8 @@ Each status request moves a batch one step on (``steps`` polls from created to e
 from :func:`fake_openai.default_reply` (or ``script(Received) -> Reply``) in each protocol's shape, in a
 shuffled order (``shuffle``, seeded). ``fail`` (custom id → message) answers those requests with an error;
 ``expire`` (a set of custom ids) leaves them unprocessed, as an expired batch does; ``batch_state`` forces a
-whole batch's end state (``"failed"`` with a validation error, ``"expired"``). Every created batch is in
+whole batch's end state (``"failed"`` with a validation error, ``"expired"``); ``hold_from`` keeps batches from
+that number on running until it is set to None. Every created batch is in
 ``server.batches``; ``server.created`` counts them. ``require_key`` answers 401 to any request whose key
 header (``Authorization``, ``x-api-key``, ``x-goog-api-key``) does not hold that key; ``server.keys`` records
 the key headers seen.
@@ -45,6 +46,7 @@ class FakeBatch:
     metadata: dict[str, Any] = field(default_factory=dict)
     polls: int = 0
     end_state: str = "completed"
+    number: int = 0  # creation order, from 1
     results: list[dict[str, Any]] | None = None  # computed once, when it ends
 
 
@@ -53,9 +55,10 @@ class FakeBatchServer:
 
     def __init__(self, script: Callable[[Received], Reply] | None = None, *, steps: int = 2, shuffle: bool = True,
                  seed: int = 0, fail: dict[str, str] | None = None, expire: set[str] | None = None,
-                 batch_state: str | None = None, require_key: str | None = None) -> None:
+                 batch_state: str | None = None, require_key: str | None = None, hold_from: int | None = None) -> None:
         self.script = script or default_reply
         self.require_key = require_key  # answer 401 to a request whose key header does not hold it
+        self.hold_from = hold_from  # batches numbered from this on (1 = the first) stay running until it is set to None
         self.steps = steps
         self.shuffle = shuffle
         self.rng = random.Random(seed)
@@ -99,7 +102,7 @@ class FakeBatchServer:
             self.created += 1
             prefix = {"openai": "batch_", "anthropic": "msgbatch_", "gemini": "batches/"}[protocol]
             batch = FakeBatch(id=f"{prefix}{self.created:04d}", protocol=protocol, requests=requests, metadata=metadata,
-                              end_state=self.batch_state or "completed")
+                              end_state=self.batch_state or "completed", number=self.created)
             self.batches[batch.id] = batch
             return batch
 
@@ -123,7 +126,9 @@ class FakeBatchServer:
         """One poll: True once the batch has ended."""
         with self.lock:
             self.polls += 1
-            batch.polls += 1
+            held = self.hold_from is not None and batch.number >= self.hold_from
+            if not held or batch.polls + 1 < self.steps:
+                batch.polls += 1
             return batch.polls >= self.steps
 
     # --- HTTP ------------------------------------------------------------------------------------------------

@@ -195,32 +195,46 @@ def _cli(*args: str) -> list[str]:
     return [sys.executable, "-m", "lightemma", "run", *args]
 
 
-def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, synth_root):
-    env = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "OPENAI_API_KEY": "sk-test-openai",
-           "LITELLM_LOCAL_MODEL_COST_MAP": "True"}
-    with FakeBatchServer(steps=10**6, shuffle=True, seed=3) as server:  # the first batch never ends while the run lives
-        proc = subprocess.Popen(_cli("--model", "openai/gpt-4o", "--api-base", server.url, "--dataroot", str(synth_root),
-                                     "--version", "v1.0-mini", "--split", "all", "--sample", "4", "--batch",
-                                     "--batch-poll", "0.2", "--output", str(tmp_path / "runs"), "--no-progress"),
+@pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
+def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, synth_root, monkeypatch, provider):
+    """Killed while polling the stage-2 batch: the resume reads stage 1 from the journal's saved results, polls
+    the same stage-2 batch again (results shuffled, matched by custom id) and creates only the stage-3 batch."""
+    model = {"openai": "openai/gpt-4o", "anthropic": "anthropic/claude-sonnet-4-6", "gemini": "gemini/gemini-2.5-flash"}[provider]
+    env = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "LITELLM_LOCAL_MODEL_COST_MAP": "True"}
+    with FakeBatchServer(steps=2, shuffle=True, seed=3, hold_from=2) as server:  # the stage-2 batch never ends while the run lives
+        where = ["--api-base", server.url] if provider == "openai" else []
+        if provider != "openai":
+            base = {"anthropic": "ANTHROPIC_API_BASE", "gemini": "GEMINI_API_BASE"}[provider]
+            env[base] = server.root
+            monkeypatch.setenv(base, server.root)
+        proc = subprocess.Popen(_cli("--model", model, *where, "--dataroot", str(synth_root), "--version", "v1.0-mini",
+                                     "--split", "all", "--sample", "4", "--batch", "--batch-poll", "0.2",
+                                     "--output", str(tmp_path / "runs"), "--no-progress"),
                                 env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-        deadline = time.monotonic() + 90
-        while time.monotonic() < deadline and server.polls < 2:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and not (server.created >= 2 and server.polls >= server.steps + 2):
             time.sleep(0.1)
-        assert server.polls >= 2, proc.communicate(timeout=5)
-        proc.send_signal(signal.SIGKILL)  # mid-poll
+        assert server.created == 2, proc.communicate(timeout=5)
+        proc.send_signal(signal.SIGKILL)  # mid-poll of the stage-2 batch
         proc.wait(timeout=10)
         run_dir = next((tmp_path / "runs").glob("*/*"))
-        assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting", "submitted"]
-        assert server.created == 1 and _records(run_dir) == {}
-        server.steps = server.polls + 1  # the provider finishes the batch now
+        assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting", "submitted", "completed", "submitting", "submitted"]
+        assert _records(run_dir) == {}
+        first, second = list(server.batches.values())
+        first_polls = first.polls
+        server.hold_from = None  # the provider finishes the stage-2 batch now
         resume(run_dir, progress=False)  # in this process: the same code as `lightemma run --resume`, one start-up less
-    first = next(iter(server.batches.values()))
-    assert server.created == 3  # the first batch polled again, never resubmitted; stages 2 and 3 new
-    assert [b.id for b in server.batches.values()][0] == first.id
+    assert server.created == 3  # stage 1 and 2 never resubmitted; only stage 3 is new
+    assert first.polls == first_polls  # stage 1 answered from the saved results, not even polled
+    assert second.polls >= server.steps
     records = _records(run_dir)
     assert len(records) == 4 and all(r["status"] == "ok" for r in records.values())
+    for rec in records.values():  # each frame got its own answers back, whatever order they came in
+        assert [c["stage"] for c in rec["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
+        assert rec["attempts"][0]["calls"][1]["text"].startswith("The ego vehicle")
     manifest = json.loads((run_dir / "manifest.json").read_text())
-    assert manifest["sessions"][-1]["batch"]["batches_resumed"] == 1
+    assert manifest["sessions"][-1]["batch"]["batches_resumed"] == 2
+    assert manifest["sessions"][-1]["batch"]["batches_created"] == 1
 
 
 def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
