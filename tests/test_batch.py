@@ -310,3 +310,21 @@ def test_a_rejected_key_stops_the_batch_run_at_once_and_journals_nothing_as_pend
         monkeypatch.setenv(variable, "the-right-key")
         resume(run_dir, progress=False)
     assert len(_records(run_dir)) == 4 and server.created == 3
+
+
+def test_an_expired_openai_batch_has_its_unrun_requests_resubmitted(tmp_path, synth_root):
+    # an expired batch: the requests it reached are answered (output file), the others come back batch_expired
+    with FakeBatchServer(steps=1, batch_state="expired") as server:
+        result = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, sample=2)
+    records = _records(result.run_dir)
+    resubmitted = json.loads((result.run_dir / "manifest.json").read_text())["sessions"][-1]["batch"]["requests_resubmitted"]
+    sent = [cid for b in server.batches.values() for cid, _ in b.requests]
+    assert resubmitted >= 3 and len(sent) == 6 + resubmitted  # each expired request went out again under a new id
+    assert all(cid.rsplit("-r", 1)[-1] in ("1", "2") for cid in sent if "-r" in cid)  # twice at most
+    states = {e["state"] for e in _journal_lines(result.run_dir) if e["event"] == "completed"}
+    assert states == {"expired"}
+    # two resubmits were not always enough: such a request fails as BatchExpired, with its reason, and is re-asked
+    calls = [c for r in records.values() for a in r["attempts"] for c in a["calls"]]
+    expired = [c for c in calls if c["error"] == "BatchExpired"]
+    assert all("batch_expired" in c["error_message"] for c in expired)
+    assert all(r["status"] == "ok" for r in records.values()) and len(records) == 2
