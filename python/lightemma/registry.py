@@ -19,6 +19,11 @@ the provider's default, as the paper ran them). Claude models reason only with
 extended thinking, which lightemma does not request. A model outside the registry
 that litellm's list marks as reasoning gets :data:`DEFAULT_REASONING_BUDGET`.
 
+Batch prices (``lightemma run --batch``, :func:`batch_price`) come from litellm's bundled
+``*_cost_per_token_batches`` where it has them, else from the registry's own entries (with their
+source), else the list price at the providers' 50 % batch discount. :func:`image_tokens` gives each
+provider's published image-token rule (:data:`IMAGE_TOKEN_RULES`), which ``--estimate`` uses.
+
 Anything not in the registry is taken as a litellm model string
 (``anthropic/…``, ``gemini/…``, ``openai/NAME`` with ``--api-base``, …).
 ``lightemma models`` prints the registry.
@@ -38,6 +43,11 @@ from lightemma.errors import UserError
 ANTHROPIC_PRICES = "docs.anthropic.com/en/docs/about-claude/pricing (stored copy)"
 GOOGLE_PRICES = "ai.google.dev/gemini-api/docs/pricing (as quoted by morphllm.com/gemini-api-pricing, stored copy)"
 PRICE_READ = "2026-11-22"
+# Batch prices: 50 % of the interactive price for input and output tokens at all three providers.
+OPENAI_BATCH_PRICES = "platform.openai.com/docs/guides/batch (50 % of the synchronous price; per model in litellm's list)"
+ANTHROPIC_BATCH_PRICES = "docs.anthropic.com/en/docs/build-with-claude/batch-processing#pricing (50 % of standard prices)"
+GOOGLE_BATCH_PRICES = "ai.google.dev/gemini-api/docs/batch-mode (50 % of the interactive price)"
+BATCH_DISCOUNT = 0.5
 #: output tokens added to --max-tokens for a reasoning model's hidden reasoning
 DEFAULT_REASONING_BUDGET = 8192
 
@@ -62,6 +72,10 @@ class ModelInfo:
     # tokens read from the provider's prompt cache, and tokens written to it (Anthropic bills writes above input).
     cache_read_usd_per_mtok: float | None = None
     cache_write_usd_per_mtok: float | None = None
+    # Batch-API prices (USD per million tokens) when litellm's list lacks them, with their source.
+    batch_input_usd_per_mtok: float | None = None
+    batch_output_usd_per_mtok: float | None = None
+    batch_price_source: str | None = None
     # Some providers reject temperature 0 (gpt-5 family: only the default, 1, while
     # reasoning); False means "send no temperature, the provider default applies".
     supports_temperature: bool = True
@@ -91,7 +105,8 @@ def _local(key: str, display: str, family: str, gen: int, checkpoint: str, gpus:
 _REASONS = dict(reasoning=True, reasoning_budget=DEFAULT_REASONING_BUDGET)
 # Sonnet 3.7 and 4: $3 input, $15 output, cache hits $0.30, 5-minute cache writes $3.75 per million tokens
 _ANTHROPIC_SONNET = dict(input_usd_per_mtok=3.0, output_usd_per_mtok=15.0, cache_read_usd_per_mtok=0.30,
-                         cache_write_usd_per_mtok=3.75, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ)
+                         cache_write_usd_per_mtok=3.75, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ,
+                         batch_input_usd_per_mtok=1.5, batch_output_usd_per_mtok=7.5, batch_price_source=ANTHROPIC_BATCH_PRICES)
 
 PAPER_MODELS: tuple[ModelInfo, ...] = (
     _api("gpt-4o", "GPT-4o", "GPT", 1, "gpt-4o"),
@@ -101,7 +116,8 @@ PAPER_MODELS: tuple[ModelInfo, ...] = (
     _api("claude-4.0-sonnet", "Claude-4.0-Sonnet", "Claude", 2, "anthropic/claude-sonnet-4-20250514", **_ANTHROPIC_SONNET),
     _api("claude-4.6-sonnet", "Claude-4.6-Sonnet", "Claude", 3, "anthropic/claude-sonnet-4-6"),
     _api("gemini-2.0-flash", "Gemini-2.0-Flash", "Gemini", 1, "gemini/gemini-2.0-flash",
-         input_usd_per_mtok=0.10, output_usd_per_mtok=0.40, price_source=GOOGLE_PRICES, price_read=PRICE_READ),
+         input_usd_per_mtok=0.10, output_usd_per_mtok=0.40, price_source=GOOGLE_PRICES, price_read=PRICE_READ,
+         batch_input_usd_per_mtok=0.05, batch_output_usd_per_mtok=0.20, batch_price_source=GOOGLE_BATCH_PRICES),
     _api("gemini-2.5-flash", "Gemini-2.5-Flash", "Gemini", 2, "gemini/gemini-2.5-flash", **_REASONS),
     _api("gemini-3.0-flash", "Gemini-3.0-Flash", "Gemini", 3, "gemini/gemini-3-flash-preview", **_REASONS),
     _local("qwen-2.0-vl-7b", "Qwen-2.0-VL-7B", "Qwen", 1, "Qwen/Qwen2-VL-7B-Instruct", 1),
@@ -301,6 +317,94 @@ def cache_price_per_token(info: ModelInfo) -> tuple[float | None, float | None]:
     found = price(info)
     read, write = found["cache_read_usd_per_mtok"], found["cache_write_usd_per_mtok"]
     return (None if read is None else read / 1e6), (None if write is None else write / 1e6)
+
+
+def batch_price(info: ModelInfo) -> dict[str, Any]:
+    """The batch-API price of ``info`` (``lightemma run --batch``), shaped like :func:`price`.
+
+    litellm's bundled ``*_cost_per_token_batches`` when it has them; else the registry's own batch prices
+    (with their source); else the interactive price at the providers' batch discount
+    (:data:`BATCH_DISCOUNT`, 50 % at OpenAI, Anthropic and Google). Cache-read and cache-write prices are
+    the interactive ones at the same discount (Anthropic: batch and cache discounts stack). Unknown
+    prices stay None.
+    """
+    base = price(info)
+    if info.backend != "api" or base["input_usd_per_mtok"] is None or base["output_usd_per_mtok"] is None:
+        return {**base, "discount": None}
+    entry = _litellm_entry(info.model_id)
+    if entry.get("input_cost_per_token_batches") is not None and entry.get("output_cost_per_token_batches") is not None:
+        pin, pout = float(entry["input_cost_per_token_batches"]) * 1e6, float(entry["output_cost_per_token_batches"]) * 1e6
+        source = f"litellm {_litellm_version()} bundled price list (batches)"
+    elif info.batch_input_usd_per_mtok is not None and info.batch_output_usd_per_mtok is not None:
+        pin, pout = info.batch_input_usd_per_mtok, info.batch_output_usd_per_mtok
+        source = f"{info.batch_price_source}, read {info.price_read or PRICE_READ}"
+    else:
+        pin, pout = base["input_usd_per_mtok"] * BATCH_DISCOUNT, base["output_usd_per_mtok"] * BATCH_DISCOUNT
+        source = f"{base['source']} at the batch discount ({BATCH_DISCOUNT:.0%}: {_batch_source(info)})"
+    discount = pin / base["input_usd_per_mtok"] if base["input_usd_per_mtok"] else BATCH_DISCOUNT
+
+    def scaled(key: str) -> float | None:
+        return None if base[key] is None else base[key] * discount
+
+    return {"input_usd_per_mtok": pin, "output_usd_per_mtok": pout, "cache_read_usd_per_mtok": scaled("cache_read_usd_per_mtok"),
+            "cache_write_usd_per_mtok": scaled("cache_write_usd_per_mtok"), "source": source, "discount": discount}
+
+
+def _batch_source(info: ModelInfo) -> str:
+    model = _norm(info.model_id)
+    if model.startswith("anthropic/") or "claude" in model:
+        return ANTHROPIC_BATCH_PRICES
+    if model.startswith(("gemini/", "vertex_ai/")):
+        return GOOGLE_BATCH_PRICES
+    return OPENAI_BATCH_PRICES
+
+
+# --- image tokens, for estimates ------------------------------------------------------------------------
+#: where each provider's image-token rule is published
+IMAGE_TOKEN_RULES = {
+    "openai": "platform.openai.com/docs/guides/images-vision#calculating-costs (high detail: fit in 2048 × 2048, "
+              "short side to 768, 85 + 170 per 512-px tile)",
+    "anthropic": "docs.anthropic.com/en/docs/build-with-claude/vision#calculate-image-costs (long side to at most "
+                 "1568 px, tokens = width × height / 750)",
+    "gemini": "ai.google.dev/gemini-api/docs/image-understanding#technical-details-image (258 tokens for an image "
+              "within 384 × 384, else 258 per 768 × 768 tile)",
+}
+
+
+def image_tokens(width: int, height: int, provider: str) -> int:
+    """Input tokens one ``width`` × ``height`` image costs at ``provider`` (``openai``, ``anthropic``, ``gemini``),
+    by the provider's published rule (:data:`IMAGE_TOKEN_RULES`); any other provider is counted as OpenAI."""
+    import math
+
+    if width < 1 or height < 1:
+        raise ValueError(f"an image needs a positive size, got {width} × {height}")
+    if provider == "anthropic":
+        scale = min(1.0, 1568 / max(width, height))
+        return math.ceil(round(width * scale) * round(height * scale) / 750)
+    if provider in ("gemini", "vertex_ai"):
+        if width <= 384 and height <= 384:
+            return 258
+        return 258 * math.ceil(width / 768) * math.ceil(height / 768)
+    scale = min(1.0, 2048 / max(width, height))
+    w, h = width * scale, height * scale
+    scale = min(1.0, 768 / min(w, h))
+    w, h = w * scale, h * scale
+    return 85 + 170 * math.ceil(w / 512) * math.ceil(h / 512)
+
+
+#: output tokens per frame (three stages, first attempt) for a model the paper did not run
+DEFAULT_OUTPUT_TOKENS = 400
+
+
+def typical_output_tokens(info: ModelInfo) -> tuple[int, str]:
+    """Output tokens a frame typically takes (all three stages) and where the figure comes from:
+    the paper's Table I for its models, else :data:`DEFAULT_OUTPUT_TOKENS` (about the paper's median)."""
+    from lightemma.evaluation.paper import paper_efficiency_rows
+
+    for row in paper_efficiency_rows():
+        if row["model"] == info.display_name and row.get("output_tokens"):
+            return int(row["output_tokens"]), "the paper's Table I"
+    return DEFAULT_OUTPUT_TOKENS, "lightemma's default (about the paper's median)"
 
 
 def list_models() -> list[dict[str, Any]]:

@@ -24,11 +24,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def rows() -> list[dict[str, Any]]:
     """One plain dict per registry entry: what ``lightemma models`` prints."""
-    from lightemma.registry import list_models
+    from lightemma.registry import MODELS, batch_price, list_models
 
     out = []
-    for entry in list_models():
-        price = entry["price"]
+    for entry, info in zip(list_models(), MODELS):
+        price, batch = entry["price"], batch_price(info)
         out.append({
             "key": entry["key"],
             "display_name": entry["display_name"],
@@ -37,6 +37,9 @@ def rows() -> list[dict[str, Any]]:
             "input_usd_per_mtok": price["input_usd_per_mtok"],
             "output_usd_per_mtok": price["output_usd_per_mtok"],
             "price_source": price["source"],
+            "batch_input_usd_per_mtok": batch["input_usd_per_mtok"],
+            "batch_output_usd_per_mtok": batch["output_usd_per_mtok"],
+            "batch_price_source": batch["source"] if batch["input_usd_per_mtok"] is not None else None,
             "reasoning": entry["reasoning"],
             "reasoning_budget": entry["reasoning_budget"],
             "in_paper": entry["in_paper"],
@@ -50,14 +53,15 @@ def _money(value: float | None) -> str:
 
 def markdown(table: list[dict[str, Any]]) -> str:
     """The registry as a Markdown table."""
-    lines = ["| --model | name | provider id | backend | $ / MTok in | $ / MTok out | price source | reasoning |",
-             "|---|---|---|---|---:|---:|---|---|"]
+    lines = ["| --model | name | provider id | backend | $ / MTok in | $ / MTok out | price source | --batch $ in / out | reasoning |",
+             "|---|---|---|---|---:|---:|---|---:|---|"]
     for r in table:
         reasoning = f"yes (+{r['reasoning_budget']} output tokens)" if r["reasoning"] else "no"
         if not r["reasoning"] and r["provider_id"].startswith("anthropic/"):
             reasoning = "no (extended thinking not requested)"
         lines.append(f"| `{r['key']}` | {r['display_name']} | `{r['provider_id']}` | {r['backend']} | "
-                     f"{_money(r['input_usd_per_mtok'])} | {_money(r['output_usd_per_mtok'])} | {r['price_source']} | {reasoning} |")
+                     f"{_money(r['input_usd_per_mtok'])} | {_money(r['output_usd_per_mtok'])} | {r['price_source']} | "
+                     f"{_money(r['batch_input_usd_per_mtok'])} / {_money(r['batch_output_usd_per_mtok'])} | {reasoning} |")
     lines.append("")
     lines.append("Any other litellm model string (anthropic/…, gemini/…) or openai/NAME with --api-base also works; "
                  "local checkpoints run with --backend hf or vllm.")

@@ -29,7 +29,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     data.add_argument("--scenes", nargs="+", metavar="SCENE", help="explicit scene names")
     data.add_argument("--window", choices=("reference", "full"), help="reference (the paper: N-14 frames per scene, default) or full (N-13) "
                       "(docs/definitions.md#frames-and-windows)")
-    data.add_argument("--limit", type=int, help="only the first N frames")
+    data.add_argument("--limit", type=int, help="only the first N frames (in scene order; see --sample)")
+    data.add_argument("--sample", type=int, metavar="N", help="a reproducible sample of N frames spread over as many scenes "
+                      "as possible, recorded in the manifest (docs/run.md#samples)")
+    data.add_argument("--sample-seed", type=int, metavar="S", help="seed of --sample (default 0)")
     data.add_argument("--on-bad-record", choices=("skip", "error"),
                       help="a scene with an unusable pose or timestamp: skip it with a warning (default) or stop loading")
     ex = p.add_argument_group("execution")
@@ -47,6 +50,16 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     ex.add_argument("--transport", choices=("litellm", "direct"),
                     help="with --api-base: call the OpenAI-compatible server through litellm (default) or directly (less CPU per call)")
     ex.add_argument("--no-progress", action="store_true", help="no progress bar")
+    ex.add_argument("--name", help="a name for the run, shown in every table instead of its timestamp id")
+    paid = p.add_argument_group("paid runs (docs/run.md#paid-runs)")
+    paid.add_argument("--batch", action="store_true", help="through the provider's batch API (OpenAI, Anthropic, Gemini) at "
+                      "its batch price (about 50 %%); results within 24 h; a killed run resumes by polling the same batches")
+    paid.add_argument("--batch-poll", type=float, metavar="SECONDS", help="with --batch: first poll after SECONDS "
+                      "(default 30), then ×1.5 per poll up to 10 min")
+    paid.add_argument("--estimate", action="store_true", help="print the frames, calls, tokens and expected cost "
+                      "(normal and --batch) without calling anything, and exit")
+    paid.add_argument("--max-cost", type=float, metavar="CENTS", help="stop cleanly (resumable) before the run would spend "
+                      "more than CENTS US cents (on --resume: the run's whole limit, earlier sessions included)")
     local = p.add_argument_group("local models (--backend hf | vllm)")
     local.add_argument("--batch-size", type=int, help="requests per batched forward pass (default 8; 1 is the paper's way)")
     local.add_argument("--max-pixels", type=int, help="cap on image pixels (width × height) fed to the model")
@@ -93,7 +106,7 @@ RUN_DEFAULTS: dict[str, object] = {
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
-                  "replicas", "ray_address", "gpus_per_replica"}  # where the model runs, not what it is asked
+                  "replicas", "ray_address", "gpus_per_replica", "max_cost", "batch", "estimate"}  # where the model runs, not what it is asked
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
@@ -108,6 +121,7 @@ LIMITS: dict[str, tuple[float, bool]] = {
     "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
     "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
     "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False),
+    "sample": (1, False), "max_cost": (0, True), "batch_poll": (0, True),
 }
 
 
@@ -147,20 +161,53 @@ def local_backend_options(args: argparse.Namespace) -> dict[str, object]:
     return given
 
 
+def print_estimate(args: argparse.Namespace) -> int:
+    """``--estimate``: load the frames the run would take and print its expected bill; nothing is called."""
+    from lightemma.errors import UserError
+    from lightemma.pipeline.runner import _load_frames, _require_frames, estimate_run
+
+    if args.resume:
+        raise UserError("--estimate is for a new run; drop --resume")
+    if not args.model or not args.dataroot:
+        raise UserError("--estimate needs --model and --dataroot (the run it estimates)")
+    settings = run_settings(args)
+    dataset = {"dataroot": args.dataroot, "version": settings["version"], "split": args.split, "scenes": args.scenes,
+               "window": settings["window"], "limit": args.limit, "on_bad_record": settings["on_bad_record"],
+               "sample": {"n": args.sample, "seed": args.sample_seed or 0} if args.sample is not None else None}
+    frames = _load_frames(dataset)
+    _require_frames(frames)
+    planned = estimate_run(args.model, frames=frames, prompt_set=settings["prompt_set"], chain=settings["chain"],
+                           answer_format=settings["answer_format"], max_tokens=settings["max_tokens"], api_base=args.api_base)
+    print(planned.report())
+    return 0
+
+
 def main(args: argparse.Namespace) -> int:
     from lightemma.errors import UserError
     from lightemma.pipeline.runner import resume, run, stderr_log
 
     progress = not args.no_progress
     check_limits(args)
+    if args.batch is False:
+        args.batch = None  # a flag not given: --resume takes the run's own mode
+    if args.batch_poll is not None and not args.batch:
+        raise UserError("--batch-poll goes with --batch")
+    if args.sample_seed is not None and args.sample is None:
+        raise UserError("--sample-seed goes with --sample N")
+    if args.sample is not None and args.limit is not None:
+        raise UserError("--sample and --limit are exclusive: --limit takes the first N frames, --sample N spreads N over the scenes")
+    if args.estimate:
+        return print_estimate(args)
     if args.resume:
         given = sorted("--" + name.replace("_", "-") for name, value in vars(args).items()
                        if name not in RESUME_OPTIONS and value is not None)
         if given:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
+        if args.batch:
+            raise UserError("--resume takes the run's mode (batch or not) from its manifest; drop --batch")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
                         concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
-                        gpus_per_replica=args.gpus_per_replica)
+                        gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost)
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")
@@ -190,6 +237,8 @@ def main(args: argparse.Namespace) -> int:
             backend_options=options, on_bad_record=settings["on_bad_record"],
             replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
             chain=settings["chain"], answer_format=settings["answer_format"],
+            batch=bool(args.batch), batch_poll=args.batch_poll or 30.0, max_cost_cents=args.max_cost,
+            sample=args.sample, sample_seed=args.sample_seed or 0, name=args.name,
         )
     print(result.report())
     summary = result.summary

@@ -180,18 +180,20 @@ def _variant_parts(info: Any) -> dict[str, str]:
 
 def unique_labels(runs: list[RunData]) -> list[str]:
     """Display labels, made distinct where two runs share one: by the variant settings that differ among them
-    (integrator, chain, answer format: ``GPT-4o [conversation, structured]``), else by run id."""
-    original = [r.info.label for r in runs]
+    (integrator, chain, answer format: ``GPT-4o [conversation, structured]``), else by run id.
+
+    A named run (``lightemma run --name NAME``) is always ``<model> [NAME]``, its name in place of the id."""
+    original = [f"{r.info.label} [{r.info.name}]" if r.info.name else r.info.label for r in runs]
     labels = list(original)
     for i, run in enumerate(runs):
-        clashes = [j for j, lab in enumerate(original) if lab == run.info.label]
+        clashes = [j for j, lab in enumerate(original) if lab == original[i]]
         if len(clashes) > 1:
             parts = [_variant_parts(runs[j].info) for j in clashes]
             differing = [k for k in parts[0] if len({p[k] for p in parts}) > 1]
             variants = {tuple(p[k] for k in differing) for p in parts}
             own = _variant_parts(run.info)
             suffix = ", ".join(own[k] for k in differing) if differing and len(variants) == len(clashes) else run.info.run_dir.name
-            labels[i] = f"{run.info.label} [{suffix}]"
+            labels[i] = f"{original[i]} [{suffix}]"
     return labels
 
 

@@ -42,6 +42,9 @@ class RunInfo:
     dataset_kind: str | None = None  # "nuscenes", "synthetic", or None when the manifest cannot tell
     chain: str = "independent"  # request variant: independent stages (the paper's) or one conversation
     answer_format: str = "text"  # stage-3 answers as text (the paper's) or structured JSON
+    name: str | None = None  # the run's name (``lightemma run --name``), shown instead of its id
+    batch: bool = False  # run through a provider's batch API (``--batch``): per-frame latency has no meaning
+    batch_turnaround_s: float | None = None  # mean seconds from a batch's submission to its results
 
     @property
     def variant(self) -> str:
@@ -180,4 +183,17 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
         dataset_kind=dataset_kind(manifest),
         chain=_setting(manifest, "chain", "independent"),
         answer_format=_setting(manifest, "answer_format", "text"),
+        name=str(manifest["name"]) if isinstance(manifest.get("name"), str) and manifest["name"].strip() else None,
+        batch=_get(manifest, "config", "batch") is True,
+        batch_turnaround_s=_batch_turnaround(manifest),
     )
+
+
+def _batch_turnaround(manifest: Mapping[str, Any]) -> float | None:
+    """Mean turnaround (submission to results, seconds) over the batches of a batch run's sessions; None when none."""
+    turns: list[float] = []
+    for session in manifest.get("sessions") or []:
+        report = session.get("batch") if isinstance(session, Mapping) else None
+        if isinstance(report, Mapping):
+            turns += [float(t) for t in report.get("turnaround_s") or [] if isinstance(t, (int, float)) and not isinstance(t, bool)]
+    return sum(turns) / len(turns) if turns else None

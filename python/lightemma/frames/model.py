@@ -267,6 +267,9 @@ def summary_line(described: Mapping[str, Any]) -> str:
     line = f"{version}, {which}: {_count(len(scenes), 'scene')}, {_count(n_frames, 'frame')}, {described.get('window') or 'reference'} window"
     if described.get("limit"):
         line += f" (first {_count(int(described['limit']), 'frame')})"
+    sample = described.get("sample")
+    if isinstance(sample, Mapping) and sample.get("n"):
+        line += f" (sample of {_count(int(sample['n']), 'frame')}, seed {sample.get('seed', 0)}, spread over scenes)"
     if described.get("skipped_scenes"):
         line += f"; {_count(len(described['skipped_scenes']), 'scene')} too short for a frame, skipped"
     if described.get("missing_images"):

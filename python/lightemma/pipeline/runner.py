@@ -23,6 +23,7 @@ frames that ended ``failed`` with the error that stopped the run.
 from __future__ import annotations
 
 import asyncio
+import math
 import os
 import platform
 import subprocess
@@ -115,6 +116,17 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
     """The backend a run's config names; checks the API key before anything else happens."""
     kind = backend_kind(config["model"], config["backend"], config["api_base"])
     options = dict(config.get("backend_options") or {})
+    if config.get("batch"):
+        if kind != "api":
+            raise UserError(f"--batch is for models behind a provider's API; {config['model']} runs on the {kind} backend")
+        ignored = [flag for flag, key in (("--cache", "cache"), ("--rpm", "rpm"), ("--tpm", "tpm")) if config.get(key)]
+        if ignored:
+            raise UserError(f"{', '.join(ignored)} do(es) not apply to --batch (the provider paces a batch itself, and the "
+                            "run's batch journal keeps every result); drop them or drop --batch")
+        from lightemma.backends.batch import BatchBackend
+
+        return BatchBackend(config["model"], api_base=config["api_base"], timeout=config["timeout"],
+                            poll_seconds=config.get("batch_poll") or 30.0)
     if kind == "api":
         from lightemma.backends.retry import RetryPolicy
         from lightemma.cache import ResponseCache
@@ -140,6 +152,18 @@ def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
 
     frames = load_frames(dataset["dataroot"], dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"),
                          window=dataset.get("window", "reference"), on_bad_record=dataset.get("on_bad_record") or "skip")
+    return _subset(frames, dataset)
+
+
+def _subset(frames: Any, dataset: Mapping[str, Any]) -> Sequence[Any]:
+    """The frames a dataset request keeps: ``limit`` (the first N) or ``sample`` (N spread over scenes, seeded)."""
+    sample = dataset.get("sample")
+    if sample:
+        from lightemma.frames.sample import sample_frames
+
+        if dataset.get("limit") is not None:
+            raise UserError("--sample and --limit are exclusive: --limit takes the first N frames, --sample N spreads N over the scenes")
+        return sample_frames(frames, int(sample["n"]), int(sample.get("seed") or 0))
     return _head(frames, dataset.get("limit"))
 
 
@@ -166,7 +190,12 @@ def _head(frames: Any, limit: int | None) -> Sequence[Any]:
 
 def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
     described = dict(frames.describe()) if hasattr(frames, "describe") else {}
-    return {**described, **{k: v for k, v in dataset.items() if v is not None}, "n_frames": len(frames)}
+    out = {**described, **{k: v for k, v in dataset.items() if v is not None}, "n_frames": len(frames)}
+    if dataset.get("sample"):
+        from lightemma.frames.sample import describe_sample
+
+        out["sample"] = {**describe_sample(frames, dataset["sample"]["n"], dataset["sample"].get("seed") or 0)}
+    return out
 
 
 class _Stopped(Exception):
@@ -174,12 +203,19 @@ class _Stopped(Exception):
 
 
 class _Guard:
-    """The backend as the chain sees it during a session: once the run stops, no new call starts."""
+    """The backend as the chain sees it during a session: once the run stops, no new call starts.
 
-    def __init__(self, backend: Backend) -> None:
+    With a ``budget`` (``--max-cost``), a frame starts only while its chain fits
+    (:class:`~lightemma.pipeline.estimate.Budget`); the first that does not stops the run (cause ``budget``,
+    resumable): no new frame starts, the frames in flight finish.
+    """
+
+    def __init__(self, backend: Backend, budget: Any = None) -> None:
         self.backend = backend
         self.name = getattr(backend, "name", "backend")
         self.stopped = False
+        self.admitting = True  # False once the budget is spent: frames in flight go on, no new frame starts
+        self.budget = budget
 
     @property
     def info(self) -> Any:
@@ -188,7 +224,26 @@ class _Guard:
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         if self.stopped:
             raise _Stopped
-        return await self.backend.generate(requests)
+        if self.budget is None:
+            return await self.backend.generate(requests)
+        reserved = 0.0
+        for req in requests:
+            held = self.budget.reserve(req.frame_id, first_call=req.stage == "scene" and req.attempt == 1)
+            if held is None:
+                self.budget.settle(reserved, 0.0)
+                raise RunFatalError(self.budget.message(), cause="budget")
+            reserved += held
+        spent = 0.0
+        try:
+            results = await self.backend.generate(requests)
+            spent = sum(r.cost_cents or 0.0 for r in results)
+            return results
+        finally:
+            self.budget.settle(reserved, spent)
+
+    def frame_done(self, frame_id: str) -> None:
+        if self.budget is not None:
+            self.budget.release(frame_id)
 
     async def aclose(self) -> None:
         await self.backend.aclose()
@@ -201,23 +256,26 @@ class _Outcome:
 
 
 async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
-                   concurrency: int, bar: Progress, earlier: Mapping[str, dict[str, Any]]) -> _Outcome:
+                   concurrency: int, bar: Progress, earlier: Mapping[str, dict[str, Any]], budget: Any = None) -> _Outcome:
     """Run every frame, ``concurrency`` at a time, appending each record as it finishes; stop on a run-fatal cause.
 
     ``earlier``: frame id -> the failed record a frame is run again after (its attempts are kept).
     """
     iterator = iter(frames)
-    guard = _Guard(backend)
+    guard = _Guard(backend, budget)
     outcome = _Outcome()
 
     def halt(cause: RunFatalError) -> None:
         if outcome.stop is None:
             outcome.stop = cause
-        guard.stopped = True
+        if cause.cause == "budget":
+            guard.admitting = False  # the spending limit: the frames in flight finish, no new one starts
+        else:
+            guard.stopped = True
 
     async def worker() -> None:
         for frame in iterator:  # shared: each frame goes to exactly one worker
-            if guard.stopped:
+            if guard.stopped or not guard.admitting:
                 return
             try:
                 record = await run_frame(frame, guard, prompts, policy, earlier.get(frame.frame_id))
@@ -226,6 +284,8 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             except RunFatalError as exc:
                 halt(exc)
                 return
+            finally:
+                guard.frame_done(frame.frame_id)
             try:
                 writer.append(record)
             except OSError as exc:
@@ -271,6 +331,11 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
 
     Raises :class:`RunStopped` (after saving the session) when the run stopped for a run-fatal cause.
     """
+    try:
+        budget = _budget(run_dir, config, todo, backend, prompts)
+    except BaseException:
+        asyncio.run(backend.aclose())
+        raise
     manifest = read_manifest(run_dir)
     sessions = list(manifest.get("sessions", []))
     sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"],
@@ -281,12 +346,17 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     except OSError as exc:
         asyncio.run(backend.aclose())
         raise RunStoreError(os_error_line(exc, "open the frame records") + f"; continue later with: lightemma run --resume {run_dir}") from None
+    attach = getattr(backend, "attach", None)
+    if attach is not None:  # a batch backend journals its batches in the run directory
+        attach(run_dir, log)
+    concurrency = max(1, len(todo)) if getattr(backend, "wants_all_frames", False) else config["concurrency"]
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
     try:
         with writer:
             if todo:
-                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar, earlier or {}))
+                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), concurrency, bar, earlier or {},
+                                               budget))
             else:
                 outcome = _Outcome()
                 asyncio.run(backend.aclose())
@@ -309,6 +379,10 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     replicas = getattr(backend, "replica_report", None)
     if replicas:
         sessions[-1]["replicas"] = replicas
+    batches = getattr(backend, "batch_report", None)
+    if batches:
+        sessions[-1]["batch"] = batches
+        summary.update(batch=True, batch_turnaround_s=batches.get("turnaround_s_mean"))
     images = getattr(backend, "image_report", None)
     if images:
         sessions[-1]["images_reencoded"] = images
@@ -324,6 +398,36 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
                          cause=stop.cause, error=stop.error, run_dir=run_dir, frames_run=outcome.done)
     manifest = _write_manifest(run_dir, sessions=sessions, finished_at=_now(), summary=summary)
     return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=outcome.done)
+
+
+def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backend: Backend, prompts: PromptSet) -> Any:
+    """The session's ``--max-cost`` budget (None without one): the run's recorded spending, the expected cost per call."""
+    limit = config.get("max_cost_cents")
+    if limit is None:
+        return None
+    from lightemma.pipeline.estimate import Budget, estimate
+
+    info = resolve(config["model"])
+    planned = estimate(todo, info, getattr(backend, "provider", None), prompts, max_tokens=config["max_tokens"],
+                       chain=config.get("chain") or "independent")
+    per_call = planned.batch_cents_per_call if config.get("batch") else planned.cents_per_call
+    if per_call is None:
+        raise UserError(f"--max-cost: the price of {config['model']} is unknown ({planned.price_source}), so no spending "
+                        "can be bounded; drop --max-cost")
+    spent = sum(float(r.get("cost_cents") or 0.0) for r in read_run(run_dir).records.values())
+    return Budget(float(limit), per_call, spent)
+
+
+def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT_PROMPT_SET, chain: str = "independent",
+                 answer_format: str = "text", max_tokens: int = 512, api_base: str | None = None) -> Any:
+    """The :class:`~lightemma.pipeline.estimate.Estimate` of running ``model`` over ``frames`` — nothing is called."""
+    from lightemma.backends.api import _provider, litellm_model
+    from lightemma.pipeline.estimate import estimate
+
+    info = resolve(model)
+    prompts = load_prompt_set(prompt_set).select(chain, answer_format)
+    provider = _provider(litellm_model(info, api_base)) if info.backend == "api" or api_base else None
+    return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain)
 
 
 def run(
@@ -363,6 +467,12 @@ def run(
     replicas: int = 1,
     ray_address: str | None = None,
     gpus_per_replica: float | None = None,
+    batch: bool = False,
+    batch_poll: float = 30.0,
+    max_cost_cents: float | None = None,
+    sample: int | None = None,
+    sample_seed: int = 0,
+    name: str | None = None,
     progress: bool = True,
     log: Log | None = None,
 ) -> RunResult:
@@ -389,6 +499,12 @@ def run(
     ``speed_range`` (m/s) and ``max_abs_curvature`` (1/m) are the parser's plausibility
     limits (None disables one; see :func:`lightemma.parse_actions`), recorded in the
     manifest as ``params.parse`` and kept by a resume.
+
+    ``batch=True`` sends the chain through the provider's batch interface at its batch price
+    (:mod:`lightemma.backends.batch`; first poll after ``batch_poll`` seconds). ``max_cost_cents``
+    stops the run (resumable) before a call would take its spending past the limit. ``sample`` keeps
+    N frames spread over the scenes (seeded by ``sample_seed``, :mod:`lightemma.frames.sample`),
+    recorded in the manifest. ``name`` is the run's name, shown in tables instead of its id.
     """
     if concurrency < 1:
         raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -407,7 +523,12 @@ def run(
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
         "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica,
+        "batch": bool(batch), "batch_poll": float(batch_poll) if batch else None, "max_cost_cents": max_cost_cents,
     }
+    if max_cost_cents is not None and not (math.isfinite(max_cost_cents) and max_cost_cents > 0):
+        raise UserError(f"--max-cost must be a number of cents greater than 0, got {max_cost_cents:g}")
+    if name is not None and (not name.strip() or len(name) > 80 or any(ord(ch) < 32 for ch in name)):
+        raise UserError(f"--name must be 1 to 80 printable characters, got {name!r}")
     if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
         config["prompt_set"] = os.fspath(Path(prompt_set).resolve())
     try:
@@ -419,17 +540,22 @@ def run(
     instance = _make_backend(config, output)
     dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
                "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit,
-               "on_bad_record": on_bad_record}
+               "on_bad_record": on_bad_record, "sample": {"n": int(sample), "seed": int(sample_seed)} if sample is not None else None}
     config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
         structured = _structured_output(instance, policy)
         if frames is None:
             frames = _load_frames(dataset)
         else:
-            frames = _head(frames, limit)
+            frames = _subset(frames, dataset)
         _require_frames(frames)
+        planned = None
+        if getattr(instance, "info", {}).get("kind") == "api":  # a paid run: its bill first, in one line
+            planned = estimate_run(model, frames=frames, prompt_set=prompt_set, chain=chain, answer_format=answer_format,
+                                   max_tokens=max_tokens, api_base=api_base)
         manifest = {
             "model": model,
+            **({"name": name.strip()} if name else {}),
             "display_name": info.display_name,
             "model_info": info.to_dict(),
             "backend": dict(instance.info),
@@ -443,6 +569,7 @@ def run(
             "python": platform.python_version(),
             "started_at": _now(),
             "finished_at": None,
+            **({"estimate": planned.to_dict()} if planned is not None else {}),
         }
         run_dir = create_run_dir(output, model, manifest, frame_ids=[f.frame_id for f in frames])
         lock = RunLock(run_dir).acquire()
@@ -451,14 +578,18 @@ def run(
         raise
     if log:
         log(f"frames: {summary_line(manifest['dataset'])}")
-        log(f"run directory: {run_dir}  ({len(frames)} frames, concurrency {concurrency})")
+        if planned is not None:
+            log(planned.line())
+        mode = "batch mode" if batch else f"concurrency {concurrency}"
+        log(f"run directory: {run_dir}  ({len(frames)} frames, {mode})")
     with lock:
         return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
 
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
            concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
-           gpus_per_replica: float | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
+           gpus_per_replica: float | None = None, max_cost_cents: float | None = None, progress: bool = True,
+           log: Log | None = None) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
@@ -470,7 +601,9 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     for runs started from in-memory frames. Another process writing the run
     makes this raise :class:`~lightemma.errors.RunStoreError` (naming its PID).
     ``concurrency``, ``replicas``, ``ray_address`` and ``gpus_per_replica`` replace the run's own
-    for this session (where the model runs, not what it is asked).
+    for this session (where the model runs, not what it is asked); so does ``max_cost_cents`` (the run's
+    whole spending limit, records of earlier sessions included). A batch run polls the batches its
+    journal names before submitting anything (:mod:`lightemma.backends.batch`).
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
@@ -481,6 +614,10 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         if concurrency < 1:
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
         config["concurrency"] = concurrency
+    if max_cost_cents is not None:
+        if not (math.isfinite(max_cost_cents) and max_cost_cents > 0):
+            raise UserError(f"--max-cost must be a number of cents greater than 0, got {max_cost_cents:g}")
+        config["max_cost_cents"] = max_cost_cents
     placement = {"replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica}
     config.update({k: v for k, v in placement.items() if v is not None})
     recorded = manifest.get("prompt_set", {})
@@ -500,7 +637,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
             if dataset.get("split") is None and not dataset.get("scenes"):
                 # the split the run resolved when it started, not today's default for the version
                 dataset["split"] = (manifest.get("dataset") or {}).get("split")
-            all_frames = _head(frames, dataset.get("limit")) if frames is not None else _load_frames(dataset)
+            all_frames = _subset(frames, dataset) if frames is not None else _load_frames(dataset)
             _same_frame_set(run_dir, all_frames)
             contents = read_run(run_dir)
             for warning in contents.warnings():

@@ -106,7 +106,8 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}"
         + _unanswered(summary),
         f"ADE avg       {_fmt(summary['ade_avg'], '.3f', ' m')}  over {summary['ade_frames']} frame(s)",
-        f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}",
+        (f"time/frame    n/a (batch mode; mean batch turnaround {_fmt(summary.get('batch_turnaround_s'), '.0f', ' s')})"
+         if summary.get("batch") else f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}"),
         f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}"
         + (f" (of which reasoning {_fmt(summary['mean_reasoning_tokens'], '.0f')})" if summary.get("mean_reasoning_tokens") else "")
         + (f", {summary['cached_input_percent']:.1f} % of input from the prompt cache" if summary.get("cached_input_percent") else "")

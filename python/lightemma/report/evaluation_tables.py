@@ -12,7 +12,7 @@ from lightemma.evaluation.paper import (
     paper_accuracy_rows,
     paper_efficiency_rows,
 )
-from lightemma.report.tables import ACCURACY_COLUMNS, EFFICIENCY_COLUMNS, Column, Table, coverage_note, fixed
+from lightemma.report.tables import ACCURACY_COLUMNS, BATCH_TURNAROUND_COLUMN, EFFICIENCY_COLUMNS, Column, Table, coverage_note, fixed
 
 
 def coverage_flags(evaluation: Evaluation) -> dict[str, str]:
@@ -48,7 +48,13 @@ def efficiency_table(evaluation: Evaluation, *, with_paper: bool = False) -> Tab
     rows = evaluation.efficiency_rows()
     if with_paper:
         rows = beside_paper(evaluation.models, rows, paper_efficiency_rows(), EFFICIENCY_DIFF_KEYS)
-    return Table("Efficiency — per frame, all attempts", EFFICIENCY_COLUMNS, rows, name="efficiency", flags=coverage_flags(evaluation), notes=_notes(evaluation))
+    columns, notes = EFFICIENCY_COLUMNS, _notes(evaluation)
+    if any("batch_turnaround_s" in row for row in rows):  # a batch run: its latency is n/a, its batches' turnaround shown
+        at = next(i for i, c in enumerate(columns) if c.key == "seconds_per_frame") + 1
+        columns = (*columns[:at], BATCH_TURNAROUND_COLUMN, *columns[at:])
+        notes = [*notes, "Batch runs (lightemma run --batch): per-frame time is n/a (a frame waits for its batches); "
+                 "Batch turnaround is the mean time from a batch's submission to its results; cost at batch prices."]
+    return Table("Efficiency — per frame, all attempts", columns, rows, name="efficiency", flags=coverage_flags(evaluation), notes=notes)
 
 
 PAIRWISE_COLUMNS: tuple[Column, ...] = (

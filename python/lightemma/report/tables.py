@@ -94,6 +94,9 @@ EFFICIENCY_COLUMNS: tuple[Column, ...] = (
     Column("frames", "Frames"),
 )
 
+#: Table I's extra column when a batch run is among its rows (``lightemma run --batch``)
+BATCH_TURNAROUND_COLUMN = Column("batch_turnaround_s", "Batch turnaround (s)", fixed(0))
+
 
 @dataclass
 class Table:
@@ -123,6 +126,8 @@ def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
                 continue
             value = row.get(col.key)
             cell = with_interval(value, row.get(col.ci), col.fmt) if col.ci else col.fmt(value)
+            if value is None and col.key in (row.get("not_applicable") or ()):
+                cell = "n/a"  # e.g. per-frame latency of a batch run
             if row.get("source") == "diff" and isinstance(value, (int, float)) and value > 0 and cell != "-":
                 cell = "+" + cell  # a difference row: signed
             if col.key in MODEL_KEYS and row.get("source") not in ("paper", "diff"):

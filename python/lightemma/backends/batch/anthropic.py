@@ -1,0 +1,126 @@
+"""Anthropic Message Batches over HTTP (httpx): litellm 1.106.2 can retrieve an Anthropic batch but not create one.
+
+``POST /v1/messages/batches`` with ``{"requests": [{"custom_id", "params": <a Messages API body>}]}`` (at most
+100,000 requests or 256 MB per batch; custom ids ``^[a-zA-Z0-9_-]{1,64}$``), ``GET /v1/messages/batches/{id}``
+(``processing_status`` ``in_progress`` → ``canceling`` → ``ended``), then the JSONL at ``results_url``: per line
+``{"custom_id", "result": {"type": "succeeded", "message"} | {"type": "errored", "error"} | {"type": "expired"} |
+{"type": "canceled"}}``, in any order (docs.anthropic.com/en/docs/build-with-claude/batch-processing).
+The base URL is ``ANTHROPIC_API_BASE`` / ``ANTHROPIC_BASE_URL`` when set (as litellm reads them), else
+``https://api.anthropic.com``; the key goes only there, in ``x-api-key``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any
+
+from lightemma.backends.batch.base import (
+    ENDED,
+    PENDING,
+    BatchHTTPError,
+    BatchStatus,
+    count,
+    http_call,
+    item_result,
+    split_data_url,
+)
+
+VERSION = "2023-06-01"
+
+
+def base_url() -> str:
+    return (os.environ.get("ANTHROPIC_API_BASE") or os.environ.get("ANTHROPIC_BASE_URL") or "https://api.anthropic.com").rstrip("/")
+
+
+def _part(part: dict[str, Any]) -> dict[str, Any]:
+    """An OpenAI content part as Anthropic's (images as base64 sources), its cache breakpoint kept."""
+    if part.get("type") == "image_url":
+        mime, data = split_data_url(part["image_url"]["url"])
+        out: dict[str, Any] = {"type": "image", "source": {"type": "base64", "media_type": mime, "data": data}}
+    else:
+        out = {"type": "text", "text": part.get("text", "")}
+    if "cache_control" in part:
+        out["cache_control"] = part["cache_control"]
+    return out
+
+
+class AnthropicBatches:
+    """Anthropic's Message Batches API (see the module docstring)."""
+
+    provider = "anthropic"
+    max_requests = 100_000
+    max_bytes = 256 * 1000 * 1000
+
+    def __init__(self, model: str, *, api_key: str | None, timeout: float = 120.0, base: str | None = None) -> None:
+        import httpx
+
+        self.model = model.split("/", 1)[1] if model.startswith("anthropic/") else model
+        self.base = (base or base_url()).rstrip("/")
+        key = api_key or os.environ.get("ANTHROPIC_API_KEY", "")
+        self._client = httpx.AsyncClient(timeout=timeout, headers={"x-api-key": key, "anthropic-version": VERSION})
+
+    def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
+        params: dict[str, Any] = {"model": self.model, "max_tokens": body["max_tokens"],
+                                  "messages": [{"role": m["role"], "content": [_part(p) for p in m["content"]]}
+                                               for m in body["messages"]]}
+        if "temperature" in body:
+            params["temperature"] = body["temperature"]
+        return {"custom_id": custom_id, "params": params}
+
+    async def _request(self, method: str, url: str, **kw: Any) -> Any:
+        response = await http_call(self._client, method, url, **kw)
+        return response
+
+    async def submit(self, entries: list[dict[str, Any]], token: str) -> str:
+        response = await self._request("POST", f"{self.base}/v1/messages/batches", json={"requests": entries})
+        return str(response.json()["id"])
+
+    async def status(self, batch_id: str) -> BatchStatus:
+        data = (await self._request("GET", f"{self.base}/v1/messages/batches/{batch_id}")).json()
+        state = str(data.get("processing_status"))
+        return BatchStatus(state=ENDED if state == "ended" else PENDING, provider_state=state,
+                           counts=dict(data.get("request_counts") or {}), handle={"results_url": data.get("results_url")})
+
+    async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
+        url = status.handle.get("results_url") or f"{self.base}/v1/messages/batches/{batch_id}/results"
+        if not str(url).startswith(self.base + "/"):  # the key goes only to the base the user chose
+            raise BatchHTTPError(0, f"results_url {url!r} is not under {self.base}; not sending the key there", answer=True)
+        text = (await self._request("GET", url)).text
+        out = []
+        for line in text.splitlines():
+            if not line.strip():
+                continue
+            row = json.loads(line)
+            cid, result = str(row.get("custom_id")), row.get("result") or {}
+            kind = result.get("type")
+            if kind == "succeeded":
+                out.append(_message_result(cid, result.get("message") or {}))
+            elif kind in ("expired", "canceled"):
+                out.append(item_result(cid, error="BatchExpired", error_message=f"{kind}: not run by the batch", resubmit=True))
+            else:
+                err = (result.get("error") or {}).get("error") or result.get("error") or {}
+                out.append(item_result(cid, error="BatchRequestError", error_message=f"{err.get('type')}: {err.get('message')}"))
+        return out
+
+    async def find(self, token: str) -> str | None:
+        return None  # Anthropic batches carry no name or metadata to find one by
+
+    async def aclose(self) -> None:
+        await self._client.aclose()
+
+
+def _message_result(custom_id: str, message: dict[str, Any]) -> dict[str, Any]:
+    """An Anthropic message as an item result: input tokens include cache reads and writes (as litellm counts them)."""
+    usage = message.get("usage") or {}
+
+    base, out_tokens = count(usage, "input_tokens"), count(usage, "output_tokens")
+    read, written = count(usage, "cache_read_input_tokens") or 0, count(usage, "cache_creation_input_tokens") or 0
+    total = None if base is None else base + read + written
+    text = "".join(b.get("text", "") for b in message.get("content") or [] if b.get("type") == "text")
+    kw = dict(finish_reason=message.get("stop_reason"), input_tokens=total if total else None,
+              output_tokens=out_tokens if total else None, cached_input_tokens=read if total else None,
+              cache_write_tokens=written if total else None)
+    if not text.strip():
+        return item_result(custom_id, error="EmptyResponse", error_message=f"no answer text (finish_reason={kw['finish_reason']})", **kw)
+    return item_result(custom_id, text=text, **kw)
