@@ -37,6 +37,7 @@ import json
 import math
 import os
 import platform
+import shutil
 import sys
 import tempfile
 import threading
@@ -394,6 +395,13 @@ def main(argv: list[str] | None = None) -> int:
 
     deadline = Deadline(args.deadline, save)
     work = Path(tempfile.mkdtemp(prefix="lightemma-gpu-bench-"))
+    try:
+        return _bench(args, result, save, deadline, work, device, max_new, image_size, sizes, frames_for, agree_frames)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+def _bench(args, result, save, deadline, work, device, max_new, image_size, sizes, frames_for, agree_frames) -> int:
     import lightemma.synth
 
     start = time.perf_counter()
