@@ -2,6 +2,7 @@
 # The GPU bench, one command (docs/local.md#gpu-bench): on the GPU machine, after benches/gpu/prepare.sh here,
 #   bash benches/gpu/run.sh            # installs benches/gpu/wheels offline, measures, writes $OUT/gpu.json + gpu.md
 #   bash benches/gpu/run.sh --tiny     # the same on a CPU with tiny configs, in the current environment (CI runs it)
+# PYTHON: the interpreter (default: the first of python3, python, python3.12 that imports torch).
 # Stops itself before 8 minutes (install included): no step starts that would not fit, and a watchdog
 # ends the bench at its deadline with what it measured already written.
 set -euo pipefail
@@ -15,14 +16,24 @@ if [ "${1:-}" = "--tiny" ]; then
 fi
 start=$SECONDS
 mkdir -p "$out"
-# a venv over the machine's own torch and transformers; lightemma and what is missing, from the wheels
-venv="$here/.venv"
-"$py" -m venv --system-site-packages "$venv"
-"$venv/bin/python" - "$here/wheels" <<'PY' 2>&1 | tee "$out/install.log"
-import glob, subprocess, sys
+if [ -z "${PYTHON:-}" ]; then  # the interpreter that has the machine's torch
+  for candidate in python3 python python3.12; do
+    if command -v "$candidate" >/dev/null && "$candidate" -c 'import torch, transformers' 2>/dev/null; then
+      py="$candidate"; break
+    fi
+  done
+fi
+# lightemma and each wheel whose package the machine lacks, unpacked (a wheel is a zip made to be
+# unpacked; no pip, no venv, no network needed) into a folder put first on the path
+site="$here/.site"
+rm -rf "$site"
+"$py" - "$here/wheels" "$site" <<'PY' 2>&1 | tee "$out/install.log"
+import glob, sys, zipfile
 from importlib import metadata
-wheels = sorted(glob.glob(f"{sys.argv[1]}/*.whl"))
-todo = []
+wheels, site = sorted(glob.glob(f"{sys.argv[1]}/*.whl")), sys.argv[2]
+if not wheels:
+    sys.exit(f"no wheels in {sys.argv[1]}: run benches/gpu/prepare.sh first and carry benches/gpu/wheels")
+print(f"python {sys.version.split()[0]} at {sys.executable}")
 for w in wheels:
     name = w.rsplit("/", 1)[1].split("-")[0].replace("_", "-").lower()
     try:
@@ -30,9 +41,11 @@ for w in wheels:
     except metadata.PackageNotFoundError:
         have = None
     if name == "lightemma" or have is None:
-        todo.append(w)
-    print(f"{name}: {'installing ' + w.rsplit('/', 1)[1] if w in todo else 'present (' + have + ')'}")
-subprocess.run([sys.executable, "-m", "pip", "install", "--quiet", "--no-index", "--no-deps", *todo], check=True)
+        zipfile.ZipFile(w).extractall(site)
+        print(f"{name}: unpacked {w.rsplit('/', 1)[1]}")
+    else:
+        print(f"{name}: present ({have})")
 PY
+export PYTHONPATH="$site${PYTHONPATH:+:$PYTHONPATH}"
 left=$(( 470 - (SECONDS - start) ))
-timeout "$left" "$venv/bin/python" "$here/bench_gpu.py" --out "$out" --deadline $(( left - 25 )) "$@"
+timeout "$left" "$py" "$here/bench_gpu.py" --out "$out" --deadline $(( left - 25 )) "$@"
