@@ -282,8 +282,12 @@ try:
     lightemma.load_frames({str(root)!r}, {VERSION!r}, split="val")
 except lightemma.errors.DatasetError as exc:
     print(exc)
+from lightemma.cli import main
+print(main(["run", "--model", "baseline:cv", "--dataroot", {str(root)!r}, "--version", {VERSION!r}, "--split", "mini_val",
+            "--output", {str(tmp_path / "runs")!r}, "--no-progress"]))
 """
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
+    assert out[-1] == "0"  # a whole run, without the devkit
     assert out[0] == f"{2 * (SMALL['keyframes'] - 14)} {sorted(splits['mini_val'])}"
     assert "of the 150 scenes of split 'val' are not in version v1.0-mini" in out[1] and "v1.0-trainval" in out[1]
 
