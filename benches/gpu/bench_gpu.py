@@ -75,18 +75,10 @@ ARCHITECTURES: dict[str, dict[str, Any]] = {
     },
 }
 
-QWEN_SPECIALS = ["<|endoftext|>", "<|im_start|>", "<|im_end|>", "<|vision_start|>", "<|vision_end|>",
-                 "<|image_pad|>", "<|video_pad|>"]
-# Qwen's chat template for a conversation of user turns [image, text] and assistant turns (no system turn).
-QWEN_TEMPLATE = (
-    "{% for message in messages %}<|im_start|>{{ message['role'] }}\n"
-    "{% if message['content'] is string %}{{ message['content'] }}"
-    "{% else %}{% for part in message['content'] %}"
-    "{% if part['type'] == 'image' %}<|vision_start|><|image_pad|><|vision_end|>"
-    "{% elif part['type'] == 'text' %}{{ part['text'] }}{% endif %}"
-    "{% endfor %}{% endif %}<|im_end|>\n{% endfor %}"
-    "{% if add_generation_prompt %}<|im_start|>assistant\n{% endif %}"
-)
+# Qwen's special tokens and chat template (single user turns [image, text] and assistant turns), shared
+# with the tests' tiny models
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
+from local_models import QWEN_SPECIALS, QWEN_TEMPLATE  # noqa: E402
 
 
 def tiny_architecture(name: str) -> dict[str, Any]:
