@@ -17,6 +17,7 @@ import lightemma
 from frames_fixtures import make_small_dataset, read_table, reference_frames, small_copy, small_root  # noqa: F401
 from lightemma.errors import DatasetError
 from lightemma.frames import Frame, FrameSet, format_history, format_number, geometry, load_frames, window_range
+from lightemma.frames.loader import QUATERNION_TOLERANCE, Tables, extract_frames, load_tables, predefined_splits
 from lightemma.frames.model import summary_line
 from lightemma.synth import build_scenarios
 
@@ -206,6 +207,98 @@ def test_full_window_matches_the_independent_reading_too(small_root):
     assert list(ref) == full.frame_ids
     last = full[len(full) - 1]
     np.testing.assert_allclose(last.gt_positions, ref[last.frame_id]["gt_positions"], atol=1e-9)
+
+
+# --------------------------------------------------------------------------- against the devkit's own reading
+
+
+def _devkit():
+    return pytest.importorskip("nuscenes.nuscenes", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed; "
+                               "CI installs it (the README's main install includes the nuscenes extra)")
+
+
+@pytest.mark.parametrize("window", ["reference", "full"])
+def test_the_frame_reader_agrees_with_the_devkits_reading_of_the_same_dataroot(small_root, window):
+    from pyquaternion import Quaternion  # a devkit dependency
+
+    nusc = _devkit().NuScenes(version=VERSION, dataroot=str(small_root), verbose=False)
+    tables = load_tables(small_root, VERSION)
+    # the index: every sample's CAM_FRONT keyframe, as the devkit's sample["data"] holds it
+    assert tables.front_keyframes == {s["token"]: s["data"]["CAM_FRONT"] for s in nusc.sample}
+    assert [s["name"] for s in tables.scenes] == [s["name"] for s in nusc.scene]
+    frames = extract_frames(tables, split="all", window=window)
+    assert len(frames) == sum(len(window_range(s["nbr_samples"], window)) for s in nusc.scene)
+    # each frame's keyframe chain, pose, time, image and calibration through the devkit's own get()
+    chains = {}
+    for scene in nusc.scene:
+        chain, token = [], scene["first_sample_token"]
+        while token:
+            chain.append(token)
+            token = nusc.get("sample", token)["next"]
+        chains[scene["name"]] = chain
+    for i, frame in enumerate(frames):
+        chain = chains[frame.scene_name]
+        assert chain[frame.keyframe_index] == frame.sample_token
+        sd = nusc.get("sample_data", nusc.get("sample", frame.sample_token)["data"]["CAM_FRONT"])
+        pose = nusc.get("ego_pose", sd["ego_pose_token"])
+        cs = nusc.get("calibrated_sensor", sd["calibrated_sensor_token"])
+        assert frame.image_path == nusc.get_sample_data_path(sd["token"])
+        assert frame.timestamp == pose["timestamp"] == sd["timestamp"]
+        np.testing.assert_allclose(frame.ego_pose[:2], pose["translation"][:2], rtol=0, atol=1e-9)
+        assert frame.ego_pose[2] == pytest.approx(Quaternion(pose["rotation"]).yaw_pitch_roll[0], abs=1e-12)
+        np.testing.assert_array_equal(frame.camera_intrinsic, cs["camera_intrinsic"])
+        np.testing.assert_allclose(frame.camera_extrinsic[:3, :3], Quaternion(cs["rotation"]).rotation_matrix, atol=1e-12)
+        np.testing.assert_allclose(frame.camera_extrinsic[:3, 3], cs["translation"], atol=1e-12)
+        # the future positions from the devkit's poses of keyframes c+1 … c+6, in the ego frame
+        future = [nusc.get("ego_pose", nusc.get("sample_data", nusc.get("sample", t)["data"]["CAM_FRONT"])["ego_pose_token"])
+                  for t in chain[frame.keyframe_index + 1: frame.keyframe_index + 7]]
+        x, y, yaw = frame.ego_pose
+        d = np.array([p["translation"][:2] for p in future]) - [x, y]
+        c, s = math.cos(yaw), math.sin(yaw)
+        np.testing.assert_allclose(frames.gt_positions[i], np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], -1),
+                                   atol=1e-9)
+
+
+def test_the_split_lists_are_the_devkits():
+    splits = pytest.importorskip("nuscenes.utils.splits", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed")
+    assert predefined_splits() == splits.create_splits_scenes()
+    assert {k: len(v) for k, v in predefined_splits().items()} == {
+        "train": 700, "val": 150, "test": 150, "mini_train": 8, "mini_val": 2, "train_detect": 350, "train_track": 350}
+
+
+def test_frames_and_splits_load_without_the_devkit_or_its_dependencies(renamed_mini, tmp_path):
+    import subprocess
+    import sys
+
+    root, splits = renamed_mini
+    code = f"""
+import sys
+for name in ("nuscenes", "pyquaternion", "cv2", "shapely", "sklearn"):
+    sys.modules[name] = None  # any import of them fails
+import lightemma
+fs = lightemma.load_frames({str(root)!r}, {VERSION!r}, split="mini_val")
+print(len(fs), fs.scenes)
+try:
+    lightemma.load_frames({str(root)!r}, {VERSION!r}, split="val")
+except lightemma.errors.DatasetError as exc:
+    print(exc)
+from lightemma.cli import main
+print(main(["run", "--model", "baseline:cv", "--dataroot", {str(root)!r}, "--version", {VERSION!r}, "--split", "mini_val",
+            "--output", {str(tmp_path / "runs")!r}, "--no-progress"]))
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
+    assert out[-1] == "0"  # a whole run, without the devkit
+    assert out[0] == f"{2 * (SMALL['keyframes'] - 14)} {sorted(splits['mini_val'])}"
+    assert "of the 150 scenes of split 'val' are not in version v1.0-mini" in out[1] and "v1.0-trainval" in out[1]
+
+
+def test_extract_frames_takes_the_readers_tables_only(small_root):
+    tables = load_tables(small_root, VERSION)
+    assert isinstance(tables, Tables) and tables.version == VERSION and tables.dataroot == str(small_root)
+    with pytest.raises(TypeError, match="load_tables"):
+        extract_frames(object(), split="all")
+    with pytest.raises(DatasetError, match="ego_pose 'nope' is not in"):
+        tables.get("ego_pose", "nope")
 
 
 # --------------------------------------------------------------------------- against the closed form
@@ -448,7 +541,7 @@ def test_custom_version_needs_an_explicit_choice(tmp_path):
 @pytest.fixture
 def renamed_mini(small_copy):
     """The small dataset with scenes renamed to nuScenes' real mini split names."""
-    splits = __import__("nuscenes.utils.splits", fromlist=["x"]).create_splits_scenes()
+    splits = predefined_splits()
     names = splits["mini_val"] + splits["mini_train"][:6]
     path = small_copy / VERSION / "scene.json"
     scenes = json.loads(path.read_text())
@@ -458,7 +551,7 @@ def renamed_mini(small_copy):
     return small_copy, splits
 
 
-def test_default_split_and_named_splits_resolve_through_the_devkit(renamed_mini):
+def test_default_split_and_named_splits_resolve_by_the_devkits_split_lists(renamed_mini):
     root, splits = renamed_mini
     fs = load_frames(root, VERSION)  # v1.0-mini defaults to all 10 of its scenes (here 8)
     assert fs.split == "all"
@@ -499,10 +592,12 @@ def test_corrupt_table_is_named(small_copy):
         load_frames(small_copy, VERSION, split="all")
 
 
-def test_missing_map_file_is_a_dataset_error(small_copy):
+def test_frames_do_not_need_the_map_files(small_copy, fs):
+    # the devkit refuses a dataroot without its map masks; frames use no map, so they load the same
     shutil.rmtree(small_copy / "maps")
-    with pytest.raises(DatasetError, match="map mask"):
-        load_frames(small_copy, VERSION, split="all")
+    loaded = load_frames(small_copy, VERSION, split="all")
+    assert loaded.frame_ids == fs.frame_ids
+    np.testing.assert_array_equal(loaded.gt_positions, fs.gt_positions)
 
 
 def test_inconsistent_tables_are_a_dataset_error_not_a_key_error(small_copy):
@@ -607,13 +702,24 @@ def _keyframe_pose(root, scene_index: int, keyframe: int):
 
 
 BAD_POSES = {
-    "zero quaternion": ("rotation", [0.0, 0.0, 0.0, 0.0], "has no rotation"),
-    "three-value quaternion": ("rotation", [1.0, 0.0, 0.0], "not a quaternion"),
-    "one-value translation": ("translation", [412.5], "needs at least 2"),
+    "zero quaternion": ("rotation", [0.0, 0.0, 0.0, 0.0], "is not a unit quaternion (norm 0;"),
+    "scaled quaternion": ("rotation", [2.0, 0.0, 0.0, 0.0], "is not a unit quaternion (norm 2;"),
+    "quaternion just outside the tolerance": ("rotation", [1.0 + 2e-5, 0.0, 0.0, 0.0], "|norm - 1| <= 1e-05"),
+    "three-value quaternion": ("rotation", [1.0, 0.0, 0.0], "has 3 value(s), needs 4"),
+    "NaN quaternion": ("rotation", [float("nan"), 0.0, 0.0, 1.0], "not finite"),
+    "text quaternion": ("rotation", "1 0 0 0", "is not a list of 4 numbers"),
+    "one-value translation": ("translation", [412.5], "has 1 value(s), needs 3"),
+    "two-value translation": ("translation", [412.5, 1180.2], "has 2 value(s), needs 3"),
+    "four-value translation": ("translation", [412.5, 1180.2, 0.0, 1.0], "has 4 value(s), needs 3"),
     "NaN translation": ("translation", [float("nan"), 1.0, 0.0], "not finite"),
-    "text translation": ("translation", ["a", "b", "c"], "not a list of numbers"),
-    "NaN timestamp": ("timestamp", float("nan"), "not a finite whole number"),
-    "fractional timestamp": ("timestamp", 1.5e15 + 0.5, "not a finite whole number"),
+    "infinite translation": ("translation", [float("inf"), 1.0, 0.0], "not finite"),
+    "text translation": ("translation", ["a", "b", "c"], "is not a list of 3 numbers"),
+    "boolean translation": ("translation", [True, 1.0, 0.0], "is not a list of 3 numbers"),
+    "missing translation": ("translation", None, "is not a list of 3 numbers"),
+    "NaN timestamp": ("timestamp", float("nan"), "not a finite, whole, non-negative number"),
+    "fractional timestamp": ("timestamp", 1.5e15 + 0.5, "not a finite, whole, non-negative number"),
+    "negative timestamp": ("timestamp", -5, "not a finite, whole, non-negative number"),
+    "text timestamp": ("timestamp", "1532402927647951", "not a finite, whole, non-negative number"),
 }
 
 
@@ -642,16 +748,37 @@ def test_an_unusable_pose_is_named_by_table_token_and_field_and_its_scene_skippe
     assert "--on-bad-record skip" in info.value.for_cli()  # the command line names the flag
 
 
-def test_a_two_value_translation_and_an_unnormalised_quaternion_are_usable_poses(small_copy, fs):
+def test_quaternions_within_the_tolerance_are_renormalised_and_give_the_same_frames(small_copy, fs):
     poses = json.loads((small_copy / VERSION / "ego_pose.json").read_text())
     for pose in poses:
-        pose["translation"] = pose["translation"][:2]
-        pose["rotation"] = [2.0 * q for q in pose["rotation"]]  # same rotation, norm 2
+        pose["rotation"] = [(1 + 0.9e-5) * q for q in pose["rotation"]]  # inside QUATERNION_TOLERANCE = 1e-5
     (small_copy / VERSION / "ego_pose.json").write_text(json.dumps(poses))
     loaded = load_frames(small_copy, VERSION, split="all")
     assert loaded.frame_ids == fs.frame_ids and not loaded.bad_records
     np.testing.assert_allclose(loaded.gt_positions, fs.gt_positions, atol=1e-9)
     np.testing.assert_allclose(loaded.history_actions, fs.history_actions, atol=1e-9)
+
+
+CAMERA_FIELDS = {
+    "two-value translation": ("translation", [1.7, 0.0], "has 2 value(s), needs 3"),
+    "scaled quaternion": ("rotation", [1.0, 1.0, 1.0, 1.0], "is not a unit quaternion (norm 2;"),
+    "2x3 intrinsic": ("camera_intrinsic", [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]], "is not a finite 3x3 matrix"),
+}
+
+
+@pytest.mark.parametrize("kind", list(CAMERA_FIELDS))
+def test_an_unusable_camera_calibration_is_named_too(small_copy, kind):
+    field, value, why = CAMERA_FIELDS[kind]
+    path = small_copy / VERSION / "calibrated_sensor.json"
+    sensors = {s["token"]: s["channel"] for s in read_table(small_copy, VERSION, "sensor")}
+    rows = json.loads(path.read_text())
+    (front,) = [r for r in rows if sensors[r["sensor_token"]] == "CAM_FRONT"]
+    front[field] = value
+    path.write_text(json.dumps(rows))
+    with pytest.raises(DatasetError) as info:
+        load_frames(small_copy, VERSION, split="all", on_bad_record="error")
+    message = str(info.value)
+    assert "\n" not in message and f"calibrated_sensor {front['token']}: field {field} = " in message and why in message
 
 
 def test_on_bad_record_must_be_skip_or_error(small_root):

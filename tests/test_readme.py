@@ -24,9 +24,17 @@ def test_readme_test_command_is_what_ci_runs() -> None:
 
 
 def test_readme_install_commands_use_the_lock() -> None:
-    for line in _fenced_after("## Install\n"):
-        if line.startswith("pip install") and "vllm" not in line:
+    lines = [line for line in _fenced_after("## Install\n") if line.startswith("pip install")]
+    for line in lines:
+        if "vllm" not in line:
             assert "-c constraints.txt" in line, line
+            # the main installs include the devkit (maps, rendering; the lock's numpy<2)
+            assert re.search(r"\[[^]]*nuscenes", line), line
+        else:
+            # vLLM needs numpy 2: no devkit, no lock (whose numpy is < 2)
+            assert "nuscenes" not in line and "constraints.txt" not in line, line
+    test_command = _fenced_after("## Test\n")[0]
+    assert "nuscenes" in test_command  # CI runs the tests against the devkit's reading
 
 
 def test_lock_pins_exactly_and_excludes_known_broken_releases() -> None:

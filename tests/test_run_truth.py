@@ -601,7 +601,7 @@ def test_a_malformed_pose_is_named_in_one_line_or_its_scene_left_out_of_the_run(
                 "--split", "all", "--output", tmp_path / "out", "--no-progress"]
         code, _, errors = run_cli(capsys, *args, "--on-bad-record", "error")
         assert code == 2 and len(errors) == 1 and not (tmp_path / "out").exists() and not server.requests, errors
-        assert f"scene {first_scene}: ego_pose {pose['token']}: field rotation = [0, 0, 0, 0] has no rotation" in errors[0]
+        assert f"scene {first_scene}: ego_pose {pose['token']}: field rotation = [0, 0, 0, 0] is not a unit quaternion (norm 0;" in errors[0]
         code, _, errors = run_cli(capsys, *args)  # the default: that scene is left out, with a warning
         assert code == 0 and not errors
     contents = read_run(only_run_dir(tmp_path / "out"))

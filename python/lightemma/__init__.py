@@ -6,7 +6,7 @@ trajectories, scoring them) live in the compiled, private module
 plus data loading, prompting, backends, run storage, reporting and the CLI.
 
 Attributes are imported lazily so that ``import lightemma`` stays fast and never
-pulls in heavy dependencies (nuscenes-devkit, litellm, torch) until used.
+pulls in heavy dependencies (litellm, torch) until used.
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
 Public names: :func:`load_frames`, :class:`Frame`, :class:`FrameSet`,
 :func:`extract_frames`, :func:`load_tables`, :func:`format_number`,
 :func:`format_history`, :func:`format_python_list`,
-:func:`history_placeholders`. The devkit is imported only when tables are loaded.
+:func:`history_placeholders`. The tables are read without nuscenes-devkit (numpy 1 or 2).
 """
 
 from __future__ import annotations

@@ -1,32 +1,41 @@
-"""Load frames from a nuScenes dataroot through ``nuscenes-devkit`` (docs/definitions.md#frames-and-windows).
+"""Load frames from a nuScenes dataroot (docs/definitions.md#frames-and-windows).
+
+lightemma reads the nuScenes JSON tables itself — ``scene`` → its chain of
+``sample`` records → each sample's CAM_FRONT keyframe ``sample_data`` → its
+``ego_pose`` and ``calibrated_sensor`` — exactly as ``nuscenes-devkit``'s
+``NuScenes`` indexes them (tests/test_frames.py checks the two readings agree
+on the same dataroot), so that loading frames needs only numpy (1 or 2) and no
+devkit; the devkit stays an optional extra (``lightemma[nuscenes]``) for maps
+and rendering. The predefined splits are the devkit's ``create_splits_scenes()``,
+copied into ``splits.json`` beside this module.
 
 Two steps, usable separately: :func:`load_tables` checks the dataroot and
-loads the devkit's ``NuScenes`` tables (the slow part, seconds to minutes on
-the real dataset); :func:`extract_frames` turns chosen scenes of a loaded
-``NuScenes`` into a :class:`FrameSet` with vectorised NumPy.
+reads the tables the frames need (the slow part: seconds on the real
+dataset); :func:`extract_frames` turns chosen scenes of the loaded
+:class:`Tables` into a :class:`FrameSet` with vectorised NumPy.
 :func:`load_frames` does both.
 """
 
 from __future__ import annotations
 
+import functools
 import json
 import logging
+import math
 import os
 from collections.abc import Iterable, Sequence
-from typing import TYPE_CHECKING, Any
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
-from lightemma.errors import DatasetError, UserError
+from lightemma.errors import DatasetError
 from lightemma.frames import geometry
 from lightemma.frames.model import FrameSet
 
-if TYPE_CHECKING:  # pragma: no cover
-    from nuscenes.nuscenes import NuScenes
-
 log = logging.getLogger("lightemma.frames")
 
-#: the 13 tables the devkit loads
+#: the 13 tables of a nuScenes version folder (all must be present, as the devkit requires)
 TABLES = (
     "category",
     "attribute",
@@ -42,6 +51,14 @@ TABLES = (
     "sample_annotation",
     "map",
 )
+
+#: the tables the frame reader reads
+READ_TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor")
+
+#: largest allowed deviation of a rotation quaternion's norm from 1 (|‖q‖ − 1|): nuScenes stores unit
+#: quaternions to ~1e-15; 1e-5 also admits quaternions written in float32 or to 6 decimals, and refuses
+#: anything that is visibly not a rotation (a scaled, truncated or zero quaternion)
+QUATERNION_TOLERANCE = 1e-5
 
 #: versions whose scenes the devkit's hard-coded splits name
 KNOWN_VERSIONS = ("v1.0-test", "v1.0-trainval", "v1.0-mini")
@@ -97,40 +114,43 @@ def _bad(table: str, token: str, field: str, value: Any, why: str) -> BadRecordE
     return BadRecordError(f"{table} {token}: field {field} = {shown} {why}")
 
 
-def _translation(record: dict[str, Any], table: str, min_len: int) -> np.ndarray:
-    """The record's ``translation`` as finite floats (at least ``min_len`` of them)."""
-    value = record.get("translation")
-    try:
-        array = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise _bad(table, record.get("token", "?"), "translation", value, "is not a list of numbers") from None
-    if array.size < min_len:
-        raise _bad(table, record.get("token", "?"), "translation", value, f"has {array.size} value(s), needs at least {min_len}")
+def _numbers(record: dict[str, Any], table: str, field: str, size: int, what: str) -> np.ndarray:
+    """The record's ``field`` as exactly ``size`` finite numbers (bools and text refused)."""
+    value = record.get(field)
+    token = record.get("token", "?")
+    if not isinstance(value, (list, tuple)) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        raise _bad(table, token, field, value, f"is not a list of {size} numbers ({what})")
+    if len(value) != size:
+        raise _bad(table, token, field, value, f"has {len(value)} value(s), needs {size} ({what})")
+    array = np.asarray(value, dtype=np.float64)
     if not np.isfinite(array).all():
-        raise _bad(table, record.get("token", "?"), "translation", value, "is not finite")
+        raise _bad(table, token, field, value, "is not finite")
     return array
 
 
+def _translation(record: dict[str, Any], table: str) -> np.ndarray:
+    """The record's ``translation``: exactly 3 finite numbers (x, y, z in metres)."""
+    return _numbers(record, table, "translation", 3, "x, y, z in metres")
+
+
 def _rotation(record: dict[str, Any], table: str) -> np.ndarray:
-    """The record's ``rotation`` quaternion (w, x, y, z), normalised to unit length."""
-    value = record.get("rotation")
-    try:
-        q = np.asarray(value, dtype=np.float64).reshape(-1)
-    except (TypeError, ValueError):
-        raise _bad(table, record.get("token", "?"), "rotation", value, "is not a quaternion (w, x, y, z)") from None
-    if q.size != 4 or not np.isfinite(q).all():
-        raise _bad(table, record.get("token", "?"), "rotation", value, "is not a quaternion of 4 finite numbers (w, x, y, z)")
+    """The record's ``rotation``: a unit quaternion (w, x, y, z) within :data:`QUATERNION_TOLERANCE`, renormalised."""
+    q = _numbers(record, table, "rotation", 4, "a quaternion w, x, y, z")
     norm = float(np.linalg.norm(q))
-    if not norm > 1e-6:
-        raise _bad(table, record.get("token", "?"), "rotation", value, "has no rotation (norm 0): it cannot be normalised")
+    if not abs(norm - 1.0) <= QUATERNION_TOLERANCE:
+        raise _bad(table, record.get("token", "?"), "rotation", record.get("rotation"),
+                   f"is not a unit quaternion (norm {norm:.6g}; allowed |norm - 1| <= {QUATERNION_TOLERANCE:g})")
     return q / norm
 
 
 def _timestamp(record: dict[str, Any], table: str) -> int:
-    """The record's ``timestamp`` (integer microseconds), which must be finite and whole."""
+    """The record's ``timestamp``: a finite, whole, non-negative number of microseconds."""
     value = record.get("timestamp")
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or float(value) != int(value):
-        raise _bad(table, record.get("token", "?"), "timestamp", value, "is not a finite whole number of microseconds")
+    if (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
+            or float(value) != int(value) or value < 0):
+        raise _bad(table, record.get("token", "?"), "timestamp", value,
+                   "is not a finite, whole, non-negative number of microseconds")
     return int(value)
 
 
@@ -170,53 +190,141 @@ def check_dataroot(dataroot: str | os.PathLike[str], version: str) -> str:
     return root
 
 
-def _bad_json_table(table_root: str) -> str | None:
-    for t in TABLES:
-        path = os.path.join(table_root, f"{t}.json")
+@dataclass(frozen=True)
+class Tables:
+    """The nuScenes tables the frames need, read from ``<dataroot>/<version>/*.json`` by :func:`load_tables`.
+
+    ``scenes``: the ``scene`` records in file order; ``samples``, ``sample_data``, ``ego_poses``,
+    ``calibrated_sensors``: records by token (``sample_data``, ``ego_poses``, ``calibrated_sensors``
+    only those of CAM_FRONT keyframes); ``front_keyframes``: sample token → its CAM_FRONT keyframe
+    ``sample_data`` token (what the devkit puts in ``sample["data"]["CAM_FRONT"]``). Records are the
+    tables' own dicts, unvalidated: :func:`extract_frames` checks each field it uses.
+    """
+
+    dataroot: str
+    version: str
+    scenes: list[dict[str, Any]]
+    samples: dict[str, dict[str, Any]]
+    sample_data: dict[str, dict[str, Any]]
+    ego_poses: dict[str, dict[str, Any]]
+    calibrated_sensors: dict[str, dict[str, Any]]
+    front_keyframes: dict[str, str]
+
+    def get(self, table: str, token: str) -> dict[str, Any]:
+        """A record by table name (``sample``, ``sample_data``, ``ego_pose``, ``calibrated_sensor``) and token."""
+        rows = {"sample": self.samples, "sample_data": self.sample_data, "ego_pose": self.ego_poses,
+                "calibrated_sensor": self.calibrated_sensors}[table]
         try:
-            with open(path, encoding="utf-8") as f:
-                json.load(f)
-        except (ValueError, UnicodeDecodeError) as exc:
-            return f"{path}: {exc}"
-    return None
+            return rows[token]
+        except (KeyError, TypeError):
+            raise DatasetError(f"{table} {token!r} is not in {os.path.join(self.dataroot, self.version, table)}.json"
+                               ) from None
 
 
-def load_tables(dataroot: str | os.PathLike[str], version: str) -> NuScenes:
-    """Check the dataroot and load its tables with the devkit's ``NuScenes`` (quietly).
+def _read_table(table_root: str, table: str) -> list[dict[str, Any]]:
+    """One table: a JSON list of records, each a dict with a string ``token``."""
+    path = os.path.join(table_root, f"{table}.json")
+    try:
+        with open(path, encoding="utf-8") as f:
+            rows = json.load(f)
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise DatasetError(f"nuScenes table is not valid JSON: {path}: {exc}") from None
+    except RecursionError:
+        raise DatasetError(f"nuScenes table is not valid JSON: {path}: nested too deeply") from None
+    except OSError as exc:
+        raise DatasetError(f"cannot read nuScenes table {path}: {exc}") from None
+    if not isinstance(rows, list):
+        raise DatasetError(f"nuScenes table {path} is not a list of records (a JSON {type(rows).__name__})")
+    for i, row in enumerate(rows):
+        if not isinstance(row, dict) or not isinstance(row.get("token"), str):
+            raise DatasetError(f"nuScenes table {path}: record {i} is not an object with a string token")
+    return rows
 
-    Problems become :class:`DatasetError` naming the path, never an assertion
-    or ``KeyError`` from inside the devkit.
+
+def _field(record: dict[str, Any], table: str, field: str, kind: type | tuple[type, ...] = str) -> Any:
+    """``record[field]``, which must exist and be of ``kind``; else a DatasetError naming table, token and field."""
+    value = record.get(field, KeyError)
+    if value is KeyError:
+        raise DatasetError(f"{table} {record['token']}: field {field} is missing")
+    if not isinstance(value, kind) or isinstance(value, bool) and kind is not bool:
+        shown = repr(value) if len(repr(value)) <= 80 else repr(value)[:77] + "..."
+        names = kind.__name__ if isinstance(kind, type) else " or ".join(k.__name__ for k in kind)
+        raise DatasetError(f"{table} {record['token']}: field {field} = {shown} is not a {names}")
+    return value
+
+
+def _inconsistent(table_root: str, what: str) -> DatasetError:
+    return DatasetError(f"nuScenes tables in {table_root} are inconsistent: {what}; "
+                        "is this an unmodified nuScenes version folder?")
+
+
+def load_tables(dataroot: str | os.PathLike[str], version: str) -> Tables:
+    """Check the dataroot and read the tables the frames need (no devkit; numpy 1 or 2).
+
+    Indexes them as ``nuscenes-devkit``'s ``NuScenes`` does: a sample's CAM_FRONT keyframe is the
+    ``sample_data`` record with ``is_key_frame`` true whose ``calibrated_sensor``'s ``sensor`` has
+    channel ``CAM_FRONT``. Problems raise :class:`DatasetError` naming the path, table, token or
+    field: a missing or invalid table, a token that points nowhere, two CAM_FRONT keyframes for one
+    sample. Pose values are checked later, per scene, by :func:`extract_frames`.
     """
     root = check_dataroot(dataroot, version)
-    try:
-        from nuscenes.nuscenes import NuScenes  # lazy: the devkit pulls in cv2, sklearn, matplotlib
-    except ImportError as exc:
-        raise UserError(
-            f"loading nuScenes needs nuscenes-devkit (pip install nuscenes-devkit==1.2.0): {exc}"
-        ) from exc
-
     table_root = os.path.join(root, version)
-    try:
-        return NuScenes(version=version, dataroot=root, verbose=False)
-    except json.JSONDecodeError:
-        raise DatasetError(f"nuScenes table is not valid JSON: {_bad_json_table(table_root)}") from None
-    except AssertionError as exc:
-        raise DatasetError(f"nuScenes devkit could not load {table_root}: {exc}") from None
-    except (KeyError, IndexError, TypeError, AttributeError) as exc:
-        raise DatasetError(
-            f"nuScenes tables in {table_root} are inconsistent "
-            f"({type(exc).__name__}: {exc}); is this an unmodified nuScenes version folder?"
-        ) from None
+    sensors = {r["token"]: r for r in _read_table(table_root, "sensor")}
+    calibrated = {r["token"]: r for r in _read_table(table_root, "calibrated_sensor")}
+    channel_of: dict[str, Any] = {}  # calibrated_sensor token -> channel
+    for token, cs in calibrated.items():
+        sensor = sensors.get(_field(cs, "calibrated_sensor", "sensor_token"))
+        if sensor is None:
+            raise _inconsistent(table_root, f"calibrated_sensor {token} names sensor {cs['sensor_token']}, "
+                                            "which is not in sensor.json")
+        channel_of[token] = sensor.get("channel")
+    samples = {r["token"]: r for r in _read_table(table_root, "sample")}
+    front: dict[str, str] = {}
+    front_sd: dict[str, dict[str, Any]] = {}
+    for sd in _read_table(table_root, "sample_data"):
+        cs_token = sd.get("calibrated_sensor_token")
+        if cs_token not in channel_of:
+            raise _inconsistent(table_root, f"sample_data {sd['token']} names calibrated_sensor {cs_token!r}, "
+                                            "which is not in calibrated_sensor.json")
+        if sd.get("is_key_frame") is not True or channel_of[cs_token] != CAMERA:
+            continue
+        sample_token = _field(sd, "sample_data", "sample_token")
+        if sample_token not in samples:
+            raise _inconsistent(table_root, f"sample_data {sd['token']} names sample {sample_token}, "
+                                            "which is not in sample.json")
+        if sample_token in front:
+            raise DatasetError(f"sample {sample_token} has two {CAMERA} keyframes in sample_data: "
+                               f"{front[sample_token]} and {sd['token']}")
+        front[sample_token] = sd["token"]
+        front_sd[sd["token"]] = sd
+    wanted = {sd.get("ego_pose_token") for sd in front_sd.values()}
+    poses = {r["token"]: r for r in _read_table(table_root, "ego_pose") if r["token"] in wanted}
+    scenes = _read_table(table_root, "scene")
+    for scene in scenes:
+        _field(scene, "scene", "name")
+        _field(scene, "scene", "first_sample_token")
+    return Tables(dataroot=root, version=version, scenes=scenes, samples=samples, sample_data=front_sd,
+                  ego_poses=poses, calibrated_sensors={t: calibrated[t] for t in {sd["calibrated_sensor_token"]
+                                                                                 for sd in front_sd.values()}},
+                  front_keyframes=front)
 
 
 # -- scenes ------------------------------------------------------------------------
 
 
-def predefined_splits() -> dict[str, list[str]]:
-    """The devkit's scene splits (``create_splits_scenes()``)."""
-    from nuscenes.utils.splits import create_splits_scenes
+SPLITS_FILE = os.path.join(os.path.dirname(__file__), "splits.json")
 
-    return create_splits_scenes()
+
+@functools.cache
+def _splits() -> dict[str, tuple[str, ...]]:
+    with open(SPLITS_FILE, encoding="utf-8") as f:
+        return {name: tuple(scenes) for name, scenes in json.load(f)["splits"].items()}
+
+
+def predefined_splits() -> dict[str, list[str]]:
+    """The devkit's scene splits: name → scene names, as ``nuscenes.utils.splits.create_splits_scenes()``
+    (nuscenes-devkit 1.2.0) returns them — copied into ``lightemma/frames/splits.json``, so no devkit is needed."""
+    return {name: list(scenes) for name, scenes in _splits().items()}
 
 
 def default_split(version: str) -> str:
@@ -293,12 +401,16 @@ def resolve_scenes(
 # -- extraction --------------------------------------------------------------------
 
 
-def _scene_keyframes(nusc: NuScenes, scene: dict[str, Any], cs_cache: dict[str, tuple]) -> dict[str, Any]:
-    """Walk a scene's sample chain; collect CAM_FRONT pose, time, image and calibration per keyframe."""
+def _scene_keyframes(tables: Tables, scene: dict[str, Any], cs_cache: dict[str, tuple]) -> dict[str, Any]:
+    """Walk a scene's sample chain; collect CAM_FRONT pose, time, image and calibration per keyframe.
+
+    Structural problems (a chain that loops or points nowhere, a missing keyframe) raise
+    :class:`DatasetError`; an unusable value (pose, timestamp, calibration) raises :class:`BadRecordError`.
+    """
     name = scene["name"]
     tokens: list[str] = []
     xy: list[tuple[float, float]] = []
-    quats: list[list[float]] = []
+    quats: list[np.ndarray] = []
     times: list[int] = []
     files: list[str] = []
     cs_tokens: list[str] = []
@@ -308,40 +420,36 @@ def _scene_keyframes(nusc: NuScenes, scene: dict[str, Any], cs_cache: dict[str, 
         if token in seen:
             raise DatasetError(f"scene {name}: the sample chain loops at sample {token}")
         seen.add(token)
-        try:
-            sample = nusc.get("sample", token)
-        except KeyError:
-            raise DatasetError(f"scene {name}: sample {token} is not in the sample table") from None
-        sd_token = sample["data"].get(CAMERA)
+        sample = tables.samples.get(token)
+        if sample is None:
+            raise DatasetError(f"scene {name}: sample {token} is not in the sample table")
+        sd_token = tables.front_keyframes.get(token)
         if sd_token is None:
             raise DatasetError(f"scene {name}: sample {token} has no {CAMERA} keyframe in sample_data")
-        sd = nusc.get("sample_data", sd_token)
-        try:
-            pose = nusc.get("ego_pose", sd["ego_pose_token"])
-        except KeyError:
-            raise DatasetError(
-                f"scene {name}: ego_pose {sd['ego_pose_token']} of sample_data {sd_token} is missing"
-            ) from None
+        sd = tables.sample_data[sd_token]
+        pose_token = _field(sd, "sample_data", "ego_pose_token")
+        pose = tables.ego_poses.get(pose_token)
+        if pose is None:
+            raise DatasetError(f"scene {name}: ego_pose {pose_token} of sample_data {sd_token} is missing")
         cs_token = sd["calibrated_sensor_token"]
         if cs_token not in cs_cache:
-            cs = nusc.get("calibrated_sensor", cs_token)
-            try:
-                intrinsic = np.asarray(cs["camera_intrinsic"], dtype=np.float64)
-            except (TypeError, ValueError):
-                intrinsic = np.zeros(0)
-            if intrinsic.shape != (3, 3) or not np.isfinite(intrinsic).all():
-                raise _bad("calibrated_sensor", cs_token, "camera_intrinsic", cs.get("camera_intrinsic"),
+            cs = tables.calibrated_sensors[cs_token]
+            intrinsic = cs.get("camera_intrinsic")
+            rows = intrinsic if isinstance(intrinsic, list) and len(intrinsic) == 3 else None
+            if rows is None or not all(isinstance(r, list) and len(r) == 3 and all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in r) for r in rows):
+                raise _bad("calibrated_sensor", cs_token, "camera_intrinsic", intrinsic,
                            f"is not a finite 3x3 matrix (needed for {CAMERA})")
-            translation = _translation(cs, "calibrated_sensor", 3)
-            cs_cache[cs_token] = (intrinsic, geometry.extrinsic_matrix(translation, _rotation(cs, "calibrated_sensor")))
-        position = _translation(pose, "ego_pose", 2)
+            extrinsic = geometry.extrinsic_matrix(_translation(cs, "calibrated_sensor"), _rotation(cs, "calibrated_sensor"))
+            cs_cache[cs_token] = (np.asarray(intrinsic, dtype=np.float64), extrinsic)
+        position = _translation(pose, "ego_pose")
         tokens.append(token)
         xy.append((position[0], position[1]))
         quats.append(_rotation(pose, "ego_pose"))
         times.append(_timestamp(pose, "ego_pose"))
-        files.append(sd["filename"])
+        files.append(_field(sd, "sample_data", "filename"))
         cs_tokens.append(cs_token)
-        token = sample["next"]
+        token = _field(sample, "sample", "next")
     return {
         "name": name,
         "token": scene["token"],
@@ -355,7 +463,7 @@ def _scene_keyframes(nusc: NuScenes, scene: dict[str, Any], cs_cache: dict[str, 
 
 
 def extract_frames(
-    nusc: NuScenes,
+    tables: Tables,
     *,
     split: str | None = None,
     scenes: Sequence[str] | None = None,
@@ -363,11 +471,19 @@ def extract_frames(
     on_missing_image: str = "skip",
     on_bad_record: str = "skip",
 ) -> FrameSet:
-    """Frames of the chosen scenes of an already loaded ``NuScenes`` (see :func:`load_frames`)."""
+    """Frames of the chosen scenes of tables read by :func:`load_tables` (see :func:`load_frames`)."""
+    if not isinstance(tables, Tables):
+        raise TypeError(f"extract_frames takes the Tables of lightemma.frames.load_tables(dataroot, version), "
+                        f"not {type(tables).__name__} (frames are no longer read through the devkit's NuScenes)")
     _check_options(window, on_missing_image, on_bad_record)
-    dataroot = os.path.abspath(nusc.dataroot)
-    by_name = {s["name"]: s for s in nusc.scene}
-    split, names = resolve_scenes(by_name, nusc.version, split=split, scenes=scenes)
+    dataroot = tables.dataroot
+    by_name: dict[str, dict[str, Any]] = {}
+    for scene in tables.scenes:
+        if scene["name"] in by_name:
+            raise DatasetError(f"scene name {scene['name']} is used by two scenes: {by_name[scene['name']]['token']} "
+                               f"and {scene['token']}")
+        by_name[scene["name"]] = scene
+    split, names = resolve_scenes(by_name, tables.version, split=split, scenes=scenes)
 
     cs_cache: dict[str, tuple] = {}
     xy_parts, yaw_parts, t_parts, current_parts = [], [], [], []
@@ -379,7 +495,7 @@ def extract_frames(
     offset = 0
     for name in names:
         try:
-            kf = _scene_keyframes(nusc, by_name[name], cs_cache)
+            kf = _scene_keyframes(tables, by_name[name], cs_cache)
         except BadRecordError as exc:
             if on_bad_record == "error":
                 raise BadRecordError(f"scene {name}: {exc} (pass on_bad_record='skip' to skip such scenes)",
@@ -452,7 +568,7 @@ def extract_frames(
         gt_positions=gt_positions,
         gt_actions=gt_actions,
         dataroot=dataroot,
-        version=nusc.version,
+        version=tables.version,
         split=split,
         scenes=used,
         window=window,
@@ -494,7 +610,7 @@ def load_frames(
     on_missing_image: str = "skip",
     on_bad_record: str = "skip",
 ) -> FrameSet:
-    """Load the frames of a nuScenes version through the devkit (docs/definitions.md#frames-and-windows).
+    """Load the frames of a nuScenes version (docs/definitions.md#frames-and-windows); no devkit needed.
 
     Args:
         dataroot: folder holding ``<version>/`` (the tables), ``samples/``, ``maps/``.
@@ -509,9 +625,10 @@ def load_frames(
         on_missing_image: ``skip`` (default: drop those frames, log and list them in
             ``missing_images``), ``error`` (raise), or ``keep`` (keep them, still listed).
         on_bad_record: what to do with a scene holding a record that cannot be used — an
-            ``ego_pose`` or ``calibrated_sensor`` whose translation is not ≥ 2 finite numbers
-            (3 for a sensor), whose rotation is not a quaternion that normalises (4 finite
-            numbers, norm > 0), or whose timestamp is not a finite whole number: ``skip``
+            ``ego_pose`` or ``calibrated_sensor`` whose ``translation`` is not exactly 3 finite
+            numbers, whose ``rotation`` is not a unit quaternion (4 finite numbers, |norm − 1| ≤
+            :data:`QUATERNION_TOLERANCE`), whose ``timestamp`` is not a finite, whole, non-negative
+            number, or a CAM_FRONT ``camera_intrinsic`` that is not a finite 3×3 matrix: ``skip``
             (default: the scene is left out with a warning naming table, token and field, and
             listed in ``skipped_scenes`` and ``bad_records``) or ``error`` (raise
             :class:`BadRecordError`, one line naming scene, table, token and field).
@@ -520,8 +637,8 @@ def load_frames(
     split, how many scenes and how many frames were taken.
     """
     _check_options(window, on_missing_image, on_bad_record)  # before the slow table load
-    nusc = load_tables(dataroot, version)
-    frames = extract_frames(nusc, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image,
+    tables = load_tables(dataroot, version)
+    frames = extract_frames(tables, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image,
                             on_bad_record=on_bad_record)
     log.info("loaded %s", frames.summary_line())
     return frames
