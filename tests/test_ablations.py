@@ -183,3 +183,86 @@ def test_local_backends_make_the_blank_image_themselves(tmp_path):
     frame.image_path = str(tmp_path / "gone.jpg")  # unreadable: the call fails as a full run's would, never a guessed size
     with pytest.raises(OSError):
         read_image_bytes(request_image(frame, "blank-image"))
+
+
+# -- evaluate: "does the image matter?" ------------------------------------------------------------------
+
+BAD_ACTIONS = "[(1.0, 0.0), (1.0, 0.0), (1.0, 0.0), (1.0, 0.0), (1.0, 0.0), (1.0, 0.0)]"
+
+
+def sees_the_road(req):
+    """Good actions when an image (any image) is sent, poor ones without."""
+    from fake_openai import GOOD_ACTIONS, Reply, default_reply
+
+    if req.stage == "actions":
+        return Reply(GOOD_ACTIONS if req.has_image or any(p["kind"] == "image" for p in parts(req)) else BAD_ACTIONS)
+    return default_reply(req)
+
+
+def per_frame_ade(run_dir):
+    from lightemma import displacement_errors
+
+    return {fid: float(displacement_errors(np.array(r["trajectory"]), np.array(r["gt_positions"])).mean())
+            for fid, r in read_run(run_dir).records.items()}
+
+
+def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_each_model_meets_the_best_baseline(tmp_path):
+    from lightemma.evaluation import evaluate_runs, evaluation_tables
+    from lightemma.stats import Resampling
+    from lightemma.tables import to_markdown
+
+    frames = make_frames(tmp_path, 9)
+    for i, f in enumerate(frames):
+        f.scene_name = f"scene-{i % 3:04d}"
+        f.frame_id = f"{f.scene_name}/token{i:03d}"
+        f.gt_actions = np.column_stack([np.full(6, 5.0), np.zeros(6)])
+    out = tmp_path / "runs"
+    with FakeOpenAIServer(sees_the_road) as server:
+        full = run("openai/gpt-4o", api_base=server.url, frames=frames, output=out, **FAST).run_dir
+        blind = run("openai/gpt-4o", api_base=server.url, frames=frames[:6], output=out, inputs="no-image", **FAST).run_dir
+        blank = run("openai/gpt-4o", api_base=server.url, frames=frames, output=out, inputs="blank-image", **FAST).run_dir
+    bases = {kind: run(f"baseline:{kind}", frames=frames, output=out, progress=False).run_dir for kind in ("constant", "cv", "ego")}
+    evaluation = evaluate_runs([out], resampling=Resampling(n_resamples=2000))
+    rows = {r["ablation"]: r for r in evaluation.input_ablations}
+    assert set(rows) == {"no-image", "blank-image"}
+    ade_full, ade_blind, ade_blank = per_frame_ade(full), per_frame_ade(blind), per_frame_ade(blank)
+    common = sorted(ade_blind)  # the no-image run covers 6 of the 9 frames: paired on those only
+    r = rows["no-image"]
+    assert (r["model"], r["frames"], r["scenes"]) == ("openai/gpt-4o [full]", 6, 3)
+    assert r["ade_avg_full"] == pytest.approx(np.mean([ade_full[f] for f in common]))
+    assert r["ade_avg_diff"] == pytest.approx(np.mean([ade_full[f] - ade_blind[f] for f in common]))
+    assert r["ade_avg_diff"] < -1 and r["ade_avg_ci95"][1] < 0  # it uses the image
+    assert r["ade_avg_p_holm"] >= r["ade_avg_p"] and r["ade_avg_significant"] in (True, False)
+    b = rows["blank-image"]
+    assert b["frames"] == 9 and b["ade_avg_diff"] == pytest.approx(np.mean([ade_full[f] - ade_blank[f] for f in ade_full]))
+    assert abs(b["ade_avg_diff"]) < 1e-9 and b["ade_avg_significant"] is False  # a grey image does as well: no image use shown
+    # every model run against the best of constant, cv and ego on the frames scored in both
+    gains = {g["model"]: g for g in evaluation.baseline_gains}
+    assert set(gains) == {"openai/gpt-4o [full]", "openai/gpt-4o [no-image]", "openai/gpt-4o [blank-image]"}
+    base_ade = {kind: per_frame_ade(d) for kind, d in bases.items()}
+    for label, ade, ids in (("openai/gpt-4o [full]", ade_full, sorted(ade_full)), ("openai/gpt-4o [no-image]", ade_blind, common)):
+        means = {kind: np.mean([v[f] for f in ids]) for kind, v in base_ade.items()}
+        best = min(means, key=means.get)
+        g = gains[label]
+        assert g["baseline"] == f"Baseline ({ {'constant': 'constant actions', 'cv': 'constant velocity', 'ego': 'ego status'}[best] })"
+        assert g["frames"] == len(ids)
+        assert g["ade_avg_gain"] == pytest.approx(means[best] - np.mean([ade[f] for f in ids]))
+    names = [t.name for t in evaluation_tables(evaluation)]
+    assert names[-2:] == ["input_ablations", "baseline_gains"]
+    text = to_markdown(evaluation_tables(evaluation)[-2])
+    assert "Does the image matter?" in text and "no-image" in text and "full − ablated" in text
+    assert evaluation.to_dict()["input_ablations"] == evaluation.input_ablations
+
+
+def test_an_ablation_with_two_full_runs_to_pair_with_is_left_out_with_a_warning(tmp_path):
+    from lightemma.evaluation import evaluate_runs
+    from lightemma.stats import Resampling
+
+    frames = make_frames(tmp_path, 4)
+    out = tmp_path / "runs"
+    with FakeOpenAIServer() as server:
+        for inputs in ("full", "full", "no-image"):
+            run("openai/gpt-4o", api_base=server.url, frames=frames, output=out, inputs=inputs, **FAST)
+    evaluation = evaluate_runs([out], resampling=Resampling(n_resamples=100))
+    assert evaluation.input_ablations == []
+    assert any("2 full runs" in w and "left out" in w for w in evaluation.warnings)

@@ -42,6 +42,7 @@ class RunInfo:
     dataset_kind: str | None = None  # "nuscenes", "synthetic", or None when the manifest cannot tell
     chain: str = "independent"  # request variant: independent stages (the paper's) or one conversation
     answer_format: str = "text"  # stage-3 answers as text (the paper's) or structured JSON
+    inputs: str = "full"  # input ablation (lightemma.inputs): full (the paper's), no-image, blank-image, no-history
 
     @property
     def variant(self) -> str:
@@ -180,4 +181,5 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
         dataset_kind=dataset_kind(manifest),
         chain=_setting(manifest, "chain", "independent"),
         answer_format=_setting(manifest, "answer_format", "text"),
+        inputs=_setting(manifest, "inputs", "full"),
     )
