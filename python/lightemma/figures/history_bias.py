@@ -18,6 +18,33 @@ def _limits(values: Sequence[np.ndarray], *, floor: float) -> tuple[float, float
     return -reach, reach
 
 
+# marker per input ablation (lightemma.inputs): an ablated run is drawn hollow, in its full run's colour, just below it
+INPUT_MARKERS = {"full": "o", "no-image": "s", "blank-image": "D", "no-history": "^"}
+
+
+def _beside_full(runs: Sequence[Any]) -> tuple[list[int], dict[int, int]]:
+    """Run order with each full run followed by its ablation runs (same model and variant), and ablated -> full index."""
+    def key(run: Any) -> tuple[Any, ...]:
+        info = getattr(run, "info", None)
+        return tuple(getattr(info, k, None) for k in ("model", "integrator", "chain", "answer_format"))
+
+    def inputs(run: Any) -> str:
+        return getattr(getattr(run, "info", None), "inputs", "full")
+
+    full: dict[tuple[Any, ...], list[int]] = {}
+    for i, run in enumerate(runs):
+        if inputs(run) == "full":
+            full.setdefault(key(run), []).append(i)
+    partner = {i: full[key(run)][0] for i, run in enumerate(runs) if inputs(run) != "full" and len(full.get(key(run), [])) == 1}
+    order: list[int] = []
+    for i in range(len(runs)):
+        if i in partner:
+            continue
+        order.append(i)
+        order += [j for j, f in partner.items() if f == i]
+    return order, partner
+
+
 def history_bias_figure(
     runs: Sequence[Any],
     *,
@@ -39,6 +66,10 @@ def history_bias_figure(
     ``rows``: the :func:`~lightemma.scenarios.history_bias` rows of ``runs`` when
     already computed (the fits are the slow part); ``notes``: a flag after a
     model's name (e.g. fewer than half of its frames scored).
+
+    Input-ablation runs (``--inputs``) are drawn beside their model's full run: just after it in
+    every panel, in its colour, hollow, with a marker per ablation (:data:`INPUT_MARKERS`), and
+    dashed lines / hatched bars.
     """
     from lightemma.evaluation.core import unique_labels
     from lightemma.scenarios import bias_row, curvature_samples, truth_samples
@@ -48,6 +79,11 @@ def history_bias_figure(
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
     samples = [curvature_samples(run) for run in runs]
     stats = list(rows) if rows is not None else [bias_row(label, k) for label, k in zip(labels, samples)]
+    order, partner = _beside_full(runs)
+    ablated = {labels[i]: getattr(runs[i].info, "inputs", "full") for i in partner}
+    for i, f in partner.items():
+        palette[labels[i]] = palette[labels[f]]
+    labels, samples, stats = [labels[i] for i in order], [samples[i] for i in order], [stats[i] for i in order]
     truth = truth_samples(runs[0]) if runs else {"history": np.zeros(0), "true": np.zeros(0)}
     truth_fit = bias_row("truth", {"history": truth["history"], "pred": truth["true"], "true": truth["true"], "after_turn": np.zeros(len(truth["history"]), dtype=bool), "short_path": np.array(0)})
     fig, (scatter, slopes, bars) = plt.subplots(1, 3, figsize=(16, 5.2), gridspec_kw={"width_ratios": [1.35, 1, 1]})
@@ -57,7 +93,11 @@ def history_bias_figure(
     rng = np.random.default_rng(0)
     for label, k in zip(labels, samples):
         keep = rng.permutation(len(k["history"]))[:max_points]
-        scatter.scatter(k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2)
+        if label in ablated:
+            scatter.scatter(k["history"][keep], k["pred"][keep], s=9, marker=INPUT_MARKERS.get(ablated[label], "s"), facecolors="none",
+                            edgecolors=palette[label], alpha=0.35, linewidths=0.6, zorder=2)
+        else:
+            scatter.scatter(k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2)
     keep = rng.permutation(len(truth["history"]))[:max_points]
     scatter.scatter(truth["history"][keep], truth["true"][keep], s=7, color=GT_COLOR, alpha=0.45, linewidths=0, zorder=3)
     xs = np.array(xlim)
@@ -65,7 +105,8 @@ def history_bias_figure(
     few = len(labels) <= 4  # with many models the middle panel names them; the scatter shows their lines only
     for label, stat in zip(labels, stats):
         if stat["slope_pred"] is not None:
-            scatter.plot(xs, stat["slope_pred"] * xs + stat["intercept_pred"], color=palette[label], linewidth=1.6, zorder=5, label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None)
+            scatter.plot(xs, stat["slope_pred"] * xs + stat["intercept_pred"], color=palette[label], linewidth=1.6, zorder=5,
+                         linestyle="--" if label in ablated else "-", label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None)
     if not few:
         scatter.plot([], [], color="0.3", linewidth=1.6, label="each model's fit (colours as in the middle panel)")
     if truth_fit["slope_true"] is not None:
@@ -94,7 +135,9 @@ def history_bias_figure(
         slopes.axvline(0.0, color="0.75", linewidth=0.8, zorder=1)
         for yi, (label, s) in zip(y, fitted):
             low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
-            slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt="o", color=palette[label], capsize=3, zorder=3)
+            slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]],
+                            fmt=INPUT_MARKERS.get(ablated.get(label, "full"), "o"), color=palette[label], capsize=3, zorder=3,
+                            markerfacecolor="white" if label in ablated else palette[label])
         slopes.set_yticks(y)
         slopes.set_yticklabels([label + (notes or {}).get(label, "") for label, _ in fitted], fontsize=7)
         slopes.set_ylim(-1.8, len(fitted) - 0.4)  # an empty band at the bottom holds the legend
@@ -107,7 +150,10 @@ def history_bias_figure(
     with_turns = [s for s in stats if s["carry_pred"] is not None]
     if with_turns:
         y = np.arange(len(with_turns))[::-1]
-        bars.barh(y, [s["carry_pred"] for s in with_turns], color=[palette[s["model"]] for s in with_turns], height=0.6, zorder=2)
+        for yi, stat in zip(y, with_turns):
+            hollow = stat["model"] in ablated
+            bars.barh([yi], [stat["carry_pred"]], color="white" if hollow else palette[stat["model"]], edgecolor=palette[stat["model"]],
+                      hatch="//" if hollow else None, linewidth=1.0 if hollow else 0, height=0.6, zorder=2)
         carried = float(np.mean([s["carry_true"] for s in with_turns]))
         bars.axvline(carried, color="white", linewidth=4.5, zorder=3)
         bars.axvline(carried, color=GT_COLOR, linewidth=2.4, zorder=4, label=f"truth ({carried:.2f})")
