@@ -5,6 +5,7 @@ Layout of ``OUT``::
     index.md                      links everything below, tables inline
     tables/efficiency.{md,csv,tex}, tables/accuracy_<convention>.{md,csv,tex}
     tables/pairwise_ade.{md,csv,tex}, tables/generations.{md,csv,tex}   (paired comparisons)
+    tables/input_ablations.{md,csv,tex}, tables/baseline_gains.{md,csv,tex}   (does the image matter?)
     tables/scenarios.{md,csv}, tables/history_bias.{md,csv}, tables/evaluation.json
     figures/bubble.{png,svg}, figures/pairwise.{png,svg}, figures/history_bias.{png,svg}
     figures/frames/<kind>_<frame>.{png,svg}     model grids and single-model pictures
@@ -139,6 +140,21 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
         w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
 
 
+_ABLATION_TABLES = ("input_ablations", "baseline_gains")
+
+
+def _ablation_section(w: _Writer, tables: Sequence[Table]) -> None:
+    """"Does the model look at the road?": the input ablations and the gains over the best baseline, where the runs hold them."""
+    shown = [t for t in tables if t.name in _ABLATION_TABLES]
+    if not shown:
+        return
+    w.lines += ["## Does the model look at the road?", "",
+                "Each input ablation against its model's full run, and each model against the best of the constant, "
+                "constant-velocity and ego-status baselines (the history alone), paired on common frames (docs/evaluate.md).", ""]
+    for table in shown:
+        w.table(table)
+
+
 def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
     """One entry per frame (the first kind), its captions joined: a frame is drawn once."""
     merged: dict[str, tuple[str, str, str]] = {}
@@ -199,10 +215,10 @@ def write_report(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     w = _Writer(out)
-    w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format |",
-                "|---|---|---|---:|---|---|---|---|"]
+    w.lines += ["# lightemma report", "", "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format | Inputs |",
+                "|---|---|---|---:|---|---|---|---|---|"]
     w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | "
-                f"{m.integrator} | {m.chain} | {m.answer_format} |" for m in evaluation.models]
+                f"{m.integrator} | {m.chain} | {m.answer_format} | {m.inputs} |" for m in evaluation.models]
     w.lines.append("")
     if evaluation.warnings:
         w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]
@@ -212,7 +228,7 @@ def write_report(
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations"):
+        if table.name in ("pairwise_ade", "generations", *_ABLATION_TABLES):
             continue
         w.table(table)
     (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
@@ -238,6 +254,8 @@ def write_report(
                 w.table(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
+
+    _ablation_section(w, tables)
 
     shared = common_frames(runs) if len(runs) > 1 else None
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
