@@ -62,6 +62,7 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     assert {g["model"] for g in evaluation["baseline_gains"]} == {"GPT-4o [full]", "GPT-4o [no-image]"}
     text = (out / "report" / "index.md").read_text()
     assert "## Does the model look at the road?" in text and "Does the image matter?" in text and "Gain over the best baseline" in text
+    assert (out / "report" / "figures" / "input_ablations.png").stat().st_size > 1000
 
 
 def test_demo_refuses_a_folder_it_did_not_make(tmp_path):

@@ -176,6 +176,26 @@ def test_history_bias_figure_draws_ablated_runs_beside_the_full_ones(tmp_path):
     assert [p.get_hatch() for p in bars.patches] == [None, "//", None]
 
 
+def test_ablation_figure_draws_each_comparison_with_its_interval_filled_when_significant(tmp_path):
+    from lightemma.figures import ablation_figure
+
+    ablations = [{"model": "m", "ablation": "no-image", "ade_avg_diff": -0.4, "ade_avg_ci95": [-0.6, -0.2], "ade_avg_significant": True},
+                 {"model": "m", "ablation": "blank-image", "ade_avg_diff": 0.01, "ade_avg_ci95": [-0.1, 0.12], "ade_avg_significant": False}]
+    gains = [{"model": "m", "baseline": "Baseline (ego status)", "ade_avg_gain": 0.3, "ade_avg_ci95": None, "ade_avg_significant": False}]
+    fig = ablation_figure(ablations, gains)
+    left, right = fig.axes
+    assert [t.get_text() for t in left.get_yticklabels()] == ["m − no-image", "m − blank-image"]
+    points = [line for line in left.lines if line.get_marker() == "o"]
+    assert [p.get_xdata()[0] for p in points] == [-0.4, 0.01]
+    assert points[0].get_markerfacecolor() != points[1].get_markerfacecolor()  # filled: significant; hollow: not
+    assert [t.get_text() for t in right.get_yticklabels()] == ["m vs Baseline (ego status)"]
+    (png,) = save_figure(fig, tmp_path / "ablations", formats=("png",))
+    assert png.stat().st_size > 1000
+    assert len(ablation_figure([], gains).axes) == 1
+    with pytest.raises(ValueError, match="no ablation"):
+        ablation_figure([], [])
+
+
 def test_saved_as_150_dpi_png_and_svg_even_with_a_dot_in_the_name(tmp_path):
     import matplotlib.pyplot as plt
 

@@ -7,7 +7,7 @@ Layout of ``OUT``::
     tables/pairwise_ade.{md,csv,tex}, tables/generations.{md,csv,tex}   (paired comparisons)
     tables/input_ablations.{md,csv,tex}, tables/baseline_gains.{md,csv,tex}   (does the image matter?)
     tables/scenarios.{md,csv}, tables/history_bias.{md,csv}, tables/evaluation.json
-    figures/bubble.{png,svg}, figures/pairwise.{png,svg}, figures/history_bias.{png,svg}
+    figures/bubble.{png,svg}, figures/pairwise.{png,svg}, figures/history_bias.{png,svg}, figures/input_ablations.{png,svg}
     figures/frames/<kind>_<frame>.{png,svg}     model grids and single-model pictures
 
 Every model keeps one colour in every figure; only scored frames enter a mean,
@@ -153,6 +153,12 @@ def _ablation_section(w: _Writer, tables: Sequence[Table]) -> None:
                 "constant-velocity and ego-status baselines (the history alone), paired on common frames (docs/evaluate.md).", ""]
     for table in shown:
         w.table(table)
+    from lightemma.figures import ablation_figure
+
+    ablations = next((t.rows for t in shown if t.name == "input_ablations"), [])
+    gains = next((t.rows for t in shown if t.name == "baseline_gains"), [])
+    w.figure(ablation_figure(ablations, gains), "input_ablations", "full − ablated ADE avg per ablation run, and each model's gain over "
+             "the best baseline, with 95 % scene-bootstrap intervals; filled: significant after Holm")
 
 
 def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
