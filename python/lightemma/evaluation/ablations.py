@@ -1,7 +1,7 @@
 """Does the model look at the road? Input ablations and each model's gain over the best baseline (docs/evaluate.md).
 
 * :func:`input_ablations` — for each model that has ablation runs (``--inputs no-image|blank-image|no-history``)
-  beside its full run (same model, integrator, chain, answer format), paired on the frames scored in both:
+  beside its full run (same model, integrator, chain, answer format, prompt set), paired on the frames scored in both:
   the mean of full − ablated per metric (negative ADE: the full input helps, so the model uses what the
   ablation took away), its scene-bootstrap interval, a sign-flip p over scenes and Holm's adjustment over
   every row of the table (per metric);
@@ -16,7 +16,7 @@ better; a new metric (e.g. a safety rate) is one more entry there and becomes mo
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,9 +48,16 @@ def _ade_avg(run: RunData, rows: np.ndarray, convention: str) -> np.ndarray:
 PAIRED_METRICS: list[PairedMetric] = [PairedMetric("ade_avg", "ADE avg", "m", _ade_avg)]
 
 
-def _variant_key(run: RunData) -> tuple[str, str, str, str]:
-    info = run.info
-    return (info.model, info.integrator, info.chain, info.answer_format)
+def comparison_key(info: Any) -> tuple[Any, ...]:
+    """What an ablation run shares with the full run it is paired with: model, integrator, chain, answer format and
+    prompt set (a :class:`~lightemma.evaluation.RunInfo`)."""
+    prompt_set = (getattr(info, "manifest", None) or {}).get("prompt_set")
+    return (info.model, info.integrator, info.chain, info.answer_format,
+            prompt_set.get("name") if isinstance(prompt_set, Mapping) else None)
+
+
+def _variant_key(run: RunData) -> tuple[Any, ...]:
+    return comparison_key(run.info)
 
 
 def _scored(run: RunData, only: set[str] | None) -> np.ndarray:
@@ -117,7 +124,7 @@ def input_ablations(runs: Sequence[RunData], labels: Sequence[str], convention: 
     ``m_ablated``, ``m_diff`` (full − ablated), ``m_ci95``, ``m_p``, ``m_p_holm``, ``m_significant``.
     A model with more than one full run is left out (which one to pair with would be a guess), with a warning.
     """
-    full: dict[tuple[str, str, str, str], list[int]] = {}
+    full: dict[tuple[Any, ...], list[int]] = {}
     for i, run in enumerate(runs):
         if run.info.inputs == "full":
             full.setdefault(_variant_key(run), []).append(i)

@@ -24,9 +24,10 @@ INPUT_MARKERS = {"full": "o", "no-image": "s", "blank-image": "D", "no-history":
 
 def _beside_full(runs: Sequence[Any]) -> tuple[list[int], dict[int, int]]:
     """Run order with each full run followed by its ablation runs (same model and variant), and ablated -> full index."""
+    from lightemma.evaluation.ablations import comparison_key
+
     def key(run: Any) -> tuple[Any, ...]:
-        info = getattr(run, "info", None)
-        return tuple(getattr(info, k, None) for k in ("model", "integrator", "chain", "answer_format"))
+        return comparison_key(run.info)
 
     def inputs(run: Any) -> str:
         return getattr(getattr(run, "info", None), "inputs", "full")
