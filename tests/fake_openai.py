@@ -104,7 +104,7 @@ class Received:
         text = self.text
         if "v1, c1" in text:  # "[(v1, c1), …]" or the JSON form "[[v1, c1], …]"
             return "actions"
-        if "past 3 seconds" in text:
+        if "past 3 seconds" in text or "recent intent" in text:  # the latter: the no-history prompts' intent stage
             return "intent"
         return "scene"
 

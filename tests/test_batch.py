@@ -239,7 +239,7 @@ def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, syn
 
 def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
     from lightemma.evaluation import efficiency_table, evaluate_runs
-    from lightemma.tables import to_markdown
+    from lightemma.report.tables import to_markdown
 
     with FakeBatchServer(steps=1) as server:
         batch = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, name="half-price")

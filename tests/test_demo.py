@@ -30,10 +30,10 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
             "ANTHROPIC_API_KEY), gemini-2.0-flash (no key: set GEMINI_API_KEY)\n") in captured.err
     assert "frames: v1.0-mini, split all: 8 scenes, 8 frames, reference window" in captured.err
     text = index.read_text()
-    # four baseline runs, every frame scored, the oracle's integrator floor visible
+    # five baseline runs (the ego baseline cross-fitted over the 8 scenes), every frame scored, the oracle's floor visible
     evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
     rows = {r["model"]: r for r in evaluation["accuracy"]["lightemma"]}
-    assert len(rows) == 4 and all(r["frames"] > 0 and r["frames"] == r["frames_in_run"] for r in rows.values())
+    assert len(rows) == 5 and "Baseline (ego status)" in rows and all(r["frames"] > 0 and r["frames"] == r["frames_in_run"] for r in rows.values())
     oracle = [r for name, r in rows.items() if "oracle" in name]
     others = [r for name, r in rows.items() if "oracle" not in name]
     assert len(oracle) == 2 and max(r["ade_avg"] for r in oracle) < min(r["ade_avg"] for r in others)
@@ -49,11 +49,20 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     with FakeOpenAIServer() as server:
         result = run_demo(out, scenes=1, keyframes=15, api_limit=1, api_base=server.url, log=lambda message: None)
         assert server.requests  # the model was asked
-    assert result.skipped == {"claude-3.7-sonnet": "no key: set ANTHROPIC_API_KEY", "gemini-2.0-flash": "no key: set GEMINI_API_KEY"}
-    assert len(list((out / "runs").glob("*/*/manifest.json"))) == 5 == len(result.run_dirs)
+    # one scene: too few for the ego baseline's scene cross-fit, which is skipped with its reason
+    assert set(result.skipped) == {"claude-3.7-sonnet", "gemini-2.0-flash", "baseline:ego"}
+    assert "at least 3 scenes" in result.skipped["baseline:ego"]
+    # the baselines, GPT-4o with all its inputs and again without the image
+    assert len(list((out / "runs").glob("*/*/manifest.json"))) == 6 == len(result.run_dirs)
     evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
-    gpt = next(r for r in evaluation["accuracy"]["lightemma"] if r["model"] == "GPT-4o")
+    gpt = next(r for r in evaluation["accuracy"]["lightemma"] if r["model"] == "GPT-4o [full]")
     assert gpt["frames_in_run"] == 1
+    (ablation,) = evaluation["input_ablations"]
+    assert (ablation["model"], ablation["ablation"], ablation["frames"]) == ("GPT-4o [full]", "no-image", 1)
+    assert {g["model"] for g in evaluation["baseline_gains"]} == {"GPT-4o [full]", "GPT-4o [no-image]"}
+    text = (out / "report" / "index.md").read_text()
+    assert "## Does the model look at the road?" in text and "Does the image matter?" in text and "Gain over the best baseline" in text
+    assert (out / "report" / "figures" / "input_ablations.png").stat().st_size > 1000
 
 
 def test_demo_refuses_a_folder_it_did_not_make(tmp_path):

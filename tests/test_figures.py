@@ -147,6 +147,55 @@ def test_history_bias_figure_is_drawn(tmp_path):
     assert near(img, rgb(GT_COLOR), 40).sum() > 100 and near(img, rgb(pred_color(0)), 40).sum() > 500
 
 
+def test_history_bias_figure_draws_ablated_runs_beside_the_full_ones(tmp_path):
+    """An ablation run is drawn just after its model's full run, in the same colour, hollow, with its own marker."""
+    import matplotlib.colors as mcolors
+
+    import lightemma
+    from lightemma.evaluation.synthetic import make_record
+    from lightemma.report.figures.history_bias import INPUT_MARKERS
+    from lightemma.runs.store import RunWriter, create_run_dir
+
+    straight = np.stack([8.0 * STEPS, np.zeros(6)], axis=1)
+    runs = []
+    for model, inputs, gain in (("m", "full", 1.0), ("other", "full", 0.2), ("m", "no-image", 0.5)):
+        run_dir = create_run_dir(tmp_path, model, {"model": model, "finished_at": "t", "config": {"inputs": inputs}})
+        with RunWriter(run_dir) as w:
+            for i, k in enumerate(np.linspace(-0.08, 0.08, 40)):
+                pred = lightemma.integrate(np.array([[8.0, gain * k]] * 6), method="midpoint")
+                w.append(make_record(f"f{i}", straight, pred, history_actions=np.array([[8.0, k]] * 6)))
+        runs.append(load_run(run_dir, details=True))
+    fig = history_bias_figure(runs)
+    scatter, slopes, bars = fig.axes
+    assert [t.get_text() for t in slopes.get_yticklabels()] == ["m [full]", "m [no-image]", "other"]
+    points = [line for line in slopes.lines if line.get_marker() in INPUT_MARKERS.values()]
+    assert [p.get_marker() for p in points] == ["o", "s", "o"]  # top to bottom as the labels
+    full, ablated = points[0], points[1]
+    assert mcolors.to_hex(full.get_color()) == mcolors.to_hex(ablated.get_color())
+    assert mcolors.to_hex(ablated.get_markerfacecolor()) == "#ffffff" != mcolors.to_hex(full.get_markerfacecolor())
+    assert [p.get_hatch() for p in bars.patches] == [None, "//", None]
+
+
+def test_ablation_figure_draws_each_comparison_with_its_interval_filled_when_significant(tmp_path):
+    from lightemma.report.figures import ablation_figure
+
+    ablations = [{"model": "m", "ablation": "no-image", "ade_avg_diff": -0.4, "ade_avg_ci95": [-0.6, -0.2], "ade_avg_significant": True},
+                 {"model": "m", "ablation": "blank-image", "ade_avg_diff": 0.01, "ade_avg_ci95": [-0.1, 0.12], "ade_avg_significant": False}]
+    gains = [{"model": "m", "baseline": "Baseline (ego status)", "ade_avg_gain": 0.3, "ade_avg_ci95": None, "ade_avg_significant": False}]
+    fig = ablation_figure(ablations, gains)
+    left, right = fig.axes
+    assert [t.get_text() for t in left.get_yticklabels()] == ["m − no-image", "m − blank-image"]
+    points = [line for line in left.lines if line.get_marker() == "o"]
+    assert [p.get_xdata()[0] for p in points] == [-0.4, 0.01]
+    assert points[0].get_markerfacecolor() != points[1].get_markerfacecolor()  # filled: significant; hollow: not
+    assert [t.get_text() for t in right.get_yticklabels()] == ["m vs Baseline (ego status)"]
+    (png,) = save_figure(fig, tmp_path / "ablations", formats=("png",))
+    assert png.stat().st_size > 1000
+    assert len(ablation_figure([], gains).axes) == 1
+    with pytest.raises(ValueError, match="no ablation"):
+        ablation_figure([], [])
+
+
 def test_saved_as_150_dpi_png_and_svg_even_with_a_dot_in_the_name(tmp_path):
     import matplotlib.pyplot as plt
 

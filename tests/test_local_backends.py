@@ -761,3 +761,52 @@ def test_vllm_without_structured_outputs_is_refused_for_structured_answers(fake_
     backend = vllm_backend()
     with pytest.raises(UserError, match="has no StructuredOutputsParams"):
         backend.structured_output()
+
+
+# -- input ablations (--inputs) on the local backends ---------------------------------------------------
+
+
+@pytest.mark.parametrize("inputs", ["no-image", "blank-image", "no-history"])
+def test_vllm_is_shown_what_each_input_ablation_leaves(fake_vllm, dataroot, tmp_path, capsys, inputs):
+    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
+                     "v1.0-mini", "--split", "all", "--limit", "2", "--output", str(tmp_path), "--batch-size", "2",
+                     "--answer-format", "structured", "--inputs", inputs, "--no-progress"])
+    assert code == 0, capsys.readouterr().err
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    contents = read_run(run_dir)
+    assert contents.manifest["config"]["inputs"] == inputs
+    frames = lightemma.load_frames(dataroot, "v1.0-mini", split="all")
+    (llm,) = FakeLLM.instances
+    conversations = [c for cs, _, _ in llm.calls for c in cs]
+    assert len(conversations) >= 6
+    histories = {lightemma.frames.format_history(f.history_actions) for f in frames.head(2)}
+    for conversation in conversations:
+        sent = [p["image_pil"] for turn in conversation for p in turn["content"] if p["type"] == "image_pil"]
+        text = "\n".join(p["text"] for turn in conversation for p in turn["content"] if p["type"] == "text")
+        if inputs == "no-image":
+            assert sent == []
+        else:
+            (image,) = sent
+            if inputs == "blank-image":
+                assert image.size == (64, 48) and np.unique(np.asarray(image).reshape(-1, 3), axis=0).tolist() == [[128, 128, 128]]
+            else:
+                assert np.asarray(image).std() > 0  # the camera image itself
+        if inputs == "no-history":
+            assert not any(h in text for h in histories) and "past 3 seconds" not in text
+
+
+def test_hf_runs_each_image_ablation_end_to_end(qwen2_vl, dataroot, tmp_path):
+    from lightemma.pipeline import run
+
+    for inputs in ("no-image", "blank-image"):
+        result = run(str(qwen2_vl), backend="hf", dataroot=dataroot, version="v1.0-mini", split="all", limit=1,
+                     output=tmp_path / inputs, max_tokens=4, max_attempts=1, inputs=inputs, progress=False,
+                     backend_options={"dtype": "float32", "device": "cpu"})
+        (record,) = read_run(result.run_dir).records.values()
+        calls = [c for a in record["attempts"] for c in a["calls"]]
+        assert calls and all(c["error"] is None and c["input_tokens"] > 0 for c in calls)
+        assert result.manifest["config"]["inputs"] == inputs
+    # the blank image costs the same image tokens as the photo (same size), no image costs none
+    tokens = {i: read_run(next((tmp_path / i).glob("*/*"))).records for i in ("no-image", "blank-image")}
+    first = {i: next(iter(r.values()))["attempts"][0]["calls"][0]["input_tokens"] for i, r in tokens.items()}
+    assert first["blank-image"] > first["no-image"]

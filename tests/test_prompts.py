@@ -22,7 +22,11 @@ def test_default_set_is_shipped_as_package_data_and_hashed_over_its_content():
     assert ps.hash == "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()
     assert set(ps.stages) == {"scene", "intent", "actions"}
     settings = {"structured": ("independent", "structured"), "conversation": ("conversation", "text"),
-                "conversation+structured": ("conversation", "structured")}
+                "conversation+structured": ("conversation", "structured"),
+                "no-history": ("independent", "text", "no-history"),
+                "no-history+structured": ("independent", "structured", "no-history"),
+                "conversation+no-history": ("conversation", "text", "no-history"),
+                "conversation+no-history+structured": ("conversation", "structured", "no-history")}
     assert set(variants) == set(settings)
     for name, templates in variants.items():
         canonical = json.dumps(templates, sort_keys=True, separators=(",", ":"), ensure_ascii=False)

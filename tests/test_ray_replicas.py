@@ -516,3 +516,18 @@ def test_vllm_pipeline_parallelism_passes_through_and_counts_its_gpus(dataroot, 
     assert cli_main(["run", "--backend", "hf", "--model", "m", "--pipeline-parallel-size", "2",
                      *frames_args(dataroot, tmp_path, 4)]) == 2
     assert "--pipeline-parallel-size do(es) not apply to the hf backend" in capsys.readouterr().err
+
+
+def test_replicas_make_each_frames_blank_image_themselves(ray_address, tiny, dataroot, reference, tmp_path, capsys):
+    """--inputs blank-image through replicas: each replica draws the grey image from the frame's size (no file sent), so
+    a frame's image costs the tokens its photo does, while what the model sees (and says) changes."""
+    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--batch-size", "4", "--dtype", "float32",
+                     "--replicas", "2", "--gpus-per-replica", "0", "--inputs", "blank-image", *frames_args(dataroot, tmp_path, 4, attempts=1)])
+    assert code == 1, capsys.readouterr().err  # random weights: every text is cut off
+    run_dir = only_run(tmp_path)
+    assert read_run(run_dir).manifest["config"]["inputs"] == "blank-image"
+    got = answers(run_dir)
+    assert len(got) == 4
+    for fid, calls in got.items():
+        assert calls[0][0] == "scene" and calls[0][2] == reference[fid][0][2]  # the same image tokens as the photo
+    assert any(calls[0][1] != reference[fid][0][1] for fid, calls in got.items())  # but not the photo

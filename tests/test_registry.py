@@ -56,7 +56,7 @@ def test_lookup_by_key_display_name_or_provider_id_and_ad_hoc_strings():
 
 
 def test_baselines_are_listed_and_need_no_key():
-    assert [b.key for b in BASELINES] == ["baseline:constant", "baseline:cv", "baseline:oracle"]
+    assert [b.key for b in BASELINES] == ["baseline:constant", "baseline:cv", "baseline:oracle", "baseline:ego"]
     assert all(b.family == "baseline" and not b.needs_api_key for b in BASELINES)
 
 

@@ -35,17 +35,21 @@ CREATE TABLE IF NOT EXISTS responses (
 
 
 def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None,
-                turns: tuple[tuple[str, str], ...] = (), attempt: int = 1) -> str:
+                turns: tuple[tuple[str, str], ...] = (), attempt: int = 1, inputs: str = "full") -> str:
     """The cache key of one request: ``text`` after the earlier ``turns`` (a single-turn request keeps its old key).
 
     ``attempt`` > 1 (a re-ask) is part of the key: a re-ask must reach the provider, not replay the cached
-    answer it was asked again for; a first ask keeps its old key.
+    answer it was asked again for; a first ask keeps its old key. ``inputs`` (an input ablation other than
+    ``full``, :mod:`lightemma.inputs`) is part of the key too: an ablated request never shares an answer
+    with a full one, even where its text and image happen to match; a full request keeps its old key.
     """
     parts: list[Any] = [model, api_base or "", params, text, image_digest or ""]
     if turns:
         parts.append([list(t) for t in turns])
     if attempt > 1:
         parts.append({"attempt": attempt})
+    if inputs != "full":
+        parts.append({"inputs": inputs})
     payload = json.dumps(parts, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(payload.encode("utf-8")).hexdigest()
 

@@ -3,10 +3,13 @@
 1. writes a small synthetic nuScenes-format dataset (every scenario kind:
    cruising, braking at a red light, starting at green, turns, straight just
    after a turn, …) under ``OUT/data``;
-2. runs the baselines (constant, constant velocity, oracle under Euler and
-   midpoint integration) through the ordinary run pipeline into ``OUT/runs``,
-   plus, for each API key that is set, one of the paper's models on a few frames;
-3. evaluates them and writes the report to ``OUT/report/index.md``.
+2. runs the baselines (constant, constant velocity, ego status, oracle under Euler
+   and midpoint integration) through the ordinary run pipeline into ``OUT/runs``,
+   plus, for each API key that is set, one of the paper's models on a few frames,
+   with all its inputs and again without the image (``--inputs no-image``);
+3. evaluates them and writes the report to ``OUT/report/index.md`` — with the
+   "does the model look at the road?" tables (the ablation against the full run,
+   each model's gain over the best baseline) when a model ran.
 """
 
 from __future__ import annotations
@@ -25,10 +28,12 @@ VERSION = "v1.0-mini"
 BASELINE_RUNS: tuple[tuple[str, str], ...] = (
     ("baseline:constant", "euler"),
     ("baseline:cv", "euler"),
+    ("baseline:ego", "euler"),
     ("baseline:oracle", "euler"),
     ("baseline:oracle", "midpoint"),
 )
-# one paper model per provider, run only when its key is in the environment
+# one paper model per provider, run only when its key is in the environment (full inputs, then each of these ablations)
+API_ABLATIONS: tuple[str, ...] = ("no-image",)
 API_MODELS: tuple[tuple[str, str], ...] = (
     ("OPENAI_API_KEY", "gpt-4o"),
     ("ANTHROPIC_API_KEY", "claude-3.7-sonnet"),
@@ -107,18 +112,21 @@ def run_demo(
     dataroot = Path(write_dataset(out / "data", scenes=scenes, seed=0, version=VERSION, keyframes=keyframes, images=True, sweeps=False, overwrite=True))
     common = dict(dataroot=dataroot, version=VERSION, split="all", output=out / "runs", progress=False)
     run_dirs = []
-    models = list(BASELINE_RUNS) + ([(m, "euler") for m in api_models()] if use_api else [])
+    models = [(m, method, "full") for m, method in BASELINE_RUNS]
+    models += [(m, "euler", inputs) for m in api_models() for inputs in ("full", *API_ABLATIONS)] if use_api else []
     skipped = skipped_api_models(use_api=use_api)
     if skipped:
         log(skipped_line(skipped))
-    for i, (model, method) in enumerate(models, start=1):
+    for i, (model, method, inputs) in enumerate(models, start=1):
         limit = api_limit if not model.startswith("baseline:") else None
-        log(f"2/3 run {i}/{len(models)}: {model} ({method})" + (f", first {limit} frames" if limit else ""))
+        shown = "" if inputs == "full" else f", inputs {inputs}"
+        log(f"2/3 run {i}/{len(models)}: {model} ({method}{shown})" + (f", first {limit} frames" if limit else ""))
         try:
             api = {"timeout": 60.0, "max_retries": 2, "api_base": api_base} if limit else {}  # a demo should not wait long
-            result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32, **api, **common)
+            result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32, inputs=inputs,
+                                   **api, **common)
         except UserError as exc:
-            if model.startswith("baseline:"):
+            if model.startswith("baseline:") and model != "baseline:ego":  # the ego baseline's cross-fit needs 3 scenes
                 raise
             log(f"    skipped {model}: {exc}")
             skipped[model] = str(exc)

@@ -131,7 +131,8 @@ PAPER_MODELS: tuple[ModelInfo, ...] = (
 BASELINES: tuple[ModelInfo, ...] = tuple(
     ModelInfo(key=f"baseline:{kind}", display_name=f"Baseline ({label})", family="baseline", generation=0,
               model_id=f"baseline:{kind}", backend="baseline", in_paper=False)
-    for kind, label in (("constant", "constant actions"), ("cv", "constant velocity"), ("oracle", "oracle actions"))
+    for kind, label in (("constant", "constant actions"), ("cv", "constant velocity"), ("oracle", "oracle actions"),
+                        ("ego", "ego status"))
 )
 
 MODELS: tuple[ModelInfo, ...] = PAPER_MODELS + BASELINES

@@ -57,6 +57,7 @@ from lightemma.backends.retry import (
 )
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import RunFatalError, UserError
+from lightemma.inputs import read_image_bytes
 from lightemma.registry import (
     ModelInfo,
     _litellm_entry,
@@ -227,8 +228,7 @@ class _ImageCache:
         if item is not None:
             self._items.move_to_end(path)
             return item
-        with open(path, "rb") as fh:
-            data = fh.read()
+        data = read_image_bytes(path)  # a file, or a blank image (--inputs blank-image)
         mime = _MIME.get(os.path.splitext(path)[1].lower(), "image/jpeg")
         if self._too_big(data):
             data, done = fit_image(data, self.max_b64 or len(data) * 2, self.max_side)
@@ -415,7 +415,7 @@ class APIBackend:
 
         key = None
         if self.cache is not None and params.get("temperature", None) == 0:
-            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns, req.attempt)
+            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns, req.attempt, req.inputs)
             hit = self.cache.get(key)
             if hit is not None:
                 return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],

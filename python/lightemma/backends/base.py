@@ -93,6 +93,9 @@ class ChatRequest:
     # Which attempt of the frame's chain this request belongs to (1 = the first ask; re-asks count on, also
     # across --retry-failed passes): a re-ask is a new question to the provider, never a replay of a cached answer.
     attempt: int = 1
+    # The run's input ablation (lightemma.inputs: full, no-image, blank-image, no-history); the chain has already
+    # applied it to text and image — backends only key their response cache by it.
+    inputs: str = "full"
 
 
 @dataclass

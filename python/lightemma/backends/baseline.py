@@ -3,7 +3,11 @@
 * ``constant`` — repeat the last history action (speed and curvature) six times;
 * ``cv`` — constant speed (the last history speed), straight ahead (curvature 0);
 * ``oracle`` — the ground-truth future actions; integrated, they show the
-  integrator's own error floor (run it under ``euler`` and ``midpoint``).
+  integrator's own error floor (run it under ``euler`` and ``midpoint``);
+* ``ego`` — a ridge regression from the history to the future actions, cross-fitted by scene on
+  the evaluated frames or fitted on a training split (``fit_split``; :mod:`lightemma.backends.ego`).
+  It is fitted before the run starts (:meth:`BaselineBackend.prepare`), and the fit (features,
+  coefficients, folds, λ) is part of the backend's ``info`` in the manifest.
 
 They run through the same three-stage chain, parser, accounting and run store
 as any model (``lightemma run --model baseline:cv``), so their runs have exactly
@@ -23,7 +27,7 @@ from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.frames import format_history
 from lightemma.frames.geometry import round_like_python
 
-KINDS: tuple[str, ...] = ("constant", "cv", "oracle")
+KINDS: tuple[str, ...] = ("constant", "cv", "oracle", "ego")
 STAGE_TEXTS = {
     "scene": "baseline: no scene description",
     "intent": "baseline: no driving intent",
@@ -49,6 +53,8 @@ def baseline_actions(kind: str, frame: Any) -> np.ndarray:
         return np.array([[speed, 0.0]] * 6)
     if kind == "oracle":
         return _field(frame, "gt_actions").copy()
+    if kind == "ego":
+        raise ValueError("baseline:ego predicts from a fit over the frame set (BaselineBackend.prepare), not from one frame")
     raise ValueError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
 
 
@@ -67,15 +73,51 @@ def format_actions_json(actions: np.ndarray) -> str:
 class BaselineBackend:
     """A :class:`lightemma.backends.base.Backend` answering from the frame itself."""
 
-    def __init__(self, kind: str) -> None:
+    def __init__(self, kind: str, *, fit_split: str | None = None, folds: int | None = None) -> None:
         if kind not in KINDS:
             raise ValueError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
+        if kind != "ego" and (fit_split is not None or folds is not None):
+            from lightemma.errors import UserError
+
+            raise UserError(f"--fit-split is for baseline:ego; baseline:{kind} is not fitted")
         self.kind = kind
         self.name = f"baseline:{kind}"
+        self.fit_split = fit_split
+        self.folds = folds
+        self._fit: Any = None  # the ego baseline's EgoFit, once prepared
 
     @property
     def info(self) -> Mapping[str, Any]:
-        return {"backend": "baseline", "kind": self.kind, "model": self.name, "gpus": None, "token_counting": "none (no model)"}
+        out = {"backend": "baseline", "kind": self.kind, "model": self.name, "gpus": None, "token_counting": "none (no model)"}
+        if self._fit is not None:
+            out["fit"] = self._fit.record
+        return out
+
+    def prepare(self, frames: Sequence[Any], dataset: Mapping[str, Any] | None = None) -> None:
+        """Fit the ego baseline for ``frames`` before the run (nothing to do for the other baselines).
+
+        With ``fit_split`` the training frames are loaded from the run's ``dataset`` (dataroot, version,
+        window). Raises :class:`~lightemma.errors.UserError` when the fit cannot be made (too few scenes,
+        a training split that shares scenes with the evaluated frames, frames passed in memory).
+        """
+        if self.kind != "ego":
+            return
+        from lightemma.backends.ego import FOLDS, EgoFit
+
+        folds = self.folds or FOLDS
+        if self.fit_split is None:
+            self._fit = EgoFit.cross_fit(frames, folds=folds)
+            return
+        from lightemma.errors import UserError
+
+        dataset = dataset or {}
+        if not dataset.get("dataroot") or not dataset.get("version"):
+            raise UserError("baseline:ego --fit-split needs a dataset (--dataroot, --version) to load the training split from")
+        from lightemma import load_frames
+
+        train = load_frames(dataset["dataroot"], dataset["version"], split=self.fit_split, window=dataset.get("window") or "reference",
+                            on_missing_image="keep", on_bad_record=dataset.get("on_bad_record") or "skip")
+        self._fit = EgoFit.fit_split(train, frames, split=self.fit_split, folds=folds)
 
     def _answer(self, request: ChatRequest) -> ChatResult:
         if request.stage in STAGE_TEXTS:
@@ -86,11 +128,20 @@ class BaselineBackend:
         if request.frame is None:
             return ChatResult(text=None, error="ValueError", error_message=f"baseline needs the frame of {request.frame_id}")
         try:
-            actions = baseline_actions(self.kind, request.frame)
+            actions = self._ego(request) if self.kind == "ego" else baseline_actions(self.kind, request.frame)
             text = format_actions(actions) if request.response_schema is None else format_actions_json(actions)
         except ValueError as exc:
             return ChatResult(text=None, error="ValueError", error_message=str(exc))
         return ChatResult(text=text, input_tokens=0, output_tokens=0, cost_cents=0.0, finish_reason="stop", reasoning_tokens=0)
+
+    def _ego(self, request: ChatRequest) -> np.ndarray:
+        if self._fit is None:
+            raise ValueError("baseline:ego was not fitted (BaselineBackend.prepare) before it was asked")
+        actions = self._fit.predictions.get(request.frame_id)
+        if actions is None:
+            raise ValueError(f"baseline:ego has no prediction for {request.frame_id} (not in the fitted frame set, "
+                             "or its history is not finite)")
+        return actions
 
     def structured_output(self) -> dict[str, Any]:
         """Baselines answer a response schema's JSON object themselves."""

@@ -75,9 +75,10 @@ def load_image(path: str, max_pixels: int | None = None) -> Any:
     """The image at ``path`` as an RGB ``PIL.Image``, downscaled to at most ``max_pixels`` pixels when given."""
     from PIL import Image
 
+    from lightemma.inputs import open_image
+
     try:
-        with Image.open(path) as img:
-            image = img.convert("RGB")
+        image = open_image(path)  # a file, or a blank image (--inputs blank-image)
     except (OSError, ValueError) as exc:
         raise UserError(f"cannot read image {path}: {exc}") from None
     size = cap_pixels(*image.size, max_pixels)

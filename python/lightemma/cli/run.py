@@ -18,7 +18,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "model, the same failure on frame after frame) stops with one line naming the cause and the fix, keeping what "
         "finished. Exit status: 0 done, 1 done without one valid frame, 2 stopped or refused.",
     )
-    p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or baseline:constant|cv|oracle")
+    p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or "
+                   "baseline:constant|cv|oracle|ego")
     p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")
     p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1)")
     data = p.add_argument_group("frames")
@@ -92,6 +93,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--chain", choices=("independent", "conversation"),
                      help="independent stages, each with the image (default, the paper's), or one conversation continued "
                      "through stages 2 and 3, the image in its first turn (docs/run.md#request-variants-and-prompt-caching)")
+    gen.add_argument("--inputs", choices=("full", "no-image", "blank-image", "no-history"),
+                     help="what the model is shown: full (default, the paper's), no-image (no image in any stage), "
+                     "blank-image (a uniform grey image of the frame's size), no-history (the prompt set's no-history "
+                     "variant: no history numbers) (docs/run.md#input-ablations)")
+    base = p.add_argument_group("baselines")
+    base.add_argument("--fit-split", metavar="SPLIT",
+                      help="baseline:ego: fit on this split of --version (train on v1.0-trainval) instead of cross-fitting "
+                      "by scene on the evaluated frames (docs/definitions.md#the-ego-status-baseline)")
     p.set_defaults(func=main)
     return p
 
@@ -103,6 +112,7 @@ RUN_DEFAULTS: dict[str, object] = {
     "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
     "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler", "on_bad_record": "skip",
     "speed_range": (-10.0, 50.0), "max_curvature": 1.0, "answer_format": "text", "chain": "independent",
+    "inputs": "full",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
@@ -216,6 +226,10 @@ def main(args: argparse.Namespace) -> int:
         if not args.dataroot:
             raise UserError("--dataroot is required (a nuScenes directory)")
         options = local_backend_options(args)
+        if args.fit_split is not None:
+            if not args.model.strip().lower().startswith("baseline:ego"):
+                raise UserError(f"--fit-split is for baseline:ego (a fitted baseline); {args.model} is not fitted")
+            options["fit_split"] = args.fit_split
         # local backends batch across frames in flight: keep at least one batch's worth of frames going (per replica)
         replicas = args.replicas or 1
         concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0))) * replicas
@@ -239,6 +253,7 @@ def main(args: argparse.Namespace) -> int:
             chain=settings["chain"], answer_format=settings["answer_format"],
             batch=bool(args.batch), batch_poll=args.batch_poll or 30.0, max_cost_cents=args.max_cost,
             sample=args.sample, sample_seed=args.sample_seed or 0, name=args.name,
+            inputs=settings["inputs"],
         )
     print(result.report())
     summary = result.summary

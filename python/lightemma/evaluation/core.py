@@ -52,6 +52,7 @@ class ModelResult:
     intervals: dict[str, dict[str, list[float] | None]] = field(default_factory=dict)  # convention -> ade_avg/fde -> [low, high]
     chain: str = "independent"  # request variant (docs/run.md): independent stages or one conversation
     answer_format: str = "text"  # stage-3 answers as text or structured JSON
+    inputs: str = "full"  # input ablation (docs/run.md#input-ablations): full, no-image, blank-image, no-history
 
     @property
     def scored_pct(self) -> float | None:
@@ -85,6 +86,7 @@ class ModelResult:
             "dataset_kind": self.dataset_kind,
             "chain": self.chain,
             "answer_format": self.answer_format,
+            "inputs": self.inputs,
             "ade_avg_ci95": ci.get("ade_avg"),
             "fde_ci95": ci.get("fde"),
         }
@@ -92,7 +94,7 @@ class ModelResult:
     def efficiency_row(self) -> dict[str, Any]:
         """A flat dict: model, family, time, cost, tokens, GPUs, run wall time, frames/s."""
         return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self._coverage(), **self.efficiency,
-                "dataset_kind": self.dataset_kind, "chain": self.chain, "answer_format": self.answer_format}
+                "dataset_kind": self.dataset_kind, "chain": self.chain, "answer_format": self.answer_format, "inputs": self.inputs}
 
 
 @dataclass
@@ -106,6 +108,9 @@ class Evaluation:
     warnings: list[str] = field(default_factory=list)
     resampling: Resampling = field(default_factory=Resampling)
     pairwise: list[dict[str, Any]] | None = None  # see lightemma.evaluation.uncertainty.pairwise_ade
+    # "does the image matter?": see lightemma.evaluation.ablations (empty when the runs hold nothing to compare)
+    input_ablations: list[dict[str, Any]] = field(default_factory=list)
+    baseline_gains: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def main_convention(self) -> str:
@@ -141,6 +146,10 @@ class Evaluation:
         if self.pairwise is not None:
             out["pairwise_ade"] = self.pairwise
             out["generations"] = self.generations()
+        if self.input_ablations:
+            out["input_ablations"] = self.input_ablations
+        if self.baseline_gains:
+            out["baseline_gains"] = self.baseline_gains
         return out
 
 
@@ -174,13 +183,15 @@ def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
 
 
 def _variant_parts(info: Any) -> dict[str, str]:
-    """What tells runs of one model apart: integrator, chain, answer format (docs/run.md)."""
-    return {"integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format}
+    """What tells runs of one model apart: integrator, chain, answer format, inputs (docs/run.md)."""
+    return {"integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format,
+            "inputs": getattr(info, "inputs", "full")}
 
 
 def unique_labels(runs: list[RunData]) -> list[str]:
     """Display labels, made distinct where two runs share one: by the variant settings that differ among them
-    (integrator, chain, answer format: ``GPT-4o [conversation, structured]``), else by run id.
+    (integrator, chain, answer format, inputs: ``GPT-4o [conversation, structured]``, ``GPT-4o [no-image]``),
+    else by run id.
 
     A named run (``lightemma run --name NAME``) is always ``<model> [NAME]``, its name in place of the id."""
     original = [f"{r.info.label} [{r.info.name}]" if r.info.name else r.info.label for r in runs]
@@ -303,6 +314,7 @@ def evaluate_loaded(
                 outcomes=run.outcomes(rows),
                 chain=run.info.chain,
                 answer_format=run.info.answer_format,
+                inputs=run.info.inputs,
             )
         )
         entries.append((label, run, scored))
@@ -315,10 +327,21 @@ def _with_uncertainty(evaluation: Evaluation, entries: list[tuple[str, RunData, 
 
     for result, intervals in zip(evaluation.models, model_intervals(entries, evaluation.conventions, evaluation.resampling)):
         result.intervals = intervals
+    runs, labels = [run for _, run, _ in entries], [label for label, _, _ in entries]
     if pairwise:
-        runs, labels = [run for _, run, _ in entries], [label for label, _, _ in entries]
         evaluation.pairwise = pairwise_ade(runs, labels, evaluation.main_convention, evaluation.resampling, only=set(shared) if shared is not None else None)
+    _with_ablations(evaluation, runs, labels, shared)
     return evaluation
+
+
+def _with_ablations(evaluation: Evaluation, runs: list[RunData], labels: list[str], shared: list[str] | None) -> None:
+    """"Does the image matter?": the input ablations against their full runs, each model against the best baseline."""
+    from lightemma.evaluation.ablations import baseline_gains, input_ablations
+
+    only = set(shared) if shared is not None else None
+    evaluation.input_ablations = input_ablations(runs, labels, evaluation.main_convention, evaluation.resampling, only=only,
+                                                 warnings=evaluation.warnings)
+    evaluation.baseline_gains = baseline_gains(runs, labels, evaluation.main_convention, evaluation.resampling, only=only)
 
 
 def evaluate_runs(

@@ -45,6 +45,7 @@ class RunInfo:
     name: str | None = None  # the run's name (``lightemma run --name``), shown instead of its id
     batch: bool = False  # run through a provider's batch API (``--batch``): per-frame latency has no meaning
     batch_turnaround_s: float | None = None  # mean seconds from a batch's submission to its results
+    inputs: str = "full"  # input ablation (lightemma.inputs): full (the paper's), no-image, blank-image, no-history
 
     @property
     def variant(self) -> str:
@@ -186,6 +187,7 @@ def run_info(run_dir: str | os.PathLike[str], manifest: Mapping[str, Any] | None
         name=str(manifest["name"]) if isinstance(manifest.get("name"), str) and manifest["name"].strip() else None,
         batch=_get(manifest, "config", "batch") is True,
         batch_turnaround_s=_batch_turnaround(manifest),
+        inputs=_setting(manifest, "inputs", "full"),
     )
 
 

@@ -25,6 +25,10 @@ continued (the image once, in the first user turn; the earlier stages' prompts
 and answers as turns). A stage-3 re-ask in a conversation resends the same
 conversation up to the stage-3 prompt — the failed answer is not shown to the
 model — exactly as an independent re-ask resends the same request.
+
+An input ablation (``ChainPolicy.inputs``, :mod:`lightemma.inputs`) changes what every stage is shown:
+no image, a blank one of the frame's size, or (through the prompt set's no-history variant, chosen by
+the runner) no history numbers.
 """
 
 from __future__ import annotations
@@ -38,6 +42,7 @@ import numpy as np
 
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, ResponseSchema, is_truncated
 from lightemma.frames import history_placeholders
+from lightemma.inputs import request_image
 from lightemma.prompts import ANSWER_FORMATS, CHAINS, PromptSet
 from lightemma.runs.records import attempt_received
 
@@ -61,6 +66,7 @@ class ChainPolicy:
     max_abs_curvature: float | None = 1.0
     chain: str = "independent"  # or "conversation": stages 2 and 3 continue one conversation
     answer_format: str = "text"  # or "structured": stage 3 constrained to the actions JSON schema
+    inputs: str = "full"  # input ablation (lightemma.inputs): full, no-image, blank-image, no-history
 
     def __post_init__(self) -> None:
         if self.reask not in REASK_MODES:
@@ -76,6 +82,9 @@ class ChainPolicy:
             raise ValueError(f"chain must be one of {', '.join(CHAINS)}, got {self.chain!r}")
         if self.answer_format not in ANSWER_FORMATS:
             raise ValueError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {self.answer_format!r}")
+        from lightemma.inputs import check_inputs
+
+        check_inputs(self.inputs)
 
     @property
     def parse_mode(self) -> str:
@@ -99,7 +108,7 @@ class ChainPolicy:
     def to_dict(self) -> dict[str, Any]:
         return {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
                 "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "chain": self.chain,
-                "answer_format": self.answer_format, "parse": self.parse_record()}
+                "answer_format": self.answer_format, "inputs": self.inputs, "parse": self.parse_record()}
 
 
 def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
@@ -204,12 +213,13 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     """
     start = time.perf_counter()
     history = history_placeholders(frame.history_actions)  # {history}, {speeds}, {curvatures}
-    image = str(frame.image_path) if getattr(frame, "image_path", None) else None
+    image = request_image(frame, policy.inputs)  # the frame's image, a blank one, or none (--inputs)
 
     async def ask(stage: str, text: str, turns: tuple[tuple[str, str], ...] = ()) -> ChatResult:
         request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
                               turns=turns, response_schema=policy.response_schema(stage),
-                              prefix_of_next=policy.chain == "conversation" and stage != "actions", attempt=attempt.number)
+                              prefix_of_next=policy.chain == "conversation" and stage != "actions", attempt=attempt.number,
+                              inputs=policy.inputs)
         return (await backend.generate([request]))[0]
 
     def turns(*texts: str) -> tuple[tuple[str, str], ...]:

@@ -95,8 +95,10 @@ def _policy(config: dict[str, Any]) -> ChainPolicy:
 
 
 def _request_variant(config: dict[str, Any]) -> dict[str, str]:
-    """The run's chain and answer format (runs recorded before they existed: the paper's, independent and text)."""
-    return {"chain": config.get("chain") or "independent", "answer_format": config.get("answer_format") or "text"}
+    """The run's chain, answer format and inputs (runs recorded before they existed: the paper's, independent,
+    text and full)."""
+    return {"chain": config.get("chain") or "independent", "answer_format": config.get("answer_format") or "text",
+            "inputs": config.get("inputs") or "full"}
 
 
 def _structured_output(backend: Backend, policy: ChainPolicy) -> dict[str, Any] | None:
@@ -453,6 +455,7 @@ def run(
     max_abs_curvature: float | None = 1.0,
     chain: str = "independent",
     answer_format: str = "text",
+    inputs: str = "full",
     prompt_set: str = DEFAULT_PROMPT_SET,
     on_bad_record: str = "skip",
     timeout: float = 120.0,
@@ -491,7 +494,9 @@ def run(
     ``chain`` (``independent``, the paper's, or ``conversation``) and ``answer_format``
     (``text``, the paper's, or ``structured``: stage 3 constrained to a JSON schema) choose
     the request variant (docs/run.md); a backend that cannot constrain its answers is a
-    :class:`~lightemma.errors.UserError` before any work.
+    :class:`~lightemma.errors.UserError` before any work. ``inputs`` is the input ablation
+    (:mod:`lightemma.inputs`: ``full``, the paper's, ``no-image``, ``blank-image`` or ``no-history``,
+    the last through the prompt set's no-history variant); recorded in the manifest, kept by a resume.
 
     A missing API key, an unknown model or an empty frame set raises
     :class:`~lightemma.errors.UserError` before any work. A run-fatal cause met while
@@ -519,7 +524,7 @@ def run(
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
         "speed_range": None if speed_range is None else [float(x) for x in speed_range],
         "max_abs_curvature": None if max_abs_curvature is None else float(max_abs_curvature),
-        "chain": chain, "answer_format": answer_format, "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
+        "chain": chain, "answer_format": answer_format, "inputs": inputs, "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
         "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
         "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica,
@@ -535,7 +540,10 @@ def run(
         policy = _policy(config)  # validates reask / attempts / method / chain / answer format before any work
     except ValueError as exc:
         raise UserError(str(exc)) from None
-    prompts = load_prompt_set(prompt_set).select(policy.chain, policy.answer_format)
+    if policy.inputs != "full" and backend_kind(model, backend, api_base) == "baseline":
+        raise UserError(f"--inputs {policy.inputs} is an ablation of what a model is shown; {model} reads the frame's "
+                        "numbers itself and is shown nothing: drop --inputs")
+    prompts = load_prompt_set(prompt_set).select(policy.chain, policy.answer_format, policy.inputs)
     output = Path(output)
     instance = _make_backend(config, output)
     dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
@@ -553,6 +561,7 @@ def run(
         if getattr(instance, "info", {}).get("kind") == "api":  # a paid run: its bill first, in one line
             planned = estimate_run(model, frames=frames, prompt_set=prompt_set, chain=chain, answer_format=answer_format,
                                    max_tokens=max_tokens, api_base=api_base)
+        _prepare(instance, frames, dataset)
         manifest = {
             "model": model,
             **({"name": name.strip()} if name else {}),
@@ -639,6 +648,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                 dataset["split"] = (manifest.get("dataset") or {}).get("split")
             all_frames = _subset(frames, dataset) if frames is not None else _load_frames(dataset)
             _same_frame_set(run_dir, all_frames)
+            _prepare(instance, all_frames, dataset, recorded=manifest.get("backend"), run_dir=run_dir)
             contents = read_run(run_dir)
             for warning in contents.warnings():
                 if log and "not finished" not in warning:
@@ -662,6 +672,23 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         earlier = {f.frame_id: records[f.frame_id] for f in todo if f.frame_id in records}
         return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume",
                         len(all_frames) - len(todo), log, earlier)
+
+
+def _prepare(backend: Backend, frames: Sequence[Any], dataset: Mapping[str, Any], *, recorded: Any = None,
+             run_dir: Path | None = None) -> None:
+    """Let a backend that learns from the frame set (``baseline:ego``) fit before the run; on a resume, refuse a fit
+    whose predictions differ from the recorded ones (``recorded``: the manifest's ``backend``)."""
+    prepare = getattr(backend, "prepare", None)
+    if prepare is None:
+        return
+    prepare(frames, dataset)
+    fit = dict(backend.info).get("fit")
+    before = recorded.get("fit") if isinstance(recorded, Mapping) else None
+    if run_dir is not None and isinstance(fit, Mapping) and isinstance(before, Mapping) \
+            and fit.get("predictions_sha256") != before.get("predictions_sha256"):
+        raise UserError(f"{run_dir}: {backend.name}'s fit gives other predictions now than when the run started "
+                        f"(run: {before.get('predictions_sha256')}, now: {fit.get('predictions_sha256')}); start a new run "
+                        "instead of resuming")
 
 
 def _stopped_error(manifest: dict[str, Any]) -> str | None:

@@ -23,7 +23,12 @@ that replace some of the paper's stages —
   conversation, so their templates do not paste the earlier stages' texts
   (those are the assistant turns before them); the intent template carries the
   history, the actions template needs no placeholder;
-* ``conversation+structured``: both at once.
+* ``conversation+structured``: both at once;
+* ``no-history`` (``--inputs no-history``, :mod:`lightemma.inputs`): the templates without the history
+  numbers and the sentence that introduces them — a ``no-history`` template may hold no ``{history}``,
+  ``{speeds}`` or ``{curvatures}``, and with the variant in place no stage may; combined with the others
+  as ``no-history+structured``, ``conversation+no-history`` and ``conversation+no-history+structured``
+  (parts in that order).
 
 The set's ``hash`` covers its name, description and stages (the paper's chain; a set
 without variants hashes as before variants existed); a run in a variant records the
@@ -48,19 +53,33 @@ HISTORY_FORMS: tuple[tuple[str, ...], ...] = (("history",), ("speeds", "curvatur
 HISTORY_KEYS = ("history", "speeds", "curvatures")
 CHAINS = ("independent", "conversation")
 ANSWER_FORMATS = ("text", "structured")
-VARIANTS = ("structured", "conversation", "conversation+structured")
+VARIANTS = ("structured", "conversation", "conversation+structured", "no-history", "no-history+structured",
+            "conversation+no-history", "conversation+no-history+structured")
 # placeholders each stage must carry in a conversation variant: the earlier stages' texts are turns, not pasted
 CONVERSATION_PLACEHOLDERS: dict[str, tuple[str, ...]] = {"scene": (), "intent": ("history",), "actions": ()}
 
 
-def variant_name(chain: str = "independent", answer_format: str = "text") -> str | None:
-    """The prompt-set variant a run with ``chain`` and ``answer_format`` uses (None: the paper's stages)."""
+def variant_name(chain: str = "independent", answer_format: str = "text", inputs: str = "full") -> str | None:
+    """The prompt-set variant a run with ``chain``, ``answer_format`` and ``inputs`` uses (None: the paper's stages).
+
+    Only ``inputs="no-history"`` changes the prompts; the image ablations send the paper's (or the
+    request variant's) templates.
+    """
+    from lightemma.inputs import check_inputs
+
     if chain not in CHAINS:
         raise ValueError(f"chain must be one of {', '.join(CHAINS)}, got {chain!r}")
     if answer_format not in ANSWER_FORMATS:
         raise ValueError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {answer_format!r}")
-    parts = [p for p, on in (("conversation", chain == "conversation"), ("structured", answer_format == "structured")) if on]
+    check_inputs(inputs)
+    parts = [p for p, on in (("conversation", chain == "conversation"), ("no-history", inputs == "no-history"),
+                             ("structured", answer_format == "structured")) if on]
     return "+".join(parts) or None
+
+
+def _history_left(stages: dict[str, str]) -> list[str]:
+    """The stages whose templates hold a history placeholder."""
+    return [s for s, t in stages.items() if any("{" + k + "}" in t for k in HISTORY_KEYS)]
 
 
 def content_hash(data: dict[str, Any]) -> str:
@@ -92,6 +111,12 @@ def _variants(data: dict[str, Any], origin: str) -> dict[str, dict[str, str]]:
         if not isinstance(stages, dict) or not stages or any(s not in STAGES or not isinstance(t, str) for s, t in stages.items()):
             raise UserError(f"{origin}: variant {name!r} must map stage names ({', '.join(STAGES)}) to template strings")
         required = CONVERSATION_PLACEHOLDERS if name.startswith("conversation") else PLACEHOLDERS
+        if "no-history" in name.split("+"):
+            left = _history_left(stages)
+            if left:
+                raise UserError(f"{origin}: the {name} variant's {left[0]!r} template holds a history placeholder "
+                                "({history}, {speeds} or {curvatures}); a no-history template must not")
+            required = {s: tuple(p for p in req if p != "history") for s, req in required.items()}
         _check_placeholders(origin, f"{name} variant's ", stages, required)
     return {name: dict(stages) for name, stages in variants.items()}
 
@@ -128,22 +153,28 @@ class PromptSet:
         return cls(name=data["name"], description=str(data.get("description", "")), stages=dict(stages),
                    hash=content_hash(base), variants=variants, paper_stages=dict(stages))
 
-    def select(self, chain: str = "independent", answer_format: str = "text") -> PromptSet:
-        """This set as a run with ``chain`` and ``answer_format`` uses it: the variant's templates in place.
+    def select(self, chain: str = "independent", answer_format: str = "text", inputs: str = "full") -> PromptSet:
+        """This set as a run with ``chain``, ``answer_format`` and ``inputs`` uses it: the variant's templates in place.
 
-        Raises :class:`UserError` when the set has no templates for that variant.
+        Raises :class:`UserError` when the set has no templates for that variant, or when a
+        no-history variant leaves a stage of the paper's with the history in place.
         """
-        name = variant_name(chain, answer_format)
+        name = variant_name(chain, answer_format, inputs)
         paper = dict(self.paper_stages or self.stages)
         if name is None:
             return replace(self, stages=paper, variant=None, variant_hash=None, paper_stages=paper)
         if name not in self.variants:
             flags = " and ".join(f for f, on in (("--chain conversation", chain == "conversation"),
+                                                 ("--inputs no-history", inputs == "no-history"),
                                                  ("--answer-format structured", answer_format == "structured")) if on)
             raise UserError(f"prompt set {self.name!r} has no {name!r} variant, which {flags} needs; add its templates "
                             "under \"variants\" (docs/run.md, Prompt sets)")
-        return replace(self, stages={**paper, **self.variants[name]}, variant=name,
-                       variant_hash=content_hash(self.variants[name]), paper_stages=paper)
+        stages = {**paper, **self.variants[name]}
+        left = _history_left(stages) if inputs == "no-history" else []
+        if left:
+            raise UserError(f"prompt set {self.name!r}: its {name!r} variant has no {left[0]!r} template, so that stage "
+                            "would keep the history; give every stage that holds the history a template there")
+        return replace(self, stages=stages, variant=name, variant_hash=content_hash(self.variants[name]), paper_stages=paper)
 
     def render(self, stage: str, *, scene: str = "", history: str = "", intent: str = "", speeds: str = "", curvatures: str = "") -> str:
         """The text of ``stage`` with the earlier stages' texts and the history filled in.

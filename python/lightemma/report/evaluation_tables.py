@@ -98,11 +98,72 @@ def generations_table(evaluation: Evaluation) -> Table:
     return Table("Generations — is each generation better than its predecessor?", GENERATION_COLUMNS, evaluation.generations(), name="generations", flags=coverage_flags(evaluation), notes=notes)
 
 
+def _significant(value: object) -> str:
+    return "-" if value is None else ("yes" if value else "no")
+
+
+def _paired_metric_columns(diff: str, sides: tuple[tuple[str, str], tuple[str, str]], diff_header: str) -> list[Column]:
+    """Per metric of :data:`~lightemma.evaluation.ablations.PAIRED_METRICS`: both sides, the difference [CI], p (Holm), verdict."""
+    from lightemma.evaluation.ablations import PAIRED_METRICS
+
+    out: list[Column] = []
+    for m in PAIRED_METRICS:
+        unit = f" ({m.unit})" if m.unit else ""
+        out += [Column(f"{m.key}_{side}", f"{m.title} {name}{unit}", fixed(3)) for side, name in sides]
+        out += [Column(f"{m.key}_{diff}", f"{m.title} {diff_header}{unit} [95% CI]", fixed(3), ci=f"{m.key}_ci95"),
+                Column(f"{m.key}_p_holm", f"{m.title} p (Holm)", fixed(4)),
+                Column(f"{m.key}_significant", f"{m.title} significant", _significant)]
+    return out
+
+
+def _paired_note(evaluation: Evaluation, rows: int) -> str:
+    r = evaluation.resampling
+    return (f"Paired on the frames scored in both runs; {100 * r.confidence:g} % scene-bootstrap interval; p from {r.n_resamples} "
+            f"sign flips of scene-level differences, Holm-adjusted over the {rows} row(s) of this table (per metric); significant: "
+            f"p (Holm) ≤ {1 - r.confidence:.2f}.")
+
+
+def input_ablation_table(evaluation: Evaluation) -> Table:
+    """Does the image matter? Each ablation run against its model's full run: full − ablated, CI, Holm p (``input_ablations``)."""
+    columns = [Column("model", "Model (full inputs)"), Column("ablation", "Ablation"), Column("frames", "Common frames"),
+               Column("scenes", "Scenes"),
+               *_paired_metric_columns("diff", (("full", "full"), ("ablated", "ablated")), "full − ablated")]
+    notes = ["full − ablated < 0: the model is better with what the ablation takes away (the image, or the history) — it uses it; "
+             "≈ 0: it does not. no-image: no image in any stage; blank-image: a uniform grey image of the frame's size; "
+             "no-history: the prompts without the history numbers (docs/run.md#input-ablations).",
+             _paired_note(evaluation, len(evaluation.input_ablations)), *_notes(evaluation)[:1]]
+    return Table(f"Does the image matter? — input ablations, {evaluation.main_convention} convention", columns,
+                 list(evaluation.input_ablations), name="input_ablations", flags=coverage_flags(evaluation), notes=notes)
+
+
+def baseline_gain_table(evaluation: Evaluation) -> Table:
+    """Each model's gain over the best baseline (constant, cv, ego) on their common frames (``baseline_gains``)."""
+    columns = [Column("model", "Model"), Column("inputs", "Inputs"), Column("baseline", "Best baseline"),
+               Column("frames", "Common frames"), Column("scenes", "Scenes"),
+               *_paired_metric_columns("gain", (("model", "model"), ("baseline", "baseline")), "gain (baseline − model)")]
+    notes = ["Gain > 0: the model beats the best of the constant, constant-velocity and ego-status baselines by that much "
+             "(best: the lowest ADE avg on the frames scored in both); ≤ 0: the history alone does as well.",
+             _paired_note(evaluation, len(evaluation.baseline_gains)), *_notes(evaluation)[:1]]
+    return Table(f"Gain over the best baseline — {evaluation.main_convention} convention", columns, list(evaluation.baseline_gains),
+                 name="baseline_gains", flags=coverage_flags(evaluation), notes=notes)
+
+
+def ablation_tables(evaluation: Evaluation) -> list[Table]:
+    """The "does the image matter?" tables that have rows: input ablations, gains over the best baseline."""
+    tables = []
+    if evaluation.input_ablations:
+        tables.append(input_ablation_table(evaluation))
+    if evaluation.baseline_gains:
+        tables.append(baseline_gain_table(evaluation))
+    return tables
+
+
 def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> list[Table]:
-    """Efficiency first (Table I), then accuracy per evaluated convention (Table II), then the paired comparisons if computed."""
+    """Efficiency first (Table I), then accuracy per evaluated convention (Table II), then the paired comparisons if computed,
+    then the input ablations and gains over the best baseline where the runs hold them."""
     tables = [efficiency_table(evaluation, with_paper=with_paper)] + [accuracy_table(evaluation, c, with_paper=with_paper) for c in evaluation.conventions]
     if evaluation.pairwise:  # computed, and at least two runs
         tables.append(pairwise_table(evaluation))
         if evaluation.generations():
             tables.append(generations_table(evaluation))
-    return tables
+    return tables + ablation_tables(evaluation)

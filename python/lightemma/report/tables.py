@@ -60,7 +60,7 @@ def coverage_note(scored_pct: float | None) -> str:
     return " (no frame scored)" if scored_pct is None else f" (only {scored_pct:.0f} % scored)"
 
 
-MODEL_KEYS = ("model", "model_a", "model_b", "predecessor")  # columns whose cells name a model
+MODEL_KEYS = ("model", "model_a", "model_b", "predecessor", "baseline")  # columns whose cells name a model
 
 
 ACCURACY_COLUMNS: tuple[Column, ...] = (

@@ -5,8 +5,9 @@ Layout of ``OUT``::
     index.md                      links everything below, tables inline
     tables/efficiency.{md,csv,tex}, tables/accuracy_<convention>.{md,csv,tex}
     tables/pairwise_ade.{md,csv,tex}, tables/generations.{md,csv,tex}   (paired comparisons)
+    tables/input_ablations.{md,csv,tex}, tables/baseline_gains.{md,csv,tex}   (does the image matter?)
     tables/scenarios.{md,csv}, tables/history_bias.{md,csv}, tables/evaluation.json
-    figures/bubble.{png,svg}, figures/pairwise.{png,svg}, figures/history_bias.{png,svg}
+    figures/bubble.{png,svg}, figures/pairwise.{png,svg}, figures/history_bias.{png,svg}, figures/input_ablations.{png,svg}
     figures/frames/<kind>_<frame>.{png,svg}     model grids and single-model pictures
 
 Every model keeps one colour in every figure; only scored frames enter a mean,
@@ -151,6 +152,27 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
         texts = stage_texts(records[id(run)].get(fid))
         fig = frame_figure(gt, {worst: preds[worst]}, camera=cameras.get(fid), texts=texts, title=f"{fid}: {worst} (ADE {errors[worst]:.2f} m)", colors=colors)
         w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
+
+
+_ABLATION_TABLES = ("input_ablations", "baseline_gains")
+
+
+def _ablation_section(w: _Writer, tables: Sequence[Table]) -> None:
+    """"Does the model look at the road?": the input ablations and the gains over the best baseline, where the runs hold them."""
+    shown = [t for t in tables if t.name in _ABLATION_TABLES]
+    if not shown:
+        return
+    w.lines += ["## Does the model look at the road?", "",
+                "Each input ablation against its model's full run, and each model against the best of the constant, "
+                "constant-velocity and ego-status baselines (the history alone), paired on common frames (docs/evaluate.md).", ""]
+    for table in shown:
+        w.table(table)
+    from lightemma.report.figures import ablation_figure
+
+    ablations = next((t.rows for t in shown if t.name == "input_ablations"), [])
+    gains = next((t.rows for t in shown if t.name == "baseline_gains"), [])
+    w.figure(ablation_figure(ablations, gains), "input_ablations", "full − ablated ADE avg per ablation run, and each model's gain over "
+             "the best baseline, with 95 % scene-bootstrap intervals; filled: significant after Holm")
 
 
 def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
@@ -375,10 +397,10 @@ def _write(
     flags = coverage_flags(evaluation)
     w = _Writer(out, svg=svg)
     w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
-                "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format |",
-                "|---|---|---|---:|---|---|---|---|"]
+                "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format | Inputs |",
+                "|---|---|---|---:|---|---|---|---|---|"]
     w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | "
-                f"{m.integrator} | {m.chain} | {m.answer_format} |" for m in evaluation.models]
+                f"{m.integrator} | {m.chain} | {m.answer_format} | {m.inputs} |" for m in evaluation.models]
     w.lines.append("")
     if evaluation.warnings:
         w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]
@@ -388,7 +410,7 @@ def _write(
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations"):
+        if table.name in ("pairwise_ade", "generations", *_ABLATION_TABLES):
             continue
         w.table(table)
     (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
@@ -414,6 +436,8 @@ def _write(
                 w.table(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
+
+    _ablation_section(w, tables)
 
     shared = common_frames(runs) if len(runs) > 1 else None
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"

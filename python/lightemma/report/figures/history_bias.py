@@ -18,6 +18,34 @@ def _limits(values: Sequence[np.ndarray], *, floor: float) -> tuple[float, float
     return -reach, reach
 
 
+# marker per input ablation (lightemma.inputs): an ablated run is drawn hollow, in its full run's colour, just below it
+INPUT_MARKERS = {"full": "o", "no-image": "s", "blank-image": "D", "no-history": "^"}
+
+
+def _beside_full(runs: Sequence[Any]) -> tuple[list[int], dict[int, int]]:
+    """Run order with each full run followed by its ablation runs (same model and variant), and ablated -> full index."""
+    from lightemma.evaluation.ablations import comparison_key
+
+    def key(run: Any) -> tuple[Any, ...]:
+        return comparison_key(run.info)
+
+    def inputs(run: Any) -> str:
+        return getattr(getattr(run, "info", None), "inputs", "full")
+
+    full: dict[tuple[Any, ...], list[int]] = {}
+    for i, run in enumerate(runs):
+        if inputs(run) == "full":
+            full.setdefault(key(run), []).append(i)
+    partner = {i: full[key(run)][0] for i, run in enumerate(runs) if inputs(run) != "full" and len(full.get(key(run), [])) == 1}
+    order: list[int] = []
+    for i in range(len(runs)):
+        if i in partner:
+            continue
+        order.append(i)
+        order += [j for j, f in partner.items() if f == i]
+    return order, partner
+
+
 def history_bias_figure(
     runs: Sequence[Any],
     *,
@@ -39,6 +67,10 @@ def history_bias_figure(
     ``rows``: the :func:`~lightemma.evaluation.scenarios.history_bias` rows of ``runs`` when
     already computed (the fits are the slow part); ``notes``: a flag after a
     model's name (e.g. fewer than half of its frames scored).
+
+    Input-ablation runs (``--inputs``) are drawn beside their model's full run: just after it in
+    every panel, in its colour, hollow, with a marker per ablation (:data:`INPUT_MARKERS`), and
+    dashed lines / hatched bars.
     """
     from lightemma.evaluation.core import unique_labels
     from lightemma.evaluation.scenarios import bias_row, curvature_samples, truth_over_runs
@@ -48,6 +80,11 @@ def history_bias_figure(
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
     samples = [curvature_samples(run) for run in runs]
     stats = list(rows) if rows is not None else [bias_row(label, k) for label, k in zip(labels, samples)]
+    order, partner = _beside_full(runs)
+    ablated = {labels[i]: getattr(runs[i].info, "inputs", "full") for i in partner}
+    for i, f in partner.items():
+        palette[labels[i]] = palette[labels[f]]
+    labels, samples, stats = [labels[i] for i in order], [samples[i] for i in order], [stats[i] for i in order]
     # the truth of every frame any run covers (not only the first run's): its line never depends on run order or coverage
     truth = truth_over_runs(runs)
     truth_fit = bias_row("truth", {"history": truth["history"], "pred": truth["true"], "true": truth["true"], "after_turn": truth["after_turn"], "short_path": np.array(0)})
@@ -60,7 +97,11 @@ def history_bias_figure(
     rng = np.random.default_rng(0)
     for label, k in zip(labels, samples):
         keep = rng.permutation(len(k["history"]))[:max_points]
-        scatter.scatter(k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2)
+        if label in ablated:
+            scatter.scatter(k["history"][keep], k["pred"][keep], s=9, marker=INPUT_MARKERS.get(ablated[label], "s"), facecolors="none",
+                            edgecolors=palette[label], alpha=0.35, linewidths=0.6, zorder=2)
+        else:
+            scatter.scatter(k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2)
     keep = rng.permutation(len(truth["history"]))[:max_points]
     scatter.scatter(truth["history"][keep], truth["true"][keep], s=7, color=GT_COLOR, alpha=0.45, linewidths=0, zorder=3)
     xs = np.array(xlim)
@@ -68,7 +109,8 @@ def history_bias_figure(
     few = len(labels) <= 4  # with many models the middle panel names them; the scatter shows their lines only
     for label, stat in zip(labels, stats):
         if stat["slope_pred"] is not None:
-            scatter.plot(xs, stat["slope_pred"] * xs + stat["intercept_pred"], color=palette[label], linewidth=1.6, zorder=5, label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None)
+            scatter.plot(xs, stat["slope_pred"] * xs + stat["intercept_pred"], color=palette[label], linewidth=1.6, zorder=5,
+                         linestyle="--" if label in ablated else "-", label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None)
     if not few:
         scatter.plot([], [], color="0.3", linewidth=1.6, label="each model's fit (colours as in the middle panel)")
     if truth_fit["slope_true"] is not None:
@@ -100,7 +142,8 @@ def history_bias_figure(
             slopes.text(0.5, yi, "too few moving frames for a slope", transform=slopes.get_yaxis_transform(), ha="center", va="center", fontsize=7, color="0.45")
             continue
         low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
-        slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt="o", color=palette[label], capsize=3, zorder=3)
+        slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt=INPUT_MARKERS.get(ablated.get(label, "full"), "o"), color=palette[label], capsize=3, zorder=3,
+                        markerfacecolor="white" if label in ablated else palette[label])
     slopes.set_yticks(y)
     slopes.set_yticklabels(names, fontsize=7)
     slopes.set_ylim(-0.6, n - 0.4)
@@ -114,7 +157,9 @@ def history_bias_figure(
         if s["carry_pred"] is None:
             bars.text(0.02, yi, "no frame straight just after a turn", transform=bars.get_yaxis_transform(), ha="left", va="center", fontsize=7, color="0.45")
             continue
-        bars.barh([yi], [s["carry_pred"]], color=palette[label], height=0.6, zorder=2)
+        hollow = label in ablated
+        bars.barh([yi], [s["carry_pred"]], color="white" if hollow else palette[label], edgecolor=palette[label],
+                  hatch="//" if hollow else None, linewidth=1.0 if hollow else 0, height=0.6, zorder=2)
         values.append(s["carry_pred"])
     if carried is not None:
         bars.axvline(carried, color="white", linewidth=4.5, zorder=3)
