@@ -319,7 +319,7 @@ def write_dataset(
         raise UserError(f"{table_root} already exists; pass overwrite=True to replace it",
                         cli=f"{table_root} already exists; add --force to replace it")
     camera = Camera(int(image_size[0]), int(image_size[1]))
-    scenarios = synth_maps.place_scenarios(build_scenarios(scenes, seed=seed, keyframes=keyframes))
+    scenarios = build_scenarios(scenes, seed=seed, keyframes=keyframes)
     tables, todo = build_tables(scenarios, seed=seed, camera=camera, sweeps=sweeps)
 
     masks: dict[str, bool] = {}
