@@ -564,8 +564,9 @@ def na_reason(fs: FrameSafety, which: str) -> str | None:
         return None
     counts: dict[str, int] = {}
     for r in reasons:
-        counts[r] = counts.get(r, 0) + 1
-    return max(counts, key=counts.get)
+        if r:
+            counts[r] = counts.get(r, 0) + 1
+    return max(counts, key=counts.get) if counts else None
 
 
 def frame_warnings(fs: FrameSafety, frame_ids: Sequence[str], what: str) -> list[str]:
