@@ -14,14 +14,13 @@ import pytest
 from lightemma.errors import DatasetError
 from lightemma.evaluation import safety as S
 
-shapely = pytest.importorskip("shapely")
-from shapely import affinity  # noqa: E402
-from shapely.geometry import Polygon, box  # noqa: E402
-
 L, W, OFF = S.EGO_LENGTH, S.EGO_WIDTH, S.EGO_OFFSET
 
 
 def _rect(cx, cy, yaw, length, width):
+    from shapely import affinity
+    from shapely.geometry import box
+
     return affinity.rotate(box(cx - length / 2, cy - width / 2, cx + length / 2, cy + width / 2), yaw, origin=(cx, cy), use_radians=True)
 
 

@@ -584,3 +584,249 @@ def frame_warnings(fs: FrameSafety, frame_ids: Sequence[str], what: str) -> list
         out.append(f"{what}: the map mask does not cover the footprint of {len(outside)} frame(s) (e.g. {frame_ids[outside[0]]}); "
                    "those points count as off the drivable area")
     return out
+
+
+# -- evaluation of runs ------------------------------------------------------------------------------
+
+#: row keys this module adds to every accuracy row (values are shares 0..1; tables print %)
+ROW_KEYS = (*AREA_KEYS, *COLLISION_KEYS, "offroad_ci95", "collision_ci95", "safety_frames", "offroad_frames", "collision_frames",
+            "area_source", "offroad_na", "collision_na", "collision_convention")
+FLOOR_LABEL = "Ground truth (floor)"
+_NO_DATAROOT = "no dataroot (pass --dataroot and --version)"
+
+
+def sample_token_of(frame_id: str) -> str:
+    """The sample token in a frame id ``scene/sample_token``."""
+    return frame_id.rsplit("/", 1)[-1]
+
+
+@dataclass
+class RunSafety:
+    """One run's outcomes on its scored frames (model and ground truth), for tables, tests, tags and figures."""
+
+    frame_ids: list[str]
+    rows: np.ndarray
+    model: FrameSafety | None
+    truth: FrameSafety | None
+    reason: str | None = None  # why there is nothing (no dataroot, unreadable dataset)
+
+
+@dataclass
+class SafetyResult:
+    """Safety rows per model and ADE convention, the ground-truth floor, and the per-frame outcomes."""
+
+    rows: dict[str, dict[str, dict[str, Any]]]  # label -> ADE convention -> row keys
+    floor: dict[str, dict[str, Any]]  # ADE convention -> row keys (ground truth, unmasked)
+    runs: dict[str, RunSafety]
+    warnings: list[str] = field(default_factory=list)
+    gt_off_scenes: list[str] = field(default_factory=list)  # scenes whose ground truth leaves the drivable area
+    gt_collision_scenes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"floor": self.floor, "gt_off_road_scenes": self.gt_off_scenes, "gt_collision_scenes": self.gt_collision_scenes}
+
+
+def _resolve_dataset(run: Any, dataroot: str | os.PathLike[str] | None, version: str | None) -> tuple[str, str] | str:
+    """(dataroot, version) for a run: the given ones, else the run's manifest's; or the reason there is none."""
+    if dataroot is not None:
+        if not version:
+            return "--dataroot needs --version"
+        return os.fspath(dataroot), version
+    ds = run.info.dataset or {}
+    root, ver = ds.get("dataroot"), ds.get("version")
+    if isinstance(root, str) and root and isinstance(ver, str) and ver and Path(root, ver).is_dir():
+        return root, ver
+    return _NO_DATAROOT
+
+
+def _row(values: Mapping[str, np.ndarray], fs: FrameSafety, convention: str) -> dict[str, Any]:
+    r = rates(values)
+    area_ok, coll_ok = np.isfinite(values["offroad"]), np.isfinite(values["collision"])
+    kinds = sorted({k for k in fs.area_kind if k})
+    return {**r, "safety_frames": int(len(fs.area_ok)), "offroad_frames": int(area_ok.sum()), "collision_frames": int(coll_ok.sum()),
+            "area_source": "+".join(kinds) if kinds else None, "offroad_na": None if area_ok.any() else (na_reason(fs, "area") or "no frame"),
+            "collision_na": None if coll_ok.any() else (na_reason(fs, "collision") or "no frame"), "collision_convention": convention}
+
+
+def _intervals(groups: list[tuple[np.ndarray, np.ndarray]], keys: list[str], resampling: Any) -> np.ndarray:
+    from lightemma.stats import bootstrap_ci
+
+    if not groups or not resampling.n_resamples:
+        return np.full((len(groups), 1, 2), np.nan)
+    return bootstrap_ci(groups, keys, resampling)
+
+
+def _scenes(frame_ids: Sequence[str]) -> np.ndarray:
+    """Scene names of frame ids ``scene/sample_token`` (the clusters of the scene bootstrap)."""
+    return np.asarray([f.rsplit("/", 1)[0] for f in frame_ids], dtype=object)
+
+
+def evaluate_safety(
+    entries: Sequence[tuple[str, Any, np.ndarray]],
+    conventions: Sequence[str],
+    resampling: Any,
+    *,
+    dataroot: str | os.PathLike[str] | None = None,
+    version: str | None = None,
+    ego: EgoModel = EGO,
+) -> SafetyResult:
+    """Safety rows for evaluated runs: ``entries`` = (label, RunData, scored rows) as in :func:`evaluate_loaded`.
+
+    Each ADE convention's table shows the collision convention of the same name (``lightemma`` → ``any``);
+    off-road values are the same in every table. Intervals: scene bootstrap as for ADE. The floor is the
+    ground truth's own (unmasked) rates over every frame with usable ground truth in any run.
+    """
+    warnings: list[str] = []
+    datasets: dict[tuple[str, str], list[int]] = {}
+    resolved = []
+    for i, (_, run, _) in enumerate(entries):
+        ds = _resolve_dataset(run, dataroot, version)
+        resolved.append(ds)
+        if isinstance(ds, tuple):
+            datasets.setdefault(ds, []).append(i)
+    loaded: dict[tuple[str, str], SafetyData | str] = {}
+    for ds, members in datasets.items():
+        tokens = {sample_token_of(f) for i in members for f in entries[i][1].frame_ids}
+        try:
+            loaded[ds] = load_safety_data(ds[0], ds[1], samples=tokens)
+        except DatasetError as exc:
+            loaded[ds] = str(exc)
+            warnings.append(f"safety metrics: {exc}")
+    result = SafetyResult(rows={}, floor={}, runs={}, warnings=warnings)
+    groups: list[tuple[np.ndarray, np.ndarray]] = []
+    keys: list[str] = []
+    slots: list[tuple[str, str, str]] = []
+    floor_frames: dict[str, tuple[np.ndarray, str, Any]] = {}
+    for (label, run, rows), ds in zip(entries, resolved):
+        data = loaded.get(ds) if isinstance(ds, tuple) else None
+        reason = ds if isinstance(ds, str) else (data if isinstance(data, str) else None)
+        fids = [run.frame_ids[i] for i in rows]
+        if reason is not None or not isinstance(data, SafetyData):
+            result.runs[label] = RunSafety(fids, rows, None, None, reason)
+            na = {k: None for k in ROW_KEYS}
+            result.rows[label] = {c: {**na, "offroad_na": reason, "collision_na": reason, "collision_convention": COLLISION_FOR_ADE[c]} for c in conventions}
+            continue
+        tokens = [sample_token_of(f) for f in fids]
+        model = frame_safety(run.trajectory[rows], tokens, data, ego)
+        truth = frame_safety(run.gt_positions[rows], tokens, data, ego)
+        result.runs[label] = RunSafety(fids, rows, model, truth)
+        warnings.extend(frame_warnings(model, fids, label))
+        result.rows[label] = {}
+        scenes = _scenes(fids)
+        for c in conventions:
+            cc = COLLISION_FOR_ADE[c]
+            values = safety_values(model, cc, gt=truth)
+            result.rows[label][c] = _row(values, model, cc)
+            for key in ("offroad", "collision"):
+                ok = np.isfinite(values[key])
+                if ok.sum() > 0:
+                    groups.append((values[key][ok], scenes[ok]))
+                    keys.append(f"safety|{label}|{cc}|{key}")
+                    slots.append((label, c, key))
+        for j, fid in enumerate(fids):
+            floor_frames.setdefault(fid, (run.gt_positions[rows[j]], tokens[j], data))
+    # the floor: every frame's ground truth once
+    if floor_frames:
+        by_data: dict[int, list[str]] = {}
+        for fid, (_, _, data) in floor_frames.items():
+            by_data.setdefault(id(data), []).append(fid)
+        parts = []
+        for fids in by_data.values():
+            data = floor_frames[fids[0]][2]
+            gt = np.stack([floor_frames[f][0] for f in fids])
+            parts.append((fids, frame_safety(gt, [floor_frames[f][1] for f in fids], data, ego)))
+        fids = [f for p in parts for f in p[0]]
+        truth = _concat([p[1] for p in parts])
+        scenes = _scenes(fids)
+        warnings.extend(frame_warnings(truth, fids, "ground truth"))
+        off = truth.off_steps.any(axis=1) & truth.area_ok
+        hit = truth.collide.any(axis=(1, 2)) & truth.coll_ok
+        result.gt_off_scenes = sorted({f.rsplit("/", 1)[0] for f, o in zip(fids, off) if o})
+        result.gt_collision_scenes = sorted({f.rsplit("/", 1)[0] for f, o in zip(fids, hit) if o})
+        if result.gt_off_scenes:
+            warnings.append(f"the ground truth itself leaves the drivable area in {int(off.sum())} frame(s) of scene(s) "
+                            f"{', '.join(result.gt_off_scenes[:10])}{' …' if len(result.gt_off_scenes) > 10 else ''} (the floor row counts them)")
+        for c in conventions:
+            cc = COLLISION_FOR_ADE[c]
+            values = safety_values(truth, cc)  # unmasked: the ground truth's own rate
+            result.floor[c] = {"model": FLOOR_LABEL, **_row(values, truth, cc)}
+            for key in ("offroad", "collision"):
+                ok = np.isfinite(values[key])
+                if ok.sum() > 0:
+                    groups.append((values[key][ok], scenes[ok]))
+                    keys.append(f"safety|{FLOOR_LABEL}|{cc}|{key}")
+                    slots.append((FLOOR_LABEL, c, key))
+    ci = _intervals(groups, keys, resampling)
+    for (label, c, key), pair in zip(slots, ci[:, 0]):
+        target = result.floor[c] if label == FLOOR_LABEL else result.rows[label][c]
+        target[f"{key}_ci95"] = [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
+    return result
+
+
+def _concat(parts: Sequence[FrameSafety]) -> FrameSafety:
+    if len(parts) == 1:
+        return parts[0]
+    return FrameSafety(np.concatenate([p.area for p in parts]), np.concatenate([p.area_ok for p in parts]), [r for p in parts for r in p.area_reason],
+                       [k for p in parts for k in p.area_kind], np.concatenate([p.collide for p in parts]),
+                       np.concatenate([p.coll_ok for p in parts]), [r for p in parts for r in p.coll_reason])
+
+
+def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str, resampling: Any, *, only: set[str] | None = None) -> list[dict[str, Any]]:
+    """Every pair of runs (a before b) on the frames where both have a value: mean paired difference a − b of
+    ``offroad`` and of ``collision`` (the collision convention of ``convention``'s table), scene-bootstrap
+    interval, sign-flip p-value over scenes, Holm over all pairs and both metrics. Rows as :func:`pairwise_ade`'s,
+    with ``metric`` and ``diff``."""
+    from lightemma.stats import holm, sign_flip_p
+
+    cc = COLLISION_FOR_ADE[convention]
+    per: dict[str, dict[str, dict[str, float]]] = {}
+    scene_of: dict[str, str] = {}
+    for label in labels:
+        rs = result.runs.get(label)
+        if rs is None or rs.model is None:
+            continue
+        values = safety_values(rs.model, cc, gt=rs.truth)
+        per[label] = {}
+        for key in ("offroad", "collision"):
+            per[label][key] = {f: float(v) for f, v in zip(rs.frame_ids, values[key]) if math.isfinite(v) and (only is None or f in only)}
+        for f in rs.frame_ids:
+            scene_of.setdefault(f, f.rsplit("/", 1)[0])
+    codes: dict[str, int] = {}
+    out, groups, keys, where = [], [], [], []
+    for key in ("offroad", "collision"):
+        for a in range(len(labels)):
+            for b in range(a + 1, len(labels)):
+                la, lb = labels[a], labels[b]
+                row: dict[str, Any] = {"model_a": la, "model_b": lb, "metric": key, "convention": cc, "frames": 0, "scenes": 0, "diff": None, "ci95": None, "p_value": None}
+                if la in per and lb in per:
+                    common = sorted(set(per[la][key]) & set(per[lb][key]))
+                    if common:
+                        d = np.array([per[la][key][f] - per[lb][key][f] for f in common])
+                        sc = np.array([codes.setdefault(scene_of[f], len(codes)) for f in common])
+                        row.update(frames=len(common), scenes=int(len(np.unique(sc))), diff=float(d.mean()))
+                        groups.append((d, sc))
+                        keys.append(f"{la}|{lb}|{cc}|{key}")
+                        where.append(len(out))
+                out.append(row)
+    if groups and resampling.n_resamples:
+        ci = _intervals(groups, keys, resampling)
+        p = sign_flip_p(groups, keys, resampling)
+        for k, i in enumerate(where):
+            pair = ci[k, 0]
+            out[i]["ci95"] = [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
+            out[i]["p_value"] = None if np.isnan(p[k]) else float(p[k])
+    adjusted = holm([np.nan if r["p_value"] is None else r["p_value"] for r in out]) if out else []
+    alpha = 1.0 - resampling.confidence
+    for row, adj in zip(out, adjusted):
+        row["p_holm"] = None if np.isnan(adj) else float(adj)
+        row["significant"] = bool(row["p_holm"] is not None and row["p_holm"] <= alpha)
+    return out
+
+
+def frame_tags(rs: RunSafety) -> dict[str, np.ndarray]:
+    """Scenario tags of a run's scored frames from the model's own outcomes: ``collides`` (any step, any
+    agent) and ``off_road`` (some corner off the drivable area at some step); False where n/a."""
+    n = len(rs.frame_ids)
+    if rs.model is None:
+        return {"collides": np.zeros(n, bool), "off_road": np.zeros(n, bool)}
+    return {"collides": rs.model.collide.any(axis=(1, 2)) & rs.model.coll_ok, "off_road": rs.model.off_steps.any(axis=1) & rs.model.area_ok}
