@@ -160,8 +160,8 @@ def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> li
         tables.append(safety_table(evaluation, PAPER_CONVENTION))
     if evaluation.pairwise:  # computed, and at least two runs
         tables.append(pairwise_table(evaluation))
-    if evaluation.pairwise_safety:
-        tables.append(pairwise_safety_table(evaluation))
         if evaluation.generations():
             tables.append(generations_table(evaluation))
+    if any(r["diff"] is not None for r in evaluation.pairwise_safety or []):  # some pair has common frames with values
+        tables.append(pairwise_safety_table(evaluation))
     return tables
