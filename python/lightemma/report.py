@@ -22,6 +22,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, evaluation_tables, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
@@ -139,6 +141,38 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
         w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
 
 
+def _safety_views(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], safety: Any, colors: dict[str, str], per_model: int = 1) -> None:
+    """Bird's-eye views of each model's first colliding and first off-road frames (figures/bev.py)."""
+    from lightemma.evaluation.safety import frame_tags
+    from lightemma.figures.bev import bev_figure
+
+    picks: dict[str, str] = {}
+    for label in labels:
+        rs = safety.runs.get(label)
+        if rs is None or rs.data is None:
+            continue
+        tags = frame_tags(rs)
+        for tag, why in (("collides", "collides"), ("off_road", "leaves the drivable area")):
+            for i in np.flatnonzero(tags[tag])[:per_model]:
+                picks.setdefault(rs.frame_ids[i], f"{label} {why}")
+    if not picks:
+        return
+    w.lines += ["## Safety — bird's-eye views", "",
+                "Grey: drivable area; black boxes: annotated agents over the next 3 s (darker = later); outlines: ego footprints "
+                "(green: ground truth), filled red where they overlap an agent, dashed red where a corner is off the drivable area.", ""]
+    by_label = {label: run for label, run in zip(labels, runs)}
+    for k, (fid, why) in enumerate(picks.items()):
+        trajectories, gt, data = [], None, None
+        for label in labels:
+            rs, run = safety.runs.get(label), by_label[label]
+            if rs is None or rs.data is None or fid not in rs.frame_ids:
+                continue
+            i = rs.rows[rs.frame_ids.index(fid)]
+            trajectories.append((label, run.trajectory[i], colors.get(label, "#1f77b4")))
+            gt, data = run.gt_positions[i], rs.data
+        w.figure(bev_figure(fid, trajectories, gt, data), f"bev_{k:02d}_{_slug(fid)}", f"{fid}: {why}")
+
+
 def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
     """One entry per frame (the first kind), its captions joined: a frame is drawn once."""
     merged: dict[str, tuple[str, str, str]] = {}
@@ -165,6 +199,8 @@ def write_report(
     case_tags: Sequence[str] | None = None,
     pairwise: bool = True,
     resampling: Resampling = Resampling(),
+    version: str | None = None,
+    safety: bool = True,
 ) -> Path:
     """Evaluate runs and write tables, figures and the scenario analysis into ``out``; returns ``index.md``.
 
@@ -174,6 +210,9 @@ def write_report(
     every pair of runs (table, matrix figure, per-family generation verdicts);
     ``resampling`` sets the scene bootstrap (resamples, seed, confidence). A ``dataroot``
     that is not a folder, or a negative ``top``, raises :class:`~lightemma.errors.UserError` before any work.
+    With ``safety`` the tables carry off-road and collision columns (from ``dataroot``/``version`` when both
+    are given, else each run's own dataset), the scenarios the ``collides`` / ``off_road`` tags, and a
+    bird's-eye view is drawn of each model's first colliding and first off-road frame.
     """
     from lightemma.evaluation.tables import coverage_flags
     from lightemma.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
@@ -190,7 +229,8 @@ def write_report(
     missing = [fid for fid in frames if fid not in known]
     if missing:
         raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
-    evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1)
+    evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1,
+                                             safety=safety, dataroot=dataroot if version else None, version=version)
     order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
     runs.sort(key=lambda r: order[r.info.run_dir])
     labels = unique_labels(runs)
@@ -212,7 +252,7 @@ def write_report(
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations"):
+        if table.name in ("pairwise_ade", "generations", "pairwise_safety"):
             continue
         w.table(table)
     (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
@@ -234,7 +274,7 @@ def write_report(
             w.lines += ["Is each generation better than its predecessor? (ADE avg change newer − older, 95 % scene-bootstrap interval, Holm-adjusted p over all pairs)", ""]
             w.lines += _generation_lines(generations) + [""]
         for table in tables:
-            if table.name in ("pairwise_ade", "generations"):
+            if table.name in ("pairwise_ade", "generations", "pairwise_safety"):
                 w.table(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
@@ -242,7 +282,7 @@ def write_report(
     shared = common_frames(runs) if len(runs) > 1 else None
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
-    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags), latex=False)
+    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None, safety=evaluation.safety), labels, flags), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
     w.table(_bias_table(bias, flags), latex=False)
@@ -258,6 +298,8 @@ def write_report(
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
         w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
         _frame_pictures(w, runs, labels, picks, cameras, colors)
+    if pictures and evaluation.safety is not None:
+        _safety_views(w, runs, labels, evaluation.safety, colors)
     index = out / "index.md"
     index.write_text("\n".join(w.lines) + "\n", encoding="utf-8")
     return index

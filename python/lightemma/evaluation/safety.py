@@ -609,6 +609,7 @@ class RunSafety:
     model: FrameSafety | None
     truth: FrameSafety | None
     reason: str | None = None  # why there is nothing (no dataroot, unreadable dataset)
+    data: SafetyData | None = None  # the dataset the outcomes come from (for figures)
 
 
 @dataclass
@@ -709,7 +710,7 @@ def evaluate_safety(
         tokens = [sample_token_of(f) for f in fids]
         model = frame_safety(run.trajectory[rows], tokens, data, ego)
         truth = frame_safety(run.gt_positions[rows], tokens, data, ego)
-        result.runs[label] = RunSafety(fids, rows, model, truth)
+        result.runs[label] = RunSafety(fids, rows, model, truth, data=data)
         warnings.extend(frame_warnings(model, fids, label))
         result.rows[label] = {}
         scenes = _scenes(fids)
