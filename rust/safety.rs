@@ -300,12 +300,21 @@ pub fn collisions(
                 );
                 for (k, p) in buf.iter().enumerate() {
                     let ego = footprint(p, shape);
+                    let ego_reach = ego.half_length.hypot(ego.half_width);
                     let base = (f * steps + k) * slots;
-                    for a in 0..slots {
-                        let b = &agents[(base + a) * BOX_VALUES..(base + a + 1) * BOX_VALUES];
-                        if !b[0].is_nan() && ego.overlaps(&Rect::new(b[0], b[1], b[2], b[3], b[4]))
-                        {
-                            of[k * slots + a] = 1;
+                    let boxes = &agents[base * BOX_VALUES..(base + slots) * BOX_VALUES];
+                    let hits = &mut of[k * slots..(k + 1) * slots];
+                    for (b, hit) in boxes.chunks_exact(BOX_VALUES).zip(hits.iter_mut()) {
+                        // bounding circles first: most pairs are far apart, and this needs no sin/cos
+                        // (a NaN centre, an empty slot, fails the comparison and is skipped too)
+                        let (dx, dy) = (b[0] - ego.centre.x, b[1] - ego.centre.y);
+                        let reach = ego_reach + 0.5 * (b[3] * b[3] + b[4] * b[4]).sqrt();
+                        let near = dx * dx + dy * dy < reach * reach;
+                        if !near {
+                            continue;
+                        }
+                        if ego.overlaps(&Rect::new(b[0], b[1], b[2], b[3], b[4])) {
+                            *hit = 1;
                         }
                     }
                 }
