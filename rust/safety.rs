@@ -334,6 +334,19 @@ pub struct Mask<'a> {
     pub foreground: u8,
 }
 
+/// NumPy's `round` (half to even) for |v| < 2⁵¹ by the add-and-subtract-1.5·2⁵² trick (exact under the
+/// default rounding mode; the same result as `f64::round_ties_even`, which without SSE4.1 is a slow
+/// library call). Larger values are returned as they are (they lie outside any mask).
+#[inline]
+pub fn round_half_even(v: f64) -> f64 {
+    const MAGIC: f64 = 6_755_399_441_055_744.0; // 1.5 · 2⁵²
+    if v.abs() < 2_251_799_813_685_248.0 {
+        (v + MAGIC) - MAGIC
+    } else {
+        v
+    }
+}
+
 impl Mask<'_> {
     pub fn check(&self) -> CoreResult<()> {
         check_len(
@@ -351,19 +364,31 @@ impl Mask<'_> {
         Ok(())
     }
 
+    /// The pixel index of (x, y) in `data`, or `usize::MAX` when the image does not cover it.
+    #[inline]
+    pub fn index(&self, x: f64, y: f64) -> usize {
+        let scale = 1.0 / self.resolution;
+        let px = round_half_even(scale * x);
+        let py = round_half_even(-scale * y + self.height as f64);
+        if !(px >= 0.0 && py >= 0.0 && px < self.width as f64 && py < self.height as f64) {
+            return usize::MAX;
+        }
+        py as usize * self.width + px as usize
+    }
+
+    /// `ON`, `OFF` or `OUTSIDE` of a pixel index from [`Mask::index`].
+    #[inline]
+    pub fn at(&self, index: usize) -> u8 {
+        match self.data.get(index) {
+            None => OUTSIDE,
+            Some(&v) if v == self.foreground => ON,
+            Some(_) => OFF,
+        }
+    }
+
     /// `ON`, `OFF` or `OUTSIDE` (the point is not covered by the image).
     pub fn lookup(&self, x: f64, y: f64) -> u8 {
-        let scale = 1.0 / self.resolution;
-        let px = (scale * x).round_ties_even();
-        let py = (-scale * y + self.height as f64).round_ties_even();
-        if !(px >= 0.0 && py >= 0.0 && px < self.width as f64 && py < self.height as f64) {
-            return OUTSIDE;
-        }
-        if self.data[py as usize * self.width + px as usize] == self.foreground {
-            ON
-        } else {
-            OFF
-        }
+        self.at(self.index(x, y))
     }
 }
 
@@ -510,7 +535,10 @@ pub fn footprint_area(
         .enumerate()
         .for_each(|(task, o)| {
             let mut buf = vec![[0.0; 3]; steps];
-            for (j, of) in o.chunks_mut(steps * TEST_POINTS).enumerate() {
+            // the task's test points first (x, y), then the lookups: for a mask, the independent loads of
+            // a tight loop overlap their cache misses (one random 64-byte line each)
+            let mut points = Vec::with_capacity(o.len());
+            for j in 0..o.len() / (steps * TEST_POINTS) {
                 let f = task * FRAMES_PER_TASK + j;
                 frame_poses(
                     &traj[f * steps * 2..(f + 1) * steps * 2],
@@ -518,12 +546,22 @@ pub fn footprint_area(
                     shape,
                     &mut buf,
                 );
-                for (k, p) in buf.iter().enumerate() {
-                    let corners = footprint(p, shape).corners();
-                    for (c, q) in corners.iter().enumerate() {
-                        of[k * TEST_POINTS + c] = area.lookup(q.x, q.y);
+                for p in &buf {
+                    points.extend(footprint(p, shape).corners().iter().map(|q| (q.x, q.y)));
+                    points.push((p[0], p[1]));
+                }
+            }
+            match area {
+                Area::Mask(m) => {
+                    let idx: Vec<usize> = points.iter().map(|&(x, y)| m.index(x, y)).collect();
+                    for (slot, &i) in o.iter_mut().zip(&idx) {
+                        *slot = m.at(i);
                     }
-                    of[k * TEST_POINTS + 4] = area.lookup(p[0], p[1]);
+                }
+                Area::Polygons(_) => {
+                    for (slot, &(x, y)) in o.iter_mut().zip(&points) {
+                        *slot = area.lookup(x, y);
+                    }
                 }
             }
         });
@@ -536,10 +574,17 @@ pub fn mask_points(points: &[f64], mask: &Mask<'_>) -> CoreResult<Vec<u8>> {
     if !points.len().is_multiple_of(2) {
         return Err(CoreError::Shape("points must have shape (M, 2)".to_owned()));
     }
-    Ok(points
-        .par_chunks(2 * 4096)
-        .flat_map_iter(|c| c.chunks_exact(2).map(|p| mask.lookup(p[0], p[1])))
-        .collect())
+    let mut out = vec![0u8; points.len() / 2];
+    out.par_chunks_mut(4096)
+        .zip(points.par_chunks(2 * 4096))
+        .for_each(|(o, c)| {
+            // indices first, then the loads: independent loads in a tight loop overlap their cache misses
+            let idx: Vec<usize> = c.chunks_exact(2).map(|p| mask.index(p[0], p[1])).collect();
+            for (slot, &i) in o.iter_mut().zip(&idx) {
+                *slot = mask.at(i);
+            }
+        });
+    Ok(out)
 }
 
 #[cfg(test)]
@@ -653,6 +698,31 @@ mod tests {
         assert_eq!(m.lookup(-0.6, 1.0), OUTSIDE);
         assert_eq!(m.lookup(0.0, 0.4), OUTSIDE); // py round(2.6) = 3 = H
         assert_eq!(m.lookup(3.4, 3.0), OFF);
+    }
+
+    #[test]
+    fn round_half_even_is_numpys_round() {
+        for v in [
+            0.5,
+            1.5,
+            2.5,
+            -0.5,
+            -1.5,
+            -2.5,
+            3.4999999,
+            3.5000001,
+            1e6 + 0.5,
+            12345.5,
+            -0.0,
+            7.0,
+        ] {
+            assert_eq!(round_half_even(v), v.round_ties_even(), "{v}");
+        }
+        let mut x = -3000.0;
+        while x < 3000.0 {
+            assert_eq!(round_half_even(x), x.round_ties_even(), "{x}");
+            x += 0.0137;
+        }
     }
 
     #[test]
