@@ -170,3 +170,41 @@ def test_imported_runs_get_safety_numbers_with_a_dataroot(world, tmp_path, capsy
     want = S.rates(S.safety_values(S.frame_safety(np.array(trajectories), fs.sample_tokens, S.load_safety_data(root, "v1.0-mini")), "any"))
     assert row["offroad"] == pytest.approx(want["offroad"]) and row["collision"] == pytest.approx(want["collision"])
     assert 0.0 < row["offroad"] < 0.5
+
+
+def test_bird_eye_view_marks_the_colliding_steps(world):
+    from matplotlib.colors import to_hex
+
+    from lightemma.figures.bev import COLLISION_COLOR, bev_figure
+
+    base, root, dirs = world
+    run = load_run(dirs["oracle"])
+    i, steps, _ = _swerve(run)
+    data = S.load_safety_data(root, "v1.0-mini")
+    fig = bev_figure(run.frame_ids[i], [("swerve", run.trajectory[i], "#1f77b4")], run.gt_positions[i], data)
+    patches = fig.axes[0].patches
+    filled = [p for p in patches if p.get_fill() and to_hex(p.get_facecolor()) == COLLISION_COLOR]
+    dashed = [p for p in patches if p.get_linestyle() == "--"]
+    assert len(filled) == sum(steps) and len(dashed) == 6  # every step of the swerve has a corner off the road
+    agents = sum(len(data.boxes[t]) for t in data.future[S.sample_token_of(run.frame_ids[i])])
+    assert agents > 0 and len([p for p in patches if not p.get_fill()]) >= agents + 12 - sum(steps)
+
+
+def test_report_has_safety_tags_and_views(world, tmp_path):
+    from lightemma.report import write_report
+    from lightemma.scenarios import per_tag_metrics
+
+    base, root, dirs = world
+    index = write_report([base / "runs"], tmp_path / "rep", convention="lightemma", top=0, case_tags=(), resampling=Resampling(n_resamples=0))
+    text = index.read_text()
+    assert "## Safety — bird's-eye views" in text and list((tmp_path / "rep" / "figures").glob("bev_*.png"))
+    runs = [load_run(d, details=True) for d in dirs.values()]
+    ev = evaluate_loaded(runs, resampling=Resampling(n_resamples=0))
+    order = {m.run_dir: k for k, m in enumerate(ev.models)}
+    runs.sort(key=lambda r: order[r.info.run_dir])
+    tags = {r["tag"]: r for r in per_tag_metrics(runs, safety=ev.safety)}
+    for m in ev.models:
+        rs = ev.safety.runs[m.label]
+        assert tags["off_road"][f"{m.label} frames"] == int((rs.model.off_steps.any(axis=1)).sum())
+        assert tags["collides"][f"{m.label} frames"] == int(rs.model.collide.any(axis=(1, 2)).sum())
+    assert "| off_road |" in text and "| collides |" in text
