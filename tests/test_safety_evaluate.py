@@ -157,6 +157,8 @@ def test_imported_runs_get_safety_numbers_with_a_dataroot(world, tmp_path, capsy
         frame["predictions"] = {"pred_actions": actions, "trajectory": euler(actions)}
         trajectories.append(euler(actions))
         by_scene[name].append(frame)
+    first = next(iter(by_scene.values()))[0]
+    first["ego_info"]["position"] = [first["ego_info"]["position"][0] + 50.0, first["ego_info"]["position"][1]]
     for name, frames in by_scene.items():
         write_scene(tmp_path / "results" / "gpt-4o", name, frames)
     (run,) = import_reference([tmp_path / "results" / "gpt-4o"], tmp_path / "runs", dataset_kind="synthetic")
@@ -164,10 +166,16 @@ def test_imported_runs_get_safety_numbers_with_a_dataroot(world, tmp_path, capsy
     row = json.loads(capsys.readouterr().out)["tables"][1]["rows"][0]
     assert row["offroad"] is None and row["offroad_na"].startswith("no dataroot")
     assert main(["evaluate", str(run.run_dir), "--resamples", "0", "--format", "json", "--dataroot", str(root), "--version", "v1.0-mini"]) == 0
-    row = json.loads(capsys.readouterr().out)["tables"][1]["rows"][0]
-    assert row["offroad_frames"] == row["collision_frames"] == row["frames"] == len(fs)
+    doc = json.loads(capsys.readouterr().out)
+    row = doc["tables"][1]["rows"][0]
+    # one frame's recorded position was moved 50 m: it is not placed, and a warning says why
+    assert row["offroad_frames"] == row["collision_frames"] == row["frames"] - 1 == len(fs) - 1
+    assert any("50.0 m from v1.0-mini's pose" in w for w in doc["warnings"])
+    keep = np.ones(len(fs), dtype=bool)
+    keep[[i for i in range(len(fs)) if fs.sample_tokens[i] == first["sample_token"]]] = False
     # the imported trajectories placed with the dataroot's poses
-    want = S.rates(S.safety_values(S.frame_safety(np.array(trajectories), fs.sample_tokens, S.load_safety_data(root, "v1.0-mini")), "any"))
+    tokens = [t for t, k in zip(fs.sample_tokens, keep) if k]
+    want = S.rates(S.safety_values(S.frame_safety(np.array(trajectories)[keep], tokens, S.load_safety_data(root, "v1.0-mini")), "any"))
     assert row["offroad"] == pytest.approx(want["offroad"]) and row["collision"] == pytest.approx(want["collision"])
     assert 0.0 < row["offroad"] < 0.5
 

@@ -708,8 +708,13 @@ def evaluate_safety(
             result.rows[label] = {c: {**na, "offroad_na": reason, "collision_na": reason, "collision_convention": COLLISION_FOR_ADE[c]} for c in conventions}
             continue
         tokens = [sample_token_of(f) for f in fids]
+        conflicts = _recorded_pose_conflicts(run, fids, tokens, data, warnings, label) if getattr(run.info, "imported", False) else {}
         model = frame_safety(run.trajectory[rows], tokens, data, ego)
         truth = frame_safety(run.gt_positions[rows], tokens, data, ego)
+        for j, why in conflicts.items():
+            for fs in (model, truth):
+                fs.area_ok[j] = fs.coll_ok[j] = False
+                fs.area_reason[j] = fs.coll_reason[j] = why
         result.runs[label] = RunSafety(fids, rows, model, truth, data=data)
         warnings.extend(frame_warnings(model, fids, label))
         result.rows[label] = {}
@@ -725,6 +730,8 @@ def evaluate_safety(
                     keys.append(f"safety|{label}|{cc}|{key}")
                     slots.append((label, c, key))
         for j, fid in enumerate(fids):
+            if j in conflicts:
+                continue
             floor_frames.setdefault(fid, (run.gt_positions[rows[j]], tokens[j], data))
     # the floor: every frame's ground truth once
     if floor_frames:
@@ -762,6 +769,42 @@ def evaluate_safety(
         target = result.floor[c] if label == FLOOR_LABEL else result.rows[label][c]
         target[f"{key}_ci95"] = [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
     return result
+
+
+#: an imported frame whose recorded pose is further than this from the dataroot's is not placed (n/a)
+POSE_CONFLICT_M = 5.0
+POSE_NOTE_M = 0.05  # smaller differences are sensor timing (CAM_FRONT vs another channel's pose), noted only
+
+
+def _recorded_pose_conflicts(run: Any, fids: list[str], tokens: list[str], data: SafetyData, warnings: list[str], label: str) -> dict[int, str]:
+    """Compare an imported run's recorded global position and heading (``ego_position``, ``ego_heading``) with
+    the dataroot's pose of the same sample; frames that disagree by more than :data:`POSE_CONFLICT_M` get n/a."""
+    from lightemma.evaluation.loading import read_frame_records
+
+    records = read_frame_records(run.info.run_dir, fids)
+    out: dict[int, str] = {}
+    worst, noted = 0.0, 0
+    for j, (fid, tok) in enumerate(zip(fids, tokens)):
+        rec, pose = records.get(fid, {}), data.poses.get(tok)
+        pos, heading = rec.get("ego_position"), rec.get("ego_heading")
+        if pose is None or not isinstance(pos, list) or len(pos) < 2:
+            continue
+        try:
+            d = math.hypot(float(pos[0]) - pose[0], float(pos[1]) - pose[1])
+            dh = abs((float(heading) - pose[2] + math.pi) % (2 * math.pi) - math.pi) if heading is not None else 0.0
+        except (TypeError, ValueError):
+            continue
+        if d > POSE_CONFLICT_M:
+            out[j] = f"the recorded ego position is {d:.1f} m from {data.version}'s pose of sample {tok} (another dataset?)"
+        elif d > POSE_NOTE_M or dh > 1e-3:
+            noted += 1
+            worst = max(worst, d)
+    if out:
+        warnings.append(f"{label}: {len(out)} frame(s) have no safety value: {next(iter(out.values()))} (is --dataroot the dataset the run was made on?)")
+    if noted:
+        warnings.append(f"{label}: the recorded pose differs from {data.version}'s CAM_FRONT pose in {noted} frame(s), by up to {worst:.2f} m "
+                        "(the dataroot's pose is used)")
+    return out
 
 
 def _concat(parts: Sequence[FrameSafety]) -> FrameSafety:
