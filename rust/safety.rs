@@ -407,6 +407,76 @@ pub struct Polygons<'a> {
 pub struct PolygonIndex<'a> {
     polys: Polygons<'a>,
     bounds: Vec<[f64; 4]>,
+    bands: Vec<Option<Bands>>, // per ring
+}
+
+/// A ring's edges bucketed into horizontal bands: the crossing test of a point needs only the edges
+/// whose y-range holds its y, i.e. those of its band (real drivable areas have rings of 10⁴ vertices).
+struct Bands {
+    y0: f64,
+    y1: f64,
+    height: f64,
+    offsets: Vec<u32>, // (bands + 1) into edges
+    edges: Vec<u32>,   // edge i joins vertex i − 1 (cyclically) to vertex i
+}
+
+/// Rings with fewer vertices are scanned whole.
+const BAND_MIN_VERTICES: usize = 16;
+
+impl Bands {
+    fn new(pts: &[f64]) -> Option<Self> {
+        let m = pts.len() / 2;
+        if m < BAND_MIN_VERTICES {
+            return None;
+        }
+        let ys = || pts.chunks_exact(2).map(|p| p[1]);
+        let (y0, y1) = ys().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| {
+            (a.min(y), b.max(y))
+        });
+        let count = m / 4;
+        let height = (y1 - y0) / count as f64;
+        if height.is_nan() || height <= 0.0 {
+            return None;
+        }
+        let band = |y: f64| (((y - y0) / height) as usize).min(count - 1);
+        let span = |i: usize| {
+            let j = (i + m - 1) % m;
+            let (a, b) = (pts[2 * i + 1], pts[2 * j + 1]);
+            (band(a.min(b)), band(a.max(b)))
+        };
+        let mut sizes = vec![0u32; count + 1];
+        let mut total = 0usize;
+        for i in 0..m {
+            let (lo, hi) = span(i);
+            for s in &mut sizes[lo + 1..=hi + 1] {
+                *s += 1;
+            }
+            total += hi - lo + 1;
+        }
+        if total > 16 * m {
+            return None; // long edges everywhere: a plain scan is as good
+        }
+        for b in 0..count {
+            sizes[b + 1] += sizes[b];
+        }
+        let offsets = sizes.clone();
+        let mut fill = sizes;
+        let mut edges = vec![0u32; total];
+        for i in 0..m {
+            let (lo, hi) = span(i);
+            for slot in &mut fill[lo..=hi] {
+                edges[*slot as usize] = i as u32;
+                *slot += 1;
+            }
+        }
+        Some(Bands {
+            y0,
+            y1,
+            height,
+            offsets,
+            edges,
+        })
+    }
 }
 
 impl<'a> PolygonIndex<'a> {
@@ -463,13 +533,35 @@ impl<'a> PolygonIndex<'a> {
             }
             bounds.push(bb);
         }
-        Ok(PolygonIndex { polys, bounds })
+        let bands = (0..polys.rings.len() - 1)
+            .map(|r| Bands::new(&polys.xy[2 * polys.rings[r]..2 * polys.rings[r + 1]]))
+            .collect();
+        Ok(PolygonIndex {
+            polys,
+            bounds,
+            bands,
+        })
     }
 
     fn in_ring(&self, ring: usize, x: f64, y: f64) -> bool {
         let pts = &self.polys.xy[2 * self.polys.rings[ring]..2 * self.polys.rings[ring + 1]];
         let m = pts.len() / 2;
         let mut inside = false;
+        if let Some(b) = &self.bands[ring] {
+            if !(y >= b.y0 && y <= b.y1) {
+                return false;
+            }
+            let k = (((y - b.y0) / b.height) as usize).min(b.offsets.len() - 2);
+            for &e in &b.edges[b.offsets[k] as usize..b.offsets[k + 1] as usize] {
+                let i = e as usize;
+                let j = (i + m - 1) % m;
+                let (xi, yi, xj, yj) = (pts[2 * i], pts[2 * i + 1], pts[2 * j], pts[2 * j + 1]);
+                if (yi > y) != (yj > y) && x < (xj - xi) * (y - yi) / (yj - yi) + xi {
+                    inside = !inside;
+                }
+            }
+            return inside;
+        }
         let mut j = m.wrapping_sub(1);
         for i in 0..m {
             let (xi, yi, xj, yj) = (pts[2 * i], pts[2 * i + 1], pts[2 * j], pts[2 * j + 1]);
@@ -752,6 +844,53 @@ mod tests {
             polygons: &[0, 2]
         })
         .is_err());
+    }
+
+    #[test]
+    fn banded_rings_agree_with_a_full_scan() {
+        // a star-shaped ring of 400 vertices: banded (≥ 16 vertices) against the plain crossing test
+        let m = 400;
+        let mut xy = Vec::new();
+        for i in 0..m {
+            let t = i as f64 / m as f64 * std::f64::consts::TAU;
+            let r = 10.0 + 3.0 * (7.0 * t).sin();
+            xy.extend([r * t.cos(), r * t.sin()]);
+        }
+        let rings = [0, m];
+        let idx = PolygonIndex::new(Polygons {
+            xy: &xy,
+            rings: &rings,
+            polygons: &[0, 1],
+        })
+        .unwrap();
+        assert!(idx.bands[0].is_some());
+        let plain = |x: f64, y: f64| {
+            let mut inside = false;
+            let mut j = m - 1;
+            for i in 0..m {
+                let (xi, yi, xj, yj) = (xy[2 * i], xy[2 * i + 1], xy[2 * j], xy[2 * j + 1]);
+                if (yi > y) != (yj > y) && x < (xj - xi) * (y - yi) / (yj - yi) + xi {
+                    inside = !inside;
+                }
+                j = i;
+            }
+            inside
+        };
+        let (mut a, mut b) = (0.37_f64, 0.71_f64);
+        let mut both = [0, 0];
+        for _ in 0..20_000 {
+            a = (a * 997.0 + 0.123).fract();
+            b = (b * 991.0 + 0.456).fract();
+            let (x, y) = (30.0 * a - 15.0, 30.0 * b - 15.0);
+            let got = idx.contains(x, y);
+            assert_eq!(got, plain(x, y), "({x}, {y})");
+            both[got as usize] += 1;
+        }
+        assert!(both[0] > 1000 && both[1] > 1000);
+        // vertices exactly at a band boundary and the extremes
+        for (x, y) in [(0.0, 13.0), (0.0, -13.0), (13.0, 0.0), (0.0, 0.0)] {
+            assert_eq!(idx.contains(x, y), plain(x, y));
+        }
     }
 
     #[test]
