@@ -4,6 +4,8 @@
 //!   actions, a status, a failure kind and a reason;
 //! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
 //! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
+//! * [`safety`]: the ego footprint along a trajectory (SE(2), nalgebra), exact rotated-rectangle
+//!   collisions with agents' boxes, drivable-area tests against a raster mask or polygons;
 //! * [`stats`]: scene-level bootstrap intervals and sign-flip p-values (deterministic, parallel);
 //! * [`error`]: the one error type, mapped to Python's `ValueError` in `python.rs`.
 //!
@@ -19,4 +21,5 @@ pub mod metrics;
 pub mod paper;
 pub mod parse;
 mod python;
+pub mod safety;
 pub mod stats;

@@ -38,6 +38,10 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     others = [r for name, r in rows.items() if "oracle" not in name]
     assert len(oracle) == 2 and max(r["ade_avg"] for r in oracle) < min(r["ade_avg"] for r in others)
     assert {r["fe_pct"] for r in rows.values()} == {0.0}  # baselines answer in the strict format
+    # the safety columns: off-road on the synthetic map, collisions with its agents, the ground-truth floor at 0
+    assert all(r["offroad"] is not None and r["collision"] is not None and r["area_source"] == "expansion" for r in rows.values())
+    assert evaluation["safety"]["floor"]["lightemma"]["offroad"] == 0.0 and evaluation["safety"]["floor"]["lightemma"]["collision"] == 0.0
+    assert "Off-road (%) [95% CI]" in text and "Collision (%) [95% CI]" in text and "| Ground truth (floor) |" in text
     # pictures drawn with the synthetic camera images (no "no camera view" note)
     assert "pictures have no camera view" not in text
     assert list((out / "report" / "figures" / "frames").glob("*_grid.png"))

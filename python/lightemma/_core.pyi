@@ -62,3 +62,51 @@ def sign_flip_test(
     seed: int = 0,
 ) -> npt.NDArray[np.float64]:
     """Two-sided p-values (R,) that the mean of the clusters' summed differences (K, 1) is zero, by random sign flips."""
+
+# ---- safety geometry (rust/safety.rs; docs/definitions.md#safety) ----
+# traj: (N, T, 2) float64 in the ego frame of each keyframe (x forward, y left, m; origin = ego_pose, the
+# rear-axle centre); poses: (N, 3) float64 global (x, y, yaw) of each keyframe. The footprint at step k is
+# length × width, centred `offset` m ahead of p_k along the heading of segment p_{k-1} → p_k (p_0 = origin,
+# heading 0), kept from the step before when that segment is shorter than `min_step` m.
+
+def ego_poses(
+    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64],
+    length: float = 4.084, width: float = 1.85, offset: float = 0.0, min_step: float = 1.0,
+) -> npt.NDArray[np.float64]:
+    """Global (x, y, heading) of every step's reference point: (N, T, 3)."""
+
+def footprint_corners(
+    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64],
+    length: float = 4.084, width: float = 1.85, offset: float = 0.0, min_step: float = 1.0,
+) -> npt.NDArray[np.float64]:
+    """Global footprint corners (N, T, 4, 2): front-left, front-right, rear-right, rear-left."""
+
+def box_collisions(
+    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64], agents: npt.NDArray[np.float64],
+    length: float = 4.084, width: float = 1.85, offset: float = 0.0, min_step: float = 1.0,
+) -> npt.NDArray[np.bool_]:
+    """(N, T, A) overlap of the footprint with agents (N, T, A, 5) = global centre x, y, yaw, length, width
+    (exact separating-axis test; touching is no overlap). A slot with NaN centre x is empty; other non-finite
+    values or sizes ≤ 0 raise ValueError naming frame, step and slot."""
+
+def mask_area(
+    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64], mask: npt.NDArray[np.uint8],
+    resolution: float = 0.1, foreground: int = 255,
+    length: float = 4.084, width: float = 1.85, offset: float = 0.0, min_step: float = 1.0,
+) -> npt.NDArray[np.uint8]:
+    """(N, T, 5) lookups of the 4 corners then the reference point in a devkit MapMask raster (H, W):
+    0 off, 1 on (pixel == foreground), 2 outside the image. Pixel = (round(x/r), round(-y/r + H)), half to even."""
+
+def polygon_area(
+    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64], xy: npt.NDArray[np.float64],
+    rings: npt.NDArray[np.int64], polygons: npt.NDArray[np.int64],
+    length: float = 4.084, width: float = 1.85, offset: float = 0.0, min_step: float = 1.0,
+) -> npt.NDArray[np.uint8]:
+    """(N, T, 5) point-in-polygon tests (0 off, 1 on) of the 4 corners then the reference point against the
+    union of polygons: vertices xy (V, 2), ring offsets (R+1,) into vertices, polygon offsets (P+1,) into rings
+    (first ring exterior, the rest holes)."""
+
+def mask_lookup(
+    points: npt.NDArray[np.float64], mask: npt.NDArray[np.uint8], resolution: float = 0.1, foreground: int = 255
+) -> npt.NDArray[np.uint8]:
+    """(M,) lookups of global points (M, 2) in a MapMask raster: 0 off, 1 on, 2 outside the image."""

@@ -27,6 +27,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--keep-implausible", action="store_true",
                         help="average implausible actions too (every answer the parse definition reads, as the paper's evaluation did; one can dominate a mean)")
     parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
+    add_safety_arguments(parser)
     add_statistics_arguments(parser, pairwise_default=False)
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout")
     parser.set_defaults(func=run)
@@ -42,6 +43,25 @@ def _parse_definition(args: argparse.Namespace):  # -> ParseDefinition | None
             raise UserError("--speed-range and --max-curvature need --parse lenient, strict or json")
         return None
     return ParseDefinition(args.parse, tuple(args.speed_range) if args.speed_range else None, args.max_curvature)
+def add_safety_arguments(parser: argparse.ArgumentParser) -> None:
+    """--dataroot / --version / --no-safety (shared with ``lightemma report``; docs/definitions.md#safety)."""
+    parser.add_argument("--dataroot", metavar="DIR",
+                        help="nuScenes folder for the off-road and collision columns (maps, annotations, poses; default: each run's own, as its manifest records)")
+    parser.add_argument("--version", dest="dataset_version", metavar="V", help="with --dataroot: the nuScenes version (v1.0-test, v1.0-trainval, v1.0-mini, …)")
+    parser.add_argument("--no-safety", dest="safety", action="store_false", help="skip the off-road and collision columns")
+
+
+def safety_options(args: argparse.Namespace) -> dict:
+    """evaluate_runs keywords from the safety arguments (a --version without --dataroot is refused)."""
+    from lightemma.errors import UserError
+
+    if args.dataset_version and not args.dataroot:
+        raise UserError("--version needs --dataroot")
+    if args.dataroot and not args.dataset_version:
+        raise UserError("--dataroot needs --version (the nuScenes version folder under it, e.g. v1.0-trainval)")
+    return {"safety": args.safety, "dataroot": args.dataroot, "version": args.dataset_version}
+
+
 def add_statistics_arguments(parser: argparse.ArgumentParser, *, pairwise_default: bool) -> None:
     """--pairwise / --no-pairwise, --resamples, --seed (shared with ``lightemma report``)."""
     if pairwise_default:
@@ -70,7 +90,7 @@ def run(args: argparse.Namespace) -> int:
     evaluation = evaluate_runs(
         args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold, parse=parse,
         keep_implausible=args.keep_implausible,
-        resampling=resampling_of(args), pairwise=args.pairwise,
+        resampling=resampling_of(args), pairwise=args.pairwise, **safety_options(args),
     )
     for warning in evaluation.warnings:
         print(f"lightemma evaluate: warning: {warning}", file=sys.stderr)

@@ -20,6 +20,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--no-paper", action="store_true", help="leave the paper's rows out of the tables and chart")
     parser.add_argument("--top", type=int, default=5, metavar="N", help="pictures of the N frames where models disagree most (default: 5)")
     parser.add_argument("--dataroot", metavar="DIR", help="dataset location for camera images, if not where the runs were made")
+    parser.add_argument("--version", dest="dataset_version", metavar="V",
+                        help="with --dataroot: its nuScenes version, for the off-road and collision columns (default: each run's own)")
+    parser.add_argument("--no-safety", dest="safety", action="store_false", help="skip the off-road and collision columns and views")
     parser.add_argument("--frame", action="append", default=[], metavar="FRAME_ID", help="also draw this frame (repeatable)")
     parser.add_argument("--no-pictures", action="store_true", help="skip per-frame pictures and camera thumbnails (the HTML frame browser still draws bird's-eye views)")
     parser.add_argument("--svg", action="store_true", help="also write every figure as SVG (PNG only by default)")
@@ -50,6 +53,8 @@ def run(args: argparse.Namespace) -> int:
         svg=args.svg,
         force=args.force,
         progress=True,
+        version=args.dataset_version,
+        safety=args.safety,
     )
     print(f"report written to {index} (browse {index.with_name('index.html')})")
     return 0

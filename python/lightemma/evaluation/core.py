@@ -53,6 +53,7 @@ class ModelResult:
     chain: str = "independent"  # request variant (docs/run.md): independent stages or one conversation
     answer_format: str = "text"  # stage-3 answers as text or structured JSON
     inputs: str = "full"  # input ablation (docs/run.md#input-ablations): full, no-image, blank-image, no-history
+    safety: dict[str, dict[str, Any]] = field(default_factory=dict)  # convention -> off-road / collision keys (evaluation/safety.py)
 
     @property
     def scored_pct(self) -> float | None:
@@ -89,6 +90,7 @@ class ModelResult:
             "inputs": self.inputs,
             "ade_avg_ci95": ci.get("ade_avg"),
             "fde_ci95": ci.get("fde"),
+            **self.safety.get(convention, {}),
         }
 
     def efficiency_row(self) -> dict[str, Any]:
@@ -111,6 +113,8 @@ class Evaluation:
     # "does the image matter?": see lightemma.evaluation.ablations (empty when the runs hold nothing to compare)
     input_ablations: list[dict[str, Any]] = field(default_factory=list)
     baseline_gains: list[dict[str, Any]] = field(default_factory=list)
+    safety: Any = None  # lightemma.evaluation.safety.SafetyResult when safety metrics were computed
+    pairwise_safety: list[dict[str, Any]] | None = None  # see lightemma.evaluation.safety.pairwise_safety
 
     @property
     def main_convention(self) -> str:
@@ -150,6 +154,10 @@ class Evaluation:
             out["input_ablations"] = self.input_ablations
         if self.baseline_gains:
             out["baseline_gains"] = self.baseline_gains
+        if self.safety is not None:
+            out["safety"] = self.safety.to_dict()
+        if self.pairwise_safety is not None:
+            out["pairwise_safety"] = self.pairwise_safety
         return out
 
 
@@ -263,6 +271,9 @@ def evaluate_loaded(
     miss_threshold: float = 2.0,
     resampling: Resampling = Resampling(),
     pairwise: bool = False,
+    safety: bool = True,
+    dataroot: str | os.PathLike[str] | None = None,
+    version: str | None = None,
 ) -> Evaluation:
     """Evaluate already loaded runs (see :func:`evaluate_runs`).
 
@@ -318,7 +329,26 @@ def evaluate_loaded(
             )
         )
         entries.append((label, run, scored))
-    return _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling), entries, shared, pairwise)
+    evaluation = _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling), entries, shared, pairwise)
+    if safety:
+        _with_safety(evaluation, entries, shared, pairwise, dataroot, version)
+    return evaluation
+
+
+def _with_safety(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool,
+                 dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
+    """Off-road and collision rates beside ADE, the ground-truth floor, and paired tests (docs/definitions.md#safety)."""
+    from lightemma.evaluation.safety import evaluate_safety, pairwise_safety
+
+    result = evaluate_safety(entries, evaluation.conventions, evaluation.resampling, dataroot=dataroot, version=version)
+    for model in evaluation.models:
+        model.safety = result.rows.get(model.label, {})
+    evaluation.safety = result
+    evaluation.warnings.extend(result.warnings)
+    if pairwise:
+        labels = [label for label, _, _ in entries]
+        evaluation.pairwise_safety = pairwise_safety(result, labels, evaluation.main_convention, evaluation.resampling,
+                                                     only=set(shared) if shared is not None else None)
 
 
 def _with_uncertainty(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool) -> Evaluation:
@@ -354,6 +384,9 @@ def evaluate_runs(
     resampling: Resampling = Resampling(),
     pairwise: bool = False,
     keep_implausible: bool = False,
+    safety: bool = True,
+    dataroot: str | os.PathLike[str] | None = None,
+    version: str | None = None,
 ) -> Evaluation:
     """Evaluate run directories (or folders holding runs): Tables I and II as rows of dicts.
 
@@ -369,8 +402,11 @@ def evaluate_runs(
     defaults for ``paper``) are counted as implausible and never averaged;
     ``keep_implausible=True`` averages every readable answer, as the paper's own
     evaluation did. Unfinished runs are evaluated on their finished frames; corrupt lines
-    are skipped; both are reported in ``Evaluation.warnings``.
+    are skipped; both are reported in ``Evaluation.warnings``. ``safety`` adds off-road and collision
+    rates beside ADE (docs/definitions.md#safety) from ``dataroot``/``version`` (default: each run's
+    manifest's dataset); without one the columns say why they are empty.
     """
     conventions = _conventions(convention)  # check the arguments before reading any run
     runs = [load_run(d, parse=parse, keep_implausible=keep_implausible) for d in expand_run_dirs(run_dirs)]
-    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling, pairwise=pairwise)
+    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling, pairwise=pairwise,
+                           safety=safety, dataroot=dataroot, version=version)

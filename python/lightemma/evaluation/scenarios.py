@@ -16,6 +16,10 @@ straight_after_left_turn    heading within 5° for 3 s while the last three hist
 / straight_after_right_turn curvatures include one beyond ±0.03 1/m (Case 1)
 cruising                    moving ≥ 1 m/s, straight, steady speed, no other tag
 ==========================  ===============================================================
+
+With the safety outcomes of an evaluation (docs/definitions.md#safety), two more tags, per model
+from its own trajectory: ``collides`` (its footprint overlaps an annotated agent at some step) and
+``off_road`` (a footprint corner leaves the drivable area at some step).
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ TAGS: tuple[str, ...] = (
     "straight_after_right_turn",
     "cruising",
 )
+#: tags from a model's own safety outcomes (need the evaluation's ``safety``)
+SAFETY_TAGS: tuple[str, ...] = ("collides", "off_road")
 # tags whose worst frames illustrate the paper's failure cases
 CASE_TAGS: tuple[str, ...] = ("straight_after_right_turn", "straight_after_left_turn", "turning_left", "turning_right", "braking", "starting")
 
@@ -149,22 +155,44 @@ def _rows_of(run: RunData, frame_ids: Sequence[str] | None) -> np.ndarray:
     return np.fromiter((index[f] for f in frame_ids), dtype=np.int64, count=len(frame_ids))
 
 
-def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None) -> list[dict[str, Any]]:
+def _safety_masks(safety: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """``collides`` / ``off_road`` of ``rows`` of a run from its safety outcomes (False where it has none)."""
+    from lightemma.evaluation.safety import frame_tags
+
+    rs = safety.runs.get(label) if safety is not None else None
+    out = {tag: np.zeros(len(rows), dtype=bool) for tag in SAFETY_TAGS}
+    if rs is None:
+        return out
+    tags = frame_tags(rs)
+    where = {f: i for i, f in enumerate(rs.frame_ids)}
+    for j, r in enumerate(rows):
+        i = where.get(run.frame_ids[r])
+        if i is not None:
+            for tag in SAFETY_TAGS:
+                out[tag][j] = tags[tag][i]
+    return out
+
+
+def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None, safety: Any = None) -> list[dict[str, Any]]:
     """One row per tag (and ``all``): frames and, per model, ADE avg / FDE / miss rate on them.
 
     Each model is scored on its valid frames, or on ``frame_ids`` (e.g. the
-    common frames) when given; one batched core call per model and tag.
+    common frames) when given; one batched core call per model and tag. With ``safety``
+    (an evaluation's :class:`~lightemma.evaluation.safety.SafetyResult`) the tags ``collides`` and
+    ``off_road`` follow, per model from its own outcomes ("frames" counts the first model's).
     """
     from lightemma import evaluate
 
     labels = unique_labels(list(runs))
     per_model = []
-    for run in runs:
+    for run, label in zip(runs, labels):
         rows = _rows_of(run, frame_ids)
         masks = tag_frames(run.gt_positions[rows], _require_history(run)[rows])
+        if safety is not None:
+            masks.update(_safety_masks(safety, label, run, rows))
         per_model.append((run, rows, {"all": np.ones(len(rows), dtype=bool), **masks}))
     out = []
-    for tag in ("all", *TAGS):
+    for tag in ("all", *TAGS, *(SAFETY_TAGS if safety is not None else ())):
         row: dict[str, Any] = {"tag": tag, "frames": int(per_model[0][2][tag].sum()) if per_model else 0}
         for label, (run, rows, masks) in zip(labels, per_model):
             chosen = rows[masks[tag]]

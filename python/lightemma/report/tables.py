@@ -39,12 +39,21 @@ def _text(value: Any) -> str:
 @dataclass(frozen=True)
 class Column:
     """One table column: row key, header, cell formatter; ``ci`` names a row key holding
-    a [low, high] interval printed after the value (``1.07 [0.99, 1.15]``)."""
+    a [low, high] interval printed after the value (``1.07 [0.99, 1.15]``); ``na`` names a row
+    key holding why the value is missing, printed as ``n/a (why)`` instead of ``-``."""
 
     key: str
     header: str
     fmt: Callable[[Any], str] = _text
     ci: str | None = None
+    na: str | None = None
+
+
+def _na_cell(col: Column, row: dict[str, Any]) -> str | None:
+    """``n/a (why)`` for a missing value whose row says why, else None."""
+    if col.na and row.get(col.key) is None and row.get(col.na):
+        return f"n/a ({row[col.na]})"
+    return None
 
 
 def with_interval(value: Any, interval: Any, fmt: Callable[[Any], str]) -> str:
@@ -79,6 +88,22 @@ ACCURACY_COLUMNS: tuple[Column, ...] = (
     Column("fde", "FDE (m) [95% CI]", fixed(2), ci="fde_ci95"),
     Column("miss_rate", "Miss (%)", _percent),
     Column("parse", "Parse"),
+)
+
+#: off-road and collision beside ADE (docs/definitions.md#safety); values are shares, printed in %
+SAFETY_COLUMNS: tuple[Column, ...] = (
+    Column("offroad", "Off-road (%) [95% CI]", _percent, ci="offroad_ci95", na="offroad_na"),
+    Column("offroad_1s", "Off-road 1s (%)", _percent, na="offroad_na"),
+    Column("offroad_2s", "Off-road 2s (%)", _percent, na="offroad_na"),
+    Column("offroad_3s", "Off-road 3s (%)", _percent, na="offroad_na"),
+    Column("offroad_centre", "Off-road centre (%)", _percent, na="offroad_na"),
+    Column("collision_1s", "Col. 1s (%)", _percent, na="collision_na"),
+    Column("collision_2s", "Col. 2s (%)", _percent, na="collision_na"),
+    Column("collision_3s", "Col. 3s (%)", _percent, na="collision_na"),
+    Column("collision", "Collision (%) [95% CI]", _percent, ci="collision_ci95", na="collision_na"),
+    Column("collision_vehicle", "Col. vehicles (%)", _percent, na="collision_na"),
+    Column("collision_vru", "Col. VRU (%)", _percent, na="collision_na"),
+    Column("area_source", "Drivable area"),
 )
 
 EFFICIENCY_COLUMNS: tuple[Column, ...] = (
@@ -120,12 +145,13 @@ def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
         marked = set(row.get("anomalous") or ())
         cells = []
         for col in table.columns:
+            na = _na_cell(col, row)
             if col.ci and split_intervals:
                 interval = row.get(col.ci) or (None, None)
-                cells += [col.fmt(row.get(col.key)), col.fmt(interval[0]), col.fmt(interval[1])]
+                cells += [na or col.fmt(row.get(col.key)), col.fmt(interval[0]), col.fmt(interval[1])]
                 continue
             value = row.get(col.key)
-            cell = with_interval(value, row.get(col.ci), col.fmt) if col.ci else col.fmt(value)
+            cell = na or (with_interval(value, row.get(col.ci), col.fmt) if col.ci else col.fmt(value))
             if value is None and col.key in (row.get("not_applicable") or ()):
                 cell = "n/a"  # e.g. per-frame latency of a batch run
             if row.get("source") == "diff" and isinstance(value, (int, float)) and value > 0 and cell != "-":

@@ -24,6 +24,8 @@ from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, expand_run_dirs, load_run, read_frame_records
 from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
@@ -175,6 +177,38 @@ def _ablation_section(w: _Writer, tables: Sequence[Table]) -> None:
              "the best baseline, with 95 % scene-bootstrap intervals; filled: significant after Holm")
 
 
+def _safety_views(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], safety: Any, colors: dict[str, str], per_model: int = 1) -> None:
+    """Bird's-eye views of each model's first colliding and first off-road frames (figures/bev.py)."""
+    from lightemma.evaluation.safety import frame_tags
+    from lightemma.report.figures.bev import bev_figure
+
+    picks: dict[str, str] = {}
+    for label in labels:
+        rs = safety.runs.get(label)
+        if rs is None or rs.data is None:
+            continue
+        tags = frame_tags(rs)
+        for tag, why in (("collides", "collides"), ("off_road", "leaves the drivable area")):
+            for i in np.flatnonzero(tags[tag])[:per_model]:
+                picks.setdefault(rs.frame_ids[i], f"{label} {why}")
+    if not picks:
+        return
+    w.lines += ["## Safety — bird's-eye views", "",
+                "Grey: drivable area; black boxes: annotated agents over the next 3 s (darker = later); outlines: ego footprints "
+                "(green: ground truth), filled red where they overlap an agent, dashed red where a corner is off the drivable area.", ""]
+    by_label = {label: run for label, run in zip(labels, runs)}
+    for k, (fid, why) in enumerate(picks.items()):
+        trajectories, gt, data = [], None, None
+        for label in labels:
+            rs, run = safety.runs.get(label), by_label[label]
+            if rs is None or rs.data is None or fid not in rs.frame_ids:
+                continue
+            i = rs.rows[rs.frame_ids.index(fid)]
+            trajectories.append((label, run.trajectory[i], colors.get(label, "#1f77b4")))
+            gt, data = run.gt_positions[i], rs.data
+        w.figure(bev_figure(fid, trajectories, gt, data), f"bev_{k:02d}_{_slug(fid)}", f"{fid}: {why}")
+
+
 def _merge_picks(picks: list[tuple[str, str, str]]) -> list[tuple[str, str, str]]:
     """One entry per frame (the first kind), its captions joined: a frame is drawn once."""
     merged: dict[str, tuple[str, str, str]] = {}
@@ -280,6 +314,8 @@ def write_report(
     svg: bool = False,
     force: bool = False,
     progress: bool = False,
+    version: str | None = None,
+    safety: bool = True,
 ) -> Path:
     """Evaluate runs and write tables, figures, the scenario analysis and ``index.html`` into ``out``; returns ``index.md``.
 
@@ -289,6 +325,9 @@ def write_report(
     every pair of runs (table, matrix figure, per-family generation verdicts);
     ``resampling`` sets the scene bootstrap (resamples, seed, confidence); ``svg`` also writes
     every figure as SVG (PNG only by default); ``progress`` shows progress bars (tqdm, on stderr).
+    With ``safety`` the tables carry off-road and collision columns (from ``dataroot``/``version`` when both
+    are given, else each run's own dataset), the scenarios the ``collides`` / ``off_road`` tags, and a
+    bird's-eye view is drawn of each model's first colliding and first off-road frame.
 
     The report is written into a hidden folder beside ``out`` and swapped in whole when done: a
     killed report leaves the old one intact. An ``out`` that is a non-empty folder holding no
@@ -314,7 +353,8 @@ def write_report(
     tmp.mkdir()
     try:
         _write(tmp, run_dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
-               frames=frames, case_tags=case_tags, pairwise=pairwise, resampling=resampling, svg=svg, progress=progress)
+               frames=frames, case_tags=case_tags, pairwise=pairwise, resampling=resampling, svg=svg, progress=progress,
+               version=version, safety=safety)
         (tmp / REPORT_MARKER).write_text(json.dumps({"written_by": "lightemma report"}) + "\n", encoding="utf-8")
         _swap_in(tmp, out)
     except BaseException:
@@ -345,9 +385,9 @@ class _Steps:
 
 def _runs_table(evaluation: Evaluation, flags: dict[str, str]) -> Table:
     rows = [{"model": m.label, "family": m.family, "run": str(m.run_dir), "frames": m.frames_in_run, "complete": "yes" if m.complete else "no",
-             "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format} for m in evaluation.models]
+             "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format, "inputs": m.inputs} for m in evaluation.models]
     columns = [Column("model", "Model"), Column("family", "Family"), Column("run", "Run"), Column("frames", "Frames"), Column("complete", "Finished"),
-               Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format")]
+               Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format"), Column("inputs", "Inputs")]
     return Table("Runs", columns, rows, name="runs", flags=flags)
 
 
@@ -367,6 +407,8 @@ def _write(
     resampling: Resampling,
     svg: bool,
     progress: bool,
+    version: str | None,
+    safety: bool,
 ) -> None:
     import html as html_escape
 
@@ -387,7 +429,8 @@ def _write(
     missing = [fid for fid in frames if fid not in known]
     if missing:
         raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
-    evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1)
+    evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1,
+                                             safety=safety, dataroot=dataroot if version else None, version=version)
     evaluation.warnings[:0] = skipped
     steps.step("evaluated")
     order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
@@ -410,7 +453,7 @@ def _write(
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations", *_ABLATION_TABLES):
+        if table.name in ("pairwise_ade", "generations", "pairwise_safety", *_ABLATION_TABLES):
             continue
         w.table(table)
     (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
@@ -432,7 +475,7 @@ def _write(
             w.lines += ["Is each generation better than its predecessor? (ADE avg change newer − older, 95 % scene-bootstrap interval, Holm-adjusted p over all pairs)", ""]
             w.lines += _generation_lines(generations) + [""]
         for table in tables:
-            if table.name in ("pairwise_ade", "generations"):
+            if table.name in ("pairwise_ade", "generations", "pairwise_safety"):
                 w.table(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
@@ -443,7 +486,7 @@ def _write(
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     steps.step("tables and charts")
-    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None), labels, flags), latex=False)
+    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None, safety=evaluation.safety), labels, flags), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
     w.table(_bias_table(bias, flags), latex=False)
@@ -461,6 +504,8 @@ def _write(
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
         w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
         _frame_pictures(w, runs, labels, picks, cameras, colors, shown={d["frame_id"]: d["models"] for d in spread}, progress=progress)
+    if pictures and evaluation.safety is not None:
+        _safety_views(w, runs, labels, evaluation.safety, colors)
     steps.step("frame pictures")
     index = out / "index.md"
     index.write_text("\n".join(w.lines) + "\n", encoding="utf-8")

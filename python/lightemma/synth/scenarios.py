@@ -239,10 +239,13 @@ def build_scenario(index: int, *, seed: int = 0, keyframes: int = 40) -> Scenari
 
 
 def build_scenarios(scenes: int = 8, *, seed: int = 0, keyframes: int = 40) -> list[Scenario]:
-    """Scenarios of scenes ``0 … scenes−1`` for ``seed`` (kinds cycle through :data:`KINDS`)."""
+    """Scenarios of scenes ``0 … scenes−1`` for ``seed`` (kinds cycle through :data:`KINDS`), placed so that
+    each location's roads lie side by side near the map origin (:func:`lightemma.synth.maps.place_scenarios`)."""
+    from lightemma.synth.maps import place_scenarios  # maps builds on this module
+
     if scenes < 1:
         raise ValueError(f"need at least one scene, got {scenes}")
-    return [build_scenario(i, seed=seed, keyframes=keyframes) for i in range(scenes)]
+    return place_scenarios([build_scenario(i, seed=seed, keyframes=keyframes) for i in range(scenes)])
 
 
 def sweep_times_us(keyframe_times_us: tuple[int, ...]) -> list[list[int]]:

@@ -4,7 +4,8 @@ Layout under ``outdir``::
 
     <version>/{category,attribute,visibility,instance,sensor,calibrated_sensor,
                ego_pose,log,scene,sample,sample_data,sample_annotation,map}.json
-    maps/<token>.png                          # placeholder semantic map (the devkit requires the file)
+    maps/<token>.png                          # base map mask per location: road + sidewalks (lightemma.synth.maps)
+    maps/expansion/<location>.json            # map expansion with the drivable_area layer
     samples/CAM_FRONT/<log>__CAM_FRONT__<µs>.jpg   # keyframes, 2 Hz
     sweeps/CAM_FRONT/<log>__CAM_FRONT__<µs>.jpg    # sweeps, 12 Hz between keyframes
     lightemma-synth.json                      # what was generated (seed, scenes, parameters)
@@ -31,6 +32,7 @@ from lightemma.errors import UserError
 from lightemma.frames.loader import TABLES
 from lightemma.frames.model import SYNTH_MARKER
 from lightemma.synth.camera import Camera
+from lightemma.synth import maps as synth_maps
 from lightemma.synth.render import render_frame
 from lightemma.synth.scenarios import Scenario, build_scenarios, sweep_times_us
 
@@ -176,6 +178,8 @@ def build_tables(
             images.append((filename, float(secs[j]), scn))
         if scn.lead is not None:
             _lead_annotations(t, scn, seed, sample_tokens, cat_tokens["vehicle.car"], attr_tokens)
+        for agent in synth_maps.scene_agents(scn):
+            _agent_annotations(t, scn, agent, seed, sample_tokens, cat_tokens[agent.category], attr_tokens)
 
     for location, logs in sorted(maps.items()):
         map_token = token(seed, "map", location)
@@ -220,6 +224,47 @@ def _lead_annotations(t, scn: Scenario, seed: int, sample_tokens: list[str], cat
         "first_annotation_token": ann_tokens[0],
         "last_annotation_token": ann_tokens[-1],
     })
+
+
+def _agent_annotations(t, scn: Scenario, agent, seed: int, sample_tokens: list[str], cat_token: str, attrs) -> None:
+    """An instance and one sample_annotation per keyframe for a parked or oncoming car or a pedestrian."""
+    i = scn.index
+    inst_token = token(seed, "instance", i, agent.name)
+    ann_tokens = [token(seed, "sample_annotation", i, agent.name, k) for k in range(len(sample_tokens))]
+    secs = scn.seconds(list(scn.keyframe_times_us))
+    poses = agent.pose(scn.path, float(scn.profile.s(0.0)), secs)
+    if agent.category.startswith("vehicle."):
+        attribute = [attrs["vehicle.moving" if abs(agent.v) > 0.1 else "vehicle.parked"]]
+    else:
+        attribute = []
+    for k, pose in enumerate(poses):
+        t["sample_annotation"].append({
+            "token": ann_tokens[k],
+            "sample_token": sample_tokens[k],
+            "instance_token": inst_token,
+            "visibility_token": "4",
+            "attribute_tokens": attribute,
+            "translation": [float(pose[0]), float(pose[1]), agent.height / 2],
+            "size": [agent.width, agent.length, agent.height],
+            "rotation": quaternion_from_yaw(float(pose[2])),
+            "prev": ann_tokens[k - 1] if k > 0 else "",
+            "next": ann_tokens[k + 1] if k + 1 < len(ann_tokens) else "",
+            "num_lidar_pts": 60,
+            "num_radar_pts": 0,
+        })
+    t["instance"].append({
+        "token": inst_token,
+        "category_token": cat_token,
+        "nbr_annotations": len(ann_tokens),
+        "first_annotation_token": ann_tokens[0],
+        "last_annotation_token": ann_tokens[-1],
+    })
+
+
+def _png(mask: np.ndarray) -> bytes:
+    buf = io.BytesIO()
+    Image.fromarray(mask, mode="L").save(buf, format="PNG")
+    return buf.getvalue()
 
 
 def _jpeg(img: Image.Image) -> bytes:
@@ -277,8 +322,15 @@ def write_dataset(
     scenarios = build_scenarios(scenes, seed=seed, keyframes=keyframes)
     tables, todo = build_tables(scenarios, seed=seed, camera=camera, sweeps=sweeps)
 
-    for rec in tables["map"]:
-        write_atomic(root / rec["filename"], _png_placeholder())
+    masks: dict[str, bool] = {}
+    for location in sorted({s.location for s in scenarios}):
+        here = [s for s in scenarios if s.location == location]
+        doc = synth_maps.expansion_json(here, location, lambda *parts: token(seed, *parts))
+        write_atomic(root / "maps" / "expansion" / f"{location}.json", _json_bytes(doc))
+        mask = synth_maps.mask_image(here)
+        rec = next(r for r in tables["map"] if r["token"] == token(seed, "map", location))
+        write_atomic(root / rec["filename"], _png(mask) if mask is not None else _png_placeholder())
+        masks[location] = mask is not None
     if images:
         it = todo
         if progress:
@@ -297,8 +349,11 @@ def write_dataset(
         "images": images,
         "sweeps": sweeps,
         "image_size": list(image_size),
+        # base map masks written per location (False: larger than synth.maps.MAX_MASK_PIXELS, a placeholder instead)
+        "map_masks": masks,
         "scenes": [
-            {"name": s.name, "kind": s.kind, "description": s.description, "params": s.params}
+            {"name": s.name, "kind": s.kind, "description": s.description, "params": s.params,
+             "agents": [a.name for a in synth_maps.scene_agents(s)]}
             for s in scenarios
         ],
     }

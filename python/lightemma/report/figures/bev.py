@@ -1,0 +1,103 @@
+"""Bird's-eye view of one frame's safety (docs/definitions.md#safety): the map patch around the ego, the
+annotated agents' boxes over the next 3 s, every model's ego footprints along its trajectory and the ground
+truth's, collisions and off-road steps marked."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
+import numpy as np
+
+from lightemma.report.figures._mpl import GT_COLOR, pyplot
+
+COLLISION_COLOR = "#e00000"
+
+
+def box_corners(boxes: np.ndarray) -> np.ndarray:
+    """(K, 4, 2) corners of boxes (K, 5) = centre x, y, yaw, length, width (front-left, front-right, rear-right, rear-left)."""
+    b = np.asarray(boxes, dtype=np.float64).reshape(-1, 5)
+    c, s = np.cos(b[:, 2]), np.sin(b[:, 2])
+    a = np.stack([c, s], axis=1) * (b[:, 3:4] / 2)
+    n = np.stack([-s, c], axis=1) * (b[:, 4:5] / 2)
+    ctr = b[:, :2]
+    return np.stack([ctr + a + n, ctr + a - n, ctr - a - n, ctr - a + n], axis=1)
+
+
+def _map_patch(ax: Any, area: Any, centre: np.ndarray, radius: float) -> None:
+    from matplotlib.patches import Polygon as MplPolygon
+
+    if area is None:
+        return
+    if area.kind == "mask":
+        from lightemma.evaluation.safety import MASK_RESOLUTION as r
+
+        h, w = area.mask.shape
+        px0, px1 = int(max(0, (centre[0] - radius) / r)), int(min(w - 1, (centre[0] + radius) / r))
+        py0, py1 = int(max(0, h - (centre[1] + radius) / r)), int(min(h - 1, h - (centre[1] - radius) / r))
+        if px1 > px0 and py1 > py0:
+            crop = area.mask[py0 : py1 + 1, px0 : px1 + 1] == 255
+            ax.imshow(np.where(crop, 0.85, 1.0), cmap="gray", vmin=0, vmax=1, origin="upper", interpolation="nearest",
+                      extent=((px0 - 0.5) * r, (px1 + 0.5) * r, (h - py1 - 0.5) * r, (h - py0 + 0.5) * r), zorder=0)
+        return
+    for p in range(len(area.polygons) - 1):
+        r0, r1 = area.polygons[p], area.polygons[p + 1]
+        for k, ring in enumerate(range(r0, r1)):
+            pts = area.xy[area.rings[ring] : area.rings[ring + 1]]
+            if len(pts) < 3 or (np.abs(pts - centre).min(axis=0) > radius * 4).any():
+                continue
+            ax.add_patch(MplPolygon(pts, closed=True, facecolor="#d9d9d9" if k == 0 else "white", edgecolor="#9a9a9a", lw=0.6, zorder=0 if k == 0 else 0.5))
+
+
+def bev_figure(frame_id: str, trajectories: Sequence[tuple[str, np.ndarray, str]], gt: np.ndarray | None, data: Any, *, ego: Any = None, radius: float = 35.0) -> Any:
+    """A top view of frame ``frame_id`` (``scene/sample_token``) in the global frame, ``radius`` metres around the ego.
+
+    ``trajectories``: (label, (6, 2) ego-frame positions, colour) per model; ``gt``: the ground truth (6, 2);
+    ``data``: the :class:`~lightemma.evaluation.safety.SafetyData` of the frame's dataset. Grey: the drivable
+    area (expansion polygons, or the base mask's drivable-and-sidewalk pixels); thin black boxes: the agents at the
+    six future keyframes (darker = later); coloured outlines: the footprints, filled red where they overlap an agent,
+    dashed red where a corner is off the drivable area.
+    """
+    from matplotlib.patches import Polygon as MplPolygon
+
+    from lightemma.evaluation import safety as S
+
+    ego = ego or S.EGO
+    plt = pyplot()
+    token = S.sample_token_of(frame_id)
+    fig, ax = plt.subplots(figsize=(6.4, 6.4))
+    pose = data.poses.get(token)
+    if pose is None:
+        ax.text(0.5, 0.5, f"no ego pose for {token}", ha="center", transform=ax.transAxes)
+        return fig
+    centre = np.asarray(pose[:2])
+    key = data.map_of.get(token)
+    area = data.areas.get(key) if key else None
+    _map_patch(ax, area if isinstance(area, S.DrivableArea) else None, centre, radius)
+    future = data.future.get(token, [])
+    for k, ft in enumerate(future):
+        for corners in box_corners(data.boxes.get(ft, np.zeros((0, 5)))):
+            ax.add_patch(MplPolygon(corners, closed=True, fill=False, edgecolor=str(0.65 - 0.1 * k), lw=0.8, zorder=2))
+    series = ([("ground truth", gt, GT_COLOR)] if gt is not None else []) + list(trajectories)
+    for label, traj, color in series:
+        traj = np.asarray(traj, dtype=np.float64).reshape(1, -1, 2)
+        if not np.isfinite(traj).all():
+            continue
+        fs = S.frame_safety(traj, [token], data, ego) if traj.shape[1] == S.STEPS else None
+        corners = S.footprints(traj, np.asarray([pose]), ego)[0]
+        for k, c in enumerate(corners):
+            hit = fs is not None and fs.coll_ok[0] and fs.collide[0, k].any()
+            off = fs is not None and fs.area_ok[0] and fs.off_steps[0, k]
+            ax.add_patch(MplPolygon(c, closed=True, fill=hit, facecolor=COLLISION_COLOR if hit else "none", alpha=0.9 if hit else 1.0,
+                                    edgecolor=COLLISION_COLOR if off else color, linestyle="--" if off else "-", lw=1.1, zorder=3))
+        g = S.ego_poses(traj, np.asarray([pose]), ego)[0]
+        ax.plot(np.r_[pose[0], g[:, 0]], np.r_[pose[1], g[:, 1]], "-o", color=color, ms=2.5, lw=1.2, label=label, zorder=4)
+    ax.plot(*centre, marker="*", color="black", ms=9, zorder=5)
+    ax.set_xlim(centre[0] - radius, centre[0] + radius)
+    ax.set_ylim(centre[1] - radius, centre[1] + radius)
+    ax.set_aspect("equal")
+    ax.set_xlabel("global x (m)")
+    ax.set_ylabel("global y (m)")
+    ax.set_title(frame_id.split("/")[0] + f" — {area.kind if isinstance(area, S.DrivableArea) else 'no map'}", fontsize=9)
+    ax.legend(loc="upper right", fontsize=7)
+    return fig
