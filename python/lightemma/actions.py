@@ -138,7 +138,8 @@ def parse_actions(
             (N, n, 2) (a frame's ``history_actions``), float64 (other dtypes are cast).
             A lenient candidate list equal to its row — compared as the float64 values
             the prompt's shortest round-trip decimals denote, so ``4.50`` is ``4.5`` —
-            is a quotation and never the answer. Other modes ignore it.
+            is a quotation and never the answer. A row of NaN equals nothing (no history
+            for that answer; :func:`history_rows` builds such arrays). Other modes ignore it.
 
     Returns:
         :class:`ParsedActions` with ``actions`` (N, n, 2), ``status``, ``reason`` and
@@ -169,6 +170,25 @@ def parse_actions(
             raise ValueError(f"history must have shape ({len(items)}, {n}, 2) like the texts, got {hist.shape}")
     actions, codes, failures, reasons = _core.parse_actions(items, n, mode, speed, curvature, hist)
     return ParsedActions(actions=actions, status=_STATUS_NAMES[codes], reason=reasons, failure=_FAILURE_NAMES[failures])
+
+
+def history_rows(histories: Iterable[object], n: int = 6) -> np.ndarray:
+    """Histories for :func:`parse_actions`'s ``history``: a float64 (N, n, 2) array, one row per item.
+
+    An item that is not ``n`` finite (speed, curvature) pairs (None, a record without its
+    history, a wrong shape) becomes a row of NaN, which equals no list: that answer is
+    parsed as without a history.
+    """
+    rows = []
+    for item in histories:
+        try:
+            row = np.asarray(item, dtype=np.float64)
+        except (TypeError, ValueError):
+            row = None
+        if row is None or row.shape != (n, 2) or not np.isfinite(row).all():
+            row = np.full((n, 2), np.nan)
+        rows.append(row)
+    return np.stack(rows) if rows else np.zeros((0, n, 2))
 
 
 def plausibility(speed_range: object = DEFAULT_SPEED_RANGE, max_abs_curvature: object = DEFAULT_MAX_ABS_CURVATURE) -> dict:
