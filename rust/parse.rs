@@ -135,21 +135,38 @@ impl Limits {
             if let Some((lo, hi)) = self.speed {
                 if !(lo..=hi).contains(&v) {
                     return Some(format!(
-                        "speed {v} at step {} outside [{lo}, {hi}] m/s",
-                        step + 1
+                        "speed {} at step {} outside [{}, {}] m/s",
+                        short(v),
+                        step + 1,
+                        short(lo),
+                        short(hi)
                     ));
                 }
             }
             if let Some(k) = self.curvature {
                 if c.abs() > k {
                     return Some(format!(
-                        "curvature {c} at step {} outside [-{k}, {k}] 1/m",
-                        step + 1
+                        "curvature {} at step {} outside [-{}, {}] 1/m",
+                        short(c),
+                        step + 1,
+                        short(k),
+                        short(k)
                     ));
                 }
             }
         }
         None
+    }
+}
+
+/// A value for a reason: as written for everyday magnitudes (`5254`, `-0.02`), in short
+/// scientific notation beyond them (`1e308`, `2.5e-9`), never a 309-digit number.
+pub fn short(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && !(1e-6..1e9).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 
@@ -1077,6 +1094,18 @@ mod tests {
         assert_eq!(p.status, Status::Corrected);
         assert_eq!(p.values.unwrap()[5], -0.02);
         assert!(p.reason.contains("unicode minus"), "{}", p.reason);
+    }
+
+    #[test]
+    fn huge_values_are_named_in_short_scientific_notation() {
+        let p = lenient(&list(&[("1e308", "0"); 6]));
+        assert_eq!(p.reason, "speed 1e308 at step 1 outside [-10, 50] m/s");
+        let p = lenient(&list(&[("5", "-2.5e300"); 6]));
+        assert_eq!(p.reason, "curvature -2.5e300 at step 1 outside [-1, 1] 1/m");
+        assert_eq!(
+            (short(5254.0), short(-0.02), short(0.0), short(3e-9)),
+            ("5254".into(), "-0.02".into(), "0".into(), "3e-9".into())
+        );
     }
 
     #[test]

@@ -92,8 +92,9 @@ def implausible_trajectory(trajectory: np.ndarray, limits: Plausibility) -> np.n
     """(N,) True where a finite (N, T, 2) trajectory goes further than the fastest allowed speed reaches."""
     steps = np.arange(1, trajectory.shape[1] + 1)
     reach = limits.reach_speed * DT * steps * (1.0 + 1e-9) + 1e-6
-    with np.errstate(invalid="ignore"):
-        return (np.linalg.norm(trajectory, axis=2) > reach).any(axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        # hypot: a huge finite position (1e200 m) has a finite distance, and no overflow warning
+        return (np.hypot(trajectory[..., 0], trajectory[..., 1]) > reach).any(axis=1)
 
 
 def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarray, actions_gate: np.ndarray, limits: Plausibility) -> tuple[np.ndarray, np.ndarray]:

@@ -40,7 +40,13 @@ def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool 
     title = f"Accuracy — {convention} convention ({scope})"
     if with_paper and convention == PAPER_CONVENTION:
         rows = beside_paper(evaluation.models, rows, paper_accuracy_rows(), ACCURACY_DIFF_KEYS)
-    return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=coverage_flags(evaluation), notes=_notes(evaluation, intervals=True))
+    flags, notes = coverage_flags(evaluation), _notes(evaluation, intervals=True)
+    for row in rows:
+        if row.get("ci95_unavailable") and row.get("source") != "paper":
+            # the row is computed; only its interval is missing, and the note says why
+            flags[row["model"]] = flags.get(row["model"], "") + " (no interval)"
+            notes.append(f"{row['model']}: {row['ci95_unavailable']}.")
+    return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
 
 
 def efficiency_table(evaluation: Evaluation, *, with_paper: bool = False) -> Table:
