@@ -32,7 +32,7 @@ class ParsedActions:
             literal rule), ``"corrected"`` (found only by the lenient reading, or by
             the paper's digit-run rule) or ``"failed"``, one per answer.
         reason: one str per answer: ``""`` when plainly ok; otherwise what happened
-            (``"took the last of 2 candidate lists"``, ``"expression evaluated"``,
+            (``"skipped 1 list(s) repeating the history given in the prompt"``, ``"expression evaluated"``,
             ``"speed 5254 at step 1 outside [-10, 50] m/s"``, ``"truncated"``, …).
         failure: array of str, one per answer: ``""`` unless failed, else
             ``"truncated"`` (the answer ends inside the list), ``"implausible"``
