@@ -742,15 +742,18 @@ impl Scan<'_> {
             }
         }
         // distinct readings among the rest
-        let mut reps: Vec<usize> = Vec::new();
+        let mut reps = [0_usize; 9];
+        let mut distinct = 0;
         for &c in &self.buf.live {
-            if !reps.iter().any(|&r| self.same(r, c)) {
-                reps.push(c);
-                if reps.len() > 8 {
+            if !reps[..distinct].iter().any(|&r| self.same(r, c)) {
+                reps[distinct] = c;
+                distinct += 1;
+                if distinct == reps.len() {
                     break;
                 }
             }
         }
+        let reps = &reps[..distinct];
         if reps.len() > 1 {
             let starts: Vec<usize> = reps.iter().map(|&r| self.buf.cands[r].start).collect();
             let many = if reps.len() > 8 { "more than 8" } else { "" };
@@ -845,21 +848,19 @@ impl Scan<'_> {
     /// The standalone numbers, paired by their layout: a candidate, or why not.
     fn loose(&mut self) -> Result<(), Reading> {
         let n = self.n;
-        let items = &self.buf.loose;
         let text = self.text.as_bytes();
-        let nums: Vec<(f64, usize, usize)> = items
-            .iter()
-            .filter_map(|x| match *x {
-                Loose::Num(v, p, e) => Some((v, p, e)),
-                _ => None,
-            })
-            .collect();
-        let count = nums.len();
-        let newline = |a: usize, b: usize| text[a..b].contains(&b'\n');
-        // a range or a subtraction: `4.5-5.0`, `4.5 - 5.0` on one line
-        for w in items.windows(3) {
-            if let [Loose::Num(_, p, e), Loose::Minus(_), Loose::Num(_, p2, e2)] = *w {
-                if !newline(e, p2) {
+        let mut count = 0;
+        let mut span = (0, 0);
+        for (k, x) in self.buf.loose.iter().enumerate() {
+            let Loose::Num(_, p, e) = *x else { continue };
+            if count == 0 {
+                span.0 = p;
+            }
+            span.1 = e;
+            count += 1;
+            // a range or a subtraction: `4.5-5.0`, `4.5 - 5.0` on one line
+            if let [Loose::Minus(_), Loose::Num(_, p2, e2), ..] = self.buf.loose[k + 1..] {
+                if !text[e..p2].contains(&b'\n') {
                     return Err(Reading::Ambiguous(format!(
                         "ambiguous: {:?} at position {p} is a range or a subtraction",
                         self.snippet(p, e2)
@@ -867,39 +868,38 @@ impl Scan<'_> {
                 }
             }
         }
-        let pairing = if count == 2 * n {
-            self.labelled()
-                .map(|v| (v, "by their speed / curvature labels"))
-                .or_else(|| self.table().map(|v| (v, "as the columns of a table")))
-                .or_else(|| self.per_line().map(|v| (v, "one pair per line")))
-        } else {
-            None
-        };
-        match pairing {
-            Some((values, how)) => {
-                let off = self.buf.values.len();
-                self.buf.values.extend_from_slice(&values);
-                let span = (nums[0].1, nums[count - 1].2);
-                self.offer_values(span, off, false, Shape::Loose(how));
-                Ok(())
-            }
-            None if count == 2 * n => Err(Reading::Ambiguous(format!(
-                "ambiguous: {count} standalone numbers, but their pairing is unknown (no speed / \
-                 curvature labels, not one pair per line)"
-            ))),
-            None => Err(Reading::Failed(format!(
+        if count != 2 * n {
+            return Err(Reading::Failed(format!(
                 "no bracketed pairs, and {count} standalone number(s) where exactly {} are needed",
                 2 * n
-            ))),
+            )));
         }
+        let off = self.buf.values.len();
+        self.buf.values.resize(off + 2 * n, f64::NAN);
+        let how = if self.labelled(off) {
+            "by their speed / curvature labels"
+        } else if self.table(off) {
+            "as the columns of a table"
+        } else if self.per_line(off, false) {
+            "one pair per line"
+        } else {
+            self.buf.values.truncate(off);
+            return Err(Reading::Ambiguous(format!(
+                "ambiguous: {count} standalone numbers, but their pairing is unknown (no speed / \
+                 curvature labels, not one pair per line)"
+            )));
+        };
+        self.offer_values(span, off, false, Shape::Loose(how));
+        Ok(())
     }
 
-    /// Every number after a speed or a curvature key, `n` of each: v1, c1, … in order.
-    fn labelled(&self) -> Option<Vec<f64>> {
+    /// Every number after a speed or a curvature key, `n` of each: the k-th speed with the
+    /// k-th curvature, written at `values[off..]`.
+    fn labelled(&mut self, off: usize) -> bool {
         let n = self.n;
         let mut key: Option<bool> = None;
         let mut had_numbers = false;
-        let (mut speeds, mut curvatures) = (Vec::new(), Vec::new());
+        let (mut speeds, mut curvatures) = (0, 0);
         for x in &self.buf.loose {
             match *x {
                 Loose::Key(k, _) => {
@@ -909,90 +909,87 @@ impl Scan<'_> {
                 Loose::Prose(_) if had_numbers => key = None,
                 Loose::Num(v, ..) => {
                     had_numbers = true;
-                    match key {
-                        Some(true) => speeds.push(v),
-                        Some(false) => curvatures.push(v),
-                        None => return None,
+                    let (count, slot) = match key {
+                        Some(true) => (&mut speeds, 0),
+                        Some(false) => (&mut curvatures, 1),
+                        None => return false,
+                    };
+                    if *count == n {
+                        return false;
                     }
+                    self.buf.values[off + 2 * *count + slot] = v;
+                    *count += 1;
                 }
                 _ => {}
             }
         }
-        (speeds.len() == n && curvatures.len() == n).then(|| interleave(&speeds, &curvatures))
+        speeds == n && curvatures == n
     }
 
-    /// Lines (and `;` groups) of the text holding numbers: the numbers of each.
-    fn lines(&self) -> Vec<Vec<f64>> {
+    /// `n` lines (or `;` groups) of exactly two numbers each, written at `values[off..]`
+    /// (swapped when `swap`).
+    fn per_line(&mut self, off: usize, swap: bool) -> bool {
         let text = self.text.as_bytes();
-        let mut lines: Vec<Vec<f64>> = Vec::new();
-        let mut current: Vec<f64> = Vec::new();
+        let mut lines = 0; // complete lines of two
+        let mut current = 0; // numbers on the current line
         let mut last = 0;
         for x in &self.buf.loose {
             let pos = match *x {
                 Loose::Num(_, p, _) | Loose::Key(_, p) | Loose::Prose(p) | Loose::Minus(p) => p,
                 Loose::Break(p) => p,
             };
-            let breaks = text[last.min(pos)..pos].contains(&b'\n') || matches!(x, Loose::Break(_));
-            if breaks && !current.is_empty() {
-                lines.push(std::mem::take(&mut current));
+            let breaks = matches!(x, Loose::Break(_)) || text[last.min(pos)..pos].contains(&b'\n');
+            if breaks && current > 0 {
+                if current != 2 {
+                    return false;
+                }
+                lines += 1;
+                current = 0;
             }
             last = pos;
             if let Loose::Num(v, _, e) = *x {
-                current.push(v);
+                if current == 2 || lines == self.n {
+                    return false;
+                }
+                let slot = if swap { 1 - current } else { current };
+                self.buf.values[off + 2 * lines + slot] = v;
+                current += 1;
                 last = e;
             }
         }
-        if !current.is_empty() {
-            lines.push(current);
+        if current == 2 {
+            lines += 1;
+        } else if current > 0 {
+            return false;
         }
-        lines
+        lines == self.n
     }
 
-    /// `n` lines of exactly two numbers each.
-    fn per_line(&self) -> Option<Vec<f64>> {
-        let lines = self.lines();
-        (lines.len() == self.n && lines.iter().all(|l| l.len() == 2)).then(|| lines.concat())
-    }
-
-    /// A header line naming speed and curvature (no numbers), then `n` rows of two numbers.
-    fn table(&self) -> Option<Vec<f64>> {
+    /// A header line naming speed and curvature (no numbers before it, no other keys), then
+    /// `n` rows of two numbers, written at `values[off..]` in the header's order.
+    fn table(&mut self, off: usize) -> bool {
         let text = self.text.as_bytes();
-        // the keys before the first number, all on one line
-        let mut keys: Vec<(bool, usize)> = Vec::new();
+        let mut keys: [(bool, usize); 2] = [(false, 0); 2];
+        let mut found = 0;
+        let mut before_numbers = true;
         for x in &self.buf.loose {
             match *x {
-                Loose::Key(k, p) => keys.push((k, p)),
-                Loose::Num(..) => break,
+                Loose::Key(k, p) => {
+                    if found == 2 || !before_numbers {
+                        return false; // keys after the header make the layout something else
+                    }
+                    keys[found] = (k, p);
+                    found += 1;
+                }
+                Loose::Num(..) => before_numbers = false,
                 _ => {}
             }
         }
-        let [(first, p1), (second, p2)] = keys[..] else {
-            return None;
-        };
-        if first == second || text[p1..p2].contains(&b'\n') {
-            return None;
+        let [(first, p1), (second, p2)] = keys;
+        if found != 2 || first == second || text[p1..p2].contains(&b'\n') {
+            return false;
         }
-        let lines = self.lines();
-        if !(lines.len() == self.n && lines.iter().all(|l| l.len() == 2)) {
-            return None;
-        }
-        // keys after the header would make the layout something else
-        if self
-            .buf
-            .loose
-            .iter()
-            .filter(|x| matches!(x, Loose::Key(..)))
-            .count()
-            != 2
-        {
-            return None;
-        }
-        let values = lines.concat();
-        Some(if first {
-            values
-        } else {
-            values.chunks_exact(2).flat_map(|p| [p[1], p[0]]).collect()
-        })
+        self.per_line(off, !first)
     }
 
     fn bad_reason(&self, k: usize, p: &Pair) -> String {
@@ -1032,14 +1029,6 @@ fn positions(p: &[usize]) -> String {
         1 => s[0].clone(),
         k => format!("{} and {}", s[..k - 1].join(", "), s[k - 1]),
     }
-}
-
-fn interleave(speeds: &[f64], curvatures: &[f64]) -> Vec<f64> {
-    speeds
-        .iter()
-        .zip(curvatures)
-        .flat_map(|(&v, &c)| [v, c])
-        .collect()
 }
 
 /// Whether the word `w` (followed by the token `next`) says that a corrected or final
@@ -1097,23 +1086,42 @@ fn is_cue(w: &str, next: Option<&Token>, text: &str) -> bool {
 
 /// `Some(true)` for a word naming speeds (`speed`, `speeds`, `v`, `velocity`, …),
 /// `Some(false)` for curvatures (`curvature`, `curvatures`, `c`, `k`, `κ`, `kappa`, …):
-/// the label of a sequence or a table column.
+/// the label of a sequence or a table column. No allocation: most words are rejected by
+/// their first byte.
 fn sequence_key(word: &str) -> Option<bool> {
-    if word.len() > 12 {
+    let first = *word.as_bytes().first()? | 0x20;
+    if word.len() > 12 || !(matches!(first, b'v' | b's' | b'c' | b'k') || word.starts_with('κ')) {
         return None;
     }
-    let first = word.as_bytes()[0] | 0x20;
-    if !matches!(first, b'v' | b's' | b'c' | b'k') && !word.starts_with('κ') {
-        return None;
-    }
-    key_kind(word).or_else(|| {
-        let lower = word.to_lowercase();
-        match lower.as_str() {
-            "speeds" | "velocities" | "vels" => Some(true),
-            "curvatures" | "curvs" | "kappas" => Some(false),
-            _ => None,
+    if word.is_ascii() {
+        let stem = word.trim_end_matches(|c: char| c.is_ascii_digit() || c == '_');
+        let is = |names: &[&str]| names.iter().any(|n| n.eq_ignore_ascii_case(stem));
+        if is(&[
+            "v",
+            "speed",
+            "velocity",
+            "vel",
+            "speeds",
+            "velocities",
+            "vels",
+        ]) {
+            return Some(true);
         }
-    })
+        if is(&[
+            "c",
+            "k",
+            "kappa",
+            "curvature",
+            "curv",
+            "curvatures",
+            "curvs",
+            "kappas",
+        ]) {
+            return Some(false);
+        }
+        return None;
+    }
+    key_kind(word)
 }
 
 /// Classify a round or square group without nested groups.
