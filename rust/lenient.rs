@@ -20,7 +20,8 @@
 //!   Two flat lists of `n` numbers labelled as speeds and curvatures (`"speeds": [...]`,
 //!   `v: [...]`) form one list. Lists with another count are not candidates.
 //! * **The candidates must agree.** A candidate equal to the history the prompt gave
-//!   is a quotation and is skipped; identical candidates are one. Several different
+//!   is a quotation and is skipped when another candidate exists (alone, it is the
+//!   answer: a car stopped and predicted to stay stopped); identical candidates are one. Several different
 //!   candidates are **ambiguous** unless a correction or final-answer cue (`Wait`,
 //!   `Actually`, `Correction`, `Revised`, `Final answer`, …) stands after an earlier
 //!   one and before the last: then the candidates after the last such cue must agree.
@@ -719,12 +720,10 @@ impl Scan<'_> {
                 self.buf.live.push(ci);
             }
         }
-        if self.buf.live.is_empty() {
-            return Reading::Failed(format!(
-                "the only list of {n} actions (at position {}) repeats the history given in the \
-                 prompt: a quotation, not an answer",
-                positions(&quoted)
-            ));
+        // only the history: no other reading contradicts it (a stopped car predicted to stay stopped)
+        let only_history = self.buf.live.is_empty();
+        if only_history {
+            self.buf.live.extend(0..self.buf.cands.len());
         }
         // a correction or final-answer cue between candidates: the ones after the last such cue
         let mut cue = None;
@@ -795,7 +794,10 @@ impl Scan<'_> {
         self.out
             .copy_from_slice(&self.buf.values[values..values + 2 * n]);
         let mut notes = Vec::new();
-        if !quoted.is_empty() {
+        if only_history {
+            notes
+                .push("the list equals the history given in the prompt (no other list)".to_owned());
+        } else if !quoted.is_empty() {
             notes.push(format!(
                 "skipped {} list(s) repeating the history given in the prompt (at position {})",
                 quoted.len(),

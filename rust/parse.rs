@@ -710,10 +710,20 @@ mod tests {
         ] {
             assert_ambiguous(&with_history(&format!("{answer}\n{tail}"), &HISTORY), "different lists");
         }
-        // a history that is the only list is a quotation, not an answer
-        let p = with_history(&format!("The past actions were {HISTORY_TEXT}."), &HISTORY);
-        assert_eq!((p.status, p.failure), (Status::Failed, Failure::Format));
-        assert!(p.reason.contains("repeats the history"), "{}", p.reason);
+        // a history that is the only list contradicts nothing: it is the answer (stay stopped)
+        let p = with_history(&format!("Keep it: {HISTORY_TEXT}."), &HISTORY);
+        assert_eq!(p.values.as_deref(), Some(&HISTORY[..]), "{}", p.reason);
+        assert!(
+            p.reason
+                .contains("the list equals the history given in the prompt (no other list)"),
+            "{}",
+            p.reason
+        );
+        let p = with_history(
+            &format!("Keep it: {HISTORY_TEXT}. Same: {HISTORY_TEXT}"),
+            &HISTORY,
+        );
+        assert_eq!(p.values.as_deref(), Some(&HISTORY[..]), "{}", p.reason);
         // the same list twice is one candidate
         let p = lenient(&format!("{EXACT}\nTo repeat: {EXACT}"));
         assert_eq!(p.values.unwrap(), SIX.to_vec());

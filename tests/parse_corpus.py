@@ -135,7 +135,7 @@ STRUCTURE = [
     case("quoted-history-unbracketed", QUOTED_UNBRACKETED, "corrected", A),
     case("quoted-history-labelled", f"Past speeds: {[v for v, _ in H]}, past curvatures: {[c for _, c in H]}.\n" + bracket(A), "corrected", A),
     case("recap-history-after", RECAP_AFTER, "corrected", J),
-    case("history-only", "The ego vehicle kept " + bracket(H) + ".", "failed"),
+    case("history-only", "The ego vehicle is stopped and stays so: " + bracket(H) + ".", "corrected", H),  # alone, it is the answer
     case("history-echo-after", bracket(A) + "\n(previous: (4.0, 0.0))", "corrected", A),
     # kind 2: self-corrections
     case("self-correction", bracket(F) + "\nWait, that ignores the red light. Corrected: " + bracket(B), "corrected", B),

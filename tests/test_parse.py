@@ -48,7 +48,7 @@ def test_corpus_reasons_say_what_happened():
 
     assert "skipped 1 list(s) repeating the history given in the prompt (at position 14)" in reason("quoted-history-before")
     assert "skipped 1 list(s) repeating the history" in reason("recap-history-after")
-    assert "repeats the history given in the prompt: a quotation, not an answer" in reason("history-only")
+    assert "the list equals the history given in the prompt (no other list)" in reason("history-only")
     assert 'took the list after the cue "actually" at position' in reason("self-correction-three")
     assert "the same list given 2 times" in reason("repeated-same-list")
     assert reason("recap-after-answer") == ("ambiguous: 2 different lists of 6 actions (at positions 0 and 116), and no correction or "

@@ -150,5 +150,18 @@ def test_history_rows_and_the_shape_check():
     # a row of NaN equals nothing; the other modes ignore the history
     text = "Past: " + text_of(np.zeros((6, 2)))
     assert lightemma.parse_actions(text, history=np.full((1, 6, 2), np.nan)).status[0] == "corrected"
-    assert lightemma.parse_actions(text, history=np.zeros((1, 6, 2))).failure[0] == "format"
+    assert "the list equals the history" in lightemma.parse_actions(text, history=np.zeros((1, 6, 2))).reason[0]
+    assert lightemma.parse_actions(text + " then " + text.replace("0.0)", "0.5)", 1), history=np.zeros((1, 6, 2))).status[0] == "corrected"
     assert lightemma.parse_actions(text, mode="paper", history=np.zeros((1, 6, 2))).status[0] == "corrected"
+
+
+def test_every_parse_failure_kind_is_known_to_evaluation():
+    """A new parse failure kind (``ambiguous``) is counted as failed, never mistaken for another kind."""
+    from lightemma.actions import FAILURES
+    from lightemma.evaluation.outcomes import FAILURE_CODES, UNREADABLE, failure_code, outcome_counts
+
+    assert set(FAILURES) <= set(FAILURE_CODES)
+    assert "ambiguous" in UNREADABLE and failure_code("ambiguous") not in (failure_code("format"), failure_code("implausible"))
+    codes = np.array([failure_code(k) for k in ("", "ambiguous", "format", "truncated", "implausible", "api_error")])
+    counts = outcome_counts(codes, codes == 0)
+    assert counts == {"scored": 1, "failed": 3, "implausible": 1, "api_errors": 1}

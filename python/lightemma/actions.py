@@ -114,7 +114,7 @@ def parse_actions(
       columns. Several *different* lists are ``ambiguous`` unless a correction or
       final-answer cue (``Wait``, ``Correction:``, ``Final answer:``, …) comes after an
       earlier one and before the last; a list equal to the frame's ``history`` is a
-      quotation, never the answer. A text without bracketed pairs gives exactly ``2n``
+      quotation, never the answer beside another list. A text without bracketed pairs gives exactly ``2n``
       standalone numbers only where labels or the layout pair them. Malformed pairs,
       ranges (``4.5-5.0``), doubled signs and cut-off lists are ``failed`` with a
       reason — never re-paired or guessed.
@@ -138,7 +138,8 @@ def parse_actions(
             (N, n, 2) (a frame's ``history_actions``), float64 (other dtypes are cast).
             A lenient candidate list equal to its row — compared as the float64 values
             the prompt's shortest round-trip decimals denote, so ``4.50`` is ``4.5`` —
-            is a quotation and never the answer. A row of NaN equals nothing (no history
+            is a quotation, never the answer, whenever another candidate exists (alone it
+            is the answer: a stopped car predicted to stay stopped). A row of NaN equals nothing (no history
             for that answer; :func:`history_rows` builds such arrays). Other modes ignore it.
 
     Returns:
