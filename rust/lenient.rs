@@ -1034,8 +1034,8 @@ fn positions(p: &[usize]) -> String {
 }
 
 /// Whether the word `w` (followed by the token `next`) says that a corrected or final
-/// answer follows: `Wait`, `Actually`, `Correction`, `Corrected`, `Revised`, `Updated`,
-/// `Final answer`, `Final:` (any case).
+/// answer follows: `Wait`, `Actually`, `Correction`, `Corrected`, `Revised`, `Updated`
+/// (capitalised, or followed by punctuation: `wait,`), `Final answer`, `Final:` (any case).
 fn is_cue(w: &str, next: Option<&Token>, text: &str) -> bool {
     const CUES: &[&str] = &[
         "wait",
@@ -1071,7 +1071,14 @@ fn is_cue(w: &str, next: Option<&Token>, text: &str) -> bool {
     }
     let eq = |list: &[&str], s: &str| list.iter().any(|c| c.eq_ignore_ascii_case(s));
     if eq(CUES, w) {
-        return true;
+        // a sentence's first word or followed by punctuation (`Wait,`, `Corrected:`, `actually:`):
+        // "we could wait for the pedestrian" is no correction
+        let punctuated = next.is_some_and(|t| match t.kind {
+            Kind::Comma | Kind::Semicolon => true,
+            Kind::Other => text[t.pos..].starts_with([':', '!', '.', '\u{2014}']),
+            _ => false,
+        });
+        return w.as_bytes()[0].is_ascii_uppercase() || punctuated;
     }
     if !w.eq_ignore_ascii_case("final") {
         return false;

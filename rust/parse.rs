@@ -775,6 +775,9 @@ mod tests {
             "Alternatively,",
             "For comparison",
             "The final speed is fine.",
+            "Or we could wait for the pedestrian",
+            "if the light is actually red",
+            "the corrected history",
         ] {
             assert_ambiguous(
                 &lenient(&format!("{first}\n{words} {EXACT}")),

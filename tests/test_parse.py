@@ -311,8 +311,9 @@ def test_the_one_list_among_prose_with_other_pairs_is_returned(before, answer, a
 
 NO_CUE_WORDS = st.sampled_from(["the", "car", "Past actions:", "So:", "history", "For comparison,", "Alternatively,", "speed", "is",
                                 "3 seconds", "at", "about", "\n", "\n\n", "I think", "e.g.", "**", "Also", "then", "final speed",
-                                "the correct", "waypoints:", "m/s", "."])
-CUES = st.sampled_from(["Wait,", "Correction:", "Final answer:", "**Final Answer:**", "Actually,", "Revised:", "Corrected:", "wait"])
+                                "the correct", "waypoints:", "m/s", ".", "we could wait for", "if it is actually red", "the updated plan"])
+CUES = st.sampled_from(["Wait,", "Correction:", "Final answer:", "**Final Answer:**", "Actually,", "Revised:", "Corrected:", "wait,",
+                        "the final answer is"])
 
 
 @settings(max_examples=600, deadline=None)
