@@ -151,6 +151,15 @@ def main() -> None:
             assert all(python_parse(t) is not None for t in texts[:3])
             t_py = best_of(lambda: [python_parse(t) for t in texts], 1)
         rows.append(("parse (lenient)", n, t_parse, None, t_py))
+        # with each frame's history (issue 19: a list equal to it is a quotation); builds without it skip the row
+        histories = np.stack([rng.uniform(0, 15, (n, 6)), rng.uniform(-0.1, 0.1, (n, 6))], axis=-1).round(3)
+        try:
+            with_history = lightemma.parse_actions(texts, history=histories)
+        except TypeError:
+            continue
+        assert (with_history.status == ours_parse.status).all()
+        t_hist = best_of(lambda: lightemma.parse_actions(texts, history=histories), args.repeat)
+        rows.append(("parse (lenient, with histories)", n, t_hist, None, None))
 
     # memory: growth of the process's peak RSS during the Rust path vs its output array
     n = args.sizes[-1]

@@ -45,7 +45,7 @@ fn kernels(c: &mut Criterion) {
         });
         let texts = answers(n);
         group.bench_with_input(BenchmarkId::new("parse_lenient", n), &texts, |b, t| {
-            b.iter(|| parse_batch(black_box(t), 6, Mode::Lenient, &Limits::DEFAULT).unwrap())
+            b.iter(|| parse_batch(black_box(t), 6, Mode::Lenient, &Limits::DEFAULT, None).unwrap())
         });
         group.finish();
     }

@@ -1,26 +1,37 @@
-//! The lenient reading of an answer: the last complete list of `n` bracketed pairs.
+//! The lenient reading of an answer: the one list of `n` actions its structure gives.
 //!
 //! One pass over the tokens with an explicit stack of open brackets (no recursion):
 //!
 //! * A **pair** is one bracketed group without nested groups whose content is exactly
 //!   two values: numbers (`5.0`, `-0.02`, `3e-3`, `−0.02`), or a simple expression of
-//!   two numbers (`7.2-0.5`, `1/50`; evaluated, and the reason says so), separated by
-//!   `,` or `;` (or by spaces when there is no separator: `(5.0 0.01)`). Units (`m/s`,
-//!   `1/m`) are skipped. A group with one speed key and one curvature key
+//!   two numbers (`7.2+0.5`, `1/50`, `0.5*0.02`; evaluated, and the reason says so),
+//!   separated by `,` or `;` (or by spaces when there is no separator: `(5.0 0.01)`).
+//!   Units (`m/s`, `1/m`) are skipped. A group with one speed key and one curvature key
 //!   (`{"v": 5.0, "c": 0.01}`, `(v=5.0, c=0.01)`) is a pair too, read by key.
 //! * A group that looks numeric but is not two readable values — a fused number
-//!   (`3.7640.002`), leading zeros (`0001`), one or three values, stray symbols — is a
-//!   **bad pair**: if it belongs to the chosen list, the answer fails with a reason
-//!   naming it. Pairs are never re-formed across groups.
+//!   (`3.7640.002`), leading zeros (`0001`), a doubled sign (`--0.01`), a range or a
+//!   subtraction (`4.5-5.0`: which is meant is unknown), one or three values, stray
+//!   symbols — is a **bad pair**: if it belongs to the chosen list, the answer fails
+//!   with a reason naming it. Pairs are never re-formed across groups.
 //! * A **list** is a bracketed group whose direct children include pairs, or a run of
 //!   pairs outside any bracket (one per line, numbered, bulleted…) that is not broken
-//!   by prose. The answer is the **last** list (by where it ends) with exactly `n`
-//!   pairs; lists with another count are not candidates.
+//!   by prose. A bracketed group of `n` items `v c` (`[11.4 0.0, 11.5 0.0, …]`) is a
+//!   list too, and so is a flat bracketed list of exactly `2n` numbers `[v1, c1, …]`.
+//!   Two flat lists of `n` numbers labelled as speeds and curvatures (`"speeds": [...]`,
+//!   `v: [...]`) form one list. Lists with another count are not candidates.
+//! * **The candidates must agree.** A candidate equal to the history the prompt gave
+//!   is a quotation and is skipped when another candidate exists (alone, it is the
+//!   answer: a car stopped and predicted to stay stopped); identical candidates are one. Several different
+//!   candidates are **ambiguous** unless a correction or final-answer cue (`Wait`,
+//!   `Actually`, `Correction`, `Revised`, `Final answer`, …) stands after an earlier
+//!   one and before the last: then the candidates after the last such cue must agree.
 //! * A text that ends inside a bracket holding pairs, or inside a group without words
 //!   (`(5.6, -0.0`, a bare `[`), is **truncated**.
 //! * Only a text with no pair-like group at all falls back to its standalone numbers
 //!   (outside brackets; labels such as `v1 =` and horizon prose such as `3 seconds`
-//!   are not numbers), and only when there are exactly `2n` of them.
+//!   are not numbers), and only when their layout pairs them: labelled as speeds and
+//!   curvatures (`Speeds: … Curvatures: …`, `v1 = …, c1 = …`), a table under a speed
+//!   and curvature header, or one pair per line. Otherwise `2n` numbers are ambiguous.
 
 use crate::lexer::{BadNum, Kind, Token};
 
@@ -31,6 +42,8 @@ pub enum Reading {
     Found(Vec<String>),
     /// The answer ends inside a list or pair.
     Truncated(String),
+    /// Readings disagree (several different lists, a range, an unknown pairing).
+    Ambiguous(String),
     /// Nothing usable; the reason says why.
     Failed(String),
 }
@@ -43,6 +56,8 @@ enum BadPair {
     Symbols,
     Expression,
     Keys,
+    /// `a-b`: a range or a subtraction (byte span of the item)
+    Range(usize, usize),
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -76,17 +91,67 @@ struct Frame {
     other: bool,
     stray: Option<usize>, // a number directly in the list: its token index
     pairs_start: usize,
+    /// the speed (true) or curvature (false) key last written directly in this group
+    key: Option<bool>,
 }
 
-/// The best candidate so far: the list that ends last with exactly `n` pairs.
-struct Best {
+/// How a candidate was written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Shape {
+    Pairs,
+    /// `[v c, v c, …]`
+    Spaced,
+    /// `[v1, c1, v2, c2, …]`
+    Flat,
+    /// speeds and curvatures as two labelled lists
+    Labelled,
+    /// standalone numbers (the fallback); the note says how they were paired
+    Loose(&'static str),
+}
+
+/// A complete reading of `n` actions.
+struct Cand {
     start: usize,
     end: usize,
+    /// offset of its `2n` values in `Lenient::values`
+    values: usize,
     bad: Option<(usize, Pair)>,
     stray: Option<usize>,
     explicit: bool,
     unicode: bool,
     keyed: bool,
+    /// its expression pairs (1-based) in `Lenient::expr`
+    expr: (usize, usize),
+    shape: Shape,
+}
+
+impl Cand {
+    fn good(&self) -> bool {
+        self.bad.is_none() && self.stray.is_none()
+    }
+}
+
+/// A flat bracketed list of numbers: its values in `Lenient::seq_values`.
+#[derive(Debug, Clone, Copy)]
+struct Seq {
+    pos: usize,
+    end: usize,
+    off: usize,
+    len: usize,
+    unicode: bool,
+}
+
+/// A token outside every bracket, kept for the standalone-number fallback.
+#[derive(Debug, Clone, Copy)]
+enum Loose {
+    Num(f64, usize, usize),
+    /// a speed (true) or curvature (false) key word
+    Key(bool, usize),
+    Prose(usize),
+    /// `-` not attached to a number, at this byte
+    Minus(usize),
+    /// `;`: ends a group like a line break
+    Break(usize),
 }
 
 /// Buffers reused from one answer to the next.
@@ -94,34 +159,51 @@ struct Best {
 pub struct Lenient {
     pairs: Vec<Pair>,
     stack: Vec<Frame>,
-    top_numbers: Vec<f64>,
-    other_counts: Vec<usize>,
+    cands: Vec<Cand>,
+    values: Vec<f64>,
     expr: Vec<usize>,
+    cues: Vec<(usize, usize)>,
+    seq_values: Vec<f64>,
+    loose: Vec<Loose>,
+    other_counts: Vec<usize>,
+    live: Vec<usize>,
 }
 
 impl Lenient {
     /// Read `tokens` (of `text`) leniently for `n` pairs, writing `2n` values into `out`.
-    pub fn read(&mut self, tokens: &[Token], text: &str, n: usize, out: &mut [f64]) -> Reading {
+    /// `history` (`2n` values: the history the prompt printed), when given, marks a
+    /// candidate equal to it as a quotation.
+    pub fn read(
+        &mut self,
+        tokens: &[Token],
+        text: &str,
+        n: usize,
+        history: Option<&[f64]>,
+        out: &mut [f64],
+    ) -> Reading {
         self.pairs.clear();
         self.stack.clear();
-        self.top_numbers.clear();
-        self.other_counts.clear();
+        self.cands.clear();
+        self.values.clear();
         self.expr.clear();
+        self.cues.clear();
+        self.seq_values.clear();
+        self.loose.clear();
+        self.other_counts.clear();
+        self.live.clear();
         Scan {
             tokens,
             text,
             n,
+            history: history.filter(|h| h.len() == 2 * n),
             out,
-            pairs: &mut self.pairs,
-            stack: &mut self.stack,
-            best: None,
-            best_expr: &mut self.expr,
-            candidates: 0,
-            other_counts: &mut self.other_counts,
+            buf: self,
             pair_like: 0,
             run_broken: false,
-            top_numbers: &mut self.top_numbers,
             top_bad: None,
+            top_key: None,
+            pending: [None, None],
+            unlabelled_seqs: 0,
         }
         .run()
     }
@@ -131,20 +213,19 @@ struct Scan<'a> {
     tokens: &'a [Token],
     text: &'a str,
     n: usize,
+    history: Option<&'a [f64]>,
     out: &'a mut [f64],
-    pairs: &'a mut Vec<Pair>,
-    stack: &'a mut Vec<Frame>,
-    best: Option<Best>,
-    /// the pairs of the best candidate that were expressions (1-based)
-    best_expr: &'a mut Vec<usize>,
-    candidates: usize,
-    /// pair counts of lists that were not candidates (for the failure reason)
-    other_counts: &'a mut Vec<usize>,
+    buf: &'a mut Lenient,
     pair_like: usize,
     /// the top-level run: whether prose broke it since its last pair
     run_broken: bool,
-    top_numbers: &'a mut Vec<f64>,
     top_bad: Option<usize>,
+    /// the speed / curvature key last written outside brackets
+    top_key: Option<bool>,
+    /// a labelled list of `n` speeds \[0\] or curvatures \[1\] waiting for its partner
+    pending: [Option<Seq>; 2],
+    /// flat lists of `n` numbers without a speed / curvature label
+    unlabelled_seqs: usize,
 }
 
 impl Scan<'_> {
@@ -158,59 +239,83 @@ impl Scan<'_> {
     }
 
     /// Offer a finished list: `pairs[start..]`, ending at byte `end`.
-    fn offer(&mut self, start: usize, span: (usize, usize), explicit: bool, stray: Option<usize>) {
+    fn offer(
+        &mut self,
+        start: usize,
+        span: (usize, usize),
+        explicit: bool,
+        stray: Option<usize>,
+        shape: Shape,
+    ) {
         let (pos, end) = span;
-        let count = self.pairs.len() - start;
+        let count = self.buf.pairs.len() - start;
         if count < self.n.min(2) {
             return;
         }
         if count != self.n {
-            if self.other_counts.len() < 8 {
-                self.other_counts.push(count);
+            if self.buf.other_counts.len() < 8 {
+                self.buf.other_counts.push(count);
             }
             return;
         }
-        self.candidates += 1;
-        if self.best.as_ref().is_some_and(|b| b.end > end) {
-            return;
-        }
-        let mut best = Best {
+        let values = self.buf.values.len();
+        let expr_start = self.buf.expr.len();
+        let mut cand = Cand {
             start: pos,
             end,
+            values,
             bad: None,
             stray,
             explicit,
             unicode: false,
             keyed: false,
+            expr: (expr_start, expr_start),
+            shape,
         };
-        self.best_expr.clear();
-        for (k, p) in self.pairs[start..].iter().enumerate() {
+        for k in 0..count {
+            let p = self.buf.pairs[start + k];
             match p.value {
-                Ok((v, c)) => {
-                    self.out[2 * k] = v;
-                    self.out[2 * k + 1] = c;
-                }
+                Ok((v, c)) => self.buf.values.extend_from_slice(&[v, c]),
                 Err(_) => {
-                    if best.bad.is_none() {
-                        best.bad = Some((k, *p));
+                    self.buf.values.extend_from_slice(&[f64::NAN, f64::NAN]);
+                    if cand.bad.is_none() {
+                        cand.bad = Some((k, p));
                     }
                 }
             }
             if p.expr {
-                self.best_expr.push(k + 1);
+                self.buf.expr.push(k + 1);
             }
-            best.unicode |= p.unicode;
-            best.keyed |= p.keyed;
+            cand.unicode |= p.unicode;
+            cand.keyed |= p.keyed;
         }
-        self.best = Some(best);
+        cand.expr.1 = self.buf.expr.len();
+        self.buf.cands.push(cand);
+    }
+
+    /// Offer `n` actions given as values (v1, c1, …) already in `Lenient::values` from `values`.
+    fn offer_values(&mut self, span: (usize, usize), values: usize, unicode: bool, shape: Shape) {
+        let e = self.buf.expr.len();
+        self.buf.cands.push(Cand {
+            start: span.0,
+            end: span.1,
+            values,
+            bad: None,
+            stray: None,
+            explicit: !matches!(shape, Shape::Loose(_)),
+            unicode,
+            keyed: false,
+            expr: (e, e),
+            shape,
+        });
     }
 
     /// Finish the run of pairs outside any bracket.
     fn end_run(&mut self) {
-        if let (Some(first), Some(last)) = (self.pairs.first(), self.pairs.last()) {
+        if let (Some(first), Some(last)) = (self.buf.pairs.first(), self.buf.pairs.last()) {
             let span = (first.pos, last.end);
-            self.offer(0, span, false, None);
-            self.pairs.clear();
+            self.offer(0, span, false, None, Shape::Pairs);
+            self.buf.pairs.clear();
         }
     }
 
@@ -219,21 +324,23 @@ impl Scan<'_> {
         for (i, t) in tokens.iter().enumerate() {
             match t.kind {
                 Kind::Open(b) => {
-                    if let Some(parent) = self.stack.last_mut() {
+                    if let Some(parent) = self.buf.stack.last_mut() {
                         parent.leaf = false;
                     }
-                    self.stack.push(Frame {
+                    let pairs_start = self.buf.pairs.len();
+                    self.buf.stack.push(Frame {
                         open: i,
                         brace: b == b'{',
                         leaf: true,
                         other: false,
                         stray: None,
-                        pairs_start: self.pairs.len(),
+                        pairs_start,
+                        key: None,
                     });
                 }
                 Kind::Close(_) => {
                     // a closer with nothing open (`1)` in prose) is ignored
-                    if let Some(frame) = self.stack.pop() {
+                    if let Some(frame) = self.buf.stack.pop() {
                         self.close(frame, i);
                     }
                 }
@@ -241,23 +348,24 @@ impl Scan<'_> {
             }
         }
         // does the text end inside a list or a pair?
-        let depth = self.stack.len();
+        let depth = self.buf.stack.len();
         let truncated = (0..depth).any(|d| {
-            let f = &self.stack[d];
+            let f = &self.buf.stack[d];
             let own_end = self
+                .buf
                 .stack
                 .get(d + 1)
-                .map_or(self.pairs.len(), |g| g.pairs_start);
+                .map_or(self.buf.pairs.len(), |g| g.pairs_start);
             let holds_pairs = own_end > f.pairs_start;
             holds_pairs || (d + 1 == depth && f.leaf && self.looks_unfinished(f.open + 1))
         });
         if truncated {
             return Reading::Truncated("truncated: the answer ends inside a list".to_owned());
         }
-        if let Some(first) = self.stack.first() {
+        if let Some(first) = self.buf.stack.first() {
             // only the pairs before the first unclosed bracket form the top-level run
             let top = first.pairs_start;
-            self.pairs.truncate(top);
+            self.buf.pairs.truncate(top);
         }
         self.end_run();
         self.verdict()
@@ -265,25 +373,56 @@ impl Scan<'_> {
 
     /// A token outside brackets, or directly inside the innermost open bracket.
     fn content(&mut self, i: usize, t: &Token) {
-        match self.stack.last_mut() {
+        let word = match t.kind {
+            Kind::Word { .. } => {
+                let w = &self.text[t.pos..t.end];
+                if is_cue(w, self.tokens.get(i + 1), self.text) {
+                    self.buf.cues.push((t.pos, t.end));
+                }
+                Some(sequence_key(w))
+            }
+            _ => None,
+        };
+        match self.buf.stack.last_mut() {
             Some(frame) => match t.kind {
                 Kind::Num { .. } | Kind::Bad(_) => {
                     frame.other = true;
+                    frame.key = None;
                     frame.stray.get_or_insert(i);
                 }
                 Kind::Comma | Kind::Semicolon | Kind::Unit => {}
-                _ => frame.other = true,
+                _ => {
+                    frame.other = true;
+                    if let Some(Some(k)) = word {
+                        frame.key = Some(k);
+                    }
+                }
             },
             None => match t.kind {
                 Kind::Num { value, .. } => {
-                    self.top_numbers.push(value);
+                    self.buf.loose.push(Loose::Num(value, t.pos, t.end));
+                    self.top_key = None;
                     self.run_broken = true;
                 }
                 Kind::Bad(_) => {
                     self.top_bad.get_or_insert(i);
                     self.run_broken = true;
                 }
-                Kind::Word { label: false } => self.run_broken = true,
+                Kind::Word { label } => {
+                    match word.flatten() {
+                        Some(k) => {
+                            self.buf.loose.push(Loose::Key(k, t.pos));
+                            self.top_key = Some(k);
+                        }
+                        None if !label => self.buf.loose.push(Loose::Prose(t.pos)),
+                        None => {}
+                    }
+                    if !label {
+                        self.run_broken = true;
+                    }
+                }
+                Kind::Op { op: b'-', .. } => self.buf.loose.push(Loose::Minus(t.pos)),
+                Kind::Semicolon => self.buf.loose.push(Loose::Break(t.pos)),
                 _ => {}
             },
         }
@@ -311,37 +450,188 @@ impl Scan<'_> {
                     is_label = true;
                     None
                 }
-                Leaf::Prose | Leaf::Flat => None,
+                Leaf::Flat => {
+                    self.flat(inner, pos, end);
+                    None
+                }
+                Leaf::Prose => None,
             }
         } else {
-            let own = self.pairs.len() - frame.pairs_start;
+            let own = self.buf.pairs.len() - frame.pairs_start;
             let wrapped = if own == 1 && !frame.other {
                 // redundant brackets around one pair: `((5.0, 0.01))`
-                self.pairs.pop()
+                self.buf.pairs.pop()
             } else {
-                self.offer(frame.pairs_start, (pos, end), true, frame.stray);
+                self.offer(
+                    frame.pairs_start,
+                    (pos, end),
+                    true,
+                    frame.stray,
+                    Shape::Pairs,
+                );
                 None
             };
-            self.pairs.truncate(frame.pairs_start);
+            self.buf.pairs.truncate(frame.pairs_start);
             wrapped
         };
-        match self.stack.last_mut() {
-            Some(parent) => match as_pair {
-                Some(p) => self.pairs.push(p),
-                None => parent.other = true,
-            },
-            None => match as_pair {
-                Some(p) => {
-                    if self.run_broken {
-                        self.end_run();
-                        self.run_broken = false;
-                    }
-                    self.pairs.push(p);
+        match self.buf.stack.last_mut() {
+            Some(parent) => {
+                parent.key = None;
+                match as_pair {
+                    Some(p) => self.buf.pairs.push(p),
+                    None => parent.other = true,
                 }
-                None if is_label => {}
-                None => self.run_broken = true,
-            },
+            }
+            None => {
+                self.top_key = None;
+                match as_pair {
+                    Some(p) => {
+                        if self.run_broken {
+                            self.end_run();
+                            self.run_broken = false;
+                        }
+                        self.buf.pairs.push(p);
+                    }
+                    None if is_label => {}
+                    None => self.run_broken = true,
+                }
+            }
         }
+    }
+
+    /// A leaf group of four or more values: `[v c, v c, …]` (a list of pairs), a flat
+    /// list of `2n` numbers, or a flat list of `n` speeds or curvatures.
+    fn flat(&mut self, inner: &[Token], pos: usize, end: usize) {
+        let key = match self.buf.stack.last() {
+            Some(parent) => parent.key,
+            None => self.top_key,
+        };
+        let has_seps = inner
+            .iter()
+            .any(|t| matches!(t.kind, Kind::Comma | Kind::Semicolon));
+        let off = self.buf.seq_values.len();
+        let pairs_start = self.buf.pairs.len();
+        let mut per_item: Option<usize> = None; // numbers per item: 1 or 2
+        let mut items = 0;
+        let mut cur = 0; // numbers in the current item
+        let mut span = (pos, pos);
+        let mut unicode = false;
+        let mut ok = true;
+        for t in inner {
+            let ends_item = match t.kind {
+                Kind::Num { value, plain, .. } => {
+                    if cur == 0 {
+                        span.0 = t.pos;
+                    }
+                    span.1 = t.end;
+                    cur += 1;
+                    unicode |= !plain;
+                    self.buf.seq_values.push(value);
+                    !has_seps
+                }
+                Kind::Comma | Kind::Semicolon => {
+                    if cur == 0 {
+                        ok = false; // an empty item
+                    }
+                    true
+                }
+                Kind::Unit => false,
+                _ => {
+                    ok = false;
+                    false
+                }
+            };
+            if !ok {
+                break;
+            }
+            if ends_item {
+                if !self.end_flat_item(&mut per_item, &mut cur, span) {
+                    ok = false;
+                    break;
+                }
+                items += 1;
+            }
+        }
+        if ok && cur > 0 {
+            ok = self.end_flat_item(&mut per_item, &mut cur, span);
+            items += 1;
+        }
+        let n = self.n;
+        match per_item {
+            Some(2) if ok => self.offer(pairs_start, (pos, end), true, None, Shape::Spaced),
+            Some(1) if ok && key.is_none() && items == 2 * n => {
+                let values = self.buf.values.len();
+                let seq = &self.buf.seq_values[off..off + 2 * n];
+                self.buf.values.extend_from_slice(seq);
+                self.offer_values((pos, end), values, unicode, Shape::Flat);
+            }
+            Some(1) if ok && items == n => match key {
+                None => self.unlabelled_seqs += 1,
+                Some(speeds) => {
+                    let seq = Seq {
+                        pos,
+                        end,
+                        off,
+                        len: n,
+                        unicode,
+                    };
+                    let (mine, theirs) = if speeds { (0, 1) } else { (1, 0) };
+                    match self.pending[theirs].take() {
+                        None => {
+                            self.pending[mine] = Some(seq);
+                            return; // its values wait for the partner
+                        }
+                        Some(other) => {
+                            let (s, c) = if speeds { (seq, other) } else { (other, seq) };
+                            let values = self.buf.values.len();
+                            for k in 0..s.len.min(c.len) {
+                                let v = self.buf.seq_values[s.off + k];
+                                let cv = self.buf.seq_values[c.off + k];
+                                self.buf.values.extend_from_slice(&[v, cv]);
+                            }
+                            let span = (s.pos.min(c.pos), s.end.max(c.end));
+                            self.offer_values(
+                                span,
+                                values,
+                                s.unicode || c.unicode,
+                                Shape::Labelled,
+                            );
+                        }
+                    }
+                }
+            },
+            _ => {}
+        }
+        self.buf.pairs.truncate(pairs_start);
+        self.buf.seq_values.truncate(off);
+    }
+
+    /// End an item of a flat group: every item holds the same count (1 or 2) of numbers;
+    /// an item of two becomes a pair.
+    fn end_flat_item(
+        &mut self,
+        per_item: &mut Option<usize>,
+        cur: &mut usize,
+        span: (usize, usize),
+    ) -> bool {
+        let k = std::mem::take(cur);
+        if !matches!(k, 1 | 2) || per_item.is_some_and(|p| p != k) {
+            return false;
+        }
+        *per_item = Some(k);
+        if k == 2 {
+            let l = self.buf.seq_values.len();
+            let (v, c) = (self.buf.seq_values[l - 2], self.buf.seq_values[l - 1]);
+            self.buf.pairs.push(Pair {
+                value: Ok((v, c)),
+                expr: false,
+                unicode: false,
+                keyed: false,
+                pos: span.0,
+                end: span.1,
+            });
+        }
+        true
     }
 
     /// Whether the tokens from `from` to the end (the innermost unclosed group's
@@ -365,80 +655,343 @@ impl Scan<'_> {
             .any(|(k, t)| matches!(t.kind, Kind::Word { .. } | Kind::Label) && !cut_exponent(k))
     }
 
-    fn verdict(self) -> Reading {
+    fn cand_values(&self, c: &Cand) -> &[f64] {
+        &self.buf.values[c.values..c.values + 2 * self.n]
+    }
+
+    fn same(&self, a: usize, b: usize) -> bool {
+        let (ca, cb) = (&self.buf.cands[a], &self.buf.cands[b]);
+        a == b || (ca.good() && cb.good() && self.cand_values(ca) == self.cand_values(cb))
+    }
+
+    fn verdict(mut self) -> Reading {
         let n = self.n;
-        if let Some(best) = &self.best {
-            if let Some((k, p)) = best.bad {
-                return Reading::Failed(self.bad_reason(k, &p));
+        if self.buf.cands.is_empty() {
+            if self.pair_like > 0 || !self.buf.other_counts.is_empty() {
+                let counts: Vec<String> =
+                    self.buf.other_counts.iter().map(usize::to_string).collect();
+                return Reading::Failed(if counts.is_empty() {
+                    format!(
+                        "{} bracketed pair(s) but no list of {n} pairs",
+                        self.pair_like
+                    )
+                } else {
+                    format!(
+                        "no list of {n} pairs (found lists of {} pairs)",
+                        counts.join(", ")
+                    )
+                });
             }
-            if let Some(i) = best.stray {
+            if self.unlabelled_seqs >= 2 {
+                return Reading::Ambiguous(format!(
+                    "ambiguous: {} lists of {n} numbers, but which holds the speeds and which the \
+                     curvatures is unknown (no speed / curvature labels)",
+                    self.unlabelled_seqs
+                ));
+            }
+            if let Some(i) = self.top_bad {
                 let t = self.tokens[i];
+                let what = match t.kind {
+                    Kind::Bad(BadNum::DoubledSign) => "has a doubled sign",
+                    _ => "is not a number",
+                };
                 return Reading::Failed(format!(
-                    "a number outside the pairs of the list: {:?} at position {}",
+                    "no bracketed pairs, and {:?} at position {} {what}",
                     self.snippet(t.pos, t.end),
                     t.pos
                 ));
             }
-            let mut notes = Vec::new();
-            if self.candidates > 1 {
-                notes.push(format!(
-                    "took the last of {} candidate lists",
-                    self.candidates
-                ));
+            if let Err(r) = self.loose() {
+                return r;
             }
-            if !best.explicit {
-                notes.push("pairs without an enclosing list".to_owned());
-            }
-            let whole = (self.tokens[0].pos, self.tokens[self.tokens.len() - 1].end);
-            if best.explicit && (best.start, best.end) != whole {
-                notes.push("text around the list".to_owned());
-            }
-            if !self.best_expr.is_empty() {
-                let which: Vec<String> = self.best_expr.iter().map(usize::to_string).collect();
-                notes.push(format!("expression evaluated (pair {})", which.join(", ")));
-            }
-            if best.keyed {
-                notes.push("pairs read by their keys (speed, curvature)".to_owned());
-            }
-            if best.unicode {
-                notes.push("unicode minus read as '-'".to_owned());
-            }
-            return Reading::Found(notes);
         }
-        if self.pair_like > 0 || !self.other_counts.is_empty() {
-            let counts: Vec<String> = self.other_counts.iter().map(usize::to_string).collect();
-            return Reading::Failed(if counts.is_empty() {
-                format!(
-                    "{} bracketed pair(s) but no list of {n} pairs",
-                    self.pair_like
-                )
+        self.select()
+    }
+
+    /// Choose among the candidates (at least one).
+    fn select(&mut self) -> Reading {
+        let n = self.n;
+        let mut quoted = Vec::new();
+        for (ci, c) in self.buf.cands.iter().enumerate() {
+            let is_quote = c.good() && self.history.is_some_and(|h| self.cand_values(c) == h);
+            if is_quote {
+                quoted.push(c.start);
             } else {
-                format!(
-                    "no list of {n} pairs (found lists of {} pairs)",
-                    counts.join(", ")
-                )
-            });
+                self.buf.live.push(ci);
+            }
         }
-        if let Some(i) = self.top_bad {
+        // only the history: no other reading contradicts it (a stopped car predicted to stay stopped)
+        let only_history = self.buf.live.is_empty();
+        if only_history {
+            self.buf.live.extend(0..self.buf.cands.len());
+        }
+        // a correction or final-answer cue between candidates: the ones after the last such cue
+        let mut cue = None;
+        if self.buf.live.len() > 1 {
+            for &(cpos, cend) in self.buf.cues.iter().rev() {
+                let cands = &self.buf.cands;
+                let live = &self.buf.live;
+                if live.iter().any(|&c| cands[c].end <= cpos)
+                    && live.iter().any(|&c| cands[c].start >= cend)
+                {
+                    self.buf.live.retain(|&c| cands[c].start >= cend);
+                    cue = Some((cpos, cend));
+                    break;
+                }
+            }
+        }
+        // distinct readings among the rest
+        let mut reps = [0_usize; 9];
+        let mut distinct = 0;
+        for &c in &self.buf.live {
+            if !reps[..distinct].iter().any(|&r| self.same(r, c)) {
+                reps[distinct] = c;
+                distinct += 1;
+                if distinct == reps.len() {
+                    break;
+                }
+            }
+        }
+        let reps = &reps[..distinct];
+        if reps.len() > 1 {
+            let starts: Vec<usize> = reps.iter().map(|&r| self.buf.cands[r].start).collect();
+            let many = if reps.len() > 8 { "more than 8" } else { "" };
+            let count = if many.is_empty() {
+                reps.len().to_string()
+            } else {
+                many.to_owned()
+            };
+            let after = match cue {
+                Some((p, e)) => format!(" after the cue {:?} at position {p}", self.snippet(p, e)),
+                None => String::new(),
+            };
+            return Reading::Ambiguous(format!(
+                "ambiguous: {count} different lists of {n} actions{after} (at positions {}), \
+                 and no correction or final-answer cue says which is the answer",
+                positions(&starts)
+            ));
+        }
+        let chosen_index = *self.buf.live.last().expect("live is not empty");
+        let repeats = self.buf.live.len();
+        let chosen = &self.buf.cands[chosen_index];
+        if let Some((k, p)) = chosen.bad {
+            let reason = self.bad_reason(k, &p);
+            return if matches!(p.value, Err(BadPair::Range(..))) {
+                Reading::Ambiguous(reason)
+            } else {
+                Reading::Failed(reason)
+            };
+        }
+        if let Some(i) = chosen.stray {
             let t = self.tokens[i];
             return Reading::Failed(format!(
-                "no bracketed pairs, and {:?} at position {} is not a number",
+                "a number outside the pairs of the list: {:?} at position {}",
                 self.snippet(t.pos, t.end),
                 t.pos
             ));
         }
-        let count = self.top_numbers.len();
-        if count == 2 * n {
-            self.out.copy_from_slice(self.top_numbers);
-            return Reading::Found(vec![format!(
-                "read {} standalone numbers (no bracketed pairs)",
-                2 * n
-            )]);
+        let values = chosen.values;
+        self.out
+            .copy_from_slice(&self.buf.values[values..values + 2 * n]);
+        let mut notes = Vec::new();
+        if only_history {
+            notes
+                .push("the list equals the history given in the prompt (no other list)".to_owned());
+        } else if !quoted.is_empty() {
+            notes.push(format!(
+                "skipped {} list(s) repeating the history given in the prompt (at position {})",
+                quoted.len(),
+                positions(&quoted)
+            ));
         }
-        Reading::Failed(format!(
-            "no bracketed pairs, and {count} standalone number(s) where exactly {} are needed",
-            2 * n
-        ))
+        if let Some((p, e)) = cue {
+            notes.push(format!(
+                "took the list after the cue {:?} at position {p}",
+                self.snippet(p, e)
+            ));
+        }
+        if repeats > 1 {
+            notes.push(format!("the same list given {repeats} times"));
+        }
+        match chosen.shape {
+            Shape::Pairs => {
+                if !chosen.explicit {
+                    notes.push("pairs without an enclosing list".to_owned());
+                }
+            }
+            Shape::Spaced => notes.push("pairs written as 'v c' items".to_owned()),
+            Shape::Flat => notes.push(format!(
+                "a flat list of {} numbers read as v1, c1, v2, c2, …",
+                2 * n
+            )),
+            Shape::Labelled => {
+                notes.push("speeds and curvatures read from their labelled lists".to_owned())
+            }
+            Shape::Loose(how) => notes.push(format!("read {} standalone numbers {how}", 2 * n)),
+        }
+        let whole = (self.tokens[0].pos, self.tokens[self.tokens.len() - 1].end);
+        if chosen.explicit && (chosen.start, chosen.end) != whole {
+            notes.push("text around the list".to_owned());
+        }
+        let (e0, e1) = chosen.expr;
+        if e1 > e0 {
+            let which: Vec<String> = self.buf.expr[e0..e1].iter().map(usize::to_string).collect();
+            notes.push(format!("expression evaluated (pair {})", which.join(", ")));
+        }
+        if chosen.keyed {
+            notes.push("pairs read by their keys (speed, curvature)".to_owned());
+        }
+        if chosen.unicode {
+            notes.push("unicode minus read as '-'".to_owned());
+        }
+        Reading::Found(notes)
+    }
+
+    /// The standalone numbers, paired by their layout: a candidate, or why not.
+    fn loose(&mut self) -> Result<(), Reading> {
+        let n = self.n;
+        let text = self.text.as_bytes();
+        let mut count = 0;
+        let mut span = (0, 0);
+        for (k, x) in self.buf.loose.iter().enumerate() {
+            let Loose::Num(_, p, e) = *x else { continue };
+            if count == 0 {
+                span.0 = p;
+            }
+            span.1 = e;
+            count += 1;
+            // a range or a subtraction: `4.5-5.0`, `4.5 - 5.0` on one line
+            if let [Loose::Minus(_), Loose::Num(_, p2, e2), ..] = self.buf.loose[k + 1..] {
+                if !text[e..p2].contains(&b'\n') {
+                    return Err(Reading::Ambiguous(format!(
+                        "ambiguous: {:?} at position {p} is a range or a subtraction",
+                        self.snippet(p, e2)
+                    )));
+                }
+            }
+        }
+        if count != 2 * n {
+            return Err(Reading::Failed(format!(
+                "no bracketed pairs, and {count} standalone number(s) where exactly {} are needed",
+                2 * n
+            )));
+        }
+        let off = self.buf.values.len();
+        self.buf.values.resize(off + 2 * n, f64::NAN);
+        let how = if self.labelled(off) {
+            "by their speed / curvature labels"
+        } else if self.table(off) {
+            "as the columns of a table"
+        } else if self.per_line(off, false) {
+            "one pair per line"
+        } else {
+            self.buf.values.truncate(off);
+            return Err(Reading::Ambiguous(format!(
+                "ambiguous: {count} standalone numbers, but their pairing is unknown (no speed / \
+                 curvature labels, not one pair per line)"
+            )));
+        };
+        self.offer_values(span, off, false, Shape::Loose(how));
+        Ok(())
+    }
+
+    /// Every number after a speed or a curvature key, `n` of each: the k-th speed with the
+    /// k-th curvature, written at `values[off..]`.
+    fn labelled(&mut self, off: usize) -> bool {
+        let n = self.n;
+        let mut key: Option<bool> = None;
+        let mut had_numbers = false;
+        let (mut speeds, mut curvatures) = (0, 0);
+        for x in &self.buf.loose {
+            match *x {
+                Loose::Key(k, _) => {
+                    key = Some(k);
+                    had_numbers = false;
+                }
+                Loose::Prose(_) if had_numbers => key = None,
+                Loose::Num(v, ..) => {
+                    had_numbers = true;
+                    let (count, slot) = match key {
+                        Some(true) => (&mut speeds, 0),
+                        Some(false) => (&mut curvatures, 1),
+                        None => return false,
+                    };
+                    if *count == n {
+                        return false;
+                    }
+                    self.buf.values[off + 2 * *count + slot] = v;
+                    *count += 1;
+                }
+                _ => {}
+            }
+        }
+        speeds == n && curvatures == n
+    }
+
+    /// `n` lines (or `;` groups) of exactly two numbers each, written at `values[off..]`
+    /// (swapped when `swap`).
+    fn per_line(&mut self, off: usize, swap: bool) -> bool {
+        let text = self.text.as_bytes();
+        let mut lines = 0; // complete lines of two
+        let mut current = 0; // numbers on the current line
+        let mut last = 0;
+        for x in &self.buf.loose {
+            let pos = match *x {
+                Loose::Num(_, p, _) | Loose::Key(_, p) | Loose::Prose(p) | Loose::Minus(p) => p,
+                Loose::Break(p) => p,
+            };
+            let breaks = matches!(x, Loose::Break(_)) || text[last.min(pos)..pos].contains(&b'\n');
+            if breaks && current > 0 {
+                if current != 2 {
+                    return false;
+                }
+                lines += 1;
+                current = 0;
+            }
+            last = pos;
+            if let Loose::Num(v, _, e) = *x {
+                if current == 2 || lines == self.n {
+                    return false;
+                }
+                let slot = if swap { 1 - current } else { current };
+                self.buf.values[off + 2 * lines + slot] = v;
+                current += 1;
+                last = e;
+            }
+        }
+        if current == 2 {
+            lines += 1;
+        } else if current > 0 {
+            return false;
+        }
+        lines == self.n
+    }
+
+    /// A header line naming speed and curvature (no numbers before it, no other keys), then
+    /// `n` rows of two numbers, written at `values[off..]` in the header's order.
+    fn table(&mut self, off: usize) -> bool {
+        let text = self.text.as_bytes();
+        let mut keys: [(bool, usize); 2] = [(false, 0); 2];
+        let mut found = 0;
+        let mut before_numbers = true;
+        for x in &self.buf.loose {
+            match *x {
+                Loose::Key(k, p) => {
+                    if found == 2 || !before_numbers {
+                        return false; // keys after the header make the layout something else
+                    }
+                    keys[found] = (k, p);
+                    found += 1;
+                }
+                Loose::Num(..) => before_numbers = false,
+                _ => {}
+            }
+        }
+        let [(first, p1), (second, p2)] = keys;
+        if found != 2 || first == second || text[p1..p2].contains(&b'\n') {
+            return false;
+        }
+        self.per_line(off, !first)
     }
 
     fn bad_reason(&self, k: usize, p: &Pair) -> String {
@@ -453,8 +1006,13 @@ impl Scan<'_> {
                     BadNum::LeadingZeros => {
                         format!("{num} has leading zeros (a lost decimal point?)")
                     }
+                    BadNum::DoubledSign => format!("{num} has a doubled sign"),
                 }
             }
+            Err(BadPair::Range(pos, end)) => format!(
+                "is ambiguous: {} is a range or a subtraction",
+                self.snippet(pos, end)
+            ),
             Err(BadPair::Count(c)) => format!("holds {c} value(s), not 2"),
             Err(BadPair::Symbols) => "is not two numbers".to_owned(),
             Err(BadPair::Expression) => "is not two numbers or simple expressions".to_owned(),
@@ -463,6 +1021,116 @@ impl Scan<'_> {
         };
         format!("pair {} {group} {what}", k + 1)
     }
+}
+
+/// Byte positions, joined for a reason: `12`, `12 and 80`, `12, 80 and 140`.
+fn positions(p: &[usize]) -> String {
+    let s: Vec<String> = p.iter().map(usize::to_string).collect();
+    match s.len() {
+        0 => String::new(),
+        1 => s[0].clone(),
+        k => format!("{} and {}", s[..k - 1].join(", "), s[k - 1]),
+    }
+}
+
+/// Whether the word `w` (followed by the token `next`) says that a corrected or final
+/// answer follows: `Wait`, `Actually`, `Correction`, `Corrected`, `Revised`, `Updated`
+/// (capitalised, or followed by punctuation: `wait,`), `Final answer`, `Final:` (any case).
+fn is_cue(w: &str, next: Option<&Token>, text: &str) -> bool {
+    const CUES: &[&str] = &[
+        "wait",
+        "actually",
+        "correction",
+        "corrections",
+        "corrected",
+        "revised",
+        "revision",
+        "updated",
+    ];
+    const FINAL_WHAT: &[&str] = &[
+        "answer",
+        "answers",
+        "actions",
+        "action",
+        "list",
+        "output",
+        "plan",
+        "prediction",
+        "predictions",
+        "result",
+        "trajectory",
+    ];
+    if w.len() < 4
+        || w.len() > 11
+        || !matches!(
+            w.as_bytes()[0] | 0x20,
+            b'a' | b'c' | b'f' | b'r' | b'u' | b'w'
+        )
+    {
+        return false;
+    }
+    let eq = |list: &[&str], s: &str| list.iter().any(|c| c.eq_ignore_ascii_case(s));
+    if eq(CUES, w) {
+        // a sentence's first word or followed by punctuation (`Wait,`, `Corrected:`, `actually:`):
+        // "we could wait for the pedestrian" is no correction
+        let punctuated = next.is_some_and(|t| match t.kind {
+            Kind::Comma | Kind::Semicolon => true,
+            Kind::Other => text[t.pos..].starts_with([':', '!', '.', '\u{2014}']),
+            _ => false,
+        });
+        return w.as_bytes()[0].is_ascii_uppercase() || punctuated;
+    }
+    if !w.eq_ignore_ascii_case("final") {
+        return false;
+    }
+    match next {
+        Some(t) => match t.kind {
+            Kind::Word { .. } => eq(FINAL_WHAT, &text[t.pos..t.end]),
+            Kind::Other => text[t.pos..].starts_with(':'),
+            _ => false,
+        },
+        None => false,
+    }
+}
+
+/// `Some(true)` for a word naming speeds (`speed`, `speeds`, `v`, `velocity`, …),
+/// `Some(false)` for curvatures (`curvature`, `curvatures`, `c`, `k`, `κ`, `kappa`, …):
+/// the label of a sequence or a table column. No allocation: most words are rejected by
+/// their first byte.
+fn sequence_key(word: &str) -> Option<bool> {
+    let first = *word.as_bytes().first()? | 0x20;
+    if word.len() > 12 || !(matches!(first, b'v' | b's' | b'c' | b'k') || word.starts_with('κ')) {
+        return None;
+    }
+    if word.is_ascii() {
+        let stem = word.trim_end_matches(|c: char| c.is_ascii_digit() || c == '_');
+        let is = |names: &[&str]| names.iter().any(|n| n.eq_ignore_ascii_case(stem));
+        if is(&[
+            "v",
+            "speed",
+            "velocity",
+            "vel",
+            "speeds",
+            "velocities",
+            "vels",
+        ]) {
+            return Some(true);
+        }
+        if is(&[
+            "c",
+            "k",
+            "kappa",
+            "curvature",
+            "curv",
+            "curvatures",
+            "curvs",
+            "kappas",
+        ]) {
+            return Some(false);
+        }
+        return None;
+    }
+    key_kind(word)
 }
 
 /// Classify a round or square group without nested groups.
@@ -546,12 +1214,12 @@ fn classify(inner: &[Token], text: &str, pos: usize, end: usize) -> Leaf {
         let rest = &inner[(split + 1).min(inner.len())..];
         let rest = &rest[..rest.iter().position(is_sep).unwrap_or(rest.len())];
         match (expression(&inner[..split]), expression(rest)) {
-            (Some(a), Some(b)) => {
+            (Ok(a), Ok(b)) => {
                 pair.expr = a.expr || b.expr;
                 pair.unicode = a.unicode || b.unicode;
                 Ok((a.value, b.value))
             }
-            _ => Err(BadPair::Expression),
+            (Err(e), _) | (_, Err(e)) => Err(e),
         }
     };
     Leaf::Pair(pair)
@@ -563,31 +1231,41 @@ struct Value {
     unicode: bool,
 }
 
-/// One item of a pair: `[±] a [op b]`, or `a ±b` (a signed number after a number).
-fn expression(item: &[Token]) -> Option<Value> {
+/// One item of a pair: `[±] a [op b]`, or `a +b` (a signed number after a number).
+/// `a - b`, `a-b` and `a -b` are a range or a subtraction: [`BadPair::Range`]; a sign
+/// before a signed number (`- -0.01`, `5 + -1`) is a doubled sign.
+fn expression(item: &[Token]) -> Result<Value, BadPair> {
+    let (Some(first_tok), Some(last_tok)) = (item.first(), item.last()) else {
+        return Err(BadPair::Expression);
+    };
+    let span = (first_tok.pos, last_tok.end);
+    let doubled = BadPair::Number(BadNum::DoubledSign, span.0, span.1);
     let mut toks = item.iter().filter(|t| t.kind != Kind::Unit).map(|t| t.kind);
     let mut unicode = false;
-    let mut first = toks.next()?;
+    let mut first = toks.next().ok_or(BadPair::Expression)?;
     let mut negate = false;
     if let Kind::Op { op, plain } = first {
         if op != b'-' && op != b'+' {
-            return None;
+            return Err(BadPair::Expression);
         }
         negate = op == b'-';
         unicode |= !plain;
-        first = toks.next()?;
+        first = toks.next().ok_or(BadPair::Expression)?;
+        if matches!(first, Kind::Num { signed: true, .. }) {
+            return Err(doubled);
+        }
     }
     let Kind::Num {
         value: a, plain, ..
     } = first
     else {
-        return None;
+        return Err(BadPair::Expression);
     };
     unicode |= !plain;
     let a = if negate { -a } else { a };
     let value = match (toks.next(), toks.next(), toks.next()) {
         (None, _, _) => {
-            return Some(Value {
+            return Ok(Value {
                 value: a,
                 expr: false,
                 unicode,
@@ -602,6 +1280,9 @@ fn expression(item: &[Token]) -> Option<Value> {
             None,
             _,
         ) => {
+            if b.is_sign_negative() {
+                return Err(BadPair::Range(span.0, span.1));
+            }
             unicode |= !plain;
             a + b
         }
@@ -610,21 +1291,22 @@ fn expression(item: &[Token]) -> Option<Value> {
             Some(Kind::Num {
                 value: b,
                 plain: pb,
-                ..
+                signed,
             }),
             None,
         ) => {
             unicode |= !(plain && pb);
             match op {
+                b'-' => return Err(BadPair::Range(span.0, span.1)),
+                b'+' if signed => return Err(doubled),
                 b'+' => a + b,
-                b'-' => a - b,
                 b'*' => a * b,
                 _ => a / b,
             }
         }
-        _ => return None,
+        _ => return Err(BadPair::Expression),
     };
-    Some(Value {
+    Ok(Value {
         value,
         expr: true,
         unicode,

@@ -9,7 +9,7 @@
 //!   when it does not follow a word or number; the words `nan`, `inf` and
 //!   `infinity` are numbers too (non-finite, so they never pass);
 //! * a **bad number** looks numeric but is not one: fused numbers (`3.7640.002`),
-//!   leading zeros (`0001`, a lost decimal point);
+//!   leading zeros (`0001`, a lost decimal point), a doubled sign (`--0.01`, `+-0.5`);
 //! * a number glued to a word (`v1`, `step2`, `0.5s`, `c_1`) is part of that word;
 //! * a **label** is a number that is not a value: `Step 1:` (followed by `:`), a list
 //!   marker `2.` or `2)` at the start of a line, or a number describing the horizon
@@ -63,6 +63,8 @@ pub enum BadNum {
     Fused,
     /// An integer part with leading zeros (`0001`, `05.5`): a lost decimal point.
     LeadingZeros,
+    /// Two signs before a number (`--0.01`, `+-0.5`): neither sign can be trusted.
+    DoubledSign,
 }
 
 const MINUS_SIGNS: [char; 2] = ['\u{2212}', '\u{2013}'];
@@ -179,6 +181,14 @@ pub fn tokenize_range(
             MINUS_SIGNS.contains(&c)
         };
         let signed = sign && !prev_word;
+        if signed {
+            if let Some(end) = doubled_sign(text, i + width) {
+                push(out, Kind::Bad(BadNum::DoubledSign), start, end);
+                prev_word = true;
+                i = end;
+                continue;
+            }
+        }
         let num_start = if signed { i + width } else { i };
         if (signed || !prev_word) && starts_number(bytes, num_start) {
             let mut end = scan_number(bytes, num_start);
@@ -311,6 +321,16 @@ pub fn tokenize_range(
         i += width;
     }
     maybe_tags
+}
+
+/// A second sign at `i` followed by a number (`--0.01`): the end of that number.
+fn doubled_sign(text: &str, i: usize) -> Option<usize> {
+    let c = text[i..].chars().next()?;
+    if !(c == '-' || c == '+' || MINUS_SIGNS.contains(&c)) {
+        return None;
+    }
+    let j = i + c.len_utf8();
+    starts_number(text.as_bytes(), j).then(|| scan_number(text.as_bytes(), j))
 }
 
 /// Whether the number `bytes[num_start..end]` is a label: `1:`, a list marker `1.` or
@@ -560,6 +580,16 @@ mod tests {
                 Some(BadNum::LeadingZeros)
             ]
         );
+    }
+
+    #[test]
+    fn doubled_signs_are_bad_numbers() {
+        for text in ["--0.01", "+-0.5", "-+1", "\u{2212}-2", "-\u{2212}2"] {
+            assert_eq!(kinds(text), vec![Kind::Bad(BadNum::DoubledSign)], "{text}");
+        }
+        // an operator between numbers, then a signed number, is no doubled sign
+        assert_eq!(nums("5 - -3"), vec![5.0, -3.0]);
+        assert_eq!(nums("x --"), Vec::<f64>::new());
     }
 
     #[test]

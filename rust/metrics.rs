@@ -71,7 +71,25 @@ pub struct Summary {
 
 #[inline(always)]
 fn distance(dx: f64, dy: f64) -> f64 {
-    (dx * dx + dy * dy).sqrt()
+    let d = (dx * dx + dy * dy).sqrt();
+    if d.is_finite() {
+        d
+    } else {
+        // a huge finite error (1e200 m): the squares overflow, hypot does not
+        dx.hypot(dy)
+    }
+}
+
+/// The mean of `values`, finite whenever they are (huge values are scaled before summing).
+#[inline(always)]
+fn mean(values: &[f64]) -> f64 {
+    let n = values.len() as f64;
+    let m = values.iter().sum::<f64>() / n;
+    if m.is_finite() {
+        m
+    } else {
+        values.iter().map(|v| v / n).sum()
+    }
 }
 
 /// Values per frame, in this order: ADE 1s, ADE 2s, ADE 3s, ADE avg, FDE.
@@ -93,11 +111,11 @@ fn frame_values(
     }
     let mut out = [0.0_f64; FRAME_VALUES];
     for (value, &(a, b)) in out.iter_mut().zip(windows.iter()) {
-        *value = e[a..=b].iter().sum::<f64>() / (b - a + 1) as f64;
+        *value = mean(&e[a..=b]);
     }
     out[3] = match convention {
-        Convention::Lightemma => e.iter().sum::<f64>() / HORIZON as f64,
-        Convention::Stp3 | Convention::Uniad => (out[0] + out[1] + out[2]) / 3.0,
+        Convention::Lightemma => mean(&e),
+        Convention::Stp3 | Convention::Uniad => mean(&out[..3]),
     };
     out[4] = e[HORIZON - 1];
     (out, worst)
@@ -355,6 +373,31 @@ pub fn evaluate_masked(
         misses += partial.misses;
     }
     let nf = kept as f64;
+    if !sums.iter().all(|v| v.is_finite()) {
+        // huge finite errors overflowed the sums: a second pass sums each frame's share
+        sums = [0.0; FRAME_VALUES];
+        let frames = pred
+            .chunks_exact(2 * HORIZON)
+            .zip(gt.chunks_exact(2 * HORIZON));
+        for (i, (p, g)) in frames.enumerate() {
+            if mask.is_some_and(|m| !m[i]) {
+                continue;
+            }
+            let (values, _) = frame_values(p, g, &windows, convention);
+            for (sum, v) in sums.iter_mut().zip(values) {
+                *sum += v / nf;
+            }
+        }
+        return Ok(Summary {
+            ade_1s: sums[0],
+            ade_2s: sums[1],
+            ade_3s: sums[2],
+            ade_avg: sums[3],
+            fde: sums[4],
+            miss_rate: misses as f64 / nf,
+            n_frames: kept,
+        });
+    }
     Ok(Summary {
         ade_1s: sums[0] / nf,
         ade_2s: sums[1] / nf,
@@ -369,6 +412,24 @@ pub fn evaluate_masked(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn huge_finite_errors_give_finite_metrics() {
+        let (mut pred, gt) = batch(&[[1.0; 6], [1.0; 6], [1.0; 6]]);
+        for v in pred[..12].iter_mut() {
+            *v = 1e307; // both coordinates: the squares overflow, and so would the sums
+        }
+        let s = evaluate(&pred, &gt, 6, Convention::Lightemma, 2.0).unwrap();
+        let d = 1e307_f64.hypot(1e307);
+        assert!((s.ade_avg - (d + 2.0) / 3.0).abs() <= 1e-12 * d, "{s:?}");
+        assert!(s.fde.is_finite() && s.ade_1s.is_finite());
+        let mut out = vec![0.0; 3 * FRAME_VALUES];
+        frame_metrics(&pred, &gt, 6, Convention::Uniad, &mut out).unwrap();
+        assert!(out.iter().all(|v| v.is_finite()) && (out[4] - d).abs() <= 1e-12 * d);
+        let mut e = vec![0.0; 18];
+        displacement_errors(&pred, &gt, &mut e).unwrap();
+        assert_eq!(e[0], d);
+    }
 
     /// Ground truth at the origin; predictions displaced along y by the given errors.
     fn batch(errors: &[[f64; 6]]) -> (Vec<f64>, Vec<f64>) {

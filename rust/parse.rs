@@ -48,10 +48,15 @@ pub enum Failure {
     Implausible = 2,
     /// Everything else: no list, malformed pairs, non-finite values, empty answers.
     Format = 3,
+    /// Readings disagree: several different lists and no cue saying which is final, a
+    /// range or subtraction inside a pair (`4.5-5.0`), standalone numbers whose pairing
+    /// the layout does not give.
+    Ambiguous = 4,
 }
 
 impl Failure {
-    pub const NAMES: &'static [&'static str] = &["", "truncated", "implausible", "format"];
+    pub const NAMES: &'static [&'static str] =
+        &["", "truncated", "implausible", "format", "ambiguous"];
 
     pub fn as_str(self) -> &'static str {
         Self::NAMES[self as usize]
@@ -130,21 +135,38 @@ impl Limits {
             if let Some((lo, hi)) = self.speed {
                 if !(lo..=hi).contains(&v) {
                     return Some(format!(
-                        "speed {v} at step {} outside [{lo}, {hi}] m/s",
-                        step + 1
+                        "speed {} at step {} outside [{}, {}] m/s",
+                        short(v),
+                        step + 1,
+                        short(lo),
+                        short(hi)
                     ));
                 }
             }
             if let Some(k) = self.curvature {
                 if c.abs() > k {
                     return Some(format!(
-                        "curvature {c} at step {} outside [-{k}, {k}] 1/m",
-                        step + 1
+                        "curvature {} at step {} outside [-{}, {}] 1/m",
+                        short(c),
+                        step + 1,
+                        short(k),
+                        short(k)
                     ));
                 }
             }
         }
         None
+    }
+}
+
+/// A value for a reason: as written for everyday magnitudes (`5254`, `-0.02`), in short
+/// scientific notation beyond them (`1e308`, `2.5e-9`), never a 309-digit number.
+pub fn short(x: f64) -> String {
+    let a = x.abs();
+    if a != 0.0 && !(1e-6..1e9).contains(&a) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
     }
 }
 
@@ -206,13 +228,15 @@ impl Parser {
     }
 
     /// Parse one answer for `n` actions. The values are written into `out` (length `2n`,
-    /// NaN where failed).
+    /// NaN where failed). `history` (`2n` values v1, c1, …: the history the prompt
+    /// printed) makes a lenient candidate equal to it a quotation, never the answer.
     pub fn parse_into(
         &mut self,
         text: &str,
         n: usize,
         mode: Mode,
         limits: &Limits,
+        history: Option<&[f64]>,
         out: &mut [f64],
     ) -> Outcome {
         debug_assert_eq!(out.len(), 2 * n);
@@ -229,7 +253,7 @@ impl Parser {
                     e.reason,
                 ),
             },
-            Mode::Strict | Mode::Lenient => self.strict_or_lenient(text, n, mode, out),
+            Mode::Strict | Mode::Lenient => self.strict_or_lenient(text, n, mode, history, out),
         };
         let outcome = match (outcome.status, mode) {
             (Status::Failed, _) => outcome,
@@ -266,7 +290,14 @@ impl Parser {
         finite(outcome, out)
     }
 
-    fn strict_or_lenient(&mut self, text: &str, n: usize, mode: Mode, out: &mut [f64]) -> Outcome {
+    fn strict_or_lenient(
+        &mut self,
+        text: &str,
+        n: usize,
+        mode: Mode,
+        history: Option<&[f64]>,
+        out: &mut [f64],
+    ) -> Outcome {
         let maybe_tags = tokenize(text, &mut self.tokens, &mut self.scratch);
         if self.tokens.is_empty() {
             return Outcome::failed(Failure::Format, "empty answer".to_owned());
@@ -300,7 +331,7 @@ impl Parser {
                 tokenize_range(text, start, end, &mut self.tokens, &mut self.scratch);
             }
         }
-        match self.lenient.read(&self.tokens, text, n, out) {
+        match self.lenient.read(&self.tokens, text, n, history, out) {
             Reading::Found(mut notes) => {
                 if blocks.removed > 0 {
                     notes.insert(0, "reasoning block removed".to_owned());
@@ -315,13 +346,26 @@ impl Parser {
             }
             Reading::Truncated(reason) => Outcome::failed(Failure::Truncated, reason),
             Reading::Failed(reason) => Outcome::failed(Failure::Format, reason),
+            Reading::Ambiguous(reason) => Outcome::failed(Failure::Ambiguous, reason),
         }
     }
 
     /// Convenience wrapper returning a [`Parsed`].
     pub fn parse(&mut self, text: &str, n: usize, mode: Mode, limits: &Limits) -> Parsed {
+        self.parse_with_history(text, n, mode, limits, None)
+    }
+
+    /// [`Parser::parse`] with the frame's history (`2n` values).
+    pub fn parse_with_history(
+        &mut self,
+        text: &str,
+        n: usize,
+        mode: Mode,
+        limits: &Limits,
+        history: Option<&[f64]>,
+    ) -> Parsed {
         let mut values = vec![f64::NAN; 2 * n];
-        let o = self.parse_into(text, n, mode, limits, &mut values);
+        let o = self.parse_into(text, n, mode, limits, history, &mut values);
         Parsed {
             status: o.status,
             failure: o.failure,
@@ -490,23 +534,35 @@ fn strict(tokens: &[Token], n: usize, out: &mut [f64]) -> Result<(), StrictError
 /// A parsed batch: values (`N × n × 2`, NaN where failed), status and failure codes, reasons.
 pub type Batch = (Vec<f64>, Vec<u8>, Vec<u8>, Vec<String>);
 
-/// Parse a batch of answers.
+/// Parse a batch of answers. `history`, when given, holds each answer's history
+/// (`N × n × 2` values, v1, c1, … per answer; see [`Parser::parse_into`]).
 pub fn parse_batch<S: AsRef<str>>(
     texts: &[S],
     n: usize,
     mode: Mode,
     limits: &Limits,
+    history: Option<&[f64]>,
 ) -> CoreResult<Batch> {
     if n == 0 {
         return Err(CoreError::Argument("n must be at least 1".to_owned()));
+    }
+    if let Some(h) = history {
+        if h.len() != texts.len() * 2 * n {
+            return Err(CoreError::Shape(format!(
+                "history must have shape ({}, {n}, 2) like the texts, got {} values",
+                texts.len(),
+                h.len()
+            )));
+        }
     }
     let mut values = vec![f64::NAN; texts.len() * 2 * n];
     let mut status = Vec::with_capacity(texts.len());
     let mut failure = Vec::with_capacity(texts.len());
     let mut reasons = Vec::with_capacity(texts.len());
     let mut parser = Parser::new();
-    for (text, out) in texts.iter().zip(values.chunks_exact_mut(2 * n)) {
-        let o = parser.parse_into(text.as_ref(), n, mode, limits, out);
+    for (i, (text, out)) in texts.iter().zip(values.chunks_exact_mut(2 * n)).enumerate() {
+        let h = history.map(|h| &h[i * 2 * n..(i + 1) * 2 * n]);
+        let o = parser.parse_into(text.as_ref(), n, mode, limits, h, out);
         status.push(o.status as u8);
         failure.push(o.failure as u8);
         reasons.push(o.reason);
@@ -588,22 +644,146 @@ mod tests {
         assert!(p.reason.contains("12 standalone numbers"), "{}", p.reason);
     }
 
+    fn with_history(text: &str, history: &[f64]) -> Parsed {
+        Parser::new().parse_with_history(text, 6, Mode::Lenient, &Limits::DEFAULT, Some(history))
+    }
+
+    const HISTORY: [f64; 12] = [4.5, 0.0, 4.6, 0.0, 4.7, 0.0, 4.8, 0.0, 4.9, 0.0, 5.0, 0.0];
+    const HISTORY_TEXT: &str =
+        "[(4.5, 0.0), (4.6, 0.0), (4.7, 0.0), (4.8, 0.0), (4.9, 0.0), (5.0, 0.0)]";
+
+    fn assert_ambiguous(p: &Parsed, needle: &str) {
+        assert_eq!(
+            (p.status, p.failure),
+            (Status::Failed, Failure::Ambiguous),
+            "{}",
+            p.reason
+        );
+        assert!(p.values.is_none());
+        assert!(p.reason.contains(needle), "{}", p.reason);
+    }
+
     #[test]
     fn kind_1_quoted_history_before_the_answer() {
-        let history = list(&[("3.0", "0.0"); 6]);
-        let p = lenient(&format!("Past actions: {history}. So: {EXACT}"));
+        let text = format!("Past actions: {HISTORY_TEXT}. So: {EXACT}");
+        // without the history, two different lists: which is the answer is unknown
+        assert_ambiguous(&lenient(&text), "2 different lists of 6 actions");
+        // with it, the quotation is no candidate
+        let p = with_history(&text, &HISTORY);
         assert_eq!(p.status, Status::Corrected);
         assert_eq!(p.values.unwrap(), SIX.to_vec());
         assert!(
-            p.reason.contains("took the last of 2 candidate lists"),
+            p.reason.contains(
+                "skipped 1 list(s) repeating the history given in the prompt (at position 14)"
+            ),
             "{}",
             p.reason
         );
         let p = lenient(&format!(
-            "<think>The history {history} covers 3 seconds at 0.5 s.</think>\n{EXACT}"
+            "<think>The history {HISTORY_TEXT} covers 3 seconds at 0.5 s.</think>\n{EXACT}"
         ));
         assert_eq!(p.values.unwrap(), SIX.to_vec());
         assert!(p.reason.contains("reasoning block removed"), "{}", p.reason);
+    }
+
+    #[test]
+    fn a_recap_after_the_answer_is_ambiguous_unless_it_is_the_history() {
+        let answer =
+            "[(5.0, 0.0), (5.2, 0.01), (5.4, 0.01), (5.6, 0.02), (5.8, 0.02), (6.0, 0.03)]";
+        let text = format!("{answer}\nFor comparison, the past actions were {HISTORY_TEXT}.");
+        let p = lenient(&text);
+        assert_ambiguous(&p, "2 different lists of 6 actions");
+        assert!(p.reason.contains("at positions 0 and"), "{}", p.reason);
+        let p = with_history(&text, &HISTORY);
+        assert_eq!(p.status, Status::Corrected, "{}", p.reason);
+        assert_eq!(p.values.unwrap()[..4], [5.0, 0.0, 5.2, 0.01]);
+        // the history is compared at the precision the prompt printed: 4.50 is 4.5, 4.51 is not
+        let p = with_history(&text.replace("(4.5, 0.0)", "(4.50, 0.000)"), &HISTORY);
+        assert_eq!(p.status, Status::Corrected, "{}", p.reason);
+        let p = with_history(&text.replace("(4.5, 0.0)", "(4.51, 0.0)"), &HISTORY);
+        assert_eq!(p.failure, Failure::Ambiguous, "{}", p.reason);
+        // waypoints, accelerations, an alternative plan after the answer: ambiguous
+        for tail in [
+            "Waypoints: [(2.5, 0.0), (5.1, 0.0), (7.8, 0.1), (10.6, 0.2), (13.5, 0.4), (16.5, 0.6)]",
+            "Accelerations: [(0.4, 0.0), (0.4, 0.0), (0.4, 0.0), (0.4, 0.0), (0.4, 0.0), (0.4, 0.0)]",
+            "Alternatively, [(3.0, 0.0), (2.0, 0.0), (1.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)]",
+        ] {
+            assert_ambiguous(&with_history(&format!("{answer}\n{tail}"), &HISTORY), "different lists");
+        }
+        // a history that is the only list contradicts nothing: it is the answer (stay stopped)
+        let p = with_history(&format!("Keep it: {HISTORY_TEXT}."), &HISTORY);
+        assert_eq!(p.values.as_deref(), Some(&HISTORY[..]), "{}", p.reason);
+        assert!(
+            p.reason
+                .contains("the list equals the history given in the prompt (no other list)"),
+            "{}",
+            p.reason
+        );
+        let p = with_history(
+            &format!("Keep it: {HISTORY_TEXT}. Same: {HISTORY_TEXT}"),
+            &HISTORY,
+        );
+        assert_eq!(p.values.as_deref(), Some(&HISTORY[..]), "{}", p.reason);
+        // the same list twice is one candidate
+        let p = lenient(&format!("{EXACT}\nTo repeat: {EXACT}"));
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        assert!(
+            p.reason.contains("the same list given 2 times"),
+            "{}",
+            p.reason
+        );
+    }
+
+    #[test]
+    fn a_cue_between_lists_says_which_is_final() {
+        let first = list(&[("8.0", "0.0"); 6]);
+        for cue in [
+            "Correction:",
+            "Final answer:",
+            "**Final Answer**",
+            "Revised plan:",
+            "Actually, slower:",
+            "Wait, the light is red.",
+            "Corrected:",
+        ] {
+            let p = lenient(&format!("{first}\n{cue} {EXACT}"));
+            assert_eq!(p.values.as_deref(), Some(&SIX[..]), "{cue}: {}", p.reason);
+            assert!(
+                p.reason.contains("took the list after the cue"),
+                "{}",
+                p.reason
+            );
+        }
+        // a cue before every list decides nothing; nor does one not followed by a list
+        assert_ambiguous(
+            &lenient(&format!("Final answer: {first}\n{EXACT}")),
+            "different lists",
+        );
+        assert_ambiguous(
+            &lenient(&format!("{first}\n{EXACT} Wait, maybe.")),
+            "different lists",
+        );
+        // after the cue the lists must agree
+        let p = lenient(&format!(
+            "{first}\nWait: {EXACT}\nFor comparison: {}",
+            list(&[("1.0", "0.0"); 6])
+        ));
+        assert_ambiguous(&p, "after the cue \"Wait\"");
+        // prose that is no cue
+        for words in [
+            "Also",
+            "Alternatively,",
+            "For comparison",
+            "The final speed is fine.",
+            "Or we could wait for the pedestrian",
+            "if the light is actually red",
+            "the corrected history",
+        ] {
+            assert_ambiguous(
+                &lenient(&format!("{first}\n{words} {EXACT}")),
+                "different lists",
+            );
+        }
     }
 
     #[test]
@@ -628,10 +808,10 @@ mod tests {
 
     #[test]
     fn kind_4_arithmetic_is_evaluated() {
-        let p = lenient(&list(&[("7.2-0.5", "0.002"); 6]));
+        let p = lenient(&list(&[("7.2+0.5", "0.002"); 6]));
         assert_eq!(p.status, Status::Corrected);
         let v = p.values.unwrap();
-        assert!((v[0] - 6.7).abs() < 1e-12 && v[1] == 0.002);
+        assert!((v[0] - 7.7).abs() < 1e-12 && v[1] == 0.002);
         assert!(
             p.reason
                 .contains("expression evaluated (pair 1, 2, 3, 4, 5, 6)"),
@@ -640,6 +820,189 @@ mod tests {
         );
         let p = lenient(&list(&[("5.0", "1/50"); 6]));
         assert_eq!(p.values.unwrap()[..2], [5.0, 0.02]);
+        let p = lenient(&list(&[("5.0", "0.5*0.02"); 6]));
+        assert_eq!(p.values.unwrap()[..2], [5.0, 0.01]);
+    }
+
+    #[test]
+    fn a_range_is_not_a_subtraction() {
+        for (v, c, item) in [
+            ("4.5-5.0", "0.0", "4.5-5.0"),
+            ("4.5 - 5.0", "0.0", "4.5 - 5.0"),
+            ("4.5 -5.0", "0.0", "4.5 -5.0"),
+            ("4.5\u{2013}5.0", "0.0", "4.5\u{2013}5.0"),
+            ("5.0", "0.01-0.02", "0.01-0.02"),
+        ] {
+            let p = lenient(&list(&[(v, c); 6]));
+            assert_ambiguous(
+                &p,
+                &format!("is ambiguous: {item} is a range or a subtraction"),
+            );
+            assert!(p.reason.starts_with("pair 1 ("), "{}", p.reason);
+        }
+        // space-separated, a signed second number is a value
+        let p = lenient(
+            "[(5.0 -0.01), (5.0 -0.01), (5.0 -0.01), (5.0 -0.01), (5.0 -0.01), (5.0 -0.01)]",
+        );
+        assert_eq!(p.values.unwrap()[..2], [5.0, -0.01]);
+        // standalone numbers with a range
+        let p = lenient("Speeds: 4.5-5.0, 5, 5, 5, 5, 5\nCurvatures: 0, 0, 0, 0, 0, 0");
+        assert_ambiguous(&p, "\"4.5-5.0\" at position 8 is a range or a subtraction");
+    }
+
+    #[test]
+    fn a_doubled_sign_fails() {
+        for item in ["--0.01", "+-0.01", "- -0.01", "-\u{2212}0.01"] {
+            let p = lenient(&list(&[("5.0", item); 6]));
+            assert_eq!(
+                (p.status, p.failure),
+                (Status::Failed, Failure::Format),
+                "{item}"
+            );
+            assert!(
+                p.reason.contains("has a doubled sign"),
+                "{item}: {}",
+                p.reason
+            );
+        }
+        let p = lenient(&list(&[("5.0+-0.1", "0.0"); 6]));
+        assert!(p.reason.contains("doubled sign"), "{}", p.reason);
+        let p = lenient("5.0 --0.01 5.0 0.0 5.0 0.0 5.0 0.0 5.0 0.0 5.0 0.0");
+        assert_eq!(p.failure, Failure::Format);
+        assert!(p.reason.contains("has a doubled sign"), "{}", p.reason);
+        // strict mode is unchanged: not a pair
+        let p = run(&list(&[("5.0", "--0.01"); 6]), Mode::Strict);
+        assert_eq!(p.failure, Failure::Format);
+        assert!(
+            p.reason.starts_with("pair 1 is not '(v, c)'"),
+            "{}",
+            p.reason
+        );
+    }
+
+    #[test]
+    fn labelled_sequences_are_read_by_their_labels() {
+        let speeds = "0.8, 0.6, 0.4, 0.2, 0.0, 0.0";
+        let curvatures = "0.01, 0.02, 0.03, 0.04, 0.05, 0.06";
+        let want = [
+            0.8, 0.01, 0.6, 0.02, 0.4, 0.03, 0.2, 0.04, 0.0, 0.05, 0.0, 0.06,
+        ];
+        for text in [
+            format!("Speeds: {speeds}\nCurvatures: {curvatures}"),
+            format!("Curvatures: {curvatures}\nSpeeds (m/s): {speeds}"),
+            format!("v: [{speeds}] k: [{curvatures}]"),
+            format!(r#"{{"speeds": [{speeds}], "curvatures": [{curvatures}]}}"#),
+            format!(r#"{{"curvature": [{curvatures}], "speed": [{speeds}]}}"#),
+            format!("Speeds: [{speeds}]\nCurvatures: [{curvatures}]"),
+        ] {
+            let p = lenient(&text);
+            assert_eq!(p.status, Status::Corrected, "{text}: {}", p.reason);
+            assert_eq!(p.values.unwrap(), want.to_vec(), "{text}");
+        }
+        let p = lenient(&format!("Speeds: {speeds}\nCurvatures: {curvatures}"));
+        assert!(
+            p.reason.contains("by their speed / curvature labels"),
+            "{}",
+            p.reason
+        );
+        // a table with speed and curvature columns, either order
+        let rows: String = want
+            .chunks(2)
+            .map(|p| format!("| {} | {} |\n", p[0], p[1]))
+            .collect();
+        let p = lenient(&format!(
+            "| Speed (m/s) | Curvature (1/m) |\n|---|---|\n{rows}"
+        ));
+        assert_eq!(p.values.unwrap(), want.to_vec(), "{rows}");
+        let swapped: String = want
+            .chunks(2)
+            .map(|p| format!("| {} | {} |\n", p[1], p[0]))
+            .collect();
+        let p = lenient(&format!("| curvature | speed |\n|---|---|\n{swapped}"));
+        assert_eq!(p.values.unwrap(), want.to_vec());
+        // one pair per line, or per `;` group
+        let lines: String = want
+            .chunks(2)
+            .map(|p| format!("{} {}\n", p[0], p[1]))
+            .collect();
+        assert_eq!(lenient(&lines).values.unwrap(), want.to_vec());
+        let groups: Vec<String> = want
+            .chunks(2)
+            .map(|p| format!("{}, {}", p[0], p[1]))
+            .collect();
+        assert_eq!(lenient(&groups.join("; ")).values.unwrap(), want.to_vec());
+    }
+
+    #[test]
+    fn loose_numbers_without_a_pairing_are_ambiguous() {
+        for text in [
+            "0.8, 0.6, 0.4, 0.2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0",
+            "I slow from 0.8 to 0.6 then 0.4 and 0.2 to 0.0 and 0.0 with curving 0.0 0.0 0.0 0.0 0.0 0.0",
+            "Speeds: 0.8, 0.6, 0.4, 0.2, 0.0\nCurvatures: 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0",
+        ] {
+            let p = lenient(text);
+            assert_ambiguous(&p, "12 standalone numbers, but their pairing is unknown");
+        }
+        // the issue's case: speeds then curvatures, at normal and at low speeds
+        let p = lenient(
+            "Speeds: 0.8, 0.6, 0.4, 0.2, 0.0, 0.0\nCurvatures: 0.0, 0.0, 0.0, 0.0, 0.0, 0.0",
+        );
+        assert_eq!(p.values.unwrap()[..4], [0.8, 0.0, 0.6, 0.0]);
+        // two unlabelled lists of six numbers
+        let p = lenient("[5.0, 5.2, 5.4, 5.6, 5.8, 6.0] and [0.0, 0.0, 0.01, 0.01, 0.0, 0.0]");
+        assert_ambiguous(&p, "2 lists of 6 numbers, but which holds the speeds");
+    }
+
+    #[test]
+    fn unambiguous_flat_and_spaced_lists_are_read() {
+        let flat: Vec<String> = SIX.iter().map(f64::to_string).collect();
+        let p = lenient(&format!("[{}]", flat.join(", ")));
+        assert_eq!(p.status, Status::Corrected);
+        assert_eq!(p.values.unwrap(), SIX.to_vec());
+        assert!(
+            p.reason.contains("a flat list of 12 numbers"),
+            "{}",
+            p.reason
+        );
+        let spaced: Vec<String> = SIX
+            .chunks(2)
+            .map(|p| format!("{} {}", p[0], p[1]))
+            .collect();
+        let p = lenient(&format!("Actions: [{}]", spaced.join(", ")));
+        assert_eq!(p.values.unwrap(), SIX.to_vec(), "{}", p.reason);
+        assert!(
+            p.reason.contains("pairs written as 'v c' items"),
+            "{}",
+            p.reason
+        );
+        // real answers (GPT-4o, LLaMA-3.2-11B)
+        let p = lenient("[11.478 0.0, 11.528 0.0, 11.578 0.0, 11.628 0.0, 11.678 0.0, 11.728 0.0]");
+        assert_eq!(p.values.unwrap()[..4], [11.478, 0.0, 11.528, 0.0]);
+        // a flat list of 13, or of 12 with one item of two numbers, is not read
+        assert_eq!(
+            lenient(&format!("[{}, 1.0]", flat.join(", "))).status,
+            Status::Failed
+        );
+        assert_eq!(
+            lenient(&format!("[{} 1.0]", flat.join(", "))).status,
+            Status::Failed
+        );
+        // a flat list and a different pair list: ambiguous
+        assert_ambiguous(
+            &lenient(&format!(
+                "[{}]\n{}",
+                flat.join(", "),
+                list(&[("1.0", "0.0"); 6])
+            )),
+            "different lists",
+        );
+        // the same actions both ways: one reading
+        assert_eq!(
+            lenient(&format!("[{}]\n{EXACT}", flat.join(", ")))
+                .values
+                .unwrap(),
+            SIX.to_vec()
+        );
     }
 
     #[test]
@@ -747,6 +1110,18 @@ mod tests {
     }
 
     #[test]
+    fn huge_values_are_named_in_short_scientific_notation() {
+        let p = lenient(&list(&[("1e308", "0"); 6]));
+        assert_eq!(p.reason, "speed 1e308 at step 1 outside [-10, 50] m/s");
+        let p = lenient(&list(&[("5", "-2.5e300"); 6]));
+        assert_eq!(p.reason, "curvature -2.5e300 at step 1 outside [-1, 1] 1/m");
+        assert_eq!(
+            (short(5254.0), short(-0.02), short(0.0), short(3e-9)),
+            ("5254".into(), "-0.02".into(), "0".into(), "3e-9".into())
+        );
+    }
+
+    #[test]
     fn plausibility_gate_and_no_limits() {
         let text = list(&[("60", "0"); 6]);
         assert_eq!(lenient(&text).failure, Failure::Implausible);
@@ -836,7 +1211,7 @@ mod tests {
                 .map(|_| FRAGMENTS[(next() % FRAGMENTS.len() as u64) as usize])
                 .collect();
             for mode in [Mode::Strict, Mode::Lenient, Mode::Paper, Mode::Json] {
-                let o = parser.parse_into(&text, 6, mode, &Limits::DEFAULT, &mut out);
+                let o = parser.parse_into(&text, 6, mode, &Limits::DEFAULT, None, &mut out);
                 assert_eq!(
                     o.failure == Failure::None,
                     o.status != Status::Failed,
@@ -863,6 +1238,7 @@ mod tests {
             6,
             Mode::Lenient,
             &Limits::NONE,
+            None,
         )
         .unwrap();
         assert_eq!(failure, vec![0, 3]);
@@ -872,6 +1248,7 @@ mod tests {
         assert_eq!(status, vec![0, 2]);
         assert!(reasons[0].is_empty() && !reasons[1].is_empty());
         assert!(Mode::from_name("fuzzy").is_err());
-        assert!(parse_batch(&["x"], 0, Mode::Lenient, &Limits::NONE).is_err());
+        assert!(parse_batch(&["x"], 0, Mode::Lenient, &Limits::NONE, None).is_err());
+        assert!(parse_batch(&["x"], 6, Mode::Lenient, &Limits::NONE, Some(&[0.0; 11])).is_err());
     }
 }

@@ -102,10 +102,13 @@ fn texts_of(list: &Bound<'_, PyList>) -> PyResult<Vec<Text>> {
     Ok(texts)
 }
 
-/// parse_actions(texts, n, mode, speed_range, max_abs_curvature)
+/// parse_actions(texts, n, mode, speed_range, max_abs_curvature, history)
 ///     -> (actions (N, n, 2), status codes (N,), failure codes (N,), reasons)
+///
+/// `history`: None, or a C-contiguous float64 (N, n, 2) array of the histories the
+/// prompts printed (a lenient candidate equal to its row is a quotation).
 #[pyfunction]
-#[pyo3(signature = (texts, n = 6, mode = "lenient", speed_range = Some((-10.0, 50.0)), max_abs_curvature = Some(1.0)))]
+#[pyo3(signature = (texts, n = 6, mode = "lenient", speed_range = Some((-10.0, 50.0)), max_abs_curvature = Some(1.0), history = None))]
 fn parse_actions<'py>(
     py: Python<'py>,
     texts: &Bound<'py, PyList>,
@@ -113,13 +116,29 @@ fn parse_actions<'py>(
     mode: &str,
     speed_range: Option<(f64, f64)>,
     max_abs_curvature: Option<f64>,
+    history: Option<PyReadonlyArrayDyn<'py, f64>>,
 ) -> PyResult<ParsedBatch<'py>> {
     let mode = parse::Mode::from_name(mode)?;
     let limits = parse::Limits::new(speed_range, max_abs_curvature)?;
     let texts = texts_of(texts)?;
     let count = texts.len();
-    let (values, status, failure, reasons) =
-        maybe_detach(py, count, || parse::parse_batch(&texts, n, mode, &limits))?;
+    let history_view = match &history {
+        None => None,
+        Some(h) => {
+            let (data, rows, steps) = frames_view(h, "history")?;
+            if rows != count || steps != n {
+                return Err(CoreError::Shape(format!(
+                    "history must have shape ({count}, {n}, 2) like the texts, got {:?}",
+                    h.shape()
+                ))
+                .into());
+            }
+            Some(data)
+        }
+    };
+    let (values, status, failure, reasons) = maybe_detach(py, count, || {
+        parse::parse_batch(&texts, n, mode, &limits, history_view)
+    })?;
     let values = shape_to_3d(values, count, n)?;
     Ok((
         values.into_pyarray(py),

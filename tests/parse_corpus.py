@@ -4,7 +4,10 @@ Each case: (name, answer, expected status, expected 6×2 values or None, expecte
 The shapes follow what GPT-4o, Claude, Gemini, Qwen-VL, LLaMA-Vision and DeepSeek-VL return
 for the chain's stage 3, including the seven kinds of issue 9: quoted history and reasoning
 blocks, self-corrections, prose numbers, arithmetic in pairs, fused numbers, lost decimal
-points and cut-off answers.
+points and cut-off answers; and the shapes of issue 19: a recap or an alternative after the
+answer, ranges, speeds-then-curvatures, doubled signs (ambiguous or failed, never guessed), and the
+unambiguous flat and ``v c`` lists (read). ``HISTORIES`` gives the history the prompt printed for
+the cases that quote it: the test parses those with ``history=``.
 """
 
 from __future__ import annotations
@@ -19,6 +22,8 @@ E = [(8.4, -0.045), (8.1, -0.06), (7.9, -0.072), (7.9, -0.072), (8.0, -0.05), (8
 F = [(11.2, 0.0), (10.1, 0.0), (8.7, 0.0), (7.0, 0.0), (5.1, 0.0), (3.0, 0.0)]  # braking
 G = [(-1.0, 0.0), (-1.2, 0.05), (-1.2, 0.05), (-1.0, 0.0), (0.0, 0.0), (0.0, 0.0)]  # reversing
 H = [(3.0, 0.0), (3.0, 0.0), (3.0, 0.0), (3.0, 0.0), (3.0, 0.0), (3.0, 0.0)]  # a history to quote
+J = [(5.0, 0.0), (5.2, 0.01), (5.4, 0.01), (5.6, 0.02), (5.8, 0.02), (6.0, 0.03)]  # issue 19's answer
+K = [(4.5, 0.0), (4.6, 0.0), (4.7, 0.0), (4.8, 0.0), (4.9, 0.0), (5.0, 0.0)]  # ... and its history
 I = [(12.52, 0.0014), (12.61, 0.0012), (12.7, 0.0009), (12.74, 0.0007), (12.8, 0.0004), (12.83, 0.0001)]
 
 
@@ -35,6 +40,12 @@ def case(name, answer, status, values=None, failure=""):
         failure = "format"
     return (name, answer, status, values, failure)
 
+
+QUOTED_BEFORE = "Past actions: " + bracket(H) + ". The road is clear, so: " + bracket(A)
+QUOTED_CLAUDE = ("Looking at the history, the ego vehicle held " + bracket(H, inner="[]") + " for the last 3 seconds.\n\nPredicted actions:\n"
+                 + bracket(A))
+QUOTED_UNBRACKETED = "Past: " + ", ".join(f"({v}, {c})" for v, c in H) + ".\nPredicted: " + ", ".join(f"({v}, {c})" for v, c in A)
+RECAP_AFTER = bracket(J) + "\nFor comparison, the past actions were " + bracket(K) + "."
 
 EXACT = [
     case("exact", bracket(A), "ok", A),
@@ -119,19 +130,20 @@ STRUCTURE = [
     case("thinking-tags", "<thinking>history " + bracket(H) + "</thinking>\n" + bracket(E), "corrected", E),
     case("think-upper-case", "<THINK>" + bracket(H) + "</THINK>" + bracket(F), "corrected", F),
     case("kimi-think-tokens", "\u25c1think\u25b7" + bracket(H) + "\u25c1/think\u25b7" + bracket(A), "corrected", A),
-    case("quoted-history-before", "Past actions: " + bracket(H) + ". The road is clear, so: " + bracket(A), "corrected", A),
-    case("quoted-history-claude", "Looking at the history, the ego vehicle held " + bracket(H, inner="[]") + " for the last 3 seconds.\n\nPredicted actions:\n" + bracket(A), "corrected", A),
-    case("quoted-history-unbracketed", "Past: " + ", ".join(f"({v}, {c})" for v, c in H) + ".\nPredicted: " + ", ".join(f"({v}, {c})" for v, c in A), "corrected", A),
+    case("quoted-history-before", QUOTED_BEFORE, "corrected", A),
+    case("quoted-history-claude", QUOTED_CLAUDE, "corrected", A),
+    case("quoted-history-unbracketed", QUOTED_UNBRACKETED, "corrected", A),
+    case("quoted-history-labelled", f"Past speeds: {[v for v, _ in H]}, past curvatures: {[c for _, c in H]}.\n" + bracket(A), "corrected", A),
+    case("recap-history-after", RECAP_AFTER, "corrected", J),
+    case("history-only", "The ego vehicle is stopped and stays so: " + bracket(H) + ".", "corrected", H),  # alone, it is the answer
     case("history-echo-after", bracket(A) + "\n(previous: (4.0, 0.0))", "corrected", A),
     # kind 2: self-corrections
     case("self-correction", bracket(F) + "\nWait, that ignores the red light. Corrected: " + bracket(B), "corrected", B),
     case("self-correction-reasoning", "First guess: " + bracket(A) + "\nHmm, the car ahead is braking, so let me revise.\nFinal answer: " + bracket(F), "corrected", F),
     case("self-correction-three", bracket(H) + " no: " + bracket(A) + " actually: " + bracket(C), "corrected", C),
-    # kind 4: arithmetic in pairs
-    case("arithmetic-minus", "[" + ", ".join(f"({v + 0.5}-0.5, {c})" for v, c in A) + "]", "corrected",
-         [(v + 0.5 - 0.5, c) for v, c in A]),
-    case("arithmetic-llama-11b", "[(7.2-0.5, 0.002), (6.6-0.5, 0.002), (6.0-0.5, 0.002), (5.4-0.5, 0.002), (4.8-0.5, 0.002), (4.2-0.5, 0.002)]",
-         "corrected", [(7.2 - 0.5, 0.002), (6.6 - 0.5, 0.002), (6.0 - 0.5, 0.002), (5.4 - 0.5, 0.002), (4.8 - 0.5, 0.002), (4.2 - 0.5, 0.002)]),
+    case("self-correction-revised", bracket(A) + "\nRevised plan (the pedestrian is crossing): " + bracket(B), "corrected", B),
+    case("repeated-same-list", bracket(A) + "\nSo the actions are " + bracket(A), "corrected", A),
+    # kind 4: arithmetic in pairs (a-b is a range or a subtraction: ambiguous, below)
     case("arithmetic-fraction", "[(5.0, 1/50), (5.0, 1/50), (5.0, 1/100), (5.0, 0), (5.0, 0), (5.0, 0)]", "corrected",
          [(5.0, 1 / 50), (5.0, 1 / 50), (5.0, 1 / 100), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)]),
     case("arithmetic-spaced", "[(3.0 + 0.5, 0.0), (3.5 + 0.5, 0.0), (4.0 + 0.5, 0.0), (4.5 + 0.5, 0.0), (5.0 + 0.5, 0.0), (5.5 + 0.5, 0.0)]",
@@ -150,8 +162,12 @@ FALLBACK = [
     case("list-marker-numbers", lines(A, "{i}. {v}, {c}"), "corrected", A),
     case("step-colon-numbers", lines(A, "Step {i}: {v} {c}"), "corrected", A),
     case("fence-and-labels", "```\n" + lines(A, "v{i}={v}, c{i}={c}") + "\n```", "corrected", A),
-    case("bare-numbers", " ".join(f"{v} {c}" for v, c in A), "corrected", A),
-    case("comma-numbers", ", ".join(f"{v}, {c}" for v, c in A), "corrected", A),
+    case("bare-pair-per-line", "\n".join(f"{v} {c}" for v, c in A), "corrected", A),
+    case("pairs-in-semicolon-groups", "; ".join(f"{v}, {c}" for v, c in A), "corrected", A),
+    case("speeds-then-curvatures", f"Speeds: {', '.join(str(v) for v, _ in B)}\nCurvatures: {', '.join(str(c) for _, c in B)}", "corrected", B),
+    case("speeds-then-curvatures-slow", "Speeds: 0.8, 0.6, 0.4, 0.2, 0.0, 0.0\nCurvatures: 0.0, 0.0, 0.0, 0.0, 0.0, 0.0", "corrected",
+         [(0.8, 0.0), (0.6, 0.0), (0.4, 0.0), (0.2, 0.0), (0.0, 0.0), (0.0, 0.0)]),
+    case("table-columns", "| Step | Speed (m/s) | Curvature (1/m) |\n|---|---|---|\n" + lines(E, "| t{i} | {v} | {c} |"), "corrected", E),
     # kind 3: prose numbers about the horizon are not actions
     case("prose-horizon-labels", "Over the next 3 seconds at 0.5 s steps:\n" + lines(H, "v{i} = {v}, c{i} = {c}"), "corrected", H),
     case("prose-six-steps", "For the next 6 steps (3 seconds):\n" + lines(E, "v{i} = {v}, c{i} = {c}"), "corrected", E),
@@ -190,10 +206,43 @@ FAILED = [
     case("long-expression", bracket(A).replace("(5.0,", "(5.5-0.25-0.25,"), "failed"),
     case("stray-number-in-list", "[(5.0, 0.01), (5.5, 0.0), 6.0, (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]", "failed"),
     case("json-keys-missing-curvature", json.dumps([{"speed": v} for v, _ in A]), "failed"),
-    # flat lists are not pairs (speeds and curvatures could be in either order)
-    case("flat-list", "[" + ", ".join(f"{v}, {c}" for v, c in A) + "]", "failed"),
-    case("speeds-and-curvatures", f"speeds = {[v for v, _ in A]}\ncurvatures = {[c for _, c in A]}", "failed"),
+    # a doubled sign: neither sign can be trusted
+    case("doubled-minus", bracket(A).replace("-0.02", "--0.02"), "failed"),
+    case("plus-minus", bracket(A).replace("0.003", "+-0.003"), "failed"),
     case("pairs-broken-by-prose", "(5.0, 0.01) to start, and then (5.5, 0.0), after that (6.0, -0.02), (6.5, 0.0), (7.0, 0.0) and (7.5, 0.003)", "failed"),
+]
+
+# unambiguous shapes that are not pairs: read
+SHAPES = [
+    case("flat-list", "[" + ", ".join(f"{v}, {c}" for v, c in A) + "]", "corrected", A),
+    case("flat-list-gpt-4o", "The actions are: [11.478, 0.0, 11.528, 0.0, 11.578, 0.0, 11.628, 0.0, 11.678, 0.0, 11.728, 0.0]", "corrected",
+         [(11.478, 0.0), (11.528, 0.0), (11.578, 0.0), (11.628, 0.0), (11.678, 0.0), (11.728, 0.0)]),
+    case("space-separated-items-llama", "[11.478 0.0, 11.528 0.0, 11.578 0.0, 11.628 0.0, 11.678 0.0, 11.728 0.0]", "corrected",
+         [(11.478, 0.0), (11.528, 0.0), (11.578, 0.0), (11.628, 0.0), (11.678, 0.0), (11.728, 0.0)]),
+    case("speeds-and-curvatures", f"speeds = {[v for v, _ in A]}\ncurvatures = {[c for _, c in A]}", "corrected", A),
+    case("speeds-and-curvatures-json", json.dumps({"speeds": [v for v, _ in C], "curvatures": [c for _, c in C]}), "corrected", C),
+    case("v-and-k-lists", f"v: {[v for v, _ in E]} k: {[c for _, c in E]}", "corrected", E),
+]
+
+# readings that disagree: failed as ambiguous, naming the candidates
+AMBIGUOUS = [
+    case("recap-after-answer", RECAP_AFTER, "failed", failure="ambiguous"),
+    case("quoted-history-before-no-history", QUOTED_BEFORE, "failed", failure="ambiguous"),
+    case("quoted-history-unbracketed-no-history", QUOTED_UNBRACKETED, "failed", failure="ambiguous"),
+    case("waypoints-after-answer", bracket(A) + "\nWaypoints (x, y): " + bracket([(2.5, 0.0), (5.2, 0.01), (8.1, 0.05), (11.3, 0.1), (14.8, 0.2), (18.5, 0.3)]),
+         "failed", failure="ambiguous"),
+    case("alternative-after-answer", bracket(F) + "\nAlternatively, if the light turns green: " + bracket(A), "failed", failure="ambiguous"),
+    case("accelerations-after-answer", bracket(A) + "\nAccelerations: " + bracket([(1.0, 0.0)] * 6), "failed", failure="ambiguous"),
+    case("final-answer-then-recap", "Final answer: " + bracket(A) + "\nFor comparison: " + bracket(C), "failed", failure="ambiguous"),
+    case("range-in-pairs", "[(4.5-5.0, 0.0), (4.7-5.2, 0.0), (4.9-5.4, 0.0), (5.1-5.6, 0.0), (5.3-5.8, 0.0), (5.5-6.0, 0.0)]", "failed",
+         failure="ambiguous"),
+    case("range-curvature", bracket(A).replace("(5.5, 0.0)", "(5.5, 0.01-0.02)"), "failed", failure="ambiguous"),
+    case("arithmetic-minus", "[" + ", ".join(f"({v + 0.5}-0.5, {c})" for v, c in A) + "]", "failed", failure="ambiguous"),
+    case("arithmetic-llama-11b", "[(7.2-0.5, 0.002), (6.6-0.5, 0.002), (6.0-0.5, 0.002), (5.4-0.5, 0.002), (4.8-0.5, 0.002), (4.2-0.5, 0.002)]",
+         "failed", failure="ambiguous"),
+    case("bare-numbers", " ".join(f"{v} {c}" for v, c in A), "failed", failure="ambiguous"),
+    case("comma-numbers", ", ".join(f"{v}, {c}" for v, c in A), "failed", failure="ambiguous"),
+    case("two-unlabelled-lists", f"{[v for v, _ in A]} and {[c for _, c in A]}", "failed", failure="ambiguous"),
 ]
 
 TRUNCATED = [
@@ -215,4 +264,15 @@ IMPLAUSIBLE = [
     case("fused-reading-curvature", "[(3.764, 2.0), (4.014, 1.0), (4.264, 1.0), (4.514, 0.0), (4.764, 0.0), (5.014, 0.0)]", "failed", failure="implausible"),
 ]
 
-CASES: list[tuple[str, str, str, list | None, str]] = EXACT + STRUCTURE + FALLBACK + FAILED + TRUNCATED + IMPLAUSIBLE
+CASES: list[tuple[str, str, str, list | None, str]] = EXACT + STRUCTURE + FALLBACK + FAILED + SHAPES + AMBIGUOUS + TRUNCATED + IMPLAUSIBLE
+
+# the history the prompt printed, for the cases that quote it (parsed with ``history=``)
+HISTORIES: dict[str, list] = {
+    "quoted-history-before": H,
+    "quoted-history-claude": H,
+    "quoted-history-unbracketed": H,
+    "quoted-history-labelled": H,
+    "recap-history-after": K,
+    "history-only": H,
+    "waypoints-after-answer": K,  # the history does not explain the waypoints
+}

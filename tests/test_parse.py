@@ -7,17 +7,21 @@ import re
 
 import numpy as np
 import pytest
-from hypothesis import given, settings
+from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import lightemma
 from paper_reference import paper_reference
-from parse_corpus import CASES
+from parse_corpus import CASES, HISTORIES
+
+
+def _history(name):
+    return None if name not in HISTORIES else np.array([HISTORIES[name]], dtype=float)
 
 
 @pytest.mark.parametrize(("name", "answer", "status", "values", "failure"), CASES, ids=[c[0] for c in CASES])
 def test_corpus(name, answer, status, values, failure):
-    parsed = lightemma.parse_actions(answer)
+    parsed = lightemma.parse_actions(answer, history=_history(name))
     assert parsed.status[0] == status, parsed.reason[0]
     assert parsed.failure[0] == failure, parsed.reason[0]
     if values is None:
@@ -32,19 +36,35 @@ def test_corpus_is_large_and_covers_every_outcome():
     assert len(CASES) >= 120
     assert len({c[0] for c in CASES}) == len(CASES)
     assert {c[2] for c in CASES} == {"ok", "corrected", "failed"}
-    assert {c[4] for c in CASES} == {"", "format", "truncated", "implausible"}
+    assert {c[4] for c in CASES} == {"", "format", "truncated", "implausible", "ambiguous"}
+    assert set(HISTORIES) <= {c[0] for c in CASES}
 
 
 def test_corpus_reasons_say_what_happened():
     by_name = {c[0]: c for c in CASES}
 
     def reason(name):
-        return lightemma.parse_actions(by_name[name][1]).reason[0]
+        return lightemma.parse_actions(by_name[name][1], history=_history(name)).reason[0]
 
-    assert "took the last of 2 candidate lists" in reason("quoted-history-before")
-    assert "took the last of 3 candidate lists" in reason("self-correction-three")
+    assert "skipped 1 list(s) repeating the history given in the prompt (at position 14)" in reason("quoted-history-before")
+    assert "skipped 1 list(s) repeating the history" in reason("recap-history-after")
+    assert "the list equals the history given in the prompt (no other list)" in reason("history-only")
+    assert 'took the list after the cue "actually" at position' in reason("self-correction-three")
+    assert "the same list given 2 times" in reason("repeated-same-list")
+    assert reason("recap-after-answer") == ("ambiguous: 2 different lists of 6 actions (at positions 0 and 116), and no correction or "
+                                            "final-answer cue says which is the answer")
+    assert "ambiguous: 2 different lists" in reason("waypoints-after-answer")
+    assert reason("range-in-pairs") == "pair 1 (4.5-5.0, 0.0) is ambiguous: 4.5-5.0 is a range or a subtraction"
+    assert "pair 2 (5.5, 0.01-0.02) is ambiguous: 0.01-0.02" in reason("range-curvature")
+    assert "12 standalone numbers, but their pairing is unknown" in reason("bare-numbers")
+    assert "--0.02 has a doubled sign" in reason("doubled-minus")
+    assert "by their speed / curvature labels" in reason("speeds-then-curvatures-slow")
+    assert "as the columns of a table" in reason("table-columns")
+    assert "a flat list of 12 numbers read as v1, c1" in reason("flat-list-gpt-4o")
+    assert "pairs written as 'v c' items" in reason("space-separated-items-llama")
+    assert "speeds and curvatures read from their labelled lists" in reason("speeds-and-curvatures-json")
     assert "reasoning block removed" in reason("think-block")
-    assert "expression evaluated (pair 1, 2, 3, 4, 5, 6)" in reason("arithmetic-llama-11b")
+    assert "expression evaluated (pair 1, 2, 3, 4, 5, 6)" in reason("arithmetic-spaced")
     assert "expression evaluated (pair 1, 2, 3)" in reason("arithmetic-fraction")
     assert reason("fused-72b").startswith("pair 1 (3.7640.002) 3.7640.002 is not a number")
     assert "0001 has leading zeros" in reason("lost-decimal-points")
@@ -60,10 +80,11 @@ def test_corpus_reasons_say_what_happened():
 
 def test_batch_of_the_whole_corpus_matches_one_by_one():
     answers = [c[1] for c in CASES]
-    batch = lightemma.parse_actions(answers)
+    histories = np.array([HISTORIES.get(c[0], [(0.0, 0.0)] * 6) for c in CASES], dtype=float)
+    batch = lightemma.parse_actions(answers, history=histories)
     assert batch.actions.shape == (len(answers), 6, 2)
     for i, answer in enumerate(answers):
-        one = lightemma.parse_actions(answer)
+        one = lightemma.parse_actions(answer, history=histories[i:i + 1])
         assert one.status[0] == batch.status[i]
         assert one.reason[0] == batch.reason[i]
         np.testing.assert_array_equal(one.actions[0], batch.actions[i])
@@ -257,19 +278,20 @@ any_number = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False).map(lambd
 
 
 @st.composite
-def prose_with_pairs(draw):
-    """Prose holding other bracketed number pairs: single pairs, short and full lists, reasoning blocks."""
+def prose_with_pairs(draw, full_lists=False):
+    """Prose holding other bracketed number pairs: single pairs, short and long lists, reasoning blocks
+    (and, with ``full_lists``, other complete lists of six pairs)."""
     parts = []
     for _ in range(draw(st.integers(0, 8))):
         kind = draw(st.integers(0, 6))
         if kind == 0:
             parts.append(draw(any_number))
         elif kind == 1:
-            parts.append(f"({draw(any_number)}, {draw(any_number)})")
+            parts.append(f"({draw(any_number)}, {draw(any_number)}) and")  # six in a row would be a list
         elif kind == 2:
-            k = draw(st.integers(1, 8))
+            k = draw(st.sampled_from([1, 2, 3, 4, 5, 7, 8]))
             parts.append("[" + ", ".join(f"({draw(any_number)}, {draw(any_number)})" for _ in range(k)) + "]")
-        elif kind == 3:
+        elif kind == 3 and full_lists:
             parts.append(draw(a_list(st.lists(st.tuples(any_number.map(float), any_number.map(float)), min_size=6, max_size=6)))[0])
         elif kind == 4:
             parts.append("<think>" + draw(a_list())[0] + " (5, [1, 2" + "</think>")  # anything goes inside
@@ -280,11 +302,49 @@ def prose_with_pairs(draw):
 
 @settings(max_examples=600, deadline=None)
 @given(prose_with_pairs(), a_list(), st.lists(WORDS | any_number, max_size=6).map(" ".join))
-def test_the_last_list_after_prose_with_other_pairs_is_returned(before, answer, after):
+def test_the_one_list_among_prose_with_other_pairs_is_returned(before, answer, after):
     text, values = answer
     parsed = lightemma.parse_actions(before + "\n" + text + "\n" + after)
     assert parsed.status[0] in ("ok", "corrected"), parsed.reason[0]
     np.testing.assert_array_equal(parsed.actions[0], np.array(values))
+
+
+NO_CUE_WORDS = st.sampled_from(["the", "car", "Past actions:", "So:", "history", "For comparison,", "Alternatively,", "speed", "is",
+                                "3 seconds", "at", "about", "\n", "\n\n", "I think", "e.g.", "**", "Also", "then", "final speed",
+                                "the correct", "waypoints:", "m/s", ".", "we could wait for", "if it is actually red", "the updated plan"])
+CUES = st.sampled_from(["Wait,", "Correction:", "Final answer:", "**Final Answer:**", "Actually,", "Revised:", "Corrected:", "wait,",
+                        "the final answer is"])
+
+
+@settings(max_examples=600, deadline=None)
+@given(a_list(), a_list(), st.lists(NO_CUE_WORDS, max_size=5).map(" ".join), st.none() | CUES,
+       st.sampled_from(["none", "b", "other"]), prose_with_pairs(full_lists=True))
+def test_a_later_different_list_never_wins_without_a_cue(first, second, between, cue, history_is, after):
+    """Issue 19: for a valid answer A followed by a different list B, lenient never returns B unless a cue
+    introduces B, and never returns a list equal to the given history."""
+    (text_a, a), (text_b, b) = first, second
+    a, b = np.array(a, dtype=float), np.array(b, dtype=float)
+    assume(not np.array_equal(a, b))
+    history = {"none": None, "b": b, "other": np.full((6, 2), 0.123)}[history_is]
+    text = f"{text_a} {between} {cue or ''} {text_b}"
+    parsed = lightemma.parse_actions(text, history=None if history is None else history[None])
+    got = parsed.actions[0]
+    if history is not None:
+        assert not np.array_equal(got, history), (text, parsed.reason[0])
+    if cue is None:
+        assert not np.array_equal(got, b), (text, parsed.reason[0])
+        if history_is == "b":  # B is a quotation: A is the answer
+            np.testing.assert_array_equal(got, a)
+        else:
+            assert parsed.failure[0] == "ambiguous", (text, parsed.reason[0])
+    elif history_is != "b":  # the cue introduces B
+        np.testing.assert_array_equal(got, b)
+    # whatever follows, a text with A and B never gives B without a cue
+    tail = lightemma.parse_actions(f"{text} {after}", history=None if history is None else history[None])
+    if cue is None:
+        assert not np.array_equal(tail.actions[0], b), (text, after, tail.reason[0])
+    if history is not None:
+        assert not np.array_equal(tail.actions[0], history)
 
 
 @settings(max_examples=400, deadline=None)

@@ -7,7 +7,7 @@ __version__: str
 METHODS: list[str]
 CONVENTIONS: list[str]
 PARSE_MODES: list[str]  # strict, lenient, paper, json
-PARSE_FAILURES: list[str]  # failure codes 0..3: "", truncated, implausible, format
+PARSE_FAILURES: list[str]  # failure codes 0..4: "", truncated, implausible, format, ambiguous
 
 def parse_actions(
     texts: list[str],
@@ -15,9 +15,12 @@ def parse_actions(
     mode: str = "lenient",
     speed_range: tuple[float, float] | None = (-10.0, 50.0),
     max_abs_curvature: float | None = 1.0,
+    history: npt.NDArray[np.float64] | None = None,
 ) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8], npt.NDArray[np.uint8], list[str]]:
     """Parse answers: actions (N, n, 2) with NaN where failed, status codes (0 ok, 1 corrected, 2 failed),
-    failure codes (indices into PARSE_FAILURES), reasons. Non-str items and bad limits raise ValueError."""
+    failure codes (indices into PARSE_FAILURES), reasons. ``history``: None or a C-contiguous float64
+    (N, n, 2) array of the histories the prompts printed (a lenient list equal to its row is a quotation).
+    Non-str items, bad limits and a history of another shape raise ValueError."""
 
 def integrate(actions: npt.NDArray[np.float64], dt: float = 0.5, method: str = "euler") -> npt.NDArray[np.float64]:
     """Integrate C-contiguous (N, T, 2) actions into (N, T, 2) positions."""

@@ -14,7 +14,7 @@ import numpy as np
 from lightemma import _core
 
 STATUSES = ("ok", "corrected", "failed")
-FAILURES = tuple(_core.PARSE_FAILURES)  # "", "truncated", "implausible", "format"
+FAILURES = tuple(_core.PARSE_FAILURES)  # "", "truncated", "implausible", "format", "ambiguous"
 MODES = tuple(_core.PARSE_MODES)  # strict, lenient, paper, json
 DEFAULT_SPEED_RANGE = (-10.0, 50.0)
 DEFAULT_MAX_ABS_CURVATURE = 1.0
@@ -32,12 +32,14 @@ class ParsedActions:
             literal rule), ``"corrected"`` (found only by the lenient reading, or by
             the paper's digit-run rule) or ``"failed"``, one per answer.
         reason: one str per answer: ``""`` when plainly ok; otherwise what happened
-            (``"took the last of 2 candidate lists"``, ``"expression evaluated"``,
+            (``"skipped 1 list(s) repeating the history given in the prompt"``, ``"expression evaluated"``,
             ``"speed 5254 at step 1 outside [-10, 50] m/s"``, ``"truncated"``, …).
         failure: array of str, one per answer: ``""`` unless failed, else
             ``"truncated"`` (the answer ends inside the list), ``"implausible"``
-            (a value outside the plausibility limits) or ``"format"`` (everything
-            else, including empty answers and non-finite values).
+            (a value outside the plausibility limits), ``"ambiguous"`` (readings
+            disagree: several different lists and no cue saying which is final, a
+            range ``4.5-5.0`` inside a pair, numbers whose pairing is unknown) or
+            ``"format"`` (everything else, including empty answers and non-finite values).
     """
 
     actions: np.ndarray
@@ -98,6 +100,7 @@ def parse_actions(
     mode: str = "lenient",
     speed_range: tuple[float, float] | None = DEFAULT_SPEED_RANGE,
     max_abs_curvature: float | None = DEFAULT_MAX_ABS_CURVATURE,
+    history: np.ndarray | None = None,
 ) -> ParsedActions:
     """Parse model answers into ``n`` (speed m/s, curvature 1/m) actions each.
 
@@ -105,10 +108,16 @@ def parse_actions(
 
     - ``"strict"``: the whole answer is ``[(v1, c1), …, (vn, cn)]`` and nothing else.
     - ``"lenient"`` (the default): the strict format is ``ok``; otherwise reasoning
-      blocks (``<think>…</think>``) are dropped and the **last complete** list of
-      ``n`` bracketed pairs is taken (``corrected``); a text without bracketed pairs
-      may give exactly ``2n`` standalone numbers. Malformed pairs, cut-off lists and
-      ambiguous texts are ``failed`` with a reason — never re-paired or guessed.
+      blocks (``<think>…</think>``) are dropped and the list of ``n`` actions the
+      answer's structure gives is taken (``corrected``): bracketed pairs, ``[v c, …]``
+      items, a flat list of ``2n`` numbers, speeds and curvatures in labelled lists or
+      columns. Several *different* lists are ``ambiguous`` unless a correction or
+      final-answer cue (``Wait``, ``Correction:``, ``Final answer:``, …) comes after an
+      earlier one and before the last; a list equal to the frame's ``history`` is a
+      quotation, never the answer beside another list. A text without bracketed pairs gives exactly ``2n``
+      standalone numbers only where labels or the layout pair them. Malformed pairs,
+      ranges (``4.5-5.0``), doubled signs and cut-off lists are ``failed`` with a
+      reason — never re-paired or guessed.
     - ``"paper"``: the paper's own rules, to reproduce its FE / FE corr columns: ``ok``
       when the answer is a Python literal list of ``n`` tuples of 2 numbers; else
       ``corrected`` when at least ``2n`` numbers are found as maximal runs of digits,
@@ -125,6 +134,13 @@ def parse_actions(
         texts: one str, any iterable of str, or a 1-D NumPy array of str (dtype ``U``
             or ``object``).
         n: actions per answer (6 in the paper).
+        history: None, or the (speed, curvature) history each prompt printed, shape
+            (N, n, 2) (a frame's ``history_actions``), float64 (other dtypes are cast).
+            A lenient candidate list equal to its row — compared as the float64 values
+            the prompt's shortest round-trip decimals denote, so ``4.50`` is ``4.5`` —
+            is a quotation, never the answer, whenever another candidate exists (alone it
+            is the answer: a stopped car predicted to stay stopped). A row of NaN equals nothing (no history
+            for that answer; :func:`history_rows` builds such arrays). Other modes ignore it.
 
     Returns:
         :class:`ParsedActions` with ``actions`` (N, n, 2), ``status``, ``reason`` and
@@ -133,7 +149,8 @@ def parse_actions(
     Raises:
         ValueError: ``texts`` is not text (the message names the first bad item), ``n``
             is not a positive int, ``mode`` is unknown, or a limit is malformed (not
-            finite, ``lo >= hi``, curvature limit ``<= 0``).
+            finite, ``lo >= hi``, curvature limit ``<= 0``), or ``history`` has another
+            shape than (N, n, 2).
 
     >>> import lightemma
     >>> p = lightemma.parse_actions("Actions: [(5.0, 0.0), (5.2, 0.01), (5.4, 0.01), (5.5, 0.0), (5.5, 0.0), (5.6, 0.0)]")
@@ -147,8 +164,32 @@ def parse_actions(
     speed = _limit_pair(speed_range)
     curvature = _limit_value(max_abs_curvature)
     items = _as_list_of_str(texts)
-    actions, codes, failures, reasons = _core.parse_actions(items, n, mode, speed, curvature)
+    hist = None
+    if history is not None:
+        hist = np.ascontiguousarray(history, dtype=np.float64)
+        if hist.shape != (len(items), n, 2):
+            raise ValueError(f"history must have shape ({len(items)}, {n}, 2) like the texts, got {hist.shape}")
+    actions, codes, failures, reasons = _core.parse_actions(items, n, mode, speed, curvature, hist)
     return ParsedActions(actions=actions, status=_STATUS_NAMES[codes], reason=reasons, failure=_FAILURE_NAMES[failures])
+
+
+def history_rows(histories: Iterable[object], n: int = 6) -> np.ndarray:
+    """Histories for :func:`parse_actions`'s ``history``: a float64 (N, n, 2) array, one row per item.
+
+    An item that is not ``n`` finite (speed, curvature) pairs (None, a record without its
+    history, a wrong shape) becomes a row of NaN, which equals no list: that answer is
+    parsed as without a history.
+    """
+    rows = []
+    for item in histories:
+        try:
+            row = np.asarray(item, dtype=np.float64)
+        except (TypeError, ValueError):
+            row = None
+        if row is None or row.shape != (n, 2) or not np.isfinite(row).all():
+            row = np.full((n, 2), np.nan)
+        rows.append(row)
+    return np.stack(rows) if rows else np.zeros((0, n, 2))
 
 
 def plausibility(speed_range: object = DEFAULT_SPEED_RANGE, max_abs_curvature: object = DEFAULT_MAX_ABS_CURVATURE) -> dict:

@@ -49,7 +49,8 @@ class ModelResult:
     parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
     dataset_kind: str | None = None  # "nuscenes", "synthetic" or None (from the manifest)
     outcomes: dict[str, int] = field(default_factory=dict)  # of the accounted frames: scored, failed, implausible, api_errors
-    intervals: dict[str, dict[str, list[float] | None]] = field(default_factory=dict)  # convention -> ade_avg/fde -> [low, high]
+    # convention -> ade_avg/fde -> [low, high] (None: no interval; "unavailable" -> why, when values too large to resample)
+    intervals: dict[str, dict[str, Any]] = field(default_factory=dict)
     chain: str = "independent"  # request variant (docs/run.md): independent stages or one conversation
     answer_format: str = "text"  # stage-3 answers as text or structured JSON
     inputs: str = "full"  # input ablation (docs/run.md#input-ablations): full, no-image, blank-image, no-history
@@ -91,6 +92,7 @@ class ModelResult:
             "ade_avg_ci95": ci.get("ade_avg"),
             "fde_ci95": ci.get("fde"),
             **self.safety.get(convention, {}),
+            "ci95_unavailable": ci.get("unavailable"),
         }
 
     def efficiency_row(self) -> dict[str, Any]:

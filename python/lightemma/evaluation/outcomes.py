@@ -4,7 +4,8 @@ Only **scored** frames enter a mean, an interval, a figure or the frame picker;
 the others are counted and shown beside every table (docs/statistics.md).
 
 A run record says why a frame failed in its ``failure`` field: ``""`` (not
-failed), ``"format"``, ``"truncated"``, ``"implausible"`` or ``"api_error"``.
+failed), ``"format"``, ``"truncated"``, ``"ambiguous"`` (readings of the answer disagree:
+docs/parsing.md), ``"implausible"`` or ``"api_error"``.
 Runs written before that field existed lack it: a ``failed`` frame without it
 counts as ``"format"``.
 
@@ -28,8 +29,10 @@ from typing import Any
 
 import numpy as np
 
-# failure codes in RunData.failure; 0 = not failed
-FAILURES: tuple[str, ...] = ("", "format", "truncated", "implausible", "api_error")
+# failure codes in RunData.failure; 0 = not failed (new kinds go at the end: the codes stay stable)
+FAILURES: tuple[str, ...] = ("", "format", "truncated", "implausible", "api_error", "ambiguous")
+# the kinds counted as "failed" (the answer could not be read), apart from implausible and API errors
+UNREADABLE: tuple[str, ...] = ("format", "truncated", "ambiguous")
 FAILURE_CODES: dict[str, int] = {name: code for code, name in enumerate(FAILURES)}
 NOT_RECORDED = -1  # the record has no failure field (older runs)
 DT = 0.5  # seconds per step (docs/definitions.md#integration: actions at 0.5 s spacing)
@@ -89,8 +92,9 @@ def implausible_trajectory(trajectory: np.ndarray, limits: Plausibility) -> np.n
     """(N,) True where a finite (N, T, 2) trajectory goes further than the fastest allowed speed reaches."""
     steps = np.arange(1, trajectory.shape[1] + 1)
     reach = limits.reach_speed * DT * steps * (1.0 + 1e-9) + 1e-6
-    with np.errstate(invalid="ignore"):
-        return (np.linalg.norm(trajectory, axis=2) > reach).any(axis=1)
+    with np.errstate(invalid="ignore", over="ignore"):
+        # hypot: a huge finite position (1e200 m) has a finite distance, and no overflow warning
+        return (np.hypot(trajectory[..., 0], trajectory[..., 1]) > reach).any(axis=1)
 
 
 def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarray, actions_gate: np.ndarray, limits: Plausibility) -> tuple[np.ndarray, np.ndarray]:
@@ -113,10 +117,10 @@ def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarr
 
 
 def outcome_counts(failure: np.ndarray, valid: np.ndarray) -> dict[str, int]:
-    """Frames scored / failed (format or truncated) / implausible / lost to API errors."""
+    """Frames scored / failed (format, truncated or ambiguous) / implausible / lost to API errors."""
     return {
         "scored": int(valid.sum()),
-        "failed": int(np.isin(failure, (FAILURE_CODES["format"], FAILURE_CODES["truncated"])).sum()),
+        "failed": int(np.isin(failure, [FAILURE_CODES[k] for k in UNREADABLE]).sum()),
         "implausible": int((failure == FAILURE_CODES["implausible"]).sum()),
         "api_errors": int((failure == FAILURE_CODES["api_error"]).sum()),
     }

@@ -4,8 +4,10 @@ Every attempt of a run keeps its raw stage-3 answer, so a run can be scored
 again under ``lenient``, ``strict`` or ``paper`` parsing (with other
 plausibility limits) without asking the model again. Per frame:
 
-* every attempt's answer is parsed again, in order (attempts without an answer —
-  API errors — stay as they were);
+* every attempt's answer is parsed again, in order, with the frame's recorded
+  ``history_actions`` (a list in the answer equal to it is a quotation, never the
+  answer; a record without a history is parsed without one); attempts without an
+  answer — API errors — stay as they were;
 * the frame's actions are those of the first attempt whose answer passes: what a
   run under that definition would have stopped at. Its status is the frame's; when
   no answer passes the frame is ``failed`` (the run did not ask again, so this is
@@ -149,14 +151,17 @@ def _apply(record: dict[str, Any], attempts: list[dict[str, Any]], parsed: list[
 
 def rescored(records: Iterable[dict[str, Any]], definition: ParseDefinition, *, block: int = _BLOCK) -> Iterator[dict[str, Any]]:
     """Stream ``records`` re-parsed under ``definition`` (see the module docstring); one parser call per block."""
-    from lightemma import parse_actions
+    from lightemma.actions import history_rows, parse_actions
 
     options = definition.parser_options()
     pending: list[tuple[dict[str, Any], list[dict[str, Any]]]] = []
 
     def flush() -> Iterator[dict[str, Any]]:
         answers = [a["answer"] for _, attempts in pending for a in attempts if isinstance(a.get("answer"), str)]
-        parsed = parse_actions(answers, n=6, **options) if answers else None
+        # each answer with its frame's history, as the prompt printed it: a list quoting it is never the answer
+        histories = history_rows(record.get("history_actions") for record, attempts in pending
+                                 for a in attempts if isinstance(a.get("answer"), str))
+        parsed = parse_actions(answers, n=6, history=histories, **options) if answers else None
         k = 0
         for record, attempts in pending:
             results: list[tuple[str, str, str, Any] | None] = []

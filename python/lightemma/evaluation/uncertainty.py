@@ -40,24 +40,50 @@ def _interval(pair: np.ndarray) -> list[float] | None:
     return [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
 
 
+def too_large(values: np.ndarray, scenes: np.ndarray, what: str = "ADE avg") -> str | None:
+    """Why ``values`` (N,) or (N, M) cannot be resampled, or None when they can.
+
+    A resample sums up to one cluster sum per scene drawn, so every such sum must stay finite: with
+    huge finite errors (an answer of 1e300 m/s read under ``--keep-implausible``) it does not, and the
+    interval is unavailable rather than the whole evaluation stopped. The reason gives the largest
+    value in short scientific notation.
+    """
+    if values.size == 0:
+        return None
+    with np.errstate(over="ignore", invalid="ignore"):
+        worst = np.abs(values).sum(axis=0) * max(len(np.unique(scenes)), 1)
+    if np.isfinite(worst).all():
+        return None
+    largest = float(np.max(np.abs(values[:, 0] if values.ndim == 2 else values)))
+    return f"interval unavailable: values too large to resample ({what} up to {largest:.3g} m)"
+
+
 def model_intervals(entries: Sequence[tuple[str, RunData, np.ndarray]], conventions: Sequence[str], resampling: Resampling) -> list[dict[str, dict[str, list[float] | None]]]:
     """Per entry (label, run, scored rows): {convention: {"ade_avg": [low, high], "fde": [low, high]}}.
 
     One core call for every model and convention; a model's random numbers
     depend on its label only, so its FDE interval is the same in every
-    convention's table. None where there is no interval (fewer than 2 scenes).
+    convention's table. None where there is no interval (fewer than 2 scenes);
+    where values too large to resample leave none, ``"unavailable"`` says why
+    (:func:`too_large`) and the other rows are computed as usual.
     """
-    groups, keys = [], []
+    groups, keys, why = [], [], []
     for convention in conventions:
         for label, run, rows in entries:
-            groups.append((frame_values(run, rows, convention), run.scenes()[rows]))
+            values, scenes = frame_values(run, rows, convention), run.scenes()[rows]
+            reason = too_large(values, scenes)
+            groups.append((np.zeros_like(values) if reason else values, scenes))
             keys.append(label)
+            why.append(reason)
     ci = bootstrap_ci(groups, keys, resampling) if groups else np.zeros((0, 2, 2))
-    out: list[dict[str, dict[str, list[float] | None]]] = [{} for _ in entries]
+    out: list[dict[str, dict[str, Any]]] = [{} for _ in entries]
     for c, convention in enumerate(conventions):
         for i in range(len(entries)):
-            row = ci[c * len(entries) + i]
-            out[i][convention] = {key: _interval(row[j]) for j, key in enumerate(INTERVAL_KEYS)}
+            k = c * len(entries) + i
+            row = ci[k]
+            out[i][convention] = {key: None if why[k] else _interval(row[j]) for j, key in enumerate(INTERVAL_KEYS)}
+            if why[k]:
+                out[i][convention]["unavailable"] = why[k]
     return out
 
 
@@ -92,20 +118,29 @@ def pairwise_ade(runs: Sequence[RunData], labels: Sequence[str], convention: str
     (``p_holm`` ≤ 1 − confidence). Pairs without a common frame get None.
     """
     values, scene = _global_columns(runs, convention, only)
-    pairs, groups, keys = [], [], []
+    pairs, groups, keys, why = [], [], [], []
     for a in range(len(runs)):
         for b in range(a + 1, len(runs)):
             common = np.isfinite(values[a]) & np.isfinite(values[b])
             pairs.append((a, b, common))
             if common.any():
-                groups.append((values[a, common] - values[b, common], scene[common]))
+                with np.errstate(over="ignore", invalid="ignore"):
+                    diff = values[a, common] - values[b, common]
+                reason = too_large(diff, scene[common], "ADE avg difference")
+                groups.append((np.zeros_like(diff) if reason else diff, scene[common]))
                 keys.append(f"{labels[a]}|{labels[b]}|{convention}")
+                why.append(reason)
     ci = bootstrap_ci(groups, keys, resampling) if groups else np.zeros((0, 1, 2))
     p = sign_flip_p(groups, keys, resampling) if groups else np.zeros(0)
     rows, k = [], 0
     for a, b, common in pairs:
         row: dict[str, Any] = {"model_a": labels[a], "model_b": labels[b], "convention": convention, "frames": int(common.sum()), "scenes": int(len(np.unique(scene[common])))}
-        if common.any():
+        if common.any() and why[k]:
+            with np.errstate(over="ignore", invalid="ignore"):
+                mean = float(np.sum((values[a, common] - values[b, common]) / int(common.sum())))
+            row.update(ade_avg_diff=mean if np.isfinite(mean) else None, ci95=None, p_value=None, note=why[k])
+            k += 1
+        elif common.any():
             diff = groups[k][0]
             row.update(ade_avg_diff=float(diff.mean()), ci95=_interval(ci[k, 0]), p_value=None if np.isnan(p[k]) else float(p[k]))
             k += 1

@@ -183,12 +183,16 @@ class _Attempt:
                 "failure": failure, "error": self.error, **_totals(self.calls)}
 
 
-def _parse(answer: str, policy: ChainPolicy) -> tuple[str, str, str, np.ndarray]:
-    """Parse of one answer (lenient; json for structured answers): (status, reason, failure kind, actions (6, 2))."""
-    from lightemma import parse_actions
+def _parse(answer: str, policy: ChainPolicy, history: Any = None) -> tuple[str, str, str, np.ndarray]:
+    """Parse of one answer (lenient; json for structured answers): (status, reason, failure kind, actions (6, 2)).
+
+    ``history`` is the frame's (6, 2) history the prompt printed: a list in the answer equal to it is a
+    quotation, never the answer beside another list (see :func:`lightemma.parse_actions`).
+    """
+    from lightemma.actions import history_rows, parse_actions
 
     parsed = parse_actions([answer], n=6, mode=policy.parse_mode, speed_range=policy.speed_range,
-                           max_abs_curvature=policy.max_abs_curvature)
+                           max_abs_curvature=policy.max_abs_curvature, history=history_rows([history]))
     return (str(parsed.status[0]), str(parsed.reason[0]), str(parsed.failure[0]),
             np.asarray(parsed.actions[0], dtype=np.float64))
 
@@ -253,7 +257,7 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             else:
                 attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}", "api_error"))
             continue
-        status, reason, failure, parsed = _parse(answer, policy)
+        status, reason, failure, parsed = _parse(answer, policy, frame.history_actions)
         attempts.append(attempt.finish(answer, status, reason, failure))
         if status != "failed":
             actions = parsed

@@ -38,14 +38,20 @@ def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool 
     rows = evaluation.accuracy_rows(convention)
     scope = f"{evaluation.n_common} frames scored in every run" if evaluation.common else "each run's scored frames"
     title = f"Accuracy — {convention} convention ({scope})"
+    flags, notes = coverage_flags(evaluation), _notes(evaluation, intervals=True)
+    for row in rows:
+        if row.get("ci95_unavailable"):
+            # the row is computed; only its interval is missing, and the note says why
+            flags[row["model"]] = flags.get(row["model"], "") + " (no interval)"
+            notes.append(f"{row['model']}: {row['ci95_unavailable']}.")
     if with_paper and convention == PAPER_CONVENTION:
         rows = beside_paper(evaluation.models, rows, paper_accuracy_rows(), ACCURACY_DIFF_KEYS)
         # the paper has no safety columns: its table stays as it was, safety goes in a table of its own
-        return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=coverage_flags(evaluation), notes=_notes(evaluation, intervals=True))
+        return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
     if evaluation.safety is None:
-        return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=coverage_flags(evaluation), notes=_notes(evaluation, intervals=True))
+        return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
     return Table(title, (*ACCURACY_COLUMNS, *SAFETY_COLUMNS), _with_floor(evaluation, rows, convention), name=f"accuracy_{convention}",
-                 flags=coverage_flags(evaluation), notes=_notes(evaluation, intervals=True) + safety_notes(evaluation, convention))
+                 flags=flags, notes=notes + safety_notes(evaluation, convention))
 
 
 def _with_floor(evaluation: Evaluation, rows: list[dict], convention: str) -> list[dict]:

@@ -20,9 +20,13 @@ FORMATS = ("md", "csv", "latex", "json")
 
 
 def fixed(digits: int) -> Callable[[Any], str]:
+    """``digits`` decimals; a huge value (|x| ≥ 1e9) in short scientific notation (``8.33e+305``), never 309 digits."""
+
     def fmt(value: Any) -> str:
         if value is None or (isinstance(value, float) and not math.isfinite(value)):
             return "-"
+        if abs(value) >= 1e9:
+            return f"{value:.3g}"
         return f"{value:.{digits}f}"
 
     return fmt

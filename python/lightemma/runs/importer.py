@@ -246,7 +246,8 @@ class _Tally:
 
 def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: Warn) -> list[dict[str, Any]]:
     """Records of one scene file's frames: answers parsed in one batch, trajectories integrated in one."""
-    from lightemma import integrate, parse_actions
+    from lightemma import integrate
+    from lightemma.actions import history_rows, parse_actions
 
     frames = scene.frames
     received = [i for i, f in enumerate(frames) if not f.calls[-1].call_failed]
@@ -254,7 +255,8 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
     actions: list[Any] = [None] * len(frames)
     trajectories: list[Any] = [None] * len(frames)
     if received:
-        parsed = parse_actions([frames[i].answer for i in received], n=6, mode=IMPORT_PARSE["mode"])
+        parsed = parse_actions([frames[i].answer for i in received], n=6, mode=IMPORT_PARSE["mode"],
+                               history=history_rows(frames[i].history_actions for i in received))
         ok = parsed.status != "failed"
         paths = integrate(np.where(ok[:, None, None], parsed.actions, 0.0), method=IMPORT_INTEGRATOR)
         mismatched, worst = 0, 0.0
