@@ -22,7 +22,11 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
+import signal
+import sys
+import threading
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -44,7 +48,9 @@ from lightemma.runs.reference import (
     StageCall,
     find_model_folders,
     iter_scene_files,
+    read_regular_file,
 )
+from lightemma.runs.records import loads_bounded
 from lightemma.runs.store import FORMAT, FRAMES_FILE, MANIFEST_FILE, read_manifest, slugify, write_json_atomic
 
 IMPORT_PARSE = {"mode": "paper"}  # how an imported run is scored unless evaluate is told otherwise
@@ -87,8 +93,10 @@ def source_hash(files: Sequence[Path], root: Path) -> str:
     """``sha256:<hex>`` over the scene files' names (relative to ``root``) and bytes, in name order."""
     digest = hashlib.sha256(SOURCE_FORMAT.encode())
     for path in files:
-        with open(path, "rb") as fh:
-            content = hashlib.file_digest(fh, "sha256").hexdigest()
+        try:
+            content = hashlib.sha256(read_regular_file(path)).hexdigest()
+        except ReferenceFileError as exc:  # changed since it was listed: skipped (and named) when read
+            content = f"unreadable: {exc}"
         digest.update(f"\0{path.relative_to(root).as_posix()}\0{content}".encode())
     return "sha256:" + digest.hexdigest()
 
@@ -106,8 +114,8 @@ def _first_metadata_model(folder: ModelFolder) -> str | None:
     """``metadata.model`` of the first scene file that has one (read only when the folder name is not known)."""
     for path in folder.files[:5]:
         try:
-            doc = json.loads(path.read_bytes())
-        except (OSError, ValueError):
+            doc = loads_bounded(read_regular_file(path))
+        except (ReferenceFileError, ValueError):
             continue
         model = doc.get("metadata", {}).get("model") if isinstance(doc, dict) and isinstance(doc.get("metadata"), dict) else None
         if isinstance(model, str) and model:
@@ -368,10 +376,14 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
     prices = _prices(info)
     created = [d for d in (model_dir, *model_dir.parents) if not d.exists()]  # removed again if no run comes of it
     model_dir.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.", suffix=".partial", dir=model_dir))
+    remove_stale_partials(model_dir, warn)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.{os.getpid()}.", suffix=PARTIAL_SUFFIX, dir=model_dir))
     try:
         tally, scenes, seen = _Tally(), [], set()
         files_skipped: list[str] = []
+        for entry, why in folder.skipped:
+            warn(f"{entry}: {why}; file skipped")
+            files_skipped.append(entry.name)
         frames_skipped = 0
         stamp = None
         with open(tmp / FRAMES_FILE, "w", encoding="utf-8") as fh:
@@ -415,6 +427,42 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         raise
 
 
+PARTIAL_SUFFIX = ".partial"
+_PARTIAL = re.compile(r"^\.ref-[0-9a-f]{12}\.(\d+)\.[A-Za-z0-9_]+\.partial$")  # .<run id>.<pid of the importer>.<random>.partial
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_partials(model_dir: Path, warn: Warn = lambda _: None) -> list[Path]:
+    """Remove the hidden ``.ref-….partial`` folders that a killed import left in ``model_dir``.
+
+    A partial folder is named after the process building it; it is removed when
+    that process no longer exists (an import still running elsewhere keeps its own).
+    Returns the folders removed (each named through ``warn``).
+    """
+    removed = []
+    for entry in model_dir.iterdir():
+        match = _PARTIAL.match(entry.name)
+        if match is None or not entry.is_dir() or entry.is_symlink():
+            continue
+        pid = int(match.group(1))
+        if pid == os.getpid() or _alive(pid):
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+        if not entry.exists():
+            warn(f"{entry}: removed what an interrupted import (process {pid}) left half-written")
+            removed.append(entry)
+    return removed
+
+
 def _remove_empty(folders: list[Path]) -> None:
     """Remove the folders an import created (innermost first) where they are still empty."""
     for folder in folders:
@@ -428,6 +476,32 @@ def _import_quietly(folder: ModelFolder, output: str, dataset_kind: str) -> tupl
     """One folder in a worker process: its result and its warnings (printed by the parent, in order)."""
     warnings: list[str] = []
     return import_folder(folder, output, dataset_kind=dataset_kind, warn=warnings.append), warnings
+
+
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: the worker ends when the importing process does, however it ends (SIGKILL included).
+
+    On Linux the kernel sends SIGKILL to the worker when its parent dies
+    (``PR_SET_PDEATHSIG``); elsewhere, and as a second guard, a daemon thread
+    ends the worker once its parent process is gone (its parent pid changes).
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent died before the prctl took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            threading.Event().wait(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="lightemma-import-parent-watch").start()
 
 
 def default_jobs(folders: int) -> int:
@@ -468,7 +542,8 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
 
         results = []
         context = multiprocessing.get_context("spawn")  # no fork of a process with threads (the progress bar's)
-        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context) as pool:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context, initializer=_die_with_parent,
+                                 initargs=(os.getpid(),)) as pool:
             futures = [pool.submit(_import_quietly, f, os.fspath(output), dataset_kind) for f in folders]
             for folder, future in zip(folders, futures):
                 result, warnings = future.result()
