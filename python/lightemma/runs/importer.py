@@ -386,6 +386,9 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
             files_skipped.append(entry.name)
         frames_skipped = 0
         stamp = None
+        from lightemma.evaluation.loading import RecordColumns, source_key, write_sidecar
+
+        columns = RecordColumns()  # the evaluation sidecar, from the records in hand (no second read)
         with open(tmp / FRAMES_FILE, "w", encoding="utf-8") as fh:
             for path, scene in iter_scene_files(folder):
                 on_file()
@@ -405,6 +408,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                         continue
                     seen.add(record["frame_id"])
                     tally.add(record)
+                    columns.add(record)
                     lines.append(json.dumps(record, ensure_ascii=False, allow_nan=False))
                 if lines:
                     scenes.append(scene.scene_name)
@@ -418,6 +422,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
                              frames_skipped, dataset_kind, prices)
         write_json_atomic(tmp / MANIFEST_FILE, manifest)
+        write_sidecar(tmp, columns.finish(), source_key(tmp))
         os.rename(tmp, final)
         result.summary = manifest["summary"]
         return result
