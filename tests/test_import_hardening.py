@@ -225,3 +225,23 @@ def test_a_killed_import_really_leaves_only_what_the_next_one_removes(tmp_path):
     assert done.returncode == 0, done.stderr
     assert [p.name for p in runs.iterdir() if p.name.startswith(".")] == []
     assert len([p for p in runs.iterdir()]) == 1
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
+def test_a_parallel_import_leaves_no_child_process_behind(tmp_path):
+    for k in range(2):
+        _scene(tmp_path / "res" / f"model-{k}", "scene-0001", k)
+    code = textwrap.dedent(f"""
+        import glob, os
+        from lightemma.runs.importer import import_reference
+        if __name__ == "__main__":
+            results = import_reference([{str(tmp_path / "res")!r}], {str(tmp_path / "runs")!r}, jobs=2)
+            assert [r.outcome for r in results] == ["imported", "imported"]
+            kids = [p for f in glob.glob(f"/proc/{{os.getpid()}}/task/*/children") for p in open(f).read().split()]
+            print("children:", kids)
+    """)
+    script = tmp_path / "parent.py"
+    script.write_text(code)
+    done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=PYTHON_ENV, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert "children: []" in done.stdout  # workers joined, the resource tracker stopped and reaped

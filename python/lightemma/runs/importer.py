@@ -509,6 +509,17 @@ def _die_with_parent(parent: int) -> None:
     threading.Thread(target=watch, daemon=True, name="lightemma-import-parent-watch").start()
 
 
+def _stop_resource_tracker() -> None:
+    """Stop and reap the resource-tracker process the spawned pool started, which would otherwise outlive
+    the command for a moment (a leftover child); a later pool starts a new one."""
+    try:
+        from multiprocessing import resource_tracker
+
+        resource_tracker._resource_tracker._stop()  # noqa: SLF001 - the stdlib's own way to end it
+    except (AttributeError, OSError, ChildProcessError):
+        pass
+
+
 def default_jobs(folders: int) -> int:
     """Worker processes for ``folders`` model folders: one per folder, at most the CPUs and at most 4 (memory)."""
     return max(1, min(folders, os.cpu_count() or 1, 4))
@@ -556,6 +567,7 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
                     say(line)
                 bar.update(len(folder.files))
                 results.append(result)
+        _stop_resource_tracker()
         return results
     finally:
         bar.close()

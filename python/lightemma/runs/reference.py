@@ -69,7 +69,9 @@ def read_regular_file(path: Path, limit: int = MAX_SCENE_FILE_BYTES) -> bytes:
         if info.st_size > limit:
             raise ReferenceFileError(f"{info.st_size} bytes, above the limit of {limit} bytes for a scene file")
         with os.fdopen(fd, "rb", closefd=False) as fh:
-            data = fh.read(limit + 1)
+            data = fh.read(info.st_size + 1)  # sized by fstat: no buffer of the whole limit
+            if len(data) > info.st_size:  # grown since: read on, up to the limit
+                data += fh.read(limit + 1 - len(data))
         if len(data) > limit:
             raise ReferenceFileError(f"grew above the limit of {limit} bytes for a scene file while being read")
         return data
