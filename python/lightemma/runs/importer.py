@@ -409,7 +409,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                     seen.add(record["frame_id"])
                     tally.add(record)
                     columns.add(record)
-                    lines.append(json.dumps(record, ensure_ascii=False, allow_nan=False))
+                    lines.append(json.dumps(record, ensure_ascii=False, allow_nan=False, check_circular=False))  # a fresh tree
                 if lines:
                     scenes.append(scene.scene_name)
                     fh.write("\n".join(lines) + "\n")
