@@ -98,6 +98,17 @@ def test_a_changed_frames_jsonl_makes_the_sidecar_stale_and_it_is_rebuilt(tmp_pa
     assert load_run(run_dir).seconds[-1] == 7.5
 
 
+def test_a_killed_writers_temporary_is_removed_at_the_next_write(tmp_path):
+    run_dir = write_synthetic_run(tmp_path, "m/a", 20, seed=1)
+    old = run_dir / f".{SIDECAR_FILE}.abc123.tmp"
+    fresh = run_dir / f".{SIDECAR_FILE}.def456.tmp"  # maybe another process writing right now: kept
+    old.write_bytes(b"half")
+    fresh.write_bytes(b"half")
+    os.utime(old, (1_000_000_000, 1_000_000_000))
+    load_run(run_dir)
+    assert not old.exists() and fresh.exists() and (run_dir / SIDECAR_FILE).is_file()
+
+
 def test_a_damaged_or_foreign_sidecar_is_never_trusted(tmp_path):
     run_dir = write_synthetic_run(tmp_path, "m/a", 40, seed=1)
     truth = load_run(run_dir, sidecar=False)

@@ -15,6 +15,7 @@ import itertools
 import math
 import os
 import tempfile
+import time
 import zipfile
 from collections.abc import Iterable, Iterator, Mapping
 from contextlib import contextmanager, suppress
@@ -276,6 +277,7 @@ def write_sidecar(run_dir: str | os.PathLike[str], raw: RawColumns, key: np.ndar
     if key is None or ids is None or scenes is None:
         return False
     run_dir = Path(run_dir)
+    _remove_stale_temporaries(run_dir)
     arrays = {f"col_{name}": value for name, value in raw.columns.items()}
     counts = np.array([len(raw.frame_ids), len(raw.scene_names), raw.corrupt_lines, int(raw.truncated_tail)], dtype=np.int64)
     fd, tmp = tempfile.mkstemp(prefix=f".{SIDECAR_FILE}.", suffix=".tmp", dir=run_dir) if run_dir.is_dir() else (None, None)
@@ -290,6 +292,18 @@ def write_sidecar(run_dir: str | os.PathLike[str], raw: RawColumns, key: np.ndar
         with suppress(OSError):
             os.unlink(tmp)
         return False
+
+
+_STALE_TEMPORARY_SECONDS = 600.0
+
+
+def _remove_stale_temporaries(run_dir: Path) -> None:
+    """Remove sidecar temporaries that a killed writer left (older than 10 minutes: not another writer's, still in use)."""
+    now = time.time()
+    for leftover in run_dir.glob(f".{SIDECAR_FILE}.*.tmp"):
+        with suppress(OSError):
+            if now - leftover.lstat().st_mtime > _STALE_TEMPORARY_SECONDS:
+                leftover.unlink()
 
 
 def read_sidecar(run_dir: str | os.PathLike[str], key: np.ndarray | None) -> RawColumns | None:
