@@ -43,6 +43,19 @@ def numpy_evaluate(pred: np.ndarray, gt: np.ndarray) -> dict:
     }
 
 
+def numpy_evaluate_all(pred: np.ndarray, gt: np.ndarray) -> dict:
+    """All three conventions from one NumPy error matrix (docs/definitions.md#metrics)."""
+    e = np.hypot(*(pred - gt).transpose(2, 0, 1))
+    miss = (e.max(1) > 2.0).mean()
+    stp3 = [e[:, : 2 * s].mean(1).mean() for s in (1, 2, 3)]
+    uniad = [e[:, 2 * s - 1].mean() for s in (1, 2, 3)]
+    out = {"lightemma": numpy_evaluate(pred, gt)}
+    for name, cols in (("stp3", stp3), ("uniad", uniad)):
+        out[name] = {"ade_1s": cols[0], "ade_2s": cols[1], "ade_3s": cols[2], "ade_avg": sum(cols) / 3,
+                     "fde": e[:, 5].mean(), "miss_rate": miss}
+    return out
+
+
 def loop_integrate_evaluate(actions: list, gts: list) -> float:
     """One frame at a time in plain Python, as the paper's scripts do."""
     total = 0.0
@@ -141,6 +154,31 @@ def main() -> None:
             assert abs(loop_integrate_evaluate(frames, gts) - ours) < 1e-9
             t_loop = best_of(lambda: loop_integrate_evaluate(frames, gts), 1)
         rows.append(("integrate + evaluate", n, t_rust, t_numpy, t_loop))
+
+        # every convention: one evaluate_all call into a reused trajectory buffer vs three evaluate calls
+        from lightemma.metrics import evaluate_all
+
+        buffer = np.empty_like(actions)
+
+        def rust_all():
+            evaluate_all(lightemma.integrate(actions, out=buffer), gt)
+
+        def rust_three():
+            traj = lightemma.integrate(actions)
+            for convention in lightemma.CONVENTIONS:
+                lightemma.evaluate(traj, gt, convention=convention)
+
+        def numpy_all():
+            numpy_evaluate_all(numpy_integrate(actions), gt)
+
+        ours_all = evaluate_all(lightemma.integrate(actions), gt)
+        theirs_all = numpy_evaluate_all(numpy_integrate(actions), gt)
+        for convention, metrics in ours_all.items():
+            assert abs(metrics.ade_avg - theirs_all[convention]["ade_avg"]) < 1e-9, convention
+            assert metrics == lightemma.evaluate(lightemma.integrate(actions), gt, convention=convention)
+        t_numpy_all = best_of(numpy_all, args.repeat)
+        rows.append(("integrate + evaluate_all (3 conventions, out=)", n, best_of(rust_all, args.repeat), t_numpy_all, None))
+        rows.append(("integrate + 3 × evaluate (before)", n, best_of(rust_three, args.repeat), t_numpy_all, None))
 
         texts = answers(n)
         ours_parse = lightemma.parse_actions(texts)

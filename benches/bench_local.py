@@ -7,8 +7,16 @@ Runs ``lightemma.pipeline.run`` over the same frames with
 * ``vllm`` at the largest batch size, where vLLM is installed and a GPU is present,
 
 and reports frames/s (wall time of the frames, model loading excluded), mean seconds
-per frame, tokens per frame, and whether each configuration's answers equal batch
+per frame, tokens per frame, **calls per frame** and the share of frames that went
+through all three stages, and whether each configuration's answers equal batch
 size 1's under greedy decoding. The device is named in the output.
+
+A frame is three-stage work only when every stage's answer ends: a stage cut off at
+``--max-tokens`` stops its frame (docs/run.md). The tiny random-weight model never
+ends an answer by itself, so without ``--model`` it is first taught a scripted end
+(tests/local_models.py ``teach_to_answer``: 300 Adam steps on the first frame's three
+prompts, to answer each with a strict action list and its end-of-turn token); the table
+says so, and a row whose frames did not all make 3 calls is flagged as not measuring the chain.
 
 On a GPU, pass a real checkpoint (``--model Qwen/Qwen2.5-VL-7B-Instruct``) and
 frames (``--dataroot``/``--version``/``--split``, default: a synthetic set at
@@ -68,11 +76,26 @@ def synthetic_frames(root: Path, n_frames: int, image_size: tuple[int, int]) -> 
     return load_frames(root, "v1.0-mini", split="all").head(n_frames)
 
 
-def tiny_checkpoint(root: Path) -> str:
-    sys.path.insert(0, str(HERE.parent / "tests"))
-    from local_models import build_tiny_model
+SCRIPTED_ANSWER = "[(5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)]"
+TEACHING_STEPS = 300  # Adam steps: enough for the tiny model to say the whole list and end (50 suffice for a short phrase)
 
-    return str(build_tiny_model("qwen2_vl", root / "tiny-qwen2-vl"))
+
+def tiny_checkpoint(root: Path, frames: Any = None) -> str:
+    """A tiny random-weight Qwen2-VL; with ``frames``, taught to end every stage's answer (:data:`SCRIPTED_ANSWER`)."""
+    sys.path.insert(0, str(HERE.parent / "tests"))
+    from local_models import build_tiny_model, teach_to_answer
+
+    path = build_tiny_model("qwen2_vl", root / "tiny-qwen2-vl")
+    if frames is not None:
+        from lightemma.frames import history_placeholders
+        from lightemma.prompts import load_prompt_set
+
+        prompts = load_prompt_set()
+        history = history_placeholders(frames[0].history_actions)
+        texts = [prompts.render("scene"), prompts.render("intent", scene=SCRIPTED_ANSWER, **history),
+                 prompts.render("actions", scene=SCRIPTED_ANSWER, intent=SCRIPTED_ANSWER, **history)]
+        teach_to_answer(path, SCRIPTED_ANSWER, prompts=texts, image=frames[0].image_path, steps=TEACHING_STEPS)
+    return str(path)
 
 
 def add_model_and_frames_arguments(ap: argparse.ArgumentParser, *, frames: int) -> None:
@@ -88,21 +111,26 @@ def add_model_and_frames_arguments(ap: argparse.ArgumentParser, *, frames: int) 
     ap.add_argument("--json", action="store_true", help="print the rows as JSON too")
 
 
-def model_and_frames(args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, measures: str) -> tuple[str, Any, str]:
+def model_and_frames(args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, measures: str,
+                     scripted_end: bool = False) -> tuple[str, Any, str]:
     """The checkpoint (``--model``; else a tiny random-weight Qwen2-VL on CPU, Qwen2.5-VL-7B on GPU), the frames
-    (``--dataroot``; else synthetic ones) and a note for the table when the model is the tiny one."""
-    model, note = args.model, ""
-    if model is None and not on_gpu:
-        model = tiny_checkpoint(tmp_path)
-        note = f" — a tiny random-weight Qwen2-VL (~85k parameters) on CPU: measures {measures}, not a real model"
-    elif model is None:
-        model = "Qwen/Qwen2.5-VL-7B-Instruct"
+    (``--dataroot``; else synthetic ones) and a note for the table when the model is the tiny one.
+
+    ``scripted_end`` teaches the tiny model to end its answers, so that every frame runs all three stages."""
     if args.dataroot:
         from lightemma import load_frames
 
         frames = load_frames(args.dataroot, args.version, split=args.split).head(args.frames)
     else:
         frames = synthetic_frames(tmp_path / "synth", args.frames, (1600, 900) if on_gpu else (64, 48))
+    model, note = args.model, ""
+    if model is None and not on_gpu:
+        model = tiny_checkpoint(tmp_path, frames if scripted_end else None)
+        note = f" — a tiny random-weight Qwen2-VL (~85k parameters) on CPU: measures {measures}, not a real model"
+        if scripted_end:
+            note += "; taught a scripted end (every stage answers a strict action list, then its end token)"
+    elif model is None:
+        model = "Qwen/Qwen2.5-VL-7B-Instruct"
     return model, frames, note
 
 
@@ -116,7 +144,10 @@ def run_config(model: str, frames: Any, output: Path, *, backend: str, batch_siz
                  max_attempts=max_attempts, progress=False, backend_options={"batch_size": batch_size, **options})
     s = result.summary
     records = read_run(result.run_dir).records
+    calls = [sum(len(a.get("calls") or []) for a in r.get("attempts") or []) for r in records.values()]
+    three_stage = sum(1 for r in records.values() for a in (r.get("attempts") or [])[:1] if len(a.get("calls") or []) == 3)
     return {
+        "calls_per_frame": sum(calls) / len(calls) if calls else 0.0, "three_stage_frames": three_stage,
         "backend": backend, "batch_size": batch_size, "frames": s["frames_run"], "wall_s": round(s["wall_seconds"], 3),
         "frames_per_s": s["frames_per_second"], "s_per_frame": s["mean_seconds_per_frame"],
         "in_tokens": s["mean_input_tokens"], "out_tokens": s["mean_output_tokens"],
@@ -127,12 +158,18 @@ def run_config(model: str, frames: Any, output: Path, *, backend: str, batch_siz
 def table(rows: list[dict[str, Any]], device: str, model: str, note: str) -> str:
     base = rows[0]["frames_per_s"]
     lines = [f"device: {device}", f"model: {model}{note}", "",
-             "| backend | batch size | frames | frames/s | speed-up | s/frame (chain) | in tok/frame | out tok/frame | answers = batch 1 |",
-             "|---|---|---|---|---|---|---|---|---|"]
+             "| backend | batch size | frames | frames/s | speed-up | s/frame (chain) | calls/frame | 3-stage frames "
+             "| in tok/frame | out tok/frame | answers = batch 1 |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         same = "yes" if r["answers"] == rows[0]["answers"] else "no"
         lines.append(f"| {r['backend']} | {r['batch_size']} | {r['frames']} | {r['frames_per_s']:.3f} | "
-                     f"{r['frames_per_s'] / base:.1f}× | {r['s_per_frame']:.2f} | {r['in_tokens']:.0f} | {r['out_tokens']:.0f} | {same} |")
+                     f"{r['frames_per_s'] / base:.1f}× | {r['s_per_frame']:.2f} | {r['calls_per_frame']:.2f} | "
+                     f"{r['three_stage_frames']}/{r['frames']} | {r['in_tokens']:.0f} | {r['out_tokens']:.0f} | {same} |")
+    partial = [r for r in rows if r["three_stage_frames"] < r["frames"]]
+    if partial:
+        lines.append(f"\nWARNING: {len(partial)} row(s) did not run every frame through all three stages (a stage was cut off "
+                     "at --max-tokens): their frames/s are not three-stage frames")
     return "\n".join(lines)
 
 
@@ -154,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
         device += f", {threads} torch thread(s)"
     with tempfile.TemporaryDirectory(prefix="lightemma-bench-local-") as tmp:
         tmp_path = Path(tmp)
-        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="batching")
+        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="batching", scripted_end=True)
         common = dict(max_tokens=args.max_tokens, max_attempts=args.max_attempts)
         hf_options = {"dtype": args.dtype}
         rows = [run_config(model, frames, tmp_path / "out", backend="hf", batch_size=1, options=hf_options, **common)]

@@ -105,7 +105,7 @@ def main(argv: list[str] | None = None) -> int:
     address = ray.get_runtime_context().gcs_address
     with tempfile.TemporaryDirectory(prefix="lightemma-bench-ray-") as tmp:
         tmp_path = Path(tmp)
-        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="the replica machinery")
+        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="the replica machinery", scripted_end=True)
         common = dict(backend=args.backend, address=address, batch_size=args.batch_size, max_tokens=args.max_tokens,
                       max_attempts=args.max_attempts, options={} if args.backend == "vllm" else {"dtype": args.dtype})
         rows = [] if args.no_in_process else [run_row(model, frames, tmp_path / "out", replicas=None, **common)]

@@ -95,20 +95,25 @@ fn mean(values: &[f64]) -> f64 {
 /// Values per frame, in this order: ADE 1s, ADE 2s, ADE 3s, ADE avg, FDE.
 pub const FRAME_VALUES: usize = 5;
 
-/// The per-frame values of one frame (`2 × HORIZON` numbers each) and its largest error.
+/// The six errors of one frame (`2 × HORIZON` numbers each) and the largest.
 #[inline(always)]
-fn frame_values(
-    p: &[f64],
-    g: &[f64],
-    windows: &[(usize, usize); 3],
-    convention: Convention,
-) -> ([f64; FRAME_VALUES], f64) {
+fn frame_errors(p: &[f64], g: &[f64]) -> ([f64; HORIZON], f64) {
     let mut e = [0.0_f64; HORIZON];
     let mut worst = 0.0_f64;
     for k in 0..HORIZON {
         e[k] = distance(p[2 * k] - g[2 * k], p[2 * k + 1] - g[2 * k + 1]);
         worst = worst.max(e[k]);
     }
+    (e, worst)
+}
+
+/// A frame's values under `convention` from its six errors.
+#[inline(always)]
+fn values_of(
+    e: &[f64; HORIZON],
+    windows: &[(usize, usize); 3],
+    convention: Convention,
+) -> [f64; FRAME_VALUES] {
     let mut out = [0.0_f64; FRAME_VALUES];
     for (value, &(a, b)) in out.iter_mut().zip(windows.iter()) {
         *value = mean(&e[a..=b]);
@@ -118,7 +123,19 @@ fn frame_values(
         Convention::Stp3 | Convention::Uniad => mean(&out[..3]),
     };
     out[4] = e[HORIZON - 1];
-    (out, worst)
+    out
+}
+
+/// The per-frame values of one frame (`2 × HORIZON` numbers each) and its largest error.
+#[inline(always)]
+fn frame_values(
+    p: &[f64],
+    g: &[f64],
+    windows: &[(usize, usize); 3],
+    convention: Convention,
+) -> ([f64; FRAME_VALUES], f64) {
+    let (e, worst) = frame_errors(p, g);
+    (values_of(&e, windows, convention), worst)
 }
 
 /// Partial sums over a block of frames: ADE 1s/2s/3s, ADE avg and FDE sums, and misses.
@@ -409,6 +426,114 @@ pub fn evaluate_masked(
     })
 }
 
+/// The three conventions in [`Convention::NAMES`] order, as [`evaluate_all`] returns them.
+pub const ALL: [Convention; 3] = [Convention::Lightemma, Convention::Stp3, Convention::Uniad];
+
+/// Partial sums of every convention over a block: one error vector per frame, three sets of sums.
+#[derive(Default, Clone, Copy)]
+struct PartialAll {
+    sums: [[f64; FRAME_VALUES]; 3],
+    misses: usize,
+}
+
+fn block_sums_all(
+    pred: &[f64],
+    gt: &[f64],
+    mask: Option<&[bool]>,
+    windows: &[[(usize, usize); 3]; 3],
+    miss_threshold: f64,
+) -> PartialAll {
+    let mut acc = PartialAll::default();
+    for (i, (p, g)) in pred
+        .chunks_exact(2 * HORIZON)
+        .zip(gt.chunks_exact(2 * HORIZON))
+        .enumerate()
+    {
+        if mask.is_some_and(|m| !m[i]) {
+            continue;
+        }
+        let (e, worst) = frame_errors(p, g);
+        for ((sums, w), convention) in acc.sums.iter_mut().zip(windows).zip(ALL) {
+            for (sum, v) in sums.iter_mut().zip(values_of(&e, w, convention)) {
+                *sum += v;
+            }
+        }
+        if worst > miss_threshold {
+            acc.misses += 1;
+        }
+    }
+    acc
+}
+
+/// [`evaluate_masked`] under all three conventions at once (in [`ALL`] order), from one
+/// error vector per frame: the same numbers, bit for bit, as three separate calls.
+pub fn evaluate_all(
+    pred: &[f64],
+    gt: &[f64],
+    mask: Option<&[bool]>,
+    steps: usize,
+    miss_threshold: f64,
+) -> CoreResult<[Summary; 3]> {
+    if !(miss_threshold.is_finite() && miss_threshold >= 0.0) {
+        return Err(CoreError::Argument(format!(
+            "miss_threshold must be a non-negative number of metres, got {miss_threshold}"
+        )));
+    }
+    let n = check_batch(pred, gt, steps, mask)?;
+    if n == 0 {
+        return Err(CoreError::Shape(
+            "cannot evaluate an empty batch (0 frames)".to_owned(),
+        ));
+    }
+    let kept = mask.map_or(n, |m| m.iter().filter(|&&k| k).count());
+    if kept == 0 {
+        return Err(CoreError::Shape(format!(
+            "the mask keeps none of the {n} frames; nothing to evaluate"
+        )));
+    }
+    let windows = ALL.map(|c| [1, 2, 3].map(|s| c.window(s)));
+    let block = FRAMES_PER_BLOCK * 2 * HORIZON;
+    let block_mask = |b: usize, p: &[f64]| {
+        mask.map(|m| &m[b * FRAMES_PER_BLOCK..b * FRAMES_PER_BLOCK + p.len() / (2 * HORIZON)])
+    };
+    let sums_of = |(b, (p, g)): (usize, (&[f64], &[f64]))| {
+        block_sums_all(p, g, block_mask(b, p), &windows, miss_threshold)
+    };
+    let partials: Vec<PartialAll> = if n >= PARALLEL_MIN_FRAMES {
+        pred.par_chunks(block)
+            .zip(gt.par_chunks(block))
+            .enumerate()
+            .map(sums_of)
+            .collect()
+    } else {
+        pred.chunks(block)
+            .zip(gt.chunks(block))
+            .enumerate()
+            .map(sums_of)
+            .collect()
+    };
+    let mut sums = [[0.0_f64; FRAME_VALUES]; 3];
+    let mut misses = 0_usize;
+    for partial in &partials {
+        for (total, part) in sums.iter_mut().zip(partial.sums) {
+            for (t, v) in total.iter_mut().zip(part) {
+                *t += v;
+            }
+        }
+        misses += partial.misses;
+    }
+    let nf = kept as f64;
+    Ok(sums.map(|s| Summary {
+        ade_1s: s[0] / nf,
+        ade_2s: s[1] / nf,
+        ade_3s: s[2] / nf,
+        ade_avg: s[3] / nf,
+        fde: s[4] / nf,
+        miss_rate: misses as f64 / nf,
+        n_frames: kept,
+    }))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -560,6 +685,28 @@ mod tests {
         assert_eq!(masked.n_frames, kept.len());
         assert!((masked.ade_avg - alone.ade_avg).abs() < 1e-12);
         assert!((masked.miss_rate - alone.miss_rate).abs() < 1e-12);
+    }
+
+    #[test]
+    fn evaluate_all_equals_three_calls_bit_for_bit() {
+        let n = PARALLEL_MIN_FRAMES + FRAMES_PER_BLOCK + 11;
+        let errors: Vec<[f64; 6]> = (0..n)
+            .map(|i| [0.1, 0.7, 1.3, 2.9, 0.3, 4.1].map(|x| x * ((i % 17) as f64 + 0.37)))
+            .collect();
+        let (mut p, g) = batch(&errors);
+        for (i, v) in p.iter_mut().enumerate() {
+            *v += (i % 7) as f64 * 0.013; // x offsets too: no error along one axis only
+        }
+        let mask: Vec<bool> = (0..n).map(|i| i % 5 != 2).collect();
+        for m in [None, Some(mask.as_slice())] {
+            let all = evaluate_all(&p, &g, m, 6, 2.0).unwrap();
+            for (got, convention) in all.iter().zip(ALL) {
+                let want = evaluate_masked(&p, &g, m, 6, convention, 2.0).unwrap();
+                assert_eq!(*got, want, "{convention:?}");
+            }
+        }
+        assert!(evaluate_all(&[], &[], None, 6, 2.0).is_err());
+        assert!(evaluate_all(&p, &g, None, 6, -1.0).is_err());
     }
 
     #[test]

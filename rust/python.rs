@@ -4,8 +4,8 @@
 
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{
-    IntoPyArray, PyArray1, PyArray2, PyArray3, PyReadonlyArray1, PyReadonlyArrayDyn,
-    PyUntypedArrayMethods,
+    IntoPyArray, PyArray1, PyArray2, PyArray3, PyArrayMethods, PyReadonlyArray1,
+    PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
@@ -148,14 +148,18 @@ fn parse_actions<'py>(
     ))
 }
 
-/// integrate(actions (N, T, 2), dt, method) -> positions (N, T, 2)
+/// integrate(actions (N, T, 2), dt, method, out=None) -> positions (N, T, 2)
+///
+/// `out`: a C-contiguous float64 array of the same shape to write the positions into (returned);
+/// at large N this spares allocating, and zero-filling, a new array per call.
 #[pyfunction]
-#[pyo3(signature = (actions, dt = 0.5, method = "euler"))]
+#[pyo3(signature = (actions, dt = 0.5, method = "euler", out = None))]
 fn integrate<'py>(
     py: Python<'py>,
     actions: PyReadonlyArrayDyn<'py, f64>,
     dt: f64,
     method: &str,
+    out: Option<Bound<'py, PyArray3<f64>>>,
 ) -> PyResult<Bound<'py, PyArray3<f64>>> {
     let method = kinematics::Method::from_name(method)?;
     let (data, n, t) = frames_view(&actions, "actions")?;
@@ -163,6 +167,29 @@ fn integrate<'py>(
         return Err(
             CoreError::Shape("actions must have at least one step (T ≥ 1)".to_owned()).into(),
         );
+    }
+    if let Some(target) = out {
+        if target.shape() != [n, t, 2] {
+            return Err(CoreError::Shape(format!(
+                "out must have the shape of actions ({n}, {t}, 2), got {:?}",
+                target.shape()
+            ))
+            .into());
+        }
+        {
+            let mut write = target.try_readwrite().map_err(|_| {
+                PyValueError::new_err(
+                    "out must be writeable and must not share memory with actions",
+                )
+            })?;
+            let slice = write
+                .as_slice_mut()
+                .map_err(|_| PyValueError::new_err("out must be C-contiguous"))?;
+            maybe_detach(py, n, || {
+                kinematics::integrate_batch(data, t, dt, method, slice)
+            })?;
+        }
+        return Ok(target);
     }
     let out = maybe_detach(py, n, || {
         let mut out = vec![0.0; data.len()];
@@ -238,6 +265,46 @@ fn evaluate(
         s.miss_rate,
         s.n_frames,
     ))
+}
+
+/// evaluate_all(pred, gt, miss_threshold, mask) -> one evaluate() tuple per convention, in CONVENTIONS order
+///
+/// One error matrix for all three conventions: the same numbers as three evaluate() calls.
+#[pyfunction]
+#[pyo3(signature = (pred, gt, miss_threshold = 2.0, mask = None))]
+#[allow(clippy::type_complexity)]
+fn evaluate_all(
+    py: Python<'_>,
+    pred: PyReadonlyArrayDyn<'_, f64>,
+    gt: PyReadonlyArrayDyn<'_, f64>,
+    miss_threshold: f64,
+    mask: Option<PyReadonlyArray1<'_, bool>>,
+) -> PyResult<Vec<(f64, f64, f64, f64, f64, f64, usize)>> {
+    let (p, g, n, t) = paired_views(&pred, &gt)?;
+    let mask = mask
+        .as_ref()
+        .map(|m| {
+            m.as_slice()
+                .map_err(|_| PyValueError::new_err("mask must be C-contiguous"))
+        })
+        .transpose()?;
+    let all = maybe_detach(py, n, || {
+        metrics::evaluate_all(p, g, mask, t, miss_threshold)
+    })?;
+    Ok(all
+        .iter()
+        .map(|s| {
+            (
+                s.ade_1s,
+                s.ade_2s,
+                s.ade_3s,
+                s.ade_avg,
+                s.fde,
+                s.miss_rate,
+                s.n_frames,
+            )
+        })
+        .collect())
 }
 
 /// frame_metrics(pred, gt, convention) -> (N, 5): ADE 1s, 2s, 3s, ADE avg, FDE per frame
@@ -573,6 +640,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(integrate, m)?)?;
     m.add_function(wrap_pyfunction!(displacement_errors, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate_all, m)?)?;
     m.add_function(wrap_pyfunction!(frame_metrics, m)?)?;
     m.add_function(wrap_pyfunction!(cluster_bootstrap, m)?)?;
     m.add_function(wrap_pyfunction!(sign_flip_test, m)?)?;

@@ -147,3 +147,20 @@ def test_bool_actions_are_refused_with_their_dtype():
         lightemma.integrate(np.ones((6, 2), dtype=bool))
     with pytest.raises(ValueError, match="got dtype bool"):
         lightemma.integrate([[[True, False]] * 6])
+
+
+def test_integrate_writes_into_out_when_given():
+    rng = np.random.default_rng(3)
+    actions = np.stack([rng.uniform(0, 15, (5000, 6)), rng.normal(0, 0.05, (5000, 6))], axis=2)
+    out = np.full_like(actions, 7.0)  # whatever was there is overwritten
+    got = lightemma.integrate(actions, method="midpoint", out=out)
+    assert got is out
+    np.testing.assert_array_equal(out, lightemma.integrate(actions, method="midpoint"))
+    with pytest.raises(ValueError, match="shape"):
+        lightemma.integrate(actions, out=np.empty((4999, 6, 2)))
+    with pytest.raises(ValueError, match="share memory"):
+        lightemma.integrate(actions, out=actions)
+    with pytest.raises(ValueError, match="float64"):
+        lightemma.integrate(actions, out=np.empty((5000, 6, 2), dtype=np.float32))
+    with pytest.raises(ValueError, match="C-contiguous"):
+        lightemma.integrate(actions, out=np.empty((5000, 6, 4))[..., ::2])

@@ -210,3 +210,22 @@ def test_bool_trajectories_are_refused_with_their_dtype(which):
         lightemma.evaluate(arrays["pred"], arrays["gt"])
     with pytest.raises(ValueError, match=f"{which} must hold numbers, got dtype bool"):
         lightemma.displacement_errors(arrays["pred"], arrays["gt"])
+
+
+def test_evaluate_all_gives_every_convention_bit_for_bit_as_separate_calls():
+    from lightemma.metrics import evaluate_all
+
+    rng = np.random.default_rng(11)
+    for n in (1, 37, 20_000):  # the largest crosses the parallel threshold and several blocks
+        pred, gt = rng.normal(0, 5, (n, 6, 2)), rng.normal(0, 5, (n, 6, 2))
+        mask = rng.random(n) < 0.8
+        mask[0] = True
+        for m in (None, mask):
+            every = evaluate_all(pred, gt, miss_threshold=3.0, mask=m)
+            assert list(every) == list(lightemma.CONVENTIONS)
+            for convention, metrics in every.items():
+                assert metrics == lightemma.evaluate(pred, gt, convention=convention, miss_threshold=3.0, mask=m)
+    pred[5, 2, 0] = np.nan
+    with pytest.raises(ValueError, match="frame 5"):
+        evaluate_all(pred, gt)
+    assert lightemma.evaluate_all is evaluate_all

@@ -26,6 +26,7 @@ _EXPORTS: dict[str, str] = {
     "integrate": "lightemma.kinematics",
     "displacement_errors": "lightemma.metrics",
     "evaluate": "lightemma.metrics",
+    "evaluate_all": "lightemma.metrics",
     "Metrics": "lightemma.metrics",
     "CONVENTIONS": "lightemma.metrics",
     "load_frames": "lightemma.frames",
@@ -96,6 +97,6 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from lightemma.evaluation import evaluate_runs
     from lightemma.frames import Frame, FrameSet, load_frames
     from lightemma.kinematics import integrate
-    from lightemma.metrics import CONVENTIONS, Metrics, displacement_errors, evaluate
+    from lightemma.metrics import CONVENTIONS, Metrics, displacement_errors, evaluate, evaluate_all
     from lightemma.pipeline import RunResult, resume, run
     from lightemma.report import write_report

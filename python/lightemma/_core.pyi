@@ -22,8 +22,10 @@ def parse_actions(
     (N, n, 2) array of the histories the prompts printed (a lenient list equal to its row is a quotation).
     Non-str items, bad limits and a history of another shape raise ValueError."""
 
-def integrate(actions: npt.NDArray[np.float64], dt: float = 0.5, method: str = "euler") -> npt.NDArray[np.float64]:
-    """Integrate C-contiguous (N, T, 2) actions into (N, T, 2) positions."""
+def integrate(
+    actions: npt.NDArray[np.float64], dt: float = 0.5, method: str = "euler", out: npt.NDArray[np.float64] | None = None
+) -> npt.NDArray[np.float64]:
+    """Integrate C-contiguous (N, T, 2) actions into (N, T, 2) positions (written into ``out`` when given, and returned)."""
 
 def displacement_errors(pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float64]) -> npt.NDArray[np.float64]:
     """Per-step Euclidean errors (N, T) of two C-contiguous (N, T, 2) arrays."""
@@ -36,6 +38,14 @@ def evaluate(
     mask: npt.NDArray[np.bool_] | None = None,
 ) -> tuple[float, float, float, float, float, float, int]:
     """(ade_1s, ade_2s, ade_3s, ade_avg, fde, miss_rate, n_frames) over (N, 6, 2) arrays; only frames ``mask`` keeps."""
+
+def evaluate_all(
+    pred: npt.NDArray[np.float64],
+    gt: npt.NDArray[np.float64],
+    miss_threshold: float = 2.0,
+    mask: npt.NDArray[np.bool_] | None = None,
+) -> list[tuple[float, float, float, float, float, float, int]]:
+    """One ``evaluate`` tuple per convention, in ``CONVENTIONS`` order, from one error vector per frame."""
 
 def frame_metrics(
     pred: npt.NDArray[np.float64], gt: npt.NDArray[np.float64], convention: str = "lightemma"

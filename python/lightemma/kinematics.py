@@ -11,7 +11,7 @@ from lightemma._arrays import as_frames
 METHODS: tuple[str, ...] = tuple(_core.METHODS)
 
 
-def integrate(actions: ArrayLike, *, dt: float = 0.5, method: str = "euler") -> np.ndarray:
+def integrate(actions: ArrayLike, *, dt: float = 0.5, method: str = "euler", out: np.ndarray | None = None) -> np.ndarray:
     """Integrate (speed, curvature) actions from the origin, heading along +x.
 
     Args:
@@ -21,14 +21,22 @@ def integrate(actions: ArrayLike, *, dt: float = 0.5, method: str = "euler") -> 
             y += v sin θ dt, then θ += κ v dt) or ``"midpoint"`` (move along the
             heading at mid-step; removes Euler's bias on arcs).
 
+        out: optional C-contiguous float64 array of the shape of ``actions`` (N, T, 2) to write the
+            positions into (and return), e.g. one buffer reused across calls at large N; it must not
+            share memory with ``actions``. ``ValueError`` for another shape, dtype or layout.
+
     Returns:
-        Positions after each step (origin excluded), same shape as ``actions``.
-        NaN actions (failed parses) give NaN positions.
+        Positions after each step (origin excluded), same shape as ``actions``
+        (``out`` itself when given). NaN actions (failed parses) give NaN positions.
 
     >>> import lightemma
     >>> lightemma.integrate([[2.0, 0.0], [2.0, 0.0]]).tolist()
     [[1.0, 0.0], [2.0, 0.0]]
     """
     array, single = as_frames(actions, "actions")
-    out = _core.integrate(array, float(dt), method)
-    return out[0] if single else out
+    if out is not None:
+        if single or not isinstance(out, np.ndarray) or out.dtype != np.float64 or out.ndim != 3:
+            raise ValueError("out must be a float64 array of shape (N, T, 2), for (N, T, 2) actions")
+        return _core.integrate(array, float(dt), method, out)
+    result = _core.integrate(array, float(dt), method)
+    return result[0] if single else result

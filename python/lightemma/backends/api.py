@@ -41,7 +41,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from lightemma._litellm import litellm
+from lightemma._litellm import lazy as litellm  # imported at first use: the direct transport to an unlisted model never does
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams, is_truncated
 from lightemma.backends.local import conversation
 from lightemma.backends.ratelimit import RateLimiter
@@ -132,6 +132,9 @@ def check_model(model: str, name: str, api_base: str | None) -> str:
 
 
 def _provider(model: str) -> str | None:
+    prefix = model.split("/", 1)[0] if "/" in model else None
+    if prefix in OPENAI_COMPATIBLE:
+        return prefix  # what litellm.get_llm_provider says of an explicit OpenAI-compatible prefix, without importing it
     try:
         return litellm.get_llm_provider(model)[1]
     except Exception:  # noqa: BLE001 - an unknown provider is litellm's error to report at call time
@@ -305,6 +308,8 @@ class APIBackend:
             raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
 
     def _supports(self, param: str) -> bool:
+        if self.api_base and self.provider in OPENAI_COMPATIBLE and not _litellm_lists(self.model):
+            return True  # litellm gives an unlisted OpenAI-compatible model the whole OpenAI parameter set
         try:
             supported = litellm.get_supported_openai_params(model=self.model)
         except Exception:  # noqa: BLE001 - unknown model: assume the OpenAI parameter set
@@ -563,6 +568,8 @@ class APIBackend:
         tokens at the cached price) when litellm's list has the model, else the registry price."""
         if usage.input is None or usage.output is None:
             return None
+        if self._litellm_prices and not _litellm_lists(self.model):
+            self._litellm_prices = False  # litellm cannot price a model its list lacks (ModelNotMappedError)
         if self._litellm_prices:
             try:
                 usd = sum(litellm.cost_per_token(model=self.model, prompt_tokens=usage.input, completion_tokens=usage.output,
@@ -657,6 +664,14 @@ def _mark_cache_breakpoints(messages: list[dict[str, Any]], *, image: bool, end:
         messages[-3]["content"][-1]["cache_control"] = dict(CACHE_BREAKPOINT)
     if end:
         messages[-1]["content"][-1]["cache_control"] = dict(CACHE_BREAKPOINT)
+
+
+def _litellm_lists(model: str) -> bool:
+    """Whether litellm's bundled list has ``model`` (as given or without its provider prefix), read without importing litellm."""
+    from lightemma.registry import bundled_price_list
+
+    listed = bundled_price_list()
+    return model in listed or model.split("/", 1)[-1] in listed
 
 
 def _litellm_version() -> str | None:

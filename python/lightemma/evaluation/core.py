@@ -246,10 +246,11 @@ def score(run: RunData, rows: np.ndarray, conventions: Sequence[str], miss_thres
     """Metrics of ``rows`` of a run per convention through the Rust core.
 
     Frames go to the core in blocks of :data:`SCORE_BLOCK` (one batched call per
-    block and convention) and the block results are combined frame-weighted,
+    block, all conventions from one error matrix) and the block results are combined frame-weighted,
     which is exact for these means; memory for the copies stays bounded.
     """
     from lightemma import evaluate
+    from lightemma.metrics import evaluate_all
 
     if len(rows) == 0:
         return {c: {key: None for key in METRIC_KEYS} for c in conventions}
@@ -258,8 +259,12 @@ def score(run: RunData, rows: np.ndarray, conventions: Sequence[str], miss_thres
         block = rows[start : start + SCORE_BLOCK]
         pred = np.ascontiguousarray(run.trajectory[block])
         gt = np.ascontiguousarray(run.gt_positions[block])
-        for convention in conventions:
-            metrics = evaluate(pred, gt, convention=convention, miss_threshold=miss_threshold).to_dict()
+        if len(conventions) > 1:  # one error matrix for every convention
+            every = evaluate_all(pred, gt, miss_threshold=miss_threshold)
+            results = {c: every[c].to_dict() for c in conventions}
+        else:
+            results = {c: evaluate(pred, gt, convention=c, miss_threshold=miss_threshold).to_dict() for c in conventions}
+        for convention, metrics in results.items():
             for key in METRIC_KEYS:
                 sums[convention][key] += float(metrics[key]) * len(block)
     return {c: {key: total / len(rows) for key, total in sums[c].items()} for c in conventions}

@@ -14,8 +14,11 @@ import gc
 import itertools
 import math
 import os
+import tempfile
+import time
+import zipfile
 from collections.abc import Iterable, Iterator, Mapping
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,7 +29,7 @@ from lightemma.errors import RunStoreError
 from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
-from lightemma.runs.store import RunContents, iter_records, read_frame_ids
+from lightemma.runs.store import FRAMES_FILE, RunContents, iter_records, read_frame_ids
 from lightemma.runs.records import answer_received, first_answer_status
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
@@ -127,41 +130,46 @@ def pairs_array(values: list[Any]) -> np.ndarray:
 
 
 class _Columns:
-    """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows."""
+    """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows.
+
+    Every well-formed record becomes a row (the frame set, ground truth and
+    duplicates are judged later, in :func:`_assemble`), so that the columns depend
+    on ``frames.jsonl`` alone and can be kept in the sidecar.
+    """
 
     PAIRS = ("trajectory", "actions", "gt", "history")
-    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "cached", "failure", "scene", "gate")
-    DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "gate": bool}
+    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "cached", "failure", "scene", "traj_none", "gt_ok")
+    DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "traj_none": bool, "gt_ok": bool}
 
-    def __init__(self, details: bool, limits: Plausibility) -> None:
-        self.details = details
-        self.limits = limits
+    def __init__(self) -> None:
         self.pending: dict[str, list[Any]] = {n: [] for n in self.NAMES}
         self.chunks: dict[str, list[np.ndarray]] = {n: [] for n in self.NAMES}
-        self.rows = 0
-        self.unintegrated: dict[int, Any] = {}  # row -> actions, for records lacking a trajectory
+        self.frame_ids: list[str] = []
         self.scenes: dict[str, int] = {}
 
-    def add(self, record: Mapping[str, Any], gt: list[Any]) -> None:
+    def add(self, record: Mapping[str, Any]) -> None:
         p = self.pending
+        fid = record["frame_id"]
+        self.frame_ids.append(fid)
+        gt = record.get("gt_positions")
+        gt_ok = type(gt) is list and len(gt) == 6  # deeper damage (a bad pair) shows as NaN ground truth
+        p["gt_ok"].append(gt_ok)
+        p["gt"].append(gt if gt_ok else _NAN6x2)
         trajectory = record.get("trajectory")
+        p["traj_none"].append(trajectory is None)
         p["trajectory"].append(_NAN6x2 if trajectory is None else trajectory)
         actions = record.get("actions")
-        p["actions"].append(_NAN6x2 if actions is None else actions)  # judged against the limits at flush
-        if self.details:
-            history = record.get("history_actions")
-            p["history"].append(_NAN6x2 if history is None else history)
-        elif trajectory is None and actions is not None:
-            self.unintegrated[self.rows] = actions
+        p["actions"].append(_NAN6x2 if actions is None else actions)
+        history = record.get("history_actions")
+        p["history"].append(_NAN6x2 if history is None else history)
         scene = record.get("scene_name")
         if not isinstance(scene, str) or not scene:
-            scene = record["frame_id"].rpartition("/")[0] or record["frame_id"]
+            scene = fid.rpartition("/")[0] or fid
         p["scene"].append(self.scenes.setdefault(scene, len(self.scenes)))
         failure = record.get("failure")
         if failure is None and record.get("status") == "failed" and not answer_received(record):
             failure = "api_error"  # a record older than `failure`: failed without ever receiving an answer
         p["failure"].append(failure_code(failure))
-        p["gt"].append(gt)
         p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
         p["first"].append(STATUS_CODES.get(first_answer_status(record), UNKNOWN_STATUS) if answer_received(record)
                           else API_ERROR_STATUS)
@@ -170,7 +178,6 @@ class _Columns:
         p["out"].append(_number(record.get("output_tokens")))
         p["cost"].append(_number(record.get("cost_cents")))
         p["cached"].append(_number(record.get("cached_input_tokens")))
-        self.rows += 1
         if len(p["status"]) >= _CHUNK:
             self.flush()
 
@@ -181,19 +188,32 @@ class _Columns:
                     chunk = pairs_array(values)
                 else:
                     chunk = np.asarray(values, dtype=self.DTYPES.get(name, np.float64))
-                if name == "actions":
-                    self.chunks["gate"].append(implausible_actions(chunk, self.limits))
-                    if not self.details:
-                        values.clear()
-                        continue  # only the verdict is kept
                 self.chunks[name].append(chunk)
                 values.clear()
 
-    def column(self, name: str, shape: tuple[int, ...]) -> np.ndarray:
+    def finish(self, corrupt_lines: int = 0, truncated_tail: bool = False) -> RawColumns:
         self.flush()
-        parts = self.chunks.pop(name)
-        dtype = self.DTYPES.get(name, np.float64)
-        return np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
+        columns = {}
+        for name in self.NAMES:
+            parts = self.chunks.pop(name)
+            shape = (6, 2) if name in self.PAIRS else ()
+            dtype = self.DTYPES.get(name, np.float64)
+            columns[name] = np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
+        return RawColumns(self.frame_ids, columns, list(self.scenes), corrupt_lines, truncated_tail)
+
+
+@dataclass
+class RawColumns:
+    """Every well-formed record of ``frames.jsonl`` as columns, in file order: what the sidecar holds."""
+
+    frame_ids: list[str]
+    columns: dict[str, np.ndarray]  # the names of _Columns.NAMES, one row per record
+    scene_names: list[str]  # scene code -> name, in first-seen order over all rows
+    corrupt_lines: int = 0
+    truncated_tail: bool = False
+
+
+RecordColumns = _Columns  # for writers that hold their records: add() each, finish(), then write_sidecar()
 
 
 @contextmanager
@@ -208,8 +228,142 @@ def _gc_paused() -> Iterator[None]:
             gc.enable()
 
 
+# ---------------------------------------------------------------- the columnar sidecar
+
+SIDECAR_FILE = "frames.columns.npz"
+SIDECAR_FORMAT = 1  # bump when RawColumns or the reading of a record changes: older sidecars are rebuilt
+_TAIL_BYTES = 1 << 16
+
+
+def source_key(run_dir: str | os.PathLike[str]) -> np.ndarray | None:
+    """What identifies the current ``frames.jsonl``: format, size, mtime (ns), inode and a digest of its last 64 KiB.
+
+    None when the file cannot be read. A sidecar whose key differs is stale.
+    """
+    import hashlib
+
+    path = Path(run_dir) / FRAMES_FILE
+    try:
+        with open(path, "rb") as fh:
+            st = os.fstat(fh.fileno())
+            fh.seek(max(0, st.st_size - _TAIL_BYTES))
+            tail = hashlib.sha256(fh.read(_TAIL_BYTES)).digest()
+    except OSError:
+        return None
+    head = np.array([SIDECAR_FORMAT, st.st_size, st.st_mtime_ns, st.st_ino], dtype=np.int64).view(np.uint8)
+    return np.concatenate([head, np.frombuffer(tail, dtype=np.uint8)])
+
+
+def _join_names(names: list[str]) -> np.ndarray | None:
+    if any("\n" in name for name in names):
+        return None  # never met in practice; such a run is simply read from frames.jsonl each time
+    return np.frombuffer("\n".join(names).encode("utf-8", "surrogatepass"), dtype=np.uint8)
+
+
+def _split_names(blob: np.ndarray, n: int) -> list[str]:
+    names = blob.tobytes().decode("utf-8", "surrogatepass").split("\n") if n else []
+    if len(names) != n:
+        raise ValueError("names do not match the rows")
+    return names
+
+
+def write_sidecar(run_dir: str | os.PathLike[str], raw: RawColumns, key: np.ndarray | None) -> bool:
+    """Write ``raw`` as ``run_dir``/:data:`SIDECAR_FILE` (temporary file + rename); False when it cannot be written.
+
+    ``key`` is :func:`source_key` of the ``frames.jsonl`` that ``raw`` was read from. A
+    run folder that cannot be written to (read-only, full) just has no sidecar.
+    """
+    ids, scenes = _join_names(raw.frame_ids), _join_names(raw.scene_names)
+    if key is None or ids is None or scenes is None:
+        return False
+    run_dir = Path(run_dir)
+    _remove_stale_temporaries(run_dir)
+    arrays = {f"col_{name}": value for name, value in raw.columns.items()}
+    counts = np.array([len(raw.frame_ids), len(raw.scene_names), raw.corrupt_lines, int(raw.truncated_tail)], dtype=np.int64)
+    fd, tmp = tempfile.mkstemp(prefix=f".{SIDECAR_FILE}.", suffix=".tmp", dir=run_dir) if run_dir.is_dir() else (None, None)
+    if fd is None:
+        return False
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            np.savez(fh, key=key, counts=counts, frame_ids=ids, scene_names=scenes, **arrays)
+        os.replace(tmp, run_dir / SIDECAR_FILE)
+        return True
+    except OSError:
+        with suppress(OSError):
+            os.unlink(tmp)
+        return False
+
+
+_STALE_TEMPORARY_SECONDS = 600.0
+
+
+def _remove_stale_temporaries(run_dir: Path) -> None:
+    """Remove sidecar temporaries that a killed writer left (older than 10 minutes: not another writer's, still in use)."""
+    now = time.time()
+    for leftover in run_dir.glob(f".{SIDECAR_FILE}.*.tmp"):
+        with suppress(OSError):
+            if now - leftover.lstat().st_mtime > _STALE_TEMPORARY_SECONDS:
+                leftover.unlink()
+
+
+def read_sidecar(run_dir: str | os.PathLike[str], key: np.ndarray | None) -> RawColumns | None:
+    """The sidecar's columns when it exists and was made from the ``frames.jsonl`` that ``key`` identifies, else None.
+
+    Anything unexpected in it (another format, wrong shapes, a damaged file) makes it stale, never an error.
+    """
+    path = Path(run_dir) / SIDECAR_FILE
+    if key is None or not path.is_file():
+        return None
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if not np.array_equal(z["key"], key):
+                return None
+            n, n_scenes, corrupt, truncated = (int(v) for v in z["counts"])
+            columns = {}
+            for name in _Columns.NAMES:
+                value = z[f"col_{name}"]
+                shape = (n, 6, 2) if name in _Columns.PAIRS else (n,)
+                if value.shape != shape or value.dtype != np.dtype(_Columns.DTYPES.get(name, np.float64)):
+                    return None
+                columns[name] = value
+            raw = RawColumns(_split_names(z["frame_ids"], n), columns, _split_names(z["scene_names"], n_scenes), corrupt, bool(truncated))
+        if n and (columns["scene"].min() < 0 or columns["scene"].max() >= n_scenes):
+            return None
+        return raw
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError):
+        return None
+
+
+def refresh_sidecar(run_dir: str | os.PathLike[str]) -> bool:
+    """Write the sidecar of ``run_dir`` from its ``frames.jsonl`` unless a current one exists (end of a session)."""
+    key = source_key(run_dir)
+    if key is None or read_sidecar(run_dir, key) is not None:
+        return False
+    raw = _read_records(Path(run_dir), None)
+    return key_unchanged(run_dir, key) and write_sidecar(run_dir, raw, key)
+
+
+def key_unchanged(run_dir: str | os.PathLike[str], key: np.ndarray) -> bool:
+    now = source_key(run_dir)
+    return now is not None and np.array_equal(now, key)
+
+
+def _read_records(run_dir: Path, parse: ParseDefinition | None) -> RawColumns:
+    """Stream ``frames.jsonl`` into :class:`RawColumns` (re-parsed under ``parse`` when given)."""
+    counts = RunContents(run_dir=run_dir, manifest={}, records={})
+    columns = _Columns()
+    try:
+        with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
+            records = iter_records(run_dir, counts=counts)
+            for record in records if parse is None else rescored(records, parse):
+                columns.add(record)
+    except OSError as exc:
+        raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
+    return columns.finish(len(counts.corrupt_lines), counts.truncated_tail)
+
+
 def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None,
-             keep_implausible: bool = False) -> RunData:
+             keep_implausible: bool = False, sidecar: bool = True) -> RunData:
     """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
 
     ``details=True`` also keeps history and predicted actions (for scenario
@@ -222,42 +376,75 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
     records of frames outside the run's frame set (``frame_ids.txt``: dropped)
     and an unfinished run are counted and described in ``warnings``. Raises
     :class:`RunStoreError` for a missing, unreadable or foreign directory.
+
+    ``frames.jsonl`` stays the record of truth. Without ``parse``, the columns
+    are read from the run's sidecar (:data:`SIDECAR_FILE`, NumPy ``.npz``) when it
+    was made from the current ``frames.jsonl`` (same size, mtime, inode and last
+    64 KiB), and the sidecar is (re)written otherwise; the numbers are the same
+    either way. ``sidecar=False`` reads ``frames.jsonl`` and writes nothing.
     """
     run_dir = Path(run_dir)
     info = run_info(run_dir)
     own = recorded_parse(info.manifest)
     definition = own if parse is None else parse
-    counts = RunContents(run_dir=run_dir, manifest=dict(info.manifest), records={})
     limits = plausibility_for(definition, keep_implausible=keep_implausible)
-    columns = _Columns(details, limits)
     recorded_set = read_frame_ids(run_dir)
-    allowed = set(recorded_set) if recorded_set is not None else None
-    seen: set[str] = set()
-    frame_ids: list[str] = []  # one per kept record, in file order (duplicates included)
-    bad = duplicates = foreign = 0
-    foreign_example = None
-    try:
-        with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
-            records = iter_records(run_dir, counts=counts)
-            for record in records if parse is None else rescored(records, definition):
-                fid = record["frame_id"]
-                if allowed is not None and fid not in allowed:
-                    foreign += 1  # not a frame of this run: scoring it would mix frame sets
-                    foreign_example = foreign_example or fid
-                    continue
-                gt = record.get("gt_positions")
-                if type(gt) is not list or len(gt) != 6:
-                    bad += 1  # deeper damage (a bad pair) shows as NaN ground truth below
-                    continue
-                if fid in seen:
-                    duplicates += 1
-                else:
-                    seen.add(fid)
-                frame_ids.append(fid)
-                columns.add(record, gt)
-    except OSError as exc:
-        raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
-    del seen
+    raw = None
+    key = source_key(run_dir) if sidecar and parse is None else None
+    if key is not None:
+        raw = read_sidecar(run_dir, key)
+    if raw is None:
+        raw = _read_records(run_dir, parse)
+        if key is not None and key_unchanged(run_dir, key):  # not appended to while it was read
+            write_sidecar(run_dir, raw, key)
+    return _assemble(info, raw, details=details, definition=definition, rescored_=parse is not None, limits=limits,
+                     recorded_set=recorded_set)
+
+
+def _assemble(info: RunInfo, raw: RawColumns, *, details: bool, definition: ParseDefinition, rescored_: bool,
+              limits: Plausibility, recorded_set: list[str] | None) -> RunData:
+    """:class:`RunData` from all records' columns: the frame set, usable ground truth, last record wins."""
+    cols = raw.columns
+    ids = raw.frame_ids
+    gt_ok = cols["gt_ok"]
+    foreign, foreign_example = 0, None
+    if recorded_set is not None:
+        allowed = set(recorded_set)
+        in_set = np.fromiter((fid in allowed for fid in ids), dtype=bool, count=len(ids))
+        foreign = int((~in_set).sum())  # not frames of this run: scoring them would mix frame sets
+        if foreign:
+            foreign_example = ids[int(np.argmin(in_set))]
+        keep = in_set & gt_ok
+        bad = int((in_set & ~gt_ok).sum())
+    else:
+        keep = gt_ok
+        bad = int((~gt_ok).sum())
+    if keep.all():
+        frame_ids = list(ids)
+        col = cols.__getitem__
+    else:
+        rows = np.flatnonzero(keep)
+        frame_ids = [ids[i] for i in rows]
+
+        def col(name: str) -> np.ndarray:
+            return cols[name][rows]
+
+    # scene codes in first-seen order over the kept records
+    scene = col("scene")
+    scene_names = raw.scene_names
+    if len(scene):
+        codes, first = np.unique(scene, return_index=True)
+        by_first = codes[np.argsort(first)]
+        if not np.array_equal(by_first, np.arange(len(raw.scene_names))):
+            remap = np.empty(len(raw.scene_names), dtype=np.int32)
+            remap[by_first] = np.arange(len(by_first), dtype=np.int32)
+            scene = remap[scene]
+            scene_names = [raw.scene_names[c] for c in by_first]
+    else:
+        scene_names = []
+    unique = set(frame_ids)
+    duplicates = len(frame_ids) - len(unique)
+    del unique
     keep_all = duplicates == 0
     if not keep_all:  # last record wins, rows in first-seen order (the rare path: a --retry-failed pass)
         last: dict[str, int] = {}
@@ -266,50 +453,47 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         frame_ids = list(last)
         order = np.fromiter(last.values(), dtype=np.int64, count=len(last))
 
-    def take(name: str, shape: tuple[int, ...]) -> np.ndarray:
-        col = columns.column(name, shape)
-        return col if keep_all else col[order]
+    def take(value: np.ndarray) -> np.ndarray:
+        return value if keep_all else value[order]
 
-    trajectory = columns.column("trajectory", (6, 2))
+    trajectory = col("trajectory")
+    all_actions = col("actions")
+    gate = implausible_actions(all_actions, limits)
     if details:
-        actions = columns.column("actions", (6, 2))
-    elif columns.unintegrated:
-        actions = np.full((len(trajectory), 6, 2), np.nan)
-        actions[list(columns.unintegrated)] = pairs_array(list(columns.unintegrated.values()))
+        actions = all_actions
     else:
-        actions = None
+        traj_none = col("traj_none") & np.isfinite(all_actions).any(axis=(1, 2))
+        actions = np.where(traj_none[:, None, None], all_actions, np.nan) if traj_none.any() else None
     if actions is not None:
         trajectory = _fill_from_actions(trajectory, actions, info.integrator)
-    if not keep_all:
-        trajectory = trajectory[order]
-        actions = actions[order] if details else None
-    gt = take("gt", (6, 2))
+    trajectory = take(trajectory)
+    gt = take(col("gt"))
     bad += int((~np.isfinite(gt).all(axis=(1, 2))).sum())
-    status = take("status", ())
-    failure, caught = final_failure(take("failure", ()), status == STATUS_CODES["failed"], trajectory, take("gate", ()), limits)
+    status = take(col("status"))
+    failure, caught = final_failure(take(col("failure")), status == STATUS_CODES["failed"], trajectory, take(gate), limits)
     data = RunData(
         info=info,
         frame_ids=frame_ids,
         trajectory=trajectory,
         gt_positions=gt,
         status=status,
-        first_status=take("first", ()),
-        seconds=take("seconds", ()),
-        input_tokens=take("inp", ()),
-        output_tokens=take("out", ()),
-        cost_cents=take("cost", ()),
-        cached_input_tokens=take("cached", ()),
-        history_actions=take("history", (6, 2)) if details else None,
-        actions=actions if details else None,
-        corrupt_lines=len(counts.corrupt_lines),
-        truncated_tail=counts.truncated_tail,
+        first_status=take(col("first")),
+        seconds=take(col("seconds")),
+        input_tokens=take(col("inp")),
+        output_tokens=take(col("out")),
+        cost_cents=take(col("cost")),
+        cached_input_tokens=take(col("cached")),
+        history_actions=take(col("history")) if details else None,
+        actions=take(actions) if details else None,
+        corrupt_lines=raw.corrupt_lines,
+        truncated_tail=raw.truncated_tail,
         duplicates=duplicates,
         bad_records=bad,
         parse=definition,
-        rescored=parse is not None,
+        rescored=rescored_,
         failure=failure,
-        scene_index=take("scene", ()),
-        scene_names=list(columns.scenes),
+        scene_index=take(scene),
+        scene_names=scene_names,
         caught_implausible=int(caught.sum()),
         plausibility=limits,
         foreign_records=foreign,

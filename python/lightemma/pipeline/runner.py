@@ -375,6 +375,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     finally:
         bar.close()
     wall = time.perf_counter() - start
+    _refresh_sidecar(run_dir, log)
     contents = read_run(run_dir)
     summary = summarize(_in_set(contents.records, read_frame_ids(run_dir)), wall_seconds=wall, frames_run=outcome.done)
     sessions[-1].update(finished_at=_now(), frames_run=outcome.done, wall_seconds=round(wall, 3))
@@ -430,6 +431,17 @@ def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT
     prompts = load_prompt_set(prompt_set).select(chain, answer_format)
     provider = _provider(litellm_model(info, api_base)) if info.backend == "api" or api_base else None
     return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain)
+
+
+def _refresh_sidecar(run_dir: Path, log: Log | None) -> None:
+    """End of a session: write the evaluation sidecar (frames.jsonl stays the record of truth; never fatal)."""
+    from lightemma.evaluation.loading import refresh_sidecar
+
+    try:
+        refresh_sidecar(run_dir)
+    except (RunStoreError, OSError, ValueError) as exc:  # a cache: evaluate reads frames.jsonl without it
+        if log:
+            log(f"could not write the evaluation sidecar of {run_dir} ({exc}); evaluate will read frames.jsonl")
 
 
 def run(

@@ -22,7 +22,11 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
 import shutil
+import signal
+import sys
+import threading
 import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
@@ -44,7 +48,9 @@ from lightemma.runs.reference import (
     StageCall,
     find_model_folders,
     iter_scene_files,
+    read_regular_file,
 )
+from lightemma.runs.records import loads_bounded
 from lightemma.runs.store import FORMAT, FRAMES_FILE, MANIFEST_FILE, read_manifest, slugify, write_json_atomic
 
 IMPORT_PARSE = {"mode": "paper"}  # how an imported run is scored unless evaluate is told otherwise
@@ -87,8 +93,10 @@ def source_hash(files: Sequence[Path], root: Path) -> str:
     """``sha256:<hex>`` over the scene files' names (relative to ``root``) and bytes, in name order."""
     digest = hashlib.sha256(SOURCE_FORMAT.encode())
     for path in files:
-        with open(path, "rb") as fh:
-            content = hashlib.file_digest(fh, "sha256").hexdigest()
+        try:
+            content = hashlib.sha256(read_regular_file(path)).hexdigest()
+        except ReferenceFileError as exc:  # changed since it was listed: skipped (and named) when read
+            content = f"unreadable: {exc}"
         digest.update(f"\0{path.relative_to(root).as_posix()}\0{content}".encode())
     return "sha256:" + digest.hexdigest()
 
@@ -106,8 +114,8 @@ def _first_metadata_model(folder: ModelFolder) -> str | None:
     """``metadata.model`` of the first scene file that has one (read only when the folder name is not known)."""
     for path in folder.files[:5]:
         try:
-            doc = json.loads(path.read_bytes())
-        except (OSError, ValueError):
+            doc = loads_bounded(read_regular_file(path))
+        except (ReferenceFileError, ValueError):
             continue
         model = doc.get("metadata", {}).get("model") if isinstance(doc, dict) and isinstance(doc.get("metadata"), dict) else None
         if isinstance(model, str) and model:
@@ -370,12 +378,19 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
     prices = _prices(info)
     created = [d for d in (model_dir, *model_dir.parents) if not d.exists()]  # removed again if no run comes of it
     model_dir.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.", suffix=".partial", dir=model_dir))
+    remove_stale_partials(model_dir, warn)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.{os.getpid()}.", suffix=PARTIAL_SUFFIX, dir=model_dir))
     try:
         tally, scenes, seen = _Tally(), [], set()
         files_skipped: list[str] = []
+        for entry, why in folder.skipped:
+            warn(f"{entry}: {why}; file skipped")
+            files_skipped.append(entry.name)
         frames_skipped = 0
         stamp = None
+        from lightemma.evaluation.loading import RecordColumns, source_key, write_sidecar
+
+        columns = RecordColumns()  # the evaluation sidecar, from the records in hand (no second read)
         with open(tmp / FRAMES_FILE, "w", encoding="utf-8") as fh:
             for path, scene in iter_scene_files(folder):
                 on_file()
@@ -395,7 +410,8 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                         continue
                     seen.add(record["frame_id"])
                     tally.add(record)
-                    lines.append(json.dumps(record, ensure_ascii=False, allow_nan=False))
+                    columns.add(record)
+                    lines.append(json.dumps(record, ensure_ascii=False, allow_nan=False, check_circular=False))  # a fresh tree
                 if lines:
                     scenes.append(scene.scene_name)
                     fh.write("\n".join(lines) + "\n")
@@ -408,6 +424,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
                              frames_skipped, dataset_kind, prices)
         write_json_atomic(tmp / MANIFEST_FILE, manifest)
+        write_sidecar(tmp, columns.finish(), source_key(tmp))
         os.rename(tmp, final)
         result.summary = manifest["summary"]
         return result
@@ -415,6 +432,42 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         shutil.rmtree(tmp, ignore_errors=True)
         _remove_empty(created)
         raise
+
+
+PARTIAL_SUFFIX = ".partial"
+_PARTIAL = re.compile(r"^\.ref-[0-9a-f]{12}\.(\d+)\.[A-Za-z0-9_]+\.partial$")  # .<run id>.<pid of the importer>.<random>.partial
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def remove_stale_partials(model_dir: Path, warn: Warn = lambda _: None) -> list[Path]:
+    """Remove the hidden ``.ref-….partial`` folders that a killed import left in ``model_dir``.
+
+    A partial folder is named after the process building it; it is removed when
+    that process no longer exists (an import still running elsewhere keeps its own).
+    Returns the folders removed (each named through ``warn``).
+    """
+    removed = []
+    for entry in model_dir.iterdir():
+        match = _PARTIAL.match(entry.name)
+        if match is None or not entry.is_dir() or entry.is_symlink():
+            continue
+        pid = int(match.group(1))
+        if pid == os.getpid() or _alive(pid):
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+        if not entry.exists():
+            warn(f"{entry}: removed what an interrupted import (process {pid}) left half-written")
+            removed.append(entry)
+    return removed
 
 
 def _remove_empty(folders: list[Path]) -> None:
@@ -430,6 +483,43 @@ def _import_quietly(folder: ModelFolder, output: str, dataset_kind: str) -> tupl
     """One folder in a worker process: its result and its warnings (printed by the parent, in order)."""
     warnings: list[str] = []
     return import_folder(folder, output, dataset_kind=dataset_kind, warn=warnings.append), warnings
+
+
+def _die_with_parent(parent: int) -> None:
+    """Worker initializer: the worker ends when the importing process does, however it ends (SIGKILL included).
+
+    On Linux the kernel sends SIGKILL to the worker when its parent dies
+    (``PR_SET_PDEATHSIG``); elsewhere, and as a second guard, a daemon thread
+    ends the worker once its parent process is gone (its parent pid changes).
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, signal.SIGKILL, 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+    if os.getppid() != parent:  # the parent died before the prctl took effect
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            threading.Event().wait(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="lightemma-import-parent-watch").start()
+
+
+def _stop_resource_tracker() -> None:
+    """Stop and reap the resource-tracker process the spawned pool started, which would otherwise outlive
+    the command for a moment (a leftover child); a later pool starts a new one."""
+    try:
+        from multiprocessing import resource_tracker
+
+        resource_tracker._resource_tracker._stop()  # noqa: SLF001 - the stdlib's own way to end it
+    except (AttributeError, OSError, ChildProcessError):
+        pass
 
 
 def default_jobs(folders: int) -> int:
@@ -470,7 +560,8 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
 
         results = []
         context = multiprocessing.get_context("spawn")  # no fork of a process with threads (the progress bar's)
-        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context) as pool:
+        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context, initializer=_die_with_parent,
+                                 initargs=(os.getpid(),)) as pool:
             futures = [pool.submit(_import_quietly, f, os.fspath(output), dataset_kind) for f in folders]
             for folder, future in zip(folders, futures):
                 result, warnings = future.result()
@@ -478,6 +569,7 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
                     say(line)
                 bar.update(len(folder.files))
                 results.append(result)
+        _stop_resource_tracker()
         return results
     finally:
         bar.close()

@@ -8,8 +8,32 @@ below read both the same way.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Mapping
 from typing import Any
+
+MAX_NUMBER_DIGITS = 18  # an integer token longer than this (beyond 10^18) is no count, index or coordinate
+
+
+def loads_bounded(data: bytes | str) -> Any:
+    """``json.loads`` that refuses what would crash or mislead later: nesting too deep for the decoder
+    (``RecursionError``) and integers of more than :data:`MAX_NUMBER_DIGITS` digits (10^400 tokens
+    overflow every float). Raises :class:`ValueError` naming the problem (``json.JSONDecodeError``
+    for plain syntax errors).
+
+    The integer check is a ``parse_int`` hook: json's C scanner calls it for integer tokens only
+    (floats, strings and structure stay in C), which costs far less than scanning the text.
+    """
+    try:
+        return json.loads(data, parse_int=_bounded_int)
+    except RecursionError:
+        raise ValueError("nested too deeply to decode") from None
+
+
+def _bounded_int(token: str) -> int:
+    if len(token) > MAX_NUMBER_DIGITS and len(token.lstrip("-")) > MAX_NUMBER_DIGITS:
+        raise ValueError(f"holds an integer of {len(token.lstrip('-'))} digits (at most {MAX_NUMBER_DIGITS} are read)")
+    return int(token)
 
 
 def _attempts(record: Mapping[str, Any]) -> list[Mapping[str, Any]] | None:

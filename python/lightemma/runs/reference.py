@@ -17,13 +17,16 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import stat
 from collections.abc import Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from lightemma.errors import UserError
+from lightemma.runs.records import loads_bounded
 
 SOURCE_FORMAT = "lightemma-reference-results"
 LINE_WIDTH = 80  # the reference splits long texts into lines of at most this many characters
@@ -40,10 +43,52 @@ _CALL_FAILURE = re.compile(
     r"|Required [\w ]*modules? not available|[\w ]+ module not available)"
 )
 _RUN_SUFFIX = re.compile(r"_\d{8}-\d{6}$")  # predict.py names folders <model>_<YYYYmmdd-HHMMSS>
+MAX_SCENE_FILE_BYTES = 256 * 2**20  # a reference scene file is well under 1 MB; a larger one is skipped, never read
 
 
 class ReferenceFileError(Exception):
     """A scene file that cannot be read at all (not JSON, not a scene object)."""
+
+
+def read_regular_file(path: Path, limit: int = MAX_SCENE_FILE_BYTES) -> bytes:
+    """The bytes of ``path`` if it is a regular file of at most ``limit`` bytes; :class:`ReferenceFileError` otherwise.
+
+    Opened non-blocking (a FIFO put in place of a file never blocks the open) and
+    checked on the open descriptor (a file swapped after listing is still checked);
+    at most ``limit`` + 1 bytes are ever read (a device such as ``/dev/zero`` is
+    refused before any read).
+    """
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
+    except OSError as exc:
+        raise ReferenceFileError(f"unreadable ({exc.strerror or exc})") from None
+    try:
+        info = os.fstat(fd)
+        if not stat.S_ISREG(info.st_mode):
+            raise ReferenceFileError(f"not a regular file ({_file_kind(info.st_mode)})")
+        if info.st_size > limit:
+            raise ReferenceFileError(f"{info.st_size} bytes, above the limit of {limit} bytes for a scene file")
+        with os.fdopen(fd, "rb", closefd=False) as fh:
+            data = fh.read(info.st_size + 1)  # sized by fstat: no buffer of the whole limit
+            if len(data) > info.st_size:  # grown since: read on, up to the limit
+                data += fh.read(limit + 1 - len(data))
+        if len(data) > limit:
+            raise ReferenceFileError(f"grew above the limit of {limit} bytes for a scene file while being read")
+        return data
+    except OSError as exc:
+        raise ReferenceFileError(f"unreadable ({exc.strerror or exc})") from None
+    finally:
+        os.close(fd)
+
+
+def _file_kind(mode: int) -> str:
+    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
+                       (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder")):
+        if test(mode):
+            return name
+    return "not a plain file"
+
+
 
 
 @dataclass
@@ -63,6 +108,7 @@ class ModelFolder:
 
     path: Path
     files: list[Path]
+    skipped: list[tuple[Path, str]] = field(default_factory=list)  # entries that are not scene files to read, and why
 
     @property
     def folder_name(self) -> str:
@@ -126,7 +172,29 @@ def _has_scene_files(folder: Path) -> bool:
 
 
 def _model_folder(path: Path) -> ModelFolder:
-    return ModelFolder(path=path, files=sorted((path / "output").glob("*.json")))
+    """The scene files of ``path/output``: regular files of at most :data:`MAX_SCENE_FILE_BYTES`, symlinks
+    included only when they stay inside the model folder; every other ``*.json`` entry is listed in ``skipped``."""
+    files: list[Path] = []
+    skipped: list[tuple[Path, str]] = []
+    root = path.resolve()
+    for entry in sorted((path / "output").glob("*.json")):
+        try:
+            if entry.is_symlink():
+                target = entry.resolve()
+                if not target.is_relative_to(root):
+                    skipped.append((entry, f"a symlink leading outside {path} (to {target})"))
+                    continue
+            info = entry.stat()
+        except (OSError, RuntimeError) as exc:  # RuntimeError: a symlink loop
+            skipped.append((entry, f"unreadable ({getattr(exc, 'strerror', None) or exc})"))
+            continue
+        if not stat.S_ISREG(info.st_mode):
+            skipped.append((entry, f"not a regular file ({_file_kind(info.st_mode)})"))
+        elif info.st_size > MAX_SCENE_FILE_BYTES:
+            skipped.append((entry, f"{info.st_size} bytes, above the limit of {MAX_SCENE_FILE_BYTES} bytes for a scene file"))
+        else:
+            files.append(entry)
+    return ModelFolder(path=path, files=files, skipped=skipped)
 
 
 def find_model_folders(src: str | Path) -> list[ModelFolder]:
@@ -368,11 +436,13 @@ class SceneFile:
 def read_scene_file(path: Path, data: bytes) -> SceneFile:
     """Check the bytes of one scene file; :class:`ReferenceFileError` when the file as a whole is unusable."""
     try:
-        doc = json.loads(data.decode("utf-8"))  # the scripts write UTF-8; decoding first is faster than json's detection
+        doc = loads_bounded(data.decode("utf-8"))  # the scripts write UTF-8; decoding first is faster than json's detection
     except UnicodeDecodeError as exc:
         raise ReferenceFileError(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
         raise ReferenceFileError(f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno}; truncated?)") from None
+    except ValueError as exc:
+        raise ReferenceFileError(f"not usable JSON ({exc})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list):
         raise ReferenceFileError("not a reference scene file (no 'frames' list)")
     info = doc.get("scene_info") if isinstance(doc.get("scene_info"), dict) else {}
@@ -410,9 +480,9 @@ def iter_scene_files(folder: ModelFolder, contents: Sequence[bytes] | None = Non
     """Read each scene file of ``folder`` in name order; a file that cannot be read yields its error."""
     for i, path in enumerate(folder.files):
         try:
-            data = contents[i] if contents is not None else path.read_bytes()
-        except OSError as exc:
-            yield path, ReferenceFileError(f"unreadable ({exc.strerror or exc})")
+            data = contents[i] if contents is not None else read_regular_file(path)
+        except ReferenceFileError as exc:
+            yield path, exc
             continue
         try:
             yield path, read_scene_file(path, data)

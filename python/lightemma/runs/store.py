@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.errors import RunStoreError, os_error_line
+from lightemma.runs.records import loads_bounded
 
 MANIFEST_FILE = "manifest.json"
 FRAMES_FILE = "frames.jsonl"
@@ -295,8 +296,8 @@ def iter_records(run_dir: str | os.PathLike[str], *, counts: RunContents | None 
         if not raw.strip():
             continue
         try:
-            record = json.loads(raw)
-        except (json.JSONDecodeError, UnicodeDecodeError):
+            record = loads_bounded(raw)  # a line nested too deep or holding a 400-digit number is corrupt, not fatal
+        except ValueError:  # JSONDecodeError and UnicodeDecodeError included
             record = None
         if not isinstance(record, dict) or not isinstance(record.get("frame_id"), str):
             if counts is not None:
