@@ -119,7 +119,7 @@ fn values_of(
         *value = mean(&e[a..=b]);
     }
     out[3] = match convention {
-        Convention::Lightemma => mean(&e),
+        Convention::Lightemma => mean(e),
         Convention::Stp3 | Convention::Uniad => mean(&out[..3]),
     };
     out[4] = e[HORIZON - 1];
