@@ -64,3 +64,34 @@ def test_a_chain_passes_a_scene_text_holding_placeholders_on_verbatim(tmp_path, 
     assert scene in by_stage["intent"] and scene in by_stage["actions"]
     assert INTENT_TEXT in by_stage["actions"] and by_stage["actions"].count(INTENT_TEXT) == 1
     assert read_run(result.run_dir).records[frames[0].frame_id]["status"] == "ok"
+
+
+# -- 25.1: a provider's Retry-After never freezes a run ------------------------------------------------
+
+
+@pytest.mark.parametrize("after", ["3600", "inf", "Wed, 21 Oct 2099 07:28:00 GMT"])
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_retry_after_beyond_the_maximum_wait_stops_the_run_at_once_resumable(tmp_path, frames, after, transport):
+    from lightemma.errors import RunStopped
+
+    replies = [Reply(status=429, headers={"Retry-After": after}, body={"error": {"message": "quota", "type": "rate_limit_exceeded"}})]
+    with FakeOpenAIServer(replies) as server:
+        start = time.monotonic()
+        with pytest.raises(RunStopped) as info:
+            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
+                transport=transport, **FAST)
+        elapsed = time.monotonic() - start
+    assert elapsed < 15, elapsed  # not an hour, not forever
+    assert info.value.cause == "quota-exhausted" and "Retry-After" in str(info.value) and "--resume" in str(info.value)
+    assert len(server.requests) == 1  # nothing else is sent into a quota the provider says is gone
+
+
+def test_a_short_retry_after_is_waited_and_no_pause_exceeds_the_cap():
+    from lightemma.backends.ratelimit import MAX_PAUSE, RateLimiter
+    from lightemma.backends.retry import RetryPolicy, _parse_retry_after
+
+    limiter = RateLimiter()
+    limiter.pause(float("inf"))
+    assert limiter._paused_until - time.monotonic() <= MAX_PAUSE
+    assert RetryPolicy().waits_too_long(3600) and not RetryPolicy().waits_too_long(30)
+    assert _parse_retry_after("nan") is None and _parse_retry_after("2.5") == 2.5 and _parse_retry_after("-4") == 0.0

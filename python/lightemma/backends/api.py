@@ -372,7 +372,8 @@ class APIBackend:
                             "over_it": "re-encoded as JPEG, quality 90 → 50, then ×0.75 in size, until it fits"},
             "timeout_s": self.timeout,
             "deadline": "lightemma's own, per call: connect to last byte",
-            "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap},
+            "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap,
+                      "max_retry_after_s": self.retry.max_wait},
             "rate_limit": {"rpm": self.limiter.requests.capacity if self.limiter.requests else None,
                            "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None},
             "cache": str(self.cache.path) if self.cache else None,
@@ -439,8 +440,10 @@ class APIBackend:
                     raise self._fatal(err, message) from None
                 if self.retry.should_retry(err, retries):
                     after = retry_after_seconds(exc)
+                    if self.retry.waits_too_long(after):
+                        raise self._too_long_a_wait(err, message, after) from None
                     if after:
-                        self.limiter.pause(after)
+                        self.limiter.pause(after, limit=self.retry.max_wait)
                     await asyncio.sleep(self.retry.delay(retries, after))
                     retries += 1
                     continue
@@ -460,6 +463,17 @@ class APIBackend:
         if frames is not None:
             raise self._fatal(result.error or "Error", result.error_message or "", frames=frames, stage=req.stage)
         return result
+
+    def _too_long_a_wait(self, err: str, message: str, after: float | None) -> RunFatalError:
+        """The run-fatal error for a server that asks for a longer pause (Retry-After) than lightemma waits."""
+        asked = "forever" if after == float("inf") else f"{after:g} s"
+        what = (f"the provider asks to wait {asked} before the next request (Retry-After), longer than lightemma waits "
+                f"for one ({self.retry.max_wait:g} s)")
+        if err == "RateLimitError":
+            return RunFatalError(f"{self.model}: {err}: {message} — {what}: the account's rate limit or quota is exhausted; "
+                                 "resume later, or set --rpm / --tpm to the account's limits", cause="quota-exhausted", error=err)
+        return RunFatalError(f"{self.model}: {err}: {message} — {what}: the provider is unavailable; resume later",
+                             cause="provider-error", error=err)
 
     def _key_variables(self) -> str:
         if self.api_base and self.provider in OPENAI_COMPATIBLE:

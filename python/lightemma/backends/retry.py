@@ -66,42 +66,76 @@ def short_message(exc: BaseException, limit: int = 300, secrets: tuple[str, ...]
 
 
 def retry_after_seconds(exc: BaseException) -> float | None:
-    """The server's ``Retry-After`` (seconds) carried by a rate-limit or 5xx error, if any."""
+    """The server's ``Retry-After`` (seconds) carried by a rate-limit or 5xx error, if any.
+
+    Seconds (``"3"``, ``"0.5"``) or an HTTP date (seconds from now). ``inf`` stays ``inf`` (a wait no
+    run can make: the caller refuses it); a value that is neither, or NaN, is None (no server wait).
+    """
     candidates = (getattr(exc, "litellm_response_headers", None), getattr(getattr(exc, "response", None), "headers", None),
                   getattr(exc, "headers", None))
     for headers in candidates:
         if not headers:
             continue
-        value = headers.get("retry-after") or headers.get("Retry-After")
+        try:
+            value = headers.get("retry-after") or headers.get("Retry-After")
+        except Exception:  # noqa: BLE001 - a headers object we cannot read carries no wait
+            return None
         if value is None:
             continue
-        try:
-            return max(0.0, float(value))
-        except ValueError:
-            return None
+        return _parse_retry_after(str(value))
     return None
+
+
+def _parse_retry_after(value: str) -> float | None:
+    try:
+        seconds = float(value)
+    except ValueError:
+        from email.utils import parsedate_to_datetime
+
+        try:
+            when = parsedate_to_datetime(value)
+        except (TypeError, ValueError, IndexError):
+            return None
+        if when is None:
+            return None
+        import datetime as _dt
+
+        if when.tzinfo is None:
+            when = when.replace(tzinfo=_dt.timezone.utc)
+        seconds = (when - _dt.datetime.now(_dt.timezone.utc)).total_seconds()
+    if seconds != seconds:  # NaN
+        return None
+    return max(0.0, seconds)
 
 
 @dataclass(frozen=True)
 class RetryPolicy:
     """Up to ``max_retries`` retries of a retryable error; waits base·2^k, capped, full jitter.
 
-    A server's Retry-After is honoured (as the minimum wait, capped at ``cap``).
+    A server's Retry-After is honoured as the minimum wait up to ``max_wait`` (60 s): the longest
+    lightemma waits for any one server-asked pause. A Retry-After beyond it (an hour, ``inf``)
+    is not waited out at all — :meth:`waits_too_long` — the run stops as rate-limited / quota exhausted
+    (resumable) instead of freezing.
     """
 
     max_retries: int = 6
     base: float = 1.0
     cap: float = 60.0
+    max_wait: float = 60.0  # the longest server-asked pause (Retry-After) that is waited out
 
     def should_retry(self, error: str, retries_done: int) -> bool:
         return error in RETRYABLE and retries_done < self.max_retries
+
+    def waits_too_long(self, retry_after: float | None) -> bool:
+        """True when a server asks for a longer pause than lightemma ever waits (``max_wait``)."""
+        return retry_after is not None and retry_after > self.max_wait
 
     def delay(self, retries_done: int, retry_after: float | None = None, rng: random.Random | None = None) -> float:
         """Seconds to wait before retry number ``retries_done + 1``."""
         ceiling = min(self.cap, self.base * (2 ** retries_done))
         wait = (rng or random).uniform(0.0, ceiling)
         if retry_after is not None:
-            wait = max(wait, min(retry_after, self.cap))
+            wait = max(wait, min(retry_after, self.cap))  # the limiter pause holds the rest, up to max_wait
         return wait
 
 
