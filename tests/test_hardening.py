@@ -95,3 +95,149 @@ def test_a_short_retry_after_is_waited_and_no_pause_exceeds_the_cap():
     assert limiter._paused_until - time.monotonic() <= MAX_PAUSE
     assert RetryPolicy().waits_too_long(3600) and not RetryPolicy().waits_too_long(30)
     assert _parse_retry_after("nan") is None and _parse_retry_after("2.5") == 2.5 and _parse_retry_after("-4") == 0.0
+
+
+# -- 25.5: a provider's key goes only to its own host, or where the user names a key variable --------------
+
+
+KEYS = {"OPENAI_API_KEY": "sk-proj-OPENAI-SECRET-0123456789", "ANTHROPIC_API_KEY": "sk-ant-ANTHROPIC-SECRET-0123456789",
+        "GEMINI_API_KEY": "AIzaGEMINI-SECRET-0123456789"}
+
+
+def sent_secrets(server) -> set[str]:
+    out = set()
+    for req in server.requests:
+        blob = json.dumps([req.path, req.headers])
+        out |= {name for name, value in KEYS.items() if value in blob}
+    return out
+
+
+@pytest.mark.parametrize(("model", "openai_path"), [("gpt-4o", True), ("openai/test-model", True),
+                                                    ("anthropic/claude-sonnet-4-6", False), ("gemini/gemini-2.5-flash", False)])
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(monkeypatch, tmp_path, frames, model,
+                                                                             openai_path, transport):
+    if transport == "direct" and not openai_path:
+        pytest.skip("the direct transport speaks only the OpenAI protocol")
+    for name, value in KEYS.items():
+        monkeypatch.setenv(name, value)
+    with FakeOpenAIServer() as server:
+        run(model, frames=frames[:1], api_base=server.url if openai_path else server.root_url, output=tmp_path / "a",
+            transport=transport, **FAST)
+        assert server.requests and sent_secrets(server) == set()
+        # named explicitly, that key (and only that one) goes there
+        monkeypatch.setenv("MY_SERVER_KEY", "sk-my-own-server-key-0123456789")
+        run(model, frames=frames[:1], api_base=server.url if openai_path else server.root_url, output=tmp_path / "b",
+            transport=transport, api_key_env="MY_SERVER_KEY", **FAST)
+        later = server.requests[-1]
+        assert "sk-my-own-server-key-0123456789" in json.dumps([later.path, later.headers])
+        assert sent_secrets(server) == set()
+
+
+def test_demo_with_an_api_base_sends_none_of_the_three_keys(monkeypatch, tmp_path):
+    from lightemma.demo import run_demo
+
+    for name, value in KEYS.items():
+        monkeypatch.setenv(name, value)
+    with FakeOpenAIServer() as server:
+        run_demo(tmp_path / "demo", scenes=1, keyframes=16, api_limit=1, api_base=server.url, log=lambda line: None)
+        assert server.requests and sent_secrets(server) == set()
+
+
+def test_an_unset_key_variable_is_refused_in_one_line_and_plain_http_elsewhere_is_warned(monkeypatch):
+    from lightemma.backends import create_backend
+    from lightemma.errors import UserError
+
+    monkeypatch.delenv("NOPE_KEY", raising=False)
+    with pytest.raises(UserError, match="--api-key-env NOPE_KEY: the environment variable NOPE_KEY is not set"):
+        create_backend("openai/m", api_base="http://127.0.0.1:9/v1", api_key_env="NOPE_KEY")
+    monkeypatch.setenv("MY_KEY", "sk-abc-0123456789")
+    far = create_backend("openai/m", api_base="http://192.0.2.7:8000/v1", api_key_env="MY_KEY")
+    (notice,) = far.notices
+    assert "plain http" in notice and "MY_KEY" in notice and "sk-abc" not in notice
+    for quiet in ("http://127.0.0.1:8000/v1", "http://localhost:8000/v1", "http://[::1]:8000/v1", "https://192.0.2.7/v1"):
+        assert create_backend("openai/m", api_base=quiet).notices == []
+
+
+# -- 25.15: credentials in --api-base stay out of every record and message --------------------------------
+
+
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_password_in_the_api_base_is_in_no_record_and_no_message(tmp_path, frames, capsys, transport):
+    from lightemma.cli import main
+
+    with FakeOpenAIServer(lambda req: Reply.error(400, "bad request at http://alice:hunter2pw@host")) as server:
+        base = server.url.replace("http://", "http://alice:hunter2pw@")
+        out = tmp_path / "out"
+        code = main(["run", "--model", "openai/test-model", "--api-base", base, "--dataroot", str(tmp_path / "none"),
+                     "--output", str(out), "--no-progress"])
+        assert code == 2  # no dataset: refused, but the message must not show the password either
+        from lightemma.errors import RunStopped
+
+        with pytest.raises(RunStopped) as info:
+            run("openai/test-model", frames=frames, api_base=base, output=out, max_attempts=1, transport=transport, **FAST)
+    messages = capsys.readouterr().err + str(info.value)
+    assert server.requests[0].headers["authorization"].startswith("Basic ")  # used to reach the server, not shown
+    written = b"".join(p.read_bytes() for p in out.rglob("*") if p.is_file())
+    assert "hunter2pw" not in messages and b"hunter2pw" not in written
+    from lightemma.backends.retry import redact_url
+
+    assert redact_url("https://h/v1?api_key=querysecret123&v=2") == "https://h/v1?api_key=***&v=2"
+    (run_dir,) = [p.parent for p in out.rglob("manifest.json")]
+    assert json.loads((run_dir / "manifest.json").read_text())["config"]["api_base"].startswith("http://***@127.0.0.1:")
+
+
+# -- 25.4: a run directory never redirects keys or writes --------------------------------------------------
+
+
+def crafted_run(tmp_path, frames, server, **changes):
+    """A finished-but-incomplete run whose manifest config is then edited as someone else might have."""
+    from lightemma.runs.store import FRAMES_FILE, update_manifest
+
+    first = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", cache=True, **FAST)
+    path = first.run_dir / FRAMES_FILE
+    path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:1]))  # two frames left to do
+    manifest = json.loads((first.run_dir / "manifest.json").read_text())
+    update_manifest(first.run_dir, config={**manifest["config"], **changes})
+    return first.run_dir
+
+
+def test_resume_refuses_a_manifest_whose_endpoint_is_not_the_users(monkeypatch, tmp_path, frames, capsys):
+    from lightemma.cli import main
+
+    monkeypatch.setenv("OPENAI_API_KEY", KEYS["OPENAI_API_KEY"])
+    with FakeOpenAIServer() as ours, FakeOpenAIServer() as theirs:
+        run_dir = crafted_run(tmp_path, frames, ours, api_base=theirs.url, api_key_env="OPENAI_API_KEY")
+        before = len(ours.requests)
+        for extra in ([], ["--api-base", ours.url], ["--api-base", theirs.url, "--cache"]):
+            assert main(["run", "--resume", str(run_dir), *extra, "--no-progress"]) == 2
+            err = capsys.readouterr().err
+            assert len(err.strip().splitlines()) == 1 and ("--api-base" in err or "--api-key-env" in err), err
+        assert not theirs.requests and len(ours.requests) == before
+        # the user's own word for both: the run goes on there, with the key the user named
+        from lightemma.pipeline import resume
+
+        resume(run_dir, frames=frames, api_base=theirs.url, api_key_env="OPENAI_API_KEY", cache=True, progress=False)
+        assert theirs.requests and len(ours.requests) == before
+        assert theirs.requests[0].headers["authorization"] == f"Bearer {KEYS['OPENAI_API_KEY']}"
+
+
+@pytest.mark.parametrize("cache", ["ABS", "../../../escape.sqlite"])
+def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, frames, capsys, cache):
+    from lightemma.cli import main
+
+    target = tmp_path / "elsewhere" / "evil.sqlite"
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server, cache=str(target) if cache == "ABS" else cache)
+        for extra in ([], ["--cache"]):
+            assert main(["run", "--resume", str(run_dir), "--api-base", server.url, *extra, "--no-progress"]) == 2
+            err = capsys.readouterr().err
+            assert len(err.strip().splitlines()) == 1 and "--cache" in err, err
+        assert not target.exists() and not (tmp_path / "escape.sqlite").exists() and not list(tmp_path.parent.glob("escape*"))
+        assert len(read_run(run_dir).records) == 1
+        # given on the command line, the path is the user's choice
+        wanted = target if cache == "ABS" else (run_dir.parent.parent / cache).resolve()
+        from lightemma.pipeline import resume
+
+        resume(run_dir, frames=frames, api_base=server.url, cache=str(wanted), progress=False)
+        assert wanted.exists() and len(read_run(run_dir).records) == 3

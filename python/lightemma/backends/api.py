@@ -34,7 +34,9 @@ from __future__ import annotations
 import asyncio
 import base64
 import hashlib
+import ipaddress
 import os
+import re
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
@@ -52,8 +54,11 @@ from lightemma.backends.retry import (
     RetryPolicy,
     error_class,
     failure_signature,
+    redact_url,
     retry_after_seconds,
     short_message,
+    split_credentials,
+    url_secrets,
 )
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import RunFatalError, UserError
@@ -72,6 +77,10 @@ NO_KEY = "sk-no-key-required"
 OPENAI_COMPATIBLE = ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "text-completion-openai")
 # The providers of the paper's API models; an empty variable counts as missing.
 PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
+# Each provider's own API hosts: its key goes there as the provider's variables hold it. Any other --api-base gets
+# no provider key, only the key of a variable the user names for it (--api-key-env NAME).
+PROVIDER_HOSTS = {"openai": ("api.openai.com",), "anthropic": ("api.anthropic.com",),
+                  "gemini": ("generativelanguage.googleapis.com",)}
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 # What a provider accepts per image, as base64 characters (what is sent), and the longest side in pixels.
 # Anthropic: 5 MB per image, 8000 px; OpenAI: 20 MB per image; Gemini: 20 MB per request (kept under).
@@ -94,18 +103,20 @@ def litellm_model(info: ModelInfo, api_base: str | None) -> str:
     return info.model_id
 
 
-def require_api_key(model: str, api_base: str | None = None) -> str | None:
-    """Check the provider's API key is set, before any work; return the key to pass explicitly, if any.
+def require_api_key(model: str, api_base: str | None = None, api_key_env: str | None = None) -> str | None:
+    """Check the key a call needs is set, before any work; return the key to pass explicitly, if any.
 
-    For an OpenAI-compatible endpoint (``api_base``) a key is optional:
-    ``OPENAI_API_KEY`` when set, else a placeholder. Otherwise a missing key is
-    a :class:`UserError` naming the environment variable(s).
+    A provider's own key (``OPENAI_API_KEY``, ``ANTHROPIC_API_KEY``, ``GEMINI_API_KEY``) goes only to that
+    provider's own host (:data:`PROVIDER_HOSTS`). To any other ``api_base`` lightemma sends the key of the
+    variable the user named for it (``api_key_env``, ``--api-key-env NAME``), else none at all (a
+    placeholder: an OpenAI-compatible server without auth needs none). A missing or empty variable is a
+    :class:`UserError` naming it.
     """
+    if api_key_env:
+        return key_from_variable(api_key_env)
     provider = _provider(model)
-    if api_base and provider in OPENAI_COMPATIBLE:
-        return os.environ.get("OPENAI_API_KEY") or NO_KEY
-    if api_base:
-        return None  # a custom base for another provider: litellm reads that provider's variables
+    if api_base and not is_provider_host(provider, api_base):
+        return NO_KEY  # a server the user named without a key variable: no provider key goes there
     names = PROVIDER_KEYS.get(provider or "")
     if names is not None:
         missing = [] if any(os.environ.get(n, "").strip() for n in names) else list(names)
@@ -116,6 +127,57 @@ def require_api_key(model: str, api_base: str | None = None) -> str | None:
         names = " or ".join(missing)
         raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
     return None
+
+
+def key_from_variable(name: str) -> str:
+    """The key held by the environment variable ``name`` (``--api-key-env``), or a :class:`UserError` naming it."""
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or ""):
+        raise UserError(f"--api-key-env {name!r} is not an environment variable name")
+    value = os.environ.get(name, "").strip()
+    if not value:
+        raise UserError(f"--api-key-env {name}: the environment variable {name} is not set (or is empty)")
+    return value
+
+
+def is_provider_host(provider: str | None, api_base: str) -> bool:
+    """True when ``api_base`` is ``provider``'s own API (https to one of :data:`PROVIDER_HOSTS`)."""
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(api_base)
+        host = (parts.hostname or "").lower()
+    except ValueError:
+        return False
+    return parts.scheme == "https" and host in PROVIDER_HOSTS.get(provider or "", ())
+
+
+def is_loopback(host: str | None) -> bool:
+    """True for ``localhost`` and loopback addresses (127.0.0.0/8, ::1)."""
+    if not host:
+        return False
+    if host.lower() in ("localhost", "localhost.localdomain") or host.lower().endswith(".localhost"):
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def insecure_endpoint(api_base: str | None, key_variable: str | None = None) -> str | None:
+    """The warning for plain http to a host that is not this machine (None for https or loopback)."""
+    if not api_base:
+        return None
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(api_base)
+        host = parts.hostname
+    except ValueError:
+        return None
+    if parts.scheme.lower() != "http" or is_loopback(host):
+        return None
+    what = f"the prompts, the images and the key in {key_variable}" if key_variable else "the prompts and the images"
+    return f"warning: --api-base {redact_url(api_base)} is plain http to another host: {what} travel unencrypted; use https"
 
 
 def check_model(model: str, name: str, api_base: str | None) -> str:
@@ -266,12 +328,18 @@ class APIBackend:
         transport: str = "litellm",
         max_image_bytes: int | None = None,
         streak: FailureStreak | None = None,
+        api_key_env: str | None = None,
     ) -> None:
         self.model_info = resolve(model) if isinstance(model, str) else model
         self.api_base = api_base
+        self.api_base_shown = redact_url(api_base)  # what messages and records show: no credentials
+        self.api_key_env = api_key_env
         self.model = litellm_model(self.model_info, api_base)
         self.provider = check_model(self.model, self.model_info.key, api_base)  # before the key: a typo is the first thing to say
-        self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base)
+        self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base, api_key_env)
+        #: one-line warnings for the caller to show once (plain http to another host)
+        self.notices: list[str] = [n for n in (insecure_endpoint(api_base, api_key_env or (
+            "the key passed" if api_key is not None and api_key != NO_KEY else None)),) if n]
         if not timeout or timeout <= 0:
             raise UserError(f"--timeout must be a positive number of seconds, got {timeout}")
         self.timeout = float(timeout)
@@ -286,12 +354,15 @@ class APIBackend:
                 raise UserError(f"max_image_bytes must be at least 1024, got {max_image_bytes}")
             limit_b64 = int(max_image_bytes)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
-        self._secrets = tuple(s for s in (*_secret_values(), self._api_key or "") if s and s != NO_KEY)
+        self._secrets = tuple(s for s in (*url_secrets(api_base), *_secret_values(), self._api_key or "") if s and s != NO_KEY)
         self._price = price_per_token(self.model_info)
         self._cache_price = cache_price_per_token(self.model_info)
         self._litellm_prices = True  # switched off after litellm fails to price this model once
         self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
         self.transport = transport
+        # user:password@ in --api-base: sent as Basic auth (the URL litellm gets carries none)
+        self._litellm_base, basic = split_credentials(api_base) if api_base else (api_base, None)
+        self._litellm_extra: dict[str, Any] = {"extra_headers": {"Authorization": basic}} if basic else {}
         self._http = None
         if transport == "direct":
             if not api_base or _provider(self.model) not in OPENAI_COMPATIBLE:
@@ -322,7 +393,7 @@ class APIBackend:
         """
         if self.api_base and self.provider in OPENAI_COMPATIBLE:
             return {"mechanism": "response_format json_schema (strict), enforced by the OpenAI-compatible server at "
-                                 f"{self.api_base}", "pair_count_enforced": True}
+                                 f"{self.api_base_shown}", "pair_count_enforced": True}
         if not litellm.supports_response_schema(model=self.model):
             raise UserError(f"--answer-format structured: litellm {_litellm_version()} does not mark {self.model} as able to "
                             "follow a JSON schema (it would only paste the schema into the prompt); use --answer-format text "
@@ -351,7 +422,8 @@ class APIBackend:
             "kind": "api",
             "transport": self.transport,
             "model": self.model,
-            "api_base": self.api_base,
+            "api_base": self.api_base_shown,
+            "api_key_env": self.api_key_env,
             "registry": self.model_info.to_dict(),
             "litellm_version": _litellm_version(),
             "token_counting": "provider-reported usage (prompt_tokens / completion_tokens)",
@@ -416,7 +488,7 @@ class APIBackend:
 
         key = None
         if self.cache is not None and params.get("temperature", None) == 0:
-            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns, req.attempt)
+            key = request_key(self.model, self.api_base_shown, params, req.text, digest, req.turns, req.attempt)
             hit = self.cache.get(key)
             if hit is not None:
                 return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],
@@ -476,14 +548,17 @@ class APIBackend:
                              cause="provider-error", error=err)
 
     def _key_variables(self) -> str:
-        if self.api_base and self.provider in OPENAI_COMPATIBLE:
-            return f"OPENAI_API_KEY (sent to {self.api_base})"
+        if self.api_key_env:
+            return f"{self.api_key_env} (sent to {self.api_base_shown})"
+        if self.api_base and not is_provider_host(self.provider, self.api_base):
+            return (f"a variable named with --api-key-env NAME (no provider key is sent to --api-base {self.api_base_shown} "
+                    "unless you name its variable)")
         names = PROVIDER_KEYS.get(self.provider or "")
         return " or ".join(names) if names else "the provider's API key variable"
 
     def _fatal(self, err: str, message: str, *, frames: int | None = None, stage: str | None = None) -> RunFatalError:
         """The run-fatal error for ``err``: one line with what happened and what to do about it."""
-        where = f"--api-base {self.api_base}" if self.api_base else f"{self.provider or 'the provider'}"
+        where = f"--api-base {self.api_base_shown}" if self.api_base else f"{self.provider or 'the provider'}"
         seen = f" on {frames} frames in a row ({stage} stage), nothing succeeding in between" if frames else ""
         what = f"{self.model}: {err}: {message}"
         if err == "AuthenticationError":
@@ -535,8 +610,8 @@ class APIBackend:
             cost = self._direct_cost(usage)
         else:
             response = await litellm.acompletion(
-                model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
-                timeout=self.timeout, num_retries=0, max_retries=0, **params,
+                model=self.model, messages=messages, api_base=self._litellm_base, api_key=self._api_key,
+                timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **params,
             )
             usage = _usage(getattr(response, "usage", None), self.provider)
             choices = getattr(response, "choices", None) or [None]

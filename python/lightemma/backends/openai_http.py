@@ -17,6 +17,8 @@ from typing import Any
 
 import aiohttp
 
+MAX_BODY_BYTES = 8 << 20  # the largest response body read (a chat completion is a few KiB); beyond it the call fails
+
 
 class HTTPCallError(Exception):
     """A failed call; subclasses carry litellm's error class names. ``headers`` holds the response headers."""
@@ -61,11 +63,17 @@ def _error_for(status: int, headers: Mapping[str, str], body: bytes) -> HTTPCall
 class OpenAIHTTPClient:
     """POSTs ``/chat/completions`` under ``api_base``; one aiohttp session per event loop."""
 
-    def __init__(self, api_base: str, api_key: str | None, timeout: float) -> None:
-        self.url = api_base.rstrip("/") + "/chat/completions"
+    def __init__(self, api_base: str, api_key: str | None, timeout: float, max_body: int = MAX_BODY_BYTES) -> None:
+        from lightemma.backends.retry import split_credentials
+
+        base, basic = split_credentials(api_base)  # user:password@ in the URL: sent as Basic auth, never in the URL
+        self.url = base.rstrip("/") + "/chat/completions"
         self._headers = {"Content-Type": "application/json"}
-        if api_key:
+        if basic:
+            self._headers["Authorization"] = basic
+        elif api_key:
             self._headers["Authorization"] = f"Bearer {api_key}"
+        self.max_body = max_body
         self._timeout = aiohttp.ClientTimeout(total=timeout)
         self._session: aiohttp.ClientSession | None = None
         self._loop: asyncio.AbstractEventLoop | None = None

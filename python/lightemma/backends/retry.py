@@ -65,6 +65,65 @@ def short_message(exc: BaseException, limit: int = 300, secrets: tuple[str, ...]
     return text[:limit] + ("…" if len(text) > limit else "")
 
 
+_SECRET_QUERY = re.compile(r"(?i)(key|token|secret|passw|auth|sig|credential)")
+
+
+def redact_url(url: str | None) -> str | None:
+    """``url`` as it may be shown or recorded: credentials in it (``user:pw@``) and secret-named query
+    values (``?api_key=…``, ``token``, ``sig``, …) replaced by ``***``; anything else as given."""
+    if not url:
+        return url
+    from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
+
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return _SECRETISH.sub("***", url.split("@")[-1])
+    netloc = parts.netloc
+    if "@" in netloc:
+        netloc = "***@" + netloc.rsplit("@", 1)[1]
+    query = parts.query
+    if query:
+        pairs = parse_qsl(query, keep_blank_values=True)
+        query = urlencode([(k, "***" if _SECRET_QUERY.search(k) else v) for k, v in pairs], safe="*")
+    return urlunsplit((parts.scheme, netloc, parts.path, query, parts.fragment))
+
+
+def split_credentials(url: str) -> tuple[str, str | None]:
+    """``url`` without its user info, and that user info as an HTTP ``Authorization: Basic`` value (None if none)."""
+    import base64
+    from urllib.parse import unquote, urlsplit, urlunsplit
+
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return url, None
+    if "@" not in parts.netloc:
+        return url, None
+    userinfo, host = parts.netloc.rsplit("@", 1)
+    user, _, password = userinfo.partition(":")
+    token = base64.b64encode(f"{unquote(user)}:{unquote(password)}".encode()).decode("ascii")
+    return urlunsplit((parts.scheme, host, parts.path, parts.query, parts.fragment)), f"Basic {token}"
+
+
+def url_secrets(url: str | None) -> tuple[str, ...]:
+    """The credentials a URL carries (its user info, password and secret-named query values), to scrub from messages."""
+    if not url:
+        return ()
+    from urllib.parse import parse_qsl, unquote, urlsplit
+
+    try:
+        parts = urlsplit(url)
+    except ValueError:
+        return ()
+    out: list[str] = []
+    if "@" in parts.netloc:
+        userinfo = parts.netloc.rsplit("@", 1)[0]
+        out += [userinfo, unquote(userinfo), *[unquote(x) for x in userinfo.split(":", 1)]]
+    out += [v for k, v in parse_qsl(parts.query, keep_blank_values=True) if _SECRET_QUERY.search(k) and v]
+    return tuple(sorted({s for s in out if len(s) >= 3}, key=len, reverse=True))
+
+
 def retry_after_seconds(exc: BaseException) -> float | None:
     """The server's ``Retry-After`` (seconds) carried by a rate-limit or 5xx error, if any.
 

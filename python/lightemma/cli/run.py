@@ -20,7 +20,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or baseline:constant|cv|oracle")
     p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")
-    p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1)")
+    p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1); no provider key "
+                   "is sent there unless --api-key-env names one")
+    p.add_argument("--api-key-env", metavar="NAME", help="the environment variable holding the key to send (to --api-base, "
+                   "or to the provider); default: the provider's own variable, sent only to the provider's own host")
     data = p.add_argument_group("frames")
     data.add_argument("--dataroot", help="nuScenes directory")
     data.add_argument("--version", help="nuScenes version (default v1.0-test, the paper's set)")
@@ -93,7 +96,8 @@ RUN_DEFAULTS: dict[str, object] = {
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
-                  "replicas", "ray_address", "gpus_per_replica"}  # where the model runs, not what it is asked
+                  "replicas", "ray_address", "gpus_per_replica",  # where the model runs, not what it is asked
+                  "api_base", "api_key_env", "cache"}  # where requests, keys and writes go: the user's word, not the manifest's
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
@@ -160,7 +164,8 @@ def main(args: argparse.Namespace) -> int:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
                         concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
-                        gpus_per_replica=args.gpus_per_replica)
+                        gpus_per_replica=args.gpus_per_replica, api_base=args.api_base, api_key_env=args.api_key_env,
+                        cache=args.cache)
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")
@@ -186,7 +191,7 @@ def main(args: argparse.Namespace) -> int:
             integrate_method=settings["integrate"], speed_range=tuple(settings["speed_range"]),
             max_abs_curvature=settings["max_curvature"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
-            cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
+            cache=args.cache, transport=settings["transport"], api_key_env=args.api_key_env, progress=progress, log=stderr_log,
             backend_options=options, on_bad_record=settings["on_bad_record"],
             replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
             chain=settings["chain"], answer_format=settings["answer_format"],

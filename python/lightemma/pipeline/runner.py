@@ -54,6 +54,7 @@ from lightemma.runs.store import (
 )
 
 Log = Callable[[str], None]
+DEFAULT_CACHE = "cache.sqlite"  # the response cache's default place, relative to the output directory
 
 
 @dataclass
@@ -111,11 +112,16 @@ def _structured_output(backend: Backend, policy: ChainPolicy) -> dict[str, Any] 
     return {**check(), "schema": ACTIONS_SCHEMA.as_dict(), "parse_mode": policy.parse_mode}
 
 
-def _make_backend(config: dict[str, Any], output: Path) -> Backend:
-    """The backend a run's config names; checks the API key before anything else happens."""
+def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = None, log: Log | None = None) -> Backend:
+    """The backend a run's config names; checks the API key before anything else happens.
+
+    ``api_base`` is the endpoint as the user gave it (the config records it without credentials).
+    """
     kind = backend_kind(config["model"], config["backend"], config["api_base"])
     options = dict(config.get("backend_options") or {})
     if kind == "api":
+        if config.get("api_key_env"):
+            options["api_key_env"] = config["api_key_env"]
         from lightemma.backends.retry import RetryPolicy
         from lightemma.cache import ResponseCache
 
@@ -127,7 +133,56 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
         )
     replicas = {"replicas": config.get("replicas") or 1, "ray_address": config.get("ray_address"),
                 "gpus_per_replica": config.get("gpus_per_replica")}
-    return create_backend(config["model"], backend=kind, api_base=config["api_base"], **replicas, **options)
+    backend = create_backend(config["model"], backend=kind, api_base=api_base, **replicas, **options)
+    for notice in getattr(backend, "notices", ()):
+        if log:
+            log(notice)
+        else:
+            import warnings
+
+            warnings.warn(notice, stacklevel=3)
+    return backend
+
+
+def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | None, api_key_env: str | None,
+                      cache: str | bool | None) -> None:
+    """Refuse to resume a run whose manifest would choose where requests, keys or writes go.
+
+    A run directory may come from someone else: its endpoint (``api_base``), its key variable
+    (``api_key_env``) and its response cache path must be the ones the user gives now (``--api-base``,
+    ``--api-key-env``, ``--cache``), or the resume is refused in one line. Nothing is shown or asked.
+    """
+    from lightemma.backends.retry import redact_url
+
+    recorded = config.get("api_base")
+    if (redact_url(api_base) or None) != (recorded or None):
+        if recorded and not api_base:
+            why = (f"this run was made against an --api-base endpoint ({recorded}); a run directory does not choose where "
+                   "requests and keys go: resume it with the same --api-base URL")
+        elif not recorded:
+            why = "this run was not made against an --api-base endpoint; drop --api-base"
+        else:
+            why = f"the --api-base given is not the run's endpoint ({recorded}); give the run's own, or start a new run"
+        raise UserError(f"{run_dir}: {why}")
+    if (config.get("api_key_env") or None) != (api_key_env or None):
+        named = config.get("api_key_env")
+        why = (f"this run sent the key in --api-key-env {named}; resume it with the same --api-key-env" if named and not api_key_env
+               else "the --api-key-env given is not the run's; give the run's own (or none if it had none)")
+        raise UserError(f"{run_dir}: {why}")
+    recorded_cache = config.get("cache")
+    output = run_dir.parent.parent
+    if recorded_cache is None:
+        if cache:
+            raise UserError(f"{run_dir}: this run kept no response cache; drop --cache")
+        return
+    want = (output / recorded_cache if not os.path.isabs(recorded_cache) else Path(recorded_cache)).resolve()
+    if cache is None or cache is False:
+        raise UserError(f"{run_dir}: this run kept a response cache ({want}), outside the run directory; a run directory "
+                        f"does not choose where lightemma writes: resume it with --cache {want}"
+                        + (" (or --cache, the default place)" if recorded_cache == DEFAULT_CACHE else ""))
+    given = (output / DEFAULT_CACHE if cache is True else Path(cache)).resolve()
+    if given != want:
+        raise UserError(f"{run_dir}: the --cache given ({given}) is not the run's response cache ({want}); give the run's own")
 
 
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
@@ -359,6 +414,7 @@ def run(
     tpm: float | None = None,
     cache: str | bool | None = None,
     transport: str = "litellm",
+    api_key_env: str | None = None,
     backend_options: dict[str, Any] | None = None,
     replicas: int = 1,
     ray_address: str | None = None,
@@ -398,14 +454,16 @@ def run(
         raise UserError("backend_options are recorded in the run manifest, so they cannot carry an api_key; "
                         "set the provider's environment variable instead")
     info = resolve(model)
+    from lightemma.backends.retry import redact_url
+
     config: dict[str, Any] = {
-        "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
+        "model": model, "backend": backend, "api_base": redact_url(api_base), "api_key_env": api_key_env, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
         "speed_range": None if speed_range is None else [float(x) for x in speed_range],
         "max_abs_curvature": None if max_abs_curvature is None else float(max_abs_curvature),
         "chain": chain, "answer_format": answer_format, "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
-        "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
+        "cache": (DEFAULT_CACHE if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
         "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica,
     }
     if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
@@ -416,7 +474,7 @@ def run(
         raise UserError(str(exc)) from None
     prompts = load_prompt_set(prompt_set).select(policy.chain, policy.answer_format)
     output = Path(output)
-    instance = _make_backend(config, output)
+    instance = _make_backend(config, output, api_base, log)
     dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
                "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit,
                "on_bad_record": on_bad_record}
@@ -458,7 +516,8 @@ def run(
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
            concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
-           gpus_per_replica: float | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
+           gpus_per_replica: float | None = None, api_base: str | None = None, api_key_env: str | None = None,
+           cache: str | bool | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
@@ -471,12 +530,17 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     makes this raise :class:`~lightemma.errors.RunStoreError` (naming its PID).
     ``concurrency``, ``replicas``, ``ray_address`` and ``gpus_per_replica`` replace the run's own
     for this session (where the model runs, not what it is asked).
+
+    The manifest never chooses where requests, keys or writes go: ``api_base``, ``api_key_env`` and
+    ``cache`` must be given as the run had them (its endpoint, key variable and response cache), else a
+    one-line :class:`~lightemma.errors.UserError` before anything is sent or written.
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     config = dict(manifest.get("config") or {})
     if not config.get("model"):
         raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
+    _trusted_settings(run_dir, config, api_base, api_key_env, cache)
     if concurrency is not None:
         if concurrency < 1:
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -493,7 +557,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                         f"(run: {run_hash}, now: {now_hash}); start a new run instead of resuming")
     with RunLock(run_dir):  # before anything is read for the todo list: a second writer would redo the same frames
         manifest = read_manifest(run_dir)  # as the last writer left it
-        instance = _make_backend(config, run_dir.parent.parent)
+        instance = _make_backend(config, run_dir.parent.parent, api_base, log)
         try:
             _structured_output(instance, _policy(config))
             dataset = dict(config.get("dataset") or {})
