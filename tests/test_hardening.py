@@ -241,3 +241,132 @@ def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, fr
 
         resume(run_dir, frames=frames, api_base=server.url, cache=str(wanted), progress=False)
         assert wanted.exists() and len(read_run(run_dir).records) == 3
+
+
+# -- 25.10: SIGTERM and SIGHUP stop a run like Ctrl-C ------------------------------------------------------
+
+
+def wait_for(predicate, seconds: float, what: str) -> None:
+    deadline = time.monotonic() + seconds
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def run_dirs(out: Path) -> list[Path]:
+    return [p.parent for p in out.rglob("manifest.json") if not any(x.startswith(".") for x in p.relative_to(out).parts)]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_stop_a_run_like_ctrl_c(tmp_path, synth_root, signum):
+    from lightemma.runs.store import LOCK_PID_FILE, read_manifest
+
+    out = tmp_path / "out"
+    with FakeOpenAIServer(latency=0.2) as server:
+        proc = subprocess.Popen([sys.executable, "-m", "lightemma", "run", "--model", "openai/test-model", "--api-base",
+                                 server.url, "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
+                                 "--concurrency", "2", "--output", str(out), "--no-progress"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
+        try:
+            wait_for(lambda: any((d / "frames.jsonl").stat().st_size for d in run_dirs(out)), 60, "a first frame")
+            proc.send_signal(signum)
+            _, err = proc.communicate(timeout=20)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 128 + signum, err
+    name = signal.Signals(signum).name
+    assert f"interrupted by {name}" in err and "--resume" in err and "Traceback" not in err, err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists()
+    (session,) = read_manifest(run_dir)["sessions"]
+    assert session["interrupted"] is True and session["signal"] == name and session["wall_seconds"] > 0
+
+
+# -- 25.2: a local generate that hangs neither freezes the run nor survives Ctrl-C -------------------------
+
+
+HANG = """
+import sys, threading
+from lightemma.backends import hf
+hf.HFBackend._generate = lambda self, requests: threading.Event().wait()  # never returns, ignores every criterion
+from lightemma.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.fixture(scope="module")
+def tiny_qwen(tmp_path_factory):
+    from local_models import build_tiny_model
+
+    return build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_hang"))
+
+
+def hf_run(tiny_qwen, synth_root, out, *extra):
+    return subprocess.Popen([sys.executable, "-c", HANG, "run", "--model", str(tiny_qwen), "--backend", "hf", "--device", "cpu",
+                             "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "2",
+                             "--output", str(out), "--no-progress", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
+
+
+def test_a_hung_local_generate_stops_the_run_at_the_timeout_resumable(tmp_path, synth_root, tiny_qwen):
+    from lightemma.runs.store import LOCK_PID_FILE, read_manifest
+
+    out = tmp_path / "out"
+    proc = hf_run(tiny_qwen, synth_root, out, "--timeout", "1")
+    try:
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 2, err
+    lines = [line for line in err.splitlines() if "error" in line]
+    assert len(lines) == 1 and "did not finish a batch within --timeout 1 s" in lines[0] and "--resume" in lines[0], err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists()
+    assert read_manifest(run_dir)["sessions"][0]["stopped"]["cause"] == "local-timeout"
+
+
+@pytest.mark.parametrize("twice", [False, True])
+def test_ctrl_c_stops_a_hung_local_generate_and_a_second_one_exits_at_once(tmp_path, synth_root, tiny_qwen, twice):
+    from lightemma.runs.store import LOCK_PID_FILE
+
+    out = tmp_path / "out"
+    proc = hf_run(tiny_qwen, synth_root, out, "--timeout", "600")
+    try:
+        wait_for(lambda: any((d / LOCK_PID_FILE).exists() for d in run_dirs(out)), 120, "the run to start")
+        time.sleep(1.0)  # the worker is now inside the hung generate
+        proc.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        if twice:
+            time.sleep(0.5)
+            proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        elapsed = time.monotonic() - start
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert elapsed < (3 if twice else 15), elapsed
+    assert "--resume" in err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists()
+
+
+def test_a_local_generate_past_the_timeout_fails_its_batch_as_timeout(tiny_qwen, tmp_path):
+    from PIL import Image
+
+    from lightemma.backends import ChatRequest, GenerationParams
+    from lightemma.backends.hf import HFBackend
+
+    image = tmp_path / "cam.jpg"
+    Image.new("RGB", (32, 32), (10, 20, 30)).save(image)
+    backend = HFBackend(str(tiny_qwen), device="cpu", timeout=0.5)
+    request = ChatRequest(text="describe", stage="scene", frame_id="s/0", image_path=str(image),
+                          params=GenerationParams(max_tokens=1_000_000))  # babble: it would never end
+    start = time.monotonic()
+    (result,) = asyncio.run(backend.generate([request]))
+    assert time.monotonic() - start < 10
+    assert result.error == "Timeout" and result.text is None
+    asyncio.run(backend.aclose())

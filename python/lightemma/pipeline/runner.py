@@ -25,10 +25,13 @@ from __future__ import annotations
 import asyncio
 import os
 import platform
+import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -44,6 +47,7 @@ from lightemma.prompts import DEFAULT_PROMPT_SET, PromptSet, load_prompt_set
 from lightemma.registry import resolve
 from lightemma.runs.store import (
     FRAMES_FILE,
+    LOCK_PID_FILE,
     RunLock,
     RunWriter,
     create_run_dir,
@@ -133,6 +137,8 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
         )
     replicas = {"replicas": config.get("replicas") or 1, "ray_address": config.get("ray_address"),
                 "gpus_per_replica": config.get("gpus_per_replica")}
+    if kind == "hf" and replicas["replicas"] == 1 and replicas["ray_address"] is None and config.get("timeout"):
+        options.setdefault("timeout", config["timeout"])  # a deadline per batch (docs/run.md#when-a-run-cannot-succeed)
     backend = create_backend(config["model"], backend=kind, api_base=api_base, **replicas, **options)
     for notice in getattr(backend, "notices", ()):
         if log:
@@ -222,6 +228,49 @@ def _head(frames: Any, limit: int | None) -> Sequence[Any]:
 def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
     described = dict(frames.describe()) if hasattr(frames, "describe") else {}
     return {**described, **{k: v for k, v in dataset.items() if v is not None}, "n_frames": len(frames)}
+
+
+class Interrupted(KeyboardInterrupt):
+    """A session stopped by SIGINT, SIGTERM or SIGHUP: all three are handled like Ctrl-C (``signum``, ``name``)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        super().__init__(self.name)
+
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+@contextmanager
+def _stop_signals(run_dir: Path) -> Iterator[None]:
+    """While a session runs: SIGINT, SIGTERM and SIGHUP (what Slurm, Kubernetes and systemd send first) stop it like
+    Ctrl-C — the frames in flight are cut off, the session's wall time is recorded, the lock is released. A second
+    signal while that is under way exits at once (status 128 + signal): the frames written are whole lines, the OS
+    lock dies with the process, and ``.lock.pid`` is removed first."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def handler(signum: int, frame: Any) -> None:
+        received.append(signum)
+        if len(received) > 1:
+            try:
+                (run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
+            except OSError:
+                pass
+            os.write(2, f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
+                        f"Continue with: lightemma run --resume {run_dir}\n".encode())
+            os._exit(128 + signum)
+        raise Interrupted(signum)
+
+    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
 
 
 class _Stopped(Exception):
@@ -338,25 +387,29 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
         raise RunStoreError(os_error_line(exc, "open the frame records") + f"; continue later with: lightemma run --resume {run_dir}") from None
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
-    try:
-        with writer:
-            if todo:
-                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar, earlier or {}))
-            else:
-                outcome = _Outcome()
-                asyncio.run(backend.aclose())
-    except KeyboardInterrupt:
-        # the session's time is known: record it, so the run's wall time stays the sum of its sessions
-        sessions[-1].update(interrupted=True, wall_seconds=round(time.perf_counter() - start, 3))
+    with _stop_signals(run_dir):
         try:
-            update_manifest(run_dir, sessions=sessions)
-        except OSError:
-            pass  # the frames are safe; the run's wall time will just be unknown
-        if log:
-            log(f"interrupted; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
-        raise
-    finally:
-        bar.close()
+            with writer:
+                if todo:
+                    outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar, earlier or {}))
+                else:
+                    outcome = _Outcome()
+                    asyncio.run(backend.aclose())
+        except KeyboardInterrupt as exc:
+            # the session's time is known: record it, so the run's wall time stays the sum of its sessions
+            sessions[-1].update(interrupted=True, wall_seconds=round(time.perf_counter() - start, 3))
+            if isinstance(exc, Interrupted):
+                sessions[-1]["signal"] = exc.name
+            try:
+                update_manifest(run_dir, sessions=sessions)
+            except OSError:
+                pass  # the frames are safe; the run's wall time will just be unknown
+            if log:
+                how = f" by {exc.name}" if isinstance(exc, Interrupted) else ""
+                log(f"interrupted{how}; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+            raise
+        finally:
+            bar.close()
     wall = time.perf_counter() - start
     contents = read_run(run_dir)
     summary = summarize(_in_set(contents.records, read_frame_ids(run_dir)), wall_seconds=wall, frames_run=outcome.done)
