@@ -370,3 +370,48 @@ def test_a_local_generate_past_the_timeout_fails_its_batch_as_timeout(tiny_qwen,
     assert time.monotonic() - start < 10
     assert result.error == "Timeout" and result.text is None
     asyncio.run(backend.aclose())
+
+
+# -- 25.13: a failure tied to some frames does not stop the run ----------------------------------------------
+
+
+def scenes_in_order(tmp_path, first: int, second: int):
+    """Frames of scene A (``first`` of them) and then scene B, in that order (as a dataset lists them)."""
+    import dataclasses
+
+    frames = make_frames(tmp_path, first + second)
+    out = []
+    for i, f in enumerate(frames):
+        scene = "scene-A" if i < first else "scene-B"
+        out.append(dataclasses.replace(f, scene_name=scene, frame_id=f"{scene}/{f.sample_token}"))
+    return out
+
+
+def test_a_provider_rejecting_one_scenes_images_does_not_stop_the_run(tmp_path):
+    from memframes import FrameIndex
+
+    frames = scenes_in_order(tmp_path, 5, 3)
+    index = FrameIndex(frames)
+
+    def script(req):
+        if index(req) < 5:
+            return Reply.error(400, "Invalid image: the image could not be processed")
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
+                     max_attempts=2, **FAST)
+    records = read_run(result.run_dir).records
+    assert [records[f.frame_id]["status"] for f in frames] == ["failed"] * 5 + ["ok"] * 3
+    assert all(records[f.frame_id]["error"] == "BadRequestError" for f in frames[:5])
+
+
+def test_the_same_rejection_across_scenes_still_stops_the_run(tmp_path):
+    from lightemma.errors import RunStopped
+
+    frames = scenes_in_order(tmp_path, 4, 3)
+    with FakeOpenAIServer(lambda req: Reply.error(400, "max_tokens is too large")) as server:
+        with pytest.raises(RunStopped, match="every request is rejected the same way"):
+            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
+                max_attempts=2, **FAST)
+        assert len(server.requests) <= 2 * 5  # stopped at the first frame of the second scene

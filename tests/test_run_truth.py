@@ -84,7 +84,8 @@ def assert_resumes_to_the_end(capsys, run_dir, switch):
     before = read_run(run_dir)
     assert not before.complete and not before.truncated_tail and not before.corrupt_lines
     switch.fixed = True
-    code, out, errors = run_cli(capsys, "--resume", run_dir, "--no-progress")
+    endpoint = read_manifest(run_dir)["config"]["api_base"]  # the user names the run's endpoint again
+    code, out, errors = run_cli(capsys, "--resume", run_dir, "--api-base", endpoint, "--no-progress")
     assert code == 0 and not errors, errors
     after = read_run(run_dir)
     assert after.complete and len(after.records) == N_FRAMES and after.duplicates == 0
@@ -356,8 +357,8 @@ def test_a_second_writer_is_refused_naming_the_holders_pid(tmp_path, capsys):
         result = run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 2), output=tmp_path, progress=False)
         with RunLock(result.run_dir):
             with pytest.raises(RunStoreError, match=f"another lightemma process \\(PID {os.getpid()}\\)"):
-                resume(result.run_dir, frames=make_frames(tmp_path, 2), progress=False)
-        resume(result.run_dir, frames=make_frames(tmp_path, 2), progress=False)  # released: fine again
+                resume(result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False)
+        resume(result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False)  # released: fine again
 
 
 def test_a_second_process_on_a_run_being_written_is_refused_and_the_first_finishes_alone(tmp_path, synth_root):
@@ -375,7 +376,8 @@ def test_a_second_process_on_a_run_being_written_is_refused_and_the_first_finish
             while not read_run(run_dir).records and time.monotonic() < deadline:
                 time.sleep(0.05)  # writing for sure
             calls_before = len(server.requests)
-            second = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--no-progress"],
+            second = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base",
+                                     server.url, "--no-progress"],
                                     capture_output=True, text=True, timeout=120)
             stdout, stderr = first.communicate(timeout=120)
         finally:

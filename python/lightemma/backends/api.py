@@ -531,7 +531,8 @@ class APIBackend:
     def _observe(self, req: ChatRequest, result: ChatResult) -> ChatResult:
         """Feed the call's outcome to the failure streak; raise :class:`RunFatalError` when the run cannot succeed."""
         signature = None if result.ok else failure_signature(result.error or "Error", result.error_message)
-        frames = self.streak.observe(req.stage, req.frame_id, signature)
+        scene = getattr(req.frame, "scene_name", None) if req.frame is not None else None
+        frames = self.streak.observe(req.stage, req.frame_id, signature, scene=scene if isinstance(scene, str) else None)
         if frames is not None:
             raise self._fatal(result.error or "Error", result.error_message or "", frames=frames, stage=req.stage)
         return result

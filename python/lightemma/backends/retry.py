@@ -219,6 +219,12 @@ class FailureStreak:
     provider call rejects), or ``warm`` distinct frames once something has worked (a key that
     ran out, a server that went down), makes :meth:`observe` return the number of frames.
     Re-asks of one frame count once, so a frame whose own image is rejected never stops a run.
+
+    A request error whose wording may be about the request's own content (:data:`_WORDED`: a rejected
+    image, a content policy) can be tied to particular frames rather than to the run — a provider that
+    rejects the images of one scene only. Such a group is fatal only once its frames span two scenes
+    (when the callers say which scene a frame is of): otherwise the run goes on past those frames
+    (they end ``failed`` with the provider's message), and a resume does too.
     """
 
     def __init__(self, cold: int = 3, warm: int = 5) -> None:
@@ -227,15 +233,23 @@ class FailureStreak:
         self.cold = cold
         self.warm = warm
         self.succeeded = False
-        self._groups: dict[str, dict[tuple[str, str], set[str]]] = {}
+        self._groups: dict[str, dict[tuple[str, str], dict[str, str | None]]] = {}
 
-    def observe(self, stage: str, frame_id: str, signature: tuple[str, str] | None) -> int | None:
-        """Record one call's outcome (``signature`` None = success); the streak's frame count when it is fatal."""
+    def observe(self, stage: str, frame_id: str, signature: tuple[str, str] | None, scene: str | None = None) -> int | None:
+        """Record one call's outcome (``signature`` None = success); the streak's frame count when it is fatal.
+
+        ``scene``: the frame's scene, where known (see the class docstring).
+        """
         if signature is None:
             self.succeeded = True
             self._groups.pop(stage, None)
             return None
-        frames = self._groups.setdefault(stage, {}).setdefault(signature, set())
-        frames.add(frame_id)
+        frames = self._groups.setdefault(stage, {}).setdefault(signature, {})
+        frames[frame_id] = scene
         need = self.warm if self.succeeded else self.cold
-        return len(frames) if len(frames) >= need else None
+        if len(frames) < need:
+            return None
+        scenes = set(frames.values())
+        if signature[0] in _WORDED and None not in scenes and len(scenes) < 2:
+            return None  # maybe tied to this scene's frames, not to the run
+        return len(frames)
