@@ -415,3 +415,60 @@ def test_the_same_rejection_across_scenes_still_stops_the_run(tmp_path):
             run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
                 max_attempts=2, **FAST)
         assert len(server.requests) <= 2 * 5  # stopped at the first frame of the second scene
+
+
+# -- 25.8: a response cache that cannot write is reported once; the run goes on ----------------------------
+
+
+def test_a_locked_response_cache_is_reported_in_one_line_and_the_run_goes_on_uncached(tmp_path, frames, monkeypatch):
+    import sqlite3
+
+    from lightemma import cache as cache_module
+    from lightemma.runs.store import read_manifest
+
+    monkeypatch.setattr(cache_module, "BUSY_TIMEOUT", 0.2)
+    path = tmp_path / "out" / "cache.sqlite"
+    holder: list[sqlite3.Connection] = []
+    lines: list[str] = []
+
+    def script(req):
+        if not holder:  # another writer takes the database once the run has it open
+            db = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+            db.execute("BEGIN EXCLUSIVE")
+            holder.append(db)
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", cache=True,
+                     log=lines.append, **FAST)
+    holder[0].close()
+    warnings = [line for line in lines if "response cache" in line]
+    assert len(warnings) == 1 and "database is locked" in warnings[0] and "without caching" in warnings[0], lines
+    assert result.summary["ok"] == len(frames)
+    assert "database is locked" in read_manifest(result.run_dir)["sessions"][0]["cache_failure"]
+
+
+# -- 25.9: a response body has a size limit -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(transport):
+    from fake_openai import SCENE_TEXT
+
+    from lightemma.backends import ChatRequest, create_backend
+    from lightemma.backends.openai_http import MAX_BODY_BYTES
+    from lightemma.backends.retry import RetryPolicy
+
+    huge = Reply("x" * (MAX_BODY_BYTES + 1000))
+    with FakeOpenAIServer([huge, Reply(SCENE_TEXT)]) as server:
+        backend = create_backend("openai/test-model", api_base=server.url, transport=transport,
+                                 retry=RetryPolicy(max_retries=2, base=0.01, cap=0.05))
+
+        async def two():
+            req = ChatRequest(text="describe", stage="scene", frame_id="s/a")
+            return [(await backend.generate([req]))[0], (await backend.generate([req]))[0]]
+
+        big, small = asyncio.run(two())
+        asyncio.run(backend.aclose())
+    assert big.error == "ResponseTooLargeError" and big.retries == 0 and "bytes" in big.error_message
+    assert small.ok and small.text == SCENE_TEXT and len(server.requests) == 2

@@ -128,8 +128,9 @@ def test_the_same_invalid_request_on_every_frame_stops_the_run(tmp_path, synth_r
     with FakeOpenAIServer(switch) as server:
         code, _, errors = start(capsys, server, synth_root, tmp_path, transport=transport)
         assert code == 2 and len(errors) == 1, errors
-        assert "BadRequestError" in errors[0] and "image is too large" in errors[0] and "3 frames in a row" in errors[0]
-        assert len(server.requests) <= 2 * CONCURRENCY
+        assert "BadRequestError" in errors[0] and "image is too large" in errors[0] and "frames in a row" in errors[0]
+        # an image rejection may be tied to one scene's frames: it stops the run once it spans the second scene
+        assert len(server.requests) <= 5 * (N_FRAMES // 2 + CONCURRENCY)
         stopped = assert_resumes_to_the_end(capsys, only_run_dir(tmp_path), switch)
     assert stopped["cause"] == "invalid-request"
 

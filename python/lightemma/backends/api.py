@@ -364,6 +364,8 @@ class APIBackend:
         self._litellm_base, basic = split_credentials(api_base) if api_base else (api_base, None)
         self._litellm_extra: dict[str, Any] = {"extra_headers": {"Authorization": basic}} if basic else {}
         self._http = None
+        self._client: Any = None  # litellm transport: the bounded OpenAI client, per event loop
+        self._client_loop: Any = None
         if transport == "direct":
             if not api_base or _provider(self.model) not in OPENAI_COMPATIBLE:
                 raise UserError(f"transport 'direct' needs --api-base and an OpenAI-compatible model string (openai/NAME), got {self.model!r}")
@@ -552,8 +554,9 @@ class APIBackend:
         if self.api_key_env:
             return f"{self.api_key_env} (sent to {self.api_base_shown})"
         if self.api_base and not is_provider_host(self.provider, self.api_base):
-            return (f"a variable named with --api-key-env NAME (no provider key is sent to --api-base {self.api_base_shown} "
-                    "unless you name its variable)")
+            names = PROVIDER_KEYS.get(self.provider or "", ("OPENAI_API_KEY",))
+            return (f"a variable named with --api-key-env (e.g. --api-key-env {names[0]}): no provider key is sent to "
+                    f"--api-base {self.api_base_shown} unless its variable is named")
         names = PROVIDER_KEYS.get(self.provider or "")
         return " or ".join(names) if names else "the provider's API key variable"
 
@@ -610,10 +613,21 @@ class APIBackend:
             text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
             cost = self._direct_cost(usage)
         else:
-            response = await litellm.acompletion(
-                model=self.model, messages=messages, api_base=self._litellm_base, api_key=self._api_key,
-                timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **params,
-            )
+            from lightemma.backends.openai_http import ResponseTooLargeError, _guard
+
+            slot: dict[str, str] = {}
+            token = _guard().set(slot)
+            try:
+                response = await litellm.acompletion(
+                    model=self.model, messages=messages, api_base=self._litellm_base, api_key=self._api_key,
+                    timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **self._bounded_client(), **params,
+                )
+            except Exception:
+                if "too_large" in slot:
+                    raise ResponseTooLargeError(slot["too_large"]) from None
+                raise
+            finally:
+                _guard().reset(token)
             usage = _usage(getattr(response, "usage", None), self.provider)
             choices = getattr(response, "choices", None) or [None]
             text = getattr(getattr(choices[0], "message", None), "content", None)
@@ -629,6 +643,23 @@ class APIBackend:
             spent = f", {reasoning} reasoning tokens" if reasoning else ""
             return ChatResult(text=None, error="EmptyResponse", error_message=f"no answer text (finish_reason={finish}{spent})", **common)
         return ChatResult(text=str(text), **common)
+
+    def _bounded_client(self) -> dict[str, Any]:
+        """``client=``: litellm's OpenAI client over an httpx client that bounds response bodies (OpenAI-protocol
+        calls; one per event loop). Anthropic's and Gemini's native protocols go through litellm's own client."""
+        if self.provider != "openai":
+            return {}
+        loop = asyncio.get_running_loop()
+        if self._client_loop is not loop:
+            from openai import AsyncOpenAI
+
+            from lightemma.backends.openai_http import limited_httpx_client
+
+            key = self._api_key or os.environ.get("OPENAI_API_KEY") or NO_KEY
+            self._client = AsyncOpenAI(api_key=key, base_url=self._litellm_base or None, max_retries=0,
+                                       http_client=limited_httpx_client())
+            self._client_loop = loop
+        return {"client": self._client}
 
     def _litellm_cost(self, response: Any, usage: Usage) -> float | None:
         """Cost in US cents: what litellm priced the call at (its bundled list, cached tokens at their price), else
@@ -681,6 +712,10 @@ class APIBackend:
     async def aclose(self) -> None:
         if self._http is not None:
             await self._http.aclose()
+        if self._client is not None:
+            client, self._client, loop, self._client_loop = self._client, None, self._client_loop, None
+            if loop is asyncio.get_running_loop():
+                await client.close()
         if self.cache is not None:
             self.cache.close()
 

@@ -133,7 +133,7 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
         options.update(
             timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"], transport=config.get("transport", "litellm"),
             retry=RetryPolicy(max_retries=config["max_retries"], base=config["backoff_base"], cap=config["backoff_cap"]),
-            cache=ResponseCache(cache if os.path.isabs(cache) else output / cache) if cache else None,
+            cache=ResponseCache(cache if os.path.isabs(cache) else output / cache, log=log) if cache else None,
         )
     replicas = {"replicas": config.get("replicas") or 1, "ray_address": config.get("ray_address"),
                 "gpus_per_replica": config.get("gpus_per_replica")}
@@ -417,6 +417,9 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     replicas = getattr(backend, "replica_report", None)
     if replicas:
         sessions[-1]["replicas"] = replicas
+    failed_cache = getattr(getattr(backend, "cache", None), "failure", None)
+    if failed_cache:
+        sessions[-1]["cache_failure"] = failed_cache  # the session ran uncached from then on
     images = getattr(backend, "image_report", None)
     if images:
         sessions[-1]["images_reencoded"] = images
