@@ -472,3 +472,27 @@ def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(transport):
         asyncio.run(backend.aclose())
     assert big.error == "ResponseTooLargeError" and big.retries == 0 and "bytes" in big.error_message
     assert small.ok and small.text == SCENE_TEXT and len(server.requests) == 2
+
+
+# -- 22.5: --api-base checked at once ----------------------------------------------------------------------
+
+
+def closed_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]  # closed again: nothing listens there
+
+
+@pytest.mark.parametrize(("base", "words"), [("localhost:8000/v1", "needs a scheme"), ("http://127.0.0.1:99999/v1", "usable URL"),
+                                             ("http://127.0.0.1:PORT/v1", "cannot connect")])
+def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path, synth_root, capsys, base, words):
+    from lightemma.cli import main
+
+    base = base.replace("PORT", str(closed_port()))
+    code = main(["run", "--model", "openai/test-model", "--api-base", base, "--dataroot", str(synth_root), "--version",
+                 "v1.0-mini", "--split", "all", "--limit", "2", "--output", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and words in err, err
+    assert not (tmp_path / "out").exists()  # before any work: no run directory, no retries against a dead host

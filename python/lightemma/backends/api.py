@@ -139,6 +139,40 @@ def key_from_variable(name: str) -> str:
     return value
 
 
+CONNECT_TIMEOUT = 5.0  # seconds the --api-base reachability check waits for a TCP connection
+
+
+def check_api_base(api_base: str) -> tuple[str, int]:
+    """(host, port) of an ``--api-base`` URL, or a one-line :class:`UserError` for one without a scheme or host, or
+    with a bad port (credentials in it are never shown)."""
+    from urllib.parse import urlsplit
+
+    shown = redact_url(api_base)
+    try:
+        parts = urlsplit(api_base)
+        host, port = parts.hostname, parts.port
+    except ValueError as exc:
+        raise UserError(f"--api-base {shown!r} is not a usable URL ({exc}); give one like http://HOST:8000/v1") from None
+    if parts.scheme.lower() not in ("http", "https") or not host:
+        guess = f"http://{shown}" if "://" not in shown else shown
+        raise UserError(f"--api-base {shown!r} needs a scheme and a host (http:// or https://), e.g. {guess}")
+    return host, port or (443 if parts.scheme.lower() == "https" else 80)
+
+
+def check_reachable(api_base: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Refuse, in one line, an ``--api-base`` whose host does not accept a TCP connection within ``timeout`` s."""
+    import socket
+
+    host, port = check_api_base(api_base)
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as exc:
+        why = "no answer within " + f"{timeout:g} s" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise UserError(f"--api-base {redact_url(api_base)}: cannot connect to {host}:{port} ({why}); check that the "
+                        "server runs and the URL (scheme, host, port)") from None
+
+
 def is_provider_host(provider: str | None, api_base: str) -> bool:
     """True when ``api_base`` is ``provider``'s own API (https to one of :data:`PROVIDER_HOSTS`)."""
     from urllib.parse import urlsplit
@@ -331,6 +365,8 @@ class APIBackend:
         api_key_env: str | None = None,
     ) -> None:
         self.model_info = resolve(model) if isinstance(model, str) else model
+        if api_base:
+            check_api_base(api_base)
         self.api_base = api_base
         self.api_base_shown = redact_url(api_base)  # what messages and records show: no credentials
         self.api_key_env = api_key_env
@@ -376,6 +412,11 @@ class APIBackend:
             self._wire_model = self.model.split("/", 1)[1] if "/" in self.model else self.model
         elif transport != "litellm":
             raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
+
+    def check_endpoint(self) -> None:
+        """Before any work: the ``--api-base`` host accepts a connection (a one-line :class:`UserError` if not)."""
+        if self.api_base:
+            check_reachable(self.api_base)
 
     def _supports(self, param: str) -> bool:
         try:

@@ -537,6 +537,8 @@ def run(
     config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
         structured = _structured_output(instance, policy)
+        if hasattr(instance, "check_endpoint"):
+            instance.check_endpoint()  # a dead --api-base is refused now, not after minutes of retries
         if frames is None:
             frames = _load_frames(dataset)
         else:
@@ -616,6 +618,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         instance = _make_backend(config, run_dir.parent.parent, api_base, log)
         try:
             _structured_output(instance, _policy(config))
+            if hasattr(instance, "check_endpoint"):
+                instance.check_endpoint()
             dataset = dict(config.get("dataset") or {})
             if dataset.get("split") is None and not dataset.get("scenes"):
                 # the split the run resolved when it started, not today's default for the version
