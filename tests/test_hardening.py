@@ -115,7 +115,7 @@ def sent_secrets(server) -> set[str]:
 @pytest.mark.parametrize(("model", "openai_path"), [("gpt-4o", True), ("openai/test-model", True),
                                                     ("anthropic/claude-sonnet-4-6", False), ("gemini/gemini-2.5-flash", False)])
 @pytest.mark.parametrize("transport", ["litellm", "direct"])
-def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(monkeypatch, tmp_path, frames, model,
+def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(elsewhere, monkeypatch, tmp_path, frames, model,
                                                                              openai_path, transport):
     if transport == "direct" and not openai_path:
         pytest.skip("the direct transport speaks only the OpenAI protocol")
@@ -134,7 +134,7 @@ def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(mo
         assert sent_secrets(server) == set()
 
 
-def test_demo_with_an_api_base_sends_none_of_the_three_keys(monkeypatch, tmp_path):
+def test_demo_with_an_api_base_sends_none_of_the_three_keys(elsewhere, monkeypatch, tmp_path):
     from lightemma.demo import run_demo
 
     for name, value in KEYS.items():
@@ -202,7 +202,7 @@ def crafted_run(tmp_path, frames, server, **changes):
     return first.run_dir
 
 
-def test_resume_refuses_a_manifest_whose_endpoint_is_not_the_users(monkeypatch, tmp_path, frames, capsys):
+def test_resume_refuses_a_manifest_whose_endpoint_is_not_the_users(elsewhere, monkeypatch, tmp_path, frames, capsys):
     from lightemma.cli import main
 
     monkeypatch.setenv("OPENAI_API_KEY", KEYS["OPENAI_API_KEY"])
@@ -496,3 +496,34 @@ def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path,
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and words in err, err
     assert not (tmp_path / "out").exists()  # before any work: no run directory, no retries against a dead host
+
+
+# -- 22.5: a model served from --api-base is that server's: its protocol, no list price, no registry GPUs -------
+
+
+def test_a_registry_model_of_another_provider_at_an_api_base_speaks_openai_and_has_no_list_price(elsewhere, monkeypatch,
+                                                                                                 tmp_path, frames):
+    from lightemma.evaluation import evaluate_runs
+
+    monkeypatch.setenv("ANTHROPIC_API_KEY", KEYS["ANTHROPIC_API_KEY"])
+    with FakeOpenAIServer() as server:
+        plain = run("claude-4.6-sonnet", frames=frames[:2], api_base=server.url, output=tmp_path / "a", **FAST)
+        priced = run("gpt-4o", frames=frames[:2], api_base=server.url, output=tmp_path / "b", price=(1.0, 2.0), **FAST)
+    first = server.requests[0]
+    assert first.protocol == "openai" and first.body["model"] == "claude-sonnet-4-6" and sent_secrets(server) == set()
+    records = list(read_run(plain.run_dir).records.values())
+    assert all(r["status"] == "ok" and r["cost_cents"] is None for r in records)  # not Anthropic's list price
+    assert plain.manifest["model_info"]["input_usd_per_mtok"] is None and "unknown" in plain.manifest["backend"]["cost"]
+    for record in read_run(priced.run_dir).records.values():  # --price: 3 calls of 1000 in, 50 out
+        assert record["cost_cents"] == pytest.approx(3 * (1000 * 1.0 + 50 * 2.0) / 1e6 * 100)
+
+
+def test_a_local_model_served_from_an_api_base_shows_no_registry_gpu_count_unless_given(elsewhere, tmp_path, frames):
+    from lightemma.evaluation.manifest import _gpus
+    from lightemma.registry import lookup
+
+    assert lookup("qwen-2.5-vl-7b").gpus >= 1  # the paper's hardware
+    with FakeOpenAIServer() as server:
+        plain = run("qwen-2.5-vl-7b", frames=frames[:1], api_base=server.url, output=tmp_path / "a", **FAST)
+        given = run("qwen-2.5-vl-7b", frames=frames[:1], api_base=server.url, output=tmp_path / "b", gpus=4, **FAST)
+    assert _gpus(plain.manifest) is None and _gpus(given.manifest) == 4

@@ -66,6 +66,7 @@ from lightemma.registry import (
     ModelInfo,
     _litellm_entry,
     cache_price_per_token,
+    lookup,
     price_per_token,
     reasoning_budget,
     resolve,
@@ -97,9 +98,15 @@ FatalBackendError = RunFatalError
 
 
 def litellm_model(info: ModelInfo, api_base: str | None) -> str:
-    """The litellm model string for ``info``: local checkpoints behind ``--api-base`` go as ``openai/<id>``."""
+    """The litellm model string for ``info``: local checkpoints behind ``--api-base`` go as ``openai/<id>``, and so
+    does a registry model of another provider (Anthropic, Gemini) served at an ``--api-base`` that is not that
+    provider's own host: that server speaks the OpenAI-compatible protocol (``openai/claude-sonnet-4-6``)."""
     if api_base and info.backend in ("hf", "vllm"):
         return f"openai/{info.model_id}"
+    if api_base and info.backend == "api" and lookup(info.key) is not None:
+        native = _provider(info.model_id)
+        if native is not None and native not in OPENAI_COMPATIBLE and not is_provider_host(native, api_base):
+            return f"openai/{info.model_id.split('/', 1)[-1]}"
     return info.model_id
 
 
@@ -173,16 +180,35 @@ def check_reachable(api_base: str, timeout: float = CONNECT_TIMEOUT) -> None:
                         "server runs and the URL (scheme, host, port)") from None
 
 
+PROVIDER_HOSTS_ENV = "LIGHTEMMA_PROVIDER_HOSTS"
+
+
+def _extra_provider_hosts(provider: str) -> list[str]:
+    """Hosts the user declares to be ``provider``'s own (``LIGHTEMMA_PROVIDER_HOSTS=openai=gw.corp:8443,anthropic=…``):
+    a gateway trusted with the provider's key and billing at its list price."""
+    out = []
+    for item in os.environ.get(PROVIDER_HOSTS_ENV, "").split(","):
+        name, _, host = item.strip().partition("=")
+        if name.strip().lower() == provider and host.strip():
+            out.append(host.strip().lower())
+    return out
+
+
 def is_provider_host(provider: str | None, api_base: str) -> bool:
-    """True when ``api_base`` is ``provider``'s own API (https to one of :data:`PROVIDER_HOSTS`)."""
+    """True when ``api_base`` is ``provider``'s own API: https to one of :data:`PROVIDER_HOSTS`, or a host (or
+    host:port) the environment's ``LIGHTEMMA_PROVIDER_HOSTS`` declares to be that provider's."""
     from urllib.parse import urlsplit
 
     try:
         parts = urlsplit(api_base)
         host = (parts.hostname or "").lower()
+        port = parts.port
     except ValueError:
         return False
-    return parts.scheme == "https" and host in PROVIDER_HOSTS.get(provider or "", ())
+    if parts.scheme == "https" and host in PROVIDER_HOSTS.get(provider or "", ()):
+        return True
+    declared = _extra_provider_hosts(provider or "")
+    return bool(declared) and (host in declared or (port is not None and f"{host}:{port}" in declared))
 
 
 def is_loopback(host: str | None) -> bool:
@@ -363,6 +389,7 @@ class APIBackend:
         max_image_bytes: int | None = None,
         streak: FailureStreak | None = None,
         api_key_env: str | None = None,
+        price: tuple[float, float] | None = None,
     ) -> None:
         self.model_info = resolve(model) if isinstance(model, str) else model
         if api_base:
@@ -391,9 +418,21 @@ class APIBackend:
             limit_b64 = int(max_image_bytes)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
         self._secrets = tuple(s for s in (*url_secrets(api_base), *_secret_values(), self._api_key or "") if s and s != NO_KEY)
-        self._price = price_per_token(self.model_info)
-        self._cache_price = cache_price_per_token(self.model_info)
-        self._litellm_prices = True  # switched off after litellm fails to price this model once
+        # a model served from another --api-base is not the provider's: no list price (litellm's or the registry's)
+        self.served_elsewhere = bool(api_base) and not is_provider_host(self.provider, api_base)
+        self.price_given = price
+        if price is not None:
+            if len(price) != 2 or not all(isinstance(p, (int, float)) and p >= 0 and p == p for p in price):
+                raise UserError(f"--price needs two non-negative numbers (USD per million input / output tokens), got {price}")
+            self._price: tuple[float, float] | None = (price[0] / 1e6, price[1] / 1e6)
+            self._cache_price: tuple[float | None, float | None] = (None, None)
+        elif self.served_elsewhere:
+            self._price, self._cache_price = None, (None, None)
+        else:
+            self._price = price_per_token(self.model_info)
+            self._cache_price = cache_price_per_token(self.model_info)
+        # switched off after litellm fails to price this model once, or when its list price does not apply
+        self._litellm_prices = price is None and not self.served_elsewhere
         self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
         self.transport = transport
         # user:password@ in --api-base: sent as Basic auth (the URL litellm gets carries none)
@@ -475,7 +514,11 @@ class APIBackend:
             "prompt_cache": ("cache_control breakpoint after the image (and at the end of a conversation request a later "
                              "stage extends)" if self.provider == "anthropic" else
                              "automatic prefix cache of the provider: every request of a frame starts with the same image"),
-            "cost": ("litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
+            "cost": (f"--price {self.price_given[0]:g} {self.price_given[1]:g} (USD per million input / output tokens)"
+                     if self.price_given is not None else
+                     f"unknown: served from --api-base {self.api_base_shown}, not at the provider's list price (give --price)"
+                     if self.served_elsewhere else
+                     "litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
                      "else the registry's provider prices" if self.transport == "litellm" else
                      "litellm.cost_per_token on the provider-reported tokens (cached tokens at the cached price), "
                      "else the registry's provider prices"),
@@ -710,6 +753,8 @@ class APIBackend:
         """
         if usage.input is None or usage.output is None:
             return None
+        if self.price_given is not None or self.served_elsewhere:
+            return self._price_cost(usage)  # --price, or unknown: never the provider's list price
         usd = (getattr(response, "_hidden_params", None) or {}).get("response_cost")
         if usd is None and self._litellm_prices:
             try:

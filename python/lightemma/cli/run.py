@@ -22,6 +22,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")
     p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1); no provider key "
                    "is sent there unless --api-key-env names one")
+    p.add_argument("--price", nargs=2, type=float, metavar=("IN", "OUT"),
+                   help="USD per million input / output tokens of a model served from --api-base (default: unknown; the "
+                   "provider's list price applies only on the provider's own host)")
+    p.add_argument("--gpus", type=int, metavar="N", help="GPUs serving the model behind --api-base (recorded and shown in "
+                   "tables; default: none shown)")
     p.add_argument("--api-key-env", metavar="NAME", help="the environment variable holding the key to send (to --api-base, "
                    "or to the provider); default: the provider's own variable, sent only to the provider's own host")
     data = p.add_argument_group("frames")
@@ -111,7 +116,7 @@ LIMITS: dict[str, tuple[float, bool]] = {
     "max_retries": (0, False), "backoff": (0, False), "temperature": (0, False), "timeout": (0, True),
     "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
     "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
-    "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False),
+    "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False), "gpus": (0, False),
 }
 
 
@@ -192,6 +197,7 @@ def main(args: argparse.Namespace) -> int:
             max_abs_curvature=settings["max_curvature"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
             cache=args.cache, transport=settings["transport"], api_key_env=args.api_key_env, progress=progress, log=stderr_log,
+            price=tuple(args.price) if args.price else None, gpus=args.gpus,
             backend_options=options, on_bad_record=settings["on_bad_record"],
             replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
             chain=settings["chain"], answer_format=settings["answer_format"],

@@ -126,6 +126,8 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
     if kind == "api":
         if config.get("api_key_env"):
             options["api_key_env"] = config["api_key_env"]
+        if config.get("price") is not None:
+            options["price"] = tuple(config["price"])
         from lightemma.backends.retry import RetryPolicy
         from lightemma.cache import ResponseCache
 
@@ -189,6 +191,20 @@ def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | Non
     given = (output / DEFAULT_CACHE if cache is True else Path(cache)).resolve()
     if given != want:
         raise UserError(f"{run_dir}: the --cache given ({given}) is not the run's response cache ({want}); give the run's own")
+
+
+def _served_model_info(info: Any, price: tuple[float, float] | None, gpus: int | None, *, served: bool) -> dict[str, Any]:
+    """The registry entry as a model served from another ``--api-base`` records it: not the provider's list price nor
+    the registry's GPU count (the paper's hardware), but what ``--price`` / ``--gpus`` say (else unknown / 0)."""
+    out = info.to_dict()
+    if served:
+        out.update(input_usd_per_mtok=None, output_usd_per_mtok=None, cache_read_usd_per_mtok=None,
+                   cache_write_usd_per_mtok=None, price_source=None, price_read=None, gpus=0)
+    if price is not None:
+        out.update(input_usd_per_mtok=float(price[0]), output_usd_per_mtok=float(price[1]), price_source="--price")
+    if gpus is not None:
+        out["gpus"] = int(gpus)
+    return out
 
 
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
@@ -471,6 +487,8 @@ def run(
     cache: str | bool | None = None,
     transport: str = "litellm",
     api_key_env: str | None = None,
+    price: tuple[float, float] | None = None,
+    gpus: int | None = None,
     backend_options: dict[str, Any] | None = None,
     replicas: int = 1,
     ray_address: str | None = None,
@@ -513,7 +531,8 @@ def run(
     from lightemma.backends.retry import redact_url
 
     config: dict[str, Any] = {
-        "model": model, "backend": backend, "api_base": redact_url(api_base), "api_key_env": api_key_env, "concurrency": concurrency, "temperature": temperature,
+        "model": model, "backend": backend, "api_base": redact_url(api_base), "api_key_env": api_key_env,
+        "price": None if price is None else [float(p) for p in price], "gpus": gpus, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
         "speed_range": None if speed_range is None else [float(x) for x in speed_range],
         "max_abs_curvature": None if max_abs_curvature is None else float(max_abs_curvature),
@@ -560,6 +579,10 @@ def run(
             "started_at": _now(),
             "finished_at": None,
         }
+        if getattr(instance, "served_elsewhere", False) or gpus is not None:
+            manifest["model_info"] = _served_model_info(info, price, gpus, served=getattr(instance, "served_elsewhere", False))
+            if gpus is not None:
+                manifest["gpus"] = gpus
         run_dir = create_run_dir(output, model, manifest, frame_ids=[f.frame_id for f in frames])
         lock = RunLock(run_dir).acquire()
     except BaseException:
