@@ -124,6 +124,8 @@ def require_api_key(model: str, api_base: str | None = None, api_key_env: str | 
     provider = _provider(model)
     if api_base and not is_provider_host(provider, api_base):
         return NO_KEY  # a server the user named without a key variable: no provider key goes there
+    if api_base:  # the provider's own host (or a gateway declared as such): its key, read from its variables
+        return (os.environ.get("OPENAI_API_KEY") or NO_KEY) if provider in OPENAI_COMPATIBLE else None
     names = PROVIDER_KEYS.get(provider or "")
     if names is not None:
         missing = [] if any(os.environ.get(n, "").strip() for n in names) else list(names)

@@ -200,6 +200,8 @@ class RetryPolicy:
 
 # Failures whose wording tells one cause from another (one image rejected vs. every request rejected).
 _WORDED = frozenset({"BadRequestError", "UnprocessableEntityError", "EmptyResponse", "ContentPolicyViolationError"})
+# Of those, the rejections that may be about one request's content (its image), not the run's settings.
+_CONTENT_TIED = _WORDED - {"EmptyResponse"}
 
 
 def failure_signature(error: str, message: str | None) -> tuple[str, str]:
@@ -220,8 +222,8 @@ class FailureStreak:
     ran out, a server that went down), makes :meth:`observe` return the number of frames.
     Re-asks of one frame count once, so a frame whose own image is rejected never stops a run.
 
-    A request error whose wording may be about the request's own content (:data:`_WORDED`: a rejected
-    image, a content policy) can be tied to particular frames rather than to the run — a provider that
+    A request error whose wording may be about the request's own content (:data:`_CONTENT_TIED`: a
+    rejected image, a content policy) can be tied to particular frames rather than to the run — a provider that
     rejects the images of one scene only. Such a group is fatal only once its frames span two scenes
     (when the callers say which scene a frame is of): otherwise the run goes on past those frames
     (they end ``failed`` with the provider's message), and a resume does too.
@@ -250,6 +252,6 @@ class FailureStreak:
         if len(frames) < need:
             return None
         scenes = set(frames.values())
-        if signature[0] in _WORDED and None not in scenes and len(scenes) < 2:
+        if signature[0] in _CONTENT_TIED and None not in scenes and len(scenes) < 2:
             return None  # maybe tied to this scene's frames, not to the run
         return len(frames)
