@@ -112,7 +112,7 @@ class MicroBatcher:
         # seconds one batch may run (the backend stops generation there itself); a batch still running
         # ``deadline + grace`` seconds after it started is hung, and the batcher turns fatal (watchdog)
         self.deadline = deadline
-        self.grace = min(10.0, deadline) if deadline else 0.0
+        self.grace = max(5.0, min(10.0, deadline)) if deadline else 0.0
         self._running_since: float | None = None
         self.abandoned = False  # aclose left a worker thread stuck in the model behind
         self._failure: tuple[str, str] | None = None  # the exception that ended the last batch(es)

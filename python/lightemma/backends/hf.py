@@ -183,7 +183,7 @@ class HFBackend:
             "batch_window_s": self._batcher.batch_window,
             "timeout_s": self.timeout,
             "deadline": ("per batch: generation stops at --timeout (the batch fails as Timeout); a batch still running "
-                         "10 s later (or --timeout, if shorter) stops the run, resumable" if self.timeout else None),
+                         "5-10 s later stops the run, resumable" if self.timeout else None),
             "batching": "micro-batches of one stage, built around the oldest pending request; left padding",
             "max_pixels": self.max_pixels,
             "image_cap": self._image_cap,

@@ -272,13 +272,7 @@ def _stop_signals(run_dir: Path) -> Iterator[None]:
     def handler(signum: int, frame: Any) -> None:
         received.append(signum)
         if len(received) > 1:
-            try:
-                (run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
-            except OSError:
-                pass
-            os.write(2, f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
-                        f"Continue with: lightemma run --resume {run_dir}\n".encode())
-            os._exit(128 + signum)
+            _exit_now(run_dir, signum)
         raise Interrupted(signum)
 
     previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
@@ -287,6 +281,17 @@ def _stop_signals(run_dir: Path) -> Iterator[None]:
     finally:
         for sig, old in previous.items():
             signal.signal(sig, old)
+
+
+def _exit_now(run_dir: Path, signum: int) -> None:
+    """A second stop signal: remove ``.lock.pid``, say so in one line, exit 128 + the signal at once."""
+    try:
+        (run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
+    except OSError:
+        pass
+    os.write(2, f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
+                f"Continue with: lightemma run --resume {run_dir}\n".encode())
+    os._exit(128 + signum)
 
 
 class _Stopped(Exception):
@@ -318,6 +323,7 @@ class _Guard:
 class _Outcome:
     done: int = 0  # frames written in this session
     stop: RunFatalError | None = None  # why the session stopped early, if it did
+    interrupted: int | None = None  # the signal (SIGINT, SIGTERM, SIGHUP) that stopped it, if one did
 
 
 async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
@@ -354,14 +360,37 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             bar.update(record)
             outcome.done += 1
 
+    main = asyncio.current_task()
+    loop = asyncio.get_running_loop()
+
+    def on_signal(signum: int) -> None:  # in the loop, between steps: the session is cancelled cleanly
+        if outcome.interrupted is not None:
+            _exit_now(writer.path.parent, signum)  # a second signal while stopping: leave at once
+        outcome.interrupted = signum
+        if main is not None:
+            main.cancel()
+
+    installed = []
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            try:
+                loop.add_signal_handler(sig, on_signal, sig)
+                installed.append(sig)
+            except (NotImplementedError, RuntimeError, ValueError):
+                pass
     tasks = [asyncio.create_task(worker()) for _ in range(max(1, min(concurrency, len(frames))))]
     try:
         await asyncio.gather(*tasks)
+    except asyncio.CancelledError:
+        if outcome.interrupted is None:
+            raise
     finally:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         await backend.aclose()
+        for sig in installed:  # back to the session's own handlers (_stop_signals), not the defaults
+            loop.remove_signal_handler(sig)
     return outcome
 
 
@@ -408,6 +437,8 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
             with writer:
                 if todo:
                     outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), config["concurrency"], bar, earlier or {}))
+                    if outcome.interrupted is not None:
+                        raise Interrupted(outcome.interrupted)
                 else:
                     outcome = _Outcome()
                     asyncio.run(backend.aclose())
@@ -641,8 +672,6 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
         instance = _make_backend(config, run_dir.parent.parent, api_base, log)
         try:
             _structured_output(instance, _policy(config))
-            if hasattr(instance, "check_endpoint"):
-                instance.check_endpoint()
             dataset = dict(config.get("dataset") or {})
             if dataset.get("split") is None and not dataset.get("scenes"):
                 # the split the run resolved when it started, not today's default for the version
@@ -662,6 +691,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
 
             todo = [f for f in all_frames if f.frame_id not in records or redo(records[f.frame_id])]
             again = sum(1 for f in all_frames if f.frame_id in records and redo(records[f.frame_id]) and not retry_failed)
+            if todo and hasattr(instance, "check_endpoint"):
+                instance.check_endpoint()  # a dead --api-base is refused now, not after minutes of retries
         except BaseException:
             asyncio.run(instance.aclose())
             raise
