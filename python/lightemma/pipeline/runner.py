@@ -162,7 +162,10 @@ def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | Non
     """
     from lightemma.backends.retry import redact_url
 
-    recorded = config.get("api_base")
+    recorded = redact_url(config.get("api_base"))  # a manifest written before redaction may hold a password
+    if "api_key" in (config.get("backend_options") or {}):
+        raise UserError(f"{run_dir}: the manifest's backend_options carry an api_key; keys come from the environment only "
+                        "(--api-key-env NAME): start a new run")
     if (redact_url(api_base) or None) != (recorded or None):
         if recorded and not api_base:
             why = (f"this run was made against an --api-base endpoint ({recorded}); a run directory does not choose where "
