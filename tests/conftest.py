@@ -6,11 +6,20 @@ from pathlib import Path
 
 os.environ["HF_HUB_OFFLINE"] = "1"
 os.environ["LITELLM_LOCAL_MODEL_COST_MAP"] = "True"
+# The loopback servers of the tests play the providers themselves: a provider's key and its list price apply
+# there as on the provider's own host. Tests of what another --api-base gets (tests/test_hardening.py) clear it.
+os.environ["LIGHTEMMA_PROVIDER_HOSTS"] = "openai=127.0.0.1,anthropic=127.0.0.1,gemini=127.0.0.1"
 
 # fake_openai.py lives beside the tests and is imported by them as a module
 sys.path.insert(0, str(Path(__file__).parent))
 
 import pytest  # noqa: E402
+
+
+@pytest.fixture
+def elsewhere(monkeypatch):
+    """The loopback servers are just some server, not a provider's own host (see LIGHTEMMA_PROVIDER_HOSTS above)."""
+    monkeypatch.delenv("LIGHTEMMA_PROVIDER_HOSTS", raising=False)
 
 
 @pytest.fixture(scope="session")

@@ -107,7 +107,8 @@ def test_a_rejected_key_stops_the_run_and_the_key_is_not_in_the_message(monkeypa
     secret = "sk-test-TOPSECRET-0123456789"
     monkeypatch.setenv("OPENAI_API_KEY", secret)
     with FakeOpenAIServer(lambda req: Reply.error(401, f"Incorrect API key provided: {secret}")) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, transport=transport)
+        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, transport=transport,
+                                 api_key_env="OPENAI_API_KEY")
         with pytest.raises(FatalBackendError) as info:
             ask(backend)
     assert server.requests[0].headers["authorization"] == f"Bearer {secret}"

@@ -115,11 +115,13 @@ def test_missing_api_key_names_the_variable(monkeypatch, model, variable):
         create_backend(model)
 
 
-def test_openai_compatible_endpoint_needs_no_key(monkeypatch):
+def test_openai_compatible_endpoint_needs_no_key(elsewhere, monkeypatch):
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
     assert require_api_key("openai/served-model", "http://127.0.0.1:9/v1")
     monkeypatch.setenv("OPENAI_API_KEY", "sk-local-123456789")
-    assert require_api_key("openai/served-model", "http://127.0.0.1:9/v1") == "sk-local-123456789"
+    # the provider's key goes to the provider's own host only; another server gets the key the user names
+    assert require_api_key("openai/served-model", "http://127.0.0.1:9/v1") == "sk-no-key-required"
+    assert require_api_key("openai/served-model", "http://127.0.0.1:9/v1", "OPENAI_API_KEY") == "sk-local-123456789"
 
 
 def test_prices_come_from_litellms_bundled_list_without_importing_it():

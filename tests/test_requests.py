@@ -428,7 +428,7 @@ def test_resume_keeps_the_variant_and_refuses_to_change_it(tmp_path, frames, cap
         assert code == 2 and "drop --chain" in capsys.readouterr().err
         from lightemma.pipeline import resume
 
-        resume(result.run_dir, frames=frames, retry_failed=True, progress=False)
+        resume(result.run_dir, api_base=server.url, frames=frames, retry_failed=True, progress=False)
     assert len(server.requests) == 3 * len(frames)  # nothing failed: nothing re-run
     manifest = json.loads((result.run_dir / "manifest.json").read_text())
     assert (manifest["config"]["chain"], manifest["config"]["answer_format"]) == ("conversation", "structured")
@@ -448,11 +448,11 @@ def test_resume_refuses_a_changed_variant_template(tmp_path, frames):
     from lightemma.pipeline import resume
 
     with pytest.raises(UserError, match="has changed since this run started"):
-        resume(result.run_dir, frames=frames[:1], progress=False)
+        resume(result.run_dir, api_base=server.url, frames=frames[:1], progress=False)
     data["variants"]["structured"]["actions"] += " Thanks."  # a variant the run does not use: no matter
     data["variants"]["conversation"]["actions"] = data["variants"]["conversation"]["actions"].removesuffix(" Thank you.")
     prompt_file.write_text(json.dumps(data))
-    resume(result.run_dir, frames=frames[:1], progress=False)
+    resume(result.run_dir, api_base=server.url, frames=frames[:1], progress=False)
 
 
 def test_a_prompt_set_without_the_variant_is_refused_before_any_work(tmp_path, frames):

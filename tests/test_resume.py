@@ -69,7 +69,8 @@ def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path, 
             fh.write(b'{"frame_id": "synth-0000-cruise/tok')
         assert read_run(run_dir).truncated_tail
         before = len(server.requests)
-        resumed = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--no-progress"],
+        resumed = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base", server.url,
+                                  "--no-progress"],
                                  capture_output=True, text=True, timeout=120)
         assert resumed.returncode == 0, resumed.stderr
     assert f"{len(killed.records)} frame(s) recorded, {n - len(killed.records)} to run" in resumed.stderr
@@ -91,7 +92,7 @@ def test_resume_after_a_truncated_file_redoes_only_missing_frames(tmp_path):
         path.write_bytes(b"".join(lines[:4]) + lines[4][: len(lines[4]) // 2])  # lost frames 5, 6 (one half-written)
         kept = {json.loads(line)["frame_id"] for line in lines[:4]}
         before = len(server.requests)
-        result = resume(first.run_dir, frames=frames, progress=False)
+        result = resume(first.run_dir, api_base=server.url, frames=frames, progress=False)
     assert result.frames_run == 2 and len(server.requests) - before == 6
     assert Counter(r["frame_id"] for r in lines_of(first.run_dir)) == Counter(f.frame_id for f in frames)
     assert kept <= set(read_run(first.run_dir).records)
@@ -102,7 +103,7 @@ def test_resume_of_a_finished_run_does_nothing(tmp_path):
     with FakeOpenAIServer() as server:
         first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
         before = len(server.requests)
-        again = resume(first.run_dir, frames=frames, progress=False)
+        again = resume(first.run_dir, api_base=server.url, frames=frames, progress=False)
     assert again.frames_run == 0 and len(server.requests) == before and again.summary["frames"] == 3
 
 
@@ -122,9 +123,9 @@ def test_retry_failed_reruns_only_failed_frames_and_the_last_record_wins(tmp_pat
         assert first.summary["failed"] == 2
         fixed["now"] = True
         before = len(server.requests)
-        plain = resume(first.run_dir, frames=frames, progress=False)
+        plain = resume(first.run_dir, api_base=server.url, frames=frames, progress=False)
         assert plain.frames_run == 0 and len(server.requests) == before  # failed frames are finished frames
-        again = resume(first.run_dir, retry_failed=True, frames=frames, progress=False)
+        again = resume(first.run_dir, api_base=server.url, retry_failed=True, frames=frames, progress=False)
     assert again.frames_run == 2 and len(server.requests) - before == 2 * 3
     contents = read_run(first.run_dir)
     assert contents.duplicates == 2 and all(r["status"] == "ok" for r in contents.records.values())
@@ -159,7 +160,7 @@ def test_with_the_response_cache_a_reask_and_a_retry_reach_the_provider_not_the_
         assert asked == ["scene", "intent", "actions", "actions"], asked  # the re-ask went to the server
         assert first.summary["failed"] == 1 and first.summary["cached_calls"] == 0
         fixed["now"] = True
-        again = resume(first.run_dir, retry_failed=True, frames=frames, progress=False)
+        again = resume(first.run_dir, api_base=server.url, cache=True, retry_failed=True, frames=frames, progress=False)
         assert [r.stage for r in server.requests[len(asked):]] == ["scene", "intent", "actions"]
         sent = len(server.requests)
         # the same run again, sharing the cache: both attempts are replayed, nothing is sent
@@ -178,7 +179,7 @@ def test_resume_refuses_a_changed_prompt_set(tmp_path):
         first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
     update_manifest(first.run_dir, prompt_set={"name": "lightemma-v1", "hash": "sha256:0000"})
     with pytest.raises(UserError, match="prompt set 'lightemma-v1' has changed"):
-        resume(first.run_dir, frames=frames, progress=False)
+        resume(first.run_dir, api_base=server.url, frames=frames, progress=False)
 
 
 def test_resume_of_a_run_with_a_prompt_set_file(tmp_path, monkeypatch):
@@ -194,7 +195,7 @@ def test_resume_of_a_run_with_a_prompt_set_file(tmp_path, monkeypatch):
         path = first.run_dir / FRAMES_FILE
         path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:2]))  # lost the last frame
         monkeypatch.chdir(first.run_dir)  # resumed from elsewhere: the file is found all the same
-        result = resume(first.run_dir, frames=frames, progress=False)
+        result = resume(first.run_dir, api_base=server.url, frames=frames, progress=False)
     assert result.frames_run == 1 and result.summary["frames"] == 3
     assert result.manifest["prompt_set"]["name"] == "my-prompts"
 
@@ -204,7 +205,7 @@ def test_resume_of_in_memory_frames_needs_them_and_a_foreign_dir_is_refused(tmp_
     with FakeOpenAIServer() as server:
         first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, **FAST)
     with pytest.raises(UserError, match="frames passed in memory"):
-        resume(first.run_dir, progress=False)
+        resume(first.run_dir, api_base=server.url, progress=False)
     with pytest.raises(UserError, match="not a lightemma run directory"):
         resume(tmp_path, progress=False)
 
@@ -231,7 +232,7 @@ def test_ctrl_c_records_the_sessions_wall_time_so_the_resumed_run_has_one(tmp_pa
         first = read_manifest(run_dir)["sessions"][0]
         assert first["interrupted"] is True and first["wall_seconds"] >= 0.2
         assert read_manifest(run_dir).get("finished_at") is None
-        resume(run_dir, frames=frames, progress=False)
+        resume(run_dir, api_base=server.url, frames=frames, progress=False)
     sessions = read_manifest(run_dir)["sessions"]
     row = evaluate_runs([run_dir]).efficiency_rows()[0]
     assert row["run_wall_seconds"] == pytest.approx(sessions[0]["wall_seconds"] + sessions[1]["wall_seconds"])

@@ -179,7 +179,8 @@ def test_api_keys_never_appear_in_any_file_the_run_writes(tmp_path, frames, monk
         return Reply.error(400, f"invalid request for key {secret}") if i == 0 else None
 
     with FakeOpenAIServer(scripted(frames, per_frame)) as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", cache=True, **FAST)
+        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", cache=True,
+                     api_key_env="OPENAI_API_KEY", **FAST)
     assert server.requests[0].headers["authorization"] == f"Bearer {secret}"
     assert records_of(result)[frames[0].frame_id]["status"] == "failed"
     written = [p for p in (tmp_path / "out").rglob("*") if p.is_file()]
@@ -293,7 +294,7 @@ def test_cli_resume_refuses_limits_backend_and_cache_it_would_ignore(tmp_path, c
     from lightemma.cli import main
 
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
-    for flags in (["--rpm", "10"], ["--tpm", "1000"], ["--backend", "api"], ["--cache"]):
+    for flags in (["--rpm", "10"], ["--tpm", "1000"], ["--backend", "api"]):  # --cache, --api-base: checked against the run
         assert main(["run", "--resume", str(tmp_path), *flags]) == 2
         assert f"drop {flags[0]}" in capsys.readouterr().err
 
@@ -366,7 +367,7 @@ def test_plausibility_limits_are_run_settings_recorded_and_kept_by_resume(tmp_pa
         assert manifest["params"]["parse"] == {"mode": "lenient", "speed_range": [0.0, 40.0], "max_abs_curvature": 0.5}
         assert result.summary["fe_corr_percent"] == 100.0
         # a resume parses with the run's own limits: the 45 m/s answers still fail
-        again = resume(result.run_dir, retry_failed=True, frames=frames[:2], progress=False)
+        again = resume(result.run_dir, api_base=server.url, retry_failed=True, frames=frames[:2], progress=False)
         assert records_of(again, frames[:2])[1]["failure"] == "implausible"
     with FakeOpenAIServer(scripted(frames[:2], per_frame)) as server:
         plain = run("openai/test-model", api_base=server.url, frames=frames[1:2], output=tmp_path / "default", **FAST)

@@ -17,6 +17,7 @@ import sys
 import threading
 import time
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -84,12 +85,15 @@ def assert_resumes_to_the_end(capsys, run_dir, switch):
     before = read_run(run_dir)
     assert not before.complete and not before.truncated_tail and not before.corrupt_lines
     switch.fixed = True
-    code, out, errors = run_cli(capsys, "--resume", run_dir, "--no-progress")
+    endpoint = read_manifest(run_dir)["config"]["api_base"]  # the user names the run's endpoint again
+    code, out, errors = run_cli(capsys, "--resume", run_dir, "--api-base", endpoint, "--no-progress")
     assert code == 0 and not errors, errors
     after = read_run(run_dir)
-    assert after.complete and len(after.records) == N_FRAMES and after.duplicates == 0
+    # frames that ended failed with the error that stopped the run are redone: one fresh record each (the last wins)
+    redone = Counter(fid for fid, r in before.records.items() if r["status"] == "failed")
+    assert after.complete and len(after.records) == N_FRAMES and after.duplicates == sum(redone.values())
     assert Counter(json.loads(line)["frame_id"] for line in (run_dir / FRAMES_FILE).read_text().splitlines()) == \
-        Counter(set(after.records))
+        Counter(set(after.records)) + redone
     assert all(r["status"] == "ok" for r in after.records.values())
     sessions = read_manifest(run_dir)["sessions"]
     assert [s["kind"] for s in sessions] == ["run", "resume"] and "stopped" in sessions[0] and "stopped" not in sessions[1]
@@ -127,8 +131,9 @@ def test_the_same_invalid_request_on_every_frame_stops_the_run(tmp_path, synth_r
     with FakeOpenAIServer(switch) as server:
         code, _, errors = start(capsys, server, synth_root, tmp_path, transport=transport)
         assert code == 2 and len(errors) == 1, errors
-        assert "BadRequestError" in errors[0] and "image is too large" in errors[0] and "3 frames in a row" in errors[0]
-        assert len(server.requests) <= 2 * CONCURRENCY
+        assert "BadRequestError" in errors[0] and "image is too large" in errors[0] and "frames in a row" in errors[0]
+        # an image rejection may be tied to one scene's frames: it stops the run once it spans the second scene
+        assert len(server.requests) <= 5 * (N_FRAMES // 2 + CONCURRENCY)
         stopped = assert_resumes_to_the_end(capsys, only_run_dir(tmp_path), switch)
     assert stopped["cause"] == "invalid-request"
 
@@ -171,8 +176,8 @@ def test_a_dead_api_base_stops_the_run(tmp_path, synth_root, capsys):
     code, _, errors = run_cli(capsys, "--model", "openai/test-model", "--api-base", f"http://127.0.0.1:{port}/v1",
                               "--dataroot", synth_root, "--version", "v1.0-mini", "--split", "all", "--concurrency",
                               CONCURRENCY, "--output", tmp_path, "--backoff", 0.01, "--max-retries", 0, "--no-progress")
-    assert code == 2 and len(errors) == 1 and "cannot reach the model" in errors[0] and "--api-base" in errors[0], errors
-    assert read_run(only_run_dir(tmp_path)).records == {}
+    assert code == 2 and len(errors) == 1 and "cannot connect" in errors[0] and "--api-base" in errors[0], errors
+    assert not list(Path(tmp_path).iterdir())  # refused before any work: no run directory
 
 
 def test_a_typo_in_the_model_name_is_one_line_before_any_work(tmp_path, synth_root, capsys, monkeypatch):
@@ -356,8 +361,8 @@ def test_a_second_writer_is_refused_naming_the_holders_pid(tmp_path, capsys):
         result = run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 2), output=tmp_path, progress=False)
         with RunLock(result.run_dir):
             with pytest.raises(RunStoreError, match=f"another lightemma process \\(PID {os.getpid()}\\)"):
-                resume(result.run_dir, frames=make_frames(tmp_path, 2), progress=False)
-        resume(result.run_dir, frames=make_frames(tmp_path, 2), progress=False)  # released: fine again
+                resume(result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False)
+        resume(result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False)  # released: fine again
 
 
 def test_a_second_process_on_a_run_being_written_is_refused_and_the_first_finishes_alone(tmp_path, synth_root):
@@ -375,7 +380,8 @@ def test_a_second_process_on_a_run_being_written_is_refused_and_the_first_finish
             while not read_run(run_dir).records and time.monotonic() < deadline:
                 time.sleep(0.05)  # writing for sure
             calls_before = len(server.requests)
-            second = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--no-progress"],
+            second = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base",
+                                     server.url, "--no-progress"],
                                     capture_output=True, text=True, timeout=120)
             stdout, stderr = first.communicate(timeout=120)
         finally:

@@ -8,6 +8,11 @@ deterministic requests (temperature 0) are cached; the caller decides.
 Stored per key: the answer text and the provider-reported usage and cost of the
 original call. A hit is reported as such (``ChatResult.cached``) with the time
 the lookup took, so timings in a run stay honest.
+
+A cache that fails once it is open (``database or disk is full``, ``database is
+locked`` after :data:`BUSY_TIMEOUT` seconds, a damaged file) is switched off for
+the rest of the run: one line says so (``log``, else stderr), ``failure`` keeps the
+reason, lookups miss and answers are no longer stored — the run goes on uncached.
 """
 
 from __future__ import annotations
@@ -18,8 +23,11 @@ import os
 import sqlite3
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+BUSY_TIMEOUT = 5.0  # seconds SQLite waits for another writer's lock before "database is locked"
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS responses (
@@ -57,12 +65,14 @@ def request_key(model: str, api_base: str | None, params: dict[str, Any], text: 
 class ResponseCache:
     """A thread-safe SQLite store of answers by request key."""
 
-    def __init__(self, path: str | os.PathLike[str]) -> None:
+    def __init__(self, path: str | os.PathLike[str], log: Callable[[str], None] | None = None) -> None:
         self.path = Path(path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
         self._lock = threading.Lock()
+        self.log = log
+        self.failure: str | None = None  # why the cache was switched off mid-run, if it was
         try:
-            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None)
+            self._db = sqlite3.connect(self.path, check_same_thread=False, isolation_level=None, timeout=BUSY_TIMEOUT)
             self._db.execute("PRAGMA journal_mode=WAL")
             self._db.execute("PRAGMA synchronous=NORMAL")
             self._db.execute(_SCHEMA)
@@ -73,10 +83,16 @@ class ResponseCache:
 
     def get(self, key: str) -> dict[str, Any] | None:
         """The stored answer for ``key`` (text, input_tokens, output_tokens, cost_cents), or None."""
-        with self._lock:
-            row = self._db.execute(
-                "SELECT text, input_tokens, output_tokens, cost_cents FROM responses WHERE key = ?", (key,)
-            ).fetchone()
+        if self.failure is not None:
+            return None
+        try:
+            with self._lock:
+                row = self._db.execute(
+                    "SELECT text, input_tokens, output_tokens, cost_cents FROM responses WHERE key = ?", (key,)
+                ).fetchone()
+        except sqlite3.Error as exc:
+            self._switch_off(exc)
+            return None
         if row is None:
             self.misses += 1
             return None
@@ -85,11 +101,30 @@ class ResponseCache:
 
     def put(self, key: str, model: str, text: str, input_tokens: int | None, output_tokens: int | None, cost_cents: float | None) -> None:
         """Store one successful answer (an error is never cached)."""
-        with self._lock:
-            self._db.execute(
-                "INSERT OR REPLACE INTO responses VALUES (?, ?, ?, ?, ?, ?, ?)",
-                (key, model, text, input_tokens, output_tokens, cost_cents, time.time()),
-            )
+        if self.failure is not None:
+            return
+        try:
+            with self._lock:
+                self._db.execute(
+                    "INSERT OR REPLACE INTO responses VALUES (?, ?, ?, ?, ?, ?, ?)",
+                    (key, model, text, input_tokens, output_tokens, cost_cents, time.time()),
+                )
+        except sqlite3.Error as exc:
+            self._switch_off(exc)
+
+    def _switch_off(self, exc: sqlite3.Error) -> None:
+        """Stop using the cache after an SQLite error; say so once."""
+        if self.failure is not None:
+            return
+        self.failure = f"{type(exc).__name__}: {exc}"
+        line = (f"warning: the response cache {self.path} failed ({exc}); the run goes on without caching "
+                "(answers from here on are neither looked up nor stored)")
+        if self.log is not None:
+            self.log(line)
+        else:
+            import sys
+
+            print(f"lightemma: {line}", file=sys.stderr, flush=True)
 
     def __len__(self) -> int:
         with self._lock:
@@ -97,4 +132,7 @@ class ResponseCache:
 
     def close(self) -> None:
         with self._lock:
-            self._db.close()
+            try:
+                self._db.close()
+            except sqlite3.Error:
+                pass

@@ -34,7 +34,9 @@ from __future__ import annotations
 import asyncio
 import base64
 import hashlib
+import ipaddress
 import os
+import re
 import time
 from collections import OrderedDict
 from collections.abc import Mapping, Sequence
@@ -52,8 +54,11 @@ from lightemma.backends.retry import (
     RetryPolicy,
     error_class,
     failure_signature,
+    redact_url,
     retry_after_seconds,
     short_message,
+    split_credentials,
+    url_secrets,
 )
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import RunFatalError, UserError
@@ -62,6 +67,7 @@ from lightemma.registry import (
     ModelInfo,
     _litellm_entry,
     cache_price_per_token,
+    lookup,
     price_per_token,
     reasoning_budget,
     resolve,
@@ -73,6 +79,10 @@ NO_KEY = "sk-no-key-required"
 OPENAI_COMPATIBLE = ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "text-completion-openai")
 # The providers of the paper's API models; an empty variable counts as missing.
 PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
+# Each provider's own API hosts: its key goes there as the provider's variables hold it. Any other --api-base gets
+# no provider key, only the key of a variable the user names for it (--api-key-env NAME).
+PROVIDER_HOSTS = {"openai": ("api.openai.com",), "anthropic": ("api.anthropic.com",),
+                  "gemini": ("generativelanguage.googleapis.com",)}
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 # What a provider accepts per image, as base64 characters (what is sent), and the longest side in pixels.
 # Anthropic: 5 MB per image, 8000 px; OpenAI: 20 MB per image; Gemini: 20 MB per request (kept under).
@@ -89,24 +99,34 @@ FatalBackendError = RunFatalError
 
 
 def litellm_model(info: ModelInfo, api_base: str | None) -> str:
-    """The litellm model string for ``info``: local checkpoints behind ``--api-base`` go as ``openai/<id>``."""
+    """The litellm model string for ``info``: local checkpoints behind ``--api-base`` go as ``openai/<id>``, and so
+    does a registry model of another provider (Anthropic, Gemini) served at an ``--api-base`` that is not that
+    provider's own host: that server speaks the OpenAI-compatible protocol (``openai/claude-sonnet-4-6``)."""
     if api_base and info.backend in ("hf", "vllm"):
         return f"openai/{info.model_id}"
+    if api_base and info.backend == "api" and lookup(info.key) is not None:
+        native = _provider(info.model_id)
+        if native is not None and native not in OPENAI_COMPATIBLE and not is_provider_host(native, api_base):
+            return f"openai/{info.model_id.split('/', 1)[-1]}"
     return info.model_id
 
 
-def require_api_key(model: str, api_base: str | None = None) -> str | None:
-    """Check the provider's API key is set, before any work; return the key to pass explicitly, if any.
+def require_api_key(model: str, api_base: str | None = None, api_key_env: str | None = None) -> str | None:
+    """Check the key a call needs is set, before any work; return the key to pass explicitly, if any.
 
-    For an OpenAI-compatible endpoint (``api_base``) a key is optional:
-    ``OPENAI_API_KEY`` when set, else a placeholder. Otherwise a missing key is
-    a :class:`UserError` naming the environment variable(s).
+    A provider's own key (``OPENAI_API_KEY``, ``ANTHROPIC_API_KEY``, ``GEMINI_API_KEY``) goes only to that
+    provider's own host (:data:`PROVIDER_HOSTS`). To any other ``api_base`` lightemma sends the key of the
+    variable the user named for it (``api_key_env``, ``--api-key-env NAME``), else none at all (a
+    placeholder: an OpenAI-compatible server without auth needs none). A missing or empty variable is a
+    :class:`UserError` naming it.
     """
+    if api_key_env:
+        return key_from_variable(api_key_env)
     provider = _provider(model)
-    if api_base and provider in OPENAI_COMPATIBLE:
-        return os.environ.get("OPENAI_API_KEY") or NO_KEY
-    if api_base:
-        return None  # a custom base for another provider: litellm reads that provider's variables
+    if api_base and not is_provider_host(provider, api_base):
+        return NO_KEY  # a server the user named without a key variable: no provider key goes there
+    if api_base:  # the provider's own host (or a gateway declared as such): its key, read from its variables
+        return (os.environ.get("OPENAI_API_KEY") or NO_KEY) if provider in OPENAI_COMPATIBLE else None
     names = PROVIDER_KEYS.get(provider or "")
     if names is not None:
         missing = [] if any(os.environ.get(n, "").strip() for n in names) else list(names)
@@ -117,6 +137,110 @@ def require_api_key(model: str, api_base: str | None = None) -> str | None:
         names = " or ".join(missing)
         raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
     return None
+
+
+def key_from_variable(name: str) -> str:
+    """The key held by the environment variable ``name`` (``--api-key-env``), or a :class:`UserError` naming it."""
+    if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or ""):
+        raise UserError(f"--api-key-env {name!r} is not an environment variable name")
+    value = os.environ.get(name, "").strip()
+    if not value:
+        raise UserError(f"--api-key-env {name}: the environment variable {name} is not set (or is empty)")
+    return value
+
+
+CONNECT_TIMEOUT = 5.0  # seconds the --api-base reachability check waits for a TCP connection
+
+
+def check_api_base(api_base: str) -> tuple[str, int]:
+    """(host, port) of an ``--api-base`` URL, or a one-line :class:`UserError` for one without a scheme or host, or
+    with a bad port (credentials in it are never shown)."""
+    from urllib.parse import urlsplit
+
+    shown = redact_url(api_base)
+    try:
+        parts = urlsplit(api_base)
+        host, port = parts.hostname, parts.port
+    except ValueError as exc:
+        raise UserError(f"--api-base {shown!r} is not a usable URL ({exc}); give one like http://HOST:8000/v1") from None
+    if parts.scheme.lower() not in ("http", "https") or not host:
+        guess = f"http://{shown}" if "://" not in shown else shown
+        raise UserError(f"--api-base {shown!r} needs a scheme and a host (http:// or https://), e.g. {guess}")
+    return host, port or (443 if parts.scheme.lower() == "https" else 80)
+
+
+def check_reachable(api_base: str, timeout: float = CONNECT_TIMEOUT) -> None:
+    """Refuse, in one line, an ``--api-base`` whose host does not accept a TCP connection within ``timeout`` s."""
+    import socket
+
+    host, port = check_api_base(api_base)
+    try:
+        with socket.create_connection((host, port), timeout=timeout):
+            pass
+    except OSError as exc:
+        why = "no answer within " + f"{timeout:g} s" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
+        raise UserError(f"--api-base {redact_url(api_base)}: cannot connect to {host}:{port} ({why}); check that the "
+                        "server runs and the URL (scheme, host, port)") from None
+
+
+PROVIDER_HOSTS_ENV = "LIGHTEMMA_PROVIDER_HOSTS"
+
+
+def _extra_provider_hosts(provider: str) -> list[str]:
+    """Hosts the user declares to be ``provider``'s own (``LIGHTEMMA_PROVIDER_HOSTS=openai=gw.corp:8443,anthropic=…``):
+    a gateway trusted with the provider's key and billing at its list price."""
+    out = []
+    for item in os.environ.get(PROVIDER_HOSTS_ENV, "").split(","):
+        name, _, host = item.strip().partition("=")
+        if name.strip().lower() == provider and host.strip():
+            out.append(host.strip().lower())
+    return out
+
+
+def is_provider_host(provider: str | None, api_base: str) -> bool:
+    """True when ``api_base`` is ``provider``'s own API: https to one of :data:`PROVIDER_HOSTS`, or a host (or
+    host:port) the environment's ``LIGHTEMMA_PROVIDER_HOSTS`` declares to be that provider's."""
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(api_base)
+        host = (parts.hostname or "").lower()
+        port = parts.port
+    except ValueError:
+        return False
+    if parts.scheme == "https" and host in PROVIDER_HOSTS.get(provider or "", ()):
+        return True
+    declared = _extra_provider_hosts(provider or "")
+    return bool(declared) and (host in declared or (port is not None and f"{host}:{port}" in declared))
+
+
+def is_loopback(host: str | None) -> bool:
+    """True for ``localhost`` and loopback addresses (127.0.0.0/8, ::1)."""
+    if not host:
+        return False
+    if host.lower() in ("localhost", "localhost.localdomain") or host.lower().endswith(".localhost"):
+        return True
+    try:
+        return ipaddress.ip_address(host.strip("[]")).is_loopback
+    except ValueError:
+        return False
+
+
+def insecure_endpoint(api_base: str | None, key_variable: str | None = None) -> str | None:
+    """The warning for plain http to a host that is not this machine (None for https or loopback)."""
+    if not api_base:
+        return None
+    from urllib.parse import urlsplit
+
+    try:
+        parts = urlsplit(api_base)
+        host = parts.hostname
+    except ValueError:
+        return None
+    if parts.scheme.lower() != "http" or is_loopback(host):
+        return None
+    what = f"the prompts, the images and the key in {key_variable}" if key_variable else "the prompts and the images"
+    return f"warning: --api-base {redact_url(api_base)} is plain http to another host: {what} travel unencrypted; use https"
 
 
 def check_model(model: str, name: str, api_base: str | None) -> str:
@@ -269,12 +393,21 @@ class APIBackend:
         transport: str = "litellm",
         max_image_bytes: int | None = None,
         streak: FailureStreak | None = None,
+        api_key_env: str | None = None,
+        price: tuple[float, float] | None = None,
     ) -> None:
         self.model_info = resolve(model) if isinstance(model, str) else model
+        if api_base:
+            check_api_base(api_base)
         self.api_base = api_base
+        self.api_base_shown = redact_url(api_base)  # what messages and records show: no credentials
+        self.api_key_env = api_key_env
         self.model = litellm_model(self.model_info, api_base)
         self.provider = check_model(self.model, self.model_info.key, api_base)  # before the key: a typo is the first thing to say
-        self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base)
+        self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base, api_key_env)
+        #: one-line warnings for the caller to show once (plain http to another host)
+        self.notices: list[str] = [n for n in (insecure_endpoint(api_base, api_key_env or (
+            "the key passed" if api_key is not None and api_key != NO_KEY else None)),) if n]
         if not timeout or timeout <= 0:
             raise UserError(f"--timeout must be a positive number of seconds, got {timeout}")
         self.timeout = float(timeout)
@@ -289,13 +422,30 @@ class APIBackend:
                 raise UserError(f"max_image_bytes must be at least 1024, got {max_image_bytes}")
             limit_b64 = int(max_image_bytes)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
-        self._secrets = tuple(s for s in (*_secret_values(), self._api_key or "") if s and s != NO_KEY)
-        self._price = price_per_token(self.model_info)
-        self._cache_price = cache_price_per_token(self.model_info)
-        self._litellm_prices = True  # switched off after litellm fails to price this model once
+        self._secrets = tuple(s for s in (*url_secrets(api_base), *_secret_values(), self._api_key or "") if s and s != NO_KEY)
+        # a model served from another --api-base is not the provider's: no list price (litellm's or the registry's)
+        self.served_elsewhere = bool(api_base) and not is_provider_host(self.provider, api_base)
+        self.price_given = price
+        if price is not None:
+            if len(price) != 2 or not all(isinstance(p, (int, float)) and p >= 0 and p == p for p in price):
+                raise UserError(f"--price needs two non-negative numbers (USD per million input / output tokens), got {price}")
+            self._price: tuple[float, float] | None = (price[0] / 1e6, price[1] / 1e6)
+            self._cache_price: tuple[float | None, float | None] = (None, None)
+        elif self.served_elsewhere:
+            self._price, self._cache_price = None, (None, None)
+        else:
+            self._price = price_per_token(self.model_info)
+            self._cache_price = cache_price_per_token(self.model_info)
+        # switched off after litellm fails to price this model once, or when its list price does not apply
+        self._litellm_prices = price is None and not self.served_elsewhere
         self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
         self.transport = transport
+        # user:password@ in --api-base: sent as Basic auth (the URL litellm gets carries none)
+        self._litellm_base, basic = split_credentials(api_base) if api_base else (api_base, None)
+        self._litellm_extra: dict[str, Any] = {"extra_headers": {"Authorization": basic}} if basic else {}
         self._http = None
+        self._client: Any = None  # litellm transport: the bounded OpenAI client, per event loop
+        self._client_loop: Any = None
         if transport == "direct":
             if not api_base or _provider(self.model) not in OPENAI_COMPATIBLE:
                 raise UserError(f"transport 'direct' needs --api-base and an OpenAI-compatible model string (openai/NAME), got {self.model!r}")
@@ -306,6 +456,11 @@ class APIBackend:
             self._wire_model = self.model.split("/", 1)[1] if "/" in self.model else self.model
         elif transport != "litellm":
             raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
+
+    def check_endpoint(self) -> None:
+        """Before any work: the ``--api-base`` host accepts a connection (a one-line :class:`UserError` if not)."""
+        if self.api_base:
+            check_reachable(self.api_base)
 
     def _supports(self, param: str) -> bool:
         if self.api_base and self.provider in OPENAI_COMPATIBLE and not _litellm_lists(self.model):
@@ -327,7 +482,7 @@ class APIBackend:
         """
         if self.api_base and self.provider in OPENAI_COMPATIBLE:
             return {"mechanism": "response_format json_schema (strict), enforced by the OpenAI-compatible server at "
-                                 f"{self.api_base}", "pair_count_enforced": True}
+                                 f"{self.api_base_shown}", "pair_count_enforced": True}
         if not litellm.supports_response_schema(model=self.model):
             raise UserError(f"--answer-format structured: litellm {_litellm_version()} does not mark {self.model} as able to "
                             "follow a JSON schema (it would only paste the schema into the prompt); use --answer-format text "
@@ -356,7 +511,8 @@ class APIBackend:
             "kind": "api",
             "transport": self.transport,
             "model": self.model,
-            "api_base": self.api_base,
+            "api_base": self.api_base_shown,
+            "api_key_env": self.api_key_env,
             "registry": self.model_info.to_dict(),
             "litellm_version": _litellm_version(),
             "token_counting": "provider-reported usage (prompt_tokens / completion_tokens)",
@@ -365,7 +521,11 @@ class APIBackend:
             "prompt_cache": ("cache_control breakpoint after the image (and at the end of a conversation request a later "
                              "stage extends)" if self.provider == "anthropic" else
                              "automatic prefix cache of the provider: every request of a frame starts with the same image"),
-            "cost": ("litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
+            "cost": (f"--price {self.price_given[0]:g} {self.price_given[1]:g} (USD per million input / output tokens)"
+                     if self.price_given is not None else
+                     f"unknown: served from --api-base {self.api_base_shown}, not at the provider's list price (give --price)"
+                     if self.served_elsewhere else
+                     "litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
                      "else the registry's provider prices" if self.transport == "litellm" else
                      "litellm.cost_per_token on the provider-reported tokens (cached tokens at the cached price), "
                      "else the registry's provider prices"),
@@ -377,7 +537,8 @@ class APIBackend:
                             "over_it": "re-encoded as JPEG, quality 90 → 50, then ×0.75 in size, until it fits"},
             "timeout_s": self.timeout,
             "deadline": "lightemma's own, per call: connect to last byte",
-            "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap},
+            "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap,
+                      "max_retry_after_s": self.retry.max_wait},
             "rate_limit": {"rpm": self.limiter.requests.capacity if self.limiter.requests else None,
                            "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None},
             "cache": str(self.cache.path) if self.cache else None,
@@ -420,7 +581,7 @@ class APIBackend:
 
         key = None
         if self.cache is not None and params.get("temperature", None) == 0:
-            key = request_key(self.model, self.api_base, params, req.text, digest, req.turns, req.attempt, req.inputs)
+            key = request_key(self.model, self.api_base_shown, params, req.text, digest, req.turns, req.attempt, req.inputs)
             hit = self.cache.get(key)
             if hit is not None:
                 return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],
@@ -444,8 +605,10 @@ class APIBackend:
                     raise self._fatal(err, message) from None
                 if self.retry.should_retry(err, retries):
                     after = retry_after_seconds(exc)
+                    if self.retry.waits_too_long(after):
+                        raise self._too_long_a_wait(err, message, after) from None
                     if after:
-                        self.limiter.pause(after)
+                        self.limiter.pause(after, limit=self.retry.max_wait)
                     await asyncio.sleep(self.retry.delay(retries, after))
                     retries += 1
                     continue
@@ -461,20 +624,36 @@ class APIBackend:
     def _observe(self, req: ChatRequest, result: ChatResult) -> ChatResult:
         """Feed the call's outcome to the failure streak; raise :class:`RunFatalError` when the run cannot succeed."""
         signature = None if result.ok else failure_signature(result.error or "Error", result.error_message)
-        frames = self.streak.observe(req.stage, req.frame_id, signature)
+        scene = getattr(req.frame, "scene_name", None) if req.frame is not None else None
+        frames = self.streak.observe(req.stage, req.frame_id, signature, scene=scene if isinstance(scene, str) else None)
         if frames is not None:
             raise self._fatal(result.error or "Error", result.error_message or "", frames=frames, stage=req.stage)
         return result
 
+    def _too_long_a_wait(self, err: str, message: str, after: float | None) -> RunFatalError:
+        """The run-fatal error for a server that asks for a longer pause (Retry-After) than lightemma waits."""
+        asked = "forever" if after == float("inf") else f"{after:g} s"
+        what = (f"the provider asks to wait {asked} before the next request (Retry-After), longer than lightemma waits "
+                f"for one ({self.retry.max_wait:g} s)")
+        if err == "RateLimitError":
+            return RunFatalError(f"{self.model}: {err}: {message} — {what}: the account's rate limit or quota is exhausted; "
+                                 "resume later, or set --rpm / --tpm to the account's limits", cause="quota-exhausted", error=err)
+        return RunFatalError(f"{self.model}: {err}: {message} — {what}: the provider is unavailable; resume later",
+                             cause="provider-error", error=err)
+
     def _key_variables(self) -> str:
-        if self.api_base and self.provider in OPENAI_COMPATIBLE:
-            return f"OPENAI_API_KEY (sent to {self.api_base})"
+        if self.api_key_env:
+            return f"{self.api_key_env} (sent to {self.api_base_shown})"
+        if self.api_base and not is_provider_host(self.provider, self.api_base):
+            names = PROVIDER_KEYS.get(self.provider or "", ("OPENAI_API_KEY",))
+            return (f"a variable named with --api-key-env (e.g. --api-key-env {names[0]}): no provider key is sent to "
+                    f"--api-base {self.api_base_shown} unless its variable is named")
         names = PROVIDER_KEYS.get(self.provider or "")
         return " or ".join(names) if names else "the provider's API key variable"
 
     def _fatal(self, err: str, message: str, *, frames: int | None = None, stage: str | None = None) -> RunFatalError:
         """The run-fatal error for ``err``: one line with what happened and what to do about it."""
-        where = f"--api-base {self.api_base}" if self.api_base else f"{self.provider or 'the provider'}"
+        where = f"--api-base {self.api_base_shown}" if self.api_base else f"{self.provider or 'the provider'}"
         seen = f" on {frames} frames in a row ({stage} stage), nothing succeeding in between" if frames else ""
         what = f"{self.model}: {err}: {message}"
         if err == "AuthenticationError":
@@ -525,10 +704,21 @@ class APIBackend:
             text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
             cost = self._direct_cost(usage)
         else:
-            response = await litellm.acompletion(
-                model=self.model, messages=messages, api_base=self.api_base, api_key=self._api_key,
-                timeout=self.timeout, num_retries=0, max_retries=0, **params,
-            )
+            from lightemma.backends.openai_http import ResponseTooLargeError, _guard
+
+            slot: dict[str, str] = {}
+            token = _guard().set(slot)
+            try:
+                response = await litellm.acompletion(
+                    model=self.model, messages=messages, api_base=self._litellm_base, api_key=self._api_key,
+                    timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **self._bounded_client(), **params,
+                )
+            except Exception:
+                if "too_large" in slot:
+                    raise ResponseTooLargeError(slot["too_large"]) from None
+                raise
+            finally:
+                _guard().reset(token)
             usage = _usage(getattr(response, "usage", None), self.provider)
             choices = getattr(response, "choices", None) or [None]
             text = getattr(getattr(choices[0], "message", None), "content", None)
@@ -545,6 +735,23 @@ class APIBackend:
             return ChatResult(text=None, error="EmptyResponse", error_message=f"no answer text (finish_reason={finish}{spent})", **common)
         return ChatResult(text=str(text), **common)
 
+    def _bounded_client(self) -> dict[str, Any]:
+        """``client=``: litellm's OpenAI client over an httpx client that bounds response bodies (OpenAI-protocol
+        calls; one per event loop). Anthropic's and Gemini's native protocols go through litellm's own client."""
+        if self.provider != "openai":
+            return {}
+        loop = asyncio.get_running_loop()
+        if self._client_loop is not loop:
+            from openai import AsyncOpenAI
+
+            from lightemma.backends.openai_http import limited_httpx_client
+
+            key = self._api_key or os.environ.get("OPENAI_API_KEY") or NO_KEY
+            self._client = AsyncOpenAI(api_key=key, base_url=self._litellm_base or None, max_retries=0,
+                                       http_client=limited_httpx_client())
+            self._client_loop = loop
+        return {"client": self._client}
+
     def _litellm_cost(self, response: Any, usage: Usage) -> float | None:
         """Cost in US cents: what litellm priced the call at (its bundled list, cached tokens at their price), else
         the registry price.
@@ -553,6 +760,8 @@ class APIBackend:
         """
         if usage.input is None or usage.output is None:
             return None
+        if self.price_given is not None or self.served_elsewhere:
+            return self._price_cost(usage)  # --price, or unknown: never the provider's list price
         usd = (getattr(response, "_hidden_params", None) or {}).get("response_cost")
         if usd is None and self._litellm_prices:
             try:
@@ -598,6 +807,10 @@ class APIBackend:
     async def aclose(self) -> None:
         if self._http is not None:
             await self._http.aclose()
+        if self._client is not None:
+            client, self._client, loop, self._client_loop = self._client, None, self._client_loop, None
+            if loop is asyncio.get_running_loop():
+                await client.close()
         if self.cache is not None:
             self.cache.close()
 

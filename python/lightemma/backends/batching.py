@@ -49,6 +49,11 @@ RunBatch = Callable[[Sequence[ChatRequest]], list[ChatResult]]
 DescribeFatal = Callable[[BaseException], str]
 
 DEFAULT_BATCH_WINDOW = 0.01  # seconds the worker waits for a batch to fill
+CLOSE_GRACE = 5.0  # seconds aclose waits for a running batch before leaving its (daemon) thread behind
+
+
+class Timeout(Exception):
+    """A batch that ran past its deadline (``--timeout``); recorded as error class ``Timeout``."""
 
 
 @dataclass
@@ -87,7 +92,8 @@ class MicroBatcher:
     """Gather concurrently submitted requests into batches of ``batch_size`` run by one worker thread."""
 
     def __init__(self, run_batch: RunBatch, *, batch_size: int = 8, batch_window: float = DEFAULT_BATCH_WINDOW,
-                 name: str = "lightemma-batcher", describe_fatal: DescribeFatal | None = None) -> None:
+                 name: str = "lightemma-batcher", describe_fatal: DescribeFatal | None = None,
+                 deadline: float | None = None) -> None:
         if batch_size < 1:
             raise ValueError(f"batch_size must be at least 1, got {batch_size}")
         if batch_window < 0:
@@ -103,6 +109,12 @@ class MicroBatcher:
         self._closed = False
         self._describe_fatal = describe_fatal or (lambda exc: f"{type(exc).__name__}: {short_message(exc)}")
         self.fatal: RunFatalError | None = None  # set once the model is found unable to generate
+        # seconds one batch may run (the backend stops generation there itself); a batch still running
+        # ``deadline + grace`` seconds after it started is hung, and the batcher turns fatal (watchdog)
+        self.deadline = deadline
+        self.grace = max(5.0, min(10.0, deadline)) if deadline else 0.0
+        self._running_since: float | None = None
+        self.abandoned = False  # aclose left a worker thread stuck in the model behind
         self._failure: tuple[str, str] | None = None  # the exception that ended the last batch(es)
         self._failure_batches = 0
         self._failure_frames: set[str] = set()
@@ -123,7 +135,32 @@ class MicroBatcher:
             self._queue.extend(pending)
             self._ensure_worker()
             self._cond.notify()
-        return list(await asyncio.gather(*(p.future for p in pending)))
+        futures = [p.future for p in pending]
+        if self.deadline is None:
+            return list(await asyncio.gather(*futures))
+        while True:  # the watchdog: a batch that never returns turns the batcher fatal instead of hanging the run
+            await asyncio.wait(futures, timeout=min(0.5, self.deadline))
+            if all(f.done() for f in futures):
+                return [f.result() for f in futures]
+            self._check_hung()
+            if self.fatal is not None:
+                raise self.fatal
+
+    def _check_hung(self) -> None:
+        since = self._running_since
+        if self.fatal is not None or since is None or self.deadline is None:
+            return
+        if time.monotonic() - since <= self.deadline + self.grace:
+            return
+        self.fatal = RunFatalError(
+            f"the model did not finish a batch within --timeout {self.deadline:g} s (+{self.grace:g} s grace) and its "
+            "generation cannot be interrupted; the run stops here (finished frames are saved) — raise --timeout, or lower "
+            "--batch-size / --max-tokens", cause="local-timeout", error="Timeout")
+        with self._cond:
+            leftover = list(self._queue)
+            self._queue.clear()
+        for p in leftover:
+            self._resolve(p, self.fatal)
 
     async def aclose(self) -> None:
         """Stop the worker after the batch it is running; requests still queued get an error result."""
@@ -136,7 +173,13 @@ class MicroBatcher:
         for p in leftover:
             self._resolve(p, error_result(RuntimeError("the backend was closed before this request ran")))
         if thread is not None and thread is not threading.current_thread():
-            await asyncio.to_thread(thread.join)
+            # bounded: a worker stuck in the model (a generate that never returns) is left behind, a daemon
+            # thread that ends with the process, rather than holding the run (and Ctrl-C) forever
+            grace = 0.0 if self.fatal is not None and self.fatal.cause == "local-timeout" else CLOSE_GRACE
+            end = time.monotonic() + grace
+            while thread.is_alive() and time.monotonic() < end:
+                await asyncio.sleep(0.02)
+            self.abandoned = thread.is_alive()
 
     def _ensure_worker(self) -> None:
         if self._thread is None or not self._thread.is_alive():
@@ -178,6 +221,7 @@ class MicroBatcher:
                     self._resolve(p, self.fatal)
                 continue
             start = time.perf_counter()
+            self._running_since = time.monotonic()
             try:
                 results = self._run_batch([p.request for p in live])
                 if len(results) != len(live):
@@ -187,6 +231,8 @@ class MicroBatcher:
                 # even SystemExit: it would end this thread with the batch's futures never resolved
                 results = [error_result(exc, time.perf_counter() - start) for _ in live]
                 self._note_failure(exc, live)
+            finally:
+                self._running_since = None
             elapsed = time.perf_counter() - start
             self.stats.batches += 1
             self.stats.requests += len(live)

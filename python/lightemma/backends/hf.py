@@ -26,7 +26,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult
-from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher
+from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher, Timeout
 from lightemma.backends.local import DECODING, check_options, conversation, load_image, require, token_counting
 from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
@@ -52,10 +52,13 @@ class HFBackend:
     def __init__(self, model: str, *, batch_size: int = 8, batch_window: float = DEFAULT_BATCH_WINDOW,
                  max_pixels: int | None = None, dtype: str = "auto", device: str | None = None,
                  device_map: str | dict[str, Any] | None = None, attn_implementation: str | None = None,
-                 trust_remote_code: bool = False) -> None:
+                 trust_remote_code: bool = False, timeout: float | None = None) -> None:
         if dtype not in DTYPES:
             raise UserError(f"--dtype must be one of {', '.join(DTYPES)}, got {dtype!r}")
         check_options(batch_size, max_pixels)
+        if timeout is not None and not (timeout > 0):
+            raise UserError(f"--timeout must be a positive number of seconds, got {timeout}")
+        self.timeout = None if timeout is None else float(timeout)
         torch = require("torch", "hf")
         transformers = require("transformers", "hf")
         self.model_id = model
@@ -82,10 +85,14 @@ class HFBackend:
         self._grammars: dict[Any, Any] = {}  # ResponseSchema -> xgrammar CompiledGrammar
         self._transformers_version = transformers.__version__
         self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
-                                     name=f"lightemma-hf-{self.model_type}", describe_fatal=self._describe_fatal)
+                                     name=f"lightemma-hf-{self.model_type}", describe_fatal=self._describe_fatal,
+                                     deadline=self.timeout)
 
     def _describe_fatal(self, exc: BaseException) -> str:
         """The one line for a model that fails every batch the same way."""
+        if isinstance(exc, Timeout):
+            return (f"{self.model_id}: every batch runs past --timeout {self.timeout:g} s ({short_message(exc)}); raise "
+                    "--timeout, or lower --batch-size / --max-tokens")
         if isinstance(exc, self._oom_error):
             return (f"{self.model_id}: out of GPU memory even for one request; lower --max-pixels, "
                     "or spread the model over more GPUs (--device cuda)")
@@ -174,6 +181,9 @@ class HFBackend:
             "dtype": str(self.dtype).removeprefix("torch."),
             "batch_size": self._batcher.batch_size,
             "batch_window_s": self._batcher.batch_window,
+            "timeout_s": self.timeout,
+            "deadline": ("per batch: generation stops at --timeout (the batch fails as Timeout); a batch still running "
+                         "5-10 s later stops the run, resumable" if self.timeout else None),
             "batching": "micro-batches of one stage, built around the oldest pending request; left padding",
             "max_pixels": self.max_pixels,
             "image_cap": self._image_cap,
@@ -253,8 +263,12 @@ class HFBackend:
         params = requests[0].params
         processors = self._logits_processors(requests)
         extra = {"logits_processor": processors} if processors else {}
+        if self.timeout is not None:  # transformers' MaxTimeCriteria: generation stops at the deadline
+            extra["max_time"] = max(0.0, self.timeout - (time.perf_counter() - start))
         with self._torch.inference_mode():
             output = self._model.generate(**inputs, **self._decoding(params), **extra)
+        if self.timeout is not None and time.perf_counter() - start >= self.timeout:
+            raise Timeout(f"generation stopped at --timeout {self.timeout:g} s before the batch finished")
         prompt_len = inputs["input_ids"].shape[1]
         input_counts = inputs["attention_mask"].sum(dim=1).tolist()
         generated = output[:, prompt_len:].tolist()

@@ -17,6 +17,8 @@ from typing import Any
 
 import aiohttp
 
+MAX_BODY_BYTES = 8 << 20  # the largest response body read (a chat completion is a few KiB); beyond it the call fails
+
 
 class HTTPCallError(Exception):
     """A failed call; subclasses carry litellm's error class names. ``headers`` holds the response headers."""
@@ -39,6 +41,7 @@ class ServiceUnavailableError(HTTPCallError): ...
 class Timeout(HTTPCallError): ...
 class APIConnectionError(HTTPCallError): ...
 class APIError(HTTPCallError): ...
+class ResponseTooLargeError(HTTPCallError): ...  # not retried: the same request would get the same body
 
 
 _BY_STATUS: dict[int, type[HTTPCallError]] = {
@@ -61,11 +64,17 @@ def _error_for(status: int, headers: Mapping[str, str], body: bytes) -> HTTPCall
 class OpenAIHTTPClient:
     """POSTs ``/chat/completions`` under ``api_base``; one aiohttp session per event loop."""
 
-    def __init__(self, api_base: str, api_key: str | None, timeout: float) -> None:
-        self.url = api_base.rstrip("/") + "/chat/completions"
+    def __init__(self, api_base: str, api_key: str | None, timeout: float, max_body: int = MAX_BODY_BYTES) -> None:
+        from lightemma.backends.retry import split_credentials
+
+        base, basic = split_credentials(api_base)  # user:password@ in the URL: sent as Basic auth, never in the URL
+        self.url = base.rstrip("/") + "/chat/completions"
         self._headers = {"Content-Type": "application/json"}
-        if api_key:
+        if basic:
+            self._headers["Authorization"] = basic
+        elif api_key:
             self._headers["Authorization"] = f"Bearer {api_key}"
+        self.max_body = max_body
         self._timeout = aiohttp.ClientTimeout(total=timeout)
         self._session: aiohttp.ClientSession | None = None
         self._loop: asyncio.AbstractEventLoop | None = None
@@ -82,7 +91,7 @@ class OpenAIHTTPClient:
         payload = json.dumps({"model": model, "messages": messages, **params})
         try:
             async with self._client().post(self.url, data=payload, timeout=self._timeout) as response:
-                body = await response.read()
+                body = await self._read(response)
                 if response.status >= 400:
                     raise _error_for(response.status, response.headers, body)
         except HTTPCallError:
@@ -99,7 +108,85 @@ class OpenAIHTTPClient:
             raise APIError(f"HTTP {response.status}: unexpected body")
         return data
 
+    async def _read(self, response: aiohttp.ClientResponse) -> bytes:
+        """The body, read in chunks and never past :attr:`max_body` bytes (a larger one fails the call)."""
+        def too_large(size: str) -> ResponseTooLargeError:
+            return ResponseTooLargeError(f"HTTP {response.status}: the response body is {size}, more than the "
+                                         f"{self.max_body} bytes lightemma reads", status=response.status)
+
+        if response.content_length is not None and response.content_length > self.max_body:
+            raise too_large(f"{response.content_length} bytes")
+        body = bytearray()
+        async for chunk in response.content.iter_chunked(1 << 16):
+            body += chunk
+            if len(body) > self.max_body:
+                raise too_large(f"over {self.max_body} bytes")
+        return bytes(body)
+
     async def aclose(self) -> None:
         if self._session is not None and not self._session.closed and self._loop is asyncio.get_running_loop():
             await self._session.close()
         self._session = None
+
+
+# -- the same bound for litellm's OpenAI client (httpx) ------------------------------------------------------
+
+BODY_GUARD: Any = None  # set below: a ContextVar holding the current call's {"too_large": message} slot
+
+
+def _guard() -> Any:
+    global BODY_GUARD
+    if BODY_GUARD is None:
+        import contextvars
+
+        BODY_GUARD = contextvars.ContextVar("lightemma_body_guard", default=None)
+    return BODY_GUARD
+
+
+def limited_httpx_client(max_body: int = MAX_BODY_BYTES) -> Any:
+    """An ``httpx.AsyncClient`` that never reads more than ``max_body`` bytes of a response body.
+
+    A larger body ends the read (the OpenAI SDK then reports a connection error); the call's slot in
+    :data:`BODY_GUARD` (set by the caller) says why, so the caller records :class:`ResponseTooLargeError`.
+    """
+    import httpx
+
+    class _Stream(httpx.AsyncByteStream):
+        def __init__(self, inner: Any, slot: Any) -> None:
+            self.inner, self.slot = inner, slot
+
+        async def __aiter__(self) -> Any:
+            size = 0
+            async for chunk in self.inner:
+                size += len(chunk)
+                if size > max_body:
+                    message = f"the response body is over {max_body} bytes, more than lightemma reads"
+                    if self.slot is not None:
+                        self.slot["too_large"] = message
+                    raise ResponseTooLargeError(message)
+                yield chunk
+
+        async def aclose(self) -> None:
+            await self.inner.aclose()
+
+    class _Transport(httpx.AsyncBaseTransport):
+        def __init__(self) -> None:
+            self.inner = httpx.AsyncHTTPTransport()
+
+        async def handle_async_request(self, request: Any) -> Any:
+            response = await self.inner.handle_async_request(request)
+            slot = _guard().get()
+            length = response.headers.get("content-length")
+            if length and length.isdigit() and int(length) > max_body:
+                await response.aclose()
+                message = f"the response body is {length} bytes, more than the {max_body} bytes lightemma reads"
+                if slot is not None:
+                    slot["too_large"] = message
+                raise ResponseTooLargeError(message)
+            response.stream = _Stream(response.stream, slot)
+            return response
+
+        async def aclose(self) -> None:
+            await self.inner.aclose()
+
+    return httpx.AsyncClient(transport=_Transport(), timeout=None)

@@ -11,6 +11,8 @@ from __future__ import annotations
 import asyncio
 import time
 
+MAX_PAUSE = 60.0  # seconds: the longest a server-asked pause (Retry-After) holds the callers (RetryPolicy.cap's default)
+
 
 class _Bucket:
     """A continuously refilling bucket of ``per_minute`` units (capacity one minute's worth)."""
@@ -58,8 +60,15 @@ class RateLimiter:
     def active(self) -> bool:
         return self.requests is not None or self.tokens is not None
 
-    def pause(self, seconds: float) -> None:
-        """Hold every caller for ``seconds`` from now (a server asked us to back off)."""
+    def pause(self, seconds: float, *, limit: float = MAX_PAUSE) -> None:
+        """Hold every caller for ``seconds`` from now (a server asked us to back off), at most ``limit`` seconds.
+
+        The caller refuses longer waits (:meth:`RetryPolicy.waits_too_long`); the cap here makes sure no
+        value (``inf``, an hour) can freeze every caller however it arrives.
+        """
+        if not seconds == seconds:  # NaN
+            return
+        seconds = min(max(0.0, seconds), limit)
         self._paused_until = max(self._paused_until, time.monotonic() + seconds)
 
     async def acquire(self, tokens: float = 0.0) -> None:

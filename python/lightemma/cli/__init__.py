@@ -71,9 +71,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except KeyboardInterrupt:
-        print("lightemma: interrupted", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM / SIGHUP during a run (handled alike)
+        signum = getattr(exc, "signum", 2)
+        print(f"lightemma: interrupted{' by ' + exc.name if hasattr(exc, 'name') else ''}", file=sys.stderr)
+        return 128 + signum
     except (UserError, ValueError) as exc:
         if os.environ.get("LIGHTEMMA_DEBUG"):
             raise

@@ -21,7 +21,15 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--model", help="registry name (gpt-4o, claude-3.7-sonnet, …), litellm model string, or "
                    "baseline:constant|cv|oracle|ego")
     p.add_argument("--backend", choices=("api", "hf", "vllm", "baseline"), help="override the backend chosen from the model")
-    p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1)")
+    p.add_argument("--api-base", help="OpenAI-compatible endpoint (e.g. a vLLM server: http://host:8000/v1); no provider key "
+                   "is sent there unless --api-key-env names one")
+    p.add_argument("--price", nargs=2, type=float, metavar=("IN", "OUT"),
+                   help="USD per million input / output tokens of a model served from --api-base (default: unknown; the "
+                   "provider's list price applies only on the provider's own host)")
+    p.add_argument("--gpus", type=int, metavar="N", help="GPUs serving the model behind --api-base (recorded and shown in "
+                   "tables; default: none shown)")
+    p.add_argument("--api-key-env", metavar="NAME", help="the environment variable holding the key to send (to --api-base, "
+                   "or to the provider); default: the provider's own variable, sent only to the provider's own host")
     data = p.add_argument_group("frames")
     data.add_argument("--dataroot", help="nuScenes directory")
     data.add_argument("--version", help="nuScenes version (default v1.0-test, the paper's set)")
@@ -116,7 +124,8 @@ RUN_DEFAULTS: dict[str, object] = {
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
-                  "replicas", "ray_address", "gpus_per_replica", "max_cost", "batch", "estimate"}  # where the model runs, not what it is asked
+                  "replicas", "ray_address", "gpus_per_replica", "max_cost", "batch", "estimate",  # where the model runs, not what it is asked
+                  "api_base", "api_key_env", "cache"}  # where requests, keys and writes go: the user's word, not the manifest's
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
@@ -130,7 +139,7 @@ LIMITS: dict[str, tuple[float, bool]] = {
     "max_retries": (0, False), "backoff": (0, False), "temperature": (0, False), "timeout": (0, True),
     "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
     "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
-    "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False),
+    "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False), "gpus": (0, False),
     "sample": (1, False), "max_cost": (0, True), "batch_poll": (0, True),
 }
 
@@ -217,7 +226,8 @@ def main(args: argparse.Namespace) -> int:
             raise UserError("--resume takes the run's mode (batch or not) from its manifest; drop --batch")
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
                         concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
-                        gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost)
+                        gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost, api_base=args.api_base,
+                        api_key_env=args.api_key_env, cache=args.cache)
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")
@@ -247,7 +257,8 @@ def main(args: argparse.Namespace) -> int:
             integrate_method=settings["integrate"], speed_range=tuple(settings["speed_range"]),
             max_abs_curvature=settings["max_curvature"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
             max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
-            cache=args.cache, transport=settings["transport"], progress=progress, log=stderr_log,
+            cache=args.cache, transport=settings["transport"], api_key_env=args.api_key_env, progress=progress, log=stderr_log,
+            price=tuple(args.price) if args.price else None, gpus=args.gpus,
             backend_options=options, on_bad_record=settings["on_bad_record"],
             replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
             chain=settings["chain"], answer_format=settings["answer_format"],

@@ -26,10 +26,13 @@ import asyncio
 import math
 import os
 import platform
+import signal
 import subprocess
 import sys
+import threading
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
@@ -45,6 +48,7 @@ from lightemma.prompts import DEFAULT_PROMPT_SET, PromptSet, load_prompt_set
 from lightemma.registry import resolve
 from lightemma.runs.store import (
     FRAMES_FILE,
+    LOCK_PID_FILE,
     RunLock,
     RunWriter,
     create_run_dir,
@@ -55,6 +59,7 @@ from lightemma.runs.store import (
 )
 
 Log = Callable[[str], None]
+DEFAULT_CACHE = "cache.sqlite"  # the response cache's default place, relative to the output directory
 
 
 @dataclass
@@ -114,8 +119,11 @@ def _structured_output(backend: Backend, policy: ChainPolicy) -> dict[str, Any] 
     return {**check(), "schema": ACTIONS_SCHEMA.as_dict(), "parse_mode": policy.parse_mode}
 
 
-def _make_backend(config: dict[str, Any], output: Path) -> Backend:
-    """The backend a run's config names; checks the API key before anything else happens."""
+def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = None, log: Log | None = None) -> Backend:
+    """The backend a run's config names; checks the API key before anything else happens.
+
+    ``api_base`` is the endpoint as the user gave it (the config records it without credentials).
+    """
     kind = backend_kind(config["model"], config["backend"], config["api_base"])
     options = dict(config.get("backend_options") or {})
     if config.get("batch"):
@@ -130,6 +138,10 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
         return BatchBackend(config["model"], api_base=config["api_base"], timeout=config["timeout"],
                             poll_seconds=config.get("batch_poll") or 30.0)
     if kind == "api":
+        if config.get("api_key_env"):
+            options["api_key_env"] = config["api_key_env"]
+        if config.get("price") is not None:
+            options["price"] = tuple(config["price"])
         from lightemma.backends.retry import RetryPolicy
         from lightemma.cache import ResponseCache
 
@@ -137,11 +149,79 @@ def _make_backend(config: dict[str, Any], output: Path) -> Backend:
         options.update(
             timeout=config["timeout"], rpm=config["rpm"], tpm=config["tpm"], transport=config.get("transport", "litellm"),
             retry=RetryPolicy(max_retries=config["max_retries"], base=config["backoff_base"], cap=config["backoff_cap"]),
-            cache=ResponseCache(cache if os.path.isabs(cache) else output / cache) if cache else None,
+            cache=ResponseCache(cache if os.path.isabs(cache) else output / cache, log=log) if cache else None,
         )
     replicas = {"replicas": config.get("replicas") or 1, "ray_address": config.get("ray_address"),
                 "gpus_per_replica": config.get("gpus_per_replica")}
-    return create_backend(config["model"], backend=kind, api_base=config["api_base"], **replicas, **options)
+    if kind == "hf" and replicas["replicas"] == 1 and replicas["ray_address"] is None and config.get("timeout"):
+        options.setdefault("timeout", config["timeout"])  # a deadline per batch (docs/run.md#when-a-run-cannot-succeed)
+    backend = create_backend(config["model"], backend=kind, api_base=api_base, **replicas, **options)
+    for notice in getattr(backend, "notices", ()):
+        if log:
+            log(notice)
+        else:
+            import warnings
+
+            warnings.warn(notice, stacklevel=3)
+    return backend
+
+
+def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | None, api_key_env: str | None,
+                      cache: str | bool | None) -> None:
+    """Refuse to resume a run whose manifest would choose where requests, keys or writes go.
+
+    A run directory may come from someone else: its endpoint (``api_base``), its key variable
+    (``api_key_env``) and its response cache path must be the ones the user gives now (``--api-base``,
+    ``--api-key-env``, ``--cache``), or the resume is refused in one line. Nothing is shown or asked.
+    """
+    from lightemma.backends.retry import redact_url
+
+    recorded = redact_url(config.get("api_base"))  # a manifest written before redaction may hold a password
+    if "api_key" in (config.get("backend_options") or {}):
+        raise UserError(f"{run_dir}: the manifest's backend_options carry an api_key; keys come from the environment only "
+                        "(--api-key-env NAME): start a new run")
+    if (redact_url(api_base) or None) != (recorded or None):
+        if recorded and not api_base:
+            why = (f"this run was made against an --api-base endpoint ({recorded}); a run directory does not choose where "
+                   "requests and keys go: resume it with the same --api-base URL")
+        elif not recorded:
+            why = "this run was not made against an --api-base endpoint; drop --api-base"
+        else:
+            why = f"the --api-base given is not the run's endpoint ({recorded}); give the run's own, or start a new run"
+        raise UserError(f"{run_dir}: {why}")
+    if (config.get("api_key_env") or None) != (api_key_env or None):
+        named = config.get("api_key_env")
+        why = (f"this run sent the key in --api-key-env {named}; resume it with the same --api-key-env" if named and not api_key_env
+               else "the --api-key-env given is not the run's; give the run's own (or none if it had none)")
+        raise UserError(f"{run_dir}: {why}")
+    recorded_cache = config.get("cache")
+    output = run_dir.parent.parent
+    if recorded_cache is None:
+        if cache:
+            raise UserError(f"{run_dir}: this run kept no response cache; drop --cache")
+        return
+    want = (output / recorded_cache if not os.path.isabs(recorded_cache) else Path(recorded_cache)).resolve()
+    if cache is None or cache is False:
+        raise UserError(f"{run_dir}: this run kept a response cache ({want}), outside the run directory; a run directory "
+                        f"does not choose where lightemma writes: resume it with --cache {want}"
+                        + (" (or --cache, the default place)" if recorded_cache == DEFAULT_CACHE else ""))
+    given = (output / DEFAULT_CACHE if cache is True else Path(cache)).resolve()
+    if given != want:
+        raise UserError(f"{run_dir}: the --cache given ({given}) is not the run's response cache ({want}); give the run's own")
+
+
+def _served_model_info(info: Any, price: tuple[float, float] | None, gpus: int | None, *, served: bool) -> dict[str, Any]:
+    """The registry entry as a model served from another ``--api-base`` records it: not the provider's list price nor
+    the registry's GPU count (the paper's hardware), but what ``--price`` / ``--gpus`` say (else unknown / 0)."""
+    out = info.to_dict()
+    if served:
+        out.update(input_usd_per_mtok=None, output_usd_per_mtok=None, cache_read_usd_per_mtok=None,
+                   cache_write_usd_per_mtok=None, price_source=None, price_read=None, gpus=0)
+    if price is not None:
+        out.update(input_usd_per_mtok=float(price[0]), output_usd_per_mtok=float(price[1]), price_source="--price")
+    if gpus is not None:
+        out["gpus"] = int(gpus)
+    return out
 
 
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
@@ -200,6 +280,54 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
+class Interrupted(KeyboardInterrupt):
+    """A session stopped by SIGINT, SIGTERM or SIGHUP: all three are handled like Ctrl-C (``signum``, ``name``)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        super().__init__(self.name)
+
+
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
+
+
+@contextmanager
+def _stop_signals(run_dir: Path) -> Iterator[None]:
+    """While a session runs: SIGINT, SIGTERM and SIGHUP (what Slurm, Kubernetes and systemd send first) stop it like
+    Ctrl-C — the frames in flight are cut off, the session's wall time is recorded, the lock is released. A second
+    signal while that is under way exits at once (status 128 + signal): the frames written are whole lines, the OS
+    lock dies with the process, and ``.lock.pid`` is removed first."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    received: list[int] = []
+
+    def handler(signum: int, frame: Any) -> None:
+        received.append(signum)
+        if len(received) > 1:
+            _exit_now(run_dir, signum)
+        raise Interrupted(signum)
+
+    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
+
+
+def _exit_now(run_dir: Path, signum: int) -> None:
+    """A second stop signal: remove ``.lock.pid``, say so in one line, exit 128 + the signal at once."""
+    try:
+        (run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
+    except OSError:
+        pass
+    os.write(2, f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
+                f"Continue with: lightemma run --resume {run_dir}\n".encode())
+    os._exit(128 + signum)
+
+
 class _Stopped(Exception):
     """Raised into a frame's chain once the run has stopped: the frame is left unfinished (not written)."""
 
@@ -255,6 +383,7 @@ class _Guard:
 class _Outcome:
     done: int = 0  # frames written in this session
     stop: RunFatalError | None = None  # why the session stopped early, if it did
+    interrupted: int | None = None  # the signal (SIGINT, SIGTERM, SIGHUP) that stopped it, if one did
 
 
 async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
@@ -296,14 +425,37 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             bar.update(record)
             outcome.done += 1
 
+    main = asyncio.current_task()
+    loop = asyncio.get_running_loop()
+
+    def on_signal(signum: int) -> None:  # in the loop, between steps: the session is cancelled cleanly
+        if outcome.interrupted is not None:
+            _exit_now(writer.path.parent, signum)  # a second signal while stopping: leave at once
+        outcome.interrupted = signum
+        if main is not None:
+            main.cancel()
+
+    installed = []
+    if threading.current_thread() is threading.main_thread():
+        for sig in STOP_SIGNALS:
+            try:
+                loop.add_signal_handler(sig, on_signal, sig)
+                installed.append(sig)
+            except (NotImplementedError, RuntimeError, ValueError):
+                pass
     tasks = [asyncio.create_task(worker()) for _ in range(max(1, min(concurrency, len(frames))))]
     try:
         await asyncio.gather(*tasks)
+    except asyncio.CancelledError:
+        if outcome.interrupted is None:
+            raise
     finally:
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         await backend.aclose()
+        for sig in installed:  # back to the session's own handlers (_stop_signals), not the defaults
+            loop.remove_signal_handler(sig)
     return outcome
 
 
@@ -354,26 +506,32 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     concurrency = max(1, len(todo)) if getattr(backend, "wants_all_frames", False) else config["concurrency"]
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
-    try:
-        with writer:
-            if todo:
-                outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), concurrency, bar, earlier or {},
-                                               budget))
-            else:
-                outcome = _Outcome()
-                asyncio.run(backend.aclose())
-    except KeyboardInterrupt:
-        # the session's time is known: record it, so the run's wall time stays the sum of its sessions
-        sessions[-1].update(interrupted=True, wall_seconds=round(time.perf_counter() - start, 3))
+    with _stop_signals(run_dir):
         try:
-            update_manifest(run_dir, sessions=sessions)
-        except OSError:
-            pass  # the frames are safe; the run's wall time will just be unknown
-        if log:
-            log(f"interrupted; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
-        raise
-    finally:
-        bar.close()
+            with writer:
+                if todo:
+                    outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), concurrency, bar, earlier or {},
+                                                   budget))
+                    if outcome.interrupted is not None:
+                        raise Interrupted(outcome.interrupted)
+                else:
+                    outcome = _Outcome()
+                    asyncio.run(backend.aclose())
+        except KeyboardInterrupt as exc:
+            # the session's time is known: record it, so the run's wall time stays the sum of its sessions
+            sessions[-1].update(interrupted=True, wall_seconds=round(time.perf_counter() - start, 3))
+            if isinstance(exc, Interrupted):
+                sessions[-1]["signal"] = exc.name
+            try:
+                update_manifest(run_dir, sessions=sessions)
+            except OSError:
+                pass  # the frames are safe; the run's wall time will just be unknown
+            if log:
+                how = f" by {exc.name}" if isinstance(exc, Interrupted) else ""
+                log(f"interrupted{how}; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+            raise
+        finally:
+            bar.close()
     wall = time.perf_counter() - start
     _refresh_sidecar(run_dir, log)
     contents = read_run(run_dir)
@@ -386,6 +544,9 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     if batches:
         sessions[-1]["batch"] = batches
         summary.update(batch=True, batch_turnaround_s=batches.get("turnaround_s_mean"))
+    failed_cache = getattr(getattr(backend, "cache", None), "failure", None)
+    if failed_cache:
+        sessions[-1]["cache_failure"] = failed_cache  # the session ran uncached from then on
     images = getattr(backend, "image_report", None)
     if images:
         sessions[-1]["images_reencoded"] = images
@@ -478,6 +639,9 @@ def run(
     tpm: float | None = None,
     cache: str | bool | None = None,
     transport: str = "litellm",
+    api_key_env: str | None = None,
+    price: tuple[float, float] | None = None,
+    gpus: int | None = None,
     backend_options: dict[str, Any] | None = None,
     replicas: int = 1,
     ray_address: str | None = None,
@@ -531,14 +695,17 @@ def run(
         raise UserError("backend_options are recorded in the run manifest, so they cannot carry an api_key; "
                         "set the provider's environment variable instead")
     info = resolve(model)
+    from lightemma.backends.retry import redact_url
+
     config: dict[str, Any] = {
-        "model": model, "backend": backend, "api_base": api_base, "concurrency": concurrency, "temperature": temperature,
+        "model": model, "backend": backend, "api_base": redact_url(api_base), "api_key_env": api_key_env,
+        "price": None if price is None else [float(p) for p in price], "gpus": gpus, "concurrency": concurrency, "temperature": temperature,
         "max_tokens": max_tokens, "reask": reask, "max_attempts": max_attempts, "integrate_method": integrate_method,
         "speed_range": None if speed_range is None else [float(x) for x in speed_range],
         "max_abs_curvature": None if max_abs_curvature is None else float(max_abs_curvature),
         "chain": chain, "answer_format": answer_format, "inputs": inputs, "prompt_set": prompt_set, "timeout": timeout, "max_retries": max_retries, "backoff_base": backoff_base,
         "backoff_cap": backoff_cap, "rpm": rpm, "tpm": tpm, "transport": transport, "backend_options": backend_options or {},
-        "cache": ("cache.sqlite" if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
+        "cache": (DEFAULT_CACHE if cache is True else (os.fspath(Path(cache).resolve()) if cache else None)),
         "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica,
         "batch": bool(batch), "batch_poll": float(batch_poll) if batch else None, "max_cost_cents": max_cost_cents,
     }
@@ -557,13 +724,15 @@ def run(
                         "numbers itself and is shown nothing: drop --inputs")
     prompts = load_prompt_set(prompt_set).select(policy.chain, policy.answer_format, policy.inputs)
     output = Path(output)
-    instance = _make_backend(config, output)
+    instance = _make_backend(config, output, api_base, log)
     dataset = {"dataroot": os.fspath(Path(dataroot).resolve()) if dataroot else None, "version": version if dataroot else None,
                "split": split, "scenes": list(scenes) if scenes else None, "window": window, "limit": limit,
                "on_bad_record": on_bad_record, "sample": {"n": int(sample), "seed": int(sample_seed)} if sample is not None else None}
     config["dataset"] = dataset  # the request, as given: what a resume loads again
     try:
         structured = _structured_output(instance, policy)
+        if hasattr(instance, "check_endpoint"):
+            instance.check_endpoint()  # a dead --api-base is refused now, not after minutes of retries
         if frames is None:
             frames = _load_frames(dataset)
         else:
@@ -592,6 +761,10 @@ def run(
             "finished_at": None,
             **({"estimate": planned.to_dict()} if planned is not None else {}),
         }
+        if getattr(instance, "served_elsewhere", False) or gpus is not None:
+            manifest["model_info"] = _served_model_info(info, price, gpus, served=getattr(instance, "served_elsewhere", False))
+            if gpus is not None:
+                manifest["gpus"] = gpus
         run_dir = create_run_dir(output, model, manifest, frame_ids=[f.frame_id for f in frames])
         lock = RunLock(run_dir).acquire()
     except BaseException:
@@ -609,8 +782,8 @@ def run(
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
            concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
-           gpus_per_replica: float | None = None, max_cost_cents: float | None = None, progress: bool = True,
-           log: Log | None = None) -> RunResult:
+           gpus_per_replica: float | None = None, max_cost_cents: float | None = None, api_base: str | None = None,
+           api_key_env: str | None = None, cache: str | bool | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
@@ -625,12 +798,17 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     for this session (where the model runs, not what it is asked); so does ``max_cost_cents`` (the run's
     whole spending limit, records of earlier sessions included). A batch run polls the batches its
     journal names before submitting anything (:mod:`lightemma.backends.batch`).
+
+    The manifest never chooses where requests, keys or writes go: ``api_base``, ``api_key_env`` and
+    ``cache`` must be given as the run had them (its endpoint, key variable and response cache), else a
+    one-line :class:`~lightemma.errors.UserError` before anything is sent or written.
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     config = dict(manifest.get("config") or {})
     if not config.get("model"):
         raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
+    _trusted_settings(run_dir, config, api_base, api_key_env, cache)
     if concurrency is not None:
         if concurrency < 1:
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
@@ -651,7 +829,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                         f"(run: {run_hash}, now: {now_hash}); start a new run instead of resuming")
     with RunLock(run_dir):  # before anything is read for the todo list: a second writer would redo the same frames
         manifest = read_manifest(run_dir)  # as the last writer left it
-        instance = _make_backend(config, run_dir.parent.parent)
+        instance = _make_backend(config, run_dir.parent.parent, api_base, log)
         try:
             _structured_output(instance, _policy(config))
             dataset = dict(config.get("dataset") or {})
@@ -674,6 +852,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
 
             todo = [f for f in all_frames if f.frame_id not in records or redo(records[f.frame_id])]
             again = sum(1 for f in all_frames if f.frame_id in records and redo(records[f.frame_id]) and not retry_failed)
+            if todo and hasattr(instance, "check_endpoint"):
+                instance.check_endpoint()  # a dead --api-base is refused now, not after minutes of retries
         except BaseException:
             asyncio.run(instance.aclose())
             raise

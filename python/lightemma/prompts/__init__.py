@@ -39,6 +39,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 from dataclasses import dataclass, field, replace
 from importlib import resources
 from typing import Any
@@ -181,13 +182,15 @@ class PromptSet:
 
         ``history``, ``speeds`` and ``curvatures`` are the renderings of
         :func:`lightemma.frames.history_placeholders`.
+        Each placeholder of the template is substituted once, in one pass over the template: a value (a
+        model's scene or intent text) is data, so a ``{intent}`` or ``{history}`` inside it stays as written.
         """
         values = {"scene": scene, "history": history, "intent": intent, "speeds": speeds, "curvatures": curvatures}
-        text = self.stages[stage]
         keys = [k for k in PLACEHOLDERS[stage] if k != "history"] + (list(HISTORY_KEYS) if "history" in PLACEHOLDERS[stage] else [])
-        for key in keys:
-            text = text.replace("{" + key + "}", values[key].strip())
-        return text
+        if not keys:
+            return self.stages[stage]
+        pattern = re.compile("|".join(re.escape("{" + k + "}") for k in keys))
+        return pattern.sub(lambda m: values[m.group(0)[1:-1]].strip(), self.stages[stage])
 
     def describe(self) -> dict[str, str]:
         """What a run manifest records about the prompt set (and the variant in use, if any)."""

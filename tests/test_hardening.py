@@ -1,0 +1,529 @@
+"""Runs that no provider, file or signal can hang, crash or turn against the user (issue 25, and 22.5).
+
+Every test drives the real code against loopback servers (tests/fake_openai.py), crafted run
+directories or a subprocess it signals; none reaches the network.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from fake_openai import INTENT_TEXT, FakeOpenAIServer, Reply, default_reply
+from memframes import make_frames
+
+from lightemma.pipeline import run
+from lightemma.prompts import load_prompt_set
+from lightemma.runs.store import read_run
+
+FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture
+def frames(tmp_path):
+    return make_frames(tmp_path, 3)
+
+
+def env(**extra: str) -> dict[str, str]:
+    """The environment of a lightemma subprocess: this checkout's code, no network for HF or litellm."""
+    out = {k: v for k, v in os.environ.items() if not k.endswith("_API_KEY")}
+    out.update(PYTHONPATH=str(ROOT / "python") + os.pathsep + str(ROOT / "tests"), HF_HUB_OFFLINE="1",
+               LITELLM_LOCAL_MODEL_COST_MAP="True", PYTHONUNBUFFERED="1", **extra)
+    return out
+
+
+# -- 25.14: a model's text is data, never a template --------------------------------------------------
+
+
+def test_placeholders_in_a_models_answer_are_not_expanded_in_the_next_prompt():
+    ps = load_prompt_set()
+    scene = "a sign reads {intent} and {history} and {speeds}"
+    intent = ps.render("intent", scene=scene, history="HIST", speeds="S", curvatures="C")
+    assert scene in intent and "HIST" in intent  # the template's own {history} is filled, the scene's is not
+    actions = ps.render("actions", scene=scene, intent="go {scene} {curvatures}", history="HIST", speeds="S", curvatures="C")
+    assert scene in actions and "go {scene} {curvatures}" in actions
+
+
+def test_a_chain_passes_a_scene_text_holding_placeholders_on_verbatim(tmp_path, frames):
+    scene = "Road ahead; a billboard says {intent} {history} {scene}."
+
+    def script(req):
+        return Reply(scene) if req.stage == "scene" else default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", frames=frames[:1], api_base=server.url, output=tmp_path / "out", **FAST)
+    by_stage = {r.stage: r.text for r in server.requests}
+    assert scene in by_stage["intent"] and scene in by_stage["actions"]
+    assert INTENT_TEXT in by_stage["actions"] and by_stage["actions"].count(INTENT_TEXT) == 1
+    assert read_run(result.run_dir).records[frames[0].frame_id]["status"] == "ok"
+
+
+# -- 25.1: a provider's Retry-After never freezes a run ------------------------------------------------
+
+
+@pytest.mark.parametrize("after", ["3600", "inf", "Wed, 21 Oct 2099 07:28:00 GMT"])
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_retry_after_beyond_the_maximum_wait_stops_the_run_at_once_resumable(tmp_path, frames, after, transport):
+    from lightemma.errors import RunStopped
+
+    replies = [Reply(status=429, headers={"Retry-After": after}, body={"error": {"message": "quota", "type": "rate_limit_exceeded"}})]
+    with FakeOpenAIServer(replies) as server:
+        start = time.monotonic()
+        with pytest.raises(RunStopped) as info:
+            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
+                transport=transport, **FAST)
+        elapsed = time.monotonic() - start
+    assert elapsed < 15, elapsed  # not an hour, not forever
+    assert info.value.cause == "quota-exhausted" and "Retry-After" in str(info.value) and "--resume" in str(info.value)
+    assert len(server.requests) == 1  # nothing else is sent into a quota the provider says is gone
+
+
+def test_a_short_retry_after_is_waited_and_no_pause_exceeds_the_cap():
+    from lightemma.backends.ratelimit import MAX_PAUSE, RateLimiter
+    from lightemma.backends.retry import RetryPolicy, _parse_retry_after
+
+    limiter = RateLimiter()
+    limiter.pause(float("inf"))
+    assert limiter._paused_until - time.monotonic() <= MAX_PAUSE
+    assert RetryPolicy().waits_too_long(3600) and not RetryPolicy().waits_too_long(30)
+    assert _parse_retry_after("nan") is None and _parse_retry_after("2.5") == 2.5 and _parse_retry_after("-4") == 0.0
+
+
+# -- 25.5: a provider's key goes only to its own host, or where the user names a key variable --------------
+
+
+KEYS = {"OPENAI_API_KEY": "sk-proj-OPENAI-SECRET-0123456789", "ANTHROPIC_API_KEY": "sk-ant-ANTHROPIC-SECRET-0123456789",
+        "GEMINI_API_KEY": "AIzaGEMINI-SECRET-0123456789"}
+
+
+def sent_secrets(server) -> set[str]:
+    out = set()
+    for req in server.requests:
+        blob = json.dumps([req.path, req.headers])
+        out |= {name for name, value in KEYS.items() if value in blob}
+    return out
+
+
+@pytest.mark.parametrize(("model", "openai_path"), [("gpt-4o", True), ("openai/test-model", True),
+                                                    ("anthropic/claude-sonnet-4-6", False), ("gemini/gemini-2.5-flash", False)])
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(elsewhere, monkeypatch, tmp_path, frames, model,
+                                                                             openai_path, transport):
+    if transport == "direct" and not openai_path:
+        pytest.skip("the direct transport speaks only the OpenAI protocol")
+    for name, value in KEYS.items():
+        monkeypatch.setenv(name, value)
+    with FakeOpenAIServer() as server:
+        run(model, frames=frames[:1], api_base=server.url if openai_path else server.root_url, output=tmp_path / "a",
+            transport=transport, **FAST)
+        assert server.requests and sent_secrets(server) == set()
+        # named explicitly, that key (and only that one) goes there
+        monkeypatch.setenv("MY_SERVER_KEY", "sk-my-own-server-key-0123456789")
+        run(model, frames=frames[:1], api_base=server.url if openai_path else server.root_url, output=tmp_path / "b",
+            transport=transport, api_key_env="MY_SERVER_KEY", **FAST)
+        later = server.requests[-1]
+        assert "sk-my-own-server-key-0123456789" in json.dumps([later.path, later.headers])
+        assert sent_secrets(server) == set()
+
+
+def test_demo_with_an_api_base_sends_none_of_the_three_keys(elsewhere, monkeypatch, tmp_path):
+    from lightemma.demo import run_demo
+
+    for name, value in KEYS.items():
+        monkeypatch.setenv(name, value)
+    with FakeOpenAIServer() as server:
+        run_demo(tmp_path / "demo", scenes=1, keyframes=16, api_limit=1, api_base=server.url, log=lambda line: None)
+        assert server.requests and sent_secrets(server) == set()
+
+
+def test_an_unset_key_variable_is_refused_in_one_line_and_plain_http_elsewhere_is_warned(monkeypatch):
+    from lightemma.backends import create_backend
+    from lightemma.errors import UserError
+
+    monkeypatch.delenv("NOPE_KEY", raising=False)
+    with pytest.raises(UserError, match="--api-key-env NOPE_KEY: the environment variable NOPE_KEY is not set"):
+        create_backend("openai/m", api_base="http://127.0.0.1:9/v1", api_key_env="NOPE_KEY")
+    monkeypatch.setenv("MY_KEY", "sk-abc-0123456789")
+    far = create_backend("openai/m", api_base="http://192.0.2.7:8000/v1", api_key_env="MY_KEY")
+    (notice,) = far.notices
+    assert "plain http" in notice and "MY_KEY" in notice and "sk-abc" not in notice
+    for quiet in ("http://127.0.0.1:8000/v1", "http://localhost:8000/v1", "http://[::1]:8000/v1", "https://192.0.2.7/v1"):
+        assert create_backend("openai/m", api_base=quiet).notices == []
+
+
+# -- 25.15: credentials in --api-base stay out of every record and message --------------------------------
+
+
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_password_in_the_api_base_is_in_no_record_and_no_message(tmp_path, frames, capsys, transport):
+    from lightemma.cli import main
+
+    with FakeOpenAIServer(lambda req: Reply.error(400, "bad request at http://alice:hunter2pw@host")) as server:
+        base = server.url.replace("http://", "http://alice:hunter2pw@")
+        out = tmp_path / "out"
+        code = main(["run", "--model", "openai/test-model", "--api-base", base, "--dataroot", str(tmp_path / "none"),
+                     "--output", str(out), "--no-progress"])
+        assert code == 2  # no dataset: refused, but the message must not show the password either
+        from lightemma.errors import RunStopped
+
+        with pytest.raises(RunStopped) as info:
+            run("openai/test-model", frames=frames, api_base=base, output=out, max_attempts=1, transport=transport, **FAST)
+    messages = capsys.readouterr().err + str(info.value)
+    assert server.requests[0].headers["authorization"].startswith("Basic ")  # used to reach the server, not shown
+    written = b"".join(p.read_bytes() for p in out.rglob("*") if p.is_file())
+    assert "hunter2pw" not in messages and b"hunter2pw" not in written
+    from lightemma.backends.retry import redact_url
+
+    assert redact_url("https://h/v1?api_key=querysecret123&v=2") == "https://h/v1?api_key=***&v=2"
+    (run_dir,) = [p.parent for p in out.rglob("manifest.json")]
+    assert json.loads((run_dir / "manifest.json").read_text())["config"]["api_base"].startswith("http://***@127.0.0.1:")
+
+
+# -- 25.4: a run directory never redirects keys or writes --------------------------------------------------
+
+
+def crafted_run(tmp_path, frames, server, **changes):
+    """A finished-but-incomplete run whose manifest config is then edited as someone else might have."""
+    from lightemma.runs.store import FRAMES_FILE, update_manifest
+
+    first = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", cache=True, **FAST)
+    path = first.run_dir / FRAMES_FILE
+    path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:1]))  # two frames left to do
+    manifest = json.loads((first.run_dir / "manifest.json").read_text())
+    update_manifest(first.run_dir, config={**manifest["config"], **changes})
+    return first.run_dir
+
+
+def test_resume_refuses_a_manifest_whose_endpoint_is_not_the_users(elsewhere, monkeypatch, tmp_path, frames, capsys):
+    from lightemma.cli import main
+
+    monkeypatch.setenv("OPENAI_API_KEY", KEYS["OPENAI_API_KEY"])
+    with FakeOpenAIServer() as ours, FakeOpenAIServer() as theirs:
+        run_dir = crafted_run(tmp_path, frames, ours, api_base=theirs.url, api_key_env="OPENAI_API_KEY")
+        before = len(ours.requests)
+        for extra in ([], ["--api-base", ours.url], ["--api-base", theirs.url, "--cache"]):
+            assert main(["run", "--resume", str(run_dir), *extra, "--no-progress"]) == 2
+            err = capsys.readouterr().err
+            assert len(err.strip().splitlines()) == 1 and ("--api-base" in err or "--api-key-env" in err), err
+        assert not theirs.requests and len(ours.requests) == before
+        # the user's own word for both: the run goes on there, with the key the user named
+        from lightemma.pipeline import resume
+
+        resume(run_dir, frames=frames, api_base=theirs.url, api_key_env="OPENAI_API_KEY", cache=True, progress=False)
+        assert theirs.requests and len(ours.requests) == before
+        assert theirs.requests[0].headers["authorization"] == f"Bearer {KEYS['OPENAI_API_KEY']}"
+
+
+@pytest.mark.parametrize("cache", ["ABS", "../../../escape.sqlite"])
+def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, frames, capsys, cache):
+    from lightemma.cli import main
+
+    target = tmp_path / "elsewhere" / "evil.sqlite"
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server, cache=str(target) if cache == "ABS" else cache)
+        for extra in ([], ["--cache"]):
+            assert main(["run", "--resume", str(run_dir), "--api-base", server.url, *extra, "--no-progress"]) == 2
+            err = capsys.readouterr().err
+            assert len(err.strip().splitlines()) == 1 and "--cache" in err, err
+        assert not target.exists() and not (tmp_path / "escape.sqlite").exists() and not list(tmp_path.parent.glob("escape*"))
+        assert len(read_run(run_dir).records) == 1
+        # given on the command line, the path is the user's choice
+        wanted = target if cache == "ABS" else (run_dir.parent.parent / cache).resolve()
+        from lightemma.pipeline import resume
+
+        resume(run_dir, frames=frames, api_base=server.url, cache=str(wanted), progress=False)
+        assert wanted.exists() and len(read_run(run_dir).records) == 3
+
+
+# -- 25.10: SIGTERM and SIGHUP stop a run like Ctrl-C ------------------------------------------------------
+
+
+def wait_for(predicate, seconds: float, what: str) -> None:
+    deadline = time.monotonic() + seconds
+    while not predicate():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+def run_dirs(out: Path) -> list[Path]:
+    return [p.parent for p in out.rglob("manifest.json") if not any(x.startswith(".") for x in p.relative_to(out).parts)]
+
+
+@pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
+def test_sigterm_and_sighup_stop_a_run_like_ctrl_c(tmp_path, synth_root, signum):
+    from lightemma.runs.store import LOCK_PID_FILE, read_manifest
+
+    out = tmp_path / "out"
+    with FakeOpenAIServer(latency=0.2) as server:
+        proc = subprocess.Popen([sys.executable, "-m", "lightemma", "run", "--model", "openai/test-model", "--api-base",
+                                 server.url, "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
+                                 "--concurrency", "2", "--output", str(out), "--no-progress"],
+                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
+        try:
+            wait_for(lambda: any((d / "frames.jsonl").stat().st_size for d in run_dirs(out)), 60, "a first frame")
+            proc.send_signal(signum)
+            _, err = proc.communicate(timeout=20)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+    assert proc.returncode == 128 + signum, err
+    name = signal.Signals(signum).name
+    assert f"interrupted by {name}" in err and "--resume" in err and "Traceback" not in err, err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists()
+    (session,) = read_manifest(run_dir)["sessions"]
+    assert session["interrupted"] is True and session["signal"] == name and session["wall_seconds"] > 0
+
+
+# -- 25.2: a local generate that hangs neither freezes the run nor survives Ctrl-C -------------------------
+
+
+HANG = """
+import sys, threading
+from lightemma.backends import hf
+hf.HFBackend._generate = lambda self, requests: threading.Event().wait()  # never returns, ignores every criterion
+from lightemma.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.fixture(scope="module")
+def tiny_qwen(tmp_path_factory):
+    from local_models import build_tiny_model
+
+    return build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_hang"))
+
+
+def hf_run(tiny_qwen, synth_root, out, *extra):
+    return subprocess.Popen([sys.executable, "-c", HANG, "run", "--model", str(tiny_qwen), "--backend", "hf", "--device", "cpu",
+                             "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "2",
+                             "--output", str(out), "--no-progress", *extra],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
+
+
+def test_a_hung_local_generate_stops_the_run_at_the_timeout_resumable(tmp_path, synth_root, tiny_qwen):
+    from lightemma.runs.store import LOCK_PID_FILE, read_manifest
+
+    out = tmp_path / "out"
+    proc = hf_run(tiny_qwen, synth_root, out, "--timeout", "1")
+    try:
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 2, err
+    lines = [line for line in err.splitlines() if "error" in line]
+    assert len(lines) == 1 and "did not finish a batch within --timeout 1 s" in lines[0] and "--resume" in lines[0], err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists()
+    assert read_manifest(run_dir)["sessions"][0]["stopped"]["cause"] == "local-timeout"
+
+
+@pytest.mark.parametrize("twice", [False, True])
+def test_ctrl_c_stops_a_hung_local_generate_and_a_second_one_exits_at_once(tmp_path, synth_root, tiny_qwen, twice):
+    from lightemma.runs.store import LOCK_PID_FILE
+
+    out = tmp_path / "out"
+    proc = hf_run(tiny_qwen, synth_root, out, "--timeout", "600")
+    try:
+        wait_for(lambda: any((d / LOCK_PID_FILE).exists() for d in run_dirs(out)), 120, "the run to start")
+        time.sleep(1.0)  # the worker is now inside the hung generate
+        proc.send_signal(signal.SIGINT)
+        start = time.monotonic()
+        if twice:
+            time.sleep(0.5)
+            proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        elapsed = time.monotonic() - start
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130, err
+    assert elapsed < (3 if twice else 15), elapsed
+    assert "--resume" in err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists()
+
+
+def test_a_local_generate_past_the_timeout_fails_its_batch_as_timeout(tiny_qwen, tmp_path):
+    from PIL import Image
+
+    from lightemma.backends import ChatRequest, GenerationParams
+    from lightemma.backends.hf import HFBackend
+
+    image = tmp_path / "cam.jpg"
+    Image.new("RGB", (32, 32), (10, 20, 30)).save(image)
+    backend = HFBackend(str(tiny_qwen), device="cpu", timeout=0.5)
+    request = ChatRequest(text="describe", stage="scene", frame_id="s/0", image_path=str(image),
+                          params=GenerationParams(max_tokens=1_000_000))  # babble: it would never end
+    start = time.monotonic()
+    (result,) = asyncio.run(backend.generate([request]))
+    assert time.monotonic() - start < 10
+    assert result.error == "Timeout" and result.text is None
+    asyncio.run(backend.aclose())
+
+
+# -- 25.13: a failure tied to some frames does not stop the run ----------------------------------------------
+
+
+def scenes_in_order(tmp_path, first: int, second: int):
+    """Frames of scene A (``first`` of them) and then scene B, in that order (as a dataset lists them)."""
+    import dataclasses
+
+    frames = make_frames(tmp_path, first + second)
+    out = []
+    for i, f in enumerate(frames):
+        scene = "scene-A" if i < first else "scene-B"
+        out.append(dataclasses.replace(f, scene_name=scene, frame_id=f"{scene}/{f.sample_token}"))
+    return out
+
+
+def test_a_provider_rejecting_one_scenes_images_does_not_stop_the_run(tmp_path):
+    from memframes import FrameIndex
+
+    frames = scenes_in_order(tmp_path, 5, 3)
+    index = FrameIndex(frames)
+
+    def script(req):
+        if index(req) < 5:
+            return Reply.error(400, "Invalid image: the image could not be processed")
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
+                     max_attempts=2, **FAST)
+    records = read_run(result.run_dir).records
+    assert [records[f.frame_id]["status"] for f in frames] == ["failed"] * 5 + ["ok"] * 3
+    assert all(records[f.frame_id]["error"] == "BadRequestError" for f in frames[:5])
+
+
+def test_the_same_rejection_across_scenes_still_stops_the_run(tmp_path):
+    from lightemma.errors import RunStopped
+
+    frames = scenes_in_order(tmp_path, 4, 3)
+    with FakeOpenAIServer(lambda req: Reply.error(400, "max_tokens is too large")) as server:
+        with pytest.raises(RunStopped, match="every request is rejected the same way"):
+            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
+                max_attempts=2, **FAST)
+        assert len(server.requests) <= 2 * 5  # stopped at the first frame of the second scene
+
+
+# -- 25.8: a response cache that cannot write is reported once; the run goes on ----------------------------
+
+
+def test_a_locked_response_cache_is_reported_in_one_line_and_the_run_goes_on_uncached(tmp_path, frames, monkeypatch):
+    import sqlite3
+
+    from lightemma import cache as cache_module
+    from lightemma.runs.store import read_manifest
+
+    monkeypatch.setattr(cache_module, "BUSY_TIMEOUT", 0.2)
+    path = tmp_path / "out" / "cache.sqlite"
+    holder: list[sqlite3.Connection] = []
+    lines: list[str] = []
+
+    def script(req):
+        if not holder:  # another writer takes the database once the run has it open
+            db = sqlite3.connect(path, isolation_level=None, check_same_thread=False)
+            db.execute("BEGIN EXCLUSIVE")
+            holder.append(db)
+        return default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", cache=True,
+                     log=lines.append, **FAST)
+    holder[0].close()
+    warnings = [line for line in lines if "response cache" in line]
+    assert len(warnings) == 1 and "database is locked" in warnings[0] and "without caching" in warnings[0], lines
+    assert result.summary["ok"] == len(frames)
+    assert "database is locked" in read_manifest(result.run_dir)["sessions"][0]["cache_failure"]
+
+
+# -- 25.9: a response body has a size limit -----------------------------------------------------------------
+
+
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(transport):
+    from fake_openai import SCENE_TEXT
+
+    from lightemma.backends import ChatRequest, create_backend
+    from lightemma.backends.openai_http import MAX_BODY_BYTES
+    from lightemma.backends.retry import RetryPolicy
+
+    huge = Reply("x" * (MAX_BODY_BYTES + 1000))
+    with FakeOpenAIServer([huge, Reply(SCENE_TEXT)]) as server:
+        backend = create_backend("openai/test-model", api_base=server.url, transport=transport,
+                                 retry=RetryPolicy(max_retries=2, base=0.01, cap=0.05))
+
+        async def two():
+            req = ChatRequest(text="describe", stage="scene", frame_id="s/a")
+            return [(await backend.generate([req]))[0], (await backend.generate([req]))[0]]
+
+        big, small = asyncio.run(two())
+        asyncio.run(backend.aclose())
+    assert big.error == "ResponseTooLargeError" and big.retries == 0 and "bytes" in big.error_message
+    assert small.ok and small.text == SCENE_TEXT and len(server.requests) == 2
+
+
+# -- 22.5: --api-base checked at once ----------------------------------------------------------------------
+
+
+def closed_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return sock.getsockname()[1]  # closed again: nothing listens there
+
+
+@pytest.mark.parametrize(("base", "words"), [("localhost:8000/v1", "needs a scheme"), ("http://127.0.0.1:99999/v1", "usable URL"),
+                                             ("http://127.0.0.1:PORT/v1", "cannot connect")])
+def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path, synth_root, capsys, base, words):
+    from lightemma.cli import main
+
+    base = base.replace("PORT", str(closed_port()))
+    code = main(["run", "--model", "openai/test-model", "--api-base", base, "--dataroot", str(synth_root), "--version",
+                 "v1.0-mini", "--split", "all", "--limit", "2", "--output", str(tmp_path / "out"), "--no-progress"])
+    err = capsys.readouterr().err
+    assert code == 2 and len(err.strip().splitlines()) == 1 and words in err, err
+    assert not (tmp_path / "out").exists()  # before any work: no run directory, no retries against a dead host
+
+
+# -- 22.5: a model served from --api-base is that server's: its protocol, no list price, no registry GPUs -------
+
+
+def test_a_registry_model_of_another_provider_at_an_api_base_speaks_openai_and_has_no_list_price(elsewhere, monkeypatch,
+                                                                                                 tmp_path, frames):
+    from lightemma.evaluation import evaluate_runs
+
+    monkeypatch.setenv("ANTHROPIC_API_KEY", KEYS["ANTHROPIC_API_KEY"])
+    with FakeOpenAIServer() as server:
+        plain = run("claude-4.6-sonnet", frames=frames[:2], api_base=server.url, output=tmp_path / "a", **FAST)
+        priced = run("gpt-4o", frames=frames[:2], api_base=server.url, output=tmp_path / "b", price=(1.0, 2.0), **FAST)
+    first = server.requests[0]
+    assert first.protocol == "openai" and first.body["model"] == "claude-sonnet-4-6" and sent_secrets(server) == set()
+    records = list(read_run(plain.run_dir).records.values())
+    assert all(r["status"] == "ok" and r["cost_cents"] is None for r in records)  # not Anthropic's list price
+    assert plain.manifest["model_info"]["input_usd_per_mtok"] is None and "unknown" in plain.manifest["backend"]["cost"]
+    for record in read_run(priced.run_dir).records.values():  # --price: 3 calls of 1000 in, 50 out
+        assert record["cost_cents"] == pytest.approx(3 * (1000 * 1.0 + 50 * 2.0) / 1e6 * 100)
+
+
+def test_a_local_model_served_from_an_api_base_shows_no_registry_gpu_count_unless_given(elsewhere, tmp_path, frames):
+    from lightemma.evaluation.manifest import _gpus
+    from lightemma.registry import lookup
+
+    assert lookup("qwen-2.5-vl-7b").gpus >= 1  # the paper's hardware
+    with FakeOpenAIServer() as server:
+        plain = run("qwen-2.5-vl-7b", frames=frames[:1], api_base=server.url, output=tmp_path / "a", **FAST)
+        given = run("qwen-2.5-vl-7b", frames=frames[:1], api_base=server.url, output=tmp_path / "b", gpus=4, **FAST)
+    assert _gpus(plain.manifest) is None and _gpus(given.manifest) == 4
