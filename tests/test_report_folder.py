@@ -135,3 +135,70 @@ def test_a_decompression_bomb_image_is_skipped_not_fatal(tmp_path, size):
     assert index.is_file() and (tmp_path / "rep" / "index.html").is_file()
     assert not (tmp_path / "rep" / "html" / "images").exists() or not list((tmp_path / "rep" / "html" / "images").iterdir())
     assert np.isfinite(np.asarray(frames[0].gt_positions)).all()
+
+
+@pytest.mark.parametrize("shape", ["run", "model_folder", "runs", "parent", "inside_run", "inside_runs"])
+def test_an_out_that_is_holds_or_lies_in_an_input_is_refused_even_with_force(runs, tmp_path, monkeypatch, capsys, shape):
+    from lightemma.runs.store import find_run_dirs
+
+    run = find_run_dirs(runs)[0]  # runs/<model>/<run id>
+    out = {"run": run, "model_folder": run.parent, "runs": runs, "parent": tmp_path, "inside_run": run / "rep", "inside_runs": runs / "rep"}[shape]
+    before = _snapshot(tmp_path)
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and f"--out {out} " in err and "--force does not override this" in err
+    relation = {"run": "is the input run directory", "model_folder": "contains the input run directory", "runs": "is the runs folder", "parent": "contains the",
+                "inside_run": "lies inside the input run directory", "inside_runs": "lies inside the runs folder"}[shape]
+    assert relation in err
+    assert _snapshot(tmp_path) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]  # no hidden folder, the runs whole
+    # the same through a symlink and a relative "." (real paths are compared), and a run named alone
+    link = tmp_path.parent / f"{tmp_path.name}-link"
+    link.symlink_to(runs, target_is_directory=True)
+    assert main(["report", str(run), "--out", str(link), "--no-pictures", "--force"]) == 2
+    assert "contains the input run directory" in capsys.readouterr().err
+    monkeypatch.chdir(tmp_path)
+    assert main(["report", "runs", "--out", ".", "--no-pictures", "--force"]) == 2
+    assert "--out . contains the input run directory" in capsys.readouterr().err
+    assert _snapshot(tmp_path) == before
+
+
+def test_an_out_that_is_or_holds_the_dataroot_is_refused(runs, tmp_path, capsys):
+    data = tmp_path / "data"
+    (data / "v1.0-mini").mkdir(parents=True)
+    (data / "v1.0-mini" / "scene.json").write_text("[]")
+    for out in (data, tmp_path / "data" / "rep"):
+        assert main(["report", str(runs), "--out", str(out), "--dataroot", str(data), "--no-pictures", "--force"]) == 2
+        assert "the dataroot" in capsys.readouterr().err
+    assert (data / "v1.0-mini" / "scene.json").read_text() == "[]" and not (data / "rep").exists()
+    assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--dataroot", str(data), "--version", "v9", "--no-pictures"]) == 2
+    assert capsys.readouterr().err.strip() == f"lightemma report: error: --version v9: --dataroot {data} has no folder v9"
+
+
+def test_files_added_to_a_report_are_not_replaced_without_force(runs, tmp_path, capsys):
+    import json
+
+    out = tmp_path / "rep2"
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--no-paper", "--top", "0"]) == 0
+    marker = json.loads((out / ".lightemma-report").read_text())
+    assert "index.md" in marker["files"] and "index.html" in marker["files"] and ".lightemma-report" not in marker["files"]
+    assert sorted(marker["files"]) == sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() and p.name != ".lightemma-report")
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 0  # its own files only: replaced
+    (out / "notes.txt").write_text("mine")
+    (out / "figures" / "myfig.png").write_bytes(b"png")
+    before = _snapshot(out)
+    capsys.readouterr()
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == (f"lightemma report: error: --out {out} holds 2 file(s) its report did not write (figures/myfig.png, notes.txt): "
+                   "refusing to replace it (--force replaces it)")
+    assert _snapshot(out) == before
+    # a report whose marker has no file list (an older lightemma's) cannot be told apart from added files: refused too
+    (out / "notes.txt").unlink()
+    (out / "figures" / "myfig.png").unlink()
+    (out / ".lightemma-report").write_text('{"written_by": "lightemma report"}\n')
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
+    assert "without the list of its files" in capsys.readouterr().err
+    (out / "notes.txt").write_text("mine")
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 0
+    assert not (out / "notes.txt").exists() and (out / "index.md").is_file()

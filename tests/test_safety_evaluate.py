@@ -108,6 +108,28 @@ def test_na_without_dataroot_and_without_annotations(world, tmp_path):
     assert "n/a (no annotations)" in md and "| Ground truth (floor) |" in md
 
 
+def test_a_given_dataroot_that_is_not_there_is_an_error_and_a_gone_recorded_one_is_named(world, tmp_path, capsys):
+    base, root, dirs = world
+    (tmp_path / "afile").write_text("x")
+    for dataroot, version, message in ((tmp_path / "nonexistent", "v1.0-mini", f"--dataroot {tmp_path / 'nonexistent'} does not exist"),
+                                       (tmp_path / "afile", "v1.0-mini", f"--dataroot {tmp_path / 'afile'} is not a folder"),
+                                       (root, "v9", f"--version v9: --dataroot {root} has no folder v9")):
+        assert main(["evaluate", str(dirs["cv"]), "--dataroot", str(dataroot), "--version", version, "--resamples", "0"]) == 2
+        captured = capsys.readouterr()
+        assert captured.err == f"lightemma evaluate: error: {message}\n" and captured.out == ""
+    # the run's recorded dataroot (or its version folder) is gone: the n/a says so, not "no dataroot"
+    run = load_run(dirs["cv"])
+    gone = tmp_path / "moved-away"
+    for dataset, named in (({"dataroot": str(gone), "version": "v1.0-mini"}, str(gone)),
+                           ({"dataroot": str(root), "version": "v9"}, str(root / "v9"))):
+        run.info = dataclasses.replace(run.info, dataset=dataset)
+        ev = evaluate_loaded([run], resampling=FAST)
+        row = ev.accuracy_rows("lightemma")[0]
+        reason = f"recorded dataroot {named} is gone; pass --dataroot"
+        assert row["offroad"] is None and row["collision"] is None and row["offroad_na"] == row["collision_na"] == reason
+        assert f"n/a ({reason})" in render(evaluation_tables(ev), "md")
+
+
 def test_cli_dataroot_with_paper_and_pairwise(world, capsys):
     base, root, dirs = world
     assert main(["evaluate", str(dirs["cv"]), "--dataroot", str(root)]) == 2

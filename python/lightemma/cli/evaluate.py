@@ -52,13 +52,20 @@ def add_safety_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def safety_options(args: argparse.Namespace) -> dict:
-    """evaluate_runs keywords from the safety arguments (a --version without --dataroot is refused)."""
+    """evaluate_runs keywords from the safety arguments: a --version without --dataroot (or the reverse), a --dataroot
+    that is not a folder, or one without the --version folder is refused (UserError)."""
     from lightemma.errors import UserError
 
     if args.dataset_version and not args.dataroot:
         raise UserError("--version needs --dataroot")
     if args.dataroot and not args.dataset_version:
         raise UserError("--dataroot needs --version (the nuScenes version folder under it, e.g. v1.0-trainval)")
+    if args.dataroot:
+        root = Path(args.dataroot).expanduser()
+        if not root.is_dir():
+            raise UserError(f"--dataroot {args.dataroot} {'is not a folder' if root.exists() else 'does not exist'}")
+        if not (root / args.dataset_version).is_dir():
+            raise UserError(f"--version {args.dataset_version}: --dataroot {args.dataroot} has no folder {args.dataset_version}")
     return {"safety": args.safety, "dataroot": args.dataroot, "version": args.dataset_version}
 
 

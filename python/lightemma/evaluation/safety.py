@@ -628,15 +628,19 @@ class SafetyResult:
 
 
 def _resolve_dataset(run: Any, dataroot: str | os.PathLike[str] | None, version: str | None) -> tuple[str, str] | str:
-    """(dataroot, version) for a run: the given ones, else the run's manifest's; or the reason there is none."""
+    """(dataroot, version) for a run: the given ones, else the run's manifest's; or the reason there is none
+    (none recorded, or the recorded folder is gone)."""
     if dataroot is not None:
         if not version:
             return "--dataroot needs --version"
         return os.fspath(dataroot), version
     ds = run.info.dataset or {}
     root, ver = ds.get("dataroot"), ds.get("version")
-    if isinstance(root, str) and root and isinstance(ver, str) and ver and Path(root, ver).is_dir():
-        return root, ver
+    if isinstance(root, str) and root and isinstance(ver, str) and ver:
+        if Path(root, ver).is_dir():
+            return root, ver
+        gone = root if not Path(root).is_dir() else os.path.join(root, ver)
+        return f"recorded dataroot {gone} is gone; pass --dataroot"
     return _NO_DATAROOT
 
 

@@ -236,16 +236,78 @@ def _is_report(folder: Path) -> bool:
         return False
 
 
+def _report_files(folder: Path) -> list[str]:
+    """Every file (and link) under ``folder``, relative POSIX paths, sorted; the marker itself left out."""
+    found = []
+    for root, dirs, files in os.walk(folder):
+        base = Path(root)
+        links = [d for d in dirs if (base / d).is_symlink()]  # os.walk does not descend into them: list them as entries
+        for name in [*files, *links]:
+            rel = (base / name).relative_to(folder).as_posix()
+            if rel != REPORT_MARKER:
+                found.append(rel)
+    return sorted(found)
+
+
+def _foreign_files(out: Path) -> list[str] | None:
+    """Files in the report ``out`` that its own report did not write (its marker's file list); None: no list to compare."""
+    try:
+        marker = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, ValueError):
+        return None
+    own = marker.get("files") if isinstance(marker, dict) else None
+    if not isinstance(own, list) or not all(isinstance(f, str) for f in own):
+        return None
+    own_set = set(own)
+    return [f for f in _report_files(out) if f not in own_set]
+
+
 def _check_target(out: Path, force: bool) -> None:
-    """Refuse (UserError) an ``out`` that is a file, or a non-empty folder that is not a lightemma report, unless ``force``."""
+    """Refuse (UserError) an ``out`` that is a file, or — unless ``force`` — a non-empty folder that is not a lightemma
+    report, or a report that holds files its report did not write (the marker's file list), or one without that list."""
     if not out.exists() and not out.is_symlink():
         return
     if not out.is_dir():
         raise UserError(f"report folder {out} is a file, not a folder", cli=f"--out {out} is a file, not a folder")
-    if force or _is_report(out) or not any(out.iterdir()):
+    if force or not any(out.iterdir()):
         return
-    raise UserError(f"{out} is not empty and holds no lightemma report: refusing to overwrite it (force=True to replace it)",
-                    cli=f"--out {out} is not empty and holds no lightemma report: refusing to overwrite it (--force replaces it)")
+    if not _is_report(out):
+        raise UserError(f"{out} is not empty and holds no lightemma report: refusing to overwrite it (force=True to replace it)",
+                        cli=f"--out {out} is not empty and holds no lightemma report: refusing to overwrite it (--force replaces it)")
+    foreign = _foreign_files(out)
+    if foreign is None:
+        why = "is a lightemma report without the list of its files (an older lightemma wrote it), so files added to it cannot be told apart"
+        raise UserError(f"{out} {why}: refusing to replace it (force=True replaces it)", cli=f"--out {out} {why}: refusing to replace it (--force replaces it)")
+    if foreign:
+        named = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        why = f"holds {len(foreign)} file(s) its report did not write ({named})"
+        raise UserError(f"{out} {why}: refusing to replace it (force=True replaces it)", cli=f"--out {out} {why}: refusing to replace it (--force replaces it)")
+
+
+def _within(inner: Path, outer: Path) -> bool:
+    return inner == outer or outer in inner.parents
+
+
+def _check_inputs(out: Path, given: Sequence[Path], run_dirs: Sequence[Path], dataroot: str | None) -> None:
+    """Refuse (UserError, whatever ``force``) an ``out`` (as the user gave it) that is, contains or lies inside an input: a
+    run directory, a folder of runs given, or the dataroot — the swap would replace it. Resolved real paths are compared."""
+    target = Path(os.path.realpath(out))
+    inputs = [(Path(d), "input run directory") for d in run_dirs] + [(Path(g), "runs folder") for g in given if Path(g).is_dir()]
+    if dataroot is not None:
+        inputs.append((Path(dataroot), "dataroot"))
+    clashes = []  # (rank, relation, what, path): "is" named before "contains" before "lies inside"
+    for path, what in inputs:
+        real = Path(os.path.realpath(path))
+        if target == real:
+            clashes.append((0, "is", what, path))
+        elif _within(real, target):
+            clashes.append((1, "contains", what, path))
+        elif _within(target, real):
+            clashes.append((2, "lies inside", what, path))
+    if clashes:
+        _, relation, what, path = min(clashes, key=lambda c: c[0])
+        message = f"{out} {relation} the {what} {path}: the report would replace it; choose another folder"
+        raise UserError(f"report folder {message} (force does not override this)", cli=f"--out {message} (--force does not override this)")
 
 
 def _swap_in(tmp: Path, out: Path) -> None:
@@ -331,8 +393,11 @@ def write_report(
 
     The report is written into a hidden folder beside ``out`` and swapped in whole when done: a
     killed report leaves the old one intact. An ``out`` that is a non-empty folder holding no
-    lightemma report is refused unless ``force``. Runs without a scored frame are left out (with
-    a warning) when another run has one. A ``dataroot`` that is not a folder, or a negative ``top``,
+    lightemma report, or a report holding files it did not write (its ``.lightemma-report`` marker lists
+    its own), is refused unless ``force``; an ``out`` that is, contains or lies inside an input run
+    directory, a runs folder given or ``dataroot`` is refused even with ``force``. Runs without a scored frame are left out (with
+    a warning) when another run has one. A ``dataroot`` that is not a folder (or lacks the folder
+    ``version`` when both are given), or a negative ``top``,
     raises :class:`~lightemma.errors.UserError` before any work.
     """
     import shutil
@@ -344,6 +409,11 @@ def write_report(
     if dataroot is not None and not os.path.isdir(dataroot):
         what = "is not a folder" if os.path.exists(dataroot) else "does not exist"
         raise UserError(f"dataroot {dataroot} {what}", cli=f"--dataroot {dataroot} {what}")
+    if dataroot is not None and version and not os.path.isdir(os.path.join(dataroot, version)):
+        raise UserError(f"dataroot {dataroot} has no folder {version}", cli=f"--version {version}: --dataroot {dataroot} has no folder {version}")
+    given_dirs = [Path(d) for d in run_dirs]  # an iterator is read once
+    dirs = expand_run_dirs(given_dirs)
+    _check_inputs(given, given_dirs, dirs, dataroot)
     _check_target(out, force)
     out.parent.mkdir(parents=True, exist_ok=True)
     _remove_stale(out)
@@ -352,10 +422,12 @@ def write_report(
         shutil.rmtree(tmp)
     tmp.mkdir()
     try:
-        _write(tmp, run_dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
+        _write(tmp, dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
                frames=frames, case_tags=case_tags, pairwise=pairwise, resampling=resampling, svg=svg, progress=progress,
                version=version, safety=safety)
-        (tmp / REPORT_MARKER).write_text(json.dumps({"written_by": "lightemma report"}) + "\n", encoding="utf-8")
+        marker = {"written_by": "lightemma report", "files": _report_files(tmp)}  # what a re-report may replace
+        (tmp / REPORT_MARKER).write_text(json.dumps(marker) + "\n", encoding="utf-8")
+        _check_target(out, force)  # again: files added to the old report while this one was written
         _swap_in(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
