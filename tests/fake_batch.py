@@ -19,8 +19,8 @@ shuffled order (``shuffle``, seeded). ``fail`` (custom id → message) answers t
 whole batch's end state (``"failed"`` with a validation error, ``"expired"``); ``hold_from`` keeps batches from
 that number on running until it is set to None. Every created batch is in
 ``server.batches``; ``server.created`` counts them. ``require_key`` answers 401 to any request whose key
-header (``Authorization``, ``x-api-key``, ``x-goog-api-key``) does not hold that key; ``server.keys`` records
-the key headers seen.
+header (``Authorization``, ``x-api-key``, ``x-goog-api-key``) does not hold that key (its message:
+``refusal``); ``server.keys`` records the key headers seen.
 """
 
 from __future__ import annotations
@@ -55,9 +55,11 @@ class FakeBatchServer:
 
     def __init__(self, script: Callable[[Received], Reply] | None = None, *, steps: int = 2, shuffle: bool = True,
                  seed: int = 0, fail: dict[str, str] | None = None, expire: set[str] | None = None,
-                 batch_state: str | None = None, require_key: str | None = None, hold_from: int | None = None) -> None:
+                 batch_state: str | None = None, require_key: str | None = None, hold_from: int | None = None,
+                 refusal: str = "invalid x-api-key") -> None:
         self.script = script or default_reply
         self.require_key = require_key  # answer 401 to a request whose key header does not hold it
+        self.refusal = refusal  # the message of that 401 (providers echo what they were sent: keys, URLs)
         self.hold_from = hold_from  # batches numbered from this on (1 = the first) stay running until it is set to None
         self.steps = steps
         self.shuffle = shuffle
@@ -157,7 +159,7 @@ class FakeBatchServer:
                 with server.lock:
                     server.keys.append(key)
                 if server.require_key is not None and server.require_key not in key:
-                    self._send(401, {"error": {"type": "authentication_error", "message": "invalid x-api-key"}})
+                    self._send(401, {"error": {"type": "authentication_error", "message": server.refusal}})
                     return True
                 return False
 

@@ -6,6 +6,7 @@ journal, and a run killed mid-poll then resumed without a new batch for what was
 
 from __future__ import annotations
 
+import base64
 import json
 import os
 import signal
@@ -186,7 +187,7 @@ def test_an_interrupted_submission_is_found_by_its_token_not_resubmitted(tmp_pat
             _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url)
         run_dir = next((tmp_path / "runs").glob("*/*"))
         assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting"] and server.created == 1
-        resume(run_dir, progress=False)
+        resume(run_dir, progress=False, api_base=server.url)
     assert server.created == 3  # the first batch was found by its token; only stages 2 and 3 were submitted
     assert all(r["status"] == "ok" for r in _records(run_dir).values())
 
@@ -223,7 +224,8 @@ def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, syn
         first, second = list(server.batches.values())
         first_polls = first.polls
         server.hold_from = None  # the provider finishes the stage-2 batch now
-        resume(run_dir, progress=False)  # in this process: the same code as `lightemma run --resume`, one start-up less
+        # in this process: the same code as `lightemma run --resume`, one start-up less; the endpoint as the run had it
+        resume(run_dir, progress=False, api_base=server.url if provider == "openai" else None)
     assert server.created == 3  # stage 1 and 2 never resubmitted; only stage 3 is new
     assert first.polls == first_polls  # stage 1 answered from the saved results, not even polled
     assert second.polls >= server.steps
@@ -274,7 +276,7 @@ def test_max_cost_in_batch_mode_admits_whole_frames_and_a_resume_submits_only_th
         records = _records(run_dir)
         assert len(records) == 2 and all(r["status"] == "ok" for r in records.values())  # two whole frames, all 3 stages
         assert [len(b.requests) for b in server.batches.values()] == [2, 2, 2]
-        resume(run_dir, progress=False, max_cost_cents=100 * per_frame)
+        resume(run_dir, progress=False, max_cost_cents=100 * per_frame, api_base=server.url)
     assert len(_records(run_dir)) == 4
     assert [len(b.requests) for b in server.batches.values()] == [2, 2, 2, 2, 2, 2]  # only the two frames not yet run
 
@@ -328,3 +330,63 @@ def test_an_expired_openai_batch_has_its_unrun_requests_resubmitted(tmp_path, sy
     expired = [c for c in calls if c["error"] == "BatchExpired"]
     assert all("batch_expired" in c["error_message"] for c in expired)
     assert all(r["status"] == "ok" for r in records.values()) and len(records) == 2
+
+
+# -- keys and endpoints: the API backend's rule (issue 25), in batch mode too --------------------------------
+
+PROVIDER_KEYS = {"openai": "OPENAI_API_KEY", "anthropic": "ANTHROPIC_API_KEY", "gemini": "GEMINI_API_KEY"}
+BATCH_MODELS = ["openai/gpt-4o", "anthropic/claude-sonnet-4-6", "gemini/gemini-2.5-flash"]
+
+
+def _provider_keys_in(headers):
+    return {name for name in PROVIDER_KEYS.values() for h in headers if os.environ[name] in h}
+
+
+@pytest.mark.parametrize("model", BATCH_MODELS)
+def test_the_providers_own_host_gets_its_key_and_no_other(tmp_path, synth_root, model):
+    """127.0.0.1 is declared each provider's own host (tests/conftest.py): its --api-base gets that provider's key."""
+    provider = model.split("/")[0]
+    with FakeBatchServer(steps=1) as server:
+        result = _run(synth_root, tmp_path, model, api_base=server.url if provider == "openai" else server.root, sample=2)
+    assert all(r["status"] == "ok" for r in _records(result.run_dir).values())
+    assert {b.protocol for b in server.batches.values()} == {provider}  # the provider's own batch protocol
+    assert server.keys and all(os.environ[PROVIDER_KEYS[provider]] in k for k in server.keys)
+    assert _provider_keys_in(server.keys) == {PROVIDER_KEYS[provider]}
+
+
+@pytest.mark.parametrize("model", BATCH_MODELS)
+def test_a_batch_run_against_another_api_base_sends_no_provider_key(elsewhere, tmp_path, synth_root, monkeypatch, model):
+    with FakeBatchServer(steps=1) as server:
+        result = _run(synth_root, tmp_path / "a", model, api_base=server.url, sample=2)
+        records = _records(result.run_dir)
+        assert len(records) == 2 and all(r["status"] == "ok" for r in records.values())
+        assert {b.protocol for b in server.batches.values()} == {"openai"}  # another server speaks OpenAI's protocol
+        assert server.keys and _provider_keys_in(server.keys) == set()
+        # not the provider: no batch list price either
+        assert all(c["cost_cents"] is None for r in records.values() for a in r["attempts"] for c in a["calls"])
+        # a key variable named for that server: its key goes there, and still no provider's
+        monkeypatch.setenv("MY_SERVER_KEY", "sk-my-own-server-key-0123456789")
+        seen = len(server.keys)
+        _run(synth_root, tmp_path / "b", model, api_base=server.url, api_key_env="MY_SERVER_KEY", sample=2)
+        named = server.keys[seen:]
+        assert named and all("sk-my-own-server-key-0123456789" in k for k in named)
+        assert _provider_keys_in(named) == set()
+
+
+def test_credentials_in_the_api_base_reach_the_server_but_no_journal_record_or_message(tmp_path, synth_root):
+    with FakeBatchServer(steps=1) as server:
+        base = server.url.replace("http://", "http://alice:hunter2pw@")
+        result = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=base, sample=2)
+        assert all(r["status"] == "ok" for r in _records(result.run_dir).values())
+        basic = "Basic " + base64.b64encode(b"alice:hunter2pw").decode()
+        assert server.keys and set(server.keys) == {basic}  # used to reach the server, on every call
+        # a server that refuses, echoing the URL it was asked at: the reason is journaled, the password is not
+        server.require_key, server.refusal = "a-key-never-sent", "bad key at http://alice:hunter2pw@host"
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, "openai/gpt-4o", api_base=base, sample=2, name="refused")
+    run_dir = stopped.value.run_dir
+    abandoned = [e for e in _journal_lines(run_dir) if e["event"] == "abandoned"]
+    assert len(abandoned) == 1 and "bad key at" in abandoned[0]["reason"]
+    written = b"".join(p.read_bytes() for p in (tmp_path / "runs").rglob("*") if p.is_file())
+    assert b"hunter2pw" not in written and "hunter2pw" not in str(stopped.value)
+    assert b"hunter2pw" not in (run_dir / "batches.jsonl").read_bytes() and b"hunter2pw" not in (result.run_dir / "batches.jsonl").read_bytes()

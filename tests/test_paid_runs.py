@@ -115,7 +115,7 @@ def test_max_cost_stops_cleanly_before_spending_more_and_a_resume_finishes(synth
         spent = sum(r["cost_cents"] for r in records.values())
         assert 0 < len(records) < 12 and spent <= 2.0
         assert len(server.requests) == 3 * len(records)  # no call beyond the frames that finished
-        done = resume(run_dir, progress=False, max_cost_cents=100.0)
+        done = resume(run_dir, progress=False, max_cost_cents=100.0, api_base=server.url)
     assert len(read_run(run_dir).records) == 12 and done.summary["frames"] == 12
 
 

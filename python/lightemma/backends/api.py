@@ -139,6 +139,13 @@ def require_api_key(model: str, api_base: str | None = None, api_key_env: str | 
     return None
 
 
+def provider_key(provider: str | None) -> str | None:
+    """The key ``provider``'s own variables hold (:data:`PROVIDER_KEYS`, first one set), or None.
+
+    Only for that provider's own host: :func:`require_api_key` decides whether it goes anywhere at all."""
+    return next((v for v in (os.environ.get(n, "").strip() for n in PROVIDER_KEYS.get(provider or "", ())) if v), None)
+
+
 def key_from_variable(name: str) -> str:
     """The key held by the environment variable ``name`` (``--api-key-env``), or a :class:`UserError` naming it."""
     if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name or ""):
@@ -457,6 +464,18 @@ class APIBackend:
         elif transport != "litellm":
             raise UserError(f"unknown transport {transport!r}; choose litellm or direct")
 
+    @property
+    def sent_key(self) -> str | None:
+        """The key this backend sends, as :func:`require_api_key` decided it once: the key of ``--api-key-env``,
+        the provider's own key when the destination is its own host, or None (no key at all: another
+        ``--api-base`` without a key variable). Everything that calls the provider for this backend (the batch
+        adapters included) sends this key and no other."""
+        if self._api_key == NO_KEY:
+            return None
+        if self._api_key is not None:
+            return self._api_key
+        return provider_key(self.provider)
+
     def check_endpoint(self) -> None:
         """Before any work: the ``--api-base`` host accepts a connection (a one-line :class:`UserError` if not)."""
         if self.api_base:
@@ -746,7 +765,7 @@ class APIBackend:
 
             from lightemma.backends.openai_http import limited_httpx_client
 
-            key = self._api_key or os.environ.get("OPENAI_API_KEY") or NO_KEY
+            key = self.sent_key or NO_KEY
             self._client = AsyncOpenAI(api_key=key, base_url=self._litellm_base or None, max_retries=0,
                                        http_client=limited_httpx_client())
             self._client_loop = loop

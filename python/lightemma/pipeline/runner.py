@@ -135,8 +135,10 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
                             "run's batch journal keeps every result); drop them or drop --batch")
         from lightemma.backends.batch import BatchBackend
 
-        return BatchBackend(config["model"], api_base=config["api_base"], timeout=config["timeout"],
-                            poll_seconds=config.get("batch_poll") or 30.0)
+        # the endpoint as the user gave it (credentials and all), the key variable named: the same key rule as a normal run
+        backend: Backend = BatchBackend(config["model"], api_base=api_base, api_key_env=config.get("api_key_env"),
+                                        timeout=config["timeout"], poll_seconds=config.get("batch_poll") or 30.0)
+        return _with_notices(backend, log)
     if kind == "api":
         if config.get("api_key_env"):
             options["api_key_env"] = config["api_key_env"]
@@ -155,14 +157,18 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
                 "gpus_per_replica": config.get("gpus_per_replica")}
     if kind == "hf" and replicas["replicas"] == 1 and replicas["ray_address"] is None and config.get("timeout"):
         options.setdefault("timeout", config["timeout"])  # a deadline per batch (docs/run.md#when-a-run-cannot-succeed)
-    backend = create_backend(config["model"], backend=kind, api_base=api_base, **replicas, **options)
+    return _with_notices(create_backend(config["model"], backend=kind, api_base=api_base, **replicas, **options), log)
+
+
+def _with_notices(backend: Backend, log: Log | None) -> Backend:
+    """``backend``, its one-line notices (plain http to another host, …) shown once."""
     for notice in getattr(backend, "notices", ()):
         if log:
             log(notice)
         else:
             import warnings
 
-            warnings.warn(notice, stacklevel=3)
+            warnings.warn(notice, stacklevel=4)
     return backend
 
 

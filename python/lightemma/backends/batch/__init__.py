@@ -21,6 +21,11 @@ Message Batches and Gemini batch mode over their own HTTP APIs (litellm 1.106.2 
 the provider-reported tokens at the registry's batch prices (:func:`lightemma.registry.batch_price`).
 A call's ``seconds`` is its batch's turnaround (submission to results): per-frame latency has no meaning in
 batch mode, and Table I prints it as ``n/a``.
+
+Keys and endpoints follow :class:`~lightemma.backends.api.APIBackend`, which decides them once: a provider's key
+goes only to its own host (or one ``LIGHTEMMA_PROVIDER_HOSTS`` declares); any other ``--api-base`` speaks the
+OpenAI batch protocol and gets the key of ``--api-key-env NAME`` or none. Credentials in ``--api-base``
+(``user:pw@``) go as Basic auth, never into the journal, a record or a message.
 """
 
 from __future__ import annotations
@@ -28,7 +33,6 @@ from __future__ import annotations
 import asyncio
 import hashlib
 import json
-import os
 import secrets
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -49,21 +53,26 @@ BATCH_PROVIDERS = ("openai", "anthropic", "gemini")
 
 
 def adapter_for(provider: str, model: str, *, api_base: str | None, api_key: str | None, timeout: float) -> BatchAdapter:
-    """The batch adapter for ``provider``, or a :class:`UserError` naming the providers that have one."""
+    """The batch adapter for ``provider``, or a :class:`UserError` naming the providers that have one.
+
+    ``api_key`` is the key the run's :class:`~lightemma.backends.api.APIBackend` decided to send
+    (:attr:`~lightemma.backends.api.APIBackend.sent_key`; None: no key at all). An adapter sends that key
+    and reads none from the environment itself, so a provider's key never reaches another ``--api-base``.
+    """
     from lightemma.backends.api import OPENAI_COMPATIBLE
 
     if provider in OPENAI_COMPATIBLE:
         from lightemma.backends.batch.openai import OpenAIBatches
 
-        return OpenAIBatches(model, api_base=api_base, api_key=api_key or os.environ.get("OPENAI_API_KEY"))
+        return OpenAIBatches(model, api_base=api_base, api_key=api_key)
     if provider == "anthropic":
         from lightemma.backends.batch.anthropic import AnthropicBatches
 
-        return AnthropicBatches(model, api_key=api_key, timeout=timeout)
+        return AnthropicBatches(model, api_key=api_key, timeout=timeout, base=api_base)
     if provider == "gemini":
         from lightemma.backends.batch.gemini import GeminiBatches
 
-        return GeminiBatches(model, api_key=api_key, timeout=timeout)
+        return GeminiBatches(model, api_key=api_key, timeout=timeout, base=api_base)
     raise UserError(f"--batch: {model} is served by {provider}, which has no batch interface in lightemma "
                     f"(batch mode covers {', '.join(BATCH_PROVIDERS)}); run it without --batch")
 
@@ -88,18 +97,20 @@ class BatchBackend:
     name = "api-batch"
     wants_all_frames = True  # the runner puts every frame in flight: a wave holds one stage of every pending frame
 
-    def __init__(self, model: str, *, api_base: str | None = None, timeout: float = 120.0, poll_seconds: float = 30.0,
-                 poll_cap: float = 600.0, idle_seconds: float | None = None, max_resubmits: int = 2,
-                 adapter: BatchAdapter | None = None, retry: Any = None) -> None:
+    def __init__(self, model: str, *, api_base: str | None = None, api_key_env: str | None = None, timeout: float = 120.0,
+                 poll_seconds: float = 30.0, poll_cap: float = 600.0, idle_seconds: float | None = None,
+                 max_resubmits: int = 2, adapter: BatchAdapter | None = None, retry: Any = None) -> None:
         from lightemma.backends.api import APIBackend, IMAGE_LIMITS, DEFAULT_IMAGE_LIMIT, _ImageCache
         from lightemma.backends.retry import RetryPolicy
         from lightemma.registry import batch_price
 
-        self.api = APIBackend(model, api_base=api_base, timeout=timeout)  # the model and key checks, the parameters sent
+        # the model and key checks, the key sent (one decision: APIBackend's), the parameters sent
+        self.api = APIBackend(model, api_base=api_base, timeout=timeout, api_key_env=api_key_env)
         self.model_info = self.api.model_info
         self.provider = self.api.provider
+        self.notices = self.api.notices
         self.adapter = adapter or adapter_for(self.provider or "", self.api.model, api_base=api_base,
-                                              api_key=self.api._api_key, timeout=timeout)
+                                              api_key=self.api.sent_key, timeout=timeout)
         if poll_seconds <= 0 or poll_cap <= 0:
             raise UserError(f"--batch-poll must be greater than 0, got {poll_seconds:g}")
         self.poll_seconds, self.poll_cap = float(poll_seconds), max(float(poll_cap), float(poll_seconds))
@@ -109,6 +120,8 @@ class BatchBackend:
         limit_b64, max_side = IMAGE_LIMITS.get(self.provider or "", DEFAULT_IMAGE_LIMIT)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
         self.price = batch_price(self.model_info)
+        if self.api.served_elsewhere:  # another --api-base: not the provider's batch price (as APIBackend's list price)
+            self.price = {**{k: None for k in self.price}, "source": f"none: served from {self.api.api_base_shown}"}
         self.journal: BatchJournal | None = None
         self._queue: list[_Pending] = []
         self._wake: asyncio.Event | None = None
@@ -129,7 +142,7 @@ class BatchBackend:
                 "their requests are answered from them, not submitted again")
 
     def structured_output(self) -> dict[str, Any]:
-        if self.provider != "openai" and not self.api.api_base:
+        if self.adapter.provider != "openai":
             raise UserError(f"--answer-format structured with --batch: lightemma sends response schemas in batch mode only "
                             f"to OpenAI (this model is served by {self.provider}); use --answer-format text or drop --batch")
         return self.api.structured_output()
@@ -391,12 +404,15 @@ class BatchBackend:
                     await asyncio.sleep(self.retry.delay(tries))
                     tries += 1
                     continue
+                from lightemma.backends.retry import short_message
+
                 where = f"{self.adapter.provider} batch API"
+                said = short_message(exc, secrets=self.api._secrets)  # no key or --api-base credential in it
                 if exc.auth:
-                    fatal = RunFatalError(f"{self.api.model}: cannot {what}: {exc} — the {where} rejected the key",
+                    fatal = RunFatalError(f"{self.api.model}: cannot {what}: {said} — the {where} rejected the key",
                                           cause="authentication", error="AuthenticationError")
                 else:
-                    fatal = RunFatalError(f"{self.api.model}: cannot {what}: {exc} ({where}"
+                    fatal = RunFatalError(f"{self.api.model}: cannot {what}: {said} ({where}"
                                           f"{f', after {tries} retries' if tries else ''})", cause="batch-api",
                                           error="BatchAPIError")
                 fatal.http_status = exc.status  # type: ignore[attr-defined]

@@ -5,8 +5,10 @@
 (``processing_status`` ``in_progress`` → ``canceling`` → ``ended``), then the JSONL at ``results_url``: per line
 ``{"custom_id", "result": {"type": "succeeded", "message"} | {"type": "errored", "error"} | {"type": "expired"} |
 {"type": "canceled"}}``, in any order (docs.anthropic.com/en/docs/build-with-claude/batch-processing).
-The base URL is ``ANTHROPIC_API_BASE`` / ``ANTHROPIC_BASE_URL`` when set (as litellm reads them), else
-``https://api.anthropic.com``; the key goes only there, in ``x-api-key``.
+The base URL is ``--api-base`` when it is Anthropic's own host (or one ``LIGHTEMMA_PROVIDER_HOSTS`` declares;
+any other ``--api-base`` is an OpenAI-compatible server, batched by the OpenAI adapter), else
+``ANTHROPIC_API_BASE`` / ``ANTHROPIC_BASE_URL`` when set (as litellm reads them), else
+``https://api.anthropic.com``; the key the run's API backend decided goes only there, in ``x-api-key``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from lightemma.backends.batch.base import (
     BatchHTTPError,
     BatchStatus,
     count,
+    endpoint,
     http_call,
     item_result,
     split_data_url,
@@ -56,9 +59,8 @@ class AnthropicBatches:
         import httpx
 
         self.model = model.split("/", 1)[1] if model.startswith("anthropic/") else model
-        self.base = (base or base_url()).rstrip("/")
-        key = api_key or os.environ.get("ANTHROPIC_API_KEY", "")
-        self._client = httpx.AsyncClient(timeout=timeout, headers={"x-api-key": key, "anthropic-version": VERSION})
+        self.base, headers = endpoint(base, base_url(), api_key, key_header="x-api-key", version="/v1")
+        self._client = httpx.AsyncClient(timeout=timeout, headers={**headers, "anthropic-version": VERSION})
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         params: dict[str, Any] = {"model": self.model, "max_tokens": body["max_tokens"],

@@ -76,6 +76,26 @@ async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
     return response
 
 
+def endpoint(api_base: str | None, default: str, api_key: str | None, *, key_header: str,
+             version: str) -> tuple[str, dict[str, str]]:
+    """The base URL and headers of a provider's own batch HTTP API (Anthropic, Gemini).
+
+    The base is ``api_base`` without credentials and a trailing ``version`` (``/v1``, ``/v1beta``), else
+    ``default``; the headers carry ``api_key`` — the key the run's API backend decided to send, None for none —
+    in ``key_header``, and ``user:pw@`` of ``api_base`` as Basic auth. No key is read from the environment here.
+    """
+    from lightemma.backends.retry import split_credentials
+
+    url, basic = split_credentials(api_base) if api_base else (default, None)
+    url = url.rstrip("/")
+    if url.endswith(version):
+        url = url[: -len(version)]
+    headers = {key_header: api_key} if api_key else {}
+    if basic:
+        headers["Authorization"] = basic
+    return url, headers
+
+
 def count(usage: dict[str, Any], name: str) -> int | None:
     """A token count a provider reported: a non-negative int, else None (unknown, never zero)."""
     value = usage.get(name)

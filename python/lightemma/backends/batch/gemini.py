@@ -6,8 +6,10 @@ at most 20 MB per batch request (ai.google.dev/gemini-api/docs/batch-mode); ``GE
 an operation whose ``metadata.state`` goes ``BATCH_STATE_PENDING`` → ``RUNNING`` → ``SUCCEEDED`` (or ``FAILED``,
 ``CANCELLED``, ``EXPIRED``), with ``response.inlinedResponses.inlinedResponses[]`` (``response`` or ``error``,
 each with its request's ``metadata``) once done. Results are matched by the metadata key, never by position.
-The base URL is ``GEMINI_API_BASE`` when set (as litellm reads it), else
-``https://generativelanguage.googleapis.com``; the key goes only there, in ``x-goog-api-key``.
+The base URL is ``--api-base`` when it is Gemini's own host (or one ``LIGHTEMMA_PROVIDER_HOSTS`` declares; any
+other ``--api-base`` is an OpenAI-compatible server, batched by the OpenAI adapter), else ``GEMINI_API_BASE`` when
+set (as litellm reads it), else ``https://generativelanguage.googleapis.com``; the key the run's API backend
+decided goes only there, in ``x-goog-api-key``.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from lightemma.backends.batch.base import (
     BatchHTTPError,
     BatchStatus,
     count,
+    endpoint,
     http_call,
     item_result,
     split_data_url,
@@ -53,9 +56,8 @@ class GeminiBatches:
         import httpx
 
         self.model = model.split("/", 1)[1] if model.startswith("gemini/") else model
-        self.base = (base or base_url()).rstrip("/")
-        key = api_key or os.environ.get("GEMINI_API_KEY") or os.environ.get("GOOGLE_API_KEY") or ""
-        self._client = httpx.AsyncClient(timeout=timeout, headers={"x-goog-api-key": key})
+        self.base, headers = endpoint(base, base_url(), api_key, key_header="x-goog-api-key", version="/v1beta")
+        self._client = httpx.AsyncClient(timeout=timeout, headers=headers)
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         config: dict[str, Any] = {"maxOutputTokens": body["max_tokens"]}

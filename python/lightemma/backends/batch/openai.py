@@ -33,8 +33,14 @@ class OpenAIBatches:
     max_bytes = 200 * 1000 * 1000
 
     def __init__(self, model: str, *, api_base: str | None, api_key: str | None) -> None:
+        """``api_key``: the key to send, as the run's API backend decided it; None sends none (litellm is given a
+        placeholder, so it reads no key from the environment). ``user:pw@`` in ``api_base`` stays in the URL: the
+        HTTP client sends it as Basic auth on every call (litellm's ``alist_batches`` and ``afile_content`` drop
+        ``extra_headers``); messages are scrubbed of it by :class:`~lightemma.backends.batch.BatchBackend`."""
+        from lightemma.backends.api import NO_KEY
+
         self.model = model.split("/", 1)[1] if model.startswith(("openai/", "hosted_vllm/")) else model
-        self._where = {"custom_llm_provider": "openai", "api_base": api_base, "api_key": api_key}
+        self._where = {"custom_llm_provider": "openai", "api_base": api_base, "api_key": api_key or NO_KEY}
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         body = dict(body, model=self.model)
