@@ -168,11 +168,13 @@ def four_scenes(tmp_path_factory):
 def test_lightemma_run_baseline_ego_records_the_fit_and_resumes_under_it(four_scenes, tmp_path, capsys):
     code = cli_main(["run", "--model", "baseline:ego", "--dataroot", str(four_scenes), "--version", "v1.0-mini",
                      "--split", "all", "--output", str(tmp_path), "--no-progress"])
-    assert code == 0, capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert code == 0, err
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     contents = read_run(run_dir)
     fit = contents.manifest["backend"]["fit"]
     assert fit["features"] == list(FEATURES) and len(fit["folds"]) == 4 and fit["frames_without_prediction"] == 0
+    assert "subset" not in fit and "cross-fitted on the" not in err  # the whole set: no warning
     assert all(r["status"] == "ok" for r in contents.records.values())
     frames = lightemma.load_frames(four_scenes, "v1.0-mini", split="all")
     expected = EgoFit.cross_fit(list(frames))
@@ -191,6 +193,23 @@ def test_lightemma_run_baseline_ego_records_the_fit_and_resumes_under_it(four_sc
     (run_dir / "manifest.json").write_text(json.dumps(manifest))
     with pytest.raises(UserError, match="fit gives other predictions"):
         resume(run_dir, progress=False)
+
+
+@pytest.mark.parametrize("flag", [["--sample", "6"], ["--limit", "6"]])
+def test_a_cross_fit_on_a_sample_or_limit_warns_in_one_line_and_is_recorded(four_scenes, tmp_path, capsys, flag):
+    code = cli_main(["run", "--model", "baseline:ego", "--dataroot", str(four_scenes), "--version", "v1.0-mini",
+                     "--split", "all", "--output", str(tmp_path), "--no-progress", *flag])
+    err = capsys.readouterr().err
+    assert code == 0, err
+    (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
+    fit = read_run(run_dir).manifest["backend"]["fit"]
+    subset = fit["subset"]
+    scenes = len({s for f in fit["folds"] for s in f["predicted_scenes"]})
+    assert subset["taken_by"] == " ".join(flag) and subset["frames"] == 6 and subset["scenes"] == scenes >= 3
+    assert subset["fit_frames_per_fold"] == [f["fit_frames"] for f in fit["folds"]] and max(subset["fit_frames_per_fold"]) < 6
+    warned = [line for line in err.splitlines() if "baseline:ego is cross-fitted on the 6 frame(s) of " + " ".join(flag) in line]
+    assert len(warned) == 1 and f"({scenes} scenes;" in warned[0] and "--fit-split train" in warned[0]
+    assert warned[0] == "lightemma run: " + subset["warning"]
 
 
 def test_fit_split_is_for_baseline_ego_only_and_checks_its_split(four_scenes, tmp_path, capsys):

@@ -57,8 +57,8 @@ def test_the_estimate_counts_images_text_and_output_and_prices_both_modes(synth_
     assert est.batch_cost_cents == pytest.approx(est.cost_cents / 2)
     claude = estimate_run("claude-3.7-sonnet", frames=frames)
     assert claude.provider == "anthropic" and claude.image_tokens == 3 * n * image_tokens(64, 36, "anthropic")
-    local = estimate_run("qwen-2.5-vl-7b", frames=frames)
-    assert local.cost_cents is None and "local model" in local.price_source
+    with pytest.raises(UserError, match="0 calls to a provider, no cost: qwen-2.5-vl-7b runs on this machine through the hf backend"):
+        estimate_run("qwen-2.5-vl-7b", frames=frames)  # a local model: no bill, no image tokens by anyone's rule
     assert "~$" in est.line() and "with --batch" in est.line()
 
 
@@ -90,6 +90,76 @@ def test_cli_estimate_prints_the_bill_and_calls_nothing(synth_root, capsys, monk
     out = capsys.readouterr().out
     assert code == 0 and out.startswith("estimate: 5 frames, 15 calls") and "with --batch" in out
     assert "platform.openai.com/docs/guides/images-vision" in out and "the paper's Table I" in out
+
+
+def test_the_estimate_uses_the_prompts_and_images_of_the_chosen_inputs(synth_root, tmp_path):
+    from lightemma.pipeline.estimate import MESSAGE_TOKENS, text_tokens
+    from lightemma.prompts import load_prompt_set
+
+    frames = _frames(synth_root)
+    n = len(frames)
+    full = estimate_run("gpt-4o", frames=frames)
+    no_image, blank = estimate_run("gpt-4o", frames=frames, inputs="no-image"), estimate_run("gpt-4o", frames=frames, inputs="blank-image")
+    no_history = estimate_run("gpt-4o", frames=frames, inputs="no-history")
+    assert full.image_tokens == 3 * n * image_tokens(64, 36, "openai") > 0
+    assert no_image.image_tokens == 0 and no_image.image_sizes == {} and no_image.missing_images == 0
+    assert no_image.input_tokens == full.input_tokens - full.image_tokens and no_image.cost_cents < full.cost_cents
+    assert "(0 image: --inputs no-image) + ~" in no_image.line() and "none (--inputs no-image" in no_image.report()
+    assert blank.to_dict() | {"inputs": "full"} == full.to_dict()  # a blank image of the frame's size: the same tokens
+    # no-history: the image as full, the no-history templates' text (stage 1 has no history either way)
+    variant = load_prompt_set("lightemma-v1").select("independent", "text", "no-history")
+    assert no_history.image_tokens == full.image_tokens
+    assert no_history.input_tokens - no_history.image_tokens < full.input_tokens - full.image_tokens
+    assert no_history.input_tokens - no_history.image_tokens >= n * 3 * MESSAGE_TOKENS + n * sum(
+        text_tokens(variant.stages[stage].replace("{scene}", "").replace("{intent}", "")) - 2 for stage in ("scene", "intent", "actions"))
+    # the line a paid run prints first follows --inputs too
+    lines = []
+    with FakeOpenAIServer() as server:
+        run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url, output=tmp_path,
+            progress=False, sample=2, inputs="no-image", log=lines.append)
+    assert any(line.startswith("estimate: 2 frames, 6 calls") and "(0 image: --inputs no-image)" in line for line in lines)
+
+
+def test_cli_estimate_follows_inputs_and_has_no_bill_where_nothing_is_paid(synth_root, capsys, monkeypatch):
+    from lightemma.cli import main
+
+    monkeypatch.delenv("OPENAI_API_KEY", raising=False)
+    base = ["run", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--estimate"]
+    assert main([*base, "--model", "gpt-4o"]) == 0
+    full = capsys.readouterr().out.splitlines()[0]
+    assert main([*base, "--model", "gpt-4o", "--inputs", "no-image"]) == 0
+    no_image = capsys.readouterr().out.splitlines()[0]
+    assert "(0 image: --inputs no-image)" in no_image and "(0 image" not in full and no_image != full
+    assert main([*base, "--model", "gpt-4o", "--inputs", "no-history"]) == 0
+    assert capsys.readouterr().out.splitlines()[0] != full
+    for model, extra, where in (("baseline:cv", [], "runs here as a baseline"),
+                                ("qwen-2.5-vl-7b", ["--backend", "hf"], "runs on this machine through the hf backend (local compute)")):
+        assert main([*base, "--model", model, *extra]) == 0
+        out = capsys.readouterr().out
+        assert out.count("\n") == 1 and "0 calls to a provider, no cost" in out and where in out, out
+        assert "tokens" not in out and "rule" not in out
+    assert main([*base, "--model", "baseline:cv", "--inputs", "no-image"]) == 2  # as a run refuses it
+    assert "drop --inputs" in capsys.readouterr().err
+    assert main([*base, "--model", "nonexistent-model-xyz"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and "unknown model 'nonexistent-model-xyz'" in captured.err
+    assert len(captured.err.strip().splitlines()) == 1
+
+
+def test_a_sample_larger_than_the_set_is_refused(synth_root, tmp_path, capsys):
+    from lightemma.cli import main
+
+    n = len(_frames(synth_root))
+    with pytest.raises(UserError, match=f"--sample 1000 is more than the {n} frames of the set; drop --sample to take them all"):
+        run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, sample=1000)
+    assert not list(tmp_path.glob("*/*/manifest.json"))  # nothing written
+    base = ["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all"]
+    assert main([*base, "--sample", "1000", "--output", str(tmp_path)]) == 2
+    assert f"--sample 1000 is more than the {n} frames" in capsys.readouterr().err
+    assert main(["run", "--model", "gpt-4o", *base[3:], "--sample", "1000", "--estimate"]) == 2
+    assert f"--sample 1000 is more than the {n} frames" in capsys.readouterr().err
+    result = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, sample=n)
+    assert result.manifest["dataset"]["sample"]["n"] == n == result.manifest["dataset"]["sample"]["frames"]
 
 
 def test_every_paid_run_prints_its_estimate_first_and_records_it(synth_root, tmp_path):

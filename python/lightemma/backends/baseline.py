@@ -107,6 +107,9 @@ class BaselineBackend:
         folds = self.folds or FOLDS
         if self.fit_split is None:
             self._fit = EgoFit.cross_fit(frames, folds=folds)
+            subset = _subset_taken(dataset or {}, len(frames))
+            if subset:
+                self._fit.record["subset"] = _subset_record(self._fit.record, subset)
             return
         from lightemma.errors import UserError
 
@@ -153,3 +156,29 @@ class BaselineBackend:
 
     async def aclose(self) -> None:
         """Nothing to release."""
+
+
+def _subset_taken(dataset: Mapping[str, Any], n_frames: int) -> str | None:
+    """The flag that cut the evaluated frames to a subset of the set (``--sample N`` / ``--limit N``), or None.
+
+    ``--limit N`` that kept fewer than N frames took the whole set.
+    """
+    sample, limit = dataset.get("sample"), dataset.get("limit")
+    if sample:
+        return f"--sample {int(sample['n'])}"
+    if limit is not None and n_frames >= int(limit):
+        return f"--limit {int(limit)}"
+    return None
+
+
+def _subset_record(record: Mapping[str, Any], taken: str) -> dict[str, Any]:
+    """The manifest's ``fit.subset`` of an ego baseline cross-fitted on a subset: what it fits on and the warning."""
+    folds = list(record.get("folds") or [])
+    per_fold = [int(f["fit_frames"]) for f in folds]
+    frames = int(record.get("frames_predicted", 0)) + int(record.get("frames_without_prediction", 0))
+    scenes = len({s for f in folds for s in f.get("predicted_scenes", [])})
+    fits = f"{min(per_fold)}–{max(per_fold)}" if per_fold and min(per_fold) != max(per_fold) else f"{per_fold[0] if per_fold else 0}"
+    warning = (f"warning: baseline:ego is cross-fitted on the {frames} frame(s) of {taken} only ({scenes} scenes; each fold's "
+               f"fit sees {fits} frames): its ADE is worse than a fit on the full set and every model's gain over the best "
+               "baseline is inflated; fit it with --fit-split train or run it on the full set")
+    return {"taken_by": taken, "frames": frames, "scenes": scenes, "fit_frames_per_fold": per_fold, "warning": warning}

@@ -18,7 +18,9 @@ docs/definitions.md#the-ego-status-baseline.
   fit, λ by ``folds``-fold scene CV on the training frames), otherwise **cross-fitted by scene** on the
   evaluated frames: ``folds`` scene folds (``GroupKFold``, deterministic), each fold's frames predicted by a
   fit on the other folds, its λ chosen by an inner scene CV on those other folds only (nested CV) — no
-  frame is ever predicted by a fit that saw its own scene, its targets or its scene's targets.
+  frame is ever predicted by a fit that saw its own scene, its targets or its scene's targets. Cross-fitted
+  on a ``--sample`` / ``--limit`` subset, each fold fits on that subset's other folds only (a few frames):
+  the run warns in one line and records it as ``fit.subset`` (:meth:`BaselineBackend.prepare`).
 
 Everything is deterministic: the same frames give the same folds, λ and predictions.
 """

@@ -193,10 +193,23 @@ def print_estimate(args: argparse.Namespace) -> int:
     dataset = {"dataroot": args.dataroot, "version": settings["version"], "split": args.split, "scenes": args.scenes,
                "window": settings["window"], "limit": args.limit, "on_bad_record": settings["on_bad_record"],
                "sample": {"n": args.sample, "seed": args.sample_seed or 0} if args.sample is not None else None}
+    from lightemma.backends import backend_kind
+    from lightemma.pipeline.estimate import no_bill
+    from lightemma.registry import resolve
+
+    resolve(args.model)  # an unknown baseline is refused as a run refuses it
+    kind = backend_kind(args.model, args.backend, args.api_base)
+    if kind == "baseline" and settings["inputs"] != "full":
+        raise UserError(f"--inputs {settings['inputs']} is an ablation of what a model is shown; {args.model} reads the "
+                        "frame's numbers itself and is shown nothing: drop --inputs")
     frames = _load_frames(dataset)
     _require_frames(frames)
+    if kind != "api":  # a baseline or a local model: no call to a provider, no bill
+        print(no_bill(args.model, kind, len(frames)))
+        return 0
     planned = estimate_run(args.model, frames=frames, prompt_set=settings["prompt_set"], chain=settings["chain"],
-                           answer_format=settings["answer_format"], max_tokens=settings["max_tokens"], api_base=args.api_base)
+                           answer_format=settings["answer_format"], inputs=settings["inputs"],
+                           max_tokens=settings["max_tokens"], api_base=args.api_base, backend=args.backend)
     print(planned.report())
     return 0
 

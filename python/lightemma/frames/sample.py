@@ -5,6 +5,7 @@ bootstrap interval needs at least two. :func:`sample_frames` instead visits the 
 by ``seed`` and takes one frame from each (chosen by the same generator) round after round, until N frames
 are taken: N ≥ the number of scenes covers every scene; fewer covers N distinct scenes. The frames come
 back in the set's own order (scene, then keyframe). Same frames + same N + same seed = the same sample.
+``lightemma run --sample N`` refuses an N above the set's size (it would record N frames it did not take).
 """
 
 from __future__ import annotations

@@ -3,11 +3,14 @@
 ``lightemma run … --estimate`` prints it and exits; every run of a paid model prints its one-line form
 before it starts, and ``--max-cost CENTS`` stops a run before it spends more (:class:`Budget`).
 
-The estimate counts the first attempt of every frame: three calls, each with the frame's image.
+The estimate counts the first attempt of every frame: three calls, each with what ``--inputs`` shows the
+model (:mod:`lightemma.inputs`): the frame's image (``full``, ``no-history``), a blank one of its size
+(``blank-image``: the same image tokens) or none (``no-image``).
 
 * Image tokens: the provider's published rule at each frame's image size, read from the image file's
   header (:func:`lightemma.registry.image_tokens`; sources in :data:`lightemma.registry.IMAGE_TOKEN_RULES`).
-* Text tokens: the prompts as rendered for the frame (its history), at one token per 4 UTF-8 bytes (OpenAI's
+* Text tokens: the prompts of the run's variant (``no-history``: the no-history templates) as rendered for
+  the frame (its history), at one token per 4 UTF-8 bytes (OpenAI's
   rule of thumb, platform.openai.com/tokenizer) plus 4 tokens of role markers per message; stages 2 and 3
   also carry the earlier stages' answers, taken as 45 % (scene) and 35 % (intent) of the frame's output.
 * Output tokens: the registry's typical figure per frame (:func:`lightemma.registry.typical_output_tokens`,
@@ -15,7 +18,8 @@ The estimate counts the first attempt of every frame: three calls, each with the
 * Cost: at the list price (:func:`lightemma.registry.price`) and the batch price
   (:func:`lightemma.registry.batch_price`); prompt-cache discounts are left out, so the figure errs high.
 
-Re-asks (format errors, API errors) add calls the estimate does not foresee.
+Re-asks (format errors, API errors) add calls the estimate does not foresee. A run with no provider bill
+(a baseline, a local ``hf`` / ``vllm`` backend) has no estimate: :func:`no_bill` is its one line.
 """
 
 from __future__ import annotations
@@ -67,6 +71,7 @@ class Estimate:
     batch_price_source: str
     output_source: str
     image_rule: str
+    inputs: str = "full"  # the input ablation estimated (lightemma.inputs)
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -82,19 +87,23 @@ class Estimate:
     def line(self) -> str:
         """The one-line form printed before every paid run."""
         sizes = ", ".join(f"{size}" for size in self.image_sizes) or "no image"
+        if self.inputs == "blank-image" and self.image_sizes:
+            sizes += " blank"
+        images = ("0 image: --inputs no-image" if self.inputs == "no-image"
+                  else f"{self.image_tokens:,} image, {sizes}, {self.provider} rule")
 
         def money(cents: float | None) -> str:
             return "unknown" if cents is None else f"${cents / 100:,.2f}"
 
         return (f"estimate: {self.frames:,} frames, {self.calls:,} calls, ~{self.input_tokens:,} input tokens "
-                f"({self.image_tokens:,} image, {sizes}, {self.provider} rule) + ~{self.output_tokens:,} output tokens: "
+                f"({images}) + ~{self.output_tokens:,} output tokens: "
                 f"~{money(self.cost_cents)} normal, ~{money(self.batch_cost_cents)} with --batch")
 
     def report(self) -> str:
         """The ``--estimate`` report: the line, then where each figure comes from."""
         return "\n".join([
             self.line(),
-            f"  image tokens: {self.image_rule}",
+            f"  image tokens: {'none (--inputs no-image sends no image)' if self.inputs == 'no-image' else self.image_rule}",
             "  text tokens: the rendered prompts at 4 UTF-8 bytes per token + 4 per message",
             f"  output tokens: {self.output_tokens // max(self.frames, 1):,} per frame ({self.output_source})",
             f"  list price: {self.price_source}",
@@ -103,12 +112,22 @@ class Estimate:
         ])
 
 
+def no_bill(model: str, kind: str, frames: int) -> str:
+    """The one line ``--estimate`` prints for a run with no provider bill: a baseline or a local backend (``kind``)."""
+    where = "here as a baseline, from the frame's numbers (no model)" if kind == "baseline" else \
+        f"on this machine through the {kind} backend (local compute)"
+    return f"estimate: {frames:,} frames, 0 calls to a provider, no cost: {model} runs {where}; there is no bill to estimate"
+
+
 def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, prompts: Any, *, max_tokens: int,
-             chain: str = "independent") -> Estimate:
-    """The :class:`Estimate` of running ``info`` over ``frames`` with ``prompts`` (a selected PromptSet)."""
+             chain: str = "independent", inputs: str = "full") -> Estimate:
+    """The :class:`Estimate` of running ``info`` over ``frames`` with ``prompts`` (a PromptSet selected for the run's
+    variant, ``inputs`` included); ``inputs`` ``no-image`` counts no image token."""
     from lightemma.frames import history_placeholders
+    from lightemma.inputs import check_inputs
     from lightemma.registry import IMAGE_TOKEN_RULES
 
+    check_inputs(inputs)
     rule_provider = provider if provider in ("anthropic", "gemini", "vertex_ai") else "openai"
     typical, output_source = typical_output_tokens(info)
     out_per_frame = min(typical, 3 * max_tokens)
@@ -118,12 +137,14 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
     image_total = text_total = missing = 0
     for frame in frames:
         path = str(getattr(frame, "image_path", "") or "")
-        if path not in cache:
+        if path not in cache and inputs != "no-image":
             cache[path] = _image_size(path)
-        size = cache[path]
-        if size is None:
+        size = cache.get(path)
+        if inputs == "no-image":  # no image in any stage
+            pass
+        elif size is None:
             missing += 1
-        else:
+        else:  # the frame's image, or a blank one of its size (the same tokens)
             sizes[f"{size[0]}×{size[1]}"] = sizes.get(f"{size[0]}×{size[1]}", 0) + 1
             image_total += 3 * image_tokens(size[0], size[1], rule_provider)
         history = history_placeholders(frame.history_actions)
@@ -148,7 +169,7 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
                     image_tokens=image_total, output_tokens=output, image_sizes=sizes, missing_images=missing,
                     cost_cents=cost(list_price), batch_cost_cents=cost(batch), price_source=list_price["source"],
                     batch_price_source=batch["source"], output_source=output_source,
-                    image_rule=IMAGE_TOKEN_RULES[rule_provider if rule_provider != "vertex_ai" else "gemini"])
+                    image_rule=IMAGE_TOKEN_RULES[rule_provider if rule_provider != "vertex_ai" else "gemini"], inputs=inputs)
 
 
 class Budget:

@@ -251,7 +251,10 @@ def _subset(frames: Any, dataset: Mapping[str, Any]) -> Sequence[Any]:
 
         if dataset.get("limit") is not None:
             raise UserError("--sample and --limit are exclusive: --limit takes the first N frames, --sample N spreads N over the scenes")
-        return sample_frames(frames, int(sample["n"]), int(sample.get("seed") or 0))
+        n = int(sample["n"])
+        if n > len(frames):  # a sample cannot hold more frames than the set: refused, not recorded as N frames
+            raise UserError(f"--sample {n} is more than the {len(frames)} frames of the set; drop --sample to take them all")
+        return sample_frames(frames, n, int(sample.get("seed") or 0))
     return _head(frames, dataset.get("limit"))
 
 
@@ -579,7 +582,7 @@ def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backe
 
     info = resolve(config["model"])
     planned = estimate(todo, info, getattr(backend, "provider", None), prompts, max_tokens=config["max_tokens"],
-                       chain=config.get("chain") or "independent")
+                       chain=config.get("chain") or "independent", inputs=config.get("inputs") or "full")
     per_call = planned.batch_cents_per_call if config.get("batch") else planned.cents_per_call
     if per_call is None:
         raise UserError(f"--max-cost: the price of {config['model']} is unknown ({planned.price_source}), so no spending "
@@ -589,15 +592,30 @@ def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backe
 
 
 def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT_PROMPT_SET, chain: str = "independent",
-                 answer_format: str = "text", max_tokens: int = 512, api_base: str | None = None) -> Any:
-    """The :class:`~lightemma.pipeline.estimate.Estimate` of running ``model`` over ``frames`` — nothing is called."""
-    from lightemma.backends.api import _provider, litellm_model
-    from lightemma.pipeline.estimate import estimate
+                 answer_format: str = "text", inputs: str = "full", max_tokens: int = 512, api_base: str | None = None,
+                 backend: str | None = None) -> Any:
+    """The :class:`~lightemma.pipeline.estimate.Estimate` of running ``model`` over ``frames`` with the prompts and
+    images of ``inputs`` — nothing is called.
 
+    A model with no provider bill (a baseline, a local ``hf`` / ``vllm`` backend) raises a one-line
+    :class:`~lightemma.errors.UserError` (:func:`~lightemma.pipeline.estimate.no_bill`); so does a model a
+    real run would refuse (not in the registry and no provider litellm knows).
+    """
+    from lightemma.backends.api import check_model, litellm_model
+    from lightemma.inputs import check_inputs
+    from lightemma.pipeline.estimate import estimate, no_bill
+
+    try:
+        check_inputs(inputs)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     info = resolve(model)
-    prompts = load_prompt_set(prompt_set).select(chain, answer_format)
-    provider = _provider(litellm_model(info, api_base)) if info.backend == "api" or api_base else None
-    return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain)
+    kind = backend_kind(model, backend, api_base)
+    if kind != "api":
+        raise UserError(no_bill(model, kind, len(frames)))
+    provider = check_model(litellm_model(info, api_base), model, api_base)  # the unknown-model error of a real run
+    prompts = load_prompt_set(prompt_set).select(chain, answer_format, inputs)
+    return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain, inputs=inputs)
 
 
 def _refresh_sidecar(run_dir: Path, log: Log | None) -> None:
@@ -747,8 +765,8 @@ def run(
         planned = None
         if getattr(instance, "info", {}).get("kind") == "api":  # a paid run: its bill first, in one line
             planned = estimate_run(model, frames=frames, prompt_set=prompt_set, chain=chain, answer_format=answer_format,
-                                   max_tokens=max_tokens, api_base=api_base)
-        _prepare(instance, frames, dataset)
+                                   inputs=inputs, max_tokens=max_tokens, api_base=api_base, backend=backend)
+        _prepare(instance, frames, dataset, log=log)
         manifest = {
             "model": model,
             **({"name": name.strip()} if name else {}),
@@ -844,7 +862,7 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                 dataset["split"] = (manifest.get("dataset") or {}).get("split")
             all_frames = _subset(frames, dataset) if frames is not None else _load_frames(dataset)
             _same_frame_set(run_dir, all_frames)
-            _prepare(instance, all_frames, dataset, recorded=manifest.get("backend"), run_dir=run_dir)
+            _prepare(instance, all_frames, dataset, recorded=manifest.get("backend"), run_dir=run_dir, log=log)
             contents = read_run(run_dir)
             for warning in contents.warnings():
                 if log and "not finished" not in warning:
@@ -873,14 +891,23 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
 
 
 def _prepare(backend: Backend, frames: Sequence[Any], dataset: Mapping[str, Any], *, recorded: Any = None,
-             run_dir: Path | None = None) -> None:
+             run_dir: Path | None = None, log: Log | None = None) -> None:
     """Let a backend that learns from the frame set (``baseline:ego``) fit before the run; on a resume, refuse a fit
-    whose predictions differ from the recorded ones (``recorded``: the manifest's ``backend``)."""
+    whose predictions differ from the recorded ones (``recorded``: the manifest's ``backend``). A fit's warning
+    (cross-fitted on a ``--sample`` / ``--limit`` subset: ``fit.subset.warning``) is shown in one line."""
     prepare = getattr(backend, "prepare", None)
     if prepare is None:
         return
     prepare(frames, dataset)
     fit = dict(backend.info).get("fit")
+    subset = fit.get("subset") if isinstance(fit, Mapping) else None
+    if isinstance(subset, Mapping) and subset.get("warning"):
+        if log:
+            log(str(subset["warning"]))
+        else:
+            import warnings
+
+            warnings.warn(str(subset["warning"]), stacklevel=3)
     before = recorded.get("fit") if isinstance(recorded, Mapping) else None
     if run_dir is not None and isinstance(fit, Mapping) and isinstance(before, Mapping) \
             and fit.get("predictions_sha256") != before.get("predictions_sha256"):

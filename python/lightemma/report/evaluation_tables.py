@@ -209,7 +209,9 @@ def baseline_gain_table(evaluation: Evaluation) -> Table:
                Column("frames", "Common frames"), Column("scenes", "Scenes"),
                *_paired_metric_columns("gain", (("model", "model"), ("baseline", "baseline")), "gain (baseline − model)")]
     notes = ["Gain > 0: the model beats the best of the constant, constant-velocity and ego-status baselines by that much "
-             "(best: the lowest ADE avg on the frames scored in both); ≤ 0: the history alone does as well.",
+             "(best: the lowest ADE avg on the frames scored in both); ≤ 0: the history alone does as well. An ego baseline "
+             "cross-fitted on a --sample / --limit subset fits on few frames and inflates every gain (its run warns; "
+             "manifest backend.fit.subset): use --fit-split train or the full set.",
              _paired_note(evaluation, len(evaluation.baseline_gains)), *_notes(evaluation)[:1]]
     return Table(f"Gain over the best baseline — {evaluation.main_convention} convention", columns, list(evaluation.baseline_gains),
                  name="baseline_gains", flags=coverage_flags(evaluation), notes=notes)
