@@ -133,7 +133,7 @@ def test_resume_keeps_the_inputs_and_refuses_a_changed_one(tmp_path, capsys):
         lines = path.read_text().splitlines()
         path.write_text(lines[0] + "\n")  # two frames lost: a resume runs them again
         before = len(server.requests)
-        resume(result.run_dir, frames=frames, progress=False)
+        resume(result.run_dir, frames=frames, progress=False, api_base=server.url)
         assert len(server.requests) == before + 6 and all(images(r) == [] for r in server.requests[before:])
     assert len(read_run(result.run_dir).records) == 3
     code = cli_main(["run", "--resume", str(result.run_dir), "--inputs", "full"])
