@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(autouse=True)
 def _fast(monkeypatch):
-    monkeypatch.setattr(batch_module, "IDLE_SECONDS", 0.05)
+    monkeypatch.setattr(batch_module, "IDLE_SECONDS", 0.15)  # a wave closes after this idle time: room for a loaded CI machine
     monkeypatch.setenv("OPENAI_API_KEY", "sk-test-openai")
     monkeypatch.setenv("ANTHROPIC_API_KEY", "sk-ant-test")
     monkeypatch.setenv("GEMINI_API_KEY", "gm-test-key")
