@@ -120,7 +120,7 @@ def test_a_recap_that_is_not_the_history_is_ambiguous_and_resume_keeps_it_so(tmp
             assert (rec["status"], rec["failure"], rec["n_attempts"]) == ("failed", "ambiguous", 2)
             assert rec["attempts"][0]["reason"].startswith("ambiguous: 2 different lists of 6 actions (at positions 0 and ")
         assert (result.summary["failed"], result.summary["ade_frames"]) == (N, 0)
-        retried = resume(result.run_dir, retry_failed=True, frames=frames, progress=False)
+        retried = resume(result.run_dir, retry_failed=True, frames=frames, progress=False, api_base=server.url)
     assert all(r["failure"] == "ambiguous" for r in read_run(retried.run_dir).records.values())
     assert cli_main(["evaluate", str(result.run_dir), "--format", "json", "--resamples", "0"]) == 0
     row = [t for t in json.loads(capsys.readouterr().out)["tables"] if t["name"] == "accuracy_lightemma"][0]["rows"][0]

@@ -67,9 +67,11 @@ def _tagged(runs, tag):
 
 
 def _wait(driver, predicate, timeout=15):
+    """Until ``predicate`` holds; an element the page re-renders between the look-up and the read is looked up again."""
+    from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.support.ui import WebDriverWait
 
-    return WebDriverWait(driver, timeout).until(lambda d: predicate(d))
+    return WebDriverWait(driver, timeout, ignored_exceptions=(StaleElementReferenceException,)).until(lambda d: predicate(d))
 
 
 def _errors(driver):
