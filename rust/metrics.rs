@@ -320,6 +320,35 @@ pub fn frame_metrics(
     Ok(())
 }
 
+/// The checks `evaluate` and `evaluate_all` share: a valid miss threshold, a well-formed non-empty batch and a mask
+/// keeping some frame. Returns (frames in the batch, frames the mask keeps).
+fn check_evaluation(
+    pred: &[f64],
+    gt: &[f64],
+    mask: Option<&[bool]>,
+    steps: usize,
+    miss_threshold: f64,
+) -> CoreResult<(usize, usize)> {
+    if !(miss_threshold.is_finite() && miss_threshold >= 0.0) {
+        return Err(CoreError::Argument(format!(
+            "miss_threshold must be a non-negative number of metres, got {miss_threshold}"
+        )));
+    }
+    let n = check_batch(pred, gt, steps, mask)?;
+    if n == 0 {
+        return Err(CoreError::Shape(
+            "cannot evaluate an empty batch (0 frames)".to_owned(),
+        ));
+    }
+    let kept = mask.map_or(n, |m| m.iter().filter(|&&k| k).count());
+    if kept == 0 {
+        return Err(CoreError::Shape(format!(
+            "the mask keeps none of the {n} frames; nothing to evaluate"
+        )));
+    }
+    Ok((n, kept))
+}
+
 /// Aggregate `N × 6` trajectories under `convention`; a frame misses when any
 /// step's error exceeds `miss_threshold` metres.
 pub fn evaluate(
@@ -342,23 +371,7 @@ pub fn evaluate_masked(
     convention: Convention,
     miss_threshold: f64,
 ) -> CoreResult<Summary> {
-    if !(miss_threshold.is_finite() && miss_threshold >= 0.0) {
-        return Err(CoreError::Argument(format!(
-            "miss_threshold must be a non-negative number of metres, got {miss_threshold}"
-        )));
-    }
-    let n = check_batch(pred, gt, steps, mask)?;
-    if n == 0 {
-        return Err(CoreError::Shape(
-            "cannot evaluate an empty batch (0 frames)".to_owned(),
-        ));
-    }
-    let kept = mask.map_or(n, |m| m.iter().filter(|&&k| k).count());
-    if kept == 0 {
-        return Err(CoreError::Shape(format!(
-            "the mask keeps none of the {n} frames; nothing to evaluate"
-        )));
-    }
+    let (n, kept) = check_evaluation(pred, gt, mask, steps, miss_threshold)?;
     let windows = [1, 2, 3].map(|s| convention.window(s));
     let block = FRAMES_PER_BLOCK * 2 * HORIZON;
     // the mask entries of block b
@@ -474,23 +487,7 @@ pub fn evaluate_all(
     steps: usize,
     miss_threshold: f64,
 ) -> CoreResult<[Summary; 3]> {
-    if !(miss_threshold.is_finite() && miss_threshold >= 0.0) {
-        return Err(CoreError::Argument(format!(
-            "miss_threshold must be a non-negative number of metres, got {miss_threshold}"
-        )));
-    }
-    let n = check_batch(pred, gt, steps, mask)?;
-    if n == 0 {
-        return Err(CoreError::Shape(
-            "cannot evaluate an empty batch (0 frames)".to_owned(),
-        ));
-    }
-    let kept = mask.map_or(n, |m| m.iter().filter(|&&k| k).count());
-    if kept == 0 {
-        return Err(CoreError::Shape(format!(
-            "the mask keeps none of the {n} frames; nothing to evaluate"
-        )));
-    }
+    let (n, kept) = check_evaluation(pred, gt, mask, steps, miss_threshold)?;
     let windows = ALL.map(|c| [1, 2, 3].map(|s| c.window(s)));
     let block = FRAMES_PER_BLOCK * 2 * HORIZON;
     let block_mask = |b: usize, p: &[f64]| {
