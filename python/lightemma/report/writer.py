@@ -31,6 +31,7 @@ from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
 from lightemma.evaluation.stats import Resampling
 from lightemma.report.evaluation_tables import evaluation_tables
+from lightemma.runs.store import pid_alive
 from lightemma.report.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
 
 
@@ -330,16 +331,6 @@ def _swap_in(tmp: Path, out: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def _pid_alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def _remove_stale(out: Path) -> None:
     """Hidden folders left beside ``out`` by a report that was killed (its process is gone)."""
     import shutil
@@ -347,7 +338,7 @@ def _remove_stale(out: Path) -> None:
     for kind in ("partial", "old"):
         for path in out.parent.glob(f".{glob_escape(out.name)}.{kind}-*"):
             pid = path.name.rsplit("-", 1)[-1]
-            if pid.isdigit() and int(pid) != os.getpid() and not _pid_alive(int(pid)):
+            if pid.isdigit() and int(pid) != os.getpid() and not pid_alive(int(pid)):
                 shutil.rmtree(path, ignore_errors=True)
 
 

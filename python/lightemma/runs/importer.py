@@ -51,7 +51,7 @@ from lightemma.runs.reference import (
     read_regular_file,
 )
 from lightemma.runs.records import loads_bounded
-from lightemma.runs.store import FORMAT, FRAMES_FILE, MANIFEST_FILE, read_manifest, slugify, write_json_atomic
+from lightemma.runs.store import FORMAT, FRAMES_FILE, MANIFEST_FILE, pid_alive, read_manifest, slugify, write_json_atomic
 
 IMPORT_PARSE = {"mode": "paper"}  # how an imported run is scored unless evaluate is told otherwise
 IMPORT_INTEGRATOR = "euler"
@@ -438,16 +438,6 @@ PARTIAL_SUFFIX = ".partial"
 _PARTIAL = re.compile(r"^\.ref-[0-9a-f]{12}\.(\d+)\.[A-Za-z0-9_]+\.partial$")  # .<run id>.<pid of the importer>.<random>.partial
 
 
-def _alive(pid: int) -> bool:
-    try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except PermissionError:
-        return True
-    return True
-
-
 def remove_stale_partials(model_dir: Path, warn: Warn = lambda _: None) -> list[Path]:
     """Remove the hidden ``.ref-….partial`` folders that a killed import left in ``model_dir``.
 
@@ -461,7 +451,7 @@ def remove_stale_partials(model_dir: Path, warn: Warn = lambda _: None) -> list[
         if match is None or not entry.is_dir() or entry.is_symlink():
             continue
         pid = int(match.group(1))
-        if pid == os.getpid() or _alive(pid):
+        if pid == os.getpid() or pid_alive(pid):
             continue
         shutil.rmtree(entry, ignore_errors=True)
         if not entry.exists():

@@ -83,6 +83,17 @@ def write_json_atomic(path: str | os.PathLike[str], data: Mapping[str, Any]) -> 
     write_text_atomic(path, text + "\n")
 
 
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (on this machine): leftovers of a killed writer are removed only when it is gone."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # it exists, owned by another user
+        return True
+    return True
+
+
 def slugify(name: str) -> str:
     """A model string as a directory name: ``openai/gpt-4o`` -> ``openai--gpt-4o``."""
     slug = re.sub(r"[^A-Za-z0-9._-]+", "-", name.replace("/", "--").replace(":", "-")).strip("-.")
