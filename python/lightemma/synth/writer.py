@@ -195,41 +195,18 @@ def build_tables(
 def _lead_annotations(t, scn: Scenario, seed: int, sample_tokens: list[str], cat_token: str, attrs) -> None:
     """An instance and one sample_annotation per keyframe for the lead vehicle."""
     i = scn.index
-    inst_token = token(seed, "instance", i, "lead")
     ann_tokens = [token(seed, "sample_annotation", i, k) for k in range(len(sample_tokens))]
     secs = scn.seconds(list(scn.keyframe_times_us))
-    poses = scn.lead_pose(secs)
-    speeds = scn.lead_speed(secs)
     lead = scn.lead
     assert lead is not None
-    for k, (pose, v) in enumerate(zip(poses, speeds)):
-        t["sample_annotation"].append({
-            "token": ann_tokens[k],
-            "sample_token": sample_tokens[k],
-            "instance_token": inst_token,
-            "visibility_token": "4",
-            "attribute_tokens": [attrs["vehicle.moving" if v > 0.1 else "vehicle.stopped"]],
-            "translation": [float(pose[0]), float(pose[1]), lead.height / 2],
-            "size": [lead.width, lead.length, lead.height],
-            "rotation": quaternion_from_yaw(float(pose[2])),
-            "prev": ann_tokens[k - 1] if k > 0 else "",
-            "next": ann_tokens[k + 1] if k + 1 < len(ann_tokens) else "",
-            "num_lidar_pts": 120,
-            "num_radar_pts": 3,
-        })
-    t["instance"].append({
-        "token": inst_token,
-        "category_token": cat_token,
-        "nbr_annotations": len(ann_tokens),
-        "first_annotation_token": ann_tokens[0],
-        "last_annotation_token": ann_tokens[-1],
-    })
+    attributes = [[attrs["vehicle.moving" if v > 0.1 else "vehicle.stopped"]] for v in scn.lead_speed(secs)]
+    _track(t, token(seed, "instance", i, "lead"), ann_tokens, sample_tokens, cat_token, scn.lead_pose(secs), lead,
+           attributes, lidar_pts=120, radar_pts=3)
 
 
 def _agent_annotations(t, scn: Scenario, agent, seed: int, sample_tokens: list[str], cat_token: str, attrs) -> None:
     """An instance and one sample_annotation per keyframe for a parked or oncoming car or a pedestrian."""
     i = scn.index
-    inst_token = token(seed, "instance", i, agent.name)
     ann_tokens = [token(seed, "sample_annotation", i, agent.name, k) for k in range(len(sample_tokens))]
     secs = scn.seconds(list(scn.keyframe_times_us))
     poses = agent.pose(scn.path, float(scn.profile.s(0.0)), secs)
@@ -237,20 +214,28 @@ def _agent_annotations(t, scn: Scenario, agent, seed: int, sample_tokens: list[s
         attribute = [attrs["vehicle.moving" if abs(agent.v) > 0.1 else "vehicle.parked"]]
     else:
         attribute = []
+    _track(t, token(seed, "instance", i, agent.name), ann_tokens, sample_tokens, cat_token, poses, agent,
+           [attribute] * len(poses), lidar_pts=60, radar_pts=0)
+
+
+def _track(t, inst_token: str, ann_tokens: list[str], sample_tokens: list[str], cat_token: str, poses, box,
+           attributes: list[list[str]], *, lidar_pts: int, radar_pts: int) -> None:
+    """One instance and its chain of sample_annotations (one per keyframe pose (x, y, yaw); ``box`` has width,
+    length and height in metres), as the nuScenes tables link them."""
     for k, pose in enumerate(poses):
         t["sample_annotation"].append({
             "token": ann_tokens[k],
             "sample_token": sample_tokens[k],
             "instance_token": inst_token,
             "visibility_token": "4",
-            "attribute_tokens": attribute,
-            "translation": [float(pose[0]), float(pose[1]), agent.height / 2],
-            "size": [agent.width, agent.length, agent.height],
+            "attribute_tokens": attributes[k],
+            "translation": [float(pose[0]), float(pose[1]), box.height / 2],
+            "size": [box.width, box.length, box.height],
             "rotation": quaternion_from_yaw(float(pose[2])),
             "prev": ann_tokens[k - 1] if k > 0 else "",
             "next": ann_tokens[k + 1] if k + 1 < len(ann_tokens) else "",
-            "num_lidar_pts": 60,
-            "num_radar_pts": 0,
+            "num_lidar_pts": lidar_pts,
+            "num_radar_pts": radar_pts,
         })
     t["instance"].append({
         "token": inst_token,
