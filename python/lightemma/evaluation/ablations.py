@@ -151,14 +151,23 @@ def input_ablations(runs: Sequence[RunData], labels: Sequence[str], convention: 
             va, vb, scenes = cols.paired(a, b, metric.key)
             if metric is PAIRED_METRICS[0]:
                 row.update(frames=len(va), scenes=len(set(scenes.tolist())))
-            has = len(va) > 0
-            row.update({f"{metric.key}_full": float(va.mean()) if has else None, f"{metric.key}_ablated": float(vb.mean()) if has else None,
-                        f"{metric.key}_diff": float((va - vb).mean()) if has else None})
-            groups[metric.key].append((va - vb, scenes) if has else None)
-            keys[metric.key].append(f"ablation|{labels[a]}|{labels[b]}|{metric.key}|{convention}")
+            _add_pair(row, groups, keys, metric.key, (("full", va), ("ablated", vb)), "diff", va - vb, scenes,
+                      f"ablation|{labels[a]}|{labels[b]}|{metric.key}|{convention}")
         rows.append(row)
     _with_statistics(rows, groups, keys, "diff", resampling)
     return rows
+
+
+def _add_pair(row: dict[str, Any], groups: dict[str, list[Any]], keys: dict[str, list[str]], metric: str,
+              sides: tuple[tuple[str, np.ndarray], tuple[str, np.ndarray]], diff_name: str, diff: np.ndarray, scenes: np.ndarray,
+              key: str) -> None:
+    """One metric of one paired row: each side's mean, the mean difference (None without common frames), and the
+    per-frame differences with their scenes and the bootstrap key for :func:`_with_statistics`."""
+    has = len(diff) > 0
+    row.update({f"{metric}_{name}": float(values.mean()) if has else None for name, values in sides})
+    row[f"{metric}_{diff_name}"] = float(diff.mean()) if has else None
+    groups[metric].append((diff, scenes) if has else None)
+    keys[metric].append(key)
 
 
 def baseline_gains(runs: Sequence[RunData], labels: Sequence[str], convention: str, resampling: Resampling, *,
@@ -197,11 +206,8 @@ def baseline_gains(runs: Sequence[RunData], labels: Sequence[str], convention: s
                 vm, vb, scenes = cols.paired(m, best, metric.key)
             if metric.key == first:
                 row.update(frames=len(vm), scenes=len(set(scenes.tolist())))
-            has = len(vm) > 0
-            row.update({f"{metric.key}_model": float(vm.mean()) if has else None, f"{metric.key}_baseline": float(vb.mean()) if has else None,
-                        f"{metric.key}_gain": float((vb - vm).mean()) if has else None})
-            groups[metric.key].append((vb - vm, scenes) if has else None)
-            keys[metric.key].append(f"gain|{labels[m]}|{labels[best] if best is not None else ''}|{metric.key}|{convention}")
+            _add_pair(row, groups, keys, metric.key, (("model", vm), ("baseline", vb)), "gain", vb - vm, scenes,
+                      f"gain|{labels[m]}|{labels[best] if best is not None else ''}|{metric.key}|{convention}")
         rows.append(row)
     _with_statistics(rows, groups, keys, "gain", resampling)
     return rows
