@@ -174,6 +174,8 @@ class Reply:
     usage: bool = True  # False: the completion has no usage block
     cached_tokens: int = 0  # of prompt_tokens, read from the prompt cache (set by the server's PrefixCache)
     cache_write_tokens: int = 0  # of prompt_tokens, written to the prompt cache (Anthropic)
+    bulk: int = 0  # > 0: the answer text is this many "x" bytes, streamed in 64 KiB pieces (``content`` unused)
+    chunked: bool = False  # with bulk: no Content-Length, chunked transfer encoding (the size is never declared)
 
     @classmethod
     def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
@@ -398,6 +400,7 @@ class FakeOpenAIServer:
                  record: bool = True, count_tokens: bool = False, prefix_cache: bool = False) -> None:
         self.latency = latency  # added to every reply's own delay
         self.requests: list[Received] = []
+        self.bulk_sent: list[int] = []  # per reply with ``bulk``: body bytes written before the client stopped reading
         self.record = record
         self.counter = TokenCounter() if (count_tokens or prefix_cache) else None
         self.cache = PrefixCache() if prefix_cache else None
@@ -459,6 +462,9 @@ class FakeOpenAIServer:
                     self.connection.close()  # RST instead of FIN
                     self.close_connection = True
                     return
+                if reply.bulk:
+                    self._send_bulk(reply, req)
+                    return
                 payload = reply.body if reply.body is not None else _completion(req, reply)
                 data = json.dumps(payload).encode("utf-8")
                 try:
@@ -484,6 +490,39 @@ class FakeOpenAIServer:
                     self.wfile.write(data)
                 except (BrokenPipeError, ConnectionResetError, OSError):
                     self.close_connection = True
+
+            def _send_bulk(self, reply: Reply, req: Received) -> None:
+                """A completion whose text is ``reply.bulk`` bytes, written piece by piece until the client stops
+                reading; the bytes written are appended to ``server.bulk_sent``."""
+                marker = "@@BULK@@"
+                head, tail = (part.encode() for part in
+                              json.dumps(_completion(req, dataclasses.replace(reply, content=marker))).split(marker))
+                piece, sent = b"x" * (1 << 16), 0
+                try:
+                    self.send_response(reply.status)
+                    self.send_header("Content-Type", "application/json")
+                    if reply.chunked:
+                        self.send_header("Transfer-Encoding", "chunked")
+                    else:
+                        self.send_header("Content-Length", str(len(head) + reply.bulk + len(tail)))
+                    self.end_headers()
+
+                    def write(data: bytes) -> None:
+                        nonlocal sent
+                        self.wfile.write(b"%x\r\n%b\r\n" % (len(data), data) if reply.chunked else data)
+                        sent += len(data)
+
+                    write(head)
+                    for start in range(0, reply.bulk, len(piece)):
+                        write(piece[: min(len(piece), reply.bulk - start)])
+                    write(tail)
+                    if reply.chunked:
+                        self.wfile.write(b"0\r\n\r\n")
+                except (BrokenPipeError, ConnectionResetError, OSError):
+                    pass
+                self.close_connection = True
+                with server._lock:
+                    server.bulk_sent.append(sent)
 
         return Handler
 

@@ -755,19 +755,15 @@ class APIBackend:
         return ChatResult(text=str(text), **common)
 
     def _bounded_client(self) -> dict[str, Any]:
-        """``client=``: litellm's OpenAI client over an httpx client that bounds response bodies (OpenAI-protocol
-        calls; one per event loop). Anthropic's and Gemini's native protocols go through litellm's own client."""
-        if self.provider != "openai":
-            return {}
+        """``client=``: the client litellm calls through, reading at most
+        :data:`~lightemma.backends.openai_http.MAX_BODY_BYTES` of a body (one per event loop): the OpenAI SDK's client
+        for the OpenAI protocol, litellm's own HTTP handler for Anthropic's and Gemini's native protocols."""
         loop = asyncio.get_running_loop()
         if self._client_loop is not loop:
-            from openai import AsyncOpenAI
+            from lightemma.backends.openai_http import limited_litellm_handler, limited_openai_client
 
-            from lightemma.backends.openai_http import limited_httpx_client
-
-            key = self.sent_key or NO_KEY
-            self._client = AsyncOpenAI(api_key=key, base_url=self._litellm_base or None, max_retries=0,
-                                       http_client=limited_httpx_client())
+            self._client = (limited_openai_client(self.sent_key or NO_KEY, self._litellm_base or None)
+                            if self.provider == "openai" else limited_litellm_handler())
             self._client_loop = loop
         return {"client": self._client}
 

@@ -129,7 +129,7 @@ class OpenAIHTTPClient:
         self._session = None
 
 
-# -- the same bound for litellm's OpenAI client (httpx) ------------------------------------------------------
+# -- the same bound for litellm's clients (httpx): its OpenAI SDK client and its native Anthropic / Gemini ones ---
 
 BODY_GUARD: Any = None  # set below: a ContextVar holding the current call's {"too_large": message} slot
 
@@ -143,11 +143,14 @@ def _guard() -> Any:
     return BODY_GUARD
 
 
-def limited_httpx_client(max_body: int = MAX_BODY_BYTES) -> Any:
-    """An ``httpx.AsyncClient`` that never reads more than ``max_body`` bytes of a response body.
+def body_limit_hook(max_body: int = MAX_BODY_BYTES) -> Any:
+    """An httpx ``response`` event hook that lets a client read at most ``max_body`` bytes of a response body.
 
-    A larger body ends the read (the OpenAI SDK then reports a connection error); the call's slot in
-    :data:`BODY_GUARD` (set by the caller) says why, so the caller records :class:`ResponseTooLargeError`.
+    A ``Content-Length`` over the limit fails at once; a body without one is counted chunk by chunk as the
+    client reads it and the read ends past the limit. Either way the call's slot in :data:`BODY_GUARD`
+    (set by the caller) says why, so the caller records :class:`ResponseTooLargeError` whatever error
+    the client library wraps it in. A hook (not a transport) keeps each client's own connection pool,
+    TLS and proxy settings.
     """
     import httpx
 
@@ -160,33 +163,40 @@ def limited_httpx_client(max_body: int = MAX_BODY_BYTES) -> Any:
             async for chunk in self.inner:
                 size += len(chunk)
                 if size > max_body:
-                    message = f"the response body is over {max_body} bytes, more than lightemma reads"
-                    if self.slot is not None:
-                        self.slot["too_large"] = message
-                    raise ResponseTooLargeError(message)
+                    raise _too_large(self.slot, f"the response body is over {max_body} bytes, more than lightemma reads")
                 yield chunk
 
         async def aclose(self) -> None:
             await self.inner.aclose()
 
-    class _Transport(httpx.AsyncBaseTransport):
-        def __init__(self) -> None:
-            self.inner = httpx.AsyncHTTPTransport()
+    async def hook(response: Any) -> None:
+        slot = _guard().get()
+        length = response.headers.get("content-length")
+        if length and length.isdigit() and int(length) > max_body:
+            raise _too_large(slot, f"the response body is {length} bytes, more than the {max_body} bytes lightemma reads")
+        response.stream = _Stream(response.stream, slot)
 
-        async def handle_async_request(self, request: Any) -> Any:
-            response = await self.inner.handle_async_request(request)
-            slot = _guard().get()
-            length = response.headers.get("content-length")
-            if length and length.isdigit() and int(length) > max_body:
-                await response.aclose()
-                message = f"the response body is {length} bytes, more than the {max_body} bytes lightemma reads"
-                if slot is not None:
-                    slot["too_large"] = message
-                raise ResponseTooLargeError(message)
-            response.stream = _Stream(response.stream, slot)
-            return response
+    return hook
 
-        async def aclose(self) -> None:
-            await self.inner.aclose()
 
-    return httpx.AsyncClient(transport=_Transport(), timeout=None)
+def _too_large(slot: dict[str, str] | None, message: str) -> ResponseTooLargeError:
+    if slot is not None:
+        slot["too_large"] = message
+    return ResponseTooLargeError(message)
+
+
+def limited_openai_client(api_key: str, base_url: str | None, max_body: int = MAX_BODY_BYTES) -> Any:
+    """The OpenAI SDK's async client (litellm's ``client=`` for the OpenAI protocol), reading at most ``max_body``
+    bytes of a body (:func:`body_limit_hook`); no retries of its own."""
+    from openai import AsyncOpenAI, DefaultAsyncHttpxClient
+
+    http = DefaultAsyncHttpxClient(event_hooks={"response": [body_limit_hook(max_body)]})
+    return AsyncOpenAI(api_key=api_key, base_url=base_url, max_retries=0, http_client=http)
+
+
+def limited_litellm_handler(max_body: int = MAX_BODY_BYTES) -> Any:
+    """litellm's ``AsyncHTTPHandler`` reading at most ``max_body`` bytes of a body (:func:`body_limit_hook`): the
+    ``client=`` litellm's native Anthropic (``/v1/messages``) and Gemini (``generateContent``) clients post through."""
+    from litellm.llms.custom_httpx.http_handler import AsyncHTTPHandler
+
+    return AsyncHTTPHandler(event_hooks={"response": [body_limit_hook(max_body)]})
