@@ -242,6 +242,62 @@ def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, fr
         assert wanted.exists() and len(read_run(run_dir).records) == 3
 
 
+@pytest.mark.parametrize(("changes", "words"), [
+    ({"ray_address": "10.0.0.1:6379"}, "--ray-address"),
+    ({"backend_options": {"trust_remote_code": True}}, "--trust-remote-code"),
+    ({"backend_options": {"runtime_env": {"pip": ["evil-package"]}}}, "runtime_env="),
+    ({"backend_options": {"attn_implementation": "someone/kernels"}}, "attn_implementation="),
+])
+def test_resume_refuses_a_manifest_that_chooses_where_the_model_runs_or_what_code_runs(tmp_path, frames, capsys, changes, words):
+    from lightemma.cli import main
+    from lightemma.pipeline import resume
+    from lightemma.errors import UserError
+
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server, **changes)
+        before = len(server.requests)
+        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and words in err and "does not choose" in err, err
+        with pytest.raises(UserError, match="does not choose"):
+            resume(run_dir, frames=frames, api_base=server.url, cache=True, progress=False)
+        assert len(server.requests) == before and len(read_run(run_dir).records) == 1
+
+
+def test_resume_refuses_options_it_takes_from_the_manifest_and_code_options_the_run_did_not_have(tmp_path, frames):
+    from lightemma.errors import UserError
+    from lightemma.pipeline import resume
+
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server)
+        with pytest.raises(UserError, match="did not load the model with trust_remote_code"):
+            resume(run_dir, frames=frames, api_base=server.url, cache=True, backend_options={"trust_remote_code": True},
+                   progress=False)
+        with pytest.raises(UserError, match="takes batch_size from the run's manifest"):
+            resume(run_dir, frames=frames, api_base=server.url, cache=True, backend_options={"batch_size": 4}, progress=False)
+        assert len(read_run(run_dir).records) == 1
+
+
+def test_a_local_run_with_trust_remote_code_resumes_only_with_it_again(tmp_path, synth_root, tiny_qwen, capsys):
+    from lightemma.cli import main
+    from lightemma.runs.store import FRAMES_FILE, read_manifest
+
+    out = tmp_path / "out"
+    args = ["--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "2", "--max-tokens", "4",
+            "--max-attempts", "1", "--output", str(out), "--no-progress"]
+    assert main(["run", "--model", str(tiny_qwen), "--backend", "hf", "--device", "cpu", "--trust-remote-code", *args]) == 1
+    (run_dir,) = run_dirs(out)
+    assert read_manifest(run_dir)["config"]["backend_options"]["trust_remote_code"] is True
+    path = run_dir / FRAMES_FILE
+    path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:1]))  # one frame left to do
+    capsys.readouterr()
+    assert main(["run", "--resume", str(run_dir), "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "--trust-remote-code" in err, err
+    assert main(["run", "--resume", str(run_dir), "--trust-remote-code", "--no-progress"]) == 1  # random weights: no valid frame
+    assert len(read_run(run_dir).records) == 2
+
+
 # -- 25.10: SIGTERM and SIGHUP stop a run like Ctrl-C ------------------------------------------------------
 
 
@@ -450,17 +506,27 @@ def test_a_locked_response_cache_is_reported_in_one_line_and_the_run_goes_on_unc
 # -- 25.9: a response body has a size limit -----------------------------------------------------------------
 
 
-@pytest.mark.parametrize("transport", ["litellm", "direct"])
-def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(transport):
+BODY_LIMIT_CASES = [  # (model, transport, key variable): every client a reply can reach lightemma through
+    ("openai/test-model", "litellm", None), ("openai/test-model", "direct", None),
+    ("anthropic/claude-sonnet-4-6", "litellm", "ANTHROPIC_API_KEY"), ("gemini/gemini-2.5-flash", "litellm", "GEMINI_API_KEY"),
+]
+
+
+@pytest.mark.parametrize(("model", "transport", "variable"), BODY_LIMIT_CASES, ids=[f"{m.split('/')[0]}-{t}" for m, t, _ in BODY_LIMIT_CASES])
+@pytest.mark.parametrize("length", ["declared", "chunked"])
+def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(monkeypatch, model, transport, variable, length):
     from fake_openai import SCENE_TEXT
 
     from lightemma.backends import ChatRequest, create_backend
     from lightemma.backends.openai_http import MAX_BODY_BYTES
     from lightemma.backends.retry import RetryPolicy
 
-    huge = Reply("x" * (MAX_BODY_BYTES + 1000))
+    if variable:
+        monkeypatch.setenv(variable, "native-test-key-0123456789")
+    huge = Reply(bulk=8 * MAX_BODY_BYTES, chunked=length == "chunked")  # 64 MiB, declared or not
     with FakeOpenAIServer([huge, Reply(SCENE_TEXT)]) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, transport=transport,
+        base = server.url if model.startswith("openai/") else server.root_url
+        backend = create_backend(model, api_base=base, transport=transport,
                                  retry=RetryPolicy(max_retries=2, base=0.01, cap=0.05))
 
         async def two():
@@ -469,8 +535,10 @@ def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(transport):
 
         big, small = asyncio.run(two())
         asyncio.run(backend.aclose())
-    assert big.error == "ResponseTooLargeError" and big.retries == 0 and "bytes" in big.error_message
+    assert big.error == "ResponseTooLargeError" and big.retries == 0 and "bytes" in big.error_message, big
     assert small.ok and small.text == SCENE_TEXT and len(server.requests) == 2
+    # the client stopped reading: what the server could write is the limit plus the sockets' buffers, not 64 MiB
+    assert len(server.bulk_sent) == 1 and server.bulk_sent[0] < 4 * MAX_BODY_BYTES, server.bulk_sent
 
 
 # -- 22.5: --api-base checked at once ----------------------------------------------------------------------

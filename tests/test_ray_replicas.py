@@ -252,8 +252,11 @@ def test_resume_after_the_driver_is_killed_finishes_the_run_as_before(ray_addres
     run_dir = frames_file.parent
     before = read_run(run_dir)
     assert 1 <= len(before.records) < 16 and not before.complete, "the driver finished before it was killed"
-    # the same cluster, from the manifest; with one replica this time (where the model runs may change on a resume)
-    assert cli_main(["run", "--resume", str(run_dir), "--replicas", "1", "--no-progress"]) == 1
+    # the run's cluster is joined again only when the user names one (a manifest does not choose where the model runs)
+    assert cli_main(["run", "--resume", str(run_dir), "--replicas", "1", "--no-progress"]) == 2
+    assert read_run(run_dir).records == before.records
+    # the same cluster, named; with one replica this time (where the model runs may change on a resume)
+    assert cli_main(["run", "--resume", str(run_dir), "--replicas", "1", "--ray-address", ray_address, "--no-progress"]) == 1
     after = read_run(run_dir)
     assert after.complete and after.duplicates == 0 and len(after.records) == 16
     assert answers(run_dir) == reference
@@ -281,6 +284,26 @@ def test_a_replica_whose_model_fails_every_batch_identically_stops_the_run_in_on
     assert "--resume" in lines[0]
     stopped = read_run(only_run(tmp_path / "out"))
     assert stopped.records == {} and stopped.manifest["sessions"][-1]["stopped"]["cause"] == "local-model"
+
+
+def test_timeout_reaches_every_replica_and_a_model_past_it_stops_the_run_in_one_line(ray_address, tiny, dataroot, tmp_path,
+                                                                                   capsys):
+    """--timeout is each replica's deadline per batch: a random-weight model asked for 10^6 tokens never ends its answer,
+    so every batch of every replica stops at the deadline (``Timeout``) and the replicas' run-fatal rule stops the run."""
+    args = frames_args(dataroot, tmp_path / "out", 4)
+    args[args.index("--max-tokens") + 1] = "1000000"
+    start = time.monotonic()
+    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--batch-size", "1", "--dtype", "float32",
+                     "--replicas", "2", "--gpus-per-replica", "0", "--ray-address", ray_address, "--timeout", "1", *args])
+    err = capsys.readouterr().err
+    lines = [line for line in err.splitlines() if "error:" in line]
+    assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
+    assert "runs past --timeout 1 s" in lines[0] and "--resume" in lines[0], lines
+    assert time.monotonic() - start < 300  # stopped, not generating 10^6 tokens
+    stopped = read_run(only_run(tmp_path / "out"))
+    assert stopped.manifest["sessions"][-1]["stopped"]["error"] == "Timeout"
+    calls = [c for r in stopped.records.values() for a in r["attempts"] for c in a["calls"]]
+    assert all(c["error"] == "Timeout" for c in calls)
 
 
 def test_replicas_that_cannot_build_the_model_are_one_line_before_any_run_directory(ray_address, dataroot, tmp_path, capsys):

@@ -49,7 +49,8 @@ class VLLMBackend:
     ``gpu_memory_utilization`` (default 0.9), ``max_pixels`` (Pillow downscale
     of each image before vLLM's processor), ``dtype`` (``auto`` lets vLLM take
     the checkpoint's, i.e. bf16 for the paper's models), ``max_model_len``,
-    ``seed``, ``enable_prefix_caching`` (default on), ``engine_options`` (more
+    ``seed``, ``enable_prefix_caching`` (default on), ``trust_remote_code`` (the
+    checkpoint's own code runs; default off), ``engine_options`` (more
     ``vllm.LLM`` keyword arguments). ``vllm`` is the vllm module itself, or
     the name of a module to import in its place, for tests that inject a stand-in.
     """
@@ -60,8 +61,8 @@ class VLLMBackend:
                  tensor_parallel_size: int = 1, pipeline_parallel_size: int = 1, gpu_memory_utilization: float = 0.9,
                  max_pixels: int | None = None,
                  dtype: str = "auto", max_model_len: int | None = None, seed: int = 0,
-                 enable_prefix_caching: bool = True, engine_options: Mapping[str, Any] | None = None,
-                 vllm: Any = None) -> None:
+                 enable_prefix_caching: bool = True, trust_remote_code: bool = False,
+                 engine_options: Mapping[str, Any] | None = None, vllm: Any = None) -> None:
         if is_mllama(model):
             raise UserError(MLLAMA_REFUSAL.format(model=model))
         if tensor_parallel_size < 1:
@@ -87,6 +88,7 @@ class VLLMBackend:
             "limit_mm_per_prompt": {"image": 1},
             "enable_prefix_caching": enable_prefix_caching,
             **({"max_model_len": max_model_len} if max_model_len else {}),
+            **({"trust_remote_code": True} if trust_remote_code else {}),
             **dict(engine_options or {}),
         }
         try:

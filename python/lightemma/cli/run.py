@@ -77,6 +77,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     local.add_argument("--tensor-parallel-size", type=int, help="vllm: GPUs to shard the model over (default 1)")
     local.add_argument("--gpu-memory-utilization", type=float, help="vllm: share of GPU memory vLLM may use (default 0.9)")
     local.add_argument("--pipeline-parallel-size", type=int, help="vllm: GPUs to split the model's layers over (default 1)")
+    local.add_argument("--trust-remote-code", action="store_true", default=None,
+                       help="run the checkpoint's own Python code (transformers' / vLLM's trust_remote_code), for models "
+                       "that need it; only for checkpoints you trust. A resume of such a run needs it again")
     ray = p.add_argument_group("replicas over Ray (--backend hf | vllm; pip install 'lightemma[ray]'; docs/local.md)")
     ray.add_argument("--replicas", type=int, metavar="N", help="model replicas, each a Ray actor with its own GPU(s), frames spread across "
                      "them (default 1: in this process, no Ray)")
@@ -125,7 +128,8 @@ RUN_DEFAULTS: dict[str, object] = {
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
                   "replicas", "ray_address", "gpus_per_replica", "max_cost", "batch", "estimate",  # where the model runs, not what it is asked
-                  "api_base", "api_key_env", "cache"}  # where requests, keys and writes go: the user's word, not the manifest's
+                  "api_base", "api_key_env", "cache",  # where requests, keys and writes go: the user's word, not the manifest's
+                  "trust_remote_code"}  # what code runs: likewise
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
@@ -160,7 +164,8 @@ def check_limits(args: argparse.Namespace) -> None:
 
 # option -> backends that take it
 LOCAL_OPTIONS = {"batch_size": ("hf", "vllm"), "max_pixels": ("hf", "vllm"), "dtype": ("hf", "vllm"), "device": ("hf",),
-                 "tensor_parallel_size": ("vllm",), "gpu_memory_utilization": ("vllm",), "pipeline_parallel_size": ("vllm",)}
+                 "tensor_parallel_size": ("vllm",), "gpu_memory_utilization": ("vllm",), "pipeline_parallel_size": ("vllm",),
+                 "trust_remote_code": ("hf", "vllm")}
 
 
 def local_backend_options(args: argparse.Namespace) -> dict[str, object]:
@@ -240,7 +245,8 @@ def main(args: argparse.Namespace) -> int:
         result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
                         concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
                         gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost, api_base=args.api_base,
-                        api_key_env=args.api_key_env, cache=args.cache)
+                        api_key_env=args.api_key_env, cache=args.cache,
+                        backend_options={"trust_remote_code": True} if args.trust_remote_code else None)
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")

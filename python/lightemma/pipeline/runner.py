@@ -155,8 +155,9 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
         )
     replicas = {"replicas": config.get("replicas") or 1, "ray_address": config.get("ray_address"),
                 "gpus_per_replica": config.get("gpus_per_replica")}
-    if kind == "hf" and replicas["replicas"] == 1 and replicas["ray_address"] is None and config.get("timeout"):
-        options.setdefault("timeout", config["timeout"])  # a deadline per batch (docs/run.md#when-a-run-cannot-succeed)
+    if kind == "hf" and config.get("timeout"):
+        # a deadline per batch, in this process or in each replica (docs/run.md#when-a-run-cannot-succeed)
+        options.setdefault("timeout", config["timeout"])
     return _with_notices(create_backend(config["model"], backend=kind, api_base=api_base, **replicas, **options), log)
 
 
@@ -172,20 +173,61 @@ def _with_notices(backend: Backend, log: Log | None) -> Backend:
     return backend
 
 
+#: backend options a manifest may carry into a resume by itself: numbers and names that say how the model runs here.
+#: Any other (``trust_remote_code``, ``attn_implementation`` — transformers may fetch kernels from the hub —,
+#: ``engine_options``, ``runtime_env``, ``vllm``, …) can fetch or run code, so the resume's caller gives it again.
+INERT_BACKEND_OPTIONS = frozenset({
+    "batch_size", "batch_window", "max_pixels", "dtype", "device", "device_map", "tensor_parallel_size",
+    "pipeline_parallel_size", "gpu_memory_utilization", "max_model_len", "seed", "enable_prefix_caching", "fit_split",
+    "folds", "max_image_bytes", "max_restarts", "max_sends",
+})
+
+
 def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | None, api_key_env: str | None,
-                      cache: str | bool | None) -> None:
-    """Refuse to resume a run whose manifest would choose where requests, keys or writes go.
+                      cache: str | bool | None, ray_address: str | None = None,
+                      backend_options: Mapping[str, Any] | None = None) -> None:
+    """Refuse to resume a run whose manifest would choose where requests, keys or writes go, or what code runs.
 
     A run directory may come from someone else: its endpoint (``api_base``), its key variable
     (``api_key_env``) and its response cache path must be the ones the user gives now (``--api-base``,
-    ``--api-key-env``, ``--cache``), or the resume is refused in one line. Nothing is shown or asked.
+    ``--api-key-env``, ``--cache``); a Ray cluster the run's replicas joined (``ray_address``) is joined
+    again only when the user names one (``--ray-address``); and backend options outside
+    :data:`INERT_BACKEND_OPTIONS` (``trust_remote_code``, …) hold only when ``backend_options`` gives them
+    again, equal (``--trust-remote-code``). Otherwise the resume is refused in one line. Nothing is shown or asked.
     """
     from lightemma.backends.retry import redact_url
 
     recorded = redact_url(config.get("api_base"))  # a manifest written before redaction may hold a password
-    if "api_key" in (config.get("backend_options") or {}):
+    options = config.get("backend_options") or {}
+    if not isinstance(options, Mapping):
+        raise UserError(f"{run_dir}: the manifest's backend_options are not an object; start a new run")
+    if "api_key" in options:
         raise UserError(f"{run_dir}: the manifest's backend_options carry an api_key; keys come from the environment only "
                         "(--api-key-env NAME): start a new run")
+    inert = sorted(k for k in (backend_options or {}) if k in INERT_BACKEND_OPTIONS)
+    if inert:
+        raise UserError(f"{run_dir}: a resume takes {', '.join(inert)} from the run's manifest; drop them from backend_options")
+
+    def active(opts: Mapping[str, Any]) -> dict[str, Any]:  # options that can fetch or run code, unset ones left out
+        return {k: v for k, v in opts.items() if k not in INERT_BACKEND_OPTIONS and v is not None and v is not False}
+
+    live, given = active(options), active(backend_options or {})
+    differ = sorted(k for k in live.keys() | given.keys() if live.get(k) != given.get(k))
+    if differ:
+        if differ == ["trust_remote_code"]:
+            why = ("this run loaded the model with trust_remote_code (the checkpoint's own Python code runs); a run directory "
+                   "does not choose what code runs: resume it with --trust-remote-code if you trust the checkpoint"
+                   if live.get("trust_remote_code") else "this run did not load the model with trust_remote_code; drop "
+                   "--trust-remote-code")
+        else:
+            shown = ", ".join(f"{k}={_short_repr(live.get(k))}" for k in differ)
+            why = (f"the run's backend options {shown} can fetch or run code and are not the ones given now; a run "
+                   "directory does not choose what code runs: give them again, the same, to resume "
+                   "(lightemma.resume(..., backend_options={...}))")
+        raise UserError(f"{run_dir}: {why}")
+    if config.get("ray_address") and not ray_address:
+        raise UserError(f"{run_dir}: this run's replicas joined the Ray cluster at {_short_repr(config['ray_address'])}; a run directory "
+                        "does not choose where the model runs: resume it with --ray-address (that one or another)")
     if (redact_url(api_base) or None) != (recorded or None):
         if recorded and not api_base:
             why = (f"this run was made against an --api-base endpoint ({recorded}); a run directory does not choose where "
@@ -214,6 +256,12 @@ def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | Non
     given = (output / DEFAULT_CACHE if cache is True else Path(cache)).resolve()
     if given != want:
         raise UserError(f"{run_dir}: the --cache given ({given}) is not the run's response cache ({want}); give the run's own")
+
+
+def _short_repr(value: Any, limit: int = 60) -> str:
+    """``repr(value)`` cut to ``limit`` characters: a manifest's value shown in a one-line message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
 def _served_model_info(info: Any, price: tuple[float, float] | None, gpus: int | None, *, served: bool) -> dict[str, Any]:
@@ -807,7 +855,8 @@ def run(
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
            concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
            gpus_per_replica: float | None = None, max_cost_cents: float | None = None, api_base: str | None = None,
-           api_key_env: str | None = None, cache: str | bool | None = None, progress: bool = True, log: Log | None = None) -> RunResult:
+           api_key_env: str | None = None, cache: str | bool | None = None, backend_options: Mapping[str, Any] | None = None,
+           progress: bool = True, log: Log | None = None) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
@@ -823,16 +872,19 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     whole spending limit, records of earlier sessions included). A batch run polls the batches its
     journal names before submitting anything (:mod:`lightemma.backends.batch`).
 
-    The manifest never chooses where requests, keys or writes go: ``api_base``, ``api_key_env`` and
-    ``cache`` must be given as the run had them (its endpoint, key variable and response cache), else a
-    one-line :class:`~lightemma.errors.UserError` before anything is sent or written.
+    The manifest never chooses where requests, keys or writes go, nor what code runs: ``api_base``,
+    ``api_key_env`` and ``cache`` must be given as the run had them (its endpoint, key variable and
+    response cache); a run whose replicas joined a Ray cluster needs a ``ray_address`` given now; and
+    backend options that can fetch or run code (``trust_remote_code``, ``engine_options``, …: all but
+    :data:`INERT_BACKEND_OPTIONS`) must be given again, equal, in ``backend_options``. Else a one-line
+    :class:`~lightemma.errors.UserError` before anything is sent, loaded or written.
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     config = dict(manifest.get("config") or {})
     if not config.get("model"):
         raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
-    _trusted_settings(run_dir, config, api_base, api_key_env, cache)
+    _trusted_settings(run_dir, config, api_base, api_key_env, cache, ray_address, backend_options)
     if concurrency is not None:
         if concurrency < 1:
             raise UserError(f"--concurrency must be at least 1, got {concurrency}")
