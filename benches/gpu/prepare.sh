@@ -31,7 +31,7 @@ pin() { grep -iE "^$1==" constraints.txt | head -1; }
 python3 -m pip download --quiet --disable-pip-version-check --only-binary=:all: --no-deps -d "$dest" \
   --python-version 3.12 --implementation cp --abi cp312 --abi abi3 --abi none \
   --platform manylinux_2_28_x86_64 --platform manylinux_2_17_x86_64 --platform manylinux2014_x86_64 --platform any \
-  "$(pin scipy)" "$(pin pillow)" "$(pin filelock)" "$(pin tqdm)" "torchvision==0.26.0"
+  "$(pin scipy)" "$(pin pillow)" "$(pin filelock)" "$(pin tqdm)" "$(pin orjson)" "torchvision==0.26.0"
 
 echo "== check: the lightemma wheel installs and imports on CPython 3.12"
 check="$(mktemp -d)"
