@@ -570,8 +570,6 @@ def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path,
 
 def test_a_registry_model_of_another_provider_at_an_api_base_speaks_openai_and_has_no_list_price(elsewhere, monkeypatch,
                                                                                                  tmp_path, frames):
-    from lightemma.evaluation import evaluate_runs
-
     monkeypatch.setenv("ANTHROPIC_API_KEY", KEYS["ANTHROPIC_API_KEY"])
     with FakeOpenAIServer() as server:
         plain = run("claude-4.6-sonnet", frames=frames[:2], api_base=server.url, output=tmp_path / "a", **FAST)

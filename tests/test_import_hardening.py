@@ -245,3 +245,15 @@ def test_a_parallel_import_leaves_no_child_process_behind(tmp_path):
     done = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, env=PYTHON_ENV, timeout=120)
     assert done.returncode == 0, done.stderr
     assert "children: []" in done.stdout  # workers joined, the resource tracker stopped and reaped
+
+
+def test_stage_times_whose_sum_overflows_are_an_unknown_total_not_a_crash(tmp_path):
+    rng = np.random.default_rng(3)
+    frames = [make_frame(rng, "scene-0001", i) for i in range(2)]
+    frames[0]["time_usage"] = {k: 1e308 for k in frames[0]["time_usage"]}  # each finite, their sum is not
+    write_scene(tmp_path / "res" / "gpt-4o", "scene-0001", frames)
+    (result,) = import_reference([tmp_path / "res"], tmp_path / "runs")
+    records = sorted(read_run(result.run_dir).records.values(), key=lambda r: r["source"]["frame_index"])
+    assert records[0]["seconds"] is None and records[0]["attempts"][0]["seconds"] is None
+    assert [c["seconds"] for c in records[0]["attempts"][0]["calls"]] == [1e308] * 3  # each stage's own time is kept
+    assert records[1]["seconds"] == pytest.approx(sum(frames[1]["time_usage"].values()))

@@ -10,15 +10,14 @@ texts are fetched later, only for the frames a figure needs
 
 from __future__ import annotations
 
-import gc
 import itertools
 import math
 import os
 import tempfile
 import time
 import zipfile
-from collections.abc import Iterable, Iterator, Mapping
-from contextlib import contextmanager, suppress
+from collections.abc import Iterable, Mapping
+from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -30,7 +29,7 @@ from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
 from lightemma.runs.store import FRAMES_FILE, RunContents, iter_records, read_frame_ids
-from lightemma.runs.records import answer_received, first_answer_status
+from lightemma.runs.records import answer_received, first_answer_status, gc_paused
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
@@ -216,18 +215,6 @@ class RawColumns:
 RecordColumns = _Columns  # for writers that hold their records: add() each, finish(), then write_sidecar()
 
 
-@contextmanager
-def _gc_paused() -> Iterator[None]:
-    """Pause the cyclic garbage collector (restoring its previous state afterwards)."""
-    enabled = gc.isenabled()
-    gc.disable()
-    try:
-        yield
-    finally:
-        if enabled:
-            gc.enable()
-
-
 # ---------------------------------------------------------------- the columnar sidecar
 
 SIDECAR_FILE = "frames.columns.npz"
@@ -353,7 +340,7 @@ def _read_records(run_dir: Path, parse: ParseDefinition | None) -> RawColumns:
     counts = RunContents(run_dir=run_dir, manifest={}, records={})
     columns = _Columns()
     try:
-        with _gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
+        with gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
             records = iter_records(run_dir, counts=counts)
             for record in records if parse is None else rescored(records, parse):
                 columns.add(record)

@@ -21,6 +21,7 @@ import os
 import re
 import stat
 from collections.abc import Iterator, Mapping, Sequence
+from itertools import chain
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -275,15 +276,20 @@ def _is_number(value: Any) -> bool:
 
 
 _NUMBER_TYPES = (int, float)
+_NUMBER_TYPE_SET = frozenset(_NUMBER_TYPES)
+_LIST, _TWO = {list}, {2}
+
+
+def _all_finite_numbers(values: list[Any]) -> bool:
+    """Every value an int or a float (never a bool) and their sum finite — so each is (loops in C). A sum that
+    overflows only sends finite numbers to the slow path, which reads them one by one."""
+    return set(map(type, values)) <= _NUMBER_TYPE_SET and math.isfinite(sum(values))
 
 
 def _pairs(value: Any, n: int, what: str) -> list[list[Any]]:
     """``n`` pairs of finite numbers, as given; :class:`_Bad` naming ``what`` otherwise."""
-    # fast path (x - x == 0 is False for NaN and ±inf; bool is not a number here)
-    if type(value) is list and len(value) == n and all(
-        type(p) is list and len(p) == 2 and type(p[0]) in _NUMBER_TYPES and type(p[1]) in _NUMBER_TYPES
-        and p[0] - p[0] == 0 and p[1] - p[1] == 0 for p in value
-    ):
+    if type(value) is list and len(value) == n and set(map(type, value)) == _LIST and set(map(len, value)) == _TWO \
+            and _all_finite_numbers(list(chain.from_iterable(value))):
         return value
     if not isinstance(value, list):
         raise _Bad(f"{what} is {'missing' if value is None else type(value).__name__}, expected {n} pairs")
@@ -304,7 +310,9 @@ def _optional_pairs(container: Mapping[str, Any], key: str, n: int, what: str) -
 
 
 def _numbers(value: Any, n: int, what: str) -> list[Any]:
-    if not (type(value) is list and len(value) == n and all(type(v) in _NUMBER_TYPES and v - v == 0 for v in value)):
+    if type(value) is list and len(value) == n and _all_finite_numbers(value):
+        return list(value)
+    if not (type(value) is list and len(value) == n and all(_is_number(v) for v in value)):
         raise _Bad(f"{what} is not {n} finite numbers: {_short(value)}")
     return list(value)
 
