@@ -19,6 +19,7 @@ from lightemma.runs import importer
 from lightemma.runs.importer import import_reference
 from lightemma.runs.reference import as_stored, join_lines, split_lines
 from lightemma.runs.store import find_run_dirs, read_manifest, read_run
+from lightemma.runs.stored_prompts import call_prompt, frame_texts
 
 
 @pytest.fixture
@@ -57,7 +58,9 @@ def test_one_run_per_model_named_by_the_registry_in_the_run_format(tmp_path, res
 def test_every_frame_field_comes_across(tmp_path, results):
     runs, _ = imported(tmp_path, results)
     source = json.loads((results["models"]["gpt-4o"] / "output" / "scene-0002.json").read_text())  # image_path only, no gt_actions
-    records = read_run(runs["gpt-4o"].run_dir).records
+    contents = read_run(runs["gpt-4o"].run_dir)
+    records, templates = contents.records, contents.manifest["prompt_set"]["templates"]
+    assert set(templates) == {"scene", "intent", "actions"}  # each stage's shared text is stored once, in the manifest
     prices = price_per_token(lookup("gpt-4o"))
     for frame in source["frames"]:
         rec = records[f"scene-0002/{frame['sample_token']}"]
@@ -76,7 +79,7 @@ def test_every_frame_field_comes_across(tmp_path, results):
         assert rec["answer"] == attempt["answer"] == calls["actions"]["text"] == inf["pred_actions_str"]
         for stage, key in (("scene", "scene_prompt"), ("intent", "intent_prompt"), ("actions", "waypoint_prompt")):
             call = calls[stage]
-            assert call["prompt"] == " ".join(inf[key])
+            assert call_prompt(call, frame_texts(attempt["calls"]), templates) == " ".join(inf[key])
             assert (call["input_tokens"], call["output_tokens"]) == (frame["token_usage"][key]["input"], frame["token_usage"][key]["output"])
             assert call["seconds"] == frame["time_usage"][key]
             assert call["cost_cents"] == pytest.approx((call["input_tokens"] * prices[0] + call["output_tokens"] * prices[1]) * 100)
@@ -143,11 +146,11 @@ def test_a_failure_mid_import_leaves_no_run(tmp_path, results, monkeypatch, erro
     original = importer._scene_records
     calls = []
 
-    def failing(scene, prices, warn):
+    def failing(scene, *args):
         calls.append(scene.path.name)
         if len(calls) == 2:
             raise error
-        return original(scene, prices, warn)
+        return original(scene, *args)
 
     monkeypatch.setattr(importer, "_scene_records", failing)
     with pytest.raises(type(error)):

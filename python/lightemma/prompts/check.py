@@ -1,7 +1,8 @@
 """Check a prompt set against the prompts an imported run stored (``lightemma prompts check``).
 
 A run imported from the reference scripts keeps each stage's prompt as the
-reference sent it (``attempts[0].calls[i].prompt``). Rendering a prompt set with
+reference sent it (``attempts[0].calls[i]``, whole or as a template of the run
+and the frame's fill: :func:`lightemma.runs.stored_prompts.call_prompt`). Rendering a prompt set with
 that frame's own stage texts and history, and folding whitespace the way the
 reference stored its prompts (lines of at most 80 characters, joined with one
 space), must give the same text if the set says what the reference said.
@@ -21,6 +22,7 @@ from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet
 from lightemma.runs.reference import as_stored
 from lightemma.runs.store import iter_records, read_manifest
+from lightemma.runs.stored_prompts import call_prompt, frame_texts
 
 CONTEXT = 30  # characters shown before the first difference
 
@@ -95,6 +97,7 @@ def check_prompts(prompts: PromptSet, run_dir: str | os.PathLike[str], *, limit:
     if not manifest.get("imported"):
         raise UserError(f"{run_dir} was not imported from reference results, so it stores no prompts to check against "
                         "(lightemma import makes such runs)")
+    templates = (manifest.get("prompt_set") or {}).get("templates") if isinstance(manifest.get("prompt_set"), Mapping) else None
     checks = {stage: StageCheck(stage) for stage in STAGES}
     seen = 0
     for record in iter_records(run_dir):
@@ -102,9 +105,10 @@ def check_prompts(prompts: PromptSet, run_dir: str | os.PathLike[str], *, limit:
         if not attempts or not isinstance(attempts[0], Mapping) or record.get("history_actions") is None:
             continue
         calls = _texts(attempts[0].get("calls") or [])
+        texts = frame_texts(list(calls.values()))
         history = history_placeholders(record["history_actions"])
         for stage, check in checks.items():
-            stored = (calls.get(stage) or {}).get("prompt")
+            stored = call_prompt(calls.get(stage) or {}, texts, templates)
             if not isinstance(stored, str):
                 check.no_prompt += 1
                 continue

@@ -15,12 +15,15 @@ so that ``evaluate``, ``report``, ``--common`` and the figures read it as any ru
 * **As the paper scored it.** The stage-3 answer is parsed with
   ``mode="paper"`` (the paper's FE / FE corr rules) and integrated with Euler;
   the manifest says so, and ``evaluate`` uses that definition by default.
+* **Prompts.** Every prompt the reference sent is kept, exactly: the text each
+  stage's prompts share once in the manifest (``prompt_set.templates``), each
+  frame's own part in its calls (:mod:`lightemma.runs.stored_prompts`).
 """
 
 from __future__ import annotations
 
 import hashlib
-import json
+import math
 import os
 import re
 import shutil
@@ -50,8 +53,18 @@ from lightemma.runs.reference import (
     iter_scene_files,
     read_regular_file,
 )
-from lightemma.runs.records import loads_bounded
-from lightemma.runs.store import FORMAT, FRAMES_FILE, MANIFEST_FILE, pid_alive, read_manifest, slugify, write_json_atomic
+from lightemma.runs.records import gc_paused, loads_bounded
+from lightemma.runs.store import (
+    FORMAT,
+    FRAMES_FILE,
+    MANIFEST_FILE,
+    encode_line,
+    pid_alive,
+    read_manifest,
+    slugify,
+    write_json_atomic,
+)
+from lightemma.runs.stored_prompts import PromptTemplates
 
 IMPORT_PARSE = {"mode": "paper"}  # how an imported run is scored unless evaluate is told otherwise
 IMPORT_INTEGRATOR = "euler"
@@ -145,17 +158,21 @@ def _prices(info: ModelInfo | None) -> tuple[float, float] | None:
 
 
 def _sum_known(values: Iterable[Any]) -> Any:
+    """The sum, or None (unknown) when a value is unknown or the sum is not finite (seconds near 1e308 each)."""
     values = list(values)
-    return None if any(v is None for v in values) else sum(values)
+    if None in values:
+        return None
+    total = sum(values)
+    return total if math.isfinite(total) else None
 
 
-def _call_record(call: StageCall, prices: tuple[float, float] | None) -> dict[str, Any]:
+def _call_record(call: StageCall, prices: tuple[float, float] | None, prompt: dict[str, Any]) -> dict[str, Any]:
     cost = None
     if prices is not None and call.input_tokens is not None and call.output_tokens is not None:
         cost = (call.input_tokens * prices[0] + call.output_tokens * prices[1]) * 100.0
     return {
         "stage": call.stage,
-        "prompt": call.prompt,
+        **prompt,  # the prompt whole, or its template and this frame's fill (lightemma.runs.stored_prompts)
         "text": None if call.call_failed else call.text,
         "error": CALL_FAILURE if call.call_failed else None,
         "error_message": call.text if call.call_failed else None,
@@ -172,9 +189,10 @@ def _call_record(call: StageCall, prices: tuple[float, float] | None) -> dict[st
 
 
 def _record(frame: ReferenceFrame, source_file: str, parse: tuple[str, str, str] | None, actions: Any, trajectory: Any,
-            prices: tuple[float, float] | None) -> dict[str, Any]:
+            prices: tuple[float, float] | None, templates: PromptTemplates) -> dict[str, Any]:
     """The run record of one frame (the chain's fields, plus what only the reference has)."""
-    calls = [_call_record(c, prices) for c in frame.calls]
+    texts = {"scene": frame.calls[0].text, "intent": frame.calls[1].text}  # as the reference had them, failed calls too
+    calls = [_call_record(c, prices, templates.encode(c.stage, c.prompt, texts)) for c in frame.calls]
     totals = {
         "input_tokens": _sum_known(c["input_tokens"] for c in calls),
         "output_tokens": _sum_known(c["output_tokens"] for c in calls),
@@ -252,7 +270,8 @@ class _Tally:
                 "fe_percent": pct(self.first_not_ok), "fe_corr_percent": pct(self.first_failed), "parse": dict(IMPORT_PARSE)}
 
 
-def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: Warn) -> list[dict[str, Any]]:
+def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: Warn,
+                   templates: PromptTemplates) -> list[dict[str, Any]]:
     """Records of one scene file's frames: answers parsed in one batch, trajectories integrated in one."""
     from lightemma import integrate
     from lightemma.actions import history_rows, parse_actions
@@ -285,7 +304,7 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
         if mismatched:
             warn(f"{scene.path}: {mismatched} frame(s) whose stored predictions.trajectory differs from the Euler "
                  f"integration of their answer (up to {worst:.3g} m); the answer is what is scored")
-    return [_record(f, scene.path.name, parses[i], actions[i], trajectories[i], prices) for i, f in enumerate(frames)]
+    return [_record(f, scene.path.name, parses[i], actions[i], trajectories[i], prices, templates) for i, f in enumerate(frames)]
 
 
 def _is_6x2(value: Any) -> bool:
@@ -313,7 +332,7 @@ def _now() -> str:
 
 def _manifest(folder: ModelFolder, model: str, info: ModelInfo | None, digest: str, run_id: str, metadata_model: str | None,
               stamp: str | None, scenes: list[str], tally: _Tally, files_skipped: list[str], frames_skipped: int,
-              dataset_kind: str, prices: tuple[float, float] | None) -> dict[str, Any]:
+              dataset_kind: str, prices: tuple[float, float] | None, templates: PromptTemplates) -> dict[str, Any]:
     from lightemma import __version__
     from lightemma.evaluation.models import infer_family
 
@@ -343,7 +362,9 @@ def _manifest(folder: ModelFolder, model: str, info: ModelInfo | None, digest: s
                     "cost": "registry price × stored tokens" if prices else None},
         "params": {"integrate_method": IMPORT_INTEGRATOR, "parse": dict(IMPORT_PARSE), "reask": None, "max_attempts": 1},
         "integrator": IMPORT_INTEGRATOR,
-        "prompt_set": {"name": "reference scripts (prompts stored per frame)", "hash": None},
+        # the reference's prompts: each stage's shared text once here, each frame's own part in its calls
+        "prompt_set": {"name": "reference scripts (prompts stored per frame)", "hash": None,
+                       "templates": templates.to_manifest()},
         "dataset": {"kind": dataset_kind, "dataroot": None, "version": None, "split": None, "scenes": scenes,
                     "window": "reference", "n_frames": sum(tally.status.values())},
         "lightemma_version": __version__,
@@ -381,7 +402,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
     remove_stale_partials(model_dir, warn)
     tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.{os.getpid()}.", suffix=PARTIAL_SUFFIX, dir=model_dir))
     try:
-        tally, scenes, seen = _Tally(), [], set()
+        tally, scenes, seen, templates = _Tally(), [], set(), PromptTemplates()
         files_skipped: list[str] = []
         for entry, why in folder.skipped:
             warn(f"{entry}: {why}; file skipped")
@@ -391,7 +412,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         from lightemma.evaluation.loading import RecordColumns, source_key, write_sidecar
 
         columns = RecordColumns()  # the evaluation sidecar, from the records in hand (no second read)
-        with open(tmp / FRAMES_FILE, "w", encoding="utf-8") as fh:
+        with open(tmp / FRAMES_FILE, "wb") as fh, gc_paused():  # scene files are trees without cycles
             for path, scene in iter_scene_files(folder):
                 on_file()
                 if isinstance(scene, ReferenceFileError):
@@ -403,7 +424,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                 stamp = stamp or scene.timestamp
                 metadata_model = metadata_model or scene.metadata_model
                 lines = []
-                for record in _scene_records(scene, prices, warn):
+                for record in _scene_records(scene, prices, warn, templates):
                     if record["frame_id"] in seen:
                         warn(f"{path}: frame {record['frame_id']} was already read from another file; frame skipped")
                         frames_skipped += 1
@@ -411,10 +432,10 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                     seen.add(record["frame_id"])
                     tally.add(record)
                     columns.add(record)
-                    lines.append(json.dumps(record, ensure_ascii=False, allow_nan=False, check_circular=False))  # a fresh tree
+                    lines.append(encode_line(record))
                 if lines:
                     scenes.append(scene.scene_name)
-                    fh.write("\n".join(lines) + "\n")
+                    fh.write(b"".join(lines))
         result.frames, result.files_skipped, result.frames_skipped = len(seen), len(files_skipped), frames_skipped
         if not seen:
             shutil.rmtree(tmp)
@@ -422,7 +443,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
             result.outcome = "nothing to import"
             return result
         manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
-                             frames_skipped, dataset_kind, prices)
+                             frames_skipped, dataset_kind, prices, templates)
         write_json_atomic(tmp / MANIFEST_FILE, manifest)
         write_sidecar(tmp, columns.finish(), source_key(tmp))
         os.rename(tmp, final)
