@@ -3,14 +3,21 @@
 Writes 13 model folders in the reference scripts' format (``<model>/output/<scene>.json``,
 150 scenes, 3,908 frames each: the paper's v1.0-test set; texts of realistic length
 split into lines of at most 80 characters, ``json.dump(indent=4)`` as the scripts
-wrote them; most answers strict, a few lists of lists, prose, or unreadable), then,
+wrote them; each stage's prompt a fixed text with the frame's scene description,
+history and intent filled in, as the reference chain builds them; most answers
+strict, a few lists of lists, prose, or unreadable), then,
 each in a fresh subprocess so that peak RSS is clean:
 
 * ``import``   — ``lightemma import`` of all 13 folders (parse, check, write the runs) with the
   default worker processes (one per folder, at most 4 and the CPUs);
 * ``import-serial`` — the same in one process (``--jobs 1``);
 * ``again``    — the same import again (finds every run by its source hash, writes nothing);
-* ``evaluate`` — ``evaluate_runs`` over the 13 imported runs (paper rules, all conventions).
+* ``evaluate`` — ``evaluate_runs`` over the 13 imported runs (paper rules, all conventions);
+
+and then, side by side (``--repeat`` times in turn, medians), ``import-serial`` against its anchor:
+
+* ``naive``    — a naive converter, the least any converter does: each scene file ``json.loads``-ed, each
+  frame written back as one ``json.dumps`` line (no checks, no parsing, no sidecar), one process.
 
 Usage::
 
@@ -53,6 +60,20 @@ elif mode == "evaluate":
     from lightemma.evaluation import evaluate_runs
     ev = evaluate_runs([out], convention="all")
     result = sum(m.frames_in_run for m in ev.models)
+elif mode == "naive":
+    from pathlib import Path
+    result = 0
+    for model in sorted(p for p in Path(src).iterdir() if (p / "output").is_dir()):
+        target = Path(out + "-naive") / model.name
+        target.mkdir(parents=True, exist_ok=True)
+        with open(target / "frames.jsonl", "w") as fh:
+            for path in sorted((model / "output").glob("*.json")):
+                doc = json.loads(path.read_bytes())
+                for frame in doc["frames"]:
+                    inference = {k: " ".join(v) if isinstance(v, list) else v for k, v in frame["inference"].items()}
+                    fh.write(json.dumps({"frame_id": doc["scene_info"]["name"] + "/" + frame["sample_token"], **frame,
+                                         "inference": inference}) + "\n")
+                    result += 1
 else:
     result = None
 seconds = time.perf_counter() - start
@@ -89,15 +110,40 @@ def answer(rng: np.random.Generator, fe_rate: float) -> str:
     return "I cannot tell from this image."
 
 
+# The reference scripts' chain (the paper's section "VLM Prompting"): one fixed prompt per stage, the scene
+# description fed into stages 2 and 3, the driving intent into stage 3, the history of (speed, curvature)
+# into both. Written here in our own words at the reference prompts' lengths (~380, ~630 and ~690 characters
+# of fixed text); what varies from frame to frame is what the reference filled in.
+SCENE_PROMPT = ("You are an autonomous driving labeller. You have access to the front-view camera image of a car. "
+                "Imagine you are driving the car. Describe the driving scene according to traffic lights, the movements "
+                "of other cars or pedestrians and the lane markings. Be concise and factual, mention every object that "
+                "matters for driving and where it is, and do not speculate about anything the image does not show.")
+INTENT_PROMPT = ("You are an autonomous driving labeller. You have access to the front-view camera image of a car taken "
+                 "at a 2 Hz frequency. Imagine you are driving the car. The scene is described as follows: {scene} The "
+                 "ego vehicle's historical speeds (m/s) over the last 3 seconds, oldest first, were {speeds} and its "
+                 "curvatures (1/m) were {curvatures}; a positive curvature is a left turn, a negative one a right turn. "
+                 "Describe what the ego vehicle has been doing: is it accelerating or decelerating, and by about how "
+                 "much, is it turning or following its lane? Then, from the scene and this history, predict the driving "
+                 "intent for the next 3 seconds in one or two sentences. Do not output numbers for the future; a "
+                 "high-level intent only, such as keeping the lane at a steady speed or slowing for the vehicle ahead.")
+ACTIONS_PROMPT = ("You are an autonomous driving labeller. You have access to the front-view camera image of a car taken "
+                  "at a 2 Hz frequency. Imagine you are driving the car. The scene is described as follows: {scene} The "
+                  "ego vehicle's historical speeds (m/s) over the last 3 seconds, oldest first, were {speeds} and its "
+                  "curvatures (1/m) were {curvatures}. The high-level driving intent for the next 3 seconds is: "
+                  "{intent} Predict the speed and curvature of the ego vehicle for each of the next 6 time steps at "
+                  "0.5 s intervals (3 seconds in all), physically feasible for a passenger car and consistent with the "
+                  "scene and the intent. Output exactly this format and nothing else, no explanation and no code "
+                  "fence: [(v1, c1), (v2, c2), (v3, c3), (v4, c4), (v5, c5), (v6, c6)]")
+
+
 def frame(rng: np.random.Generator, scene: str, index: int, fe_rate: float) -> dict:
     speeds = [round(float(v), 3) for v in rng.uniform(0, 12, 6)]
     curvatures = [round(float(c), 3) for c in rng.normal(0, 0.02, 6)]
     description = " ".join(sentence(rng, 18) for _ in range(7))
     intent = " ".join(sentence(rng, 16) for _ in range(5))
-    head = "You are an autonomous driving labeller with the front camera image. " * 2
-    scene_prompt = head + sentence(rng, 40)
-    intent_prompt = f"{head}The scene: {description} Speeds were{speeds} m/s and curvatures{curvatures}. " + sentence(rng, 80)
-    actions_prompt = intent_prompt + f" Intent: {intent} Answer as [(v1, c1), (v2, c2), (v3, c3), (v4, c4), (v5, c5), (v6, c6)]."
+    scene_prompt = SCENE_PROMPT
+    intent_prompt = INTENT_PROMPT.format(scene=description, speeds=speeds, curvatures=curvatures)
+    actions_prompt = ACTIONS_PROMPT.format(scene=description, speeds=speeds, curvatures=curvatures, intent=intent)
     gt = np.cumsum(rng.uniform(0, 6, (6, 2)), axis=0).round(6).tolist()
     return {
         "frame_index": index,
@@ -139,9 +185,30 @@ def write_results(root: Path, models: int) -> tuple[int, float]:
     return sum(sizes), total / 1e6
 
 
+def side_by_side(root: Path, repeat: int) -> None:
+    """``import-serial`` and the naive converter in turn, ``repeat`` times each: medians and their ratio."""
+    import statistics
+
+    runs: dict[str, list[dict]] = {"import-serial": [], "naive": []}
+    for _ in range(repeat):
+        for mode in runs:
+            for old in root.glob("runs*"):
+                shutil.rmtree(old)
+            runs[mode].append(measure(mode, root / "results", root / "runs"))
+    med = {mode: {k: statistics.median(m[k] for m in ms) for k in ("seconds", "cpu_seconds")} for mode, ms in runs.items()}
+    naive_mb = sum(f.stat().st_size for f in (root / "runs-naive").rglob("*") if f.is_file()) / 1e6
+    print(f"\nside by side, medians of {repeat} in turn (one process each):")
+    for mode, m in med.items():
+        print(f"{mode:>13}: {m['seconds']:6.1f} s wall, {m['cpu_seconds']:6.1f} s CPU")
+    a, b = med["import-serial"], med["naive"]
+    print(f"import / naive converter: {a['cpu_seconds'] / b['cpu_seconds']:.2f}x CPU, {a['seconds'] / b['seconds']:.2f}x wall "
+          f"(the naive converter writes {naive_mb:.0f} MB)")
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--models", type=int, default=len(MODELS), choices=range(1, len(MODELS) + 1), metavar="N")
+    parser.add_argument("--repeat", type=int, default=3, help="side-by-side runs of import-serial and the naive converter")
     parser.add_argument("--keep", type=Path, help="write here and keep (default: a temporary folder)")
     args = parser.parse_args()
     root = args.keep or Path(tempfile.mkdtemp(prefix="bench-import-"))
@@ -165,6 +232,7 @@ def main() -> int:
             print(f"{mode:>13}: {m['seconds']:6.1f} s wall, {m['cpu_seconds']:6.1f} s CPU   peak RSS {m['maxrss_mb']:5.0f} MB{workers}   {m['result']}", flush=True)
         runs = sum(f.stat().st_size for f in (root / "runs").rglob("*") if f.is_file()) / 1e6
         print(f"runs written: {runs:.0f} MB")
+        side_by_side(root, args.repeat)
     finally:
         if args.keep is None:
             shutil.rmtree(root, ignore_errors=True)
