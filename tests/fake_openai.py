@@ -50,7 +50,8 @@ import struct
 import sys
 import threading
 import time
-from collections.abc import Callable, Sequence
+import zlib
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
 from typing import Any
@@ -176,6 +177,7 @@ class Reply:
     cache_write_tokens: int = 0  # of prompt_tokens, written to the prompt cache (Anthropic)
     bulk: int = 0  # > 0: the answer text is this many "x" bytes, streamed in 64 KiB pieces (``content`` unused)
     chunked: bool = False  # with bulk: no Content-Length, chunked transfer encoding (the size is never declared)
+    encoding: str | None = None  # the body sent compressed: "gzip", "deflate", "raw-deflate" (sent as deflate), or a name
 
     @classmethod
     def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
@@ -393,6 +395,16 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
     return out
 
 
+def _compressed(chunks: Iterable[bytes], encoding: str) -> bytes:
+    """``chunks`` as one body in ``encoding`` (gzip, deflate with its zlib header, raw-deflate without); a name
+    the server only declares (br, …) leaves the bytes as they are."""
+    wbits = {"gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS, "raw-deflate": -zlib.MAX_WBITS}.get(encoding)
+    if wbits is None:
+        return b"".join(chunks)
+    packer = zlib.compressobj(6, zlib.DEFLATED, wbits)
+    return b"".join(packer.compress(c) for c in chunks) + packer.flush()
+
+
 class FakeOpenAIServer:
     """The loopback server; a context manager. ``url`` ends in ``/v1`` (an OpenAI ``api_base``)."""
 
@@ -467,10 +479,14 @@ class FakeOpenAIServer:
                     return
                 payload = reply.body if reply.body is not None else _completion(req, reply)
                 data = json.dumps(payload).encode("utf-8")
+                if reply.encoding:
+                    data = _compressed([data], reply.encoding)
                 try:
                     self.send_response(reply.status)
                     self.send_header("Content-Type", "application/json")
                     self.send_header("Content-Length", str(len(data)))
+                    if reply.encoding:
+                        self.send_header("Content-Encoding", reply.encoding.replace("raw-", ""))
                     for key, value in reply.headers.items():
                         self.send_header(key, value)
                     self.end_headers()
@@ -493,29 +509,38 @@ class FakeOpenAIServer:
 
             def _send_bulk(self, reply: Reply, req: Received) -> None:
                 """A completion whose text is ``reply.bulk`` bytes, written piece by piece until the client stops
-                reading; the bytes written are appended to ``server.bulk_sent``."""
+                reading (compressed whole first when ``reply.encoding``: small on the wire, ``bulk`` bytes decoded);
+                the bytes written are appended to ``server.bulk_sent``."""
                 marker = "@@BULK@@"
                 head, tail = (part.encode() for part in
                               json.dumps(_completion(req, dataclasses.replace(reply, content=marker))).split(marker))
-                piece, sent = b"x" * (1 << 16), 0
+                piece = b"x" * (1 << 16)
+                count, rest = divmod(reply.bulk, len(piece))
+
+                def body() -> Iterator[bytes]:
+                    yield head
+                    for _ in range(count):
+                        yield piece
+                    if rest:
+                        yield piece[:rest]
+                    yield tail
+
+                pieces: Iterable[bytes] = [_compressed(body(), reply.encoding)] if reply.encoding else body()
+                length = len(pieces[0]) if isinstance(pieces, list) else len(head) + reply.bulk + len(tail)
+                sent = 0
                 try:
                     self.send_response(reply.status)
                     self.send_header("Content-Type", "application/json")
+                    if reply.encoding:
+                        self.send_header("Content-Encoding", reply.encoding.replace("raw-", ""))
                     if reply.chunked:
                         self.send_header("Transfer-Encoding", "chunked")
                     else:
-                        self.send_header("Content-Length", str(len(head) + reply.bulk + len(tail)))
+                        self.send_header("Content-Length", str(length))
                     self.end_headers()
-
-                    def write(data: bytes) -> None:
-                        nonlocal sent
+                    for data in pieces:
                         self.wfile.write(b"%x\r\n%b\r\n" % (len(data), data) if reply.chunked else data)
                         sent += len(data)
-
-                    write(head)
-                    for start in range(0, reply.bulk, len(piece)):
-                        write(piece[: min(len(piece), reply.bulk - start)])
-                    write(tail)
                     if reply.chunked:
                         self.wfile.write(b"0\r\n\r\n")
                 except (BrokenPipeError, ConnectionResetError, OSError):

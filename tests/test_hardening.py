@@ -541,6 +541,40 @@ def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(monkeypatch
     assert len(server.bulk_sent) == 1 and server.bulk_sent[0] < 4 * MAX_BODY_BYTES, server.bulk_sent
 
 
+@pytest.mark.parametrize(("model", "transport", "variable"), BODY_LIMIT_CASES, ids=[f"{m.split('/')[0]}-{t}" for m, t, _ in BODY_LIMIT_CASES])
+def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_compressed_replies_read(monkeypatch, model,
+                                                                                                      transport, variable):
+    """A 64 MiB body gzipped to ~64 KB fails at the limit (httpx inflated it whole before); gzip, deflate and raw deflate
+    replies of normal size read as before; an encoding lightemma did not ask for fails unread."""
+    from fake_openai import SCENE_TEXT
+
+    from lightemma.backends import ChatRequest, create_backend
+    from lightemma.backends.openai_http import MAX_BODY_BYTES
+    from lightemma.backends.retry import RetryPolicy
+
+    if variable:
+        monkeypatch.setenv(variable, "native-test-key-0123456789")
+    bomb = Reply(bulk=8 * MAX_BODY_BYTES, encoding="gzip")
+    replies = [bomb, Reply(SCENE_TEXT, encoding="gzip"), Reply(SCENE_TEXT, encoding="deflate"),
+               Reply(SCENE_TEXT, encoding="raw-deflate"), Reply(SCENE_TEXT, encoding="br")]
+    with FakeOpenAIServer(replies) as server:
+        base = server.url if model.startswith("openai/") else server.root_url
+        backend = create_backend(model, api_base=base, transport=transport, retry=RetryPolicy(max_retries=0, base=0.01, cap=0.05))
+
+        async def ask_all():
+            req = ChatRequest(text="describe", stage="scene", frame_id="s/a")
+            return [(await backend.generate([req]))[0] for _ in replies]
+
+        got = asyncio.run(ask_all())
+        asyncio.run(backend.aclose())
+    assert server.bulk_sent[0] < MAX_BODY_BYTES  # the bomb is small on the wire
+    assert got[0].error == "ResponseTooLargeError" and got[0].text is None, got[0]
+    assert [r.text for r in got[1:4]] == [SCENE_TEXT] * 3, got[1:4]
+    if transport == "litellm":  # aiohttp (direct) leaves an unknown encoding's bytes as they are: JSON, read as before
+        assert got[4].error == "ResponseTooLargeError" and "'br'" in got[4].error_message, got[4]
+        assert {r.headers.get("accept-encoding") for r in server.requests} == {"gzip, deflate"}
+
+
 # -- 22.5: --api-base checked at once ----------------------------------------------------------------------
 
 

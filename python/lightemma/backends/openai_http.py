@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import zlib
 from collections.abc import Mapping
 from typing import Any
 
@@ -143,40 +144,104 @@ def _guard() -> Any:
     return BODY_GUARD
 
 
-def body_limit_hook(max_body: int = MAX_BODY_BYTES) -> Any:
-    """An httpx ``response`` event hook that lets a client read at most ``max_body`` bytes of a response body.
+#: the encodings lightemma asks for and decodes itself, within the limit (httpx decodes without one)
+ACCEPTED_ENCODINGS = "gzip, deflate"
 
-    A ``Content-Length`` over the limit fails at once; a body without one is counted chunk by chunk as the
-    client reads it and the read ends past the limit. Either way the call's slot in :data:`BODY_GUARD`
-    (set by the caller) says why, so the caller records :class:`ResponseTooLargeError` whatever error
-    the client library wraps it in. A hook (not a transport) keeps each client's own connection pool,
-    TLS and proxy settings.
+
+def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
+    """httpx ``event_hooks`` that let a client read at most ``max_body`` bytes of a response body, decoded.
+
+    A ``Content-Length`` over the limit fails at once; a body is otherwise counted chunk by chunk as the
+    client reads it and the read ends past the limit. A gzip or deflate body is decoded here, chunk by
+    chunk with a bound on each chunk's output, and counted decoded: httpx would inflate a 1 MB "gzip bomb"
+    to gigabytes before anyone counted. Requests ask for those two encodings only; a body in another
+    one fails the call unread. Either way the call's slot in :data:`BODY_GUARD` (set by the caller)
+    says why, so the caller records :class:`ResponseTooLargeError` whatever error the client library
+    wraps it in. Hooks (not a transport) keep each client's own connection pool, TLS and proxy settings.
     """
     import httpx
 
     class _Stream(httpx.AsyncByteStream):
-        def __init__(self, inner: Any, slot: Any) -> None:
+        def __init__(self, inner: Any, slot: Any, encoding: str | None) -> None:
             self.inner, self.slot = inner, slot
+            self.decoder = _Inflate(encoding, max_body, lambda: self.fail()) if encoding else None
+
+        def fail(self) -> ResponseTooLargeError:
+            return _too_large(self.slot, f"the response body is over {max_body} bytes{' decoded' if self.decoder else ''}, "
+                                         "more than lightemma reads")
 
         async def __aiter__(self) -> Any:
             size = 0
             async for chunk in self.inner:
+                if self.decoder is not None:
+                    chunk = self.decoder.feed(chunk)
                 size += len(chunk)
                 if size > max_body:
-                    raise _too_large(self.slot, f"the response body is over {max_body} bytes, more than lightemma reads")
+                    raise self.fail()
                 yield chunk
+            if self.decoder is not None:
+                yield self.decoder.flush()
 
         async def aclose(self) -> None:
             await self.inner.aclose()
 
-    async def hook(response: Any) -> None:
+    async def on_request(request: Any) -> None:
+        request.headers["Accept-Encoding"] = ACCEPTED_ENCODINGS
+
+    async def on_response(response: Any) -> None:
         slot = _guard().get()
         length = response.headers.get("content-length")
         if length and length.isdigit() and int(length) > max_body:
             raise _too_large(slot, f"the response body is {length} bytes, more than the {max_body} bytes lightemma reads")
-        response.stream = _Stream(response.stream, slot)
+        codings = [c.strip().lower() for c in response.headers.get("content-encoding", "").split(",")]
+        codings = [c for c in codings if c and c != "identity"]
+        if len(codings) > 1 or (codings and codings[0] not in _INFLATE):
+            raise _too_large(slot, f"the response body is encoded as {', '.join(codings)!r}, which lightemma did not ask "
+                                   "for and does not decode")
+        if codings:
+            del response.headers["content-encoding"]  # decoded below, within the limit: httpx must not decode it again
+        response.stream = _Stream(response.stream, slot, codings[0] if codings else None)
 
-    return hook
+    return {"request": [on_request], "response": [on_response]}
+
+
+_INFLATE = {"gzip": 16 + zlib.MAX_WBITS, "x-gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS}
+
+
+class _Inflate:
+    """A gzip or deflate body decoded chunk by chunk, never more than ``limit`` + 1 bytes of output in all: a
+    chunk that would inflate past it stops there and ``fail()`` is raised."""
+
+    def __init__(self, encoding: str, limit: int, fail: Any) -> None:
+        self.encoding, self.limit, self.fail, self.size = encoding, limit, fail, 0
+        self.raw_deflate = False
+        self._d = zlib.decompressobj(_INFLATE[encoding])
+
+    def feed(self, chunk: bytes) -> bytes:
+        out = bytearray()
+        data = chunk
+        while data:
+            try:
+                piece = self._d.decompress(data, self.limit + 1 - self.size)  # >= 1: an output bound, never 0 (none)
+            except zlib.error:
+                if self.encoding != "deflate" or self.raw_deflate or self.size:
+                    raise
+                self.raw_deflate = True  # "deflate" without its zlib header, as some servers send it (httpx allows it)
+                self._d = zlib.decompressobj(-zlib.MAX_WBITS)
+                continue
+            self.size += len(piece)
+            out += piece
+            if self.size > self.limit:
+                raise self.fail()
+            data = self._d.unconsumed_tail
+        return bytes(out)
+
+    def flush(self) -> bytes:
+        rest = self._d.flush()
+        self.size += len(rest)
+        if self.size > self.limit:
+            raise self.fail()
+        return rest
 
 
 def _too_large(slot: dict[str, str] | None, message: str) -> ResponseTooLargeError:
@@ -187,16 +252,16 @@ def _too_large(slot: dict[str, str] | None, message: str) -> ResponseTooLargeErr
 
 def limited_openai_client(api_key: str, base_url: str | None, max_body: int = MAX_BODY_BYTES) -> Any:
     """The OpenAI SDK's async client (litellm's ``client=`` for the OpenAI protocol), reading at most ``max_body``
-    bytes of a body (:func:`body_limit_hook`); no retries of its own."""
+    bytes of a body (:func:`body_limit_hooks`); no retries of its own."""
     from openai import AsyncOpenAI, DefaultAsyncHttpxClient
 
-    http = DefaultAsyncHttpxClient(event_hooks={"response": [body_limit_hook(max_body)]})
+    http = DefaultAsyncHttpxClient(event_hooks=body_limit_hooks(max_body))
     return AsyncOpenAI(api_key=api_key, base_url=base_url, max_retries=0, http_client=http)
 
 
 def limited_litellm_handler(max_body: int = MAX_BODY_BYTES) -> Any:
-    """litellm's ``AsyncHTTPHandler`` reading at most ``max_body`` bytes of a body (:func:`body_limit_hook`): the
+    """litellm's ``AsyncHTTPHandler`` reading at most ``max_body`` bytes of a body (:func:`body_limit_hooks`): the
     ``client=`` litellm's native Anthropic (``/v1/messages``) and Gemini (``generateContent``) clients post through."""
     from litellm.llms.custom_httpx.http_handler import AsyncHTTPHandler
 
-    return AsyncHTTPHandler(event_hooks={"response": [body_limit_hook(max_body)]})
+    return AsyncHTTPHandler(event_hooks=body_limit_hooks(max_body))
