@@ -6,6 +6,10 @@ requests at once that becomes the bottleneck, so the API backend can talk to an
 ``--api-base`` endpoint directly (``transport="direct"``). Errors are raised as
 exceptions named like litellm's (``RateLimitError``, ``Timeout``,
 ``APIConnectionError``, …) so retries, fatal errors and records work the same.
+
+Every reply, through this client or litellm's (OpenAI SDK, native Anthropic and Gemini), is read
+within :data:`MAX_BODY_BYTES` decoded bytes: here by :meth:`OpenAIHTTPClient._read`, for litellm by
+the httpx hooks of :func:`body_limit_hooks` (docs/run.md, "Limits").
 """
 
 from __future__ import annotations
