@@ -575,6 +575,24 @@ def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_com
         assert {r.headers.get("accept-encoding") for r in server.requests} == {"gzip, deflate"}
 
 
+@pytest.mark.parametrize("transport", ["litellm", "direct"])
+def test_half_an_emoji_in_an_answer_becomes_a_replacement_character_and_the_chain_goes_on(tmp_path, frames, transport):
+    """A provider's JSON may escape a lone surrogate ("\\ud83d"); UTF-8 cannot hold it, so neither the record nor the
+    next stage's request could: it arrives as U+FFFD."""
+    scene = "A wet road \ud83d ahead; a van is parked on the right and the light is green."
+
+    def script(req):
+        return Reply(scene) if req.stage == "scene" else default_reply(req)
+
+    with FakeOpenAIServer(script) as server:
+        result = run("openai/test-model", frames=frames[:1], api_base=server.url, output=tmp_path / "out", transport=transport,
+                     **FAST)
+    (record,) = read_run(result.run_dir).records.values()
+    assert record["status"] == "ok" and record["scene_text"] == scene.replace("\ud83d", "\ufffd")
+    assert [r.stage for r in server.requests] == ["scene", "intent", "actions"]
+    assert "\ufffd" in server.requests[1].text
+
+
 # -- 22.5: --api-base checked at once ----------------------------------------------------------------------
 
 

@@ -257,3 +257,37 @@ def test_stage_times_whose_sum_overflows_are_an_unknown_total_not_a_crash(tmp_pa
     assert records[0]["seconds"] is None and records[0]["attempts"][0]["seconds"] is None
     assert [c["seconds"] for c in records[0]["attempts"][0]["calls"]] == [1e308] * 3  # each stage's own time is kept
     assert records[1]["seconds"] == pytest.approx(sum(frames[1]["time_usage"].values()))
+
+
+def test_lone_surrogates_in_a_reference_file_are_imported_and_read_back_as_they_were(tmp_path, capsys):
+    """json.dump writes half an emoji as the escape \\ud83d; UTF-8 cannot hold it. Texts, prompts and the shared prompt
+    text (a template in the manifest) keep it, in ASCII escapes; `prompts check` prints it."""
+    from lightemma.cli import main
+    from lightemma.runs.stored_prompts import call_prompt, frame_texts
+
+    rng = np.random.default_rng(5)
+    frames = [make_frame(rng, "scene-0001", i) for i in range(3)]
+    for frame in frames:
+        inference = frame["inference"]
+        inference["scene_description"] = [line + " \ud83d" for line in inference["scene_description"]]
+        for key in ("scene_prompt", "intent_prompt", "waypoint_prompt"):
+            inference[key] = ["Half an emoji \ud83d here."] + inference[key]
+    out = tmp_path / "res" / "gpt-4o" / "output"
+    out.mkdir(parents=True)
+    (out / "scene-0001.json").write_text(json.dumps({"scene_info": {"name": "scene-0001"}, "frames": frames}, indent=4))
+    (result,) = import_reference([tmp_path / "res"], tmp_path / "runs")
+    contents = read_run(result.run_dir)
+    templates = contents.manifest["prompt_set"]["templates"]
+    assert "\ud83d" in templates["scene"][0]  # the shared text, in the manifest
+    for frame in frames:
+        record = next(r for r in contents.records.values() if r["sample_token"] == frame["sample_token"])
+        calls = record["attempts"][0]["calls"]
+        assert record["scene_text"] == " ".join(frame["inference"]["scene_description"])
+        for call, key in zip(calls, ("scene_prompt", "intent_prompt", "waypoint_prompt")):
+            assert call_prompt(call, frame_texts(calls), templates) == " ".join(frame["inference"][key])
+    prompts = tmp_path / "p.json"
+    prompts.write_text(json.dumps({"name": "p", "stages": {"scene": "x {0}", "intent": "{scene} {history}",
+                                                          "actions": "{scene} {intent} {history}"}}))
+    capsys.readouterr()
+    assert main(["prompts", "check", str(prompts), str(result.run_dir)]) == 1  # differences, printed without a crash
+    assert "first difference" in capsys.readouterr().out

@@ -41,5 +41,6 @@ def test_non_finite_numbers_become_null_and_numpy_values_plain_ones():
 
 
 def test_what_orjson_refuses_is_written_by_json_with_the_same_meaning():
-    big = {"tokens": 10**30, "n": math.nan, 3: "int key"}
-    assert json.loads(encode_line(big)) == {"tokens": 10**30, "n": None, "3": "int key"}
+    big = {"tokens": 10**30, "n": math.nan, 3: "int key", "half an emoji": "a\ud83db"}
+    line = encode_line(big)
+    assert line.isascii() and json.loads(line) == {"tokens": 10**30, "n": None, "3": "int key", "half an emoji": "a\ud83db"}

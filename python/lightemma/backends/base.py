@@ -120,9 +120,28 @@ class ChatResult:
     # Of input_tokens, those written to the provider's prompt cache (Anthropic bills them above the input price).
     cache_write_tokens: int | None = None
 
+    def __post_init__(self) -> None:
+        if self.text is not None:
+            self.text = unicode_clean(self.text)
+        if self.error_message is not None:
+            self.error_message = unicode_clean(self.error_message)
+
     @property
     def ok(self) -> bool:
         return self.error is None and self.text is not None
+
+
+def unicode_clean(text: str) -> str:
+    """``text`` with each lone surrogate (half of an emoji a provider's JSON escaped, ``"\\ud83d"``) as U+FFFD.
+
+    UTF-8 holds no lone surrogate, so neither a record, nor the next stage's request, nor a printed line
+    could carry one; every other character is kept (a string that encodes is returned as it is).
+    """
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return text.encode("utf-16", "surrogatepass").decode("utf-16", "replace")
+    return text
 
 
 @runtime_checkable

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lightemma.backends.base import STAGES
+from lightemma.backends.base import STAGES, unicode_clean
 from lightemma.errors import UserError
 from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet
@@ -136,7 +136,7 @@ def format_checks(checks: list[StageCheck], prompts: PromptSet, run_dir: str | o
         if check.first is None:
             lines.append(head)
             continue
-        stored, rendered = check.first.excerpts()
+        stored, rendered = (unicode_clean(text) for text in check.first.excerpts())  # printable, lone surrogates too
         lines += [
             f"{head}; first difference in {check.first.frame_id} at character {check.first.position + 1}:",
             f"           run:      {stored}",

@@ -83,18 +83,22 @@ def encode_line(record: Mapping[str, Any]) -> bytes:
     Through orjson: a record is mostly numbers and small containers, whose encoding costs the
     standard library ~5× more (what an import of reference results spends its time on). What orjson
     refuses — an integer beyond 64 bits, a key that is not a string, a lone surrogate — is encoded by
-    ``json`` instead, with the same meaning.
+    ``json`` instead (in ASCII escapes), with the same meaning.
     """
     try:
         return orjson.dumps(record, default=_to_jsonable, option=orjson.OPT_APPEND_NEWLINE)
-    except orjson.JSONEncodeError:
-        text = json.dumps(_sanitize(record), default=_to_jsonable, allow_nan=False, ensure_ascii=False)
-        return text.encode("utf-8") + b"\n"
+    except orjson.JSONEncodeError:  # ASCII escapes: a lone surrogate (from a reference file's "\ud83d") reads back as it was
+        text = json.dumps(_sanitize(record), default=_to_jsonable, allow_nan=False, ensure_ascii=True)
+        return text.encode("ascii") + b"\n"
 
 
 def write_json_atomic(path: str | os.PathLike[str], data: Mapping[str, Any]) -> None:
     """Write ``data`` as pretty JSON to ``path`` via a temporary file and ``os.replace``."""
     text = json.dumps(_sanitize(dict(data)), default=_to_jsonable, indent=2, allow_nan=False, ensure_ascii=False)
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:  # a lone surrogate (a reference prompt's "\ud83d"): ASCII escapes read back as it was
+        text = json.dumps(_sanitize(dict(data)), default=_to_jsonable, indent=2, allow_nan=False, ensure_ascii=True)
     write_text_atomic(path, text + "\n")
 
 
