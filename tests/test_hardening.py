@@ -245,8 +245,8 @@ def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, fr
 @pytest.mark.parametrize(("changes", "words"), [
     ({"ray_address": "10.0.0.1:6379"}, "--ray-address"),
     ({"backend_options": {"trust_remote_code": True}}, "--trust-remote-code"),
-    ({"backend_options": {"runtime_env": {"pip": ["evil-package"]}}}, "runtime_env="),
-    ({"backend_options": {"attn_implementation": "someone/kernels"}}, "attn_implementation="),
+    ({"backend_options": {"runtime_env": {"pip": ["evil-package"]}}}, "'runtime_env': the run's {'pip': ['evil-package']}"),
+    ({"backend_options": {"attn_implementation": "someone/kernels"}}, "'attn_implementation': the run's 'someone/kernels'"),
 ])
 def test_resume_refuses_a_manifest_that_chooses_where_the_model_runs_or_what_code_runs(tmp_path, frames, capsys, changes, words):
     from lightemma.cli import main
@@ -276,6 +276,57 @@ def test_resume_refuses_options_it_takes_from_the_manifest_and_code_options_the_
         with pytest.raises(UserError, match="takes batch_size from the run's manifest"):
             resume(run_dir, frames=frames, api_base=server.url, cache=True, backend_options={"batch_size": 4}, progress=False)
         assert len(read_run(run_dir).records) == 1
+
+
+@pytest.mark.parametrize(("changes", "words"), [
+    ({"concurrency": "x"}, "config.concurrency is 'x', not a whole number"),
+    ({"timeout": None}, "config.timeout is None"),
+    ({"timeout": "soon"}, "config.timeout is 'soon'"),
+    ({"dataset": [1]}, "config.dataset is [1], not an object"),
+    ({"backend_options": ["x"]}, "config.backend_options is ['x'], not an object"),
+    ({"prompt_set": ["x"]}, "config.prompt_set"),
+    ({"backend_options": {"trust_remote_code": "yes"}}, "trust_remote_code is 'yes', not true or false"),
+    ({"ray_address": 0}, "ray_address is 0, not an address"),
+    ({"backend_options": {"batch_size": "8"}}, "cannot build the run's backend (TypeError"),
+    ({"model": ["gpt-4o"]}, "config.model is ['gpt-4o'], not text"),
+])
+def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_path, frames, capsys, changes, words):
+    from lightemma.cli import main
+
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server, **changes)
+        before = len(server.requests)
+        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--no-progress"]) == 2
+        err = capsys.readouterr().err
+        assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err, err
+        assert len(server.requests) == before
+
+
+def test_a_resume_takes_how_long_and_how_fast_to_ask_and_records_it(tmp_path, frames, capsys):
+    from lightemma.cli import main
+    from lightemma.runs.store import read_manifest
+
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server)
+        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--timeout", "inf",
+                     "--no-progress"]) == 2
+        assert "--timeout must be a finite number, got inf" in capsys.readouterr().err
+        from lightemma.pipeline import resume
+
+        resume(run_dir, frames=frames, api_base=server.url, cache=True, timeout=33, rpm=600, progress=False)
+    session = read_manifest(run_dir)["sessions"][-1]
+    assert (session["kind"], session["timeout"], session["rpm"]) == ("resume", 33.0, 600.0)
+    assert read_manifest(run_dir)["config"]["timeout"] == 10.0  # the run's own setting stays as it was
+
+
+def test_replies_too_large_on_frame_after_frame_stop_the_run_naming_the_limit(tmp_path, frames):
+    from lightemma.backends.openai_http import MAX_BODY_BYTES
+    from lightemma.errors import RunStopped
+
+    with FakeOpenAIServer(lambda req: Reply(bulk=MAX_BODY_BYTES + 1)) as server:
+        with pytest.raises(RunStopped) as stopped:
+            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", max_attempts=1, **FAST)
+    assert "larger than the 8 MiB lightemma reads" in str(stopped.value) and stopped.value.cause == "invalid-response"
 
 
 def test_a_local_run_with_trust_remote_code_resumes_only_with_it_again(tmp_path, synth_root, tiny_qwen, capsys):

@@ -100,3 +100,9 @@ def test_any_prompt_decodes_to_itself(parts, fixed):
         frames.append((stage, prompt, texts))
     stored, templates = store(frames)
     assert [call_prompt(c, t, templates) for c, t in stored] == [p for _, p, _ in frames]
+
+
+def test_a_short_prompt_and_a_long_one_sharing_a_word_make_no_template():
+    """What two prompts share is measured against the longer: "Scene: " alone is no shared text of a long prompt."""
+    stored, templates = store([("scene", "Scene: a road.", {}), ("scene", "Scene: " + "a long and unrelated text " * 20, {})])
+    assert templates == {} and all(c["prompt"] is not None for c, _ in stored)

@@ -37,7 +37,7 @@ class RunFatalError(UserError):
     the CLI exits non-zero with one line naming the cause and the fix. ``cause`` is a short
     kind (``authentication``, ``billing``, ``unknown-model``, ``invalid-request``,
     ``reasoning-budget``, ``empty-answers``, ``unreachable``, ``rate-limit``, ``provider-error``,
-    ``images``, ``local-model``, ``disk``); ``error`` is the error class recorded on the calls
+    ``images``, ``local-model``, ``disk``, ``invalid-response``); ``error`` is the error class recorded on the calls
     it ended, if any.
     """
 

@@ -77,6 +77,8 @@ from lightemma.registry import (
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
 OPENAI_COMPATIBLE = ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "text-completion-openai")
+# the providers litellm calls through the OpenAI SDK's client (the others post through its own HTTP handler)
+OPENAI_SDK_PROVIDERS = ("openai", "text-completion-openai")
 # The providers of the paper's API models; an empty variable counts as missing.
 PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
 # Each provider's own API hosts: its key goes there as the provider's variables hold it. Any other --api-base gets
@@ -709,6 +711,12 @@ class APIBackend:
         if err == "ImageReadError":
             return RunFatalError(f"{what}{seen} — the frames' images cannot be read; check the dataset's samples/ folder",
                                  cause="images", error=err)
+        if err == "ResponseTooLargeError":
+            from lightemma.backends.openai_http import MAX_BODY_BYTES
+
+            return RunFatalError(f"{what}{seen} — every reply is larger than the {MAX_BODY_BYTES >> 20} MiB lightemma reads "
+                                 f"(a chat completion is a few KiB); check {where} and the model it serves",
+                                 cause="invalid-response", error=err)
         if err in ("BadRequestError", "UnprocessableEntityError", "ContentPolicyViolationError"):
             return RunFatalError(f"{what}{seen} — every request is rejected the same way; fix what the message names "
                                  "(model, --max-tokens, images, the server)", cause="invalid-request", error=err)
@@ -763,7 +771,7 @@ class APIBackend:
             from lightemma.backends.openai_http import limited_litellm_handler, limited_openai_client
 
             self._client = (limited_openai_client(self.sent_key or NO_KEY, self._litellm_base or None)
-                            if self.provider == "openai" else limited_litellm_handler())
+                            if self.provider in OPENAI_SDK_PROVIDERS else limited_litellm_handler())
             self._client_loop = loop
         return {"client": self._client}
 

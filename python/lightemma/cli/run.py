@@ -49,7 +49,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     ex.add_argument("--output", help="output directory (default ./runs)")
     ex.add_argument("--resume", metavar="RUN_DIR", help="finish this run (everything else is read from its manifest)")
     ex.add_argument("--retry-failed", action="store_true", help="with --resume: also re-run frames that ended failed")
-    ex.add_argument("--timeout", type=float, help="deadline per call in seconds, connect to last byte (default 120)")
+    ex.add_argument("--timeout", type=float, help="deadline per call in seconds, connect to last byte (default 120; on "
+                    "--resume, the run's own unless given)")
     ex.add_argument("--max-retries", type=int, help="retries of 429/5xx/timeouts/dropped connections per call (default 6)")
     ex.add_argument("--backoff", type=float, help="base of the exponential backoff in seconds (default 1)")
     ex.add_argument("--rpm", type=float, help="client-side limit: requests per minute")
@@ -129,7 +130,8 @@ RUN_DEFAULTS: dict[str, object] = {
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
                   "replicas", "ray_address", "gpus_per_replica", "max_cost", "batch", "estimate",  # where the model runs, not what it is asked
                   "api_base", "api_key_env", "cache",  # where requests, keys and writes go: the user's word, not the manifest's
-                  "trust_remote_code"}  # what code runs: likewise
+                  "trust_remote_code",  # what code runs: likewise
+                  "timeout", "rpm", "tpm"}  # how long and how fast calls go: the fixes a timeout or rate-limit stop names
 
 
 def run_settings(args: argparse.Namespace) -> dict[str, object]:
@@ -156,10 +158,12 @@ def check_limits(args: argparse.Namespace) -> None:
         value = getattr(args, name, None)
         if value is None:
             continue
+        flag = "--" + name.replace("_", "-")
         if value != value or (value <= low if exclusive else value < low):  # NaN fails too
-            flag = "--" + name.replace("_", "-")
             shown = f"greater than {low:g}" if exclusive else f"at least {low:g}"
             raise UserError(f"{flag} must be {shown}, got {value:g}")
+        if isinstance(value, float) and math.isinf(value):  # inf: no limit is no setting a manifest can hold (JSON null)
+            raise UserError(f"{flag} must be a finite number, got {value:g}")
 
 
 # option -> backends that take it
@@ -246,7 +250,8 @@ def main(args: argparse.Namespace) -> int:
                         concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
                         gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost, api_base=args.api_base,
                         api_key_env=args.api_key_env, cache=args.cache,
-                        backend_options={"trust_remote_code": True} if args.trust_remote_code else None)
+                        backend_options={"trust_remote_code": True} if args.trust_remote_code else None,
+                        timeout=args.timeout, rpm=args.rpm, tpm=args.tpm)
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")

@@ -204,9 +204,14 @@ def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | Non
     if "api_key" in options:
         raise UserError(f"{run_dir}: the manifest's backend_options carry an api_key; keys come from the environment only "
                         "(--api-key-env NAME): start a new run")
-    inert = sorted(k for k in (backend_options or {}) if k in INERT_BACKEND_OPTIONS)
+    if backend_options is not None and not isinstance(backend_options, Mapping):
+        raise UserError(f"backend_options must be a mapping of option names to values, got {type(backend_options).__name__}")
+    inert = sorted(str(k) for k in (backend_options or {}) if k in INERT_BACKEND_OPTIONS)
     if inert:
         raise UserError(f"{run_dir}: a resume takes {', '.join(inert)} from the run's manifest; drop them from backend_options")
+    trust = options.get("trust_remote_code")
+    if trust is not None and not isinstance(trust, bool):
+        raise UserError(f"{run_dir}: the manifest's trust_remote_code is {_short_repr(trust)}, not true or false; start a new run")
 
     def active(opts: Mapping[str, Any]) -> dict[str, Any]:  # options that can fetch or run code, unset ones left out
         return {k: v for k, v in opts.items() if k not in INERT_BACKEND_OPTIONS and v is not None and v is not False}
@@ -215,18 +220,21 @@ def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | Non
     differ = sorted(k for k in live.keys() | given.keys() if live.get(k) != given.get(k))
     if differ:
         if differ == ["trust_remote_code"]:
-            why = ("this run loaded the model with trust_remote_code (the checkpoint's own Python code runs); a run directory "
-                   "does not choose what code runs: resume it with --trust-remote-code if you trust the checkpoint"
-                   if live.get("trust_remote_code") else "this run did not load the model with trust_remote_code; drop "
-                   "--trust-remote-code")
+            why = (f"this run loaded {_short_repr(config.get('model'))} with trust_remote_code (the checkpoint's own Python "
+                   "code runs); a run directory does not choose what code runs: resume it with --trust-remote-code if you "
+                   "trust that checkpoint" if live.get("trust_remote_code") else
+                   "this run did not load the model with trust_remote_code; drop --trust-remote-code")
         else:
-            shown = ", ".join(f"{k}={_short_repr(live.get(k))}" for k in differ)
-            why = (f"the run's backend options {shown} can fetch or run code and are not the ones given now; a run "
-                   "directory does not choose what code runs: give them again, the same, to resume "
-                   "(lightemma.resume(..., backend_options={...}))")
+            shown = ", ".join(f"{_short_repr(k)}: the run's {_short_repr(live[k]) if k in live else '(none)'}, given "
+                              f"{_short_repr(given[k]) if k in given else '(none)'}" for k in differ)
+            why = (f"backend options that can fetch or run code differ from the run's ({shown}); a run directory does not "
+                   "choose what code runs: give the run's own again to resume (lightemma.resume(..., backend_options={...}))")
         raise UserError(f"{run_dir}: {why}")
-    if config.get("ray_address") and not ray_address:
-        raise UserError(f"{run_dir}: this run's replicas joined the Ray cluster at {_short_repr(config['ray_address'])}; a run directory "
+    recorded_ray = config.get("ray_address")
+    if recorded_ray is not None and not (isinstance(recorded_ray, str) and recorded_ray.strip()):
+        raise UserError(f"{run_dir}: the manifest's ray_address is {_short_repr(recorded_ray)}, not an address; start a new run")
+    if recorded_ray and not ray_address:
+        raise UserError(f"{run_dir}: this run's replicas joined the Ray cluster at {_short_repr(recorded_ray)}; a run directory "
                         "does not choose where the model runs: resume it with --ray-address (that one or another)")
     if (redact_url(api_base) or None) != (recorded or None):
         if recorded and not api_base:
@@ -256,6 +264,48 @@ def _trusted_settings(run_dir: Path, config: dict[str, Any], api_base: str | Non
     given = (output / DEFAULT_CACHE if cache is True else Path(cache)).resolve()
     if given != want:
         raise UserError(f"{run_dir}: the --cache given ({given}) is not the run's response cache ({want}); give the run's own")
+
+
+_NUMBER = (int, float)
+#: what each setting of a manifest's config must be for a resume to use it (None allowed where listed)
+_CONFIG_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
+    "model": ((str,), False), "backend": ((str,), True), "prompt_set": ((str,), False), "transport": ((str,), True),
+    "concurrency": ((int,), False), "max_tokens": ((int,), False), "max_attempts": ((int,), False),
+    "max_retries": ((int,), False), "replicas": ((int,), True), "timeout": (_NUMBER, False),
+    "temperature": (_NUMBER, False), "backoff_base": (_NUMBER, False), "backoff_cap": (_NUMBER, False),
+    "rpm": (_NUMBER, True), "tpm": (_NUMBER, True), "gpus_per_replica": (_NUMBER, True), "batch_poll": (_NUMBER, True),
+    "max_cost_cents": (_NUMBER, True), "dataset": ((dict,), True), "backend_options": ((dict,), True),
+    "api_key_env": ((str,), True),
+}
+
+
+_DATASET_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
+    "dataroot": ((str,), True), "version": ((str,), True), "split": ((str,), True), "scenes": ((list,), True),
+    "window": ((str,), True), "limit": ((int,), True), "on_bad_record": ((str,), True), "sample": ((dict,), True),
+}
+
+
+def _check_config_types(run_dir: Path, config: Mapping[str, Any], table: Mapping[str, tuple[tuple[type, ...], bool]] = _CONFIG_TYPES,
+                        where: str = "config") -> None:
+    """Refuse, in one line, a manifest config whose settings are not of their kind (a hand-edited file): a number
+    that is text, a bool, not finite or below 0, a count below 1, a mapping that is a list."""
+    if where == "config" and isinstance(config.get("dataset"), dict):
+        _check_config_types(run_dir, config["dataset"], _DATASET_TYPES, "config.dataset")
+    for name, (types, nullable) in table.items():
+        if name not in config:
+            continue
+        value = config[name]
+        if value is None and nullable:
+            continue
+        ok = isinstance(value, types) and not isinstance(value, bool)
+        if ok and isinstance(value, float):
+            ok = math.isfinite(value) and value >= 0
+        if ok and types == (int,):
+            ok = value >= (0 if name == "max_retries" else 1)
+        if not ok:
+            kind = {(str,): "text", (int,): "a whole number", _NUMBER: "a finite number", (dict,): "an object",
+                    (list,): "a list"}[types]
+            raise UserError(f"{run_dir}: the manifest's {where}.{name} is {_short_repr(value)}, not {kind}; start a new run")
 
 
 def _short_repr(value: Any, limit: int = 60) -> str:
@@ -550,7 +600,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     manifest = read_manifest(run_dir)
     sessions = list(manifest.get("sessions", []))
     sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"],
-                     "pid": os.getpid()})
+                     "timeout": config.get("timeout"), "rpm": config.get("rpm"), "tpm": config.get("tpm"), "pid": os.getpid()})
     _write_manifest(run_dir, sessions=sessions, finished_at=None)
     try:
         writer = RunWriter(run_dir)
@@ -614,8 +664,14 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     if stop is not None:
         sessions[-1]["stopped"] = {"cause": stop.cause, "error": stop.error, "message": str(stop)}
         _write_manifest(run_dir, sessions=sessions, summary=summary)
+        if stop.cause == "reasoning-budget":  # the fix changes what is asked, which a resume keeps
+            after = "a resume keeps the run's --max-tokens: start a new run with the larger budget"
+        elif stop.error == "Timeout":
+            after = f"continue with a longer wait: lightemma run --resume {run_dir} --timeout SECONDS"
+        else:
+            after = f"after the fix, continue with: lightemma run --resume {run_dir}"
         raise RunStopped(f"{stop} — the run stopped; {outcome.done} frame(s) finished in this session are saved in {run_dir}; "
-                         f"after the fix, continue with: lightemma run --resume {run_dir}",
+                         f"{after}",
                          cause=stop.cause, error=stop.error, run_dir=run_dir, frames_run=outcome.done)
     manifest = _write_manifest(run_dir, sessions=sessions, finished_at=_now(), summary=summary)
     return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=outcome.done)
@@ -856,7 +912,8 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
            concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
            gpus_per_replica: float | None = None, max_cost_cents: float | None = None, api_base: str | None = None,
            api_key_env: str | None = None, cache: str | bool | None = None, backend_options: Mapping[str, Any] | None = None,
-           progress: bool = True, log: Log | None = None) -> RunResult:
+           timeout: float | None = None, rpm: float | None = None, tpm: float | None = None, progress: bool = True,
+           log: Log | None = None) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest, skipping frames already recorded.
 
     ``retry_failed`` also re-runs frames whose last record is ``failed`` (new
@@ -868,8 +925,10 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     for runs started from in-memory frames. Another process writing the run
     makes this raise :class:`~lightemma.errors.RunStoreError` (naming its PID).
     ``concurrency``, ``replicas``, ``ray_address`` and ``gpus_per_replica`` replace the run's own
-    for this session (where the model runs, not what it is asked); so does ``max_cost_cents`` (the run's
-    whole spending limit, records of earlier sessions included). A batch run polls the batches its
+    for this session (where the model runs, not what it is asked); so do ``timeout`` (how long a call
+    or a local batch may take), ``rpm`` and ``tpm`` (how fast requests go) — the fixes a timeout or
+    rate-limit stop names — and ``max_cost_cents`` (the run's whole spending limit, records of earlier
+    sessions included). A batch run polls the batches its
     journal names before submitting anything (:mod:`lightemma.backends.batch`).
 
     The manifest never chooses where requests, keys or writes go, nor what code runs: ``api_base``,
@@ -881,9 +940,20 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     """
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
-    config = dict(manifest.get("config") or {})
-    if not config.get("model"):
+    raw = manifest.get("config")
+    if not isinstance(raw, Mapping) or not raw.get("model"):
         raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
+    config = dict(raw)
+    if timeout is not None:
+        if not (math.isfinite(timeout) and timeout > 0):
+            raise UserError(f"--timeout must be a finite number of seconds greater than 0, got {timeout:g}")
+        config["timeout"] = float(timeout)
+    for name, value in (("rpm", rpm), ("tpm", tpm)):
+        if value is not None:
+            if not (math.isfinite(value) and value > 0):
+                raise UserError(f"--{name} must be a finite number greater than 0, got {value:g}")
+            config[name] = float(value)
+    _check_config_types(run_dir, config)
     _trusted_settings(run_dir, config, api_base, api_key_env, cache, ray_address, backend_options)
     if concurrency is not None:
         if concurrency < 1:
@@ -905,7 +975,11 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                         f"(run: {run_hash}, now: {now_hash}); start a new run instead of resuming")
     with RunLock(run_dir):  # before anything is read for the todo list: a second writer would redo the same frames
         manifest = read_manifest(run_dir)  # as the last writer left it
-        instance = _make_backend(config, run_dir.parent.parent, api_base, log)
+        try:
+            instance = _make_backend(config, run_dir.parent.parent, api_base, log)
+        except (TypeError, AttributeError) as exc:  # a hand-edited manifest: another backend's option, a wrong type
+            raise UserError(f"{run_dir}: the manifest's settings cannot build the run's backend ({type(exc).__name__}: "
+                            f"{_short_repr(str(exc), 160)}); start a new run") from None
         try:
             _structured_output(instance, _policy(config))
             dataset = dict(config.get("dataset") or {})

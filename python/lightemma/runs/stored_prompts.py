@@ -162,7 +162,7 @@ def _common_length(a: str, b: str, limit: int, *, suffix: bool = False) -> int:
 
 def _common_ends(a: str, b: str) -> tuple[str, str] | None:
     """(head, tail): the longest start and end ``a`` and ``b`` share (not overlapping, a number never cut), or None
-    when they share less than :data:`MIN_SHARED` of the shorter text."""
+    when they share less than :data:`MIN_SHARED` of the longer text."""
     limit = min(len(a), len(b))
     n = _common_length(a, b, limit)
     if _in_number(a, n) or _in_number(b, n):  # the prompts part inside a number: it goes to the fill whole
@@ -172,7 +172,7 @@ def _common_ends(a: str, b: str) -> tuple[str, str] | None:
     if _in_number(a, len(a) - m) or _in_number(b, len(b) - m):
         while m and a[len(a) - m] in _NUMBER_CHARS:
             m -= 1
-    if n + m < MIN_SHARED * limit:
+    if n + m < MIN_SHARED * max(len(a), len(b)):  # of the longer: a short prompt and a long one are two forms
         return None
     return a[:n], a[len(a) - m:] if m else ""
 
