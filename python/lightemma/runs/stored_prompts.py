@@ -34,8 +34,8 @@ _NAME = {mark: name for name, mark in _MARK.items()}
 MIN_REFERENCED = 16
 #: templates per stage at most; prompts fitting none are stored whole
 MAX_TEMPLATES = 16
-#: a template is kept only when the two prompts it comes from share at least this share of their text
-MIN_SHARED = 0.5
+#: a template is kept only when the two prompts it comes from share at least this share of the longer one
+MIN_SHARED = 0.3
 #: characters a template's head never ends with, nor its tail begins with (numbers go to the fill whole)
 _NUMBER_CHARS = "0123456789.-+"
 
