@@ -290,21 +290,26 @@ def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_roo
     assert "not a lightemma run directory" in capsys.readouterr().err
 
 
-def test_cli_resume_refuses_limits_backend_and_cache_it_would_ignore(tmp_path, capsys, monkeypatch):
+def test_cli_resume_refuses_what_it_would_ignore_and_takes_how_long_and_how_fast(tmp_path, capsys, monkeypatch):
     from lightemma.cli import main
 
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
-    for flags in (["--rpm", "10"], ["--tpm", "1000"], ["--backend", "api"]):  # --cache, --api-base: checked against the run
+    for flags in (["--backend", "api"], ["--max-tokens", "64"]):  # --cache, --api-base: checked against the run
         assert main(["run", "--resume", str(tmp_path), *flags]) == 2
         assert f"drop {flags[0]}" in capsys.readouterr().err
+    for flags in (["--rpm", "10"], ["--tpm", "1000"], ["--timeout", "30"]):  # taken: the run directory is checked next
+        assert main(["run", "--resume", str(tmp_path), *flags]) == 2
+        assert "not a lightemma run directory" in capsys.readouterr().err
 
 
 def test_cli_resume_refuses_every_run_setting_even_one_given_at_its_default(tmp_path, capsys, monkeypatch):
     from lightemma.cli import main
-    from lightemma.cli.run import RUN_DEFAULTS
+    from lightemma.cli.run import RESUME_OPTIONS, RUN_DEFAULTS
 
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
     for name, default in RUN_DEFAULTS.items():
+        if name in RESUME_OPTIONS:  # how long to wait for a call (--timeout): a resume takes it
+            continue
         flag = "--" + name.replace("_", "-")
         values = [str(v) for v in default] if isinstance(default, tuple) else [str(default)]
         assert main(["run", "--resume", str(tmp_path), flag, *values]) == 2
