@@ -177,7 +177,10 @@ class Reply:
     cache_write_tokens: int = 0  # of prompt_tokens, written to the prompt cache (Anthropic)
     bulk: int = 0  # > 0: the answer text is this many "x" bytes, streamed in 64 KiB pieces (``content`` unused)
     chunked: bool = False  # with bulk: no Content-Length, chunked transfer encoding (the size is never declared)
-    encoding: str | None = None  # the body sent compressed: "gzip", "deflate", "raw-deflate" (sent as deflate), or a name
+    # the body sent compressed: "gzip", "deflate", "raw-deflate" (sent as deflate), "gzip-members" (two gzip members),
+    # "gzip-cut" (its end missing), "gzip-corrupt" (a byte of its data changed), or a name only declared (br, ...)
+    encoding: str | None = None
+    trailing: int = 0  # bytes of zeros sent after the body (after the end of a compressed stream)
 
     @classmethod
     def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
@@ -396,13 +399,32 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
 
 
 def _compressed(chunks: Iterable[bytes], encoding: str) -> bytes:
-    """``chunks`` as one body in ``encoding`` (gzip, deflate with its zlib header, raw-deflate without); a name
-    the server only declares (br, …) leaves the bytes as they are."""
-    wbits = {"gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS, "raw-deflate": -zlib.MAX_WBITS}.get(encoding)
+    """``chunks`` as one body in ``encoding`` (see :attr:`Reply.encoding`); a name the server only declares (br, …)
+    leaves the bytes as they are."""
+    wbits = {"gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS, "raw-deflate": -zlib.MAX_WBITS}.get(_wire_name(encoding)
+                                                                                                          if encoding.startswith("gzip") else encoding)
     if wbits is None:
         return b"".join(chunks)
-    packer = zlib.compressobj(6, zlib.DEFLATED, wbits)
-    return b"".join(packer.compress(c) for c in chunks) + packer.flush()
+
+    def pack(parts: Iterable[bytes]) -> bytes:
+        packer = zlib.compressobj(6, zlib.DEFLATED, wbits)
+        return b"".join(packer.compress(c) for c in parts) + packer.flush()
+
+    if encoding == "gzip-members":
+        body = b"".join(chunks)
+        return pack([body[: len(body) // 2]]) + pack([body[len(body) // 2:]])
+    data = pack(chunks)
+    if encoding == "gzip-cut":
+        return data[:-12]
+    if encoding == "gzip-corrupt":
+        middle = len(data) // 2
+        return data[:middle] + bytes([data[middle] ^ 0xFF]) + data[middle + 1:]
+    return data
+
+
+def _wire_name(encoding: str) -> str:
+    """The Content-Encoding a test encoding is sent as."""
+    return "deflate" if encoding == "raw-deflate" else ("gzip" if encoding.startswith("gzip") else encoding)
 
 
 class FakeOpenAIServer:
@@ -481,12 +503,13 @@ class FakeOpenAIServer:
                 data = json.dumps(payload).encode("utf-8")
                 if reply.encoding:
                     data = _compressed([data], reply.encoding)
+                data += b"\0" * reply.trailing
                 try:
                     self.send_response(reply.status)
                     self.send_header("Content-Type", "application/json")
                     self.send_header("Content-Length", str(len(data)))
                     if reply.encoding:
-                        self.send_header("Content-Encoding", reply.encoding.replace("raw-", ""))
+                        self.send_header("Content-Encoding", _wire_name(reply.encoding))
                     for key, value in reply.headers.items():
                         self.send_header(key, value)
                     self.end_headers()
@@ -532,7 +555,7 @@ class FakeOpenAIServer:
                     self.send_response(reply.status)
                     self.send_header("Content-Type", "application/json")
                     if reply.encoding:
-                        self.send_header("Content-Encoding", reply.encoding.replace("raw-", ""))
+                        self.send_header("Content-Encoding", _wire_name(reply.encoding))
                     if reply.chunked:
                         self.send_header("Transfer-Encoding", "chunked")
                     else:

@@ -240,3 +240,37 @@ def test_a_cancelled_request_is_dropped_from_its_batch():
 def test_bad_settings_are_refused(kwargs, message):
     with pytest.raises(ValueError, match=message):
         MicroBatcher(lambda rs: [], **kwargs)
+
+
+def test_requests_failed_after_their_caller_was_cancelled_leave_no_unretrieved_exception():
+    """A run that stops cancels its frames' tasks, then resolves their queued requests with the stop's error: asyncio must
+    not log "Future exception was never retrieved" (it printed a traceback per request after the one-line stop)."""
+    import gc
+
+    from lightemma.errors import RunFatalError
+
+    recorder = Recorder(block_first=True)
+    batcher = MicroBatcher(recorder, batch_size=1, batch_window=0, deadline=30)  # a deadline: the watchdog's asyncio.wait
+    logged = []
+
+    async def main():
+        asyncio.get_running_loop().set_exception_handler(lambda loop, context: logged.append(context.get("message")))
+        running = asyncio.ensure_future(batcher.submit([req(0)]))  # its batch blocks: the next requests wait in the queue
+        queued = asyncio.ensure_future(batcher.submit([req(1), req(2)]))
+        await asyncio.sleep(0.2)
+        queued.cancel()
+        with batcher._cond:
+            leftover = list(batcher._queue)
+            batcher._queue.clear()
+        stop = RunFatalError("the run stopped", cause="local-model")
+        for pending in leftover:
+            MicroBatcher._resolve(pending, stop)
+        await asyncio.sleep(0.05)
+        del leftover, pending
+        recorder.gate.set()
+        await running
+        await batcher.aclose()
+
+    asyncio.run(main())
+    gc.collect()
+    assert not [m for m in logged if m and "never retrieved" in m], logged

@@ -460,6 +460,25 @@ def test_ctrl_c_stops_a_hung_local_generate_and_a_second_one_exits_at_once(tmp_p
     assert not (run_dir / LOCK_PID_FILE).exists()
 
 
+def test_every_local_batch_past_the_timeout_stops_in_one_line_naming_the_resume_with_a_longer_wait(tmp_path, synth_root,
+                                                                                                   tiny_qwen):
+    """One line (no stray tracebacks after it: tests/test_batching.py), and the fix it names works on a resume."""
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "lightemma", "run", "--model", str(tiny_qwen), "--backend", "hf", "--device",
+                           "cpu", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "6",
+                           "--timeout", "0.001", "--max-tokens", "8", "--output", str(out), "--no-progress"],
+                          capture_output=True, text=True, env=env(), timeout=300)
+    lines = [line for line in done.stderr.splitlines() if line.strip() and not line.startswith("Loading weights")]  # transformers'
+    assert done.returncode == 2 and "Traceback" not in done.stderr and "never retrieved" not in done.stderr, done.stderr
+    assert "every batch runs past --timeout 0.001 s" in lines[-1] and "--resume" in lines[-1] and "--timeout SECONDS" in lines[-1]
+    assert len(lines) == 3, lines  # the frames, the run directory, the stop
+    (run_dir,) = run_dirs(out)
+    again = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--timeout", "600",
+                            "--no-progress"], capture_output=True, text=True, env=env(), timeout=300)
+    assert again.returncode == 1, again.stderr  # finished (random weights: no valid frame), with the longer wait
+    assert len(read_run(run_dir).records) == 6
+
+
 def test_a_local_generate_past_the_timeout_fails_its_batch_as_timeout(tiny_qwen, tmp_path):
     from PIL import Image
 
@@ -607,7 +626,10 @@ def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_com
         monkeypatch.setenv(variable, "native-test-key-0123456789")
     bomb = Reply(bulk=8 * MAX_BODY_BYTES, encoding="gzip")
     replies = [bomb, Reply(SCENE_TEXT, encoding="gzip"), Reply(SCENE_TEXT, encoding="deflate"),
-               Reply(SCENE_TEXT, encoding="raw-deflate"), Reply(SCENE_TEXT, encoding="br")]
+               Reply(SCENE_TEXT, encoding="raw-deflate"), Reply(SCENE_TEXT, encoding="br"),
+               Reply(SCENE_TEXT, encoding="gzip-members"), Reply(SCENE_TEXT, encoding="gzip", trailing=16),
+               Reply(SCENE_TEXT, encoding="gzip", trailing=MAX_BODY_BYTES + 1), Reply(SCENE_TEXT, encoding="gzip-cut"),
+               Reply(SCENE_TEXT, encoding="gzip-corrupt")]
     with FakeOpenAIServer(replies) as server:
         base = server.url if model.startswith("openai/") else server.root_url
         backend = create_backend(model, api_base=base, transport=transport, retry=RetryPolicy(max_retries=0, base=0.01, cap=0.05))
@@ -621,9 +643,13 @@ def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_com
     assert server.bulk_sent[0] < MAX_BODY_BYTES  # the bomb is small on the wire
     assert got[0].error == "ResponseTooLargeError" and got[0].text is None, got[0]
     assert [r.text for r in got[1:4]] == [SCENE_TEXT] * 3, got[1:4]
-    if transport == "litellm":  # aiohttp (direct) leaves an unknown encoding's bytes as they are: JSON, read as before
-        assert got[4].error == "ResponseTooLargeError" and "'br'" in got[4].error_message, got[4]
-        assert {r.headers.get("accept-encoding") for r in server.requests} == {"gzip, deflate"}
+    if transport == "direct":  # aiohttp decodes by its own rules (it reads an unknown encoding's bytes as they are)
+        return
+    assert got[4].error == "ResponseEncodingError" and "'br'" in got[4].error_message, got[4]
+    assert {r.headers.get("accept-encoding") for r in server.requests} == {"gzip, deflate"}
+    assert got[5].text == SCENE_TEXT and got[6].text == SCENE_TEXT  # two gzip members; a few bytes after the end
+    assert got[7].error == "ResponseTooLargeError", got[7]  # bytes after the end count: never read without end
+    assert [(r.error, "not valid gzip" in (r.error_message or "")) for r in got[8:]] == [("ResponseEncodingError", True)] * 2
 
 
 @pytest.mark.parametrize("transport", ["litellm", "direct"])

@@ -711,6 +711,9 @@ class APIBackend:
         if err == "ImageReadError":
             return RunFatalError(f"{what}{seen} — the frames' images cannot be read; check the dataset's samples/ folder",
                                  cause="images", error=err)
+        if err == "ResponseEncodingError":
+            return RunFatalError(f"{what}{seen} — every reply's body is in an encoding lightemma does not read, or does not "
+                                 f"decode; check {where}", cause="invalid-response", error=err)
         if err == "ResponseTooLargeError":
             from lightemma.backends.openai_http import MAX_BODY_BYTES
 
@@ -731,9 +734,9 @@ class APIBackend:
             text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
             cost = self._direct_cost(usage)
         else:
-            from lightemma.backends.openai_http import ResponseTooLargeError, _guard
+            from lightemma.backends.openai_http import _guard
 
-            slot: dict[str, str] = {}
+            slot: dict[str, Any] = {}
             token = _guard().set(slot)
             try:
                 response = await litellm.acompletion(
@@ -741,8 +744,8 @@ class APIBackend:
                     timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **self._bounded_client(), **params,
                 )
             except Exception:
-                if "too_large" in slot:
-                    raise ResponseTooLargeError(slot["too_large"]) from None
+                if "error" in slot:  # what the body hooks refused (too large, an encoding), whatever litellm made of it
+                    raise slot["error"] from None
                 raise
             finally:
                 _guard().reset(token)

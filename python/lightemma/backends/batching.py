@@ -71,6 +71,12 @@ class BatchStats:
                 "max_batch_size": max(self.sizes, default=0)}
 
 
+def _retrieved(future: asyncio.Future[ChatResult]) -> None:
+    """Mark a finished future's exception as seen (the caller that awaits it, if any, still gets it)."""
+    if not future.cancelled():
+        future.exception()
+
+
 @dataclass
 class _Pending:
     request: ChatRequest
@@ -136,6 +142,8 @@ class MicroBatcher:
             self._ensure_worker()
             self._cond.notify()
         futures = [p.future for p in pending]
+        for future in futures:  # a run that stops leaves these unawaited: no "Future exception was never retrieved"
+            future.add_done_callback(_retrieved)
         if self.deadline is None:
             return list(await asyncio.gather(*futures))
         while True:  # the watchdog: a batch that never returns turns the batcher fatal instead of hanging the run

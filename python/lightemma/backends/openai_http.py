@@ -47,6 +47,7 @@ class Timeout(HTTPCallError): ...
 class APIConnectionError(HTTPCallError): ...
 class APIError(HTTPCallError): ...
 class ResponseTooLargeError(HTTPCallError): ...  # not retried: the same request would get the same body
+class ResponseEncodingError(HTTPCallError): ...  # a body in an encoding not asked for, or not decodable: not retried
 
 
 _BY_STATUS: dict[int, type[HTTPCallError]] = {
@@ -136,7 +137,7 @@ class OpenAIHTTPClient:
 
 # -- the same bound for litellm's clients (httpx): its OpenAI SDK client and its native Anthropic / Gemini ones ---
 
-BODY_GUARD: Any = None  # set below: a ContextVar holding the current call's {"too_large": message} slot
+BODY_GUARD: Any = None  # set below: a ContextVar holding the current call's {"error": HTTPCallError} slot
 
 
 def _guard() -> Any:
@@ -157,34 +158,41 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
 
     A ``Content-Length`` over the limit fails at once; a body is otherwise counted chunk by chunk as the
     client reads it and the read ends past the limit. A gzip or deflate body is decoded here, chunk by
-    chunk with a bound on each chunk's output, and counted decoded: httpx would inflate a 1 MB "gzip bomb"
-    to gigabytes before anyone counted. Requests ask for those two encodings only; a body in another
-    one fails the call unread. Either way the call's slot in :data:`BODY_GUARD` (set by the caller)
-    says why, so the caller records :class:`ResponseTooLargeError` whatever error the client library
-    wraps it in. Hooks (not a transport) keep each client's own connection pool, TLS and proxy settings.
+    chunk with a bound on each chunk's output, and counted decoded (and on the wire): httpx would
+    inflate a 1 MB "gzip bomb" to gigabytes before anyone counted. Requests ask for those two encodings
+    only; a body in another one, or one that does not decode (corrupt, cut off), fails the call as
+    :class:`ResponseEncodingError`. The call's slot in :data:`BODY_GUARD` (set by the caller) holds the
+    error, so the caller raises it whatever error the client library wraps it in. Hooks (not a
+    transport) keep each client's own connection pool, TLS and proxy settings.
     """
     import httpx
 
     class _Stream(httpx.AsyncByteStream):
         def __init__(self, inner: Any, slot: Any, encoding: str | None) -> None:
             self.inner, self.slot = inner, slot
-            self.decoder = _Inflate(encoding, max_body, lambda: self.fail()) if encoding else None
-
-        def fail(self) -> ResponseTooLargeError:
-            return _too_large(self.slot, f"the response body is over {max_body} bytes{' decoded' if self.decoder else ''}, "
-                                         "more than lightemma reads")
+            self.decoder = _Inflate(encoding, max_body) if encoding else None
 
         async def __aiter__(self) -> Any:
-            size = 0
-            async for chunk in self.inner:
+            size = wire = 0
+            try:
+                async for chunk in self.inner:
+                    wire += len(chunk)
+                    if self.decoder is not None:
+                        chunk = self.decoder.feed(chunk)
+                    size += len(chunk)
+                    if size > max_body or wire > max_body:
+                        raise _failed(self.slot, ResponseTooLargeError(
+                            f"the response body is over {max_body} bytes{' decoded' if size > max_body and self.decoder else ''}, "
+                            "more than lightemma reads"))
+                    yield chunk
                 if self.decoder is not None:
-                    chunk = self.decoder.feed(chunk)
-                size += len(chunk)
-                if size > max_body:
-                    raise self.fail()
-                yield chunk
-            if self.decoder is not None:
-                yield self.decoder.flush()
+                    yield self.decoder.flush()
+            except _TooLarge:
+                raise _failed(self.slot, ResponseTooLargeError(f"the response body is over {max_body} bytes decoded, more "
+                                                               "than lightemma reads")) from None
+            except zlib.error as exc:
+                raise _failed(self.slot, ResponseEncodingError(f"the response body is not valid {self.decoder.encoding if self.decoder else ''} "
+                                                               f"({exc})")) from None
 
         async def aclose(self) -> None:
             await self.inner.aclose()
@@ -196,12 +204,13 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
         slot = _guard().get()
         length = response.headers.get("content-length")
         if length and length.isdigit() and int(length) > max_body:
-            raise _too_large(slot, f"the response body is {length} bytes, more than the {max_body} bytes lightemma reads")
+            raise _failed(slot, ResponseTooLargeError(f"the response body is {length} bytes, more than the {max_body} bytes "
+                                                      "lightemma reads"))
         codings = [c.strip().lower() for c in response.headers.get("content-encoding", "").split(",")]
         codings = [c for c in codings if c and c != "identity"]
         if len(codings) > 1 or (codings and codings[0] not in _INFLATE):
-            raise _too_large(slot, f"the response body is encoded as {', '.join(codings)!r}, which lightemma did not ask "
-                                   "for and does not decode")
+            raise _failed(slot, ResponseEncodingError(f"the response body is encoded as {', '.join(codings)!r}, which "
+                                                      "lightemma did not ask for and does not decode"))
         if codings:
             del response.headers["content-encoding"]  # decoded below, within the limit: httpx must not decode it again
         response.stream = _Stream(response.stream, slot, codings[0] if codings else None)
@@ -210,21 +219,40 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
 
 
 _INFLATE = {"gzip": 16 + zlib.MAX_WBITS, "x-gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS}
+_GZIP_MAGIC = b"\x1f\x8b"
+
+
+class _TooLarge(Exception):
+    """Raised by :class:`_Inflate` when its output passes the limit."""
 
 
 class _Inflate:
-    """A gzip or deflate body decoded chunk by chunk, never more than ``limit`` + 1 bytes of output in all: a
-    chunk that would inflate past it stops there and ``fail()`` is raised."""
+    """A gzip or deflate body decoded chunk by chunk, never more than ``limit`` + 1 bytes of output in all (a chunk
+    that would inflate past it stops there: :class:`_TooLarge`). gzip members that follow one another are one body;
+    bytes after the end of the stream are counted against the limit and dropped (zlib would keep them all); a
+    body that is corrupt or ends early raises ``zlib.error``."""
 
-    def __init__(self, encoding: str, limit: int, fail: Any) -> None:
-        self.encoding, self.limit, self.fail, self.size = encoding, limit, fail, 0
+    def __init__(self, encoding: str, limit: int) -> None:
+        self.encoding, self.limit, self.size, self.trailing = encoding, limit, 0, 0
         self.raw_deflate = False
+        self.pending = b""  # the start of what may be the next gzip member's header
         self._d = zlib.decompressobj(_INFLATE[encoding])
 
     def feed(self, chunk: bytes) -> bytes:
         out = bytearray()
-        data = chunk
+        data, self.pending = self.pending + chunk, b""
         while data:
+            if self._d.eof:  # after a whole stream: the next gzip member, or trailing bytes
+                if self.encoding != "deflate" and data[:2] == _GZIP_MAGIC:
+                    self._d = zlib.decompressobj(_INFLATE[self.encoding])
+                    continue
+                if self.encoding != "deflate" and len(data) < 2 and _GZIP_MAGIC.startswith(data):
+                    self.pending = data  # one byte of a member header: the rest comes with the next chunk
+                    break
+                self.trailing += len(data)
+                if self.size + self.trailing > self.limit:
+                    raise _TooLarge
+                break
             try:
                 piece = self._d.decompress(data, self.limit + 1 - self.size)  # >= 1: an output bound, never 0 (none)
             except zlib.error:
@@ -236,22 +264,21 @@ class _Inflate:
             self.size += len(piece)
             out += piece
             if self.size > self.limit:
-                raise self.fail()
-            data = self._d.unconsumed_tail
+                raise _TooLarge
+            data = self._d.unused_data if self._d.eof else self._d.unconsumed_tail
         return bytes(out)
 
     def flush(self) -> bytes:
-        rest = self._d.flush()
-        self.size += len(rest)
-        if self.size > self.limit:
-            raise self.fail()
-        return rest
+        if not self._d.eof or self.pending:
+            raise zlib.error("the compressed stream ends early")
+        return b""
 
 
-def _too_large(slot: dict[str, str] | None, message: str) -> ResponseTooLargeError:
+def _failed(slot: dict[str, Any] | None, error: HTTPCallError) -> HTTPCallError:
+    """``error``, kept in the call's slot for the caller to raise (the client library may wrap what we raise)."""
     if slot is not None:
-        slot["too_large"] = message
-    return ResponseTooLargeError(message)
+        slot["error"] = error
+    return error
 
 
 def limited_openai_client(api_key: str, base_url: str | None, max_body: int = MAX_BODY_BYTES) -> Any:
