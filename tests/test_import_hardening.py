@@ -259,9 +259,10 @@ def test_stage_times_whose_sum_overflows_are_an_unknown_total_not_a_crash(tmp_pa
     assert records[1]["seconds"] == pytest.approx(sum(frames[1]["time_usage"].values()))
 
 
-def test_lone_surrogates_in_a_reference_file_are_imported_and_read_back_as_they_were(tmp_path, capsys):
-    """json.dump writes half an emoji as the escape \\ud83d; UTF-8 cannot hold it. Texts, prompts and the shared prompt
-    text (a template in the manifest) keep it, in ASCII escapes; `prompts check` prints it."""
+def test_lone_surrogates_in_a_reference_file_become_replacement_characters_and_every_reader_works(tmp_path, capsys):
+    """json.dump writes half an emoji as the escape \\ud83d, which no UTF-8 file, figure or page can hold: the import
+    reads it as U+FFFD (texts, prompts, the shared prompt text in the manifest, names), and evaluate, report and
+    prompts check work on the run."""
     from lightemma.cli import main
     from lightemma.runs.stored_prompts import call_prompt, frame_texts
 
@@ -270,24 +271,49 @@ def test_lone_surrogates_in_a_reference_file_are_imported_and_read_back_as_they_
     for frame in frames:
         inference = frame["inference"]
         inference["scene_description"] = [line + " \ud83d" for line in inference["scene_description"]]
+        inference["pred_actions_str"] += " \udc80"
         for key in ("scene_prompt", "intent_prompt", "waypoint_prompt"):
             inference[key] = ["Half an emoji \ud83d here."] + inference[key]
     out = tmp_path / "res" / "gpt-4o" / "output"
     out.mkdir(parents=True)
-    (out / "scene-0001.json").write_text(json.dumps({"scene_info": {"name": "scene-0001"}, "frames": frames}, indent=4))
+    (out / "scene-0001.json").write_text(json.dumps({"scene_info": {"name": "scene-0001 \ud83d"}, "frames": frames}, indent=4))
     (result,) = import_reference([tmp_path / "res"], tmp_path / "runs")
     contents = read_run(result.run_dir)
     templates = contents.manifest["prompt_set"]["templates"]
-    assert "\ud83d" in templates["scene"][0]  # the shared text, in the manifest
+    assert "Half an emoji \ufffd here." in templates["scene"][0]  # the shared text, in the manifest
+    clean = lambda text: text.replace("\ud83d", "\ufffd").replace("\udc80", "\ufffd")  # noqa: E731
     for frame in frames:
         record = next(r for r in contents.records.values() if r["sample_token"] == frame["sample_token"])
         calls = record["attempts"][0]["calls"]
-        assert record["scene_text"] == " ".join(frame["inference"]["scene_description"])
+        assert record["scene_name"] == "scene-0001 \ufffd" and record["answer"].endswith("\ufffd")
+        assert record["scene_text"] == clean(" ".join(frame["inference"]["scene_description"]))
         for call, key in zip(calls, ("scene_prompt", "intent_prompt", "waypoint_prompt")):
-            assert call_prompt(call, frame_texts(calls), templates) == " ".join(frame["inference"][key])
+            assert call_prompt(call, frame_texts(calls), templates) == clean(" ".join(frame["inference"][key]))
+    assert (result.run_dir / "frames.jsonl").read_bytes().decode("utf-8")  # valid UTF-8 throughout
     prompts = tmp_path / "p.json"
     prompts.write_text(json.dumps({"name": "p", "stages": {"scene": "x {0}", "intent": "{scene} {history}",
                                                           "actions": "{scene} {intent} {history}"}}))
     capsys.readouterr()
     assert main(["prompts", "check", str(prompts), str(result.run_dir)]) == 1  # differences, printed without a crash
     assert "first difference" in capsys.readouterr().out
+    assert main(["evaluate", str(tmp_path / "runs")]) == 0
+    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "report"), "--top", "2"]) == 0, capsys.readouterr().err
+
+
+def test_folder_and_file_names_that_are_not_utf8_are_imported_with_replacement_characters(tmp_path, capsys):
+    from lightemma.cli import main
+
+    rng = np.random.default_rng(6)
+    root = tmp_path / "res"
+    model = Path(os.fsdecode(bytes(root) + b"/my-model-\xe9"))  # a Latin-1 name: not UTF-8
+    out = model / "output"
+    out.mkdir(parents=True)
+    scene = Path(os.fsdecode(bytes(out) + b"/scene-\xff01.json"))
+    scene.write_text(json.dumps({"frames": [make_frame(rng, "scene-0001", i) for i in range(2)]}, indent=4))
+    (result,) = import_reference([root], tmp_path / "runs")
+    assert result.model == "my-model-\ufffd" and result.frames == 2
+    records = read_run(result.run_dir).records.values()
+    assert {r["source"]["file"] for r in records} == {"scene-\ufffd01.json"} and {r["scene_name"] for r in records} == {"scene-\ufffd01"}
+    assert read_manifest(result.run_dir)["imported"]["source_model"] == "my-model-\ufffd"
+    capsys.readouterr()
+    assert main(["evaluate", str(tmp_path / "runs")]) == 0 and "my-model-\ufffd" in capsys.readouterr().out

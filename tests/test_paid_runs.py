@@ -238,8 +238,9 @@ def test_a_run_name_is_recorded_and_checked(synth_root, tmp_path):
     result = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False,
                  sample=2, name="  ego baseline ")
     assert json.loads((result.run_dir / "manifest.json").read_text())["name"] == "ego baseline"
-    with pytest.raises(UserError, match="--name"):
-        run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, name="a\nb")
+    for bad in ("a\nb", "caf\udce9"):  # a line break; a byte that is not UTF-8 (a Latin-1 terminal's argv)
+        with pytest.raises(UserError, match="--name"):
+            run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, name=bad)
     assert lookup("gpt-4o") is not None
 
 

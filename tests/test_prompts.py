@@ -91,3 +91,16 @@ def test_a_prompt_file_is_read_afresh_on_each_load(tmp_path):
     path.write_text(json.dumps(edited))
     ps = load_prompt_set(str(path))
     assert ps.hash == content_hash(edited) and ps.stages["scene"] == "describe the scene"
+
+
+def test_a_prompt_set_file_holding_half_an_emoji_is_refused_in_one_line(tmp_path):
+    import json
+
+    from lightemma.errors import UserError
+    from lightemma.prompts import load_prompt_set
+
+    path = tmp_path / "p.json"
+    path.write_text(json.dumps({"name": "p", "stages": {"scene": "Look \ud83d.", "intent": "{scene} {history}",
+                                                       "actions": "{scene} {intent} {history}"}}))
+    with pytest.raises(UserError, match="lone surrogate"):
+        load_prompt_set(str(path))

@@ -27,6 +27,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
+from lightemma._text import unicode_clean
+
 STAGES = ("scene", "intent", "actions")
 #: finish reasons that mean "cut off at the output-token limit" (OpenAI / litellm, Anthropic, Gemini spellings)
 TRUNCATED = frozenset({"length", "max_tokens", "max_output_tokens", "MAX_TOKENS"})
@@ -129,19 +131,6 @@ class ChatResult:
     @property
     def ok(self) -> bool:
         return self.error is None and self.text is not None
-
-
-def unicode_clean(text: str) -> str:
-    """``text`` with each lone surrogate (half of an emoji a provider's JSON escaped, ``"\\ud83d"``) as U+FFFD.
-
-    UTF-8 holds no lone surrogate, so neither a record, nor the next stage's request, nor a printed line
-    could carry one; every other character is kept (a string that encodes is returned as it is).
-    """
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return text.encode("utf-16", "surrogatepass").decode("utf-16", "replace")
-    return text
 
 
 @runtime_checkable

@@ -38,6 +38,7 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from lightemma._text import unicode_clean
 from lightemma.backends import Backend, ChatRequest, ChatResult, GenerationParams, backend_kind, create_backend
 from lightemma.errors import RunFatalError, RunStopped, RunStoreError, UserError, os_error_line
 from lightemma.frames.model import summary_line
@@ -839,8 +840,9 @@ def run(
     }
     if max_cost_cents is not None and not (math.isfinite(max_cost_cents) and max_cost_cents > 0):
         raise UserError(f"--max-cost must be a number of cents greater than 0, got {max_cost_cents:g}")
-    if name is not None and (not name.strip() or len(name) > 80 or any(ord(ch) < 32 for ch in name)):
-        raise UserError(f"--name must be 1 to 80 printable characters, got {name!r}")
+    if name is not None and (not name.strip() or len(name) > 80 or any(ord(ch) < 32 for ch in name)
+                             or unicode_clean(name) != name):  # bytes that are not UTF-8 (a Latin-1 terminal)
+        raise UserError(f"--name must be 1 to 80 printable characters of UTF-8 text, got {name!r}")
     if prompt_set.endswith(".json"):  # a prompt-set file: by absolute path, so that a resume finds it from anywhere
         config["prompt_set"] = os.fspath(Path(prompt_set).resolve())
     try:

@@ -44,6 +44,7 @@ from dataclasses import dataclass, field, replace
 from importlib import resources
 from typing import Any
 
+from lightemma._text import without_lone_surrogates
 from lightemma.backends.base import STAGES
 from lightemma.errors import UserError
 
@@ -222,4 +223,7 @@ def load_prompt_set(name: str = DEFAULT_PROMPT_SET) -> PromptSet:
         data = json.loads(resource.read_text(encoding="utf-8"))
     if not isinstance(data, dict):
         raise UserError(f"{origin}: expected a JSON object")
+    if without_lone_surrogates(data) != data:
+        raise UserError(f"{origin}: holds a lone surrogate (an escape such as \\ud83d, half of an emoji), which no request "
+                        "can carry; fix the file")
     return PromptSet.from_dict(data, origin=origin)

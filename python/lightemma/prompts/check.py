@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from lightemma.backends.base import STAGES, unicode_clean
+from lightemma._text import unicode_clean
+from lightemma.backends.base import STAGES
 from lightemma.errors import UserError
 from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet

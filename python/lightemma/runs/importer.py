@@ -39,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from lightemma._text import unicode_clean
 from lightemma.errors import UserError
 from lightemma.registry import ModelInfo, reference_model
 from lightemma.runs.reference import (
@@ -110,7 +111,7 @@ def source_hash(files: Sequence[Path], root: Path) -> str:
             content = hashlib.sha256(read_regular_file(path)).hexdigest()
         except ReferenceFileError as exc:  # changed since it was listed: skipped (and named) when read
             content = f"unreadable: {exc}"
-        digest.update(f"\0{path.relative_to(root).as_posix()}\0{content}".encode())
+        digest.update(b"\0" + os.fsencode(path.relative_to(root).as_posix()) + f"\0{content}".encode())  # names as bytes
     return "sha256:" + digest.hexdigest()
 
 
@@ -304,7 +305,7 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
         if mismatched:
             warn(f"{scene.path}: {mismatched} frame(s) whose stored predictions.trajectory differs from the Euler "
                  f"integration of their answer (up to {worst:.3g} m); the answer is what is scored")
-    return [_record(f, scene.path.name, parses[i], actions[i], trajectories[i], prices, templates) for i, f in enumerate(frames)]
+    return [_record(f, unicode_clean(scene.path.name), parses[i], actions[i], trajectories[i], prices, templates) for i, f in enumerate(frames)]
 
 
 def _is_6x2(value: Any) -> bool:
@@ -345,7 +346,7 @@ def _manifest(folder: ModelFolder, model: str, info: ModelInfo | None, digest: s
         "family": info.family if info else infer_family(model),
         "imported": {
             "format": SOURCE_FORMAT,
-            "from": os.fspath(folder.path.resolve()),
+            "from": unicode_clean(os.fspath(folder.path.resolve())),
             "source_model": folder.model_name,
             "source_folder": folder.folder_name,
             "metadata_model": metadata_model,
@@ -406,7 +407,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         files_skipped: list[str] = []
         for entry, why in folder.skipped:
             warn(f"{entry}: {why}; file skipped")
-            files_skipped.append(entry.name)
+            files_skipped.append(unicode_clean(entry.name))
         frames_skipped = 0
         stamp = None
         from lightemma.evaluation.loading import RecordColumns, source_key, write_sidecar
@@ -417,7 +418,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                 on_file()
                 if isinstance(scene, ReferenceFileError):
                     warn(f"{path}: {scene}; file skipped")
-                    files_skipped.append(path.name)
+                    files_skipped.append(unicode_clean(path.name))
                     continue
                 _report_problems(scene, warn)
                 frames_skipped += len(scene.problems)

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lightemma._text import unicode_clean, without_lone_surrogates
 from lightemma.errors import UserError
 from lightemma.runs.records import loads_bounded
 
@@ -113,12 +114,12 @@ class ModelFolder:
 
     @property
     def folder_name(self) -> str:
-        return self.path.name
+        return unicode_clean(self.path.name)  # a name of bytes that are not UTF-8: U+FFFD for each such byte
 
     @property
     def model_name(self) -> str:
         """The script's model name: the folder name without predict.py's ``_<timestamp>`` suffix."""
-        return _RUN_SUFFIX.sub("", self.path.name)
+        return _RUN_SUFFIX.sub("", self.folder_name)
 
 
 @dataclass
@@ -444,7 +445,10 @@ class SceneFile:
 def read_scene_file(path: Path, data: bytes) -> SceneFile:
     """Check the bytes of one scene file; :class:`ReferenceFileError` when the file as a whole is unusable."""
     try:
-        doc = loads_bounded(data.decode("utf-8"))  # the scripts write UTF-8; decoding first is faster than json's detection
+        text = data.decode("utf-8")  # the scripts write UTF-8; decoding first is faster than json's detection
+        doc = loads_bounded(text)
+        if "\\ud" in text or "\\uD" in text:  # an escaped surrogate, maybe half an emoji: U+FFFD where it is alone
+            doc = without_lone_surrogates(doc)
     except UnicodeDecodeError as exc:
         raise ReferenceFileError(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
@@ -454,7 +458,7 @@ def read_scene_file(path: Path, data: bytes) -> SceneFile:
     if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list):
         raise ReferenceFileError("not a reference scene file (no 'frames' list)")
     info = doc.get("scene_info") if isinstance(doc.get("scene_info"), dict) else {}
-    scene_name = info.get("name") if isinstance(info.get("name"), str) and info.get("name") else path.stem
+    scene_name = info.get("name") if isinstance(info.get("name"), str) and info.get("name") else unicode_clean(path.stem)
     metadata = doc.get("metadata") if isinstance(doc.get("metadata"), dict) else {}
     frames: list[ReferenceFrame] = []
     problems: list[FrameProblem] = []
