@@ -289,6 +289,13 @@ def test_resume_refuses_options_it_takes_from_the_manifest_and_code_options_the_
     ({"ray_address": 0}, "ray_address is 0, not an address"),
     ({"backend_options": {"batch_size": "8"}}, "cannot build the run's backend (TypeError"),
     ({"model": ["gpt-4o"]}, "config.model is ['gpt-4o'], not text"),
+    ({"timeout": -1}, "config.timeout is -1, not a number greater than 0"),
+    ({"temperature": -1}, "config.temperature is -1, not a number of at least 0"),
+    ({"cache": True}, "config.cache is True, not text"),
+    ({"speed_range": [5, 1]}, "config.speed_range is [5, 1], not [low, high]"),
+    ({"dataset": {"scenes": [1]}}, "config.dataset.scenes is [1], not a list of scene names"),
+    ({"dataset": {"sample": {"seed": 0}}}, "config.dataset.sample"),
+    ({"batch": -2.5}, "config.batch is -2.5, not true or false"),
 ])
 def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_path, frames, capsys, changes, words):
     from lightemma.cli import main

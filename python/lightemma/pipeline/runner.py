@@ -276,8 +276,15 @@ _CONFIG_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
     "temperature": (_NUMBER, False), "backoff_base": (_NUMBER, False), "backoff_cap": (_NUMBER, False),
     "rpm": (_NUMBER, True), "tpm": (_NUMBER, True), "gpus_per_replica": (_NUMBER, True), "batch_poll": (_NUMBER, True),
     "max_cost_cents": (_NUMBER, True), "dataset": ((dict,), True), "backend_options": ((dict,), True),
-    "api_key_env": ((str,), True),
+    "api_key_env": ((str,), True), "api_base": ((str,), True), "cache": ((str,), True), "reask": ((str,), False),
+    "integrate_method": ((str,), False), "speed_range": ((list,), True), "max_abs_curvature": (_NUMBER, True),
+    "batch": ((bool,), True), "price": ((list,), True), "gpus": ((int,), True),
 }
+#: settings read as config[...] (a resume of a manifest without them would fail with a KeyError)
+_REQUIRED = ("model", "backend", "api_base", "concurrency", "temperature", "max_tokens", "reask", "max_attempts",
+             "integrate_method", "prompt_set")
+#: numbers that must be above 0, not merely at least 0
+_POSITIVE = ("timeout", "rpm", "tpm", "batch_poll", "max_cost_cents")
 
 
 _DATASET_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
@@ -286,27 +293,55 @@ _DATASET_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
 }
 
 
+def _finite(value: Any) -> bool:
+    return isinstance(value, _NUMBER) and not isinstance(value, bool) and math.isfinite(value)
+
+
 def _check_config_types(run_dir: Path, config: Mapping[str, Any], table: Mapping[str, tuple[tuple[type, ...], bool]] = _CONFIG_TYPES,
                         where: str = "config") -> None:
     """Refuse, in one line, a manifest config whose settings are not of their kind (a hand-edited file): a number
-    that is text, a bool, not finite or below 0, a count below 1, a mapping that is a list."""
-    if where == "config" and isinstance(config.get("dataset"), dict):
-        _check_config_types(run_dir, config["dataset"], _DATASET_TYPES, "config.dataset")
+    that is text, a bool, not finite or below 0, a count below 1, a mapping that is a list, a setting left out."""
+    def refuse(name: str, value: Any, kind: str) -> UserError:
+        return UserError(f"{run_dir}: the manifest's {where}.{name} is {_short_repr(value)}, not {kind}; start a new run")
+
+    if where == "config":
+        missing = [name for name in _REQUIRED if name not in config]
+        if missing:
+            raise UserError(f"{run_dir}: the manifest's config has no {', '.join(missing)}; start a new run")
+        if isinstance(config.get("dataset"), dict):
+            _check_config_types(run_dir, config["dataset"], _DATASET_TYPES, "config.dataset")
     for name, (types, nullable) in table.items():
         if name not in config:
             continue
         value = config[name]
         if value is None and nullable:
             continue
-        ok = isinstance(value, types) and not isinstance(value, bool)
-        if ok and isinstance(value, float):
-            ok = math.isfinite(value) and value >= 0
+        ok = isinstance(value, types) and (types == (bool,) or not isinstance(value, bool))
+        if ok and types == _NUMBER:
+            ok = math.isfinite(value) and (value > 0 if name in _POSITIVE else value >= 0)
         if ok and types == (int,):
-            ok = value >= (0 if name == "max_retries" else 1)
+            ok = value >= (0 if name in ("max_retries", "gpus") else 1)
         if not ok:
             kind = {(str,): "text", (int,): "a whole number", _NUMBER: "a finite number", (dict,): "an object",
-                    (list,): "a list"}[types]
-            raise UserError(f"{run_dir}: the manifest's {where}.{name} is {_short_repr(value)}, not {kind}; start a new run")
+                    (list,): "a list", (bool,): "true or false"}[types]
+            if types == _NUMBER and _finite(value):
+                kind = "a number greater than 0" if name in _POSITIVE else "a number of at least 0"
+            raise refuse(name, value, kind)
+    if where == "config":
+        pairs = (("speed_range", lambda v: len(v) == 2 and all(map(_finite, v)) and v[0] < v[1], "[low, high]"),
+                 ("price", lambda v: len(v) == 2 and all(_finite(x) and x >= 0 for x in v), "[input, output] USD per million"))
+        for name, good, kind in pairs:
+            value = config.get(name)
+            if value is not None and not good(value):
+                raise refuse(name, value, kind)
+    else:
+        scenes, sample = config.get("scenes"), config.get("sample")
+        if scenes is not None and not all(isinstance(s, str) for s in scenes):
+            raise refuse("scenes", scenes, "a list of scene names")
+        if sample:
+            n, seed = sample.get("n"), sample.get("seed")
+            if type(n) is not int or n < 1 or (seed is not None and type(seed) is not int):
+                raise refuse("sample", sample, '{"n": N, "seed": S} (whole numbers)')
 
 
 def _short_repr(value: Any, limit: int = 60) -> str:
@@ -956,6 +991,11 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                 raise UserError(f"--{name} must be a finite number greater than 0, got {value:g}")
             config[name] = float(value)
     _check_config_types(run_dir, config)
+    for name, kind, what, needed in (("model", str, "text", True), ("prompt_set", dict, "an object", False),
+                                     ("dataset", dict, "an object", False), ("sessions", list, "a list", False)):
+        value = manifest.get(name)
+        if (needed or value is not None) and not isinstance(value, kind):  # the manifest's own blocks, beside config
+            raise UserError(f"{run_dir}: the manifest's {name} is {_short_repr(value)}, not {what}; start a new run")
     _trusted_settings(run_dir, config, api_base, api_key_env, cache, ray_address, backend_options)
     if concurrency is not None:
         if concurrency < 1:
