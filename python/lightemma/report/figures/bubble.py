@@ -82,7 +82,7 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
         return family_color(family)
 
     handles = [plt.Line2D([], [], marker="o", linestyle="", color=swatch(f), markersize=8, label=f) for f in families]
-    handles.append(plt.Line2D([], [], linestyle="", label=f"area ∝ time/frame (max {slowest:.1f} s)"))
+    handles.append(plt.Line2D([], [], linestyle="", label=f"area: time/frame (largest {slowest:.1f} s)"))
     if any(p.get("source") == "paper" for p in shown):
         handles.append(plt.Line2D([], [], marker="o", linestyle="", markerfacecolor="none", markeredgecolor="0.3", markersize=8, label="the paper's (value in italics)"))
     if any(_interval(p) for p in shown):
