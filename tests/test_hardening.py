@@ -143,6 +143,38 @@ def test_demo_with_an_api_base_sends_none_of_the_three_keys(elsewhere, monkeypat
         assert server.requests and sent_secrets(server) == set()
 
 
+BASE_VARIABLE_CASES = [("gpt-4o", "OPENAI_BASE_URL", "OPENAI_API_KEY"), ("gpt-4o", "OPENAI_API_BASE", "OPENAI_API_KEY"),
+                       ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE", "ANTHROPIC_API_KEY"),
+                       ("anthropic/claude-sonnet-4-6", "ANTHROPIC_BASE_URL", "ANTHROPIC_API_KEY"),
+                       ("gemini/gemini-2.5-flash", "GEMINI_API_BASE", "GEMINI_API_KEY")]
+
+
+@pytest.mark.parametrize(("model", "variable", "key"), BASE_VARIABLE_CASES, ids=[v for _, v, _ in BASE_VARIABLE_CASES])
+def test_a_base_url_variable_of_the_environment_gets_the_key_only_when_declared_the_providers(elsewhere, monkeypatch,
+                                                                                            tmp_path, frames, model,
+                                                                                            variable, key):
+    """litellm, the OpenAI SDK and the batch adapters send a provider's calls and key to OPENAI_BASE_URL & co. when
+    no --api-base is given: such a variable is refused unless it names a host declared the provider's own."""
+    from lightemma.errors import UserError
+
+    for name, value in KEYS.items():
+        monkeypatch.setenv(name, value)
+    with FakeOpenAIServer() as server:
+        monkeypatch.setenv(variable, server.url if model == "gpt-4o" else server.root_url)
+        with pytest.raises(UserError) as refused:
+            run(model, frames=frames[:1], output=tmp_path / "a", **FAST)
+        assert variable in str(refused.value) and "LIGHTEMMA_PROVIDER_HOSTS" in str(refused.value)
+        assert "\n" not in str(refused.value) and not server.requests and not (tmp_path / "a").exists()
+        if variable == "OPENAI_API_BASE":
+            return  # read by litellm's files and batch calls, not by its chat calls: refused, and a declared one unused
+        provider = model.split("/")[0] if "/" in model else "openai"
+        monkeypatch.setenv("LIGHTEMMA_PROVIDER_HOSTS", f"{provider}=127.0.0.1")  # declared: that gateway is the provider
+        result = run(model, frames=frames[:1], output=tmp_path / "b", **FAST)
+        assert server.requests and sent_secrets(server) == {key}
+    backend = json.loads((result.run_dir / "manifest.json").read_text())["backend"]
+    assert backend["api_base_from_environment"].startswith(f"{variable}=http://127.0.0.1:")
+
+
 def test_an_unset_key_variable_is_refused_in_one_line_and_plain_http_elsewhere_is_warned(monkeypatch):
     from lightemma.backends import create_backend
     from lightemma.errors import UserError
@@ -689,7 +721,10 @@ def closed_port() -> int:
 
 
 @pytest.mark.parametrize(("base", "words"), [("localhost:8000/v1", "needs a scheme"), ("http://127.0.0.1:99999/v1", "usable URL"),
-                                             ("http://127.0.0.1:PORT/v1", "cannot connect")])
+                                             ("http://127.0.0.1:PORT/v1", "cannot connect"),
+                                             ("alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
+                                             ("http:/alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
+                                             ("http//alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme")])
 def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path, synth_root, capsys, base, words):
     from lightemma.cli import main
 
@@ -698,6 +733,7 @@ def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path,
                  "v1.0-mini", "--split", "all", "--limit", "2", "--output", str(tmp_path / "out"), "--no-progress"])
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and words in err, err
+    assert "hunter2pw" not in err  # a password in a URL without a scheme is still a password
     assert not (tmp_path / "out").exists()  # before any work: no run directory, no retries against a dead host
 
 

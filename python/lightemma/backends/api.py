@@ -85,6 +85,9 @@ PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY
 # no provider key, only the key of a variable the user names for it (--api-key-env NAME).
 PROVIDER_HOSTS = {"openai": ("api.openai.com",), "anthropic": ("api.anthropic.com",),
                   "gemini": ("generativelanguage.googleapis.com",)}
+# Variables litellm, the OpenAI SDK and the batch adapters read for a provider's base URL when no --api-base is given.
+BASE_VARIABLES = {"openai": ("OPENAI_BASE_URL", "OPENAI_API_BASE"), "anthropic": ("ANTHROPIC_API_BASE", "ANTHROPIC_BASE_URL"),
+                  "gemini": ("GEMINI_API_BASE",)}
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 # What a provider accepts per image, as base64 characters (what is sent), and the longest side in pixels.
 # Anthropic: 5 MB per image, 8000 px; OpenAI: 20 MB per image; Gemini: 20 MB per request (kept under).
@@ -138,6 +141,30 @@ def require_api_key(model: str, api_base: str | None = None, api_key_env: str | 
     if missing:
         names = " or ".join(missing)
         raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
+    return None
+
+
+def base_from_environment(provider: str | None, api_base: str | None) -> tuple[str, str] | None:
+    """``(variable, url)`` of a base-URL variable (:data:`BASE_VARIABLES`) that would send ``provider``'s calls, and
+    its key, elsewhere than ``--api-base``; None when ``api_base`` is given (it wins everywhere lightemma calls) or no
+    such variable is set.
+
+    A set variable must name the provider's own host or one ``LIGHTEMMA_PROVIDER_HOSTS`` declares to be its own
+    (:func:`is_provider_host`): any other is a :class:`UserError` in one line, since the provider's key would go
+    there and the calls would be billed at its list price (issue 25.5)."""
+    if api_base:
+        return None
+    for name in BASE_VARIABLES.get(provider or "", ()):
+        value = os.environ.get(name, "").strip()
+        if not value:
+            continue
+        if not is_provider_host(provider, value):
+            keys = " / ".join(PROVIDER_KEYS.get(provider or "", ())) or "the provider's key"
+            raise UserError(f"the environment variable {name} is set to {redact_url(value)!r}: {provider} calls and "
+                            f"{keys} would go there, not to {provider}'s own API; unset it, or give that server as "
+                            f"--api-base (with --api-key-env NAME for its key), or declare it {provider}'s own host "
+                            f"with {PROVIDER_HOSTS_ENV}={provider}=HOST[:PORT]")
+        return name, value
     return None
 
 
@@ -413,10 +440,17 @@ class APIBackend:
         self.api_key_env = api_key_env
         self.model = litellm_model(self.model_info, api_base)
         self.provider = check_model(self.model, self.model_info.key, api_base)  # before the key: a typo is the first thing to say
+        #: a declared gateway named by a base-URL variable of the environment (``OPENAI_BASE_URL`` …), or None
+        self.base_variable = base_from_environment(self.provider, api_base)
         self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base, api_key_env)
         #: one-line warnings for the caller to show once (plain http to another host)
         self.notices: list[str] = [n for n in (insecure_endpoint(api_base, api_key_env or (
             "the key passed" if api_key is not None and api_key != NO_KEY else None)),) if n]
+        if self.base_variable is not None:
+            name, value = self.base_variable
+            warning = insecure_endpoint(value, " / ".join(PROVIDER_KEYS.get(self.provider or "", ())) or None)
+            if warning:
+                self.notices.append(warning.replace("--api-base", name, 1))
         if not timeout or timeout <= 0:
             raise UserError(f"--timeout must be a positive number of seconds, got {timeout}")
         self.timeout = float(timeout)
@@ -533,6 +567,8 @@ class APIBackend:
             "transport": self.transport,
             "model": self.model,
             "api_base": self.api_base_shown,
+            "api_base_from_environment": (f"{self.base_variable[0]}={redact_url(self.base_variable[1])}"
+                                          if self.base_variable else None),
             "api_key_env": self.api_key_env,
             "registry": self.model_info.to_dict(),
             "litellm_version": _litellm_version(),

@@ -82,6 +82,10 @@ def redact_url(url: str | None) -> str | None:
     netloc = parts.netloc
     if "@" in netloc:
         netloc = "***@" + netloc.rsplit("@", 1)[1]
+    elif not netloc and "@" in url.split("?", 1)[0].split("#", 1)[0]:
+        # no authority parsed (no scheme, "http:/…", "http//…"): whatever precedes an "@" may be credentials
+        head = re.split(r"[?#]", url, maxsplit=1)[0]
+        return _SECRETISH.sub("***", "***@" + head.rsplit("@", 1)[1] + url[len(head):])
     query = parts.query
     if query:
         pairs = parse_qsl(query, keep_blank_values=True)
