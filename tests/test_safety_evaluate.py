@@ -238,3 +238,27 @@ def test_report_has_safety_tags_and_views(world, tmp_path):
         assert tags["off_road"][f"{m.label} frames"] == int((rs.model.off_steps.any(axis=1)).sum())
         assert tags["collides"][f"{m.label} frames"] == int(rs.model.collide.any(axis=(1, 2)).sum())
     assert "| off_road |" in text and "| collides |" in text
+
+
+def test_a_map_mask_named_outside_the_dataroot_is_never_read(tmp_path):
+    """The map table's filename must lie inside the dataroot, as every dataset file name must (lightemma.frames.dataset_path):
+    one that climbs out gives the frames n/a with the reason, even where a readable mask lies there."""
+    import shutil
+
+    from lightemma.evaluation.safety import load_safety_data
+    from lightemma.synth import write_dataset
+
+    root = write_dataset(tmp_path / "data", scenes=1, keyframes=20, image_size=(64, 36), sweeps=False)
+    shutil.rmtree(root / "maps" / "expansion", ignore_errors=True)  # the base mask is what is read then
+    table = root / "v1.0-mini" / "map.json"
+    maps = json.loads(table.read_text())
+    inside = root / maps[0]["filename"]
+    shutil.copy(inside, tmp_path / "outside.png")  # a real, readable mask outside the dataroot
+    from lightemma.evaluation.safety import DrivableArea
+
+    assert all(isinstance(a, DrivableArea) for a in load_safety_data(root, "v1.0-mini").areas.values())  # the mask, read
+    for name in ("../outside.png", str(tmp_path / "outside.png")):
+        maps[0]["filename"] = name
+        table.write_text(json.dumps(maps))
+        (reason,) = set(load_safety_data(root, "v1.0-mini").areas.values())
+        assert isinstance(reason, str) and ("leaves the dataroot" in reason or "absolute path" in reason), reason

@@ -326,9 +326,11 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
     scene_log = {s["token"]: s.get("log_token") for s in _table(tables, "scene")}
     logs = {lg["token"]: lg for lg in _table(tables, "log")}
     mask_of_log: dict[str, str] = {}
+    map_record: dict[str, dict] = {}
     for rec in _table(tables, "map"):
         for lt in rec.get("log_tokens", []):
             mask_of_log[lt] = rec.get("filename", "")
+            map_record[lt] = rec
     for tok in wanted:
         log_token = scene_log.get(by_token[tok].get("scene_token"))
         log = logs.get(log_token or "")
@@ -346,7 +348,9 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
             elif not mask_of_log.get(log_token):
                 data.areas[key] = f"log {log.get('logfile', log_token)} has no map record"
             else:
-                mask_path = root / mask_of_log[log_token]
+                from lightemma.frames import dataset_path
+
+                mask_path = Path(dataset_path(root, map_record[log_token], "map"))  # inside the dataroot, or n/a with why
                 data.areas[key] = read_map_mask(mask_path) if mask_path.is_file() else f"map mask {mask_path} is missing"
         except DatasetError as exc:
             data.areas[key] = str(exc)

@@ -114,6 +114,19 @@ def _bad(table: str, token: str, field: str, value: Any, why: str) -> BadRecordE
     return BadRecordError(f"{table} {token}: field {field} = {shown} {why}")
 
 
+def _float(value: int | float) -> float:
+    """A JSON number as a float: an integer too large for a float (JSON has no bound) is infinite, not an OverflowError."""
+    try:
+        return float(value)
+    except OverflowError:
+        return math.inf
+
+
+def _is_finite_number(value: Any) -> bool:
+    """A finite int or float (bools, text and integers beyond the float range are not)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(_float(value))
+
+
 def _numbers(record: dict[str, Any], table: str, field: str, size: int, what: str) -> np.ndarray:
     """The record's ``field`` as exactly ``size`` finite numbers (bools and text refused)."""
     value = record.get(field)
@@ -123,7 +136,7 @@ def _numbers(record: dict[str, Any], table: str, field: str, size: int, what: st
         raise _bad(table, token, field, value, f"is not a list of {size} numbers ({what})")
     if len(value) != size:
         raise _bad(table, token, field, value, f"has {len(value)} value(s), needs {size} ({what})")
-    array = np.asarray(value, dtype=np.float64)
+    array = np.asarray([_float(v) for v in value], dtype=np.float64)
     if not np.isfinite(array).all():
         raise _bad(table, token, field, value, "is not finite")
     return array
@@ -144,14 +157,45 @@ def _rotation(record: dict[str, Any], table: str) -> np.ndarray:
     return q / norm
 
 
+#: largest timestamp (µs) the frame arrays hold (int64)
+TIMESTAMP_MAX = int(np.iinfo(np.int64).max)
+
+
 def _timestamp(record: dict[str, Any], table: str) -> int:
-    """The record's ``timestamp``: a finite, whole, non-negative number of microseconds."""
+    """The record's ``timestamp``: a finite, whole, non-negative number of microseconds within int64."""
     value = record.get("timestamp")
-    if (isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value)
-            or float(value) != int(value) or value < 0):
+    whole: int | None = None
+    if isinstance(value, float) and value.is_integer():  # NaN and infinities are not whole
+        whole = int(value)
+    elif isinstance(value, int) and not isinstance(value, bool):
+        whole = value
+    if whole is None or not 0 <= whole <= TIMESTAMP_MAX:
         raise _bad(table, record.get("token", "?"), "timestamp", value,
-                   "is not a finite, whole, non-negative number of microseconds")
-    return int(value)
+                   "is not a finite, whole, non-negative number of microseconds within int64")
+    return whole
+
+
+def dataset_path(dataroot: str | os.PathLike[str], record: dict[str, Any], table: str, field: str = "filename") -> str:
+    """The path of the file a table record names in ``field`` (``sample_data``/``map`` ``filename``).
+
+    The name must be a relative path that stays inside the dataroot: an absolute path, or one whose
+    normalised form climbs out through ``..``, raises :class:`BadRecordError` naming table, token and
+    field (an API run would otherwise read that file and send it to a provider). The check is lexical
+    (``os.path.normpath``), so symlinks the user set up inside the dataroot are followed as before.
+    Returns ``os.path.join(dataroot, name)``.
+    """
+    name = record.get(field)
+    token = record.get("token", "?")
+    if not isinstance(name, str) or not name or "\0" in name:
+        raise _bad(table, token, field, name, "is not a file name (a path relative to the dataroot)")
+    if os.path.isabs(name) or os.path.splitdrive(name)[0] or name.startswith(("/", "\\")):
+        raise _bad(table, token, field, name, "is an absolute path; a dataset file must lie inside the dataroot")
+    norm = os.path.normpath(name)
+    if norm == os.curdir:
+        raise _bad(table, token, field, name, "names the dataroot itself, not a file in it")
+    if norm == os.pardir or norm.startswith(os.pardir + os.sep) or (os.altsep and norm.startswith(os.pardir + os.altsep)):
+        raise _bad(table, token, field, name, "leaves the dataroot; a dataset file must lie inside it")
+    return os.path.join(os.fspath(dataroot), name)
 
 
 def window_range(n_keyframes: int, window: str) -> range:
@@ -405,7 +449,8 @@ def _scene_keyframes(tables: Tables, scene: dict[str, Any], cs_cache: dict[str, 
     """Walk a scene's sample chain; collect CAM_FRONT pose, time, image and calibration per keyframe.
 
     Structural problems (a chain that loops or points nowhere, a missing keyframe) raise
-    :class:`DatasetError`; an unusable value (pose, timestamp, calibration) raises :class:`BadRecordError`.
+    :class:`DatasetError`; an unusable value (pose, timestamp, calibration, an image filename outside
+    the dataroot) raises :class:`BadRecordError`.
     """
     name = scene["name"]
     tokens: list[str] = []
@@ -436,18 +481,18 @@ def _scene_keyframes(tables: Tables, scene: dict[str, Any], cs_cache: dict[str, 
             cs = tables.calibrated_sensors[cs_token]
             intrinsic = cs.get("camera_intrinsic")
             rows = intrinsic if isinstance(intrinsic, list) and len(intrinsic) == 3 else None
-            if rows is None or not all(isinstance(r, list) and len(r) == 3 and all(
-                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in r) for r in rows):
+            if rows is None or not all(isinstance(r, list) and len(r) == 3 and all(_is_finite_number(v) for v in r)
+                                       for r in rows):
                 raise _bad("calibrated_sensor", cs_token, "camera_intrinsic", intrinsic,
                            f"is not a finite 3x3 matrix (needed for {CAMERA})")
             extrinsic = geometry.extrinsic_matrix(_translation(cs, "calibrated_sensor"), _rotation(cs, "calibrated_sensor"))
-            cs_cache[cs_token] = (np.asarray(intrinsic, dtype=np.float64), extrinsic)
+            cs_cache[cs_token] = (np.asarray([[_float(v) for v in r] for r in rows], dtype=np.float64), extrinsic)
         position = _translation(pose, "ego_pose")
         tokens.append(token)
         xy.append((position[0], position[1]))
         quats.append(_rotation(pose, "ego_pose"))
         times.append(_timestamp(pose, "ego_pose"))
-        files.append(_field(sd, "sample_data", "filename"))
+        files.append(dataset_path(tables.dataroot, sd, "sample_data"))
         cs_tokens.append(cs_token)
         token = _field(sample, "sample", "next")
     return {
@@ -529,7 +574,7 @@ def extract_frames(
             meta["scene_names"].append(name)
             meta["scene_tokens"].append(kf["token"])
             meta["sample_tokens"].append(st)
-            meta["image_paths"].append(os.path.join(dataroot, kf["files"][c]))
+            meta["image_paths"].append(kf["files"][c])  # dataset_path: inside the dataroot
             meta["cs"].append(kf["cs_tokens"][c])
             kf_index.append(c)
 
@@ -628,7 +673,9 @@ def load_frames(
             ``ego_pose`` or ``calibrated_sensor`` whose ``translation`` is not exactly 3 finite
             numbers, whose ``rotation`` is not a unit quaternion (4 finite numbers, |norm − 1| ≤
             :data:`QUATERNION_TOLERANCE`), whose ``timestamp`` is not a finite, whole, non-negative
-            number, or a CAM_FRONT ``camera_intrinsic`` that is not a finite 3×3 matrix: ``skip``
+            number within int64, a CAM_FRONT ``camera_intrinsic`` that is not a finite 3×3 matrix, or
+            a CAM_FRONT ``sample_data`` ``filename`` that is absolute or leaves the dataroot
+            (:func:`dataset_path`): ``skip``
             (default: the scene is left out with a warning naming table, token and field, and
             listed in ``skipped_scenes`` and ``bad_records``) or ``error`` (raise
             :class:`BadRecordError`, one line naming scene, table, token and field).
