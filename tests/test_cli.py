@@ -85,6 +85,9 @@ def test_resume_loads_the_split_the_run_started_with_not_todays_default(synth_ro
         ("--rpm", "0", "--rpm must be greater than 0, got 0"),
         ("--temperature", "-0.5", "--temperature must be at least 0, got -0.5"),
         ("--timeout", "nan", "--timeout must be greater than 0, got nan"),
+        ("--timeout", "1e-300", "--timeout must be between 0.001 and 86400, got 1e-300"),
+        ("--rpm", "1e-300", "--rpm must be between 1 and 1e+09, got 1e-300"),
+        ("--max-retries", "1000000000", "--max-retries must be between 0 and 100, got 1e+09"),
     ],
 )
 def test_run_refuses_an_option_out_of_range_by_its_flag(synth_root, tmp_path, capsys, flag, value, message):

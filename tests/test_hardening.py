@@ -186,7 +186,8 @@ def test_an_unset_key_variable_is_refused_in_one_line_and_plain_http_elsewhere_i
     far = create_backend("openai/m", api_base="http://192.0.2.7:8000/v1", api_key_env="MY_KEY")
     (notice,) = far.notices
     assert "plain http" in notice and "MY_KEY" in notice and "sk-abc" not in notice
-    for quiet in ("http://127.0.0.1:8000/v1", "http://localhost:8000/v1", "http://[::1]:8000/v1", "https://192.0.2.7/v1"):
+    for quiet in ("http://127.0.0.1:8000/v1", "http://localhost:8000/v1", "http://[::1]:8000/v1", "https://192.0.2.7/v1",
+                  "http://127.1:8000/v1", "http://[::ffff:127.0.0.1]:8000/v1", "http://LOCALHOST.:8000/v1"):  # this machine too
         assert create_backend("openai/m", api_base=quiet).notices == []
 
 
@@ -221,6 +222,9 @@ def test_a_password_in_the_api_base_is_in_no_record_and_no_message(tmp_path, fra
 # -- 25.4: a run directory never redirects keys or writes --------------------------------------------------
 
 
+LEFT_OUT = object()  # a setting deleted from the manifest
+
+
 def crafted_run(tmp_path, frames, server, **changes):
     """A finished-but-incomplete run whose manifest config is then edited as someone else might have."""
     from lightemma.runs.store import FRAMES_FILE, update_manifest
@@ -229,7 +233,8 @@ def crafted_run(tmp_path, frames, server, **changes):
     path = first.run_dir / FRAMES_FILE
     path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:1]))  # two frames left to do
     manifest = json.loads((first.run_dir / "manifest.json").read_text())
-    update_manifest(first.run_dir, config={**manifest["config"], **changes})
+    config = {**manifest["config"], **changes}
+    update_manifest(first.run_dir, config={k: v for k, v in config.items() if v is not LEFT_OUT})
     return first.run_dir
 
 
@@ -328,6 +333,17 @@ def test_resume_refuses_options_it_takes_from_the_manifest_and_code_options_the_
     ({"dataset": {"scenes": [1]}}, "config.dataset.scenes is [1], not a list of scene names"),
     ({"dataset": {"sample": {"seed": 0}}}, "config.dataset.sample"),
     ({"batch": -2.5}, "config.batch is -2.5, not true or false"),
+    # the trial's: left-out settings, numbers beyond a float, and values that would wait or retry without end
+    *[({name: LEFT_OUT}, f"config has no {name}") for name in ("timeout", "max_retries", "backoff_base", "rpm", "tpm")],
+    ({"timeout": 10**400}, "config.timeout is a whole number of 401 digits, not a finite number"),
+    ({"speed_range": [-10**400, 10**400]}, "config.speed_range is [-1000"),
+    ({"rpm": 1e-300}, "config.rpm is 1e-300, not between 1 and 1e+09"),
+    ({"tpm": 1e-300}, "config.tpm is 1e-300, not between 10 and 1e+12"),
+    ({"timeout": 1e-300}, "config.timeout is 1e-300, not between 0.001 and 86400"),
+    ({"timeout": 1e308}, "config.timeout is 1e+308, not between"),
+    ({"max_attempts": 10**9}, "config.max_attempts is 1000000000, not between 1 and 100"),
+    ({"max_retries": 10**400}, "config.max_retries is a whole number of 401 digits, not between 0 and 100"),
+    ({"cache": "runs/x\x00y"}, "not text without NUL characters"),
 ])
 def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_path, frames, capsys, changes, words):
     from lightemma.cli import main
@@ -341,6 +357,41 @@ def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_pat
         assert len(server.requests) == before
 
 
+@pytest.mark.parametrize("how", ["deep manifest", "frame_ids to /dev/zero", "frame_ids a FIFO"])
+def test_a_run_directory_file_that_is_deep_endless_or_a_pipe_is_refused_in_one_line(tmp_path, frames, capsys, how):
+    from lightemma.cli import main
+    from lightemma.runs.store import FRAME_IDS_FILE, MANIFEST_FILE
+
+    from lightemma.pipeline import resume
+
+    with FakeOpenAIServer() as server:
+        run_dir = crafted_run(tmp_path, frames, server)
+        before = len(server.requests)
+        if how == "deep manifest":
+            (run_dir / MANIFEST_FILE).write_text("[" * 200_000 + "]" * 200_000)
+        elif how == "frame_ids a FIFO":
+            (run_dir / FRAME_IDS_FILE).unlink()
+            os.mkfifo(run_dir / FRAME_IDS_FILE)  # nobody writes it: a read would wait forever
+        else:
+            (run_dir / FRAME_IDS_FILE).unlink()
+            (run_dir / FRAME_IDS_FILE).symlink_to("/dev/zero")  # a read would fill the memory
+        if how == "deep manifest":
+            done = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base",
+                                   server.url, "--cache", "--no-progress"], capture_output=True, text=True, env=env(), timeout=120)
+            assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
+            assert len(done.stderr.strip().splitlines()) == 1 and "nested too deeply" in done.stderr, done.stderr
+        else:  # a run of frames passed in memory: resumed from Python
+            from lightemma.errors import RunStoreError
+
+            with pytest.raises(RunStoreError, match="frame_ids.txt is not a regular file"):
+                resume(run_dir, frames=frames, api_base=server.url, cache=True, progress=False)
+        assert len(server.requests) == before  # nothing asked
+        capsys.readouterr()
+        code = main(["evaluate", str(run_dir)])  # named and skipped, or refused: in one line, never read without end
+        err = capsys.readouterr().err
+        assert code in (0, 1, 2) and "Traceback" not in err and str(run_dir) in err, (code, err)
+
+
 def test_a_resume_takes_how_long_and_how_fast_to_ask_and_records_it(tmp_path, frames, capsys):
     from lightemma.cli import main
     from lightemma.runs.store import read_manifest
@@ -350,6 +401,9 @@ def test_a_resume_takes_how_long_and_how_fast_to_ask_and_records_it(tmp_path, fr
         assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--timeout", "inf",
                      "--no-progress"]) == 2
         assert "--timeout must be a finite number, got inf" in capsys.readouterr().err
+        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--rpm", "1e-300",
+                     "--no-progress"]) == 2
+        assert "--rpm must be between 1 and 1e+09, got 1e-300" in capsys.readouterr().err
         from lightemma.pipeline import resume
 
         resume(run_dir, frames=frames, api_base=server.url, cache=True, timeout=33, rpm=600, progress=False)
@@ -682,12 +736,16 @@ def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_com
     assert server.bulk_sent[0] < MAX_BODY_BYTES  # the bomb is small on the wire
     assert got[0].error == "ResponseTooLargeError" and got[0].text is None, got[0]
     assert [r.text for r in got[1:4]] == [SCENE_TEXT] * 3, got[1:4]
-    if transport == "direct":  # aiohttp decodes by its own rules (it reads an unknown encoding's bytes as they are)
-        return
     assert got[4].error == "ResponseEncodingError" and "'br'" in got[4].error_message, got[4]
     assert {r.headers.get("accept-encoding") for r in server.requests} == {"gzip, deflate"}
-    assert got[5].text == SCENE_TEXT and got[6].text == SCENE_TEXT  # two gzip members; a few bytes after the end
     assert got[7].error == "ResponseTooLargeError", got[7]  # bytes after the end count: never read without end
+    assert got[5].text == SCENE_TEXT  # two gzip members
+    if transport == "direct":  # aiohttp inflates by its own rules: stricter after the end, laxer on a cut-off stream
+        assert got[6].error == "ResponseEncodingError" and "not valid gzip" in got[6].error_message, got[6]
+        assert got[8].text is None and got[8].error in ("ResponseEncodingError", "APIError"), got[8]  # never an answer
+        assert got[9].error == "ResponseEncodingError" and "not valid gzip" in got[9].error_message, got[9]
+        return
+    assert got[6].text == SCENE_TEXT  # a few bytes after the end: dropped
     assert [(r.error, "not valid gzip" in (r.error_message or "")) for r in got[8:]] == [("ResponseEncodingError", True)] * 2
 
 

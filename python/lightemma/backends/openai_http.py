@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 import zlib
 from collections.abc import Mapping
 from typing import Any
@@ -75,7 +76,8 @@ class OpenAIHTTPClient:
 
         base, basic = split_credentials(api_base)  # user:password@ in the URL: sent as Basic auth, never in the URL
         self.url = base.rstrip("/") + "/chat/completions"
-        self._headers = {"Content-Type": "application/json"}
+        # the encodings aiohttp inflates (as it reads: the body limit counts decoded bytes); any other is refused unread
+        self._headers = {"Content-Type": "application/json", "Accept-Encoding": "gzip, deflate"}
         if basic:
             self._headers["Authorization"] = basic
         elif api_key:
@@ -95,8 +97,11 @@ class OpenAIHTTPClient:
     async def chat(self, model: str, messages: list[dict[str, Any]], params: Mapping[str, Any]) -> dict[str, Any]:
         """One chat completion; returns the response JSON or raises an :class:`HTTPCallError`."""
         payload = json.dumps({"model": model, "messages": messages, **params})
+        encoding = ""
         try:
             async with self._client().post(self.url, data=payload, timeout=self._timeout) as response:
+                encoding = response.headers.get("Content-Encoding", "").strip().lower()
+                encoding = "" if encoding == "identity" else encoding
                 body = await self._read(response)
                 if response.status >= 400:
                     raise _error_for(response.status, response.headers, body)
@@ -105,6 +110,15 @@ class OpenAIHTTPClient:
         except asyncio.TimeoutError:
             raise Timeout(f"no answer within {self._timeout.total} s") from None
         except aiohttp.ClientError as exc:
+            # aiohttp inflates as it parses: a coding it cannot decode, or a corrupt, cut-off or overlong compressed
+            # body, is an error of the reply (the same request gets the same), not of the connection
+            named = re.search(r"content-encoding: ?([\w-]+)(?: \(([\w-]+)\))?", str(exc), re.IGNORECASE)
+            coding = (named.group(2) or named.group(1)).lower() if named else encoding
+            if coding and coding not in _INFLATE:
+                raise ResponseEncodingError(f"the response body is encoded as {coding!r}, which lightemma did not ask "
+                                            "for and does not decode") from None
+            if coding and (named or isinstance(exc, aiohttp.ClientPayloadError)):
+                raise ResponseEncodingError(f"the response body is not valid {coding} ({type(exc).__name__})") from None
             raise APIConnectionError(f"connection error: {type(exc).__name__}: {exc}") from None
         try:
             data = json.loads(body)
@@ -123,7 +137,7 @@ class OpenAIHTTPClient:
         if response.content_length is not None and response.content_length > self.max_body:
             raise too_large(f"{response.content_length} bytes")
         body = bytearray()
-        async for chunk in response.content.iter_chunked(1 << 16):
+        async for chunk in response.content.iter_chunked(1 << 16):  # inflated by aiohttp as it reads: counted decoded
             body += chunk
             if len(body) > self.max_body:
                 raise too_large(f"over {self.max_body} bytes")

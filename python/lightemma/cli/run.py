@@ -164,6 +164,18 @@ def check_limits(args: argparse.Namespace) -> None:
             raise UserError(f"{flag} must be {shown}, got {value:g}")
         if isinstance(value, float) and math.isinf(value):  # inf: no limit is no setting a manifest can hold (JSON null)
             raise UserError(f"{flag} must be a finite number, got {value:g}")
+        if name in RANGED:  # the range a manifest's setting is held to as well (beyond it, waits or retries without end)
+            from lightemma.pipeline.runner import SETTING_RANGES
+
+            low, high = SETTING_RANGES[RANGED[name]]
+            if not low <= value <= high:
+                raise UserError(f"{flag} must be between {low:g} and {high:g}, got {value:g}")
+
+
+#: flags held to :data:`lightemma.pipeline.runner.SETTING_RANGES` (flag -> the manifest's setting)
+RANGED = {"timeout": "timeout", "rpm": "rpm", "tpm": "tpm", "max_retries": "max_retries", "max_attempts": "max_attempts",
+          "backoff": "backoff_base", "concurrency": "concurrency", "max_tokens": "max_tokens", "batch_poll": "batch_poll",
+          "replicas": "replicas", "temperature": "temperature"}
 
 
 # option -> backends that take it

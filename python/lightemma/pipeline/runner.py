@@ -282,7 +282,15 @@ _CONFIG_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
 }
 #: settings read as config[...] (a resume of a manifest without them would fail with a KeyError)
 _REQUIRED = ("model", "backend", "api_base", "concurrency", "temperature", "max_tokens", "reask", "max_attempts",
-             "integrate_method", "prompt_set")
+             "integrate_method", "prompt_set", "timeout", "max_retries", "backoff_base", "backoff_cap", "rpm", "tpm")
+#: the range (inclusive) of each numeric setting, on the command line and in a manifest: beyond it a run would wait
+#: without end (a rate of 1e-300 per minute, a 1e-300 s deadline) or retry without end (10**9 attempts)
+SETTING_RANGES: dict[str, tuple[float, float]] = {
+    "timeout": (0.001, 86_400.0), "rpm": (1.0, 1e9), "tpm": (10.0, 1e12), "max_retries": (0, 100),
+    "max_attempts": (1, 100), "backoff_base": (0.0, 600.0), "backoff_cap": (0.0, 3600.0), "concurrency": (1, 4096),
+    "max_tokens": (1, 1_000_000), "batch_poll": (0.01, 3600.0), "max_cost_cents": (0.0, 1e9), "replicas": (1, 1024),
+    "temperature": (0.0, 100.0),
+}
 #: numbers that must be above 0, not merely at least 0
 _POSITIVE = ("timeout", "rpm", "tpm", "batch_poll", "max_cost_cents")
 
@@ -294,7 +302,13 @@ _DATASET_TYPES: dict[str, tuple[tuple[type, ...], bool]] = {
 
 
 def _finite(value: Any) -> bool:
-    return isinstance(value, _NUMBER) and not isinstance(value, bool) and math.isfinite(value)
+    """A number that is no bool, and finite (an integer too large for a float is not)."""
+    if isinstance(value, bool) or not isinstance(value, _NUMBER):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:  # an int beyond a float's range
+        return False
 
 
 def _check_config_types(run_dir: Path, config: Mapping[str, Any], table: Mapping[str, tuple[tuple[type, ...], bool]] = _CONFIG_TYPES,
@@ -318,14 +332,21 @@ def _check_config_types(run_dir: Path, config: Mapping[str, Any], table: Mapping
             continue
         ok = isinstance(value, types) and (types == (bool,) or not isinstance(value, bool))
         if ok and types == _NUMBER:
-            ok = math.isfinite(value) and (value > 0 if name in _POSITIVE else value >= 0)
+            ok = _finite(value) and (value > 0 if name in _POSITIVE else value >= 0)
         if ok and types == (int,):
             ok = value >= (0 if name in ("max_retries", "gpus") else 1)
+        if ok and isinstance(value, str) and "\x00" in value:
+            ok = False
+        low, high = SETTING_RANGES.get(name, (None, None)) if where == "config" else (None, None)
+        if ok and low is not None and not low <= value <= high:
+            raise refuse(name, value, f"between {low:g} and {high:g}")
         if not ok:
             kind = {(str,): "text", (int,): "a whole number", _NUMBER: "a finite number", (dict,): "an object",
                     (list,): "a list", (bool,): "true or false"}[types]
             if types == _NUMBER and _finite(value):
                 kind = "a number greater than 0" if name in _POSITIVE else "a number of at least 0"
+            if isinstance(value, str) and "\x00" in value:
+                kind = "text without NUL characters"
             raise refuse(name, value, kind)
     if where == "config":
         pairs = (("speed_range", lambda v: len(v) == 2 and all(map(_finite, v)) and v[0] < v[1], "[low, high]"),
@@ -346,7 +367,12 @@ def _check_config_types(run_dir: Path, config: Mapping[str, Any], table: Mapping
 
 def _short_repr(value: Any, limit: int = 60) -> str:
     """``repr(value)`` cut to ``limit`` characters: a manifest's value shown in a one-line message."""
-    text = repr(value)
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 200:
+        return f"a whole number of {len(str(value)) if value.bit_length() < 13_000 else 'thousands of'} digits"
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):  # a number of over 4,300 digits inside, or nested beyond the stack
+        return f"a {type(value).__name__} that cannot be shown"
     return text if len(text) <= limit else text[: limit - 1] + "…"
 
 
@@ -672,6 +698,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
             if log:
                 how = f" by {exc.name}" if isinstance(exc, Interrupted) else ""
                 log(f"interrupted{how}; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+                exc.reported = True  # type: ignore[attr-defined]  # said: the command line adds no second line
             raise
         finally:
             bar.close()
@@ -981,14 +1008,11 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     if not isinstance(raw, Mapping) or not raw.get("model"):
         raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
     config = dict(raw)
-    if timeout is not None:
-        if not (math.isfinite(timeout) and timeout > 0):
-            raise UserError(f"--timeout must be a finite number of seconds greater than 0, got {timeout:g}")
-        config["timeout"] = float(timeout)
-    for name, value in (("rpm", rpm), ("tpm", tpm)):
+    for name, value in (("timeout", timeout), ("rpm", rpm), ("tpm", tpm)):
         if value is not None:
-            if not (math.isfinite(value) and value > 0):
-                raise UserError(f"--{name} must be a finite number greater than 0, got {value:g}")
+            low, high = SETTING_RANGES[name]
+            if not (math.isfinite(value) and low <= value <= high):
+                raise UserError(f"--{name} must be a finite number between {low:g} and {high:g}, got {value:g}")
             config[name] = float(value)
     _check_config_types(run_dir, config)
     for name, kind, what, needed in (("model", str, "text", True), ("prompt_set", dict, "an object", False),
