@@ -10,12 +10,14 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from lightemma.runs.records import bounded_values, loads_bounded
 from lightemma.runs.store import _sanitize, _to_jsonable, encode_line
 
 
 def reference(record):
-    """The record as the standard library writes it (non-finite floats as null, NumPy as plain values)."""
-    return json.dumps(_sanitize(record), default=_to_jsonable, allow_nan=False, ensure_ascii=False)
+    """The record as the standard library writes it (non-finite floats as null, NumPy as plain values), what the readers
+    refuse as null: integers of more than 18 digits, counts, times and costs beyond their bounds (lightemma.runs.records)."""
+    return json.dumps(_sanitize(bounded_values(record), []), default=_to_jsonable, allow_nan=False, ensure_ascii=False)
 
 
 scalars = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(2**70), 2**70) | st.booleans() | st.none()
@@ -31,6 +33,7 @@ def test_a_line_decodes_to_what_the_standard_encoding_decodes_to(record):
     line = encode_line(record)
     assert line.endswith(b"\n") and line.count(b"\n") == 1  # one whole line
     assert json.loads(line) == json.loads(reference(record))
+    loads_bounded(line)  # never a line the readers refuse
 
 
 def test_non_finite_numbers_become_null_and_numpy_values_plain_ones():
@@ -43,4 +46,5 @@ def test_non_finite_numbers_become_null_and_numpy_values_plain_ones():
 def test_what_orjson_refuses_is_written_by_json_with_the_same_meaning():
     big = {"tokens": 10**30, "n": math.nan, 3: "int key", "half an emoji": "a\ud83db"}
     line = encode_line(big)
-    assert line.isascii() and json.loads(line) == {"tokens": 10**30, "n": None, "3": "int key", "half an emoji": "a\ud83db"}
+    # an integer the readers refuse (more than 18 digits) is written as unknown
+    assert line.isascii() and json.loads(line) == {"tokens": None, "n": None, "3": "int key", "half an emoji": "a\ud83db"}

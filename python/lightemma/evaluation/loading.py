@@ -29,7 +29,7 @@ from lightemma.evaluation.manifest import RunInfo, run_info
 from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
 from lightemma.runs.store import FRAMES_FILE, RunContents, iter_records, read_frame_ids
-from lightemma.runs.records import answer_received, first_answer_status, gc_paused
+from lightemma.runs.records import MAX_POSITION_M, answer_received, first_answer_status, gc_paused
 
 STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
 UNKNOWN_STATUS = -1
@@ -61,6 +61,7 @@ class RunData:
     caught_implausible: int = 0  # frames evaluation found implausible that the run had not marked
     plausibility: Plausibility = field(default_factory=Plausibility)
     corrupt_lines: int = 0
+    corrupt_example: str | None = None  # why the first corrupt line was skipped, e.g. "line 7: status is ['ok'], …"
     truncated_tail: bool = False
     duplicates: int = 0
     bad_records: int = 0  # well-formed JSON lacking usable ground truth (skipped, or kept with NaN and never scored)
@@ -185,12 +186,17 @@ class _Columns:
             if values:
                 if name in self.PAIRS:
                     chunk = pairs_array(values)
+                    if name == "gt":  # beyond 100 km is no position (1e308 overflows every distance): no usable ground truth
+                        with np.errstate(invalid="ignore"):
+                            far = (np.abs(chunk) > MAX_POSITION_M).any(axis=(1, 2))
+                        if far.any():
+                            chunk[far] = np.nan
                 else:
                     chunk = np.asarray(values, dtype=self.DTYPES.get(name, np.float64))
                 self.chunks[name].append(chunk)
                 values.clear()
 
-    def finish(self, corrupt_lines: int = 0, truncated_tail: bool = False) -> RawColumns:
+    def finish(self, corrupt_lines: int = 0, truncated_tail: bool = False, corrupt_example: str | None = None) -> RawColumns:
         self.flush()
         columns = {}
         for name in self.NAMES:
@@ -198,7 +204,7 @@ class _Columns:
             shape = (6, 2) if name in self.PAIRS else ()
             dtype = self.DTYPES.get(name, np.float64)
             columns[name] = np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
-        return RawColumns(self.frame_ids, columns, list(self.scenes), corrupt_lines, truncated_tail)
+        return RawColumns(self.frame_ids, columns, list(self.scenes), corrupt_lines, truncated_tail, corrupt_example)
 
 
 @dataclass
@@ -210,6 +216,7 @@ class RawColumns:
     scene_names: list[str]  # scene code -> name, in first-seen order over all rows
     corrupt_lines: int = 0
     truncated_tail: bool = False
+    corrupt_example: str | None = None  # why the first corrupt line was skipped (records.record_problem)
 
 
 RecordColumns = _Columns  # for writers that hold their records: add() each, finish(), then write_sidecar()
@@ -218,7 +225,7 @@ RecordColumns = _Columns  # for writers that hold their records: add() each, fin
 # ---------------------------------------------------------------- the columnar sidecar
 
 SIDECAR_FILE = "frames.columns.npz"
-SIDECAR_FORMAT = 1  # bump when RawColumns or the reading of a record changes: older sidecars are rebuilt
+SIDECAR_FORMAT = 2  # bump when RawColumns or the reading of a record changes: older sidecars are rebuilt
 _TAIL_BYTES = 1 << 16
 
 
@@ -267,12 +274,13 @@ def write_sidecar(run_dir: str | os.PathLike[str], raw: RawColumns, key: np.ndar
     _remove_stale_temporaries(run_dir)
     arrays = {f"col_{name}": value for name, value in raw.columns.items()}
     counts = np.array([len(raw.frame_ids), len(raw.scene_names), raw.corrupt_lines, int(raw.truncated_tail)], dtype=np.int64)
+    example = np.frombuffer((raw.corrupt_example or "").encode("utf-8", "surrogatepass"), dtype=np.uint8)
     fd, tmp = tempfile.mkstemp(prefix=f".{SIDECAR_FILE}.", suffix=".tmp", dir=run_dir) if run_dir.is_dir() else (None, None)
     if fd is None:
         return False
     try:
         with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, key=key, counts=counts, frame_ids=ids, scene_names=scenes, **arrays)
+            np.savez(fh, key=key, counts=counts, frame_ids=ids, scene_names=scenes, corrupt_example=example, **arrays)
         os.replace(tmp, run_dir / SIDECAR_FILE)
         return True
     except OSError:
@@ -313,7 +321,9 @@ def read_sidecar(run_dir: str | os.PathLike[str], key: np.ndarray | None) -> Raw
                 if value.shape != shape or value.dtype != np.dtype(_Columns.DTYPES.get(name, np.float64)):
                     return None
                 columns[name] = value
-            raw = RawColumns(_split_names(z["frame_ids"], n), columns, _split_names(z["scene_names"], n_scenes), corrupt, bool(truncated))
+            example = z["corrupt_example"].tobytes().decode("utf-8", "surrogatepass") or None
+            raw = RawColumns(_split_names(z["frame_ids"], n), columns, _split_names(z["scene_names"], n_scenes), corrupt, bool(truncated),
+                             example)
         if n and (columns["scene"].min() < 0 or columns["scene"].max() >= n_scenes):
             return None
         return raw
@@ -346,7 +356,7 @@ def _read_records(run_dir: Path, parse: ParseDefinition | None) -> RawColumns:
                 columns.add(record)
     except OSError as exc:
         raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
-    return columns.finish(len(counts.corrupt_lines), counts.truncated_tail)
+    return columns.finish(len(counts.corrupt_lines), counts.truncated_tail, counts.corrupt_example)
 
 
 def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None,
@@ -473,6 +483,7 @@ def _assemble(info: RunInfo, raw: RawColumns, *, details: bool, definition: Pars
         history_actions=take(col("history")) if details else None,
         actions=take(actions) if details else None,
         corrupt_lines=raw.corrupt_lines,
+        corrupt_example=raw.corrupt_example,
         truncated_tail=raw.truncated_tail,
         duplicates=duplicates,
         bad_records=bad,
@@ -498,9 +509,11 @@ def _warnings(data: RunData) -> list[str]:
     if data.truncated_tail:
         out.append(f"{where}: ignored a truncated last line (the run was interrupted)")
     if data.corrupt_lines:
-        out.append(f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl")
+        out.append(f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl"
+                   + (f" ({data.corrupt_example})" if data.corrupt_example else ""))
     if data.bad_records:
-        out.append(f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions)")
+        out.append(f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions: 6 pairs of "
+                   f"finite numbers within {MAX_POSITION_M:g} m)")
     if data.caught_implausible:
         lim = data.plausibility
         out.append(

@@ -10,11 +10,146 @@ from __future__ import annotations
 
 import gc
 import json
+import numbers
 from collections.abc import Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any
 
 MAX_NUMBER_DIGITS = 18  # an integer token longer than this (beyond 10^18) is no count, index or coordinate
+
+# Bounds on a record's numbers (docs/run.md, "Limits"). A value beyond them is no measurement: the writers record it as
+# unknown (None, :func:`bounded_values`), the readers skip a line holding one (:func:`record_problem`).
+MAX_TOKENS = 10**9  # tokens of one call, and of a frame's calls together (a whole number 0..10^9)
+MAX_SECONDS = 2_592_000.0  # seconds of one call, and of one frame: 30 days (a batched frame waits for 3 waves of
+                           # batches of up to 24 h each, and their resubmissions)
+MAX_COST_CENTS = 1e9  # cents of one call, and of a frame's calls together (10 million dollars)
+MAX_POSITION_M = 1e5  # |coordinate| of a ground-truth position, metres (100 km from the ego vehicle)
+KNOWN_STATUSES = ("ok", "corrected", "failed")
+
+TOKEN_FIELDS = ("input_tokens", "output_tokens", "reasoning_tokens", "cached_input_tokens", "cache_write_tokens")
+SECONDS_FIELDS = ("seconds", "call_seconds")
+COST_FIELDS = ("cost_cents",)
+VALUE_BOUNDS: dict[str, float] = {**dict.fromkeys(TOKEN_FIELDS, MAX_TOKENS), **dict.fromkeys(SECONDS_FIELDS, MAX_SECONDS),
+                                  **dict.fromkeys(COST_FIELDS, MAX_COST_CENTS)}
+_NUMBER_TYPES = (int, float)
+
+
+def token_count(value: Any) -> int | None:
+    """``value`` as a token count (a whole number 0..:data:`MAX_TOKENS`; ``12.0`` reads as 12), else None."""
+    if type(value) is int:
+        return value if 0 <= value <= MAX_TOKENS else None
+    if type(value) is float and value.is_integer() and 0 <= value <= MAX_TOKENS:
+        return int(value)
+    return None
+
+
+def in_bounds(value: Any, bound: float) -> bool:
+    """Whether ``value`` is a number (not a bool; a NumPy scalar is one) in 0..``bound`` (so finite)."""
+    if type(value) in _NUMBER_TYPES:
+        return 0 <= value <= bound
+    return isinstance(value, numbers.Real) and not isinstance(value, bool) and bool(0 <= value <= bound)
+
+
+def value_problem(name: str, value: Any) -> str | None:
+    """Why ``value`` cannot be the record field ``name`` (a count, time or cost: None or a number within its bound), else None."""
+    if value is None:
+        return None
+    bound = VALUE_BOUNDS[name]
+    if in_bounds(value, bound):
+        return None
+    if isinstance(value, numbers.Real) and not isinstance(value, bool):
+        return f"{name} = {_shown(value)} is outside 0..{bound:g}"
+    return f"{name} is {type(value).__name__} {_shown(value)}, expected a number or null"
+
+
+def _shown(value: Any) -> str:
+    try:
+        text = repr(value)
+    except (ValueError, RecursionError):  # an int of over 4,300 digits, or nested beyond the stack
+        return f"a {type(value).__name__} too large to show"
+    return text if len(text) <= 40 else text[:39] + "…"
+
+
+def _bounded_fields(values: Mapping[str, Any], where: str, problems: list[str] | None) -> dict[str, Any] | None:
+    """A copy of ``values`` with each count/time/cost out of kind or range as None, or None when every one is fine."""
+    out = None
+    for name in VALUE_BOUNDS:
+        value = values.get(name)
+        if value is not None and not in_bounds(value, VALUE_BOUNDS[name]):
+            if out is None:
+                out = dict(values)
+            out[name] = None
+            if problems is not None:
+                problems.append(f"{where}{value_problem(name, value)}")
+    return out
+
+
+def bounded_values(record: Mapping[str, Any], problems: list[str] | None = None) -> Mapping[str, Any]:
+    """``record`` with every token count, time and cost that is not a number within its bound (:data:`VALUE_BOUNDS`) as
+    None (unknown) — at the top, in each attempt and in each attempt's calls; each replacement is described in ``problems``.
+
+    The record itself when nothing needed replacing (the common case: no copy), else a copy (the input is never changed).
+    """
+    out = _bounded_fields(record, "", problems)
+    attempts = record.get("attempts")
+    if type(attempts) is list:
+        new_attempts = None
+        for i, attempt in enumerate(attempts):
+            if not isinstance(attempt, Mapping):
+                continue
+            fixed = _bounded_fields(attempt, f"attempts[{i}].", problems)
+            calls = attempt.get("calls")
+            if type(calls) is list:
+                new_calls = None
+                for j, call in enumerate(calls):
+                    if isinstance(call, Mapping):
+                        fixed_call = _bounded_fields(call, f"attempts[{i}].calls[{j}].", problems)
+                        if fixed_call is not None:
+                            new_calls = new_calls or list(calls)
+                            new_calls[j] = fixed_call
+                if new_calls is not None:
+                    fixed = fixed if fixed is not None else dict(attempt)
+                    fixed["calls"] = new_calls
+            if fixed is not None:
+                new_attempts = new_attempts or list(attempts)
+                new_attempts[i] = fixed
+        if new_attempts is not None:
+            out = out if out is not None else dict(record)
+            out["attempts"] = new_attempts
+    return record if out is None else out
+
+
+def record_problem(record: Mapping[str, Any]) -> str | None:
+    """Why a decoded line of ``frames.jsonl`` is no usable record (the line is then skipped, named in a warning), else None.
+
+    Checked: ``frame_id`` a string; ``status`` and ``first_status`` null or one of :data:`KNOWN_STATUSES`; ``failure``
+    null or a string; each attempt's ``status`` null or a string; the frame's token counts, times and cost null or
+    numbers within :data:`VALUE_BOUNDS`. (Ground-truth positions beyond :data:`MAX_POSITION_M` make the record one
+    without usable ground truth, judged with the columns: :mod:`lightemma.evaluation.loading`.)
+    """
+    if not isinstance(record, dict):
+        return f"is {type(record).__name__}, expected an object"
+    if not isinstance(record.get("frame_id"), str):
+        return "has no frame_id string"
+    for key in ("status", "first_status"):
+        value = record.get(key)
+        if value is not None and (type(value) is not str or value not in KNOWN_STATUSES):
+            return f"{key} is {_shown(value)}, expected one of {', '.join(KNOWN_STATUSES)} or null"
+    failure = record.get("failure")
+    if failure is not None and type(failure) is not str:
+        return f"failure is {type(failure).__name__} {_shown(failure)}, expected a string or null"
+    for name in VALUE_BOUNDS:
+        value = record.get(name)
+        if value is not None and not in_bounds(value, VALUE_BOUNDS[name]):
+            return value_problem(name, value)
+    attempts = record.get("attempts")
+    if type(attempts) is list:
+        for i, attempt in enumerate(attempts):
+            if isinstance(attempt, Mapping):
+                status = attempt.get("status")
+                if status is not None and type(status) is not str:
+                    return f"attempts[{i}].status is {type(status).__name__} {_shown(status)}, expected a string or null"
+    return None
 
 
 def loads_bounded(data: bytes | str) -> Any:

@@ -28,7 +28,7 @@ from typing import Any
 
 from lightemma._text import unicode_clean, without_lone_surrogates
 from lightemma.errors import UserError
-from lightemma.runs.records import loads_bounded
+from lightemma.runs.records import MAX_SECONDS, in_bounds, loads_bounded, token_count
 
 SOURCE_FORMAT = "lightemma-reference-results"
 LINE_WIDTH = 80  # the reference splits long texts into lines of at most this many characters
@@ -339,11 +339,8 @@ def _short(value: Any, limit: int = 60) -> str:
 
 
 def _count(value: Any) -> int | None:
-    if type(value) is int and value >= 0:
-        return value
-    if type(value) is float and value.is_integer() and value >= 0:
-        return int(value)
-    return None
+    """A token count: a whole number 0..MAX_TOKENS (10^9 per call; 1e308 is no count), else None (unknown)."""
+    return token_count(value)
 
 
 def _stage_calls(frame: Mapping[str, Any], soft: list[str]) -> list[StageCall]:
@@ -364,9 +361,10 @@ def _stage_calls(frame: Mapping[str, Any], soft: list[str]) -> list[StageCall]:
         inp = _count(usage.get("input")) if isinstance(usage, dict) else None
         out = _count(usage.get("output")) if isinstance(usage, dict) else None
         if tokens is not None and (inp is None or out is None):
-            soft.append(f"token_usage.{prompt_key} unreadable")
+            soft.append(f"token_usage.{prompt_key} unreadable" if not isinstance(usage, dict) else
+                        f"token_usage.{prompt_key} = {_short(usage)} unreadable (a count is a whole number 0..10^9)")
         seconds = times.get(prompt_key) if isinstance(times, dict) else None
-        if seconds is not None and not (_is_number(seconds) and seconds >= 0):
+        if seconds is not None and not in_bounds(seconds, MAX_SECONDS):  # finite, 0..a day per call
             soft.append(f"time_usage.{prompt_key} = {_short(seconds)} unreadable")
             seconds = None
         elif times is not None and seconds is None:

@@ -31,7 +31,7 @@ import secrets
 import shutil
 import tempfile
 import threading
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -41,7 +41,7 @@ import numpy as np
 import orjson
 
 from lightemma.errors import RunStoreError, os_error_line
-from lightemma.runs.records import loads_bounded
+from lightemma.runs.records import MAX_NUMBER_DIGITS, bounded_values, loads_bounded, record_problem
 
 MANIFEST_FILE = "manifest.json"
 FRAMES_FILE = "frames.jsonl"
@@ -62,33 +62,52 @@ def _to_jsonable(value: Any) -> Any:
     raise TypeError(f"object of type {type(value).__name__} is not JSON serializable")
 
 
-def _sanitize(value: Any) -> Any:
-    """Plain lists and numbers for NumPy arrays and scalars, ``None`` for non-finite floats: strict JSON."""
+_MAX_INT = 10**MAX_NUMBER_DIGITS - 1  # the largest integer the readers take (records.loads_bounded)
+
+
+def _sanitize(value: Any, dropped: list[int] | None = None) -> Any:
+    """Plain lists and numbers for NumPy arrays and scalars, ``None`` for non-finite floats: strict JSON.
+
+    With ``dropped`` (a record line), integers of more than :data:`~lightemma.runs.records.MAX_NUMBER_DIGITS` digits,
+    which the readers refuse, become ``None`` too, their digit counts appended to ``dropped``.
+    """
     if isinstance(value, float):
         return value if math.isfinite(value) else None
+    if dropped is not None and type(value) is int and not -_MAX_INT <= value <= _MAX_INT:
+        dropped.append(len(str(abs(value))) if abs(value) < 10**4000 else 4000)
+        return None
     if isinstance(value, dict):
-        return {k: _sanitize(v) for k, v in value.items()}
+        return {k: _sanitize(v, dropped) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
-        return [_sanitize(v) for v in value]
+        return [_sanitize(v, dropped) for v in value]
     if isinstance(value, np.ndarray):
-        return _sanitize(value.tolist())
+        return _sanitize(value.tolist(), dropped)
     if isinstance(value, np.generic):
-        return _sanitize(value.item())
+        return _sanitize(value.item(), dropped)
     return value
 
 
-def encode_line(record: Mapping[str, Any]) -> bytes:
+def encode_line(record: Mapping[str, Any], problems: list[str] | None = None) -> bytes:
     """One record as one line of strict JSON in UTF-8 (NaN/inf become null), newline-terminated.
+
+    Never a line the readers refuse (:func:`iter_records`): token counts, times and costs that are not numbers within
+    their bounds (:data:`lightemma.runs.records.VALUE_BOUNDS`) and integers of more than 18 digits anywhere are
+    written as null (unknown); each replacement is described in ``problems`` when given.
 
     Through orjson: a record is mostly numbers and small containers, whose encoding costs the
     standard library ~5× more (what an import of reference results spends its time on). What orjson
-    refuses — an integer beyond 64 bits, a key that is not a string, a lone surrogate — is encoded by
-    ``json`` instead (in ASCII escapes), with the same meaning.
+    refuses — an integer beyond 53 bits (``OPT_STRICT_INTEGER``), a key that is not a string, a lone surrogate —
+    is encoded by ``json`` instead (in ASCII escapes), with the same meaning.
     """
+    record = bounded_values(record, problems)
     try:
-        return orjson.dumps(record, default=_to_jsonable, option=orjson.OPT_APPEND_NEWLINE)
+        return orjson.dumps(record, default=_to_jsonable, option=orjson.OPT_APPEND_NEWLINE | orjson.OPT_STRICT_INTEGER)
     except orjson.JSONEncodeError:  # ASCII escapes: a lone surrogate (from a reference file's "\ud83d") reads back as it was
-        text = json.dumps(_sanitize(record), default=_to_jsonable, allow_nan=False, ensure_ascii=True)
+        dropped: list[int] = []
+        clean = _sanitize(record, dropped)
+        if problems is not None and dropped:
+            problems.append(f"{len(dropped)} integer(s) of more than {MAX_NUMBER_DIGITS} digits (up to {max(dropped)})")
+        text = json.dumps(clean, default=_to_jsonable, allow_nan=False, ensure_ascii=True)
         return text.encode("ascii") + b"\n"
 
 
@@ -185,13 +204,34 @@ def write_text_atomic(path: str | os.PathLike[str], text: str) -> None:
 def read_frame_ids(run_dir: str | os.PathLike[str]) -> list[str] | None:
     """The run's frame set from ``frame_ids.txt``, or None for runs written without one."""
     path = Path(run_dir) / FRAME_IDS_FILE
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
+    if not path.exists() and not path.is_symlink():
         return None
+    text = read_small_text(path, MAX_SMALL_FILE_BYTES)
+    return [line for line in text.splitlines() if line]
+
+
+#: the largest manifest.json or frame_ids.txt read (a run of a million frames has a frame_ids.txt of ~60 MB)
+MAX_SMALL_FILE_BYTES = 256 * 1024 * 1024
+
+
+def read_small_text(path: Path, limit: int) -> str:
+    """The UTF-8 text of a regular file of at most ``limit`` bytes, or a one-line :class:`RunStoreError`: a FIFO, a
+    device (a link to ``/dev/zero``) or a larger file is never read (it would hang or fill the memory)."""
+    import stat
+
+    try:
+        with open(path, "rb", opener=lambda p, flags: os.open(p, flags | getattr(os, "O_NONBLOCK", 0))) as handle:
+            info = os.fstat(handle.fileno())
+            if not stat.S_ISREG(info.st_mode):
+                raise RunStoreError(f"{path} is not a regular file")
+            if info.st_size > limit:
+                raise RunStoreError(f"{path} is {info.st_size:,} bytes, over the {limit:,} a run directory's file may be")
+            data = handle.read(limit + 1)
+        if len(data) > limit:
+            raise RunStoreError(f"{path} is over the {limit:,} bytes a run directory's file may be")
+        return data.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         raise RunStoreError(f"{path} is unreadable: {exc}") from None
-    return [line for line in text.splitlines() if line]
 
 
 class RunLock:
@@ -258,9 +298,10 @@ def read_manifest(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
     if not path.is_file():
         raise RunStoreError(f"{run_dir} is not a lightemma run directory: no {MANIFEST_FILE}")
     try:
-        manifest = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise RunStoreError(f"{path} is unreadable: {exc}") from None
+        manifest = json.loads(read_small_text(path, MAX_SMALL_FILE_BYTES))
+    except (json.JSONDecodeError, RecursionError) as exc:
+        why = "nested too deeply" if isinstance(exc, RecursionError) else exc
+        raise RunStoreError(f"{path} is unreadable: {why}") from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
         raise RunStoreError(f"{path} is not a lightemma run manifest (format {manifest.get('format') if isinstance(manifest, dict) else None!r}, expected {FORMAT!r})")
     return manifest
@@ -291,6 +332,7 @@ class RunContents:
     corrupt_lines: list[int] = field(default_factory=list)
     truncated_tail: bool = False
     duplicates: int = 0
+    corrupt_example: str | None = None  # why the first corrupt line was skipped ("line 7: status is ['ok'], …")
 
     @property
     def complete(self) -> bool:
@@ -303,7 +345,8 @@ class RunContents:
             out.append(f"{self.run_dir}: ignored a truncated last line (the run was interrupted)")
         if self.corrupt_lines:
             shown = ", ".join(map(str, self.corrupt_lines[:10]))
-            out.append(f"{self.run_dir}: skipped {len(self.corrupt_lines)} corrupt line(s) of {FRAMES_FILE} (line {shown}{', …' if len(self.corrupt_lines) > 10 else ''})")
+            out.append(f"{self.run_dir}: skipped {len(self.corrupt_lines)} corrupt line(s) of {FRAMES_FILE} (line {shown}{', …' if len(self.corrupt_lines) > 10 else ''})"
+                       + (f"; {self.corrupt_example}" if self.corrupt_example else ""))
         if not self.complete:
             out.append(f"{self.run_dir}: run not finished; using the {len(self.records)} frame(s) done so far")
         return out
@@ -312,8 +355,10 @@ class RunContents:
 def iter_records(run_dir: str | os.PathLike[str], *, counts: RunContents | None = None) -> Iterator[dict[str, Any]]:
     """Stream the records of ``frames.jsonl`` in file order (duplicates included), skipping bad lines.
 
-    Bad lines are counted into ``counts`` when given. Memory stays flat in the
-    number of frames.
+    Bad lines are counted into ``counts`` when given (the first one's reason in ``counts.corrupt_example``): a line
+    that is not a JSON object with a ``frame_id`` string, and one whose values are of the wrong kind or out of bounds
+    (:func:`lightemma.runs.records.record_problem`: a status that is a list, seconds of -1e308, …). Memory stays
+    flat in the number of frames.
     """
     path = Path(run_dir) / FRAMES_FILE
     if not path.is_file():
@@ -327,11 +372,14 @@ def iter_records(run_dir: str | os.PathLike[str], *, counts: RunContents | None 
             continue
         try:
             record = loads_bounded(raw)  # a line nested too deep or holding a 400-digit number is corrupt, not fatal
-        except ValueError:  # JSONDecodeError and UnicodeDecodeError included
-            record = None
-        if not isinstance(record, dict) or not isinstance(record.get("frame_id"), str):
+            problem = record_problem(record)
+        except ValueError as exc:  # JSONDecodeError and UnicodeDecodeError included
+            problem = f"not usable JSON ({str(exc)[:120]})"
+        if problem is not None:
             if counts is not None:
                 counts.corrupt_lines.append(number)
+                if counts.corrupt_example is None:
+                    counts.corrupt_example = f"line {number}: {problem}"
             continue
         yield record
 
@@ -369,9 +417,11 @@ class RunWriter:
     the frame it belonged to was not finished and will be redone).
     """
 
-    def __init__(self, run_dir: str | os.PathLike[str], *, fsync: bool = False) -> None:
+    def __init__(self, run_dir: str | os.PathLike[str], *, fsync: bool = False, log: Callable[[str], None] | None = None) -> None:
         self.path = Path(run_dir) / FRAMES_FILE
         self._fsync = fsync
+        self.log = log  # where the one warning about values recorded as unknown goes (else stderr)
+        self.unknown_values = 0  # records written with a value out of kind or range replaced by null
         self._lock = threading.Lock()
         self.repaired_bytes = self._repair_tail()
         self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
@@ -403,8 +453,15 @@ class RunWriter:
             return size - keep
 
     def append(self, record: Mapping[str, Any]) -> None:
-        """Write one record as one complete line (a single ``write`` call) and flush it."""
-        data = encode_line(record)
+        """Write one record as one complete line (a single ``write`` call) and flush it.
+
+        A token count, time or cost out of kind or range is written as null (:func:`encode_line`); the first such
+        record of this writer is named in one warning line (``log``, else stderr), the rest are counted in ``unknown_values``.
+        """
+        problems: list[str] = []
+        data = encode_line(record, problems)
+        if problems:
+            self._warn_unknown(record, problems)
         with self._lock:
             view = memoryview(data)
             while view:
@@ -412,6 +469,20 @@ class RunWriter:
                 view = view[written:]
             if self._fsync:
                 os.fsync(self._fd)
+
+    def _warn_unknown(self, record: Mapping[str, Any], problems: list[str]) -> None:
+        with self._lock:
+            self.unknown_values += 1
+            if self.unknown_values > 1:
+                return
+        line = (f"warning: {self.path}: frame {record.get('frame_id')!r}: {'; '.join(problems[:3])}{'; …' if len(problems) > 3 else ''} "
+                "— recorded as unknown (null); later records with such values are not named")
+        if self.log is not None:
+            self.log(line)
+        else:
+            import sys
+
+            print(f"lightemma: {line}", file=sys.stderr, flush=True)
 
     def close(self) -> None:
         with self._lock:
