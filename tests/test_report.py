@@ -133,7 +133,8 @@ def test_requested_frames_are_drawn_and_unknown_ones_refused(tmp_path, capsys):
     assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--frame", "scene-0000/9", "--top", "0", "--convention", "lightemma"]) == 0
     text = (tmp_path / "rep" / "index.md").read_text()
     assert re.search(r"\*\*requested frame[^*]*\*\* — frame `scene-0000/9`", text)
-    assert (tmp_path / "rep" / "figures" / "frames" / "frame_scene-0000_9_grid.png").is_file()
+    (grid,) = (tmp_path / "rep" / "figures" / "frames").glob("frame_scene-0000_9_*grid.png")  # readable, then a hash of the id
+    assert re.fullmatch(r"frame_scene-0000_9_[0-9a-f]{10}_grid\.png", grid.name)
     capsys.readouterr()
     assert main(["report", str(runs), "--out", str(tmp_path / "rep2"), "--frame", "nope/1"]) == 2
     assert "frame(s) not in any run: nope/1" in capsys.readouterr().err

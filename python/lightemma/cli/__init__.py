@@ -16,6 +16,7 @@ import argparse
 import importlib
 import os
 import sys
+import warnings
 from collections.abc import Sequence
 
 # subcommand modules, in the order `lightemma --help` lists them
@@ -62,8 +63,13 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    from lightemma._text import printable
     from lightemma.errors import UserError
 
+    # litellm's clients leave coroutines of calls a stop cancelled unawaited; Python warns of each as it collects them,
+    # three lines under the stop's one line. They are litellm's (its class names), said of calls already cancelled.
+    warnings.filterwarnings("ignore", category=RuntimeWarning,
+                            message=r"coroutine '(OpenAI|Anthropic|Gemini|Vertex|BaseLLM|LiteLLM|AsyncHTTPHandler)\w*\.\w+' was never awaited")
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:
@@ -73,13 +79,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         return int(args.func(args) or 0)
     except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM / SIGHUP during a run (handled alike)
         signum = getattr(exc, "signum", 2)
-        print(f"lightemma: interrupted{' by ' + exc.name if hasattr(exc, 'name') else ''}", file=sys.stderr)
+        if not getattr(exc, "reported", False):  # a run says it in its own line, with the resume command
+            print(f"lightemma: interrupted{' by ' + exc.name if hasattr(exc, 'name') else ''}", file=sys.stderr)
         return 128 + signum
     except (UserError, ValueError) as exc:
         if os.environ.get("LIGHTEMMA_DEBUG"):
             raise
         message = exc.for_cli() if isinstance(exc, UserError) else str(exc)
-        print(f"lightemma {args.command}: error: {' '.join(message.split())}", file=sys.stderr)
+        print(f"lightemma {args.command}: error: {printable(' '.join(message.split()))}", file=sys.stderr)
         return 2
     except OSError as exc:  # disk full, permissions, … met where no caller gave it context
         if os.environ.get("LIGHTEMMA_DEBUG"):
@@ -87,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         from lightemma.errors import os_error_line
 
         message = os_error_line(exc, "read or write") if exc.errno else str(exc)
-        print(f"lightemma {args.command}: error: {' '.join(message.split())}", file=sys.stderr)
+        print(f"lightemma {args.command}: error: {printable(' '.join(message.split()))}", file=sys.stderr)
         return 2
 
 

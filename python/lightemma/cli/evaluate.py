@@ -90,6 +90,7 @@ def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, impor
 
 
 def run(args: argparse.Namespace) -> int:
+    from lightemma._text import printable
     from lightemma.evaluation import evaluate_runs, evaluation_tables
     from lightemma.report.tables import render
 
@@ -100,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         resampling=resampling_of(args), pairwise=args.pairwise, **safety_options(args),
     )
     for warning in evaluation.warnings:
-        print(f"lightemma evaluate: warning: {warning}", file=sys.stderr)
+        print(f"lightemma evaluate: warning: {printable(warning)}", file=sys.stderr)  # names from outside: one line
     tables = evaluation_tables(evaluation, with_paper=args.with_paper)
     extra = {"common": evaluation.common, "n_common": evaluation.n_common, "parse": parse.to_dict() if parse else "each run's own",
              "keep_implausible": args.keep_implausible,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import signal
 import sys
 from pathlib import Path
 
@@ -30,15 +31,24 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 
 def run(args: argparse.Namespace) -> int:
+    from lightemma._text import printable
     from lightemma.runs.importer import default_jobs, import_reference
     from lightemma.runs.reference import find_model_folders
 
     def warn(line: str) -> None:
-        print(f"lightemma import: warning: {line}", file=sys.stderr, flush=True)
+        print(f"lightemma import: warning: {printable(line)}", file=sys.stderr, flush=True)  # one line, whatever the names
 
     jobs = args.jobs if args.jobs is not None else default_jobs(sum(len(find_model_folders(s)) for s in args.sources))
-    results = import_reference(args.sources, args.output, dataset_kind=args.dataset_kind, warn=warn,
-                               progress=not args.quiet and sys.stderr.isatty(), jobs=jobs)
+    try:
+        results = import_reference(args.sources, args.output, dataset_kind=args.dataset_kind, warn=warn,
+                                   progress=not args.quiet and sys.stderr.isatty(), jobs=jobs)
+    except KeyboardInterrupt as exc:  # SIGINT, SIGTERM or SIGHUP: the workers are stopped, no partial folder is left
+        if not hasattr(exc, "runs_total"):
+            raise
+        name, signum = getattr(exc, "name", "SIGINT"), getattr(exc, "signum", signal.SIGINT)
+        print(f"lightemma import: interrupted by {name}; {exc.runs_done} of {exc.runs_total} model folder(s) imported, "
+              "run the same command again to import the rest", file=sys.stderr, flush=True)
+        return 128 + int(signum)
     for result in results:
-        print(result.describe())
+        print(printable(result.describe()))
     return 1 if any(r.outcome == "nothing to import" for r in results) else 0

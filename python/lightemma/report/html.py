@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from lightemma._text import printable
 from lightemma.evaluation.loading import RunData
 from lightemma.evaluation.outcomes import FAILURES
 from lightemma.evaluation.scenarios import TAGS, tag_frames
@@ -182,8 +183,8 @@ def table_html(table: Table, links: Mapping[str, str]) -> str:
             tds.append(f"<td{attr}>{text}</td>")
         cls = f' class="{row["source"]}"' if row.get("source") in ("paper", "diff") else ""
         body.append(f"<tr{cls}>" + "".join(tds) + "</tr>")
-    notes = "".join(f'<p class="note">{html.escape(n)}</p>' for n in table.notes)
-    return (f'<section class="table" id="table-{html.escape(table.name)}"><h3>{html.escape(table.title)}</h3>'
+    notes = "".join(f'<p class="note">{html.escape(printable(n))}</p>' for n in table.notes)
+    return (f'<section class="table" id="table-{html.escape(table.name)}"><h3>{html.escape(printable(table.title))}</h3>'
             f'<div class="scroll"><table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>{notes}</section>')
 
 

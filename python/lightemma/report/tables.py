@@ -16,6 +16,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from lightemma._text import printable
+
 FORMATS = ("md", "csv", "latex", "json")
 
 
@@ -139,7 +141,7 @@ class Table:
     notes: list[str] = field(default_factory=list)  # lines printed under the table (Markdown) or as comments
 
     def headers(self) -> list[str]:
-        return [c.header + self.flags.get(c.header, "") for c in self.columns]
+        return [printable(c.header + self.flags.get(c.header, "")) for c in self.columns]  # a header can name a model
 
 
 def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
@@ -168,18 +170,23 @@ def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
                 cell += f" ({row['note']})"
             if col.key in marked:
                 cell += "†"
-            cells.append(cell)
+            cells.append(printable(cell))  # names from outside (model, scene, run): one line, no control character
         out.append(cells)
     return out
 
 
+def markdown_cell(text: Any) -> str:
+    """``text`` as one Markdown table cell: one line (:func:`~lightemma._text.printable`), ``|`` escaped."""
+    return printable(text).replace("|", "\\|")
+
+
 def to_markdown(table: Table) -> str:
-    """A GitHub-flavoured Markdown table under a ``###`` title."""
-    headers = table.headers()
-    lines = [f"### {table.title}", "", "| " + " | ".join(headers) + " |", "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
-    lines += ["| " + " | ".join(cells) + " |" for cells in _cells(table)]
+    """A GitHub-flavoured Markdown table under a ``###`` title; every cell one line (:func:`markdown_cell`)."""
+    headers = [markdown_cell(h) for h in table.headers()]
+    lines = [f"### {printable(table.title)}", "", "| " + " | ".join(headers) + " |", "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
+    lines += ["| " + " | ".join(markdown_cell(c) for c in cells) + " |" for cells in _cells(table)]
     if table.notes:
-        lines += [""] + table.notes
+        lines += [""] + [printable(note) for note in table.notes]
     return "\n".join(lines) + "\n"
 
 
@@ -207,7 +214,7 @@ def _latex_escape(text: str) -> str:
 def to_latex(table: Table) -> str:
     """A ``tabular`` in the style of the paper (``\\hline`` rules, model column left)."""
     spec = "l" + "c" * (len(table.columns) - 1)
-    lines = [f"% {table.title}", *(f"% {note}" for note in table.notes), f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(h) for h in table.headers()) + r" \\", r"\hline"]
+    lines = [f"% {printable(table.title)}", *(f"% {printable(note)}" for note in table.notes), f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(h) for h in table.headers()) + r" \\", r"\hline"]
     lines += [" & ".join(_latex_escape(cell) for cell in cells) + r" \\" for cells in _cells(table)]
     lines += [r"\hline", r"\end{tabular}"]
     return "\n".join(lines) + "\n"
@@ -232,7 +239,7 @@ def render(tables: Sequence[Table], fmt: str, *, extra: dict[str, Any] | None = 
     """Several tables in one format (``md``, ``csv``, ``latex``, ``json``)."""
     if fmt == "json":
         return to_json(tables, extra)
-    one = {"md": to_markdown, "csv": lambda t: f"# {t.title}\n" + to_csv(t), "latex": to_latex}.get(fmt)
+    one = {"md": to_markdown, "csv": lambda t: f"# {printable(t.title)}\n" + to_csv(t), "latex": to_latex}.get(fmt)
     if one is None:
         raise ValueError(f"unknown table format {fmt!r} (choose from {', '.join(FORMATS)})")
     return "\n".join(one(t) for t in tables)

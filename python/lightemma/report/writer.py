@@ -16,6 +16,7 @@ a figure or the frame picker (docs/statistics.md).
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import re
@@ -27,16 +28,28 @@ from typing import Any
 import numpy as np
 
 from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, expand_run_dirs, load_run, read_frame_records
+from lightemma._text import printable
 from lightemma.evaluation.core import unique_labels
 from lightemma.errors import UserError
 from lightemma.evaluation.stats import Resampling
 from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.runs.store import pid_alive
-from lightemma.report.tables import Column, Table, fixed, to_csv, to_latex, to_markdown
+from lightemma.report.tables import Column, Table, fixed, markdown_cell, to_csv, to_latex, to_markdown
+
+
+SLUG_MAX = 80  # characters of a name kept in a file name (a frame id from a reference file can be any length)
 
 
 def _slug(text: str) -> str:
-    return re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_") or "frame"
+    """A part of a file name from a name from outside (frame id, model label): letters, digits, ``.``, ``_``, ``-``
+    only, at most :data:`SLUG_MAX` of them, never starting with a dot (no ``..``, no hidden file), so the file stays in
+    its folder whatever the name. Where that changed the name, 10 hex digits of its SHA-256 follow, so two names
+    (``a/b``, ``a_b``) never share a file."""
+    slug = re.sub(r"[^A-Za-z0-9._-]+", "_", text).strip("_.")[:SLUG_MAX].strip("_.")
+    if slug and slug == text:
+        return slug
+    digest = hashlib.sha256(text.encode("utf-8", "surrogatepass")).hexdigest()[:10]
+    return f"{slug}_{digest}" if slug else f"frame_{digest}"
 
 
 class _Writer:
@@ -66,6 +79,8 @@ class _Writer:
 
     def figure(self, fig: Any, stem: str, caption: str) -> Path:
         from lightemma.report.figures import save_figure
+
+        caption = printable(caption)  # it names frames and models: one line in index.md and index.html
 
         paths = save_figure(fig, self.out / "figures" / stem, formats=("png", "svg") if self.svg else ("png",))
         png = paths[0]
@@ -116,7 +131,7 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
         p = r["p_holm"]
         detail = f"{r['change']:+.3f} m" + (f" [{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "") + ("" if p is None else f", p (Holm) {p:.3f}" if p >= 0.001 else ", p (Holm) < 0.001")
         by_family.setdefault(r["family"], []).append(f"{r['model']} is **{r['verdict']}** than {r['predecessor']} ({detail})" if r["verdict"] != "not distinguishable" else f"{r['model']} is **not distinguishable** from {r['predecessor']} ({detail})")
-    return [f"- **{family}**: " + "; ".join(parts) + "." for family, parts in by_family.items()]
+    return [printable(f"- **{family}**: " + "; ".join(parts) + ".") for family, parts in by_family.items()]
 
 
 def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str], *,
@@ -146,7 +161,7 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
             errors[label] = float(displacement_errors(run.trajectory[row], gt).mean())
         if gt is None:
             continue
-        w.lines.append(f"**{caption}** — frame `{fid}`")
+        w.lines.append(printable(f"**{caption}** — frame `{fid}`"))
         w.lines.append("")
         w.figure(model_grid(gt, preds, camera=cameras.get(fid), title=f"{fid}: {caption}", errors=errors, colors=colors), f"frames/{kind}_{_slug(fid)}_grid", f"all models on {fid}")
         models = [lab for lab, run in zip(labels, runs) if lab in errors and run.info.family != "Baseline"] or list(errors)
@@ -505,14 +520,15 @@ def _write(
     w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
                 "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format | Inputs |",
                 "|---|---|---|---:|---|---|---|---|---|"]
-    w.lines += [f"| {m.label}{flags.get(m.label, '')} | {m.family} | `{m.run_dir}` | {m.frames_in_run} | {'yes' if m.complete else 'no'} | "
-                f"{m.integrator} | {m.chain} | {m.answer_format} | {m.inputs} |" for m in evaluation.models]
+    w.lines += ["| " + " | ".join(markdown_cell(c) for c in (m.label + flags.get(m.label, ""), m.family, f"`{m.run_dir}`", m.frames_in_run,
+                                                             "yes" if m.complete else "no", m.integrator, m.chain, m.answer_format, m.inputs)) + " |"
+                for m in evaluation.models]  # every cell one line: names from outside cannot split a row
     w.lines.append("")
     if evaluation.warnings:
-        w.lines += ["**Warnings**", ""] + [f"- {x}" for x in evaluation.warnings] + [""]
+        w.lines += ["**Warnings**", ""] + [f"- {printable(x)}" for x in evaluation.warnings] + [""]
 
     if flags:
-        w.lines += [f"**Fewer than half of the frames scored** for {', '.join(flags)}: their numbers describe only the frames they managed; every table flags them.", ""]
+        w.lines += [f"**Fewer than half of the frames scored** for {printable(', '.join(flags))}: their numbers describe only the frames they managed; every table flags them.", ""]
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:
@@ -565,7 +581,7 @@ def _write(
     if pictures and picks:
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
-        w.lines += [f"> {p}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
+        w.lines += [f"> {printable(p)}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
         _frame_pictures(w, runs, labels, picks, cameras, colors, shown={d["frame_id"]: d["models"] for d in spread}, progress=progress)
     if pictures and evaluation.safety is not None:
         _safety_views(w, runs, labels, evaluation.safety, colors)
@@ -584,7 +600,7 @@ def _write(
     steps.step("stage texts")
     all_ids = list(dict.fromkeys(fid for run in runs for fid in run.frame_ids))
     html_cameras = source.cameras(runs, all_ids, load=False, records=calibrations) if pictures else {}
-    intro = "".join(f'<p class="note">{html_escape.escape(x)}</p>' for x in [*evaluation.warnings, *dict.fromkeys(source.problems)])
+    intro = "".join(f'<p class="note">{html_escape.escape(printable(x))}</p>' for x in [*evaluation.warnings, *dict.fromkeys(source.problems)])
     write_html(out, title="lightemma report", intro_html=intro, tables=[_runs_table(evaluation, flags), *w.tables], figures=w.figures, runs=runs, labels=labels,
                colors=colors, texts=texts, cameras=html_cameras, progress=progress)
     steps.step("index.html")

@@ -31,7 +31,8 @@ import signal
 import sys
 import threading
 import tempfile
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -54,7 +55,7 @@ from lightemma.runs.reference import (
     iter_scene_files,
     read_regular_file,
 )
-from lightemma.runs.records import gc_paused, loads_bounded
+from lightemma.runs.records import bounded_values, gc_paused, loads_bounded
 from lightemma.runs.store import (
     FORMAT,
     FRAMES_FILE,
@@ -425,12 +426,19 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                 stamp = stamp or scene.timestamp
                 metadata_model = metadata_model or scene.metadata_model
                 lines = []
+                unknown_named = False
                 for record in _scene_records(scene, prices, warn, templates):
                     if record["frame_id"] in seen:
                         warn(f"{path}: frame {record['frame_id']} was already read from another file; frame skipped")
                         frames_skipped += 1
                         continue
                     seen.add(record["frame_id"])
+                    problems: list[str] = []
+                    record = bounded_values(record, problems)  # what frames.jsonl will hold, for the tally and the sidecar too
+                    if problems and not unknown_named:  # a frame's totals beyond the bounds (each call was within them)
+                        unknown_named = True
+                        warn(f"{path}: frame {record['frame_id']}: {'; '.join(problems[:3])}; recorded as unknown "
+                             "(later frames of this file with such values are not named)")
                     tally.add(record)
                     columns.add(record)
                     lines.append(encode_line(record))
@@ -514,6 +522,9 @@ def _die_with_parent(parent: int) -> None:
             pass
     if os.getppid() != parent:  # the parent died before the prctl took effect
         os._exit(1)
+    for name in ("SIGINT", "SIGHUP"):  # sent to the whole process group (Ctrl-C, a closed terminal): the parent stops
+        if hasattr(signal, name):  # the import, kills its workers and removes their partial folders (SIGTERM is left
+            signal.signal(getattr(signal, name), signal.SIG_IGN)  # as it is: a broken pool ends its workers with it)
 
     def watch() -> None:
         while os.getppid() == parent:
@@ -564,24 +575,127 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
         bar.clear()
         warn(line)
 
+    results: list[ImportResult] = []
+    workers: list[Any] = []  # the worker processes (jobs > 1), for the stop-signal handler and the cleanup
     try:
-        if jobs == 1 or len(folders) == 1:
-            return [import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1)) for f in folders]
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor
+        with _stop_signals(workers):
+            if jobs == 1 or len(folders) == 1:
+                for f in folders:  # a stop signal inside import_folder removes its partial folder there
+                    results.append(import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1)))
+                return results
+            import multiprocessing
+            from concurrent.futures import ProcessPoolExecutor
 
-        results = []
-        context = multiprocessing.get_context("spawn")  # no fork of a process with threads (the progress bar's)
-        with ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context, initializer=_die_with_parent,
-                                 initargs=(os.getpid(),)) as pool:
-            futures = [pool.submit(_import_quietly, f, os.fspath(output), dataset_kind) for f in folders]
-            for folder, future in zip(folders, futures):
-                result, warnings = future.result()
-                for line in warnings:
-                    say(line)
-                bar.update(len(folder.files))
-                results.append(result)
-        _stop_resource_tracker()
-        return results
+            context = multiprocessing.get_context("spawn")  # no fork of a process with threads (the progress bar's)
+            pool = ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context, initializer=_die_with_parent,
+                                       initargs=(os.getpid(),))
+            futures: list[Any] = []
+            try:
+                for f in folders:
+                    futures.append(pool.submit(_import_quietly, f, os.fspath(output), dataset_kind))
+                    workers[:] = _pool_processes(pool, workers)
+                for folder, future in zip(folders, futures):
+                    result, warnings = future.result()
+                    for line in warnings:
+                        say(line)
+                    bar.update(len(folder.files))
+                    results.append(result)
+            except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP: stop the workers now, before they write more runs
+                _stop_workers(pool, _pool_processes(pool, workers), futures, output)
+                results += [f.result()[0] for f in futures[len(results):] if f.done() and not f.cancelled() and f.exception() is None]
+                raise
+            finally:
+                pool.shutdown(wait=True)
+                _stop_resource_tracker()
+            return results
+    except KeyboardInterrupt as exc:  # the caller learns how far the import got (the CLI says so in one line)
+        exc.runs_done, exc.runs_total = len(results), len(folders)  # type: ignore[attr-defined]
+        raise
     finally:
         bar.close()
+
+
+def _pool_processes(pool: Any, known: Sequence[Any] = ()) -> list[Any]:
+    """The worker processes of ``pool`` (those in ``known`` too: the pool forgets them once it is broken)."""
+    found = {p.pid: p for p in known}
+    found.update({p.pid: p for p in list((getattr(pool, "_processes", None) or {}).values())})  # noqa: SLF001
+    return list(found.values())
+
+
+def _kill(processes: Iterable[Any]) -> None:
+    """SIGKILL each process (a worker dies at once, between two of its writes; its partial folder is left to remove)."""
+    for process in processes:
+        try:
+            process.kill()
+        except (OSError, ValueError, AttributeError):
+            pass
+
+
+def _stop_workers(pool: Any, processes: Sequence[Any], futures: Sequence[Any], output: str | os.PathLike[str]) -> None:
+    """An interrupted parallel import: cancel what has not started, kill the workers, wait for them, remove the
+    partial folders they were building (named after their pids), leave the runs already renamed into place."""
+    for future in futures:
+        future.cancel()
+    _kill(processes)
+    for process in processes:
+        try:
+            process.join(timeout=10)
+        except (OSError, ValueError, AssertionError):
+            pass
+    pool.shutdown(wait=True, cancel_futures=True)
+    remove_partials_of({p.pid for p in processes if p.pid is not None}, output)
+
+
+def remove_partials_of(pids: set[int], output: str | os.PathLike[str]) -> list[Path]:
+    """Remove the ``.ref-….partial`` folders under ``output/<model>/`` that the processes ``pids`` were building
+    (and a model folder that only held one). Returns the folders removed."""
+    removed: list[Path] = []
+    root = Path(output)
+    try:
+        model_dirs = [d for d in root.iterdir() if d.is_dir() and not d.is_symlink()]
+    except OSError:
+        return removed
+    for model_dir in model_dirs:
+        try:
+            entries = list(model_dir.iterdir())
+        except OSError:
+            continue
+        for entry in entries:
+            match = _PARTIAL.match(entry.name)
+            if match is None or int(match.group(1)) not in pids or entry.is_symlink() or not entry.is_dir():
+                continue
+            shutil.rmtree(entry, ignore_errors=True)
+            if not entry.exists():
+                removed.append(entry)
+                _remove_empty([model_dir])
+    return removed
+
+
+@contextmanager
+def _stop_signals(workers: Sequence[Any]) -> Iterator[None]:
+    """While an import runs: SIGINT, SIGTERM and SIGHUP stop it as ``lightemma run`` is stopped — an
+    :class:`~lightemma.pipeline.runner.Interrupted` is raised (the caller stops the workers and removes the partial
+    folders). A second signal while that is under way kills the workers and exits at once (status 128 + signal); the
+    next import removes what is left half-written. Nothing is changed outside the main thread."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    from lightemma.pipeline.runner import STOP_SIGNALS, Interrupted
+
+    received: list[int] = []
+
+    def handler(signum: int, frame: Any) -> None:
+        received.append(signum)
+        if len(received) > 1:
+            _kill(workers)
+            os.write(2, f"lightemma import: {signal.Signals(signum).name} again: exiting now; "
+                        "run the same command again to import the rest\n".encode())
+            os._exit(128 + signum)
+        raise Interrupted(signum)
+
+    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, old in previous.items():
+            signal.signal(sig, old)
