@@ -8,7 +8,6 @@ refuse; a line of frames.jsonl of the wrong kinds is named in a warning and skip
 from __future__ import annotations
 
 import json
-import shutil
 import sqlite3
 from pathlib import Path
 
