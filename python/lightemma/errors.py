@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import signal
 
 
 class UserError(Exception):
@@ -73,3 +74,16 @@ def os_error_line(exc: OSError, doing: str) -> str:
     reason = _OS_REASONS.get(exc.errno or 0) or exc.strerror or str(exc)
     where = f" {exc.filename}" if exc.filename else ""
     return f"cannot {doing}{where}: {reason}"
+
+
+class Interrupted(KeyboardInterrupt):
+    """A session stopped by SIGINT, SIGTERM or SIGHUP: all three are handled like Ctrl-C (``signum``, ``name``)."""
+
+    def __init__(self, signum: int) -> None:
+        self.signum = signum
+        self.name = signal.Signals(signum).name
+        super().__init__(self.name)
+
+
+#: the signals a run and an import stop on, as on Ctrl-C (what Slurm, Kubernetes and systemd send first)
+STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))

@@ -40,7 +40,15 @@ from typing import Any
 
 from lightemma._text import unicode_clean
 from lightemma.backends import Backend, ChatRequest, ChatResult, GenerationParams, backend_kind, create_backend
-from lightemma.errors import RunFatalError, RunStopped, RunStoreError, UserError, os_error_line
+from lightemma.errors import (  # Interrupted, STOP_SIGNALS: shared with the importer (which does not load this module)
+    STOP_SIGNALS,
+    Interrupted,
+    RunFatalError,
+    RunStopped,
+    RunStoreError,
+    UserError,
+    os_error_line,
+)
 from lightemma.frames.model import summary_line
 from lightemma.pipeline.chain import ChainPolicy, run_frame
 from lightemma.pipeline.progress import Progress
@@ -449,16 +457,6 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-class Interrupted(KeyboardInterrupt):
-    """A session stopped by SIGINT, SIGTERM or SIGHUP: all three are handled like Ctrl-C (``signum``, ``name``)."""
-
-    def __init__(self, signum: int) -> None:
-        self.signum = signum
-        self.name = signal.Signals(signum).name
-        super().__init__(self.name)
-
-
-STOP_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 @contextmanager

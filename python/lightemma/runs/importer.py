@@ -441,7 +441,7 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                              "(later frames of this file with such values are not named)")
                     tally.add(record)
                     columns.add(record)
-                    lines.append(encode_line(record))
+                    lines.append(encode_line(record, bounded=True))
                 if lines:
                     scenes.append(scene.scene_name)
                     fh.write(b"".join(lines))
@@ -674,13 +674,13 @@ def remove_partials_of(pids: set[int], output: str | os.PathLike[str]) -> list[P
 @contextmanager
 def _stop_signals(workers: Sequence[Any]) -> Iterator[None]:
     """While an import runs: SIGINT, SIGTERM and SIGHUP stop it as ``lightemma run`` is stopped — an
-    :class:`~lightemma.pipeline.runner.Interrupted` is raised (the caller stops the workers and removes the partial
+    :class:`~lightemma.errors.Interrupted` is raised (the caller stops the workers and removes the partial
     folders). A second signal while that is under way kills the workers and exits at once (status 128 + signal); the
     next import removes what is left half-written. Nothing is changed outside the main thread."""
     if threading.current_thread() is not threading.main_thread():
         yield
         return
-    from lightemma.pipeline.runner import STOP_SIGNALS, Interrupted
+    from lightemma.errors import STOP_SIGNALS, Interrupted
 
     received: list[int] = []
 

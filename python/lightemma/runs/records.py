@@ -32,6 +32,7 @@ COST_FIELDS = ("cost_cents",)
 VALUE_BOUNDS: dict[str, float] = {**dict.fromkeys(TOKEN_FIELDS, MAX_TOKENS), **dict.fromkeys(SECONDS_FIELDS, MAX_SECONDS),
                                   **dict.fromkeys(COST_FIELDS, MAX_COST_CENTS)}
 _NUMBER_TYPES = (int, float)
+_BOUND_ITEMS = tuple(VALUE_BOUNDS.items())
 
 
 def token_count(value: Any) -> int | None:
@@ -73,9 +74,11 @@ def _shown(value: Any) -> str:
 def _bounded_fields(values: Mapping[str, Any], where: str, problems: list[str] | None) -> dict[str, Any] | None:
     """A copy of ``values`` with each count/time/cost out of kind or range as None, or None when every one is fine."""
     out = None
-    for name in VALUE_BOUNDS:
+    for name, bound in _BOUND_ITEMS:
         value = values.get(name)
-        if value is not None and not in_bounds(value, VALUE_BOUNDS[name]):
+        if value is None or (type(value) in _NUMBER_TYPES and 0 <= value <= bound):  # the common case, inline
+            continue
+        if not in_bounds(value, bound):
             if out is None:
                 out = dict(values)
             out[name] = None

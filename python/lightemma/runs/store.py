@@ -87,7 +87,7 @@ def _sanitize(value: Any, dropped: list[int] | None = None) -> Any:
     return value
 
 
-def encode_line(record: Mapping[str, Any], problems: list[str] | None = None) -> bytes:
+def encode_line(record: Mapping[str, Any], problems: list[str] | None = None, *, bounded: bool = False) -> bytes:
     """One record as one line of strict JSON in UTF-8 (NaN/inf become null), newline-terminated.
 
     Never a line the readers refuse (:func:`iter_records`): token counts, times and costs that are not numbers within
@@ -97,9 +97,11 @@ def encode_line(record: Mapping[str, Any], problems: list[str] | None = None) ->
     Through orjson: a record is mostly numbers and small containers, whose encoding costs the
     standard library ~5× more (what an import of reference results spends its time on). What orjson
     refuses — an integer beyond 53 bits (``OPT_STRICT_INTEGER``), a key that is not a string, a lone surrogate —
-    is encoded by ``json`` instead (in ASCII escapes), with the same meaning.
+    is encoded by ``json`` instead (in ASCII escapes), with the same meaning. ``bounded=True``: the caller already
+    passed the record through :func:`~lightemma.runs.records.bounded_values` (the importer, which tallies it).
     """
-    record = bounded_values(record, problems)
+    if not bounded:
+        record = bounded_values(record, problems)
     try:
         return orjson.dumps(record, default=_to_jsonable, option=orjson.OPT_APPEND_NEWLINE | orjson.OPT_STRICT_INTEGER)
     except orjson.JSONEncodeError:  # ASCII escapes: a lone surrogate (from a reference file's "\ud83d") reads back as it was
