@@ -189,6 +189,20 @@ def test_an_unset_key_variable_is_refused_in_one_line_and_plain_http_elsewhere_i
     for quiet in ("http://127.0.0.1:8000/v1", "http://localhost:8000/v1", "http://[::1]:8000/v1", "https://192.0.2.7/v1",
                   "http://127.1:8000/v1", "http://[::ffff:127.0.0.1]:8000/v1", "http://LOCALHOST.:8000/v1"):  # this machine too
         assert create_backend("openai/m", api_base=quiet).notices == []
+    for short in ("http://127.1:8000/v1", "http://2130706433:8000/v1", "http://127.000.000.001:8000/v1"):
+        with pytest.raises(UserError, match="as 127.0.0.1 for --transport direct"):  # aiohttp refuses it at every call
+            create_backend("openai/m", api_base=short, transport="direct")
+
+
+@pytest.mark.parametrize("price", [(float("inf"), 1.0), (1e400, 1.0), (2.0, float("nan")), (-1.0, 2.0), (2e6, 1.0), (True, 1.0)])
+def test_a_price_that_is_no_price_is_refused_before_any_call(price):
+    """--price 1e400 1 was taken: every frame's cost computed as inf, then dropped to unknown after the run."""
+    from lightemma.backends import create_backend
+    from lightemma.errors import UserError
+
+    with pytest.raises(UserError, match="--price needs two numbers from 0 to 1e"):
+        create_backend("openai/m", api_base="http://127.0.0.1:9/v1", price=price)
+    assert create_backend("openai/m", api_base="http://127.0.0.1:9/v1", price=(2, 5.5)).price_given == (2, 5.5)
 
 
 # -- 25.15: credentials in --api-base stay out of every record and message --------------------------------
@@ -822,3 +836,42 @@ def test_a_local_model_served_from_an_api_base_shows_no_registry_gpu_count_unles
         plain = run("qwen-2.5-vl-7b", frames=frames[:1], api_base=server.url, output=tmp_path / "a", **FAST)
         given = run("qwen-2.5-vl-7b", frames=frames[:1], api_base=server.url, output=tmp_path / "b", gpus=4, **FAST)
     assert _gpus(plain.manifest) is None and _gpus(given.manifest) == 4
+
+
+STARTUP_WINDOW = r"""
+import sys, time
+import lightemma.pipeline.runner as runner
+original = runner._session
+def slow(*args, **kwargs):  # the run directory exists, the session's own signal handlers are not in place yet
+    print("window", file=sys.stderr, flush=True)
+    time.sleep(60)
+    return original(*args, **kwargs)
+runner._session = slow
+from lightemma.cli import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP])
+def test_a_signal_before_the_first_frame_is_one_line_naming_the_resume_and_leaves_no_lock(tmp_path, synth_root, sig):
+    """SIGTERM 3 s into a run (loading, the backend, the run directory) killed it silently: no line, .lock.pid and a
+    temporary manifest left, the session not marked."""
+    from lightemma.runs.store import LOCK_PID_FILE
+
+    out = tmp_path / "out"
+    proc = subprocess.Popen([sys.executable, "-c", STARTUP_WINDOW, "run", "--model", "baseline:cv", "--dataroot",
+                             str(synth_root), "--version", "v1.0-mini", "--split", "all", "--output", str(out),
+                             "--no-progress"], stderr=subprocess.PIPE, text=True, env=env())
+    before = []
+    for line in proc.stderr:  # the frames and run directory lines, then the window
+        if line.strip() == "window":
+            break
+        before.append(line)
+    proc.send_signal(sig)
+    err = "".join(before) + proc.communicate(timeout=60)[1]
+    assert proc.returncode == 128 + sig, err
+    lines = [line for line in err.splitlines() if "interrupted" in line]
+    assert len(lines) == 1 and f"interrupted by {signal.Signals(sig).name}" in lines[0] and "--resume" in lines[0], err
+    assert "Traceback" not in err
+    (run_dir,) = run_dirs(out)
+    assert not (run_dir / LOCK_PID_FILE).exists() and not list(run_dir.glob(".*.tmp"))

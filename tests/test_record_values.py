@@ -212,3 +212,21 @@ def test_ground_truth_beyond_the_position_bound_is_no_usable_ground_truth_and_wa
         assert data.bad_records == 1 and not data.valid[1]
         assert any("without usable ground truth" in w for w in data.warnings)
         evaluate_runs([imported_run])
+
+
+def test_a_line_longer_than_the_limit_is_skipped_unread_and_named(imported_run, monkeypatch):
+    """A line of frames.jsonl over MAX_LINE_BYTES (an 8 GB line of NUL bytes was read whole: MemoryError) is skipped
+    a chunk at a time and named; the lines after it are read."""
+    from lightemma.runs import store
+
+    path = imported_run / FRAMES_FILE
+    lines = path.read_bytes().splitlines(keepends=True)
+    limit = max(len(line) for line in lines) + 10
+    monkeypatch.setattr(store, "MAX_LINE_BYTES", limit)
+    path.write_bytes(lines[0] + b"\0" * (3 * limit) + b"\n" + b"".join(lines[1:]))
+    contents = read_run(imported_run)
+    assert len(contents.records) == 3 and contents.corrupt_lines == [2] and not contents.truncated_tail
+    assert any(f"line 2: longer than {limit:,} bytes" in w for w in contents.warnings())
+    path.write_bytes(b"".join(lines) + b"\0" * (3 * limit))  # a last line that long, without its newline: a cut tail
+    contents = read_run(imported_run)
+    assert len(contents.records) == 3 and contents.truncated_tail and not contents.corrupt_lines

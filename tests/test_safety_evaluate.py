@@ -2,6 +2,7 @@
 
 import dataclasses
 import json
+import os
 import shutil
 
 import numpy as np
@@ -262,3 +263,23 @@ def test_a_map_mask_named_outside_the_dataroot_is_never_read(tmp_path):
         table.write_text(json.dumps(maps))
         (reason,) = set(load_safety_data(root, "v1.0-mini").areas.values())
         assert isinstance(reason, str) and ("leaves the dataroot" in reason or "absolute path" in reason), reason
+
+
+def test_a_log_location_that_is_a_path_never_reads_a_map_outside_the_dataroot(tmp_path):
+    """log.location names the map expansion file: "../../../x" would read tmp_path/x.json as the drivable area."""
+    import shutil
+
+    from lightemma.evaluation.safety import load_safety_data
+    from lightemma.synth import write_dataset
+
+    root = write_dataset(tmp_path / "data", scenes=1, keyframes=20, image_size=(64, 36), sweeps=False)
+    logs = json.loads((root / "v1.0-mini" / "log.json").read_text())
+    (expansion,) = list((root / "maps" / "expansion").glob("*.json"))
+    shutil.copy(expansion, tmp_path / "outside_exp.json")  # a readable expansion outside the dataroot
+    outside = os.path.relpath(tmp_path / "outside_exp", root / "maps" / "expansion")
+    assert outside.startswith("..")
+    for log in logs:
+        log["location"] = outside
+    (root / "v1.0-mini" / "log.json").write_text(json.dumps(logs))
+    (reason,) = set(load_safety_data(root, "v1.0-mini").areas.values())
+    assert isinstance(reason, str) and "is not a map name" in reason, reason

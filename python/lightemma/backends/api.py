@@ -88,6 +88,7 @@ PROVIDER_HOSTS = {"openai": ("api.openai.com",), "anthropic": ("api.anthropic.co
 # Variables litellm, the OpenAI SDK and the batch adapters read for a provider's base URL when no --api-base is given.
 BASE_VARIABLES = {"openai": ("OPENAI_BASE_URL", "OPENAI_API_BASE"), "anthropic": ("ANTHROPIC_API_BASE", "ANTHROPIC_BASE_URL"),
                   "gemini": ("GEMINI_API_BASE",)}
+MAX_PRICE = 1e6  # USD per million tokens a --price may give (the dearest list price is ~1e2): beyond it, a typo or inf
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 # What a provider accepts per image, as base64 characters (what is sent), and the longest side in pixels.
 # Anthropic: 5 MB per image, 8000 px; OpenAI: 20 MB per image; Gemini: 20 MB per request (kept under).
@@ -268,6 +269,26 @@ def is_loopback(host: str | None) -> bool:
             return False
     mapped = getattr(address, "ipv4_mapped", None)  # ::ffff:127.0.0.1
     return address.is_loopback or address.is_unspecified or bool(mapped and mapped.is_loopback)
+
+
+def _check_canonical_host(api_base: str) -> None:
+    """Refuse, in one line, an IPv4 address in a shorthand form (``127.1``, ``2130706433``, ``127.000.000.001``): the
+    direct transport's client (aiohttp) refuses it at every call, which would be retried as a connection error."""
+    import socket
+    from urllib.parse import urlsplit
+
+    host = urlsplit(api_base).hostname or ""
+    try:
+        ipaddress.ip_address(host)
+        return
+    except ValueError:
+        pass
+    try:
+        canonical = socket.inet_ntoa(socket.inet_aton(host))
+    except OSError:
+        return  # a name, resolved at the call
+    raise UserError(f"--api-base {redact_url(api_base)}: write the address {host} as {canonical} for --transport direct "
+                    "(its client takes only the canonical form)")
 
 
 def insecure_endpoint(api_base: str | None, key_variable: str | None = None) -> str | None:
@@ -478,8 +499,10 @@ class APIBackend:
         self.served_elsewhere = bool(api_base) and not is_provider_host(self.provider, api_base)
         self.price_given = price
         if price is not None:
-            if len(price) != 2 or not all(isinstance(p, (int, float)) and p >= 0 and p == p for p in price):
-                raise UserError(f"--price needs two non-negative numbers (USD per million input / output tokens), got {price}")
+            if len(price) != 2 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and 0 <= p <= MAX_PRICE
+                                          for p in price):
+                raise UserError(f"--price needs two numbers from 0 to {MAX_PRICE:g} (USD per million input / output tokens), "
+                                f"got {' '.join(f'{p:g}' if isinstance(p, float) else str(p) for p in price)}")
             self._price: tuple[float, float] | None = (price[0] / 1e6, price[1] / 1e6)
             self._cache_price: tuple[float | None, float | None] = (None, None)
         elif self.served_elsewhere:
@@ -502,6 +525,7 @@ class APIBackend:
                 raise UserError(f"transport 'direct' needs --api-base and an OpenAI-compatible model string (openai/NAME), got {self.model!r}")
             from lightemma.backends.openai_http import OpenAIHTTPClient
 
+            _check_canonical_host(api_base)
             self._http = OpenAIHTTPClient(api_base, self._api_key, self.timeout)
             # the model name the server expects: the litellm provider prefix (openai/, hosted_vllm/, …) removed
             self._wire_model = self.model.split("/", 1)[1] if "/" in self.model else self.model

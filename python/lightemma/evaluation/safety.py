@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -280,6 +281,10 @@ def _box(ann: Mapping[str, Any]) -> tuple[float, float, float, float, float]:
     return x, y, _yaw(q), length, w
 
 
+#: a map location as nuScenes names them (singapore-onenorth, boston-seaport): letters, digits, - and _, no path
+_MAP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,99}")
+
+
 def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples: set[str] | None = None) -> SafetyData:
     """Read poses, agents and drivable areas of ``dataroot/version`` (only ``samples`` and their futures if given).
 
@@ -337,6 +342,11 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
         if log is None:
             continue
         location = str(log.get("location", ""))
+        if not _MAP_NAME.fullmatch(location):  # a name, never a path: "../../x" would read a file outside the dataroot
+            key = f"location:{location}"
+            data.map_of[tok] = key
+            data.areas[key] = f"log {log.get('logfile', log_token)}: location {location!r} is not a map name"
+            continue
         expansion = root / "maps" / "expansion" / f"{location}.json"
         key = f"expansion:{location}" if expansion.is_file() else f"mask:{mask_of_log.get(log_token, '')}"
         data.map_of[tok] = key

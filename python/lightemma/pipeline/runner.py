@@ -960,14 +960,21 @@ def run(
     except BaseException:
         asyncio.run(instance.aclose())
         raise
-    if log:
-        log(f"frames: {summary_line(manifest['dataset'])}")
-        if planned is not None:
-            log(planned.line())
-        mode = "batch mode" if batch else f"concurrency {concurrency}"
-        log(f"run directory: {run_dir}  ({len(frames)} frames, {mode})")
     with lock:
-        return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
+        try:
+            if log:
+                log(f"frames: {summary_line(manifest['dataset'])}")
+                if planned is not None:
+                    log(planned.line())
+                mode = "batch mode" if batch else f"concurrency {concurrency}"
+                log(f"run directory: {run_dir}  ({len(frames)} frames, {mode})")
+            return _session(run_dir, frames, instance, prompts, config, progress, "run", 0, log)
+        except KeyboardInterrupt as exc:  # before the session's own handlers: said here, with the resume
+            if log and not getattr(exc, "reported", False):
+                how = f" by {exc.name}" if isinstance(exc, Interrupted) else ""
+                log(f"interrupted{how}; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+                exc.reported = True  # type: ignore[attr-defined]
+            raise
 
 
 def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,

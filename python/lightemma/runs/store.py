@@ -317,10 +317,25 @@ def update_manifest(run_dir: str | os.PathLike[str], **fields: Any) -> dict[str,
     return manifest
 
 
-def _iter_lines(path: Path) -> Iterator[tuple[int, bytes, bool]]:
-    """Yield (line number, raw line, complete) for each line of ``path``."""
+#: the longest line of frames.jsonl read (a record is a few KiB; its answers are bounded by the 8 MiB reply limit)
+MAX_LINE_BYTES = 64 * 1024 * 1024
+
+
+def _iter_lines(path: Path) -> Iterator[tuple[int, bytes | None, bool]]:
+    """Yield (line number, raw line, complete) for each line of ``path``; a line longer than :data:`MAX_LINE_BYTES`
+    is skipped unread (never held in memory) and yielded as ``None``."""
     with open(path, "rb") as fh:
-        for number, raw in enumerate(fh, start=1):
+        number = 0
+        while True:
+            raw = fh.readline(MAX_LINE_BYTES + 1)
+            if not raw:
+                return
+            number += 1
+            if len(raw) > MAX_LINE_BYTES and not raw.endswith(b"\n"):
+                while raw and not raw.endswith(b"\n"):  # the rest of the line, a bounded chunk at a time
+                    raw = fh.readline(1 << 20)
+                yield number, None, bool(raw)
+                continue
             yield number, raw, raw.endswith(b"\n")
 
 
@@ -369,6 +384,12 @@ def iter_records(run_dir: str | os.PathLike[str], *, counts: RunContents | None 
         if not complete:
             if counts is not None:
                 counts.truncated_tail = True
+            continue
+        if raw is None:
+            if counts is not None:
+                counts.corrupt_lines.append(number)
+                if counts.corrupt_example is None:
+                    counts.corrupt_example = f"line {number}: longer than {MAX_LINE_BYTES:,} bytes, not read"
             continue
         if not raw.strip():
             continue
