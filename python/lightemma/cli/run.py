@@ -235,27 +235,10 @@ def print_estimate(args: argparse.Namespace) -> int:
     return 0
 
 
-def _stop_on_signals_from_the_start() -> None:
-    """SIGTERM and SIGHUP raise :class:`~lightemma.errors.Interrupted`, as SIGINT raises KeyboardInterrupt, from the
-    command's first line: before the session's own handlers are in place (loading frames, building the backend,
-    writing the run directory) they killed the process with no line, a lock pid and a temporary manifest left."""
-    import signal
-    import threading
-
-    from lightemma.errors import STOP_SIGNALS, Interrupted
-
-    def stop(signum: int, frame: object) -> None:
-        raise Interrupted(signum)
-
-    if threading.current_thread() is not threading.main_thread():
-        return  # called from Python in another thread: signals are the main thread's
-    for sig in STOP_SIGNALS:
-        if sig != signal.SIGINT:
-            signal.signal(sig, stop)
-
-
 def main(args: argparse.Namespace) -> int:
-    _stop_on_signals_from_the_start()
+    from lightemma._signals import interrupt_on_stop_signals
+
+    interrupt_on_stop_signals()  # before the session's own handlers: no silent death while loading or starting
     from lightemma.errors import UserError
     from lightemma.pipeline.runner import resume, run, stderr_log
 

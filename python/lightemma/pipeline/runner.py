@@ -31,13 +31,13 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from lightemma._signals import stop_signals
 from lightemma._text import unicode_clean
 from lightemma.backends import Backend, ChatRequest, ChatResult, GenerationParams, backend_kind, create_backend
 from lightemma.errors import (  # Interrupted, STOP_SIGNALS: shared with the importer (which does not load this module)
@@ -459,31 +459,6 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
 
 
 
-@contextmanager
-def _stop_signals(run_dir: Path) -> Iterator[None]:
-    """While a session runs: SIGINT, SIGTERM and SIGHUP (what Slurm, Kubernetes and systemd send first) stop it like
-    Ctrl-C — the frames in flight are cut off, the session's wall time is recorded, the lock is released. A second
-    signal while that is under way exits at once (status 128 + signal): the frames written are whole lines, the OS
-    lock dies with the process, and ``.lock.pid`` is removed first."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    received: list[int] = []
-
-    def handler(signum: int, frame: Any) -> None:
-        received.append(signum)
-        if len(received) > 1:
-            _exit_now(run_dir, signum)
-        raise Interrupted(signum)
-
-    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
-
-
 def _exit_now(run_dir: Path, signum: int) -> None:
     """A second stop signal: remove ``.lock.pid``, say so in one line, exit 128 + the signal at once."""
     try:
@@ -621,7 +596,7 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         await backend.aclose()
-        for sig in installed:  # back to the session's own handlers (_stop_signals), not the defaults
+        for sig in installed:  # back to the session's own handlers (stop_signals), not the defaults
             loop.remove_signal_handler(sig)
     return outcome
 
@@ -673,7 +648,9 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     concurrency = max(1, len(todo)) if getattr(backend, "wants_all_frames", False) else config["concurrency"]
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
-    with _stop_signals(run_dir):
+    # SIGINT, SIGTERM, SIGHUP stop the session like Ctrl-C: the frames in flight are cut off, the session's wall time
+    # is recorded, the lock released; a second one exits at once (frames are whole lines, .lock.pid removed first)
+    with stop_signals(lambda signum: _exit_now(run_dir, signum)):
         try:
             with writer:
                 if todo:

@@ -31,8 +31,7 @@ import signal
 import sys
 import threading
 import tempfile
-from collections.abc import Callable, Iterable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -40,6 +39,7 @@ from typing import Any
 
 import numpy as np
 
+from lightemma._signals import stop_signals
 from lightemma._text import unicode_clean
 from lightemma.errors import UserError
 from lightemma.registry import ModelInfo, reference_model
@@ -578,7 +578,7 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
     results: list[ImportResult] = []
     workers: list[Any] = []  # the worker processes (jobs > 1), for the stop-signal handler and the cleanup
     try:
-        with _stop_signals(workers):
+        with stop_signals(lambda signum: _exit_now(workers, signum)):  # Interrupted: the caller stops the workers
             if jobs == 1 or len(folders) == 1:
                 for f in folders:  # a stop signal inside import_folder removes its partial folder there
                     results.append(import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1)))
@@ -671,31 +671,10 @@ def remove_partials_of(pids: set[int], output: str | os.PathLike[str]) -> list[P
     return removed
 
 
-@contextmanager
-def _stop_signals(workers: Sequence[Any]) -> Iterator[None]:
-    """While an import runs: SIGINT, SIGTERM and SIGHUP stop it as ``lightemma run`` is stopped — an
-    :class:`~lightemma.errors.Interrupted` is raised (the caller stops the workers and removes the partial
-    folders). A second signal while that is under way kills the workers and exits at once (status 128 + signal); the
-    next import removes what is left half-written. Nothing is changed outside the main thread."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    from lightemma.errors import STOP_SIGNALS, Interrupted
-
-    received: list[int] = []
-
-    def handler(signum: int, frame: Any) -> None:
-        received.append(signum)
-        if len(received) > 1:
-            _kill(workers)
-            os.write(2, f"lightemma import: {signal.Signals(signum).name} again: exiting now; "
-                        "run the same command again to import the rest\n".encode())
-            os._exit(128 + signum)
-        raise Interrupted(signum)
-
-    previous = {sig: signal.signal(sig, handler) for sig in STOP_SIGNALS}
-    try:
-        yield
-    finally:
-        for sig, old in previous.items():
-            signal.signal(sig, old)
+def _exit_now(workers: Sequence[Any], signum: int) -> None:
+    """A second stop signal during an import: kill the workers, say so in one line, exit 128 + the signal at once (the
+    next import removes what is left half-written)."""
+    _kill(workers)
+    os.write(2, f"lightemma import: {signal.Signals(signum).name} again: exiting now; "
+                "run the same command again to import the rest\n".encode())
+    os._exit(128 + signum)
