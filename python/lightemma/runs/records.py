@@ -11,7 +11,7 @@ from __future__ import annotations
 import gc
 import json
 import numbers
-from collections.abc import Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any
 
@@ -87,6 +87,29 @@ def _bounded_fields(values: Mapping[str, Any], where: str, problems: list[str] |
     return out
 
 
+def _bounded_items(items: Any, where: str, bound: Callable[[Mapping[str, Any], str], dict[str, Any] | None]) -> list | None:
+    """A copy of the list ``items`` with each mapping in it as ``bound(item, "where[i].")`` made it, or None when
+    ``items`` is no list or nothing in it changed."""
+    if type(items) is not list:
+        return None
+    out = None
+    for i, item in enumerate(items):
+        fixed = bound(item, f"{where}[{i}].") if isinstance(item, Mapping) else None
+        if fixed is not None:
+            out = out if out is not None else list(items)
+            out[i] = fixed
+    return out
+
+
+def _bounded_attempt(attempt: Mapping[str, Any], where: str, problems: list[str] | None) -> dict[str, Any] | None:
+    """An attempt with its own and its calls' counts, times and costs bounded (None when nothing changed)."""
+    out = _bounded_fields(attempt, where, problems)
+    calls = _bounded_items(attempt.get("calls"), f"{where}calls", lambda call, at: _bounded_fields(call, at, problems))
+    if calls is not None:
+        out = {**(out if out is not None else attempt), "calls": calls}
+    return out
+
+
 def bounded_values(record: Mapping[str, Any], problems: list[str] | None = None) -> Mapping[str, Any]:
     """``record`` with every token count, time and cost that is not a number within its bound (:data:`VALUE_BOUNDS`) as
     None (unknown) — at the top, in each attempt and in each attempt's calls; each replacement is described in ``problems``.
@@ -94,31 +117,9 @@ def bounded_values(record: Mapping[str, Any], problems: list[str] | None = None)
     The record itself when nothing needed replacing (the common case: no copy), else a copy (the input is never changed).
     """
     out = _bounded_fields(record, "", problems)
-    attempts = record.get("attempts")
-    if type(attempts) is list:
-        new_attempts = None
-        for i, attempt in enumerate(attempts):
-            if not isinstance(attempt, Mapping):
-                continue
-            fixed = _bounded_fields(attempt, f"attempts[{i}].", problems)
-            calls = attempt.get("calls")
-            if type(calls) is list:
-                new_calls = None
-                for j, call in enumerate(calls):
-                    if isinstance(call, Mapping):
-                        fixed_call = _bounded_fields(call, f"attempts[{i}].calls[{j}].", problems)
-                        if fixed_call is not None:
-                            new_calls = new_calls or list(calls)
-                            new_calls[j] = fixed_call
-                if new_calls is not None:
-                    fixed = fixed if fixed is not None else dict(attempt)
-                    fixed["calls"] = new_calls
-            if fixed is not None:
-                new_attempts = new_attempts or list(attempts)
-                new_attempts[i] = fixed
-        if new_attempts is not None:
-            out = out if out is not None else dict(record)
-            out["attempts"] = new_attempts
+    attempts = _bounded_items(record.get("attempts"), "attempts", lambda attempt, where: _bounded_attempt(attempt, where, problems))
+    if attempts is not None:
+        out = {**(out if out is not None else record), "attempts": attempts}
     return record if out is None else out
 
 
