@@ -236,6 +236,19 @@ def test_a_password_in_the_api_base_is_in_no_record_and_no_message(tmp_path, fra
 # -- 25.4: a run directory never redirects keys or writes --------------------------------------------------
 
 
+def refused_resume(run_dir, server, capsys) -> str:
+    """``lightemma run --resume RUN_DIR`` (with the run's own endpoint and cache) refused: exit 2, one line, no
+    traceback, nothing asked of the server; the line."""
+    from lightemma.cli import main
+
+    before = len(server.requests)
+    assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--no-progress"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err, err
+    assert len(server.requests) == before
+    return err
+
+
 LEFT_OUT = object()  # a setting deleted from the manifest
 
 
@@ -300,16 +313,14 @@ def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, fr
     ({"backend_options": {"attn_implementation": "someone/kernels"}}, "'attn_implementation': the run's 'someone/kernels'"),
 ])
 def test_resume_refuses_a_manifest_that_chooses_where_the_model_runs_or_what_code_runs(tmp_path, frames, capsys, changes, words):
-    from lightemma.cli import main
     from lightemma.pipeline import resume
     from lightemma.errors import UserError
 
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server, **changes)
         before = len(server.requests)
-        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--no-progress"]) == 2
-        err = capsys.readouterr().err
-        assert len(err.strip().splitlines()) == 1 and words in err and "does not choose" in err, err
+        err = refused_resume(run_dir, server, capsys)
+        assert words in err and "does not choose" in err, err
         with pytest.raises(UserError, match="does not choose"):
             resume(run_dir, frames=frames, api_base=server.url, cache=True, progress=False)
         assert len(server.requests) == before and len(read_run(run_dir).records) == 1
@@ -360,15 +371,9 @@ def test_resume_refuses_options_it_takes_from_the_manifest_and_code_options_the_
     ({"cache": "runs/x\x00y"}, "not text without NUL characters"),
 ])
 def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_path, frames, capsys, changes, words):
-    from lightemma.cli import main
-
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server, **changes)
-        before = len(server.requests)
-        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--no-progress"]) == 2
-        err = capsys.readouterr().err
-        assert len(err.strip().splitlines()) == 1 and words in err and "Traceback" not in err, err
-        assert len(server.requests) == before
+        assert words in refused_resume(run_dir, server, capsys)
 
 
 @pytest.mark.parametrize("how", ["deep manifest", "frame_ids to /dev/zero", "frame_ids a FIFO"])

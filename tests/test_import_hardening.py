@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import still_running
 from reference_fixtures import make_frame, write_scene
 
 from lightemma.evaluation import evaluate_runs
@@ -119,22 +120,6 @@ def test_deep_or_huge_lines_of_frames_jsonl_are_named_and_skipped_the_rest_evalu
     assert ev.accuracy_rows()
 
 
-def _wait_gone(pids: list[int], seconds: float) -> list[int]:
-    """The pids still running (not zombies) after waiting up to ``seconds``."""
-    deadline = time.monotonic() + seconds
-    while True:
-        alive = []
-        for pid in pids:
-            try:
-                state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-            except (FileNotFoundError, ProcessLookupError):
-                continue
-            if state not in ("Z", "X"):
-                alive.append(pid)
-        if not alive or time.monotonic() > deadline:
-            return alive
-
-
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
 @pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGTERM])
 def test_import_workers_die_with_their_parent(tmp_path, sig):
@@ -159,10 +144,10 @@ def test_import_workers_die_with_their_parent(tmp_path, sig):
     parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=PYTHON_ENV)
     try:
         workers = [int(p) for p in parent.stdout.readline().split()]
-        assert len(workers) == 2 and _wait_gone(workers, 0) == workers  # they run
+        assert len(workers) == 2 and still_running(workers, 0) == workers  # they run
         os.kill(parent.pid, sig)
         parent.wait(timeout=30)
-        assert _wait_gone(workers, 10) == []
+        assert still_running(workers, 10) == []
     finally:
         parent.kill()
         parent.wait()

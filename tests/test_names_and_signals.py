@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from processes import children, still_running
 from reference_fixtures import make_frame, write_scene
 
 from lightemma._text import printable
@@ -152,25 +153,6 @@ def _big_results(root: Path, models: int = 3, scenes: int = 60, frames: int = 4)
     return root
 
 
-def _children(pid: int) -> list[int]:
-    kids = []
-    for f in Path(f"/proc/{pid}/task").glob("*/children"):
-        kids += [int(p) for p in f.read_text().split()]
-    return kids
-
-
-def _alive(pids: list[int]) -> list[int]:
-    alive = []
-    for pid in pids:
-        try:
-            state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-        except (FileNotFoundError, ProcessLookupError):
-            continue
-        if state not in ("Z", "X"):
-            alive.append(pid)
-    return alive
-
-
 def _partials(out: Path) -> list[Path]:
     return [p for p in out.glob("*/.*") if p.name.endswith(".partial")] if out.is_dir() else []
 
@@ -189,7 +171,7 @@ def test_a_stop_signal_to_the_import_stops_its_workers_and_leaves_no_partial_fol
         while not _partials(out) and proc.poll() is None and time.monotonic() < deadline:
             time.sleep(0.002)
         assert proc.poll() is None and _partials(out), "the import ended before a run was under way"
-        workers = _children(proc.pid)
+        workers = children(proc.pid)
         proc.send_signal(sig)
         stdout, stderr = proc.communicate(timeout=30)
     finally:
@@ -205,7 +187,7 @@ def test_a_stop_signal_to_the_import_stops_its_workers_and_leaves_no_partial_fol
     written = list(out.glob("*/ref-*/manifest.json"))
     assert len(written) < 3  # stopped before every run was renamed into place
     time.sleep(0.2)
-    assert _alive(workers) == []  # the workers (and the resource tracker) are gone
+    assert still_running(workers) == []  # the workers (and the resource tracker) are gone
     again = _cli("import", str(res), "--output", str(out), "--quiet", "--jobs", str(jobs))
     assert again.returncode == 0, again.stderr
     assert len(list(out.glob("*/ref-*/manifest.json"))) == 3 and _partials(out) == []
