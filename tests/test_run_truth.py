@@ -204,7 +204,7 @@ def test_a_trickling_server_is_cut_off_at_the_deadline(transport):
         elapsed = time.perf_counter() - began
     assert (result.error, result.retries, len(server.requests)) == ("Timeout", 1, 2)
     assert "connect to last byte" in result.error_message
-    assert 2.0 <= elapsed < 3.5  # two attempts of 1 s each, not 2 × ~90 s of trickle
+    assert 2.0 <= elapsed < 6.0  # two attempts of 1 s each (and a loaded machine's overhead), not 2 × ~90 s of trickle
 
 
 def test_a_server_that_trickles_every_answer_stops_the_run_within_its_deadlines(tmp_path, synth_root, capsys):
