@@ -56,7 +56,9 @@ class FakeBatchServer:
     def __init__(self, script: Callable[[Received], Reply] | None = None, *, steps: int = 2, shuffle: bool = True,
                  seed: int = 0, fail: dict[str, str] | None = None, expire: set[str] | None = None,
                  batch_state: str | None = None, require_key: str | None = None, hold_from: int | None = None,
-                 refusal: str = "invalid x-api-key") -> None:
+                 refusal: str = "invalid x-api-key", bloat: int = 0, duplicate: bool = False) -> None:
+        self.bloat = bloat  # bytes of padding in every answer (a bloated reply)
+        self.duplicate = duplicate  # the results hold the first answered request twice
         self.script = script or default_reply
         self.require_key = require_key  # answer 401 to a request whose key header does not hold it
         self.refusal = refusal  # the message of that 401 (providers echo what they were sent: keys, URLs)
@@ -97,7 +99,10 @@ class FakeBatchServer:
         path = {"openai": "/v1/chat/completions", "anthropic": "/v1/messages",
                 "gemini": "/v1beta/models/m:generateContent"}[protocol]
         received = Received(path=path, headers={}, body=body, index=index)
-        return _completion(received, self.script(received))
+        answer = _completion(received, self.script(received))
+        if self.bloat:
+            answer["padding"] = "x" * self.bloat
+        return answer
 
     def _create(self, protocol: str, requests: list[tuple[str, dict[str, Any]]], metadata: dict[str, Any]) -> FakeBatch:
         with self.lock:
@@ -121,6 +126,9 @@ class FakeBatchServer:
                     out.append({"custom_id": cid, "kind": "ok", "body": self._answer(batch.protocol, cid, body, index)})
             if self.shuffle:
                 self.rng.shuffle(out)
+            first = next((r for r in out if r["kind"] == "ok"), None)
+            if self.duplicate and first is not None:
+                out.append(json.loads(json.dumps(first)))  # the same request again (lightemma refuses even a copy)
             batch.results = out
         return batch.results
 

@@ -390,3 +390,78 @@ def test_credentials_in_the_api_base_reach_the_server_but_no_journal_record_or_m
     written = b"".join(p.read_bytes() for p in (tmp_path / "runs").rglob("*") if p.is_file())
     assert b"hunter2pw" not in written and "hunter2pw" not in str(stopped.value)
     assert b"hunter2pw" not in (run_dir / "batches.jsonl").read_bytes() and b"hunter2pw" not in (result.run_dir / "batches.jsonl").read_bytes()
+
+
+# -- what a batch API's replies may be (issue 25.9) -----------------------------------------------------------
+
+BATCH_MODEL = {"openai": "openai/gpt-4o", "anthropic": "anthropic/claude-sonnet-4-6", "gemini": "gemini/gemini-2.5-flash"}
+
+
+def _at(server, provider):
+    return server.url if provider == "openai" else server.root
+
+
+@pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
+def test_a_batch_reply_past_its_limit_stops_the_run_in_one_line_and_a_resume_reads_the_same_batch(tmp_path, synth_root,
+                                                                                                 monkeypatch, provider):
+    """A results file (a Gemini status poll: the results are inlined in it) past the limit for its batch: the run
+    stops naming the limit, nothing was read into a record, and the resume polls the same batch, never resubmits."""
+    from lightemma.backends.batch import base
+
+    monkeypatch.setattr(base, "MIN_REPLY_BYTES", 64 << 10)  # 64 KiB + 1 KiB per request, instead of 64 MiB + 256 KiB
+    monkeypatch.setattr(base, "RESULT_BYTES_PER_REQUEST", 1 << 10)
+    with FakeBatchServer(steps=1, bloat=40 << 10) as server:  # 4 answers of 40 KiB each: 160 KiB > 68 KiB
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, BATCH_MODEL[provider], api_base=_at(server, provider))
+        message = str(stopped.value).splitlines()[0]
+        assert "more than the 65,536 bytes lightemma reads" in message and "a batch of 4 request(s)" in message, message
+        assert "--resume" in message and server.created == 1
+        run_dir = stopped.value.run_dir
+        assert _records(run_dir) == {} and not (run_dir / "batch_results").exists()
+        server.bloat = 0  # the provider's reply is readable now (say, the limit was raised between the sessions)
+        for batch in server.batches.values():
+            batch.results = None  # computed again, without the padding
+        resume(run_dir, progress=False, api_base=_at(server, provider))
+    assert server.created == 3  # the stage-1 batch was read, not submitted again
+    assert len(_records(run_dir)) == 4 and all(r["status"] == "ok" for r in _records(run_dir).values())
+
+
+@pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
+def test_results_holding_a_request_twice_stop_the_run_never_pick_one(tmp_path, synth_root, provider):
+    with FakeBatchServer(steps=1, duplicate=True) as server:
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, BATCH_MODEL[provider], api_base=_at(server, provider))
+    assert "twice" in str(stopped.value) and "does not choose" in str(stopped.value)
+    assert _records(stopped.value.run_dir) == {}
+
+
+def test_results_of_the_wrong_shape_stop_the_run_with_the_reason_never_a_traceback(tmp_path, synth_root, monkeypatch):
+    """A results line that is not an object: the run stops naming the provider's API (it crashed with AttributeError)."""
+    import fake_batch
+
+    monkeypatch.setattr(fake_batch, "_anthropic_results", lambda server, batch: b'["not an object"]\n')
+    with FakeBatchServer(steps=1) as server:
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, BATCH_MODEL["anthropic"], api_base=server.root)
+    first = str(stopped.value).splitlines()[0]
+    assert "cannot read the results of batch" in first and "not what the anthropic batch API documents" in first, first
+    assert "AttributeError" in first and _records(stopped.value.run_dir) == {}
+
+
+def test_saved_results_that_are_not_a_regular_file_are_polled_again_never_read(tmp_path):
+    """A saved results file replaced by a FIFO (a read would block forever) or one past its batch's limit: the journal
+    answers "not saved", so the batch is polled again (the provider keeps its results)."""
+    journal = BatchJournal.open(tmp_path)
+    journal.submitted("tok", "batch_1", ["a", "b"])
+    journal.save_results("batch_1", [{"custom_id": "a", "text": "x"}, {"custom_id": "b", "text": "y"}], "completed", 1.0)
+    saved = tmp_path / journal.batches["batch_1"].results
+    assert [i["custom_id"] for i in BatchJournal.open(tmp_path).saved_results("batch_1")] == ["a", "b"]
+    saved.unlink()
+    os.mkfifo(saved)
+    start = time.monotonic()
+    assert BatchJournal.open(tmp_path).saved_results("batch_1") is None and time.monotonic() - start < 5
+    saved.unlink()
+    saved.write_text('{"custom_id": "a"}\n' + " " * (64 << 20) + "\n")  # over 64 MiB for a batch of 2
+    assert BatchJournal.open(tmp_path).saved_results("batch_1") is None
+    saved.write_text('["a list"]\n')
+    assert BatchJournal.open(tmp_path).saved_results("batch_1") is None

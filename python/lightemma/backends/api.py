@@ -802,21 +802,13 @@ class APIBackend:
             text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
             cost = self._direct_cost(usage)
         else:
-            from lightemma.backends.openai_http import _guard
+            from lightemma.backends.openai_http import body_guard
 
-            slot: dict[str, Any] = {}
-            token = _guard().set(slot)
-            try:
+            with body_guard():  # what the body hooks refuse (too large, an encoding) is raised as itself
                 response = await litellm.acompletion(
                     model=self.model, messages=messages, api_base=self._litellm_base, api_key=self._api_key,
                     timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **self._bounded_client(), **params,
                 )
-            except Exception:
-                if "error" in slot:  # what the body hooks refused (too large, an encoding), whatever litellm made of it
-                    raise slot["error"] from None
-                raise
-            finally:
-                _guard().reset(token)
             usage = _usage(getattr(response, "usage", None), self.provider)
             choices = getattr(response, "choices", None) or [None]
             text = getattr(getattr(choices[0], "message", None), "content", None)

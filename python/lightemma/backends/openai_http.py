@@ -9,16 +9,18 @@ exceptions named like litellm's (``RateLimitError``, ``Timeout``,
 
 Every reply, through this client or litellm's (OpenAI SDK, native Anthropic and Gemini), is read
 within :data:`MAX_BODY_BYTES` decoded bytes: here by :meth:`OpenAIHTTPClient._read`, for litellm by
-the httpx hooks of :func:`body_limit_hooks` (docs/run.md, "Limits").
+the httpx hooks of :func:`body_limit_hooks` (docs/run.md, "Limits"); a call may set its own limit with
+:func:`body_guard` (a batch's results: :func:`lightemma.backends.batch.base.results_limit`).
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import re
 import zlib
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from typing import Any
 
 import aiohttp
@@ -163,6 +165,23 @@ def _guard() -> Any:
     return BODY_GUARD
 
 
+@contextlib.contextmanager
+def body_guard(max_body: int | None = None) -> Iterator[dict[str, Any]]:
+    """The calls made inside (in this task) through a client with :func:`body_limit_hooks` read at most ``max_body``
+    bytes of a body (None: the client's own limit), and an error those hooks raise (:class:`ResponseTooLargeError`,
+    :class:`ResponseEncodingError`) leaves the block as itself, whatever the client library wrapped it in."""
+    slot: dict[str, Any] = {} if max_body is None else {"max_body": int(max_body)}
+    token = _guard().set(slot)
+    try:
+        yield slot
+    except Exception:
+        if "error" in slot:
+            raise slot["error"] from None
+        raise
+    finally:
+        _guard().reset(token)
+
+
 #: the encodings lightemma asks for and decodes itself, within the limit (httpx decodes without one)
 ACCEPTED_ENCODINGS = "gzip, deflate"
 
@@ -182,12 +201,13 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
     import httpx
 
     class _Stream(httpx.AsyncByteStream):
-        def __init__(self, inner: Any, slot: Any, encoding: str | None) -> None:
-            self.inner, self.slot = inner, slot
-            self.decoder = _Inflate(encoding, max_body) if encoding else None
+        def __init__(self, inner: Any, slot: Any, encoding: str | None, limit: int) -> None:
+            self.inner, self.slot, self.limit = inner, slot, limit
+            self.decoder = _Inflate(encoding, limit) if encoding else None
 
         async def __aiter__(self) -> Any:
             size = wire = 0
+            max_body = self.limit
             try:
                 async for chunk in self.inner:
                     wire += len(chunk)
@@ -196,13 +216,13 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
                     size += len(chunk)
                     if size > max_body or wire > max_body:
                         raise _failed(self.slot, ResponseTooLargeError(
-                            f"the response body is over {max_body} bytes{' decoded' if size > max_body and self.decoder else ''}, "
+                            f"the response body is over {max_body:,} bytes{' decoded' if size > max_body and self.decoder else ''}, "
                             "more than lightemma reads"))
                     yield chunk
                 if self.decoder is not None:
                     yield self.decoder.flush()
             except _TooLarge:
-                raise _failed(self.slot, ResponseTooLargeError(f"the response body is over {max_body} bytes decoded, more "
+                raise _failed(self.slot, ResponseTooLargeError(f"the response body is over {self.limit:,} bytes decoded, more "
                                                                "than lightemma reads")) from None
             except zlib.error as exc:
                 raise _failed(self.slot, ResponseEncodingError(f"the response body is not valid {self.decoder.encoding if self.decoder else ''} "
@@ -216,9 +236,10 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
 
     async def on_response(response: Any) -> None:
         slot = _guard().get()
+        limit = slot.get("max_body", max_body) if slot is not None else max_body  # a call's own limit (body_guard)
         length = response.headers.get("content-length")
-        if length and length.isdigit() and int(length) > max_body:
-            raise _failed(slot, ResponseTooLargeError(f"the response body is {length} bytes, more than the {max_body} bytes "
+        if length and length.isdigit() and int(length) > limit:
+            raise _failed(slot, ResponseTooLargeError(f"the response body is {int(length):,} bytes, more than the {limit:,} bytes "
                                                       "lightemma reads"))
         codings = [c.strip().lower() for c in response.headers.get("content-encoding", "").split(",")]
         codings = [c for c in codings if c and c != "identity"]
@@ -227,7 +248,7 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
                                                       "lightemma did not ask for and does not decode"))
         if codings:
             del response.headers["content-encoding"]  # decoded below, within the limit: httpx must not decode it again
-        response.stream = _Stream(response.stream, slot, codings[0] if codings else None)
+        response.stream = _Stream(response.stream, slot, codings[0] if codings else None, limit)
 
     return {"request": [on_request], "response": [on_response]}
 

@@ -16,8 +16,9 @@ is resubmitted in a new batch up to ``max_resubmits`` times, then fails as ``Bat
 provider answered with an error fails with its reason (``BatchRequestError``), which the chain re-asks like
 any API error. A batch the provider rejects as a whole (validation) stops the run with its reason.
 
-Adapters: OpenAI (and OpenAI-compatible ``--api-base`` servers) through litellm's batch functions; Anthropic
-Message Batches and Gemini batch mode over their own HTTP APIs (litellm 1.106.2 creates neither). Costs are
+Adapters: OpenAI (and OpenAI-compatible ``--api-base`` servers), Anthropic Message Batches and Gemini batch mode,
+each over its HTTP API, every reply read within :func:`~lightemma.backends.batch.base.results_limit` (litellm
+1.106.2 creates neither Anthropic nor Gemini batches, and takes no bounded client for OpenAI's). Costs are
 the provider-reported tokens at the registry's batch prices (:func:`lightemma.registry.batch_price`).
 A call's ``seconds`` is its batch's turnaround (submission to results): per-frame latency has no meaning in
 batch mode, and Table I prints it as ``n/a``.
@@ -40,7 +41,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
-from lightemma.backends.batch.base import FAILED, PENDING, BatchAdapter, BatchHTTPError, entry_bytes
+from lightemma.backends.batch.base import FAILED, PENDING, BatchAdapter, BatchHTTPError, entry_bytes, results_limit
 from lightemma.backends.batch.journal import BatchJournal
 from lightemma.errors import RunFatalError, UserError
 
@@ -64,7 +65,7 @@ def adapter_for(provider: str, model: str, *, api_base: str | None, api_key: str
     if provider in OPENAI_COMPATIBLE:
         from lightemma.backends.batch.openai import OpenAIBatches
 
-        return OpenAIBatches(model, api_base=api_base, api_key=api_key)
+        return OpenAIBatches(model, api_base=api_base, api_key=api_key, timeout=timeout)
     if provider == "anthropic":
         from lightemma.backends.batch.anthropic import AnthropicBatches
 
@@ -279,7 +280,8 @@ class BatchBackend:
             mine = [p for p in new if p.custom_id in wanted]
             if not mine:
                 continue
-            found = await self._call(lambda token=token: self.adapter.find(token), "look up an interrupted submission")
+            found = await self._call(lambda token=token: self.adapter.find(token), "look up an interrupted submission",
+                                     requests=len(ids))
             if found is None and self.adapter.provider == "anthropic":
                 raise RunFatalError(f"a batch submission of {len(ids)} request(s) (token {token}) was cut off before its id "
                                     "was journaled, and Anthropic batches cannot be looked up by name; check the console's "
@@ -327,7 +329,7 @@ class BatchBackend:
         token = f"lightemma-{secrets.token_hex(8)}"
         journal.submitting(token, ids)  # before the provider is asked: an interrupted submission can be found
         try:
-            bid = await self._call(lambda: self.adapter.submit(entries, token), "create a batch")
+            bid = await self._call(lambda: self.adapter.submit(entries, token), "create a batch", requests=len(ids))
         except RunFatalError as exc:
             if 400 <= getattr(exc, "http_status", 0) < 500:  # refused: nothing was created
                 journal.abandoned(token, f"the provider refused the batch: {exc}")
@@ -352,7 +354,7 @@ class BatchBackend:
         if items is None:
             delay = self.poll_seconds
             while True:
-                status = await self._call(lambda: self.adapter.status(bid), f"poll batch {bid}")
+                status = await self._call(lambda: self.adapter.status(bid), f"poll batch {bid}", requests=len(batch.custom_ids))
                 if status.state != PENDING:
                     break
                 await asyncio.sleep(delay)
@@ -361,7 +363,8 @@ class BatchBackend:
                 raise RunFatalError(f"the provider rejected batch {bid} as a whole ({status.provider_state}: "
                                     f"{status.reason or 'no reason given'}); fix what it names and resume",
                                     cause="batch-failed", error="BatchFailed")
-            items = await self._call(lambda: self.adapter.results(bid, status), f"read the results of batch {bid}")
+            items = await self._call(lambda: self._results(bid, status), f"read the results of batch {bid}",
+                                     requests=len(batch.custom_ids))
             turnaround = max(0.0, time.time() - batch.submitted_at) if batch.submitted_at else None
             journal.save_results(bid, items, status.provider_state, turnaround)
             state = status.provider_state
@@ -393,12 +396,38 @@ class BatchBackend:
             self._queue.extend(requeue)
             self._wake.set()
 
-    async def _call(self, make: Callable[[], Any], what: str) -> Any:
-        """An adapter call, transient failures (connection, 429, 5xx) retried with backoff; others stop the run."""
+    async def _results(self, bid: str, status: Any) -> list[dict[str, Any]]:
+        """The adapter's results of batch ``bid``; a custom id answered twice is not guessed between."""
+        items = await self.adapter.results(bid, status)
+        seen: set[str] = set()
+        for item in items:
+            cid = str(item.get("custom_id"))
+            if cid in seen:
+                raise BatchHTTPError(0, f"the results hold request {cid} twice; lightemma does not choose one", answer=True)
+            seen.add(cid)
+        return items
+
+    async def _call(self, make: Callable[[], Any], what: str, *, requests: int = 0) -> Any:
+        """An adapter call, transient failures (connection, 429, 5xx) retried with backoff; others stop the run.
+
+        The call reads at most :func:`~lightemma.backends.batch.base.results_limit` (``requests``: how many requests
+        the batch it is about holds) of any reply; a reply past it, or one that is not what the provider documents,
+        stops the run in one line (resumable), never a traceback."""
+        from lightemma.backends.openai_http import HTTPCallError, body_guard
+
+        limit = results_limit(requests)
         tries = 0
         while True:
             try:
-                return await make()
+                try:
+                    with body_guard(limit):
+                        return await make()
+                except HTTPCallError as exc:  # the body hooks: past the limit, or an encoding lightemma does not read
+                    raise BatchHTTPError(0, f"{exc} (the limit for a batch of {requests} request(s): docs/run.md, "
+                                            "Limits)", answer=True) from None
+                except (ValueError, KeyError, TypeError, AttributeError, IndexError, RecursionError) as exc:
+                    raise BatchHTTPError(0, f"the answer is not what the {self.adapter.provider} batch API documents "
+                                            f"({type(exc).__name__}: {str(exc)[:120]})", answer=True) from None
             except BatchHTTPError as exc:
                 if exc.transient and tries < self.retry.max_retries:
                     await asyncio.sleep(self.retry.delay(tries))

@@ -58,9 +58,12 @@ class AnthropicBatches:
     def __init__(self, model: str, *, api_key: str | None, timeout: float = 120.0, base: str | None = None) -> None:
         import httpx
 
+        from lightemma.backends.openai_http import body_limit_hooks
+
         self.model = model.split("/", 1)[1] if model.startswith("anthropic/") else model
         self.base, headers = endpoint(base, base_url(), api_key, key_header="x-api-key", version="/v1")
-        self._client = httpx.AsyncClient(timeout=timeout, headers={**headers, "anthropic-version": VERSION})
+        self._client = httpx.AsyncClient(timeout=timeout, headers={**headers, "anthropic-version": VERSION},
+                                         event_hooks=body_limit_hooks())  # each call's limit: BatchBackend's results_limit
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         params: dict[str, Any] = {"model": self.model, "max_tokens": body["max_tokens"],

@@ -16,6 +16,18 @@ from typing import Any, Protocol
 #: states of a batch as lightemma sees it: still running, or one terminal state
 PENDING, ENDED, FAILED = "pending", "ended", "failed"
 
+#: what one reply of a batch API may be, decoded (docs/run.md, "Limits"): RESULT_BYTES_PER_REQUEST for every request
+#: of the batch it is about (an answer of 64k tokens fits), and never less than MIN_REPLY_BYTES. A status poll, a
+#: results file or a listing past it fails that call (the run stops, resumable); an endless or bloated body never
+#: fills memory. Online replies have their own limit (:data:`lightemma.backends.openai_http.MAX_BODY_BYTES`).
+RESULT_BYTES_PER_REQUEST = 256 << 10
+MIN_REPLY_BYTES = 64 << 20
+
+
+def results_limit(n_requests: int) -> int:
+    """The most bytes lightemma reads of one reply about a batch of ``n_requests`` requests (see above)."""
+    return max(MIN_REPLY_BYTES, int(n_requests) * RESULT_BYTES_PER_REQUEST)
+
 
 class BatchHTTPError(Exception):
     """A provider's batch endpoint answered with an error (``status`` 0: no answer at all)."""

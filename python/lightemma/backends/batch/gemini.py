@@ -55,9 +55,12 @@ class GeminiBatches:
     def __init__(self, model: str, *, api_key: str | None, timeout: float = 120.0, base: str | None = None) -> None:
         import httpx
 
+        from lightemma.backends.openai_http import body_limit_hooks
+
         self.model = model.split("/", 1)[1] if model.startswith("gemini/") else model
         self.base, headers = endpoint(base, base_url(), api_key, key_header="x-goog-api-key", version="/v1beta")
-        self._client = httpx.AsyncClient(timeout=timeout, headers=headers)
+        self._client = httpx.AsyncClient(timeout=timeout, headers=headers,
+                                         event_hooks=body_limit_hooks())  # each call's limit: BatchBackend's results_limit
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         config: dict[str, Any] = {"maxOutputTokens": body["max_tokens"]}

@@ -153,7 +153,12 @@ class BatchJournal:
         path = (self.run_dir / batch.results).resolve()
         if self.run_dir.resolve() not in path.parents:  # never read outside the run directory
             raise RunStoreError(f"{self.path}: batch {batch_id} names results outside the run directory")
-        try:
-            return [json.loads(line) for line in path.read_text(encoding="utf-8").splitlines() if line.strip()]
-        except (OSError, json.JSONDecodeError):
+        from lightemma.backends.batch.base import results_limit
+        from lightemma.runs.store import read_small_text
+
+        try:  # a regular file within what its batch's results may be: never a FIFO or /dev/zero
+            items = [json.loads(line) for line in read_small_text(path, results_limit(len(batch.custom_ids))).splitlines()
+                     if line.strip()]
+        except (RunStoreError, json.JSONDecodeError, RecursionError):
             return None  # lost or damaged: poll the batch again (the provider keeps its results)
+        return items if all(isinstance(i, dict) for i in items) else None

@@ -1,28 +1,34 @@
-"""OpenAI Batch API through litellm's batch functions (``acreate_file``, ``acreate_batch``, ``aretrieve_batch``,
-``afile_content``, ``alist_batches``: litellm 1.106.2 serves them for OpenAI and OpenAI-compatible bases).
+"""OpenAI's Batch API over HTTP (httpx), as litellm 1.106.2's batch functions call it, but through a client that
+reads at most what :func:`lightemma.backends.batch.base.results_limit` allows (litellm's batch and file functions
+take no client of their own for OpenAI, so their replies could not be bounded).
 
 Input: a JSONL file of ``{"custom_id", "method": "POST", "url": "/v1/chat/completions", "body"}`` lines, at most
-50,000 requests and 200 MB (platform.openai.com/docs/guides/batch, "Rate limits" / "Batch API"). Status:
-``validating`` → ``in_progress`` → ``finalizing`` → ``completed`` (or ``failed``, ``expired``, ``cancelled``).
-Results: the output file (one line per answered request, ``response.body`` a chat completion) and the error
-file (``error.code`` such as ``batch_expired``, or ``response.status_code`` ≥ 400), in any order.
+50,000 requests and 200 MB (platform.openai.com/docs/guides/batch, "Rate limits" / "Batch API"), uploaded with
+``POST /files`` (``purpose=batch``), then ``POST /batches``. Status (``GET /batches/{id}``): ``validating`` →
+``in_progress`` → ``finalizing`` → ``completed`` (or ``failed``, ``expired``, ``cancelled``). Results
+(``GET /files/{id}/content``): the output file (one line per answered request, ``response.body`` a chat
+completion) and the error file (``error.code`` such as ``batch_expired``, or ``response.status_code`` ≥ 400), in
+any order. The base URL is ``--api-base`` (an OpenAI-compatible server's ``…/v1``), else ``OPENAI_BASE_URL`` /
+``OPENAI_API_BASE`` when set (as litellm reads them; the API backend refuses one that is not a declared host),
+else ``https://api.openai.com/v1``; the key the run's API backend decided goes only there, as a Bearer token.
 """
 
 from __future__ import annotations
 
 import json
+import os
 from typing import Any
 
-from lightemma._litellm import litellm
-from lightemma.backends.batch.base import ENDED, FAILED, PENDING, BatchHTTPError, BatchStatus, item_result
+from lightemma.backends.batch.base import ENDED, FAILED, PENDING, BatchHTTPError, BatchStatus, http_call, item_result
 
 TERMINAL = {"completed": ENDED, "expired": ENDED, "cancelled": ENDED, "failed": FAILED}
 UNRUN = ("batch_expired", "batch_cancelled")  # error codes of requests the batch never ran
+DEFAULT_BASE = "https://api.openai.com/v1"
 
 
-def _http_error(exc: Exception) -> BatchHTTPError:
-    status = getattr(exc, "status_code", None)
-    return BatchHTTPError(status if isinstance(status, int) else 0, str(exc).splitlines()[0][:300] if str(exc) else type(exc).__name__)
+def base_url() -> str:
+    """The base litellm's OpenAI batch and file calls use when no ``api_base`` is given."""
+    return (os.environ.get("OPENAI_BASE_URL") or os.environ.get("OPENAI_API_BASE") or DEFAULT_BASE).rstrip("/")
 
 
 class OpenAIBatches:
@@ -32,15 +38,21 @@ class OpenAIBatches:
     max_requests = 50_000
     max_bytes = 200 * 1000 * 1000
 
-    def __init__(self, model: str, *, api_base: str | None, api_key: str | None) -> None:
-        """``api_key``: the key to send, as the run's API backend decided it; None sends none (litellm is given a
-        placeholder, so it reads no key from the environment). ``user:pw@`` in ``api_base`` stays in the URL: the
-        HTTP client sends it as Basic auth on every call (litellm's ``alist_batches`` and ``afile_content`` drop
-        ``extra_headers``); messages are scrubbed of it by :class:`~lightemma.backends.batch.BatchBackend`."""
-        from lightemma.backends.api import NO_KEY
+    def __init__(self, model: str, *, api_base: str | None, api_key: str | None, timeout: float = 120.0) -> None:
+        """``api_key``: the key to send, as the run's API backend decided it; None sends none (no key is read from the
+        environment here). ``user:pw@`` in ``api_base`` is sent as Basic auth on every call, in place of the key (as
+        the HTTP client litellm used sends it); messages are scrubbed of it by
+        :class:`~lightemma.backends.batch.BatchBackend`."""
+        import httpx
+
+        from lightemma.backends.openai_http import body_limit_hooks
+        from lightemma.backends.retry import split_credentials
 
         self.model = model.split("/", 1)[1] if model.startswith(("openai/", "hosted_vllm/")) else model
-        self._where = {"custom_llm_provider": "openai", "api_base": api_base, "api_key": api_key or NO_KEY}
+        url, basic = split_credentials(api_base) if api_base else (base_url(), None)
+        self.base = url.rstrip("/")
+        headers = {"Authorization": basic} if basic else ({"Authorization": f"Bearer {api_key}"} if api_key else {})
+        self._client = httpx.AsyncClient(timeout=timeout, headers=headers, event_hooks=body_limit_hooks())
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         body = dict(body, model=self.model)
@@ -48,39 +60,51 @@ class OpenAIBatches:
             body["max_completion_tokens"] = body.pop("max_tokens")
         return {"custom_id": custom_id, "method": "POST", "url": "/v1/chat/completions", "body": body}
 
+    async def _json(self, method: str, path: str, **kw: Any) -> dict[str, Any]:
+        response = await http_call(self._client, method, f"{self.base}{path}", **kw)
+        try:
+            data = response.json()
+        except ValueError:
+            raise BatchHTTPError(0, f"{method} {path}: the answer is not JSON", answer=True) from None
+        if not isinstance(data, dict):
+            raise BatchHTTPError(0, f"{method} {path}: the answer is not a JSON object", answer=True)
+        return data
+
     async def submit(self, entries: list[dict[str, Any]], token: str) -> str:
         data = "".join(json.dumps(e, separators=(",", ":"), ensure_ascii=False) + "\n" for e in entries).encode("utf-8")
-        try:
-            upload = await litellm.acreate_file(file=(f"{token}.jsonl", data), purpose="batch", **self._where)
-            batch = await litellm.acreate_batch(completion_window="24h", endpoint="/v1/chat/completions",
-                                                input_file_id=upload.id, metadata={"lightemma_token": token}, **self._where)
-        except Exception as exc:  # noqa: BLE001 - every provider error is reported with its status
-            raise _http_error(exc) from None
-        return str(batch.id)
+        upload = await self._json("POST", "/files", files={"file": (f"{token}.jsonl", data, "application/jsonl")},
+                                  data={"purpose": "batch"})
+        batch = await self._json("POST", "/batches", json={"input_file_id": upload.get("id"), "completion_window": "24h",
+                                                           "endpoint": "/v1/chat/completions",
+                                                           "metadata": {"lightemma_token": token}})
+        if not batch.get("id"):
+            raise BatchHTTPError(0, "the created batch has no id", answer=True)
+        return str(batch["id"])
 
     async def status(self, batch_id: str) -> BatchStatus:
-        try:
-            batch = await litellm.aretrieve_batch(batch_id=batch_id, **self._where)
-        except Exception as exc:  # noqa: BLE001
-            raise _http_error(exc) from None
-        state = str(batch.status)
-        counts = batch.request_counts.model_dump() if getattr(batch, "request_counts", None) is not None else {}
+        batch = await self._json("GET", f"/batches/{batch_id}")
+        state = str(batch.get("status"))
         reason = None
-        errors = getattr(batch, "errors", None)
-        if errors is not None and getattr(errors, "data", None):
-            reason = "; ".join(f"{e.code}: {e.message}" + (f" (line {e.line})" if getattr(e, "line", None) else "")
-                               for e in errors.data[:3])
-        return BatchStatus(state=TERMINAL.get(state, PENDING), provider_state=state, counts=counts, reason=reason,
-                           handle={"output_file_id": batch.output_file_id, "error_file_id": batch.error_file_id})
+        errors = (batch.get("errors") or {}).get("data") if isinstance(batch.get("errors"), dict) else None
+        if errors:
+            reason = "; ".join(f"{e.get('code')}: {e.get('message')}" + (f" (line {e['line']})" if e.get("line") else "")
+                               for e in errors[:3] if isinstance(e, dict))
+        counts = batch.get("request_counts")
+        return BatchStatus(state=TERMINAL.get(state, PENDING), provider_state=state,
+                           counts=dict(counts) if isinstance(counts, dict) else {}, reason=reason,
+                           handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")})
 
     async def _lines(self, file_id: str | None) -> list[dict[str, Any]]:
         if not file_id:
             return []
+        response = await http_call(self._client, "GET", f"{self.base}/files/{file_id}/content")
         try:
-            content = await litellm.afile_content(file_id=file_id, **self._where)
-        except Exception as exc:  # noqa: BLE001
-            raise _http_error(exc) from None
-        return [json.loads(line) for line in content.content.decode("utf-8").splitlines() if line.strip()]
+            lines = [json.loads(line) for line in response.content.decode("utf-8").splitlines() if line.strip()]
+        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
+            raise BatchHTTPError(0, f"file {file_id}: a results line is not JSON ({type(exc).__name__})", answer=True) from None
+        if not all(isinstance(line, dict) for line in lines):
+            raise BatchHTTPError(0, f"file {file_id}: a results line is not a JSON object", answer=True)
+        return lines
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         out = []
@@ -103,17 +127,14 @@ class OpenAIBatches:
         return out
 
     async def find(self, token: str) -> str | None:
-        try:
-            page = await litellm.alist_batches(limit=100, **self._where)
-        except Exception as exc:  # noqa: BLE001
-            raise _http_error(exc) from None
-        for batch in getattr(page, "data", None) or []:
-            if (getattr(batch, "metadata", None) or {}).get("lightemma_token") == token:
-                return str(batch.id)
+        page = await self._json("GET", "/batches", params={"limit": 100})
+        for batch in page.get("data") or []:
+            if isinstance(batch, dict) and (batch.get("metadata") or {}).get("lightemma_token") == token:
+                return str(batch.get("id"))
         return None
 
     async def aclose(self) -> None:
-        return None
+        await self._client.aclose()
 
 
 def _completion_result(custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
