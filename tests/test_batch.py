@@ -465,3 +465,16 @@ def test_saved_results_that_are_not_a_regular_file_are_polled_again_never_read(t
     assert BatchJournal.open(tmp_path).saved_results("batch_1") is None
     saved.write_text('["a list"]\n')
     assert BatchJournal.open(tmp_path).saved_results("batch_1") is None
+
+
+@pytest.mark.parametrize("where", ["own", "elsewhere"])
+def test_price_is_the_price_of_every_batched_call(tmp_path, synth_root, monkeypatch, where):
+    """--price with --batch was dropped: calls were billed at the batch list price (or unknown elsewhere)."""
+    if where == "elsewhere":
+        monkeypatch.delenv("LIGHTEMMA_PROVIDER_HOSTS", raising=False)
+    with FakeBatchServer(steps=1) as server:
+        result = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, sample=2, price=(10.0, 20.0))
+    calls = [c for r in _records(result.run_dir).values() for a in r["attempts"] for c in a["calls"]]
+    assert len(calls) == 6 and all(c["cost_cents"] == pytest.approx((1000 * 10 + 50 * 20) / 1e6 * 100) for c in calls)
+    manifest = json.loads((result.run_dir / "manifest.json").read_text())
+    assert "--price 10 20" in manifest["backend"]["cost"]

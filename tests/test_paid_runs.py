@@ -199,6 +199,34 @@ def test_max_cost_needs_a_known_price(synth_root, tmp_path):
                 output=tmp_path, progress=False, max_cost_cents=0.0)
 
 
+def test_the_estimate_and_max_cost_price_calls_as_the_run_bills_them(synth_root, tmp_path, elsewhere):
+    """--price is the price of every call (the estimate ignored it: $0.46 for $0.15); a model served from another
+    --api-base has no list price, so its estimate is unknown and --max-cost needs --price (it bounded nothing:
+    frames were admitted at gpt-4o's list price while the records, rightly unpriced, added nothing spent)."""
+    frames = _frames(synth_root)
+    given = estimate_run("gpt-4o", frames=frames, price=(1.0, 2.0))
+    assert given.cost_cents == pytest.approx((given.input_tokens * 1.0 + given.output_tokens * 2.0) / 1e6 * 100)
+    assert given.batch_cost_cents == given.cost_cents and given.price_source.startswith("--price 1 2")
+    served = estimate_run("openai/gpt-4o", frames=frames, api_base="http://127.0.0.1:9/v1")
+    assert served.cost_cents is None and served.batch_cost_cents is None
+    assert served.price_source == "none: served from http://127.0.0.1:9/v1"
+    assert "unknown normal, unknown with --batch" in served.line() and "~unknown" not in served.line()
+    with pytest.raises(UserError, match="--price needs two numbers"):
+        estimate_run("gpt-4o", frames=frames, price=(1.0, float("inf")))
+    with FakeOpenAIServer() as server:
+        with pytest.raises(UserError, match="none: served from .* give it with --price IN OUT"):
+            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
+                output=tmp_path / "a", progress=False, max_cost_cents=1.0)
+        assert not server.requests
+        # each call: (1000 × 10 + 50 × 20) / 1e6 $ = 1.1 ¢, a frame 3.3 ¢: 5 ¢ admits one frame, not two
+        with pytest.raises(RunStopped) as stopped:
+            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
+                output=tmp_path / "b", progress=False, concurrency=1, max_cost_cents=5.0, price=(10.0, 20.0))
+    records = read_run(stopped.value.run_dir).records
+    assert stopped.value.cause == "budget" and len(records) == 1
+    assert sum(r["cost_cents"] for r in records.values()) == pytest.approx(3 * 1.1)
+
+
 def test_a_sample_spreads_over_scenes_is_reproducible_and_is_recorded(synth_root, tmp_path):
     frames = _frames(synth_root)
     assert len(set(frames.scene_names)) == 2

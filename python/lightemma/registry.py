@@ -34,6 +34,7 @@ from __future__ import annotations
 import functools
 import importlib.util
 import json
+from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
@@ -299,6 +300,22 @@ def price(info: ModelInfo) -> dict[str, Any]:
                 "cache_read_usd_per_mtok": info.cache_read_usd_per_mtok, "cache_write_usd_per_mtok": info.cache_write_usd_per_mtok,
                 "source": f"{info.price_source}, read {info.price_read}"}
     return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, **none, "source": "unknown (costs recorded as null)"}
+
+
+def run_price(info: ModelInfo, *, batch: bool = False, given: Sequence[float] | None = None,
+              served_from: str | None = None) -> dict[str, Any]:
+    """The price a run bills its calls at, shaped like :func:`price`: ``given`` (``--price``: USD per million input /
+    output tokens, for every call of the run, batched or not; cache prices unknown), else unknown when the model is
+    served from another ``--api-base`` (``served_from``: not the provider's list price), else :func:`batch_price`
+    (``batch``) or :func:`price`. :class:`~lightemma.backends.api.APIBackend` and
+    :class:`~lightemma.backends.batch.BatchBackend` price calls this way, and ``--estimate`` / ``--max-cost`` with them."""
+    none = {"cache_read_usd_per_mtok": None, "cache_write_usd_per_mtok": None}
+    if given is not None:
+        return {"input_usd_per_mtok": float(given[0]), "output_usd_per_mtok": float(given[1]), **none,
+                "source": f"--price {float(given[0]):g} {float(given[1]):g} (USD per million input / output tokens)"}
+    if served_from is not None:
+        return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, **none, "source": f"none: served from {served_from}"}
+    return batch_price(info) if batch else price(info)
 
 
 def price_per_token(info: ModelInfo) -> tuple[float, float] | None:

@@ -234,6 +234,15 @@ def _extra_provider_hosts(provider: str) -> list[str]:
     return out
 
 
+def check_price(price: Any) -> None:
+    """``--price``: two numbers from 0 to :data:`MAX_PRICE` (USD per million input / output tokens), else a one-line
+    :class:`UserError`."""
+    if len(price) != 2 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and 0 <= p <= MAX_PRICE
+                                  for p in price):
+        raise UserError(f"--price needs two numbers from 0 to {MAX_PRICE:g} (USD per million input / output tokens), "
+                        f"got {' '.join(f'{p:g}' if isinstance(p, float) else str(p) for p in price)}")
+
+
 def is_provider_host(provider: str | None, api_base: str) -> bool:
     """True when ``api_base`` is ``provider``'s own API: https to one of :data:`PROVIDER_HOSTS`, or a host (or
     host:port) the environment's ``LIGHTEMMA_PROVIDER_HOSTS`` declares to be that provider's."""
@@ -499,10 +508,7 @@ class APIBackend:
         self.served_elsewhere = bool(api_base) and not is_provider_host(self.provider, api_base)
         self.price_given = price
         if price is not None:
-            if len(price) != 2 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and 0 <= p <= MAX_PRICE
-                                          for p in price):
-                raise UserError(f"--price needs two numbers from 0 to {MAX_PRICE:g} (USD per million input / output tokens), "
-                                f"got {' '.join(f'{p:g}' if isinstance(p, float) else str(p) for p in price)}")
+            check_price(price)
             self._price: tuple[float, float] | None = (price[0] / 1e6, price[1] / 1e6)
             self._cache_price: tuple[float | None, float | None] = (None, None)
         elif self.served_elsewhere:

@@ -230,7 +230,8 @@ def print_estimate(args: argparse.Namespace) -> int:
         return 0
     planned = estimate_run(args.model, frames=frames, prompt_set=settings["prompt_set"], chain=settings["chain"],
                            answer_format=settings["answer_format"], inputs=settings["inputs"],
-                           max_tokens=settings["max_tokens"], api_base=args.api_base, backend=args.backend)
+                           max_tokens=settings["max_tokens"], api_base=args.api_base, backend=args.backend,
+                           price=tuple(args.price) if args.price else None)
     print(planned.report())
     return 0
 

@@ -29,7 +29,7 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from lightemma.registry import ModelInfo, batch_price, image_tokens, price, typical_output_tokens
+from lightemma.registry import ModelInfo, image_tokens, run_price, typical_output_tokens
 
 SCENE_SHARE, INTENT_SHARE = 0.45, 0.35  # of a frame's output: the scene and intent answers, pasted into later prompts
 MESSAGE_TOKENS = 4
@@ -93,11 +93,11 @@ class Estimate:
                   else f"{self.image_tokens:,} image, {sizes}, {self.provider} rule")
 
         def money(cents: float | None) -> str:
-            return "unknown" if cents is None else f"${cents / 100:,.2f}"
+            return "unknown" if cents is None else f"~${cents / 100:,.2f}"
 
         return (f"estimate: {self.frames:,} frames, {self.calls:,} calls, ~{self.input_tokens:,} input tokens "
                 f"({images}) + ~{self.output_tokens:,} output tokens: "
-                f"~{money(self.cost_cents)} normal, ~{money(self.batch_cost_cents)} with --batch")
+                f"{money(self.cost_cents)} normal, {money(self.batch_cost_cents)} with --batch")
 
     def report(self) -> str:
         """The ``--estimate`` report: the line, then where each figure comes from."""
@@ -120,9 +120,12 @@ def no_bill(model: str, kind: str, frames: int) -> str:
 
 
 def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, prompts: Any, *, max_tokens: int,
-             chain: str = "independent", inputs: str = "full") -> Estimate:
+             chain: str = "independent", inputs: str = "full", given_price: Sequence[float] | None = None,
+             served_from: str | None = None) -> Estimate:
     """The :class:`Estimate` of running ``info`` over ``frames`` with ``prompts`` (a PromptSet selected for the run's
-    variant, ``inputs`` included); ``inputs`` ``no-image`` counts no image token."""
+    variant, ``inputs`` included); ``inputs`` ``no-image`` counts no image token. Priced as the run bills its calls
+    (:func:`lightemma.registry.run_price`): at ``given_price`` (``--price``) when given, unknown when the model is
+    served from another ``--api-base`` (``served_from``, as shown), else at the list and batch prices."""
     from lightemma.frames import history_placeholders
     from lightemma.inputs import check_inputs
     from lightemma.registry import IMAGE_TOKEN_RULES
@@ -158,7 +161,8 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
     n = len(frames)
     output = out_per_frame * n
     total_in = image_total + text_total
-    list_price, batch = price(info), batch_price(info)
+    list_price = run_price(info, given=given_price, served_from=served_from)
+    batch = run_price(info, batch=True, given=given_price, served_from=served_from)
 
     def cost(p: dict[str, Any]) -> float | None:
         if p["input_usd_per_mtok"] is None or p["output_usd_per_mtok"] is None:

@@ -146,7 +146,8 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
 
         # the endpoint as the user gave it (credentials and all), the key variable named: the same key rule as a normal run
         backend: Backend = BatchBackend(config["model"], api_base=api_base, api_key_env=config.get("api_key_env"),
-                                        timeout=config["timeout"], poll_seconds=config.get("batch_poll") or 30.0)
+                                        timeout=config["timeout"], poll_seconds=config.get("batch_poll") or 30.0,
+                                        price=tuple(config["price"]) if config.get("price") is not None else None)
         return _with_notices(backend, log)
     if kind == "api":
         if config.get("api_key_env"):
@@ -724,18 +725,20 @@ def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backe
 
     info = resolve(config["model"])
     planned = estimate(todo, info, getattr(backend, "provider", None), prompts, max_tokens=config["max_tokens"],
-                       chain=config.get("chain") or "independent", inputs=config.get("inputs") or "full")
+                       chain=config.get("chain") or "independent", inputs=config.get("inputs") or "full",
+                       given_price=config.get("price"),
+                       served_from=getattr(backend, "api_base_shown", None) if getattr(backend, "served_elsewhere", False) else None)
     per_call = planned.batch_cents_per_call if config.get("batch") else planned.cents_per_call
     if per_call is None:
         raise UserError(f"--max-cost: the price of {config['model']} is unknown ({planned.price_source}), so no spending "
-                        "can be bounded; drop --max-cost")
+                        "can be bounded; give it with --price IN OUT, or drop --max-cost")
     spent = sum(float(r.get("cost_cents") or 0.0) for r in read_run(run_dir).records.values())
     return Budget(float(limit), per_call, spent)
 
 
 def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT_PROMPT_SET, chain: str = "independent",
                  answer_format: str = "text", inputs: str = "full", max_tokens: int = 512, api_base: str | None = None,
-                 backend: str | None = None) -> Any:
+                 backend: str | None = None, price: Sequence[float] | None = None) -> Any:
     """The :class:`~lightemma.pipeline.estimate.Estimate` of running ``model`` over ``frames`` with the prompts and
     images of ``inputs`` — nothing is called.
 
@@ -757,7 +760,16 @@ def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT
         raise UserError(no_bill(model, kind, len(frames)))
     provider = check_model(litellm_model(info, api_base), model, api_base)  # the unknown-model error of a real run
     prompts = load_prompt_set(prompt_set).select(chain, answer_format, inputs)
-    return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain, inputs=inputs)
+    from lightemma.backends.api import is_provider_host
+    from lightemma.backends.retry import redact_url
+
+    if price is not None:
+        from lightemma.backends.api import check_price
+
+        check_price(price)
+    served_from = redact_url(api_base) if api_base and not is_provider_host(provider, api_base) else None
+    return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain, inputs=inputs,
+                    given_price=price, served_from=served_from)
 
 
 def _refresh_sidecar(run_dir: Path, log: Log | None) -> None:

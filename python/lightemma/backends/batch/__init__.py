@@ -19,7 +19,7 @@ any API error. A batch the provider rejects as a whole (validation) stops the ru
 Adapters: OpenAI (and OpenAI-compatible ``--api-base`` servers), Anthropic Message Batches and Gemini batch mode,
 each over its HTTP API, every reply read within :func:`~lightemma.backends.batch.base.results_limit` (litellm
 1.106.2 creates neither Anthropic nor Gemini batches, and takes no bounded client for OpenAI's). Costs are
-the provider-reported tokens at the registry's batch prices (:func:`lightemma.registry.batch_price`).
+the provider-reported tokens at the registry's batch prices, or at ``--price`` (:func:`lightemma.registry.run_price`).
 A call's ``seconds`` is its batch's turnaround (submission to results): per-frame latency has no meaning in
 batch mode, and Table I prints it as ``n/a``.
 
@@ -100,16 +100,18 @@ class BatchBackend:
 
     def __init__(self, model: str, *, api_base: str | None = None, api_key_env: str | None = None, timeout: float = 120.0,
                  poll_seconds: float = 30.0, poll_cap: float = 600.0, idle_seconds: float | None = None,
-                 max_resubmits: int = 2, adapter: BatchAdapter | None = None, retry: Any = None) -> None:
+                 max_resubmits: int = 2, adapter: BatchAdapter | None = None, retry: Any = None,
+                 price: tuple[float, float] | None = None) -> None:
         from lightemma.backends.api import APIBackend, IMAGE_LIMITS, DEFAULT_IMAGE_LIMIT, _ImageCache
         from lightemma.backends.retry import RetryPolicy
-        from lightemma.registry import batch_price
+        from lightemma.registry import run_price
 
         # the model and key checks, the key sent (one decision: APIBackend's), the parameters sent
-        self.api = APIBackend(model, api_base=api_base, timeout=timeout, api_key_env=api_key_env)
+        self.api = APIBackend(model, api_base=api_base, timeout=timeout, api_key_env=api_key_env, price=price)
         self.model_info = self.api.model_info
         self.provider = self.api.provider
         self.notices = self.api.notices
+        self.served_elsewhere, self.api_base_shown = self.api.served_elsewhere, self.api.api_base_shown
         self.adapter = adapter or adapter_for(self.provider or "", self.api.model, api_base=api_base,
                                               api_key=self.api.sent_key, timeout=timeout)
         if poll_seconds <= 0 or poll_cap <= 0:
@@ -120,9 +122,9 @@ class BatchBackend:
         self.retry = retry or RetryPolicy(max_retries=8, base=1.0, cap=60.0)
         limit_b64, max_side = IMAGE_LIMITS.get(self.provider or "", DEFAULT_IMAGE_LIMIT)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
-        self.price = batch_price(self.model_info)
-        if self.api.served_elsewhere:  # another --api-base: not the provider's batch price (as APIBackend's list price)
-            self.price = {**{k: None for k in self.price}, "source": f"none: served from {self.api.api_base_shown}"}
+        # --price for every call; another --api-base: not the provider's batch price (as APIBackend's list price)
+        self.price = run_price(self.model_info, batch=True, given=price,
+                               served_from=self.api.api_base_shown if self.api.served_elsewhere else None)
         self.journal: BatchJournal | None = None
         self._queue: list[_Pending] = []
         self._wake: asyncio.Event | None = None
