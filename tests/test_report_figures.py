@@ -203,7 +203,10 @@ def test_disagreement_pictures_show_the_models_their_number_was_measured_on(disa
     assert len(scenes) == 3  # three different scenes, not consecutive keyframes of one
 
 
-def test_an_empty_run_is_left_out_with_a_warning_not_every_picture(disagreement_report, tmp_path, capsys):
+def test_an_empty_run_is_left_out_with_a_warning_not_every_picture(disagreement_report, tmp_path, capsys, monkeypatch):
+    import sys
+
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)  # a terminal: the progress bar is drawn
     assert main(["report", str(disagreement_report), "--out", str(tmp_path / "rep"), "--top", "2", "--no-paper"]) == 0
     err = capsys.readouterr().err
     text = (tmp_path / "rep" / "index.md").read_text()
@@ -212,3 +215,7 @@ def test_an_empty_run_is_left_out_with_a_warning_not_every_picture(disagreement_
     assert list((tmp_path / "rep" / "figures" / "frames").glob("disagree_*_grid.png"))
     # the long steps show progress (tqdm on stderr)
     assert "report:" in err and "frame pictures" in err
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: False)  # a log file or a pipe: no bar and its \r redraws
+    assert main(["report", str(disagreement_report), "--out", str(tmp_path / "rep2"), "--top", "2", "--no-paper"]) == 0
+    err = capsys.readouterr().err
+    assert "report:" not in err and "frame pictures" not in err and "\r" not in err

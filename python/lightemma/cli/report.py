@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 
 
@@ -52,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
         resampling=resampling_of(args),
         svg=args.svg,
         force=args.force,
-        progress=True,
+        progress=sys.stderr.isatty(),  # no bar (its \r redraws) in a log file or a pipe, as import and synth
         version=args.dataset_version,
         safety=args.safety,
     )
