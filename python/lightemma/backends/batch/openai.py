@@ -72,7 +72,7 @@ class OpenAIBatches:
 
     async def submit(self, entries: list[dict[str, Any]], token: str) -> str:
         data = "".join(json.dumps(e, separators=(",", ":"), ensure_ascii=False) + "\n" for e in entries).encode("utf-8")
-        upload = await self._json("POST", "/files", files={"file": (f"{token}.jsonl", data, "application/jsonl")},
+        upload = await self._json("POST", "/files", files={"file": (f"{token}.jsonl", data)},
                                   data={"purpose": "batch"})
         batch = await self._json("POST", "/batches", json={"input_file_id": upload.get("id"), "completion_window": "24h",
                                                            "endpoint": "/v1/chat/completions",
