@@ -444,8 +444,22 @@ def test_results_of_the_wrong_shape_stop_the_run_with_the_reason_never_a_traceba
         with pytest.raises(RunStopped) as stopped:
             _run(synth_root, tmp_path, BATCH_MODEL["anthropic"], api_base=server.root)
     first = str(stopped.value).splitlines()[0]
-    assert "cannot read the results of batch" in first and "not what the anthropic batch API documents" in first, first
-    assert "AttributeError" in first and _records(stopped.value.run_dir) == {}
+    assert "cannot read the results of batch" in first and "results line 1 is not a JSON object" in first, first
+    assert _records(stopped.value.run_dir) == {}
+
+
+def test_a_results_line_longer_than_one_answer_is_refused_unparsed(monkeypatch):
+    """60 MiB of '[{},{},…]' on one line took 2 GB parsed: a line may be one answer (the reply limit) and 1 MiB more."""
+    from lightemma.backends import openai_http
+    from lightemma.backends.batch.base import BatchHTTPError, jsonl_rows
+
+    monkeypatch.setattr(openai_http, "MAX_BODY_BYTES", 1000)
+    ok = b'{"custom_id": "a"}\n\n{"custom_id": "b"}\n'
+    assert [r["custom_id"] for r in jsonl_rows(ok, "file f")] == ["a", "b"]
+    with pytest.raises(BatchHTTPError, match="results line 2 is over 1,049,576 bytes"):
+        list(jsonl_rows(b'{"custom_id": "a"}\n[' + b"{}," * 400_000 + b"{}]\n", "file f"))
+    with pytest.raises(BatchHTTPError, match="not UTF-8"):
+        list(jsonl_rows(b"\xff\xfe", "file f"))
 
 
 def test_saved_results_that_are_not_a_regular_file_are_polled_again_never_read(tmp_path):
@@ -478,3 +492,169 @@ def test_price_is_the_price_of_every_batched_call(tmp_path, synth_root, monkeypa
     assert len(calls) == 6 and all(c["cost_cents"] == pytest.approx((1000 * 10 + 50 * 20) / 1e6 * 100) for c in calls)
     manifest = json.loads((result.run_dir / "manifest.json").read_text())
     assert "--price 10 20" in manifest["backend"]["cost"]
+
+
+def _rewrite_openai_results(monkeypatch, change):
+    """The OpenAI emulator's results files, each line passed through ``change`` (a JSON line -> its new text)."""
+    import fake_batch
+
+    real = fake_batch._openai_batch
+
+    def patched(server, batch, input_file, *, peek=False):
+        out = real(server, batch, input_file, peek=peek)
+        for key in ("output_file_id", "error_file_id"):
+            fid = out.get(key)
+            if fid and not getattr(batch, "_rewritten_" + key, False):
+                lines = [change(json.loads(line)) for line in server.files[fid].decode().splitlines() if line.strip()]
+                server.files[fid] = "".join(line + "\n" for line in lines).encode()
+                setattr(batch, "_rewritten_" + key, True)
+        return out
+
+    monkeypatch.setattr(fake_batch, "_openai_batch", patched)
+
+
+def _content_list(line):
+    line["response"]["body"]["choices"][0]["message"]["content"] = [{"type": "text", "text": "hi"}]
+    return json.dumps(line)
+
+
+def _stranger(line):
+    line["custom_id"] = "no-such-request"
+    return json.dumps(line)
+
+
+@pytest.mark.parametrize(("change", "said"), [
+    (lambda line: json.dumps(line).replace('"status_code": 200', '"status_code": 1e999'), "status_code inf is no HTTP status"),
+    (_content_list, "message content is a list, not text"),
+    (_stranger, "'no-such-request', which is no request of this batch"),
+], ids=["status-code-inf", "content-list", "foreign-custom-id"])
+def test_openai_results_not_as_documented_stop_the_run_in_one_line(tmp_path, synth_root, monkeypatch, change, said):
+    """Found by trial: a status_code of 1e999 ended in an OverflowError traceback; a content list was stored as its
+    Python text and re-asked; results for no request of the batch had every request re-asked and billed again."""
+    _rewrite_openai_results(monkeypatch, change)
+    with FakeBatchServer(steps=1) as server:
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url)
+    first = str(stopped.value).splitlines()[0]
+    assert "cannot read the results of batch" in first and said in first, first
+    assert _records(stopped.value.run_dir) == {} and server.created == 1
+
+
+@pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
+def test_a_batch_state_no_provider_documents_stops_the_run_never_polls_forever(tmp_path, synth_root, monkeypatch, provider):
+    import fake_batch
+
+    name, key = {"openai": ("_openai_batch", "status"), "anthropic": ("_anthropic_batch", "processing_status"),
+                 "gemini": ("_gemini_operation", None)}[provider]
+    real = getattr(fake_batch, name)
+
+    def banana(*args, **kw):
+        out = real(*args, **kw)
+        if key:
+            out[key] = "banana"
+        else:
+            out["metadata"]["state"] = "banana"
+        return out
+
+    monkeypatch.setattr(fake_batch, name, banana)
+    with FakeBatchServer(steps=1) as server:
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, BATCH_MODEL[provider], api_base=_at(server, provider))
+    first = str(stopped.value).splitlines()[0]
+    assert "cannot poll batch" in first and "'banana' is none of" in first, first
+
+
+def test_a_redirect_from_a_batch_api_is_not_followed_nor_read_as_no_results(tmp_path, synth_root, monkeypatch):
+    """A 302 on the results file was read as an empty file: every request re-asked and billed again."""
+    import fake_batch
+
+    real = fake_batch._anthropic_results
+    monkeypatch.setattr(fake_batch, "_anthropic_results", lambda server, batch: real(server, batch))
+    with FakeBatchServer(steps=1) as server:
+        original = server._handler()
+
+        class Redirecting(original):
+            def do_GET(self):  # noqa: N802
+                if self.path.endswith("/results"):
+                    self.send_response(302)
+                    self.send_header("Location", "http://127.0.0.1:9/elsewhere")
+                    self.send_header("Content-Length", "0")
+                    self.end_headers()
+                    return
+                super().do_GET()
+
+        server._server.RequestHandlerClass = Redirecting
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, BATCH_MODEL["anthropic"], api_base=server.root)
+    first = str(stopped.value).splitlines()[0]
+    assert "HTTP 302" in first and "follows no redirect" in first and "127.0.0.1:9/elsewhere" in first, first
+
+
+def test_each_batch_call_has_the_whole_timeout_and_a_trickle_is_cut_off(tmp_path):
+    """httpx bounds each read, not a call: a reply trickled byte by byte was waited on without end."""
+    import asyncio
+
+    from lightemma.backends.batch import BatchBackend
+    from lightemma.backends.retry import RetryPolicy
+    from lightemma.errors import RunFatalError
+
+    class Trickle:
+        provider = "openai"
+
+        async def status(self, batch_id):
+            await asyncio.sleep(60)
+
+    backend = BatchBackend("openai/gpt-4o", api_base="http://127.0.0.1:9/v1", timeout=0.3, adapter=Trickle(),
+                           retry=RetryPolicy(max_retries=1, base=0.01, cap=0.02))
+    start = time.monotonic()
+    with pytest.raises(RunFatalError) as fatal:
+        asyncio.run(backend._call(lambda: backend.adapter.status("b"), "poll batch b", requests=4))
+    assert time.monotonic() - start < 5
+    assert fatal.value.error == "Timeout" and "within --timeout 0.3 s" in str(fatal.value) and "after 1 retries" in str(fatal.value)
+
+
+def test_an_answer_over_the_reply_limit_is_that_requests_error_not_a_record(monkeypatch):
+    """One 60 MiB answer took 4 GB and a 943 MB frames.jsonl line no reader reads: a batch answer gets the online
+    reply limit."""
+    from lightemma.backends import openai_http
+    from lightemma.backends.batch.base import checked_results
+
+    monkeypatch.setattr(openai_http, "MAX_BODY_BYTES", 1000)
+    items = checked_results([{"custom_id": "a", "text": "ok"}, {"custom_id": "b", "text": "é" * 600}], ["a", "b"])
+    assert items[0]["text"] == "ok" and items[1]["text"] is None
+    assert items[1]["error"] == "ResponseTooLargeError" and "over 1,000 bytes" in items[1]["error_message"]
+
+
+def test_provider_ids_stay_one_piece_of_the_url():
+    from lightemma.backends.batch.base import BatchHTTPError, url_id
+
+    assert url_id("../../../x?y#z") == "..%2F..%2F..%2Fx%3Fy%23z"
+    assert url_id("batches/abc-123", slash=True) == "batches/abc-123"
+    with pytest.raises(BatchHTTPError):
+        url_id("batches/../../x", slash=True)
+
+
+def test_saved_results_holding_a_request_twice_or_a_link_are_polled_again(tmp_path):
+    journal = BatchJournal.open(tmp_path)
+    journal.submitted("tok", "batch_1", ["a", "b"])
+    journal.save_results("batch_1", [{"custom_id": "a", "text": "x"}, {"custom_id": "b", "text": "y"}], "completed", 1.0)
+    saved = tmp_path / journal.batches["batch_1"].results
+    with saved.open("a") as fh:
+        fh.write(json.dumps({"custom_id": "a", "text": "x", "input_tokens": 999999}) + "\n")
+    assert BatchJournal.open(tmp_path).saved_results("batch_1") is None  # was: the last copy, 626 ¢
+    saved.unlink()
+    saved.symlink_to("/dev/zero")
+    assert BatchJournal.open(tmp_path).saved_results("batch_1") is None  # was: "names results outside the run directory"
+
+
+def test_the_basic_auth_value_a_server_echoes_is_kept_out_of_messages_and_files(tmp_path, synth_root):
+    with FakeBatchServer(steps=1) as server:
+        base = server.url.replace("http://", "http://alice:s3cr3tPW@")
+        basic = "Basic " + base64.b64encode(b"alice:s3cr3tPW").decode()
+        server.require_key, server.refusal = "a-key-never-sent", f"bad key: {basic}"
+        with pytest.raises(RunStopped) as stopped:
+            _run(synth_root, tmp_path, "openai/gpt-4o", api_base=base, sample=2)
+    token = basic.split(" ", 1)[1]
+    written = b"".join(p.read_bytes() for p in (tmp_path / "runs").rglob("*") if p.is_file())
+    assert "bad key" in str(stopped.value) and token not in str(stopped.value)
+    assert token.encode() not in written and b"s3cr3tPW" not in written

@@ -880,3 +880,20 @@ def test_a_signal_before_the_first_frame_is_one_line_naming_the_resume_and_leave
     assert "Traceback" not in err
     (run_dir,) = run_dirs(out)
     assert not (run_dir / LOCK_PID_FILE).exists() and not list(run_dir.glob(".*.tmp"))
+
+
+def test_a_frame_record_no_reader_would_read_stops_the_run_and_is_never_written(tmp_path, frames, monkeypatch):
+    """Found by trial: a 60 MiB answer made a 943 MB frames.jsonl line, which every reader skips unread — while the
+    run summed up 'ok' and exited 0 with the frame missing. A record over the line limit stops the run instead."""
+    from lightemma.errors import RunStopped
+    from lightemma.runs import store
+
+    monkeypatch.setattr(store, "MAX_LINE_BYTES", 20_000)
+    long_scene = lambda req: Reply("A road. " * 4000) if req.stage == "scene" else default_reply(req)  # noqa: E731
+    with FakeOpenAIServer(long_scene) as server:
+        with pytest.raises(RunStopped) as stopped:
+            run("openai/test-model", frames=frames[:2], output=tmp_path, api_base=server.url, concurrency=1, **FAST)
+    assert stopped.value.cause == "record-too-large" and stopped.value.error == "RecordTooLargeError"
+    first = str(stopped.value).splitlines()[0]
+    assert "over the 20,000 a line of frames.jsonl may be" in first and "--max-tokens" in first, first
+    assert (stopped.value.run_dir / "frames.jsonl").read_bytes() == b""  # nothing half-written, nothing to skip

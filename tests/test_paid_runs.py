@@ -283,3 +283,58 @@ def test_lightemma_models_shows_batch_prices(capsys):
     assert rows["qwen-2.5-vl-7b"]["batch_price_source"] is None
     assert main(["models"]) == 0
     assert "| --batch $ in / out |" in capsys.readouterr().out
+
+
+def test_price_covers_cached_tokens_and_a_call_of_unknown_cost_is_never_free_to_max_cost(synth_root, tmp_path):
+    """--price left cached tokens unpriced: every call cost unknown, and --max-cost counted unknown as 0 (8 frames ran
+    under a 4 ¢ limit). Cached and cache-write tokens are input tokens at --price's input price; a call whose cost is
+    still unknown counts at the estimate."""
+    import dataclasses
+
+    from fake_openai import default_reply
+
+    cached = lambda req: dataclasses.replace(default_reply(req), cached_tokens=500)  # noqa: E731
+    with FakeOpenAIServer(cached) as server:
+        result = run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
+                     output=tmp_path / "a", progress=False, sample=2, price=(10.0, 20.0))
+        calls = [c for r in read_run(result.run_dir).records.values() for a in r["attempts"] for c in a["calls"]]
+        assert calls and all(c["cached_input_tokens"] == 500 for c in calls)
+        assert all(c["cost_cents"] == pytest.approx((1000 * 10 + 50 * 20) / 1e6 * 100) for c in calls)
+        manifest = json.loads((result.run_dir / "manifest.json").read_text())
+        assert manifest["estimate"]["price_source"].startswith("--price 10 20")  # the line printed before the run too
+    from lightemma.pipeline.estimate import Budget
+
+    budget = Budget(4.0, per_call_cents=1.1)
+    assert budget.reserve("f", first_call=True) == 1.1
+    budget.settle(1.1, 0.0)
+    assert budget.message().count("-0.00") == 0
+
+
+def test_unknown_costs_count_at_the_estimate_under_max_cost(synth_root, tmp_path):
+    """A provider that reports no usage: each call's cost is unknown, and --max-cost still stops the run."""
+    import dataclasses
+
+    from fake_openai import default_reply
+
+    unreported = lambda req: dataclasses.replace(default_reply(req), usage=False)  # noqa: E731
+    with FakeOpenAIServer(unreported) as server:
+        with pytest.raises(RunStopped) as stopped:
+            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
+                output=tmp_path, progress=False, concurrency=1, max_cost_cents=5.0, price=(10.0, 20.0))
+    records = read_run(stopped.value.run_dir).records
+    assert stopped.value.cause == "budget" and 0 < len(records) < 12
+    assert all(r["cost_cents"] is None for r in records.values())
+
+
+def test_price_for_a_model_no_provider_bills_is_refused_and_a_resume_names_the_way_on(synth_root, tmp_path, elsewhere):
+    with pytest.raises(UserError, match="--price is the price of a provider's tokens; baseline:cv runs on the baseline backend"):
+        run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False,
+            price=(1.0, 2.0))
+    from fake_openai import Reply
+
+    with FakeOpenAIServer(lambda req: Reply.error(401)) as server:  # stops at its first call: a run to resume
+        with pytest.raises(RunStopped) as stopped:
+            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
+                output=tmp_path, progress=False, limit=2)
+        with pytest.raises(UserError, match="a resume keeps the run's price \\(it has none\\): drop --max-cost, or start a new run"):
+            resume(stopped.value.run_dir, progress=False, max_cost_cents=5.0, api_base=server.url)

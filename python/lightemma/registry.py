@@ -305,13 +305,15 @@ def price(info: ModelInfo) -> dict[str, Any]:
 def run_price(info: ModelInfo, *, batch: bool = False, given: Sequence[float] | None = None,
               served_from: str | None = None) -> dict[str, Any]:
     """The price a run bills its calls at, shaped like :func:`price`: ``given`` (``--price``: USD per million input /
-    output tokens, for every call of the run, batched or not; cache prices unknown), else unknown when the model is
+    output tokens, for every call of the run, batched or not; cached and cache-write input tokens at the input
+    price), else unknown when the model is
     served from another ``--api-base`` (``served_from``: not the provider's list price), else :func:`batch_price`
     (``batch``) or :func:`price`. :class:`~lightemma.backends.api.APIBackend` and
     :class:`~lightemma.backends.batch.BatchBackend` price calls this way, and ``--estimate`` / ``--max-cost`` with them."""
     none = {"cache_read_usd_per_mtok": None, "cache_write_usd_per_mtok": None}
-    if given is not None:
-        return {"input_usd_per_mtok": float(given[0]), "output_usd_per_mtok": float(given[1]), **none,
+    if given is not None:  # every input token at the input price: cached and cache-write ones too
+        return {"input_usd_per_mtok": float(given[0]), "output_usd_per_mtok": float(given[1]),
+                "cache_read_usd_per_mtok": float(given[0]), "cache_write_usd_per_mtok": float(given[0]),
                 "source": f"--price {float(given[0]):g} {float(given[1]):g} (USD per million input / output tokens)"}
     if served_from is not None:
         return {"input_usd_per_mtok": None, "output_usd_per_mtok": None, **none, "source": f"none: served from {served_from}"}

@@ -510,7 +510,8 @@ class APIBackend:
         if price is not None:
             check_price(price)
             self._price: tuple[float, float] | None = (price[0] / 1e6, price[1] / 1e6)
-            self._cache_price: tuple[float | None, float | None] = (None, None)
+            # every input token at the given input price, cached and cache-write ones too (registry.run_price)
+            self._cache_price: tuple[float | None, float | None] = (price[0] / 1e6, price[0] / 1e6)
         elif self.served_elsewhere:
             self._price, self._cache_price = None, (None, None)
         else:

@@ -124,6 +124,9 @@ def url_secrets(url: str | None) -> tuple[str, ...]:
     if "@" in parts.netloc:
         userinfo = parts.netloc.rsplit("@", 1)[0]
         out += [userinfo, unquote(userinfo), *[unquote(x) for x in userinfo.split(":", 1)]]
+        basic = split_credentials(url)[1]  # the header it is sent as: a server may echo it back
+        if basic:
+            out += [basic, basic.split(" ", 1)[1]]
     out += [v for k, v in parse_qsl(parts.query, keep_blank_values=True) if _SECRET_QUERY.search(k) and v]
     return tuple(sorted({s for s in out if len(s) >= 3}, key=len, reverse=True))
 

@@ -218,5 +218,5 @@ class Budget:
         self.reserved_cents -= self.per_call_cents * self._held.pop(frame_id, 0)
 
     def message(self) -> str:
-        return (f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent and {self.reserved_cents:.2f} ¢ in flight; "
+        return (f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent and {max(self.reserved_cents, 0.0):.2f} ¢ in flight; "
                 f"the next frame (about {self.CHAIN_CALLS * self.per_call_cents:.3f} ¢) would pass the limit")

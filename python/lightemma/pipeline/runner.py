@@ -58,6 +58,7 @@ from lightemma.registry import resolve
 from lightemma.runs.store import (
     FRAMES_FILE,
     LOCK_PID_FILE,
+    RecordTooLargeError,
     RunLock,
     RunWriter,
     create_run_dir,
@@ -134,6 +135,9 @@ def _make_backend(config: dict[str, Any], output: Path, api_base: str | None = N
     ``api_base`` is the endpoint as the user gave it (the config records it without credentials).
     """
     kind = backend_kind(config["model"], config["backend"], config["api_base"])
+    if config.get("price") is not None and kind != "api":
+        raise UserError(f"--price is the price of a provider's tokens; {config['model']} runs on the {kind} backend and "
+                        "is billed none: drop --price")
     options = dict(config.get("backend_options") or {})
     if config.get("batch"):
         if kind != "api":
@@ -358,8 +362,11 @@ def _check_config_types(run_dir: Path, config: Mapping[str, Any], table: Mapping
                 kind = "text without NUL characters"
             raise refuse(name, value, kind)
     if where == "config":
+        from lightemma.backends.api import MAX_PRICE
+
         pairs = (("speed_range", lambda v: len(v) == 2 and all(map(_finite, v)) and v[0] < v[1], "[low, high]"),
-                 ("price", lambda v: len(v) == 2 and all(_finite(x) and x >= 0 for x in v), "[input, output] USD per million"))
+                 ("price", lambda v: len(v) == 2 and all(_finite(x) and 0 <= x <= MAX_PRICE for x in v),
+                  f"[input, output] USD per million, each 0..{MAX_PRICE:g}"))
         for name, good, kind in pairs:
             value = config.get(name)
             if value is not None and not good(value):
@@ -509,7 +516,10 @@ class _Guard:
         spent = 0.0
         try:
             results = await self.backend.generate(requests)
-            spent = sum(r.cost_cents or 0.0 for r in results)
+            # a call of unknown cost (no usage reported, a price not known for its cached tokens) counts at the
+            # estimate, never as free: the limit holds whatever a provider leaves out (a cache hit costs nothing)
+            spent = sum(r.cost_cents if r.cost_cents is not None else (0.0 if r.cached else self.budget.per_call_cents)
+                        for r in results)
             return results
         finally:
             self.budget.settle(reserved, spent)
@@ -564,6 +574,11 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
                 writer.append(record)
             except OSError as exc:
                 halt(RunFatalError(os_error_line(exc, "write a frame record to"), cause="disk"))
+                return
+            except RecordTooLargeError as exc:  # never written to be skipped unread later: the run says so and stops
+                halt(RunFatalError(f"{exc}: the model's answers are that long; not written (a resume asks that frame "
+                                   "again; a smaller --max-tokens bounds the answers)", cause="record-too-large",
+                                   error="RecordTooLargeError"))
                 return
             bar.update(record)
             outcome.done += 1
@@ -629,7 +644,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     Raises :class:`RunStopped` (after saving the session) when the run stopped for a run-fatal cause.
     """
     try:
-        budget = _budget(run_dir, config, todo, backend, prompts)
+        budget = _budget(run_dir, config, todo, backend, prompts, resuming=kind != "run")
     except BaseException:
         asyncio.run(backend.aclose())
         raise
@@ -716,7 +731,8 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=outcome.done)
 
 
-def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backend: Backend, prompts: PromptSet) -> Any:
+def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backend: Backend, prompts: PromptSet, *,
+            resuming: bool = False) -> Any:
     """The session's ``--max-cost`` budget (None without one): the run's recorded spending, the expected cost per call."""
     limit = config.get("max_cost_cents")
     if limit is None:
@@ -730,8 +746,10 @@ def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backe
                        served_from=getattr(backend, "api_base_shown", None) if getattr(backend, "served_elsewhere", False) else None)
     per_call = planned.batch_cents_per_call if config.get("batch") else planned.cents_per_call
     if per_call is None:
+        fix = ("a resume keeps the run's price (it has none): drop --max-cost, or start a new run with --price IN OUT"
+               if resuming else "give it with --price IN OUT, or drop --max-cost")
         raise UserError(f"--max-cost: the price of {config['model']} is unknown ({planned.price_source}), so no spending "
-                        "can be bounded; give it with --price IN OUT, or drop --max-cost")
+                        f"can be bounded; {fix}")
     spent = sum(float(r.get("cost_cents") or 0.0) for r in read_run(run_dir).records.values())
     return Budget(float(limit), per_call, spent)
 
@@ -920,7 +938,7 @@ def run(
         planned = None
         if getattr(instance, "info", {}).get("kind") == "api":  # a paid run: its bill first, in one line
             planned = estimate_run(model, frames=frames, prompt_set=prompt_set, chain=chain, answer_format=answer_format,
-                                   inputs=inputs, max_tokens=max_tokens, api_base=api_base, backend=backend)
+                                   inputs=inputs, max_tokens=max_tokens, api_base=api_base, backend=backend, price=price)
         _prepare(instance, frames, dataset, log=log)
         manifest = {
             "model": model,

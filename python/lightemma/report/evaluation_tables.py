@@ -120,7 +120,8 @@ def efficiency_table(evaluation: Evaluation, *, with_paper: bool = False) -> Tab
         at = next(i for i, c in enumerate(columns) if c.key == "seconds_per_frame") + 1
         columns = (*columns[:at], BATCH_TURNAROUND_COLUMN, *columns[at:])
         notes = [*notes, "Batch runs (lightemma run --batch): per-frame time is n/a (a frame waits for its batches); "
-                 "Batch turnaround is the mean time from a batch's submission to its results; cost at batch prices."]
+                 "Batch turnaround is the mean time from a batch's submission to its results; cost at batch prices "
+                 "(or at the run's --price)."]
     return Table("Efficiency — per frame, all attempts", columns, rows, name="efficiency", flags=coverage_flags(evaluation), notes=notes)
 
 

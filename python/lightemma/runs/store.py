@@ -43,6 +43,10 @@ import orjson
 from lightemma.errors import RunStoreError, os_error_line
 from lightemma.runs.records import MAX_NUMBER_DIGITS, bounded_values, loads_bounded, record_problem
 
+class RecordTooLargeError(RunStoreError):
+    """A frame record whose line would pass :data:`MAX_LINE_BYTES` (answers of that size): not written."""
+
+
 MANIFEST_FILE = "manifest.json"
 FRAMES_FILE = "frames.jsonl"
 FRAME_IDS_FILE = "frame_ids.txt"
@@ -483,6 +487,9 @@ class RunWriter:
         """
         problems: list[str] = []
         data = encode_line(record, problems)
+        if len(data) > MAX_LINE_BYTES:  # a line no reader would read back: refused, never written to be skipped later
+            raise RecordTooLargeError(f"frame {str(record.get('frame_id'))[:120]!r}: its record is {len(data):,} bytes, over "
+                                      f"the {MAX_LINE_BYTES:,} a line of {FRAMES_FILE} may be")
         if problems:
             self._warn_unknown(record, problems)
         with self._lock:

@@ -41,7 +41,15 @@ from dataclasses import dataclass
 from typing import Any
 
 from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
-from lightemma.backends.batch.base import FAILED, PENDING, BatchAdapter, BatchHTTPError, entry_bytes, results_limit
+from lightemma.backends.batch.base import (
+    FAILED,
+    PENDING,
+    BatchAdapter,
+    BatchHTTPError,
+    checked_results,
+    entry_bytes,
+    results_limit,
+)
 from lightemma.backends.batch.journal import BatchJournal
 from lightemma.errors import RunFatalError, UserError
 
@@ -108,6 +116,7 @@ class BatchBackend:
 
         # the model and key checks, the key sent (one decision: APIBackend's), the parameters sent
         self.api = APIBackend(model, api_base=api_base, timeout=timeout, api_key_env=api_key_env, price=price)
+        self.timeout = float(timeout)  # each batch API call, connect to last byte
         self.model_info = self.api.model_info
         self.provider = self.api.provider
         self.notices = self.api.notices
@@ -399,15 +408,9 @@ class BatchBackend:
             self._wake.set()
 
     async def _results(self, bid: str, status: Any) -> list[dict[str, Any]]:
-        """The adapter's results of batch ``bid``; a custom id answered twice is not guessed between."""
-        items = await self.adapter.results(bid, status)
-        seen: set[str] = set()
-        for item in items:
-            cid = str(item.get("custom_id"))
-            if cid in seen:
-                raise BatchHTTPError(0, f"the results hold request {cid} twice; lightemma does not choose one", answer=True)
-            seen.add(cid)
-        return items
+        """The adapter's results of batch ``bid`` (:func:`checked_results`)."""
+        assert self.journal is not None
+        return checked_results(await self.adapter.results(bid, status), self.journal.batches[bid].custom_ids)
 
     async def _call(self, make: Callable[[], Any], what: str, *, requests: int = 0) -> Any:
         """An adapter call, transient failures (connection, 429, 5xx) retried with backoff; others stop the run.
@@ -423,11 +426,14 @@ class BatchBackend:
             try:
                 try:
                     with body_guard(limit):
-                        return await make()
+                        return await asyncio.wait_for(make(), self.timeout)  # connect to last byte, as --timeout says
+                except asyncio.TimeoutError:  # a reply trickled (httpx bounds each read, not the whole call): retried
+                    raise BatchHTTPError(0, f"no whole answer within --timeout {self.timeout:g} s (connect to last byte)",
+                                         deadline=True) from None
                 except HTTPCallError as exc:  # the body hooks: past the limit, or an encoding lightemma does not read
                     raise BatchHTTPError(0, f"{exc} (the limit for a batch of {requests} request(s): docs/run.md, "
                                             "Limits)", answer=True) from None
-                except (ValueError, KeyError, TypeError, AttributeError, IndexError, RecursionError) as exc:
+                except (ValueError, KeyError, TypeError, AttributeError, IndexError, RecursionError, OverflowError) as exc:
                     raise BatchHTTPError(0, f"the answer is not what the {self.adapter.provider} batch API documents "
                                             f"({type(exc).__name__}: {str(exc)[:120]})", answer=True) from None
             except BatchHTTPError as exc:
@@ -445,6 +451,6 @@ class BatchBackend:
                 else:
                     fatal = RunFatalError(f"{self.api.model}: cannot {what}: {said} ({where}"
                                           f"{f', after {tries} retries' if tries else ''})", cause="batch-api",
-                                          error="BatchAPIError")
+                                          error="Timeout" if exc.deadline else "BatchAPIError")
                 fatal.http_status = exc.status  # type: ignore[attr-defined]
                 raise fatal from None

@@ -13,7 +13,6 @@ any other ``--api-base`` is an OpenAI-compatible server, batched by the OpenAI a
 
 from __future__ import annotations
 
-import json
 import os
 from typing import Any
 
@@ -26,10 +25,13 @@ from lightemma.backends.batch.base import (
     endpoint,
     http_call,
     item_result,
+    jsonl_rows,
     split_data_url,
+    url_id,
 )
 
 VERSION = "2023-06-01"
+STATES = {"in_progress": PENDING, "canceling": PENDING, "ended": ENDED}  # processing_status, as documented
 
 
 def base_url() -> str:
@@ -82,21 +84,20 @@ class AnthropicBatches:
         return str(response.json()["id"])
 
     async def status(self, batch_id: str) -> BatchStatus:
-        data = (await self._request("GET", f"{self.base}/v1/messages/batches/{batch_id}")).json()
+        data = (await self._request("GET", f"{self.base}/v1/messages/batches/{url_id(batch_id)}")).json()
         state = str(data.get("processing_status"))
-        return BatchStatus(state=ENDED if state == "ended" else PENDING, provider_state=state,
+        if state not in STATES:
+            raise ValueError(f"batch {batch_id}: processing_status {state[:60]!r} is none of {', '.join(STATES)}")
+        return BatchStatus(state=STATES[state], provider_state=state,
                            counts=dict(data.get("request_counts") or {}), handle={"results_url": data.get("results_url")})
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
-        url = status.handle.get("results_url") or f"{self.base}/v1/messages/batches/{batch_id}/results"
+        url = status.handle.get("results_url") or f"{self.base}/v1/messages/batches/{url_id(batch_id)}/results"
         if not str(url).startswith(self.base + "/"):  # the key goes only to the base the user chose
             raise BatchHTTPError(0, f"results_url {url!r} is not under {self.base}; not sending the key there", answer=True)
-        text = (await self._request("GET", url)).text
+        data = (await self._request("GET", url)).content
         out = []
-        for line in text.splitlines():
-            if not line.strip():
-                continue
-            row = json.loads(line)
+        for row in jsonl_rows(data, f"batch {batch_id}"):
             cid, result = str(row.get("custom_id")), row.get("result") or {}
             kind = result.get("type")
             if kind == "succeeded":

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
+from collections.abc import Iterator, Sequence
 from typing import Any, Protocol
 
 #: states of a batch as lightemma sees it: still running, or one terminal state
@@ -32,10 +33,11 @@ def results_limit(n_requests: int) -> int:
 class BatchHTTPError(Exception):
     """A provider's batch endpoint answered with an error (``status`` 0: no answer at all)."""
 
-    def __init__(self, status: int, message: str, *, answer: bool = False) -> None:
+    def __init__(self, status: int, message: str, *, answer: bool = False, deadline: bool = False) -> None:
         super().__init__(f"HTTP {status}: {message}" if status else message)
         self.status = status
         self.answer = answer  # the provider answered, with something lightemma must not use (not worth a retry)
+        self.deadline = deadline  # no whole answer within --timeout
 
     @property
     def transient(self) -> bool:
@@ -79,6 +81,10 @@ async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
         response = await client.request(method, url, **kw)
     except httpx.HTTPError as exc:
         raise BatchHTTPError(0, f"{type(exc).__name__}: {exc}") from None
+    if 300 <= response.status_code < 400 or response.status_code < 200:  # the key is not sent on to another place
+        raise BatchHTTPError(response.status_code, f"{method} answered with HTTP {response.status_code} "
+                             f"(to {str(response.headers.get('location'))[:120]!r}), not an answer; lightemma follows no "
+                             "redirect of a batch API", answer=True)
     if response.status_code >= 400:
         try:
             message = response.json().get("error", {}).get("message") or response.text[:300]
@@ -112,6 +118,66 @@ def count(usage: dict[str, Any], name: str) -> int | None:
     """A token count a provider reported: a non-negative int, else None (unknown, never zero)."""
     value = usage.get(name)
     return value if isinstance(value, int) and not isinstance(value, bool) and value >= 0 else None
+
+
+def checked_results(items: list[dict[str, Any]], custom_ids: Sequence[str]) -> list[dict[str, Any]]:
+    """A batch's results as lightemma uses them, or :class:`BatchHTTPError` (an answer not to use): every result for
+    a request of the batch (``custom_ids``), none twice — lightemma does not choose between two answers, nor take one
+    for a request it never sent. An answer text over the reply limit
+    (:data:`~lightemma.backends.openai_http.MAX_BODY_BYTES`, as an online reply) is that request's
+    ``ResponseTooLargeError``, not kept."""
+    from lightemma.backends.openai_http import MAX_BODY_BYTES
+
+    wanted, seen = set(custom_ids), set()
+    for i, item in enumerate(items):
+        cid = item.get("custom_id")
+        if not isinstance(cid, str) or cid not in wanted:
+            raise BatchHTTPError(0, f"the results answer {str(cid)[:80]!r}, which is no request of this batch", answer=True)
+        if cid in seen:
+            raise BatchHTTPError(0, f"the results hold request {cid} twice; lightemma does not choose one", answer=True)
+        seen.add(cid)
+        text = item.get("text")
+        if isinstance(text, str) and len(text) > MAX_BODY_BYTES // 4 and len(text.encode("utf-8", "surrogatepass")) > MAX_BODY_BYTES:
+            items[i] = {**item, "text": None, "error": "ResponseTooLargeError", "resubmit": False,
+                        "error_message": f"the answer is over {MAX_BODY_BYTES:,} bytes, more than lightemma reads"}
+    return items
+
+
+def jsonl_rows(data: bytes, where: str) -> Iterator[dict[str, Any]]:
+    """The JSON objects of a JSONL results file, one line at a time (parsed lines are not held: a line of ``[{},{},…]``
+    grows ~30× in memory). A line over the online reply limit plus 1 MiB of envelope, one that is not a JSON object,
+    or a file that is not UTF-8: :class:`BatchHTTPError` (an answer not to use)."""
+    from lightemma.backends.openai_http import MAX_BODY_BYTES
+
+    limit = MAX_BODY_BYTES + (1 << 20)
+    try:
+        text = data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise BatchHTTPError(0, f"{where}: the results are not UTF-8 text", answer=True) from None
+    for number, line in enumerate(text.splitlines(), 1):
+        if not line.strip():
+            continue
+        if len(line) > limit // 4 and len(line.encode("utf-8")) > limit:
+            raise BatchHTTPError(0, f"{where}: results line {number} is over {limit:,} bytes, more than one answer may be",
+                                 answer=True)
+        try:
+            row = json.loads(line)
+        except (json.JSONDecodeError, RecursionError) as exc:
+            raise BatchHTTPError(0, f"{where}: results line {number} is not JSON ({type(exc).__name__})", answer=True) from None
+        if not isinstance(row, dict):
+            raise BatchHTTPError(0, f"{where}: results line {number} is not a JSON object", answer=True)
+        yield row
+
+
+def url_id(value: Any, *, slash: bool = False) -> str:
+    """A provider's id (a batch's, a file's) as one piece of a URL path: percent-quoted, so an id never moves a call to
+    another path or query; ``slash``: ids of the form ``batches/123`` (Gemini), without ``.`` or ``..`` segments."""
+    from urllib.parse import quote
+
+    text = str(value)
+    if slash and any(part in ("", ".", "..") for part in text.split("/")):
+        raise BatchHTTPError(0, f"the id {text[:80]!r} is not an id lightemma puts in a URL", answer=True)
+    return quote(text, safe="/" if slash else "")
 
 
 def entry_bytes(entry: Any) -> int:

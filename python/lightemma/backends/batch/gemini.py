@@ -28,10 +28,12 @@ from lightemma.backends.batch.base import (
     http_call,
     item_result,
     split_data_url,
+    url_id,
 )
 
 TERMINAL = {"BATCH_STATE_SUCCEEDED": ENDED, "BATCH_STATE_EXPIRED": ENDED, "BATCH_STATE_CANCELLED": ENDED,
             "BATCH_STATE_FAILED": FAILED}
+RUNNING = ("BATCH_STATE_UNSPECIFIED", "BATCH_STATE_PENDING", "BATCH_STATE_RUNNING")  # any other state: not documented
 
 
 def base_url() -> str:
@@ -83,16 +85,18 @@ class GeminiBatches:
         return str(name)
 
     async def status(self, batch_id: str) -> BatchStatus:
-        data = await self._request("GET", f"{self.base}/v1beta/{batch_id}")
+        data = await self._request("GET", f"{self.base}/v1beta/{url_id(batch_id, slash=True)}")
         meta = data.get("metadata") or {}
         state = str(meta.get("state"))
+        if state not in TERMINAL and state not in RUNNING:
+            raise ValueError(f"batch {batch_id}: state {state[:60]!r} is none of the documented batch states")
         error = data.get("error")
         return BatchStatus(state=TERMINAL.get(state, PENDING), provider_state=state, counts=dict(meta.get("batchStats") or {}),
                            reason=f"{error.get('code')}: {error.get('message')}" if isinstance(error, dict) else None,
                            handle={"operation": data})
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
-        data = status.handle.get("operation") or await self._request("GET", f"{self.base}/v1beta/{batch_id}")
+        data = status.handle.get("operation") or await self._request("GET", f"{self.base}/v1beta/{url_id(batch_id, slash=True)}")
         rows = (((data.get("response") or {}).get("inlinedResponses") or {}).get("inlinedResponses")) or []
         out = []
         for row in rows:

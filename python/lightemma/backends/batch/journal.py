@@ -150,15 +150,20 @@ class BatchJournal:
         batch = self.batches.get(batch_id)
         if batch is None or batch.results is None:
             return None
-        path = (self.run_dir / batch.results).resolve()
-        if self.run_dir.resolve() not in path.parents:  # never read outside the run directory
+        relative = Path(str(batch.results))
+        if relative.is_absolute() or ".." in relative.parts:  # never read outside the run directory
             raise RunStoreError(f"{self.path}: batch {batch_id} names results outside the run directory")
-        from lightemma.backends.batch.base import results_limit
+        path = self.run_dir / relative
+        from lightemma.backends.batch.base import BatchHTTPError, checked_results, results_limit
         from lightemma.runs.store import read_small_text
 
+        if path.is_symlink():
+            return None  # not the file lightemma wrote (a link, to /dev/zero or anywhere): poll the batch again
         try:  # a regular file within what its batch's results may be: never a FIFO or /dev/zero
             items = [json.loads(line) for line in read_small_text(path, results_limit(len(batch.custom_ids))).splitlines()
                      if line.strip()]
-        except (RunStoreError, json.JSONDecodeError, RecursionError):
+            if not all(isinstance(i, dict) for i in items):
+                return None
+            return checked_results(items, batch.custom_ids)  # each of its requests once, as when it was saved
+        except (RunStoreError, json.JSONDecodeError, RecursionError, BatchHTTPError):
             return None  # lost or damaged: poll the batch again (the provider keeps its results)
-        return items if all(isinstance(i, dict) for i in items) else None

@@ -19,9 +19,20 @@ import json
 import os
 from typing import Any
 
-from lightemma.backends.batch.base import ENDED, FAILED, PENDING, BatchHTTPError, BatchStatus, http_call, item_result
+from lightemma.backends.batch.base import (
+    ENDED,
+    FAILED,
+    PENDING,
+    BatchHTTPError,
+    BatchStatus,
+    http_call,
+    item_result,
+    jsonl_rows,
+    url_id,
+)
 
 TERMINAL = {"completed": ENDED, "expired": ENDED, "cancelled": ENDED, "failed": FAILED}
+RUNNING = ("validating", "in_progress", "finalizing", "cancelling")  # any other status: not documented
 UNRUN = ("batch_expired", "batch_cancelled")  # error codes of requests the batch never ran
 DEFAULT_BASE = "https://api.openai.com/v1"
 
@@ -82,8 +93,10 @@ class OpenAIBatches:
         return str(batch["id"])
 
     async def status(self, batch_id: str) -> BatchStatus:
-        batch = await self._json("GET", f"/batches/{batch_id}")
+        batch = await self._json("GET", f"/batches/{url_id(batch_id)}")
         state = str(batch.get("status"))
+        if state not in TERMINAL and state not in RUNNING:
+            raise ValueError(f"batch {batch_id}: status {state[:60]!r} is none of {', '.join([*RUNNING, *TERMINAL])}")
         reason = None
         errors = (batch.get("errors") or {}).get("data") if isinstance(batch.get("errors"), dict) else None
         if errors:
@@ -94,22 +107,16 @@ class OpenAIBatches:
                            counts=dict(counts) if isinstance(counts, dict) else {}, reason=reason,
                            handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")})
 
-    async def _lines(self, file_id: str | None) -> list[dict[str, Any]]:
+    async def _content(self, file_id: str | None) -> bytes:
         if not file_id:
-            return []
-        response = await http_call(self._client, "GET", f"{self.base}/files/{file_id}/content")
-        try:
-            lines = [json.loads(line) for line in response.content.decode("utf-8").splitlines() if line.strip()]
-        except (UnicodeDecodeError, json.JSONDecodeError, RecursionError) as exc:
-            raise BatchHTTPError(0, f"file {file_id}: a results line is not JSON ({type(exc).__name__})", answer=True) from None
-        if not all(isinstance(line, dict) for line in lines):
-            raise BatchHTTPError(0, f"file {file_id}: a results line is not a JSON object", answer=True)
-        return lines
+            return b""
+        response = await http_call(self._client, "GET", f"{self.base}/files/{url_id(file_id)}/content")
+        return bytes(response.content)
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         out = []
-        lines = await self._lines(status.handle.get("output_file_id")) + await self._lines(status.handle.get("error_file_id"))
-        for line in lines:
+        files = [(fid, await self._content(fid)) for fid in (status.handle.get("output_file_id"), status.handle.get("error_file_id"))]
+        for line in (row for fid, data in files for row in jsonl_rows(data, f"file {fid}")):
             cid = str(line.get("custom_id"))
             error, response = line.get("error"), line.get("response") or {}
             if error:
@@ -118,7 +125,10 @@ class OpenAIBatches:
                                        error_message=f"{code}: {error.get('message')}", resubmit=code in UNRUN))
                 continue
             body = response.get("body") or {}
-            if int(response.get("status_code") or 0) >= 400 or "choices" not in body:
+            code = response.get("status_code")
+            if not isinstance(code, int) or isinstance(code, bool) or not 100 <= code <= 599:
+                raise ValueError(f"request {cid[:80]}: status_code {str(code)[:40]} is no HTTP status")
+            if code >= 400 or not isinstance(body, dict) or "choices" not in body:
                 message = ((body.get("error") or {}).get("message") if isinstance(body, dict) else None) or "no completion"
                 out.append(item_result(cid, error="BatchRequestError",
                                        error_message=f"HTTP {response.get('status_code')}: {message}"))
@@ -143,6 +153,8 @@ def _completion_result(custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
 
     choice = (body.get("choices") or [{}])[0]
     text = (choice.get("message") or {}).get("content")
+    if text is not None and not isinstance(text, str):  # a chat completion's content is a string (or null)
+        raise TypeError(f"request {custom_id[:80]}: message content is a {type(text).__name__}, not text")
     usage = _usage(body.get("usage"), "openai")
     kw = dict(finish_reason=choice.get("finish_reason"), input_tokens=usage.input, output_tokens=usage.output,
               reasoning_tokens=usage.reasoning, cached_input_tokens=usage.cached, cache_write_tokens=usage.written)
