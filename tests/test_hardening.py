@@ -473,7 +473,16 @@ def wait_for(predicate, seconds: float, what: str) -> None:
 
 
 def run_dirs(out: Path) -> list[Path]:
-    return [p.parent for p in out.rglob("manifest.json") if not any(x.startswith(".") for x in p.relative_to(out).parts)]
+    """The run directories under ``out`` (OUT/MODEL/RUN_ID) while a run may be creating one: a hidden temporary
+    folder is never entered (it is renamed away under a scan: rglob raised FileNotFoundError on a loaded machine)."""
+    found = []
+    for model in sorted(out.glob("*")) if out.is_dir() else []:
+        try:
+            runs = [d for d in model.iterdir() if not d.name.startswith(".")] if not model.name.startswith(".") else []
+        except (FileNotFoundError, NotADirectoryError):
+            continue
+        found += [d for d in sorted(runs) if (d / "manifest.json").exists()]
+    return found
 
 
 @pytest.mark.parametrize("signum", [signal.SIGTERM, signal.SIGHUP])
@@ -487,7 +496,8 @@ def test_sigterm_and_sighup_stop_a_run_like_ctrl_c(tmp_path, synth_root, signum)
                                  "--concurrency", "2", "--output", str(out), "--no-progress"],
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
         try:
-            wait_for(lambda: any((d / "frames.jsonl").stat().st_size for d in run_dirs(out)), 60, "a first frame")
+            wait_for(lambda: any((d / "frames.jsonl").exists() and (d / "frames.jsonl").stat().st_size for d in run_dirs(out)),
+                     60, "a first frame")
             proc.send_signal(signum)
             _, err = proc.communicate(timeout=20)
         finally:
