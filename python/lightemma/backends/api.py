@@ -71,6 +71,7 @@ from lightemma.registry import (
     price_per_token,
     reasoning_budget,
     resolve,
+    run_price,
     suggest,
 )
 
@@ -617,7 +618,7 @@ class APIBackend:
             "prompt_cache": ("cache_control breakpoint after the image (and at the end of a conversation request a later "
                              "stage extends)" if self.provider == "anthropic" else
                              "automatic prefix cache of the provider: every request of a frame starts with the same image"),
-            "cost": (f"--price {self.price_given[0]:g} {self.price_given[1]:g} (USD per million input / output tokens)"
+            "cost": (run_price(self.model_info, given=self.price_given)["source"]
                      if self.price_given is not None else
                      f"unknown: served from --api-base {self.api_base_shown}, not at the provider's list price (give --price)"
                      if self.served_elsewhere else

@@ -18,9 +18,10 @@ from typing import Any
 
 from lightemma.backends.batch.base import (
     ENDED,
-    PENDING,
     BatchHTTPError,
     BatchStatus,
+    batch_client,
+    batch_state,
     count,
     endpoint,
     http_call,
@@ -31,7 +32,7 @@ from lightemma.backends.batch.base import (
 )
 
 VERSION = "2023-06-01"
-STATES = {"in_progress": PENDING, "canceling": PENDING, "ended": ENDED}  # processing_status, as documented
+TERMINAL, RUNNING = {"ended": ENDED}, ("in_progress", "canceling")  # processing_status, as documented
 
 
 def base_url() -> str:
@@ -58,14 +59,9 @@ class AnthropicBatches:
     max_bytes = 256 * 1000 * 1000
 
     def __init__(self, model: str, *, api_key: str | None, timeout: float = 120.0, base: str | None = None) -> None:
-        import httpx
-
-        from lightemma.backends.openai_http import body_limit_hooks
-
         self.model = model.split("/", 1)[1] if model.startswith("anthropic/") else model
         self.base, headers = endpoint(base, base_url(), api_key, key_header="x-api-key", version="/v1")
-        self._client = httpx.AsyncClient(timeout=timeout, headers={**headers, "anthropic-version": VERSION},
-                                         event_hooks=body_limit_hooks())  # each call's limit: BatchBackend's results_limit
+        self._client = batch_client(timeout, {**headers, "anthropic-version": VERSION})
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         params: dict[str, Any] = {"model": self.model, "max_tokens": body["max_tokens"],
@@ -86,9 +82,7 @@ class AnthropicBatches:
     async def status(self, batch_id: str) -> BatchStatus:
         data = (await self._request("GET", f"{self.base}/v1/messages/batches/{url_id(batch_id)}")).json()
         state = str(data.get("processing_status"))
-        if state not in STATES:
-            raise ValueError(f"batch {batch_id}: processing_status {state[:60]!r} is none of {', '.join(STATES)}")
-        return BatchStatus(state=STATES[state], provider_state=state,
+        return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state,
                            counts=dict(data.get("request_counts") or {}), handle={"results_url": data.get("results_url")})
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:

@@ -25,6 +25,31 @@ RESULT_BYTES_PER_REQUEST = 256 << 10
 MIN_REPLY_BYTES = 64 << 20
 
 
+def batch_client(timeout: float, headers: dict[str, str]) -> Any:
+    """An adapter's ``httpx.AsyncClient``: every reply read within the limit the call sets
+    (:func:`~lightemma.backends.openai_http.body_guard` in :class:`~lightemma.backends.batch.BatchBackend`)."""
+    import httpx
+
+    from lightemma.backends.openai_http import body_limit_hooks
+
+    return httpx.AsyncClient(timeout=timeout, headers=headers, event_hooks=body_limit_hooks())
+
+
+def batch_state(batch_id: str, state: str, terminal: dict[str, str], running: Sequence[str]) -> str:
+    """:data:`PENDING`, :data:`ENDED` or :data:`FAILED` for a provider's documented ``state``; a state it does not
+    document is a ``ValueError`` (the answer is not used: polling it would never end)."""
+    if state in terminal:
+        return terminal[state]
+    if state in running:
+        return PENDING
+    raise ValueError(f"batch {batch_id}: state {state[:60]!r} is none of {', '.join([*running, *terminal])}")
+
+
+def _utf8_over(text: str, limit: int) -> bool:
+    """``text`` takes more than ``limit`` bytes as UTF-8 (encoded only when its length allows it)."""
+    return len(text) > limit // 4 and len(text.encode("utf-8", "surrogatepass")) > limit
+
+
 def results_limit(n_requests: int) -> int:
     """The most bytes lightemma reads of one reply about a batch of ``n_requests`` requests (see above)."""
     return max(MIN_REPLY_BYTES, int(n_requests) * RESULT_BYTES_PER_REQUEST)
@@ -96,9 +121,10 @@ async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
 
 def endpoint(api_base: str | None, default: str, api_key: str | None, *, key_header: str,
              version: str) -> tuple[str, dict[str, str]]:
-    """The base URL and headers of a provider's own batch HTTP API (Anthropic, Gemini).
+    """The base URL and headers of a provider's batch HTTP API.
 
-    The base is ``api_base`` without credentials and a trailing ``version`` (``/v1``, ``/v1beta``), else
+    The base is ``api_base`` without credentials and a trailing ``version`` (``/v1``, ``/v1beta``; ``""``: the path
+    kept, as OpenAI's bases end in ``/v1``), else
     ``default``; the headers carry ``api_key`` — the key the run's API backend decided to send, None for none —
     in ``key_header``, and ``user:pw@`` of ``api_base`` as Basic auth. No key is read from the environment here.
     """
@@ -106,7 +132,7 @@ def endpoint(api_base: str | None, default: str, api_key: str | None, *, key_hea
 
     url, basic = split_credentials(api_base) if api_base else (default, None)
     url = url.rstrip("/")
-    if url.endswith(version):
+    if version and url.endswith(version):
         url = url[: -len(version)]
     headers = {key_header: api_key} if api_key else {}
     if basic:
@@ -137,7 +163,7 @@ def checked_results(items: list[dict[str, Any]], custom_ids: Sequence[str]) -> l
             raise BatchHTTPError(0, f"the results hold request {cid} twice; lightemma does not choose one", answer=True)
         seen.add(cid)
         text = item.get("text")
-        if isinstance(text, str) and len(text) > MAX_BODY_BYTES // 4 and len(text.encode("utf-8", "surrogatepass")) > MAX_BODY_BYTES:
+        if isinstance(text, str) and _utf8_over(text, MAX_BODY_BYTES):
             items[i] = {**item, "text": None, "error": "ResponseTooLargeError", "resubmit": False,
                         "error_message": f"the answer is over {MAX_BODY_BYTES:,} bytes, more than lightemma reads"}
     return items
@@ -157,7 +183,7 @@ def jsonl_rows(data: bytes, where: str) -> Iterator[dict[str, Any]]:
     for number, line in enumerate(text.splitlines(), 1):
         if not line.strip():
             continue
-        if len(line) > limit // 4 and len(line.encode("utf-8")) > limit:
+        if _utf8_over(line, limit):
             raise BatchHTTPError(0, f"{where}: results line {number} is over {limit:,} bytes, more than one answer may be",
                                  answer=True)
         try:

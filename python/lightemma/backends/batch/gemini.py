@@ -20,9 +20,10 @@ from typing import Any
 from lightemma.backends.batch.base import (
     ENDED,
     FAILED,
-    PENDING,
     BatchHTTPError,
     BatchStatus,
+    batch_client,
+    batch_state,
     count,
     endpoint,
     http_call,
@@ -55,14 +56,9 @@ class GeminiBatches:
     max_bytes = 19 * 1000 * 1000  # the 20 MB inline limit, with room for the envelope
 
     def __init__(self, model: str, *, api_key: str | None, timeout: float = 120.0, base: str | None = None) -> None:
-        import httpx
-
-        from lightemma.backends.openai_http import body_limit_hooks
-
         self.model = model.split("/", 1)[1] if model.startswith("gemini/") else model
         self.base, headers = endpoint(base, base_url(), api_key, key_header="x-goog-api-key", version="/v1beta")
-        self._client = httpx.AsyncClient(timeout=timeout, headers=headers,
-                                         event_hooks=body_limit_hooks())  # each call's limit: BatchBackend's results_limit
+        self._client = batch_client(timeout, headers)
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         config: dict[str, Any] = {"maxOutputTokens": body["max_tokens"]}
@@ -88,10 +84,8 @@ class GeminiBatches:
         data = await self._request("GET", f"{self.base}/v1beta/{url_id(batch_id, slash=True)}")
         meta = data.get("metadata") or {}
         state = str(meta.get("state"))
-        if state not in TERMINAL and state not in RUNNING:
-            raise ValueError(f"batch {batch_id}: state {state[:60]!r} is none of the documented batch states")
         error = data.get("error")
-        return BatchStatus(state=TERMINAL.get(state, PENDING), provider_state=state, counts=dict(meta.get("batchStats") or {}),
+        return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state, counts=dict(meta.get("batchStats") or {}),
                            reason=f"{error.get('code')}: {error.get('message')}" if isinstance(error, dict) else None,
                            handle={"operation": data})
 

@@ -22,9 +22,11 @@ from typing import Any
 from lightemma.backends.batch.base import (
     ENDED,
     FAILED,
-    PENDING,
     BatchHTTPError,
     BatchStatus,
+    batch_client,
+    batch_state,
+    endpoint,
     http_call,
     item_result,
     jsonl_rows,
@@ -54,16 +56,10 @@ class OpenAIBatches:
         environment here). ``user:pw@`` in ``api_base`` is sent as Basic auth on every call, in place of the key (as
         the HTTP client litellm used sends it); messages are scrubbed of it by
         :class:`~lightemma.backends.batch.BatchBackend`."""
-        import httpx
-
-        from lightemma.backends.openai_http import body_limit_hooks
-        from lightemma.backends.retry import split_credentials
-
         self.model = model.split("/", 1)[1] if model.startswith(("openai/", "hosted_vllm/")) else model
-        url, basic = split_credentials(api_base) if api_base else (base_url(), None)
-        self.base = url.rstrip("/")
-        headers = {"Authorization": basic} if basic else ({"Authorization": f"Bearer {api_key}"} if api_key else {})
-        self._client = httpx.AsyncClient(timeout=timeout, headers=headers, event_hooks=body_limit_hooks())
+        self.base, headers = endpoint(api_base, base_url(), f"Bearer {api_key}" if api_key else None,
+                                      key_header="Authorization", version="")  # Basic auth, when given, replaces it
+        self._client = batch_client(timeout, headers)
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
         body = dict(body, model=self.model)
@@ -95,15 +91,14 @@ class OpenAIBatches:
     async def status(self, batch_id: str) -> BatchStatus:
         batch = await self._json("GET", f"/batches/{url_id(batch_id)}")
         state = str(batch.get("status"))
-        if state not in TERMINAL and state not in RUNNING:
-            raise ValueError(f"batch {batch_id}: status {state[:60]!r} is none of {', '.join([*RUNNING, *TERMINAL])}")
+        ours = batch_state(batch_id, state, TERMINAL, RUNNING)
         reason = None
         errors = (batch.get("errors") or {}).get("data") if isinstance(batch.get("errors"), dict) else None
         if errors:
             reason = "; ".join(f"{e.get('code')}: {e.get('message')}" + (f" (line {e['line']})" if e.get("line") else "")
                                for e in errors[:3] if isinstance(e, dict))
         counts = batch.get("request_counts")
-        return BatchStatus(state=TERMINAL.get(state, PENDING), provider_state=state,
+        return BatchStatus(state=ours, provider_state=state,
                            counts=dict(counts) if isinstance(counts, dict) else {}, reason=reason,
                            handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")})
 
