@@ -31,6 +31,8 @@ import json
 import math
 import os
 import re
+import stat
+import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -53,10 +55,23 @@ MIN_STEP = 1.0
 #: the base map masks' native resolution (the devkit's MapMask), metres per pixel
 MASK_RESOLUTION = 0.1
 MASK_FOREGROUND = 255
+#: the largest base map mask read, pixels (width × height from the PNG header, checked before decoding):
+#: nuScenes' largest map, singapore-queenstown, spans about 3,229 m × 3,687 m, 1.19 G pixels at 0.1 m/px;
+#: a larger header is refused (a 437 KB 1-bit PNG can claim 60,000² pixels: 3.6 GB decoded)
+MAX_MASK_PIXELS = 1_500_000_000
+#: map node and annotation coordinates beyond ± this are refused, metres (nuScenes' maps span under 4 km)
+MAX_COORDINATE_M = 1e6
+#: annotation boxes longer or wider than this are refused, metres (articulated buses are about 18 m long)
+MAX_AGENT_SIZE_M = 100.0
 STEPS = 6
 SECONDS = (1, 2, 3)
 
 COLLISION_CONVENTIONS: tuple[str, ...] = ("uniad", "stp3", "any")
+#: which annotation boxes count as agents (docs/definitions.md#safety): ``all`` (default: every vehicle and
+#: VRU box, as UniAD's occupancy labels — ``occ_filter_by_valid_flag=False``, ``filter_invisible=False``),
+#: ``valid`` (boxes with ``num_lidar_pts + num_radar_pts > 0``: mmdet3d's ``valid_flag``, VAD's ground-truth
+#: boxes), ``visible`` (boxes whose visibility is not ``v0-40``: ST-P3's ``FILTER_INVISIBLE_VEHICLES``)
+AGENT_FILTERS: tuple[str, ...] = ("all", "valid", "visible")
 #: which collision convention an ADE table shows beside it (the ADE conventions carry the same names)
 COLLISION_FOR_ADE = {"uniad": "uniad", "stp3": "stp3", "lightemma": "any"}
 
@@ -174,19 +189,110 @@ class DrivableArea:
         return self.lookup(np.zeros((len(pts), 1, 2)), poses, EgoModel(offset=0.0))[:, 0, 4]
 
 
-def read_map_mask(path: str | os.PathLike[str]) -> DrivableArea:
-    """A base map mask (``maps/<token>.png``) as the devkit's ``MapMask`` reads it at 0.1 m/px (PIL, no resize)."""
-    from PIL import Image
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+#: PNG colour types (IHDR) -> what they are
+_PNG_COLOUR = {0: "grayscale", 2: "RGB", 3: "palette", 4: "grayscale with alpha", 6: "RGBA"}
 
-    Image.MAX_IMAGE_PIXELS = None  # the real masks are ~ 20k × 20k (the devkit lifts the limit too)
+
+def _regular_file(path: str | os.PathLike[str], what: str) -> None:
+    """Raise :class:`DatasetError` unless ``path`` (links followed) is a regular file: a FIFO would block the
+    reader and ``/dev/zero`` never ends."""
     try:
-        with Image.open(path) as img:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        raise DatasetError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
+    if not stat.S_ISREG(mode):
+        raise DatasetError(f"{what} {path} is not a regular file ({_file_kind(mode)})")
+
+
+def _file_kind(mode: int) -> str:
+    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
+        if test(mode):
+            return name
+    return "not a regular file"
+
+
+def _png_header(path: str | os.PathLike[str]) -> tuple[int, int, int, int]:
+    """(width, height, bit depth, colour type) from a PNG's IHDR chunk; a file that is not a PNG raises."""
+    with open(path, "rb") as f:
+        head = f.read(26)
+    if len(head) < 26 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
+        raise DatasetError(f"map mask {path} is not a PNG image (nuScenes' base map masks are PNG files)")
+    width, height, depth, colour = struct.unpack(">IIBB", head[16:26])
+    return width, height, depth, colour
+
+
+def read_map_mask(path: str | os.PathLike[str]) -> DrivableArea:
+    """A base map mask (``maps/<token>.png``) as the devkit's ``MapMask`` reads it at 0.1 m/px (no resize).
+
+    Returns an (H, W) uint8 mask, drivable where 255. Read: 8-bit grayscale PNGs as they are (the devkit's
+    encoding, 255 drivable), and the encodings PNG optimisers give a two-valued image, mapped to the same
+    values: 1-bit grayscale (1 → 255) and palette images whose colours are grays (index → its gray level).
+    Refused with :class:`DatasetError` (one line naming the file): a file that is not a regular file or not a
+    PNG, a header claiming more than :data:`MAX_MASK_PIXELS` pixels (checked before decoding; PIL's own
+    pixel limit is left as it is), 16-bit, colour or alpha images, palettes with colours, and a mask with
+    no pixel of 255 (every point would be off the drivable area).
+    """
+    from PIL import PngImagePlugin
+
+    _regular_file(path, "map mask")
+    width, height, depth, colour = _png_header(path)
+    if width * height > MAX_MASK_PIXELS:
+        raise DatasetError(f"map mask {path} claims {width} × {height} pixels, more than the {MAX_MASK_PIXELS:,} "
+                           "a base map mask can have (nuScenes' largest is 1.19 G pixels); not decoded")
+    if colour not in (0, 3) or depth == 16:
+        kind = f"{depth}-bit {_PNG_COLOUR.get(colour, f'colour type {colour}')}"
+        raise DatasetError(f"map mask {path} is a {kind} PNG; a base map mask is 8-bit grayscale (255 drivable), "
+                           "1-bit grayscale or a gray palette")
+    try:
+        with open(path, "rb") as f:
+            img = PngImagePlugin.PngImageFile(f)  # Image.open's pixel limit is replaced by the bound above
+            img.load()
+            mode = img.mode
+            palette = img.getpalette() if mode == "P" else None
+            used = np.flatnonzero(img.histogram()) if mode == "P" else None  # palette indices in use (C, no copy)
             mask = np.array(img)
-    except (OSError, ValueError) as exc:
+            img.close()
+            del img
+    except (OSError, ValueError, SyntaxError, struct.error) as exc:
         raise DatasetError(f"map mask {path} cannot be read: {exc}") from None
+    if mode == "1":
+        mask = mask.view(np.uint8)  # in place (masks are up to 1.5 G pixels); PIL's True bytes are not always 1
+        np.minimum(mask, 1, out=mask)
+        mask *= np.uint8(MASK_FOREGROUND)
+    elif mode == "P":
+        rgb = np.asarray(palette or [], dtype=np.int64).reshape(-1, 3)
+        assert used is not None
+        if len(used) and (used.max() >= len(rgb) or not (rgb[used] == rgb[used, :1]).all()):
+            raise DatasetError(f"map mask {path} is a palette PNG with colours (or indices beyond its palette); "
+                               "a base map mask is grayscale")
+        lut = np.zeros(256, dtype=np.uint8)
+        lut[: len(rgb)] = rgb[:256, 0]
+        mask = lut[mask]
+    elif mode != "L":
+        raise DatasetError(f"map mask {path} decodes to PIL mode {mode}; a base map mask is 8-bit grayscale")
     if mask.ndim != 2:
         raise DatasetError(f"map mask {path} has shape {mask.shape}; expected a one-channel image")
+    top = int(mask.max()) if mask.size else None  # a reduction: no mask-sized temporary
+    if top != MASK_FOREGROUND:
+        raise DatasetError(f"map mask {path} has no pixel of value {MASK_FOREGROUND} (drivable); its largest value is "
+                           f"{top}: not a drivable-area mask in the devkit's encoding")
     return DrivableArea("mask", os.fspath(path), mask=np.ascontiguousarray(mask, dtype=np.uint8))
+
+
+def _map_coordinate(value: Any, path: Any, node: Any, axis: str) -> float:
+    """A map node coordinate: a finite number within :data:`MAX_COORDINATE_M` (bools and text refused)."""
+    if isinstance(value, (int, float)) and not isinstance(value, bool):
+        try:
+            v = float(value)
+        except OverflowError:
+            v = math.inf
+        if math.isfinite(v) and abs(v) <= MAX_COORDINATE_M:
+            return v
+    shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
+    raise DatasetError(f"map expansion {path}: node {node} has {axis} = {shown}; a coordinate must be a finite number "
+                       f"within ±{MAX_COORDINATE_M:g} m")
 
 
 def read_expansion(path: str | os.PathLike[str]) -> DrivableArea:
@@ -194,11 +300,22 @@ def read_expansion(path: str | os.PathLike[str]) -> DrivableArea:
 
     Each drivable_area record lists ``polygon_tokens``; each polygon has ``exterior_node_tokens``
     and ``holes`` (``node_tokens``); nodes carry global ``x``, ``y`` (the devkit's ``NuScenesMap``).
+    Raises :class:`DatasetError` naming the file (and the node or polygon) for a file that is not a regular
+    file or not readable JSON (nesting too deep included), a missing record, a node coordinate that is not
+    a finite number within :data:`MAX_COORDINATE_M`, or a ring of fewer than 3 nodes.
     """
+    _regular_file(path, "map expansion")
     try:
         with open(path, encoding="utf-8") as f:
             doc = json.load(f)
-        nodes = {n["token"]: (float(n["x"]), float(n["y"])) for n in doc["node"]}
+    except RecursionError:
+        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
+                           "(the JSON is nested too deep)") from None
+    except (OSError, ValueError) as exc:
+        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
+                           f"({type(exc).__name__}: {exc})") from None
+    try:
+        nodes = {n["token"]: n for n in doc["node"]}
         polys = {p["token"]: p for p in doc["polygon"]}
         xy: list[tuple[float, float]] = []
         rings, polygons = [0], [0]
@@ -206,10 +323,16 @@ def read_expansion(path: str | os.PathLike[str]) -> DrivableArea:
             for ptok in record["polygon_tokens"]:
                 poly = polys[ptok]
                 for ring in [poly["exterior_node_tokens"], *(h["node_tokens"] for h in poly.get("holes", []))]:
-                    xy.extend(nodes[t] for t in ring)
+                    if not isinstance(ring, list) or len(ring) < 3:
+                        n = len(ring) if isinstance(ring, list) else "no list of"
+                        raise DatasetError(f"map expansion {path}: polygon {ptok} has a ring of {n} node(s); "
+                                           "a ring needs at least 3")
+                    for t in ring:
+                        node = nodes[t]
+                        xy.append((_map_coordinate(node["x"], path, t, "x"), _map_coordinate(node["y"], path, t, "y")))
                     rings.append(len(xy))
                 polygons.append(len(rings) - 1)
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+    except (KeyError, TypeError, AttributeError) as exc:
         raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer ({type(exc).__name__}: {exc})") from None
     return DrivableArea("expansion", os.fspath(path), xy=np.asarray(xy, dtype=np.float64).reshape(-1, 2),
                         rings=np.asarray(rings, dtype=np.int64), polygons=np.asarray(polygons, dtype=np.int64))
@@ -226,7 +349,10 @@ class SafetyData:
     ``future``: the next keyframes of the scene (up to 6); ``map_of``: the map key of the sample's
     log; ``areas``: map key → :class:`DrivableArea`, or the reason there is none; ``boxes`` /
     ``classes`` / ``box_tokens``: the sample's annotated agents (K, 5) (global x, y, yaw, length,
-    width), their class codes (K,) and tokens; ``annotated``: the version has any annotation.
+    width), their class codes (K,) and tokens (those the ``agents`` filter keeps); ``annotated``: the version
+    has any annotation; ``pose_reasons``: sample → why its ego pose is unusable; ``bad_boxes``: sample → why
+    one of its annotations is refused (frames whose six later keyframes include it get collision n/a);
+    ``agents``: the filter of :data:`AGENT_FILTERS` applied.
     """
 
     dataroot: str
@@ -240,6 +366,9 @@ class SafetyData:
     box_tokens: dict[str, list[str]] = field(default_factory=dict)
     annotated: bool = False
     warnings: list[str] = field(default_factory=list)
+    pose_reasons: dict[str, str] = field(default_factory=dict)
+    bad_boxes: dict[str, str] = field(default_factory=dict)
+    agents: str = "all"
 
     def area_kinds(self) -> list[str]:
         """The kinds of drivable area in use (``expansion``, ``mask``), sorted."""
@@ -253,91 +382,169 @@ def _table(root: Path, name: str) -> list[dict[str, Any]]:
             rows = json.load(f)
     except FileNotFoundError:
         raise DatasetError(f"nuScenes table {path} is missing") from None
+    except RecursionError:
+        raise DatasetError(f"nuScenes table {path} cannot be read: the JSON is nested too deep") from None
     except (OSError, ValueError) as exc:
         raise DatasetError(f"nuScenes table {path} cannot be read: {exc}") from None
     if not isinstance(rows, list):
         raise DatasetError(f"nuScenes table {path} is not a list of records")
+    for i, row in enumerate(rows):
+        if not isinstance(row, dict) or not isinstance(row.get("token"), str):
+            raise DatasetError(f"nuScenes table {path}: record {i} is not an object with a string token")
     return rows
 
 
-def _yaw(q: Sequence[float]) -> float:
-    w, x, y, z = (float(v) for v in q)
-    return math.atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+def _yaw(q: Any) -> float:
+    """Yaw (rad) of a nuScenes rotation under the frame reader's rule
+    (:func:`lightemma.frames.geometry.unit_quaternion`): a quaternion that is not a unit one raises ``ValueError``."""
+    from lightemma.frames.geometry import unit_quaternion, yaw_from_quaternion
+
+    return float(yaw_from_quaternion(unit_quaternion(q)))
 
 
-def _box(ann: Mapping[str, Any]) -> tuple[float, float, float, float, float]:
-    """(x, y, yaw, length, width) of a sample_annotation; a degenerate box raises naming its token."""
+def _finite(values: Any, n: int) -> list[float] | None:
+    """The first ``n`` entries of ``values`` as floats when they are finite numbers (bools, text refused), else None."""
+    if not isinstance(values, (list, tuple)) or len(values) < n:
+        return None
+    out = []
+    for v in values[:n]:
+        if not isinstance(v, (int, float)) or isinstance(v, bool):
+            return None
+        try:
+            f = float(v)
+        except OverflowError:
+            return None
+        if not math.isfinite(f):
+            return None
+        out.append(f)
+    return out
+
+
+def _box(ann: Mapping[str, Any], where: str = "sample_annotation") -> tuple[float, float, float, float, float]:
+    """(x, y, yaw, length, width) of a sample_annotation; a box that is not a box raises :class:`DatasetError`
+    naming ``where`` (the table file) and the token: a centre that is not finite or beyond
+    :data:`MAX_COORDINATE_M`, a size not in (0, :data:`MAX_AGENT_SIZE_M`] m, a rotation that is not a unit
+    quaternion (the frame reader's rule)."""
     tok = ann.get("token", "?")
+    xy, size = _finite(ann.get("translation"), 2), _finite(ann.get("size"), 2)
+    shown = f"size {ann.get('size')}, translation {ann.get('translation')}, rotation {ann.get('rotation')}"
+    if xy is None or size is None:
+        raise DatasetError(f"{where} {tok}: degenerate box ({shown}); translation and size must be finite numbers")
+    w, length = size  # nuScenes size = (width, length, height)
+    sized = 0 < w <= MAX_AGENT_SIZE_M and 0 < length <= MAX_AGENT_SIZE_M
+    if not sized or max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE_M:
+        raise DatasetError(f"{where} {tok}: degenerate box ({shown}); sizes must be in (0, {MAX_AGENT_SIZE_M:g}] m "
+                           f"and the centre within ±{MAX_COORDINATE_M:g} m")
     try:
-        x, y = float(ann["translation"][0]), float(ann["translation"][1])
-        w, length = float(ann["size"][0]), float(ann["size"][1])  # nuScenes size = (width, length, height)
-        q = [float(v) for v in ann["rotation"]]
-    except (KeyError, IndexError, TypeError, ValueError):
-        raise DatasetError(f"sample_annotation {tok}: translation, size or rotation is missing or not numeric") from None
-    values = (x, y, w, length, *q)
-    if not all(math.isfinite(v) for v in values) or w <= 0 or length <= 0 or len(q) != 4 or not any(q):
-        raise DatasetError(f"sample_annotation {tok}: degenerate box (size {ann['size']}, translation {ann['translation']}, "
-                           f"rotation {ann['rotation']}); sizes must be positive and values finite")
-    return x, y, _yaw(q), length, w
+        yaw = _yaw(ann.get("rotation"))
+    except ValueError as exc:
+        raise DatasetError(f"{where} {tok}: field rotation = {ann.get('rotation')!r} {exc}") from None
+    return xy[0], xy[1], yaw, length, w
+
+
+def _keeps(ann: Mapping[str, Any], agents: str, v0_40: set[str]) -> bool:
+    """Whether the ``agents`` filter (:data:`AGENT_FILTERS`) keeps an annotation; counts that are not counts
+    raise ``ValueError``."""
+    if agents == "valid":
+        counts = [ann.get("num_lidar_pts"), ann.get("num_radar_pts")]
+        if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in counts):
+            raise ValueError(f"num_lidar_pts / num_radar_pts = {counts} are not counts "
+                             "(the 'valid' agent filter needs them)")
+        return counts[0] + counts[1] > 0
+    if agents == "visible":
+        return _ref(ann, "visibility_token") not in v0_40
+    return True
+
+
+def _ref(record: Mapping[str, Any], field: str) -> str | None:
+    """A token a record refers to, or None when the field is not text (a list would not even be a dict key)."""
+    value = record.get(field)
+    return value if isinstance(value, str) else None
+
+
+def _file_problem(path: Path) -> str | None:
+    """Why a map file that is there cannot be read as one (a FIFO, a device, a folder), or None."""
+    try:
+        mode = os.stat(path).st_mode
+    except OSError as exc:
+        return f"{path} cannot be read: {exc.strerror or exc}"
+    return None if stat.S_ISREG(mode) else f"{path} is not a regular file ({_file_kind(mode)})"
 
 
 #: a map location as nuScenes names them (singapore-onenorth, boston-seaport): letters, digits, - and _, no path
 _MAP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,99}")
 
 
-def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples: set[str] | None = None) -> SafetyData:
+def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples: set[str] | None = None,
+                     agents: str = "all") -> SafetyData:
     """Read poses, agents and drivable areas of ``dataroot/version`` (only ``samples`` and their futures if given).
 
     The drivable area of a log is the map expansion's ``drivable_area`` (``maps/expansion/<location>.json``)
-    where the dataroot has it, else the base map mask of the ``map`` table that lists the log. Maps that
-    cannot be read are recorded as reasons (frames on them get n/a), not raised; a degenerate
-    annotation box raises :class:`DatasetError` naming its token.
+    where the dataroot has it, else the base map mask of the ``map`` table that lists the log; an expansion
+    path that is there but not a regular file (a FIFO, a link to a device) is that map's n/a reason, not a
+    silent fall-back to the mask. Maps that cannot be read, ego poses that are not poses (rotation under the
+    frame reader's unit-quaternion rule) and annotation boxes that are not boxes (:func:`_box`) are
+    recorded as reasons (the frames they touch get n/a), not raised. ``agents``: which boxes count
+    (:data:`AGENT_FILTERS`). A table that is missing, unreadable or holds a record that is not an object
+    raises :class:`DatasetError` naming the file.
     """
+    if agents not in AGENT_FILTERS:
+        raise ValueError(f"unknown agent filter {agents!r}; choose one of {', '.join(AGENT_FILTERS)}")
     root = Path(dataroot).expanduser()
     tables = root / version
     if not tables.is_dir():
         raise DatasetError(f"{tables} is not a folder: no nuScenes version {version!r} under {root}")
-    data = SafetyData(os.fspath(root), version)
+    data = SafetyData(os.fspath(root), version, agents=agents)
     channel_of_sensor = {s["token"]: s.get("channel") for s in _table(tables, "sensor")}
-    channel_of_cs = {c["token"]: channel_of_sensor.get(c.get("sensor_token")) for c in _table(tables, "calibrated_sensor")}
+    channel_of_cs = {c["token"]: channel_of_sensor.get(_ref(c, "sensor_token"))
+                     for c in _table(tables, "calibrated_sensor")}
     sample_rows = _table(tables, "sample")
     by_token = {s["token"]: s for s in sample_rows}
     wanted = set(by_token) if samples is None else {t for t in samples if t in by_token}
     # the scene's next keyframes
     for tok in list(wanted):
         chain, nxt = [], by_token[tok].get("next", "")
-        while nxt and len(chain) < STEPS and nxt in by_token:
+        while isinstance(nxt, str) and nxt and len(chain) < STEPS and nxt in by_token:
             chain.append(nxt)
             nxt = by_token[nxt].get("next", "")
         data.future[tok] = chain
     needed = wanted | {t for c in data.future.values() for t in c}
     pose_token: dict[str, str] = {}
     for sd in _table(tables, "sample_data"):
-        if sd.get("is_key_frame") and sd.get("sample_token") in wanted and channel_of_cs.get(sd.get("calibrated_sensor_token")) == "CAM_FRONT":
-            pose_token[sd["sample_token"]] = sd["ego_pose_token"]
+        st, cs = sd.get("sample_token"), sd.get("calibrated_sensor_token")
+        front = isinstance(cs, str) and channel_of_cs.get(cs) == "CAM_FRONT"
+        ep_token = sd.get("ego_pose_token")
+        if sd.get("is_key_frame") and isinstance(st, str) and st in wanted and front and isinstance(ep_token, str):
+            pose_token[st] = ep_token
     by_pose = {tok: st for st, tok in pose_token.items()}
     for ep in _table(tables, "ego_pose"):
-        st = by_pose.get(ep.get("token"))
+        st = by_pose.get(ep["token"])
         if st is None:
             continue
+        xy = _finite(ep.get("translation"), 2)
         try:
-            x, y = float(ep["translation"][0]), float(ep["translation"][1])
-            yaw = _yaw(ep["rotation"])
-        except (KeyError, IndexError, TypeError, ValueError):
-            continue  # no usable pose: the frame reads n/a with the reason
-        if all(math.isfinite(v) for v in (x, y, yaw)):
-            data.poses[st] = (x, y, yaw)
+            yaw = _yaw(ep.get("rotation"))
+        except ValueError as exc:  # no usable pose: the frame reads n/a with the reason
+            data.pose_reasons[st] = f"{tables / 'ego_pose.json'}: ego_pose {ep['token']}: field rotation {exc}"
+            continue
+        if xy is None or max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE_M:
+            data.pose_reasons[st] = (f"{tables / 'ego_pose.json'}: ego_pose {ep['token']}: field translation = "
+                                     f"{ep.get('translation')!r} is not finite numbers within ±{MAX_COORDINATE_M:g} m")
+            continue
+        data.poses[st] = (xy[0], xy[1], yaw)
     # maps: scene → log → location, map record of the log
-    scene_log = {s["token"]: s.get("log_token") for s in _table(tables, "scene")}
+    scene_log = {s["token"]: _ref(s, "log_token") for s in _table(tables, "scene")}
     logs = {lg["token"]: lg for lg in _table(tables, "log")}
     mask_of_log: dict[str, str] = {}
     map_record: dict[str, dict] = {}
     for rec in _table(tables, "map"):
-        for lt in rec.get("log_tokens", []):
-            mask_of_log[lt] = rec.get("filename", "")
-            map_record[lt] = rec
+        log_tokens = rec.get("log_tokens", [])
+        for lt in log_tokens if isinstance(log_tokens, list) else []:
+            if isinstance(lt, str):
+                mask_of_log[lt] = rec.get("filename", "")
+                map_record[lt] = rec
     for tok in wanted:
-        log_token = scene_log.get(by_token[tok].get("scene_token"))
+        log_token = scene_log.get(_ref(by_token[tok], "scene_token"))
         log = logs.get(log_token or "")
         if log is None:
             continue
@@ -348,40 +555,58 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
             data.areas[key] = f"log {log.get('logfile', log_token)}: location {location!r} is not a map name"
             continue
         expansion = root / "maps" / "expansion" / f"{location}.json"
-        key = f"expansion:{location}" if expansion.is_file() else f"mask:{mask_of_log.get(log_token, '')}"
+        there = os.path.lexists(expansion)
+        key = f"expansion:{location}" if there else f"mask:{mask_of_log.get(log_token, '')}"
         data.map_of[tok] = key
         if key in data.areas:
             continue
         try:
             if key.startswith("expansion:"):
-                data.areas[key] = read_expansion(expansion)
+                problem = _file_problem(expansion)  # never a silent fall-back to the mask
+                data.areas[key] = f"map expansion {problem}" if problem else read_expansion(expansion)
             elif not mask_of_log.get(log_token):
                 data.areas[key] = f"log {log.get('logfile', log_token)} has no map record"
             else:
                 from lightemma.frames import dataset_path
 
                 mask_path = Path(dataset_path(root, map_record[log_token], "map"))  # inside the dataroot, or n/a with why
-                data.areas[key] = read_map_mask(mask_path) if mask_path.is_file() else f"map mask {mask_path} is missing"
+                there = os.path.lexists(mask_path)
+                data.areas[key] = read_map_mask(mask_path) if there else f"map mask {mask_path} is missing"
         except DatasetError as exc:
             data.areas[key] = str(exc)
     # agents
     annotations = _table(tables, "sample_annotation")
     data.annotated = bool(annotations)
     if data.annotated:
-        categories = {c["token"]: c.get("name", "") for c in _table(tables, "category")}
-        klass = {i["token"]: agent_class(categories.get(i.get("category_token"), "")) for i in _table(tables, "instance")}
+        categories = {c["token"]: str(c.get("name", "")) for c in _table(tables, "category")}
+        klass = {i["token"]: agent_class(categories.get(_ref(i, "category_token"), ""))
+                 for i in _table(tables, "instance")}
+        v0_40 = set()
+        if agents == "visible":
+            v0_40 = {v["token"] for v in _table(tables, "visibility") if v.get("level") == "v0-40"}
+        where = os.fspath(tables / "sample_annotation.json")
         gathered: dict[str, tuple[list, list, list]] = {}
         for ann in annotations:
-            st = ann.get("sample_token")
+            st = _ref(ann, "sample_token")
             if st not in needed:
                 continue
-            cls = klass.get(ann.get("instance_token"), OTHER)
+            cls = klass.get(_ref(ann, "instance_token"), OTHER)
             if cls == OTHER:
                 continue
+            try:
+                if not _keeps(ann, agents, v0_40):
+                    continue
+                box = _box(ann, where)
+            except DatasetError as exc:
+                data.bad_boxes.setdefault(st, str(exc))
+                continue
+            except ValueError as exc:
+                data.bad_boxes.setdefault(st, f"{where} {ann['token']}: {exc}")
+                continue
             b, c, t = gathered.setdefault(st, ([], [], []))
-            b.append(_box(ann))
+            b.append(box)
             c.append(cls)
-            t.append(ann.get("token", "?"))
+            t.append(ann["token"])
         for st in needed:
             b, c, t = gathered.get(st, ([], [], []))
             data.boxes[st] = np.asarray(b, dtype=np.float64).reshape(-1, 5)
@@ -443,6 +668,9 @@ def frame_safety(traj: Any, sample_tokens: Sequence[str], data: SafetyData, ego:
 
     def base_reason(i: int) -> str:
         if not has_pose[i]:
+            why = data.pose_reasons.get(sample_tokens[i])
+            if why:
+                return f"unusable CAM_FRONT ego pose: {why}"
             return f"no CAM_FRONT ego pose for sample {sample_tokens[i]} in {data.version}"
         return "" if finite[i] else "no trajectory"
 
@@ -483,6 +711,10 @@ def frame_safety(traj: Any, sample_tokens: Sequence[str], data: SafetyData, ego:
                 continue
             if len(data.future.get(st, [])) < STEPS:
                 coll_reason[i] = f"sample {st} has fewer than {STEPS} later keyframes"
+                continue
+            bad = next((data.bad_boxes[f] for f in data.future[st] if f in data.bad_boxes), None)
+            if bad is not None:
+                coll_reason[i] = f"a refused annotation: {bad}"
                 continue
             rows.append(i)
         if rows:
@@ -675,6 +907,14 @@ def _intervals(groups: list[tuple[np.ndarray, np.ndarray]], keys: list[str], res
     return bootstrap_ci(groups, keys, resampling)
 
 
+def _rate_intervals(groups: list[tuple[np.ndarray, np.ndarray]], resampling: Any) -> np.ndarray:
+    """(R, 1, 2) intervals of rates: exact binomial on the scene-clustered effective sample size, never [0, 0]
+    at a rate of 0 (:func:`lightemma.evaluation.stats.rate_ci`, docs/statistics.md#rates)."""
+    from lightemma.evaluation.stats import rate_ci
+
+    return rate_ci(groups, resampling)
+
+
 def _scenes(frame_ids: Sequence[str]) -> np.ndarray:
     """Scene names of frame ids ``scene/sample_token`` (the clusters of the scene bootstrap)."""
     return np.asarray([f.rsplit("/", 1)[0] for f in frame_ids], dtype=object)
@@ -688,14 +928,19 @@ def evaluate_safety(
     dataroot: str | os.PathLike[str] | None = None,
     version: str | None = None,
     ego: EgoModel = EGO,
+    agents: str = "all",
 ) -> SafetyResult:
     """Safety rows for evaluated runs: ``entries`` = (label, RunData, scored rows) as in :func:`evaluate_loaded`.
 
     Each ADE convention's table shows the collision convention of the same name (``lightemma`` → ``any``);
-    off-road values are the same in every table. Intervals: scene bootstrap as for ADE. The floor is the
-    ground truth's own (unmasked) rates over every frame with usable ground truth in any run.
+    off-road values are the same in every table. Intervals: :func:`_rate_intervals`. The floor is the
+    ground truth's own (unmasked) rates over every frame with usable ground truth in any run. ``agents``:
+    which annotation boxes count (:data:`AGENT_FILTERS`). A run whose ground truth moves faster than
+    :data:`lightemma.frames.geometry.POSE_JUMP_SPEED` between keyframes gets a warning (a pose jump).
     """
     warnings: list[str] = []
+    for label, run, _ in entries:  # every frame with ground truth, scored or not
+        warnings.extend(pose_jump_warnings(run.gt_positions, run.frame_ids, label))
     datasets: dict[tuple[str, str], list[int]] = {}
     resolved = []
     for i, (_, run, _) in enumerate(entries):
@@ -707,7 +952,7 @@ def evaluate_safety(
     for ds, members in datasets.items():
         tokens = {sample_token_of(f) for i in members for f in entries[i][1].frame_ids}
         try:
-            loaded[ds] = load_safety_data(ds[0], ds[1], samples=tokens)
+            loaded[ds] = load_safety_data(ds[0], ds[1], samples=tokens, agents=agents)
         except DatasetError as exc:
             loaded[ds] = str(exc)
             warnings.append(f"safety metrics: {exc}")
@@ -782,11 +1027,38 @@ def evaluate_safety(
                     groups.append((values[key][ok], scenes[ok]))
                     keys.append(f"safety|{FLOOR_LABEL}|{cc}|{key}")
                     slots.append((FLOOR_LABEL, c, key))
-    ci = _intervals(groups, keys, resampling)
+    ci = _rate_intervals(groups, resampling)
     for (label, c, key), pair in zip(slots, ci[:, 0]):
         target = result.floor[c] if label == FLOOR_LABEL else result.rows[label][c]
         target[f"{key}_ci95"] = [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
     return result
+
+
+#: nuScenes keyframes are 0.5 s apart (2 Hz): the step of the ground-truth check below
+KEYFRAME_SECONDS = 0.5
+
+
+def pose_jump_warnings(gt: Any, frame_ids: Sequence[str], label: str) -> list[str]:
+    """One warning when some frame's ground truth (N, 6, 2) (m, ego frame; p_0 the origin) moves faster than
+    :data:`lightemma.frames.geometry.POSE_JUMP_SPEED` over a :data:`KEYFRAME_SECONDS` step: an ego pose that
+    jumps in the dataset (its frames' ADE and safety values are then measured against a wrong ground truth)."""
+    from lightemma.frames.geometry import POSE_JUMP_SPEED
+
+    if not len(frame_ids):
+        return []
+    gt = np.asarray(gt, dtype=np.float64).reshape(len(frame_ids), -1, 2)
+    pts = np.concatenate([np.zeros((len(gt), 1, 2)), gt], axis=1)
+    with np.errstate(invalid="ignore"):
+        step = np.linalg.norm(np.diff(pts, axis=1), axis=2).max(axis=1)
+    bad = np.flatnonzero(step > POSE_JUMP_SPEED * KEYFRAME_SECONDS)  # NaN (no ground truth) is not a jump
+    if not len(bad):
+        return []
+    worst = int(bad[np.argmax(step[bad])])
+    most = POSE_JUMP_SPEED * KEYFRAME_SECONDS
+    return [(f"{label}: the ground truth of {len(bad)} frame(s) moves more than {most:g} m "
+             f"in one {KEYFRAME_SECONDS:g} s step (over {POSE_JUMP_SPEED:g} m/s: a physically impossible ego pose jump "
+             f"in the dataset; e.g. {frame_ids[worst]}: {step[worst]:.1f} m); their ADE and safety values are measured "
+             "against it")]
 
 
 #: an imported frame whose recorded pose is further than this from the dataroot's is not placed (n/a)

@@ -18,6 +18,63 @@ CURVATURE_ZERO_ABOVE = 0.2  # 1/m: |curvature| strictly above is set to 0 (zeroe
 ROUND_DECIMALS = 3
 
 
+#: largest allowed deviation of a rotation quaternion's norm from 1 (|‖q‖ − 1|): nuScenes stores unit
+#: quaternions to ~1e-15; 1e-5 also admits quaternions written in float32 or to 6 decimals, and refuses
+#: anything that is visibly not a rotation (a scaled, truncated or zero quaternion). One rule for every
+#: reader of nuScenes rotations: the frame reader (ego_pose, calibrated_sensor) and the safety metrics
+#: (ego_pose, sample_annotation), docs/definitions.md#frames-and-windows and #safety.
+QUATERNION_TOLERANCE = 1e-5
+
+#: an ego pose whose implied speed from the keyframe before it exceeds this is physically impossible for a
+#: car on a city street (252 km/h), metres per second (docs/definitions.md#safety, "Pose jumps"): it is
+#: flagged, not corrected
+POSE_JUMP_SPEED = 70.0
+
+
+def unit_quaternion(values: object) -> np.ndarray:
+    """``values`` as a unit quaternion ``(w, x, y, z)`` (4,), renormalised.
+
+    The rule of every nuScenes rotation lightemma reads: exactly 4 finite numbers (bools and text refused)
+    whose norm is within :data:`QUATERNION_TOLERANCE` of 1. Raises ``ValueError`` saying what is wrong (the
+    caller names the file, table and token). A nuScenes quaternion that is not a unit one is a corrupt
+    record: the yaw formula misreads it (30° scaled by 2 reads as 76.9°), and silently normalising it would
+    hide the corruption.
+    """
+    numbers = (int, float, np.floating, np.integer)
+    if not isinstance(values, (list, tuple, np.ndarray)) or len(values) != 4 or not all(
+            isinstance(v, numbers) and not isinstance(v, (bool, np.bool_)) for v in values):
+        raise ValueError("is not a list of 4 numbers (a quaternion w, x, y, z)")
+    try:
+        q = np.asarray([float(v) for v in values], dtype=np.float64)
+    except OverflowError:
+        raise ValueError("is not finite") from None
+    if not np.isfinite(q).all():
+        raise ValueError("is not finite")
+    norm = float(np.linalg.norm(q))
+    if not abs(norm - 1.0) <= QUATERNION_TOLERANCE:
+        raise ValueError(f"is not a unit quaternion (norm {norm:.6g}; allowed |norm - 1| <= {QUATERNION_TOLERANCE:g})")
+    return q / norm
+
+
+def pose_jumps(xy: np.ndarray, timestamps_us: np.ndarray,
+               max_speed: float = POSE_JUMP_SPEED) -> list[tuple[int, float, float]]:
+    """Physically impossible moves between consecutive keyframes of one scene.
+
+    ``xy`` (N, 2) global positions (m), ``timestamps_us`` (N,) strictly increasing µs. Returns
+    ``(k, distance m, seconds)`` for each keyframe ``k`` ≥ 1 whose implied speed from keyframe ``k − 1``
+    exceeds ``max_speed`` (m/s); empty when there is none.
+    """
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    t = np.asarray(timestamps_us, dtype=np.int64).reshape(-1)
+    if len(xy) < 2:
+        return []
+    dist = np.linalg.norm(np.diff(xy, axis=0), axis=1)
+    dt = np.diff(t).astype(np.float64) * 1e-6
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = np.where(dt > 0, dist / np.where(dt > 0, dt, 1.0), np.inf)
+    return [(int(k) + 1, float(dist[k]), float(dt[k])) for k in np.flatnonzero(speed > max_speed)]
+
+
 def yaw_from_quaternion(q: np.ndarray) -> np.ndarray:
     """Yaw of quaternion(s) ``(w, x, y, z)``: ``atan2(2(wz + xy), 1 - 2(y² + z²))``.
 

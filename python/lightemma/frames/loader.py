@@ -55,10 +55,9 @@ TABLES = (
 #: the tables the frame reader reads
 READ_TABLES = ("scene", "sample", "sample_data", "ego_pose", "calibrated_sensor", "sensor")
 
-#: largest allowed deviation of a rotation quaternion's norm from 1 (|‖q‖ − 1|): nuScenes stores unit
-#: quaternions to ~1e-15; 1e-5 also admits quaternions written in float32 or to 6 decimals, and refuses
-#: anything that is visibly not a rotation (a scaled, truncated or zero quaternion)
-QUATERNION_TOLERANCE = 1e-5
+#: largest allowed deviation of a rotation quaternion's norm from 1 (the one rule of every reader:
+#: :func:`lightemma.frames.geometry.unit_quaternion`)
+QUATERNION_TOLERANCE = geometry.QUATERNION_TOLERANCE
 
 #: versions whose scenes the devkit's hard-coded splits name
 KNOWN_VERSIONS = ("v1.0-test", "v1.0-trainval", "v1.0-mini")
@@ -148,13 +147,13 @@ def _translation(record: dict[str, Any], table: str) -> np.ndarray:
 
 
 def _rotation(record: dict[str, Any], table: str) -> np.ndarray:
-    """The record's ``rotation``: a unit quaternion (w, x, y, z) within :data:`QUATERNION_TOLERANCE`, renormalised."""
+    """The record's ``rotation``: a unit quaternion (w, x, y, z) within :data:`QUATERNION_TOLERANCE`, renormalised
+    (:func:`lightemma.frames.geometry.unit_quaternion`, the rule the safety metrics apply too)."""
     q = _numbers(record, table, "rotation", 4, "a quaternion w, x, y, z")
-    norm = float(np.linalg.norm(q))
-    if not abs(norm - 1.0) <= QUATERNION_TOLERANCE:
-        raise _bad(table, record.get("token", "?"), "rotation", record.get("rotation"),
-                   f"is not a unit quaternion (norm {norm:.6g}; allowed |norm - 1| <= {QUATERNION_TOLERANCE:g})")
-    return q / norm
+    try:
+        return geometry.unit_quaternion(q)
+    except ValueError as exc:
+        raise _bad(table, record.get("token", "?"), "rotation", record.get("rotation"), str(exc)) from None
 
 
 #: largest timestamp (µs) the frame arrays hold (int64)
@@ -563,6 +562,11 @@ def extract_frames(
             skipped.append(name)
             continue
         used.append(name)
+        for k, dist, dt in geometry.pose_jumps(kf["xy"], kf["t"]):
+            log.warning("scene %s: the %s ego pose of sample %s (keyframe %d) is %.1f m from the keyframe before it, "
+                        "%.2f s earlier (%.0f m/s, beyond the %g m/s bound of a physically possible move): the frames "
+                        "around it have a wrong history or ground truth", name, CAMERA, kf["sample_tokens"][k], k,
+                        dist, dt, dist / dt, geometry.POSE_JUMP_SPEED)
         xy_parts.append(kf["xy"])
         yaw_parts.append(kf["yaw"])
         t_parts.append(kf["t"])
