@@ -20,11 +20,15 @@
 //!   Two flat lists of `n` numbers labelled as speeds and curvatures (`"speeds": [...]`,
 //!   `v: [...]`) form one list. Lists with another count are not candidates.
 //! * **The candidates must agree.** A candidate equal to the history the prompt gave
-//!   is a quotation and is skipped when another candidate exists (alone, it is the
-//!   answer: a car stopped and predicted to stay stopped); identical candidates are one. Several different
-//!   candidates are **ambiguous** unless a correction or final-answer cue (`Wait`,
-//!   `Actually`, `Correction`, `Revised`, `Final answer`, …) stands after an earlier
-//!   one and before the last: then the candidates after the last such cue must agree.
+//!   is a quotation, skipped when another candidate exists, only where its own sentence
+//!   says it is the past (`past`, `previous`, `history` before it, no sentence end
+//!   between); without such a word it is a candidate like any other (keeping one's pace
+//!   is a common answer), and alone it is the answer. Identical candidates are one.
+//!   Several different candidates are **ambiguous** unless a correction or final-answer
+//!   cue (`Wait`, `Actually`, `Correction`, `Revised`, `Final answer`, …) stands after an
+//!   earlier one and before the last: then the candidates after the last such cue must
+//!   agree. Cues win over the history rule: a history-equal list whose sentence holds both
+//!   a past word and a cue is no quotation, and is ambiguous beside a different list.
 //! * A text that ends inside a bracket holding pairs, or inside a group without words
 //!   (`(5.6, -0.0`, a bare `[`), is **truncated**.
 //! * Only a text with no pair-like group at all falls back to its standalone numbers
@@ -109,6 +113,9 @@ enum Shape {
     Loose(&'static str),
 }
 
+/// A byte span `(start, end)` of the text.
+type Span = (usize, usize);
+
 /// A complete reading of `n` actions.
 struct Cand {
     start: usize,
@@ -162,7 +169,13 @@ pub struct Lenient {
     cands: Vec<Cand>,
     values: Vec<f64>,
     expr: Vec<usize>,
-    cues: Vec<(usize, usize)>,
+    cues: Vec<Span>,
+    /// words saying that what follows is the past (`past`, `previous`, `history`): their byte spans
+    pasts: Vec<Span>,
+    /// sentence ends (`.`, `!`, `?` outside numbers): their bytes
+    stops: Vec<usize>,
+    /// the candidates' ends, sorted (for the history rule)
+    ends: Vec<usize>,
     seq_values: Vec<f64>,
     loose: Vec<Loose>,
     other_counts: Vec<usize>,
@@ -187,6 +200,8 @@ impl Lenient {
         self.values.clear();
         self.expr.clear();
         self.cues.clear();
+        self.pasts.clear();
+        self.stops.clear();
         self.seq_values.clear();
         self.loose.clear();
         self.other_counts.clear();
@@ -378,8 +393,16 @@ impl Scan<'_> {
                 let w = &self.text[t.pos..t.end];
                 if is_cue(w, self.tokens.get(i + 1), self.text) {
                     self.buf.cues.push((t.pos, t.end));
+                } else if is_past(w) {
+                    self.buf.pasts.push((t.pos, t.end));
                 }
                 Some(sequence_key(w))
+            }
+            Kind::Other => {
+                if self.text[t.pos..].starts_with(['.', '!', '?']) {
+                    self.buf.stops.push(t.pos);
+                }
+                None
             }
             _ => None,
         };
@@ -708,21 +731,67 @@ impl Scan<'_> {
         self.select()
     }
 
+    /// Whether candidate `c` is a good list equal to the history the prompt gave.
+    fn is_history(&self, c: &Cand) -> bool {
+        c.good() && self.history.is_some_and(|h| self.cand_values(c) == h)
+    }
+
+    /// What the sentence introducing candidate `ci` says of it: the last past word
+    /// (`past`, `previous`, `history`) and the last correction / final-answer cue between
+    /// the end of the previous candidate (or of the previous sentence) and its start.
+    /// `ends`: every candidate's end, sorted. Binary searches only (positions are recorded
+    /// in text order), so an answer of many history-equal lists stays linear-logarithmic.
+    fn introduction(&self, ci: usize, ends: &[usize]) -> (Option<Span>, Option<Span>) {
+        let start = self.buf.cands[ci].start;
+        let before = |sorted: &[usize]| {
+            let k = sorted.partition_point(|&x| x < start);
+            (k > 0).then(|| sorted[k - 1])
+        };
+        let prev_end = match ends.partition_point(|&e| e <= start) {
+            0 => 0,
+            k => ends[k - 1],
+        };
+        let from = before(&self.buf.stops).map_or(prev_end, |s| prev_end.max(s + 1));
+        let within = |spans: &[Span]| {
+            let k = spans.partition_point(|&(p, _)| p < start);
+            (k > 0 && spans[k - 1].0 >= from).then(|| spans[k - 1])
+        };
+        (within(&self.buf.pasts), within(&self.buf.cues))
+    }
+
     /// Choose among the candidates (at least one).
     fn select(&mut self) -> Reading {
         let n = self.n;
+        // a candidate equal to the history is a quotation where its sentence says it is the past
+        // (and no cue there says it is the answer); one with both is contested
         let mut quoted = Vec::new();
-        for (ci, c) in self.buf.cands.iter().enumerate() {
-            let is_quote = c.good() && self.history.is_some_and(|h| self.cand_values(c) == h);
-            if is_quote {
-                quoted.push(c.start);
+        let mut contested = None;
+        let mut ends = std::mem::take(&mut self.buf.ends);
+        ends.clear();
+        if self.history.is_some() {
+            ends.extend(self.buf.cands.iter().map(|c| c.end));
+            ends.sort_unstable();
+        }
+        for ci in 0..self.buf.cands.len() {
+            let c = &self.buf.cands[ci];
+            let (past, cue) = if self.is_history(c) {
+                self.introduction(ci, &ends)
             } else {
-                self.buf.live.push(ci);
+                (None, None)
+            };
+            match (past, cue) {
+                (Some(_), None) => quoted.push(c.start),
+                (Some(p), Some(q)) => {
+                    contested.get_or_insert((ci, p, q));
+                    self.buf.live.push(ci);
+                }
+                _ => self.buf.live.push(ci),
             }
         }
-        // only the history: no other reading contradicts it (a stopped car predicted to stay stopped)
-        let only_history = self.buf.live.is_empty();
-        if only_history {
+        self.buf.ends = ends;
+        // only quotations of the history: no other reading contradicts it (a stopped car predicted to stay stopped)
+        if self.buf.live.is_empty() {
+            quoted.clear();
             self.buf.live.extend(0..self.buf.cands.len());
         }
         // a correction or final-answer cue between candidates: the ones after the last such cue
@@ -738,6 +807,20 @@ impl Scan<'_> {
                     cue = Some((cpos, cend));
                     break;
                 }
+            }
+        }
+        // a history-equal list introduced both as the past and as the answer, beside a different list
+        if let Some((ci, (pp, pe), (qp, qe))) = contested {
+            let other = self.buf.cands.iter().any(|c| !self.is_history(c));
+            if self.buf.live.contains(&ci) && other {
+                return Reading::Ambiguous(format!(
+                    "ambiguous: the list at position {} equals the history given in the prompt and is \
+                     introduced both as the past ({:?} at position {pp}) and as the answer ({:?} at \
+                     position {qp}), beside a different list",
+                    self.buf.cands[ci].start,
+                    self.snippet(pp, pe),
+                    self.snippet(qp, qe)
+                ));
             }
         }
         // distinct readings among the rest
@@ -794,10 +877,15 @@ impl Scan<'_> {
         self.out
             .copy_from_slice(&self.buf.values[values..values + 2 * n]);
         let mut notes = Vec::new();
-        if only_history {
-            notes
-                .push("the list equals the history given in the prompt (no other list)".to_owned());
-        } else if !quoted.is_empty() {
+        if self.is_history(chosen) {
+            let alone = self.buf.cands.iter().all(|c| self.is_history(c));
+            notes.push(if alone {
+                "the list equals the history given in the prompt (no other list)".to_owned()
+            } else {
+                "the list equals the history given in the prompt".to_owned()
+            });
+        }
+        if !quoted.is_empty() {
             notes.push(format!(
                 "skipped {} list(s) repeating the history given in the prompt (at position {})",
                 quoted.len(),
@@ -1091,6 +1179,23 @@ fn is_cue(w: &str, next: Option<&Token>, text: &str) -> bool {
         },
         None => false,
     }
+}
+
+/// Whether the word `w` says that a list after it is the past: `past`, `previous`,
+/// `previously`, `history`, `histories`, `historical` (any case).
+fn is_past(w: &str) -> bool {
+    const PAST: &[&str] = &[
+        "past",
+        "previous",
+        "previously",
+        "history",
+        "histories",
+        "historical",
+    ];
+    w.len() >= 4
+        && w.len() <= 10
+        && matches!(w.as_bytes()[0] | 0x20, b'p' | b'h')
+        && PAST.iter().any(|p| p.eq_ignore_ascii_case(w))
 }
 
 /// `Some(true)` for a word naming speeds (`speed`, `speeds`, `v`, `velocity`, …),

@@ -735,6 +735,81 @@ mod tests {
     }
 
     #[test]
+    fn an_answer_equal_to_the_history_is_an_answer_unless_the_text_calls_it_the_past() {
+        // issue 32: a draft, then a final answer that keeps the history's pace
+        let draft = list(&[
+            ("4.0", "0.0"),
+            ("3.0", "0.0"),
+            ("2.0", "0.0"),
+            ("1.0", "0.0"),
+            ("0.0", "0.0"),
+            ("0.0", "0.0"),
+        ]);
+        let text = format!("Draft: {draft}\nFinal answer: {HISTORY_TEXT}");
+        let p = with_history(&text, &HISTORY);
+        assert_eq!(p.values.as_deref(), Some(&HISTORY[..]), "{}", p.reason);
+        assert!(
+            p.reason.contains("took the list after the cue \"Final\"")
+                && p.reason
+                    .contains("the list equals the history given in the prompt"),
+            "{}",
+            p.reason
+        );
+        // the history, then a degenerate list, no cue: two readings
+        let degenerate = list(&[("0.005", "0.005"); 6]);
+        for text in [
+            format!("{HISTORY_TEXT}\n{degenerate}"),
+            format!("Keep the pace: {HISTORY_TEXT}\n{degenerate}"),
+            // a past word in an earlier sentence says nothing of this list
+            format!("The history is steady. Keep it: {HISTORY_TEXT}\n{degenerate}"),
+            format!("{degenerate}\nKeep the pace: {HISTORY_TEXT}"),
+        ] {
+            assert_ambiguous(&with_history(&text, &HISTORY), "2 different lists");
+        }
+        // the text calls it the past: a quotation
+        for text in [
+            format!("Previous actions: {HISTORY_TEXT}\nPlan: {degenerate}"),
+            format!("{degenerate} (the past: {HISTORY_TEXT})"),
+            format!("Given the HISTORY {HISTORY_TEXT}, slow down: {degenerate}"),
+        ] {
+            let p = with_history(&text, &HISTORY);
+            assert_eq!(
+                p.values.unwrap()[..2],
+                [0.005, 0.005],
+                "{text}: {}",
+                p.reason
+            );
+            assert!(
+                p.reason.contains("skipped 1 list(s) repeating the history"),
+                "{}",
+                p.reason
+            );
+        }
+        // a final-answer cue after the quotation points at another list
+        let p = with_history(
+            &format!("{HISTORY_TEXT}\nFinal answer: {degenerate}"),
+            &HISTORY,
+        );
+        assert_eq!(p.values.unwrap()[..2], [0.005, 0.005], "{}", p.reason);
+        // a cue and a past word introducing the history beside a different list: ambiguous
+        for text in [
+            format!("{degenerate}\nFinal answer: keep the previous actions {HISTORY_TEXT}"),
+            format!("{degenerate}\nWait, the past actions were {HISTORY_TEXT}"),
+        ] {
+            assert_ambiguous(
+                &with_history(&text, &HISTORY),
+                "introduced both as the past",
+            );
+        }
+        // alone it is the answer, whatever introduces it
+        let p = with_history(
+            &format!("Final answer: keep the previous actions {HISTORY_TEXT}"),
+            &HISTORY,
+        );
+        assert_eq!(p.values.as_deref(), Some(&HISTORY[..]), "{}", p.reason);
+    }
+
+    #[test]
     fn a_cue_between_lists_says_which_is_final() {
         let first = list(&[("8.0", "0.0"); 6]);
         for cue in [

@@ -137,6 +137,9 @@ STRUCTURE = [
     case("recap-history-after", RECAP_AFTER, "corrected", J),
     case("history-only", "The ego vehicle is stopped and stays so: " + bracket(H) + ".", "corrected", H),  # alone, it is the answer
     case("history-echo-after", bracket(A) + "\n(previous: (4.0, 0.0))", "corrected", A),
+    # issue 32: keeping one's pace is an answer; a cue wins over the history rule
+    case("final-answer-keeps-the-history", "Draft: " + bracket(F) + "\nFinal answer: " + bracket(K), "corrected", K),
+    case("keep-the-pace-then-recap", "Keep the pace: " + bracket(K) + "\nThe previous actions, for reference: " + bracket(K), "corrected", K),
     # kind 2: self-corrections
     case("self-correction", bracket(F) + "\nWait, that ignores the red light. Corrected: " + bracket(B), "corrected", B),
     case("self-correction-reasoning", "First guess: " + bracket(A) + "\nHmm, the car ahead is braking, so let me revise.\nFinal answer: " + bracket(F), "corrected", F),
@@ -243,6 +246,11 @@ AMBIGUOUS = [
     case("bare-numbers", " ".join(f"{v} {c}" for v, c in A), "failed", failure="ambiguous"),
     case("comma-numbers", ", ".join(f"{v}, {c}" for v, c in A), "failed", failure="ambiguous"),
     case("two-unlabelled-lists", f"{[v for v, _ in A]} and {[c for _, c in A]}", "failed", failure="ambiguous"),
+    # issue 32: the history, then a degenerate list (a real deepseek-vl2-16b answer), and nothing calls either the past
+    case("history-then-degenerate", bracket(K) + "\n" + bracket([(0.005, 0.005), (0.009, 0.009), (0.014, 0.014), (0.018, 0.018), (0.023, 0.023),
+                                                               (0.027, 0.027)]), "failed", failure="ambiguous"),
+    case("final-answer-and-past-word-on-the-history", bracket(A) + "\nFinal answer: keep the previous actions " + bracket(K), "failed",
+         failure="ambiguous"),
 ]
 
 TRUNCATED = [
@@ -275,4 +283,8 @@ HISTORIES: dict[str, list] = {
     "recap-history-after": K,
     "history-only": H,
     "waypoints-after-answer": K,  # the history does not explain the waypoints
+    "final-answer-keeps-the-history": K,
+    "keep-the-pace-then-recap": K,
+    "history-then-degenerate": K,
+    "final-answer-and-past-word-on-the-history": K,
 }

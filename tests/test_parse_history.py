@@ -142,6 +142,32 @@ def test_rescoring_passes_each_records_own_history(frames):
     assert (out[-1]["status"], out[-1]["failure"]) == ("failed", "ambiguous")
 
 
+def test_an_answer_equal_to_the_history_is_scored_as_given(frames):
+    """Issue 32: keeping one's pace is an answer. A final answer equal to the history is taken after a draft (the
+    history rule used to skip it and score the draft); the history followed by another list with nothing calling
+    it the past is ambiguous (it used to score the other list: a degenerate one in a real deepseek-vl2-16b answer)."""
+    degenerate = np.column_stack([np.linspace(0.005, 0.027, 6), np.linspace(0.005, 0.027, 6)]).round(3)
+    records = []
+    for i, f in enumerate(frames):
+        quoted = format_history(f.history_actions)
+        answer = {0: f"Draft: {text_of(answer_of(i))}\nFinal answer: {quoted}", 1: f"{quoted}\n{text_of(degenerate)}",
+                  2: f"The previous actions were {quoted}. Now: {text_of(degenerate)}"}[i % 3]
+        records.append({"frame_id": f.frame_id, "status": "failed", "failure": "format", "history_actions": f.history_actions.tolist(),
+                        "attempts": [{"answer": answer, "status": "failed", "reason": ""}], "answer": answer})
+    out = list(rescored(records, ParseDefinition("lenient"), block=4))
+    for i, (f, rec) in enumerate(zip(frames, out)):
+        reason = rec["attempts"][0]["reason"]
+        if i % 3 == 0:
+            assert rec["status"] == "corrected", reason
+            np.testing.assert_allclose(rec["actions"], f.history_actions, rtol=0, atol=1e-12)
+            assert "the list equals the history given in the prompt" in reason and "took the list after the cue" in reason
+        elif i % 3 == 1:
+            assert (rec["status"], rec["failure"]) == ("failed", "ambiguous"), reason
+        else:
+            assert rec["status"] == "corrected", reason
+            np.testing.assert_array_equal(rec["actions"], degenerate)
+
+
 def test_history_rows_and_the_shape_check():
     rows = lightemma.actions.history_rows([np.zeros((6, 2)), None, [[1, 2]], np.full((6, 2), np.inf)])
     assert rows.shape == (4, 6, 2) and (rows[0] == 0).all() and np.isnan(rows[1:]).all()

@@ -114,9 +114,10 @@ def parse_actions(
       columns. Several *different* lists are ``ambiguous`` unless a correction or
       final-answer cue (``Wait``, ``Correction:``, ``Final answer:``, …) comes after an
       earlier one and before the last; a list equal to the frame's ``history`` is a
-      quotation, never the answer beside another list. A text without bracketed pairs gives exactly ``2n``
-      standalone numbers only where labels or the layout pair them. Malformed pairs,
-      ranges (``4.5-5.0``), doubled signs and cut-off lists are ``failed`` with a
+      quotation, skipped beside another list, only where its sentence calls it the past
+      (``past``, ``previous``, ``history`` before it); cues win over that rule. A text
+      without bracketed pairs gives exactly ``2n`` standalone numbers only where labels
+      or the layout pair them. Malformed pairs, ranges (``4.5-5.0``), doubled signs and cut-off lists are ``failed`` with a
       reason — never re-paired or guessed.
     - ``"paper"``: the paper's own rules, to reproduce its FE / FE corr columns: ``ok``
       when the answer is a Python literal list of ``n`` tuples of 2 numbers; else
@@ -138,8 +139,11 @@ def parse_actions(
             (N, n, 2) (a frame's ``history_actions``), float64 (other dtypes are cast).
             A lenient candidate list equal to its row — compared as the float64 values
             the prompt's shortest round-trip decimals denote, so ``4.50`` is ``4.5`` —
-            is a quotation, never the answer, whenever another candidate exists (alone it
-            is the answer: a stopped car predicted to stay stopped). A row of NaN equals nothing (no history
+            is a quotation, skipped when another candidate exists, only where a past word
+            (``past``, ``previous``, ``history``, …) in its own sentence introduces it and no
+            correction / final-answer cue does; otherwise it is a candidate like any other, so
+            beside a different list without a cue it is ``ambiguous`` (alone it is the answer:
+            a stopped car predicted to stay stopped). See docs/parsing.md. A row of NaN equals nothing (no history
             for that answer; :func:`history_rows` builds such arrays). Other modes ignore it.
 
     Returns:

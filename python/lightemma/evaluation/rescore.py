@@ -5,8 +5,8 @@ again under ``lenient``, ``strict`` or ``paper`` parsing (with other
 plausibility limits) without asking the model again. Per frame:
 
 * every attempt's answer is parsed again, in order, with the frame's recorded
-  ``history_actions`` (a list in the answer equal to it is a quotation, never the
-  answer; a record without a history is parsed without one); attempts without an
+  ``history_actions`` (a list in the answer equal to it and called the past is a
+  quotation, docs/parsing.md; a record without a history is parsed without one); attempts without an
   answer — API errors — stay as they were;
 * the frame's actions are those of the first attempt whose answer passes: what a
   run under that definition would have stopped at. Its status is the frame's; when
@@ -158,7 +158,7 @@ def rescored(records: Iterable[dict[str, Any]], definition: ParseDefinition, *, 
 
     def flush() -> Iterator[dict[str, Any]]:
         answers = [a["answer"] for _, attempts in pending for a in attempts if isinstance(a.get("answer"), str)]
-        # each answer with its frame's history, as the prompt printed it: a list quoting it is never the answer
+        # each answer with its frame's history, as the prompt printed it: a list quoting it as the past is skipped
         histories = history_rows(record.get("history_actions") for record, attempts in pending
                                  for a in attempts if isinstance(a.get("answer"), str))
         parsed = parse_actions(answers, n=6, history=histories, **options) if answers else None

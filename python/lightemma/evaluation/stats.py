@@ -1,9 +1,12 @@
-"""Uncertainty at the level of scenes: bootstrap intervals, paired sign-flip tests, Holm's adjustment.
+"""Uncertainty at the level of scenes: bootstrap intervals, rate intervals, paired sign-flip tests, Holm's adjustment.
 
 Frames of one nuScenes scene are strongly correlated (same road, traffic and
-weather for 20 s), so the unit of resampling is the scene: intervals come from
-a **cluster bootstrap** (draw as many scenes as there are, with replacement, and
-recompute the frame-weighted mean) and p-values from a **sign-flip permutation
+weather for 20 s), so the unit of resampling is the scene: intervals of means
+(ADE, FDE) come from a **cluster bootstrap** (draw as many scenes as there are,
+with replacement, and recompute the frame-weighted mean), intervals of rates
+(off-road, collision) from an exact binomial interval on the scene-clustered
+effective sample size (:func:`rate_interval`: a bootstrap of a rate of 0 is
+[0, 0]), and p-values from a **sign-flip permutation
 test** of scene-level paired differences. The resampling runs in the Rust core
 (one call for all rows, all cores, deterministic for a seed). Definitions:
 docs/statistics.md.
@@ -40,7 +43,8 @@ class Resampling:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "method": "percentile bootstrap over scenes; sign-flip permutation over scenes",
+            "method": "percentile bootstrap over scenes; sign-flip permutation over scenes; "
+            "rates: Clopper-Pearson on the scene-clustered effective sample size",
             "unit": "scene",
             "n_resamples": self.n_resamples,
             "seed": self.seed,
@@ -107,6 +111,74 @@ def bootstrap_ci(groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[s
         return np.full((len(n_clusters), sums.shape[1], 2), np.nan)
     out = _core.cluster_bootstrap(sums, counts, offsets, _streams(keys, len(n_clusters)), resampling.n_resamples, resampling.seed, resampling.confidence)
     out[np.asarray(n_clusters) < 2] = np.nan
+    return out
+
+
+def rate_interval(values: ArrayLike, clusters: ArrayLike, confidence: float = 0.95) -> tuple[float, float]:
+    """Interval (low, high) of a rate — the frame-weighted mean of per-frame ``values`` in [0, 1] — that
+    accounts for scene clustering and is never degenerate at 0 or 1 (docs/statistics.md#rates).
+
+    Clopper–Pearson (exact binomial) at ``confidence`` on the effective sample size of Korn and Graubard
+    (1998): with n frames in k scenes, rate p = Σ values / n and the scene-level (linearised) variance
+    v = k / (k − 1) · Σ_s (S_s − p · n_s)² / n² (S_s, n_s: the scene's sum and frame count), n_eff =
+    min(n, p (1 − p) / v) · (t_{n−1} / t_{k−1})² (design effect ≥ 1, then the degrees-of-freedom correction
+    for k scenes), at most max(k, j · n / k) where j is the number of scenes with an event (or, when
+    fewer, without one): the clustering is measured on those scenes only, so a few events in a few scenes
+    give no more than those scenes' worth of frames. x = p · n_eff events: low = Beta⁻¹(α/2; x, n_eff − x + 1)
+    (0 at x = 0), high = Beta⁻¹(1 − α/2; x + 1, n_eff − x) (1 at x = n_eff). At p = 0 or 1 the data
+    cannot measure how strongly a scene's frames hang together, so the worst case is taken: n_eff = k
+    (every scene one observation; the cap above at j = 0) — no event in 24 scenes gives [0, 0.142].
+
+    ``values`` (N,): per-frame values in [0, 1] (1: the frame has the event; ``stp3``/``uniad`` collision
+    values are shares of steps); ``clusters`` (N,): scene labels. Returns (NaN, NaN) with fewer than 2
+    scenes (as :func:`bootstrap_ci`). Raises ``ValueError`` for values that are not finite numbers in [0, 1],
+    mismatched shapes, or a confidence outside (0, 1).
+    """
+    from scipy.stats import beta, t
+
+    v = np.asarray(values, dtype=np.float64)
+    if v.ndim != 1:
+        raise ValueError(f"rate values must be (N,), got shape {v.shape}")
+    bad = np.flatnonzero(~np.isfinite(v) | (v < 0.0) | (v > 1.0))
+    if len(bad):
+        raise ValueError(f"rate values must be finite numbers in [0, 1]: value {v[bad[0]]!r} at index {int(bad[0])}")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must lie strictly between 0 and 1, got {confidence}")
+    sums, counts = cluster_sums(v, clusters)
+    k, n = len(counts), float(counts.sum())
+    if k < 2:
+        return (float("nan"), float("nan"))
+    total = float(sums[:, 0].sum())
+    p = total / n
+    alpha = 1.0 - confidence
+    if total <= 0.0 or total >= n:
+        p = 0.0 if total <= 0.0 else 1.0
+        n_eff = float(k)
+    else:
+        var = k / (k - 1) * float(np.sum((sums[:, 0] - p * counts) ** 2)) / n**2
+        n_eff = n if var <= 0.0 else min(n, p * (1.0 - p) / var)
+        n_eff *= (t.ppf(1.0 - alpha / 2, n - 1) / t.ppf(1.0 - alpha / 2, k - 1)) ** 2
+        # the clustering is measured on the scenes that differ from the rest: no more than theirs to go on
+        j = int(min(np.count_nonzero(sums[:, 0] > 0.0), np.count_nonzero(sums[:, 0] < counts)))
+        n_eff = min(n_eff, max(float(k), j * n / k))
+    x = p * n_eff
+    low = 0.0 if x <= 0.0 else float(beta.ppf(alpha / 2, x, n_eff - x + 1.0))
+    high = 1.0 if x >= n_eff else float(beta.ppf(1.0 - alpha / 2, x + 1.0, n_eff - x))
+    return (low, high)
+
+
+def rate_ci(groups: Sequence[tuple[ArrayLike, ArrayLike]], resampling: Resampling = Resampling()) -> np.ndarray:
+    """:func:`rate_interval` of every group (per row: per-frame values (N,) in [0, 1], scene labels (N,)).
+
+    Returns (R, 1, 2) (low, high), shaped like :func:`bootstrap_ci` with one metric; NaN for a row with
+    fewer than 2 scenes or when ``resampling.n_resamples`` is 0 (``--resamples 0``: no intervals). Only
+    ``resampling.confidence`` enters: the interval is not resampled, so it needs no seed.
+    """
+    out = np.full((len(groups), 1, 2), np.nan)
+    if resampling.n_resamples == 0:
+        return out
+    for r, (values, clusters) in enumerate(groups):
+        out[r, 0] = rate_interval(values, clusters, resampling.confidence)
     return out
 
 

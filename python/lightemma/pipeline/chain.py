@@ -187,7 +187,7 @@ def _parse(answer: str, policy: ChainPolicy, history: Any = None) -> tuple[str, 
     """Parse of one answer (lenient; json for structured answers): (status, reason, failure kind, actions (6, 2)).
 
     ``history`` is the frame's (6, 2) history the prompt printed: a list in the answer equal to it is a
-    quotation, never the answer beside another list (see :func:`lightemma.parse_actions`).
+    quotation beside another list where the text calls it the past (see :func:`lightemma.parse_actions`).
     """
     from lightemma.actions import history_rows, parse_actions
 
