@@ -67,9 +67,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     paid.add_argument("--batch-poll", type=float, metavar="SECONDS", help="with --batch: first poll after SECONDS "
                       "(default 30), then ×1.5 per poll up to 10 min")
     paid.add_argument("--estimate", action="store_true", help="print the frames, calls, tokens and expected cost "
-                      "(normal and --batch) without calling anything, and exit")
+                      "(normal and --batch) without calling anything, and exit; image tokens by the model's published "
+                      "rule, 'unknown' where none is published")
     paid.add_argument("--max-cost", type=float, metavar="CENTS", help="stop cleanly (resumable) before the run would spend "
-                      "more than CENTS US cents (on --resume: the run's whole limit, earlier sessions included)")
+                      "more than CENTS US cents (on --resume: the run's whole limit, earlier sessions included); a frame "
+                      "is admitted at the estimate, or at its upper bound where the model's image tokens are unknown")
     local = p.add_argument_group("local models (--backend hf | vllm)")
     local.add_argument("--batch-size", type=int, help="requests per batched forward pass (default 8; 1 is the paper's way)")
     local.add_argument("--max-pixels", type=int, help="cap on image pixels (width × height) fed to the model")

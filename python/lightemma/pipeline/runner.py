@@ -467,14 +467,40 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
 
 
 
-def _exit_now(run_dir: Path, signum: int) -> None:
-    """A second stop signal: remove ``.lock.pid``, say so in one line, exit 128 + the signal at once."""
+def resume_command(run_dir: str | os.PathLike[str], config: Mapping[str, Any] | None = None) -> str:
+    """The ``lightemma run --resume`` command that continues ``run_dir``, with what a resume must be given again
+    (:func:`resume` refuses it otherwise): the run's ``--api-base`` (as recorded, credentials replaced by ``***``:
+    give the real ones), ``--api-key-env``, ``--cache`` (its path), ``--ray-address`` and ``--trust-remote-code``.
+    ``config`` is the run's config (the manifest's); without it, the bare command."""
+    import shlex
+
+    parts = ["lightemma", "run", "--resume", os.fspath(run_dir)]
+    config = config or {}
+    if config.get("api_base"):
+        parts += ["--api-base", str(config["api_base"])]
+    if config.get("api_key_env"):
+        parts += ["--api-key-env", str(config["api_key_env"])]
+    cache = config.get("cache")
+    if isinstance(cache, str) and cache:
+        output = Path(run_dir).parent.parent
+        parts += ["--cache", os.fspath((Path(cache) if os.path.isabs(cache) else output / cache).resolve())]
+    if config.get("ray_address"):
+        parts += ["--ray-address", str(config["ray_address"])]
+    options = config.get("backend_options")
+    if isinstance(options, Mapping) and options.get("trust_remote_code") is True:
+        parts.append("--trust-remote-code")
+    return shlex.join(parts)
+
+
+def _exit_now(run_dir: Path, signum: int, command: str | None = None) -> None:
+    """A second stop signal: remove ``.lock.pid``, say so in one line (``command``: how to continue), exit 128 + the
+    signal at once."""
     try:
         (run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
     except OSError:
         pass
     os.write(2, f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
-                f"Continue with: lightemma run --resume {run_dir}\n".encode())
+                f"Continue with: {command or resume_command(run_dir)}\n".encode())
     os._exit(128 + signum)
 
 
@@ -540,7 +566,8 @@ class _Outcome:
 
 
 async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
-                   concurrency: int, bar: Progress, earlier: Mapping[str, dict[str, Any]], budget: Any = None) -> _Outcome:
+                   concurrency: int, bar: Progress, earlier: Mapping[str, dict[str, Any]], budget: Any = None,
+                   command: str | None = None) -> _Outcome:
     """Run every frame, ``concurrency`` at a time, appending each record as it finishes; stop on a run-fatal cause.
 
     ``earlier``: frame id -> the failed record a frame is run again after (its attempts are kept).
@@ -588,7 +615,7 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
 
     def on_signal(signum: int) -> None:  # in the loop, between steps: the session is cancelled cleanly
         if outcome.interrupted is not None:
-            _exit_now(writer.path.parent, signum)  # a second signal while stopping: leave at once
+            _exit_now(writer.path.parent, signum, command)  # a second signal while stopping: leave at once
         outcome.interrupted = signum
         if main is not None:
             main.cancel()
@@ -625,13 +652,15 @@ def _in_set(records: dict[str, dict[str, Any]], frame_ids: list[str] | None) -> 
     return [r for fid, r in records.items() if fid in allowed]
 
 
-def _write_manifest(run_dir: Path, **fields: Any) -> dict[str, Any]:
-    """update_manifest, with an OS failure (disk full, permissions) as one line that says what is safe."""
+def _write_manifest(run_dir: Path, _command: str | None = None, **fields: Any) -> dict[str, Any]:
+    """update_manifest, with an OS failure (disk full, permissions) as one line that says what is safe (``_command``:
+    how to continue, :func:`resume_command`)."""
     try:
         return update_manifest(run_dir, **fields)
     except OSError as exc:
         raise RunStoreError(os_error_line(exc, "update the manifest in") + f"; the frames written so far are safe in "
-                            f"{run_dir / FRAMES_FILE}; after freeing space, continue with: lightemma run --resume {run_dir}") from None
+                            f"{run_dir / FRAMES_FILE}; after freeing space, continue with: "
+                            f"{_command or resume_command(run_dir)}") from None
 
 
 def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: dict[str, Any],
@@ -649,29 +678,31 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
         asyncio.run(backend.aclose())
         raise
     manifest = read_manifest(run_dir)
+    command = resume_command(run_dir, config)
     sessions = list(manifest.get("sessions", []))
     sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config["concurrency"],
                      "timeout": config.get("timeout"), "rpm": config.get("rpm"), "tpm": config.get("tpm"), "pid": os.getpid()})
-    _write_manifest(run_dir, sessions=sessions, finished_at=None)
+    _write_manifest(run_dir, command, sessions=sessions, finished_at=None)
     try:
         writer = RunWriter(run_dir)
     except OSError as exc:
         asyncio.run(backend.aclose())
-        raise RunStoreError(os_error_line(exc, "open the frame records") + f"; continue later with: lightemma run --resume {run_dir}") from None
+        raise RunStoreError(os_error_line(exc, "open the frame records")
+                            + f"; continue later with: {command}") from None
     attach = getattr(backend, "attach", None)
     if attach is not None:  # a batch backend journals its batches in the run directory
-        attach(run_dir, log)
+        attach(run_dir, log, budget=budget)  # and checks each finished wave's reported cost against --max-cost
     concurrency = max(1, len(todo)) if getattr(backend, "wants_all_frames", False) else config["concurrency"]
     bar = Progress(already + len(todo), enabled=progress, initial=already)
     start = time.perf_counter()
     # SIGINT, SIGTERM, SIGHUP stop the session like Ctrl-C: the frames in flight are cut off, the session's wall time
     # is recorded, the lock released; a second one exits at once (frames are whole lines, .lock.pid removed first)
-    with stop_signals(lambda signum: _exit_now(run_dir, signum)):
+    with stop_signals(lambda signum: _exit_now(run_dir, signum, command)):
         try:
             with writer:
                 if todo:
                     outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), concurrency, bar, earlier or {},
-                                                   budget))
+                                                   budget, command))
                     if outcome.interrupted is not None:
                         raise Interrupted(outcome.interrupted)
                 else:
@@ -688,7 +719,7 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
                 pass  # the frames are safe; the run's wall time will just be unknown
             if log:
                 how = f" by {exc.name}" if isinstance(exc, Interrupted) else ""
-                log(f"interrupted{how}; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+                log(f"interrupted{how}; finished frames are saved. Continue with: {command}")
                 exc.reported = True  # type: ignore[attr-defined]  # said: the command line adds no second line
             raise
         finally:
@@ -717,41 +748,59 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     stop = outcome.stop
     if stop is not None:
         sessions[-1]["stopped"] = {"cause": stop.cause, "error": stop.error, "message": str(stop)}
-        _write_manifest(run_dir, sessions=sessions, summary=summary)
+        _write_manifest(run_dir, command, sessions=sessions, summary=summary)
         if stop.cause == "reasoning-budget":  # the fix changes what is asked, which a resume keeps
             after = "a resume keeps the run's --max-tokens: start a new run with the larger budget"
         elif stop.error == "Timeout":
-            after = f"continue with a longer wait: lightemma run --resume {run_dir} --timeout SECONDS"
+            after = f"continue with a longer wait: {command} --timeout SECONDS"
         else:
-            after = f"after the fix, continue with: lightemma run --resume {run_dir}"
+            after = f"after the fix, continue with: {command}"
         raise RunStopped(f"{stop} — the run stopped; {outcome.done} frame(s) finished in this session are saved in {run_dir}; "
                          f"{after}",
                          cause=stop.cause, error=stop.error, run_dir=run_dir, frames_run=outcome.done)
-    manifest = _write_manifest(run_dir, sessions=sessions, finished_at=_now(), summary=summary)
+    manifest = _write_manifest(run_dir, command, sessions=sessions, finished_at=_now(), summary=summary)
     return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=outcome.done)
 
 
 def _budget(run_dir: Path, config: Mapping[str, Any], todo: Sequence[Any], backend: Backend, prompts: PromptSet, *,
             resuming: bool = False) -> Any:
-    """The session's ``--max-cost`` budget (None without one): the run's recorded spending, the expected cost per call."""
+    """The session's ``--max-cost`` budget (None without one): the run's recorded spending, what each call is
+    admitted at (:func:`_admitted_cents_per_call`)."""
     limit = config.get("max_cost_cents")
     if limit is None:
         return None
-    from lightemma.pipeline.estimate import Budget, estimate
+    from lightemma.pipeline.estimate import Budget
+
+    per_call = _admitted_cents_per_call(config, todo, backend, prompts, resuming=resuming)
+    spent = sum(float(r.get("cost_cents") or 0.0) for r in read_run(run_dir).records.values())
+    return Budget(float(limit), per_call, spent)
+
+
+def _admitted_cents_per_call(config: Mapping[str, Any], todo: Sequence[Any], backend: Backend, prompts: PromptSet, *,
+                             resuming: bool = False) -> float:
+    """The cents ``--max-cost`` admits each call of ``todo`` at (the estimate per call, or its upper bound where the
+    model's image tokens are unknown: :meth:`~lightemma.pipeline.estimate.Estimate.admitted_cents_per_call`); a
+    one-line :class:`UserError` where no spending can be bounded. Reads and writes nothing: a new run checks it before
+    its run directory exists."""
+    from lightemma.pipeline.estimate import estimate
 
     info = resolve(config["model"])
     planned = estimate(todo, info, getattr(backend, "provider", None), prompts, max_tokens=config["max_tokens"],
                        chain=config.get("chain") or "independent", inputs=config.get("inputs") or "full",
                        given_price=config.get("price"),
                        served_from=getattr(backend, "api_base_shown", None) if getattr(backend, "served_elsewhere", False) else None)
-    per_call = planned.batch_cents_per_call if config.get("batch") else planned.cents_per_call
-    if per_call is None:
+    batch = bool(config.get("batch"))
+    per_call = planned.admitted_cents_per_call(batch)
+    if per_call is not None:
+        return per_call
+    bound = planned.batch_bound if batch else planned.bound
+    if bound is None or bound.unknown == "price":
         fix = ("a resume keeps the run's price (it has none): drop --max-cost, or start a new run with --price IN OUT"
                if resuming else "give it with --price IN OUT, or drop --max-cost")
         raise UserError(f"--max-cost: the price of {config['model']} is unknown ({planned.price_source}), so no spending "
                         f"can be bounded; {fix}")
-    spent = sum(float(r.get("cost_cents") or 0.0) for r in read_run(run_dir).records.values())
-    return Budget(float(limit), per_call, spent)
+    raise UserError(f"--max-cost: the image tokens of {config['model']} are unknown (no published image rule) and "
+                    f"{bound.source}, so no spending can be bounded: drop --max-cost (--estimate shows what is known)")
 
 
 def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT_PROMPT_SET, chain: str = "independent",
@@ -935,6 +984,15 @@ def run(
         else:
             frames = _subset(frames, dataset)
         _require_frames(frames)
+        if max_cost_cents is not None:  # a limit that bounds nothing or admits no frame: refused before anything exists
+            from lightemma.pipeline.estimate import Budget
+
+            per_call = _admitted_cents_per_call(config, frames, instance, prompts)
+            if max_cost_cents < Budget.CHAIN_CALLS * per_call:
+                frame = Budget.CHAIN_CALLS * per_call
+                raise UserError(f"--max-cost {max_cost_cents:g}: not one frame fits within it (a frame is admitted at "
+                                f"{frame:.3f} ¢, its three calls at {per_call:.3f} ¢ each); give at least --max-cost "
+                                f"{math.ceil(frame * 1000) / 1000:g}, or drop it")
         planned = None
         if getattr(instance, "info", {}).get("kind") == "api":  # a paid run: its bill first, in one line
             planned = estimate_run(model, frames=frames, prompt_set=prompt_set, chain=chain, answer_format=answer_format,
@@ -979,7 +1037,7 @@ def run(
         except KeyboardInterrupt as exc:  # before the session's own handlers: said here, with the resume
             if log and not getattr(exc, "reported", False):
                 how = f" by {exc.name}" if isinstance(exc, Interrupted) else ""
-                log(f"interrupted{how}; finished frames are saved. Continue with: lightemma run --resume {run_dir}")
+                log(f"interrupted{how}; finished frames are saved. Continue with: {resume_command(run_dir, config)}")
                 exc.reported = True  # type: ignore[attr-defined]
             raise
 
@@ -1097,21 +1155,25 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
 def _prepare(backend: Backend, frames: Sequence[Any], dataset: Mapping[str, Any], *, recorded: Any = None,
              run_dir: Path | None = None, log: Log | None = None) -> None:
     """Let a backend that learns from the frame set (``baseline:ego``) fit before the run; on a resume, refuse a fit
-    whose predictions differ from the recorded ones (``recorded``: the manifest's ``backend``). A fit's warning
-    (cross-fitted on a ``--sample`` / ``--limit`` subset: ``fit.subset.warning``) is shown in one line."""
+    whose predictions differ from the recorded ones (``recorded``: the manifest's ``backend``). A fit's warnings
+    (cross-fitted on a ``--sample`` / ``--limit`` subset: ``fit.subset.warning``; fitted on few scenes or frames:
+    ``fit.warning``) are shown in one line each."""
     prepare = getattr(backend, "prepare", None)
     if prepare is None:
         return
     prepare(frames, dataset)
     fit = dict(backend.info).get("fit")
     subset = fit.get("subset") if isinstance(fit, Mapping) else None
-    if isinstance(subset, Mapping) and subset.get("warning"):
+    for warning in (subset.get("warning") if isinstance(subset, Mapping) else None,  # a --sample / --limit subset
+                    fit.get("warning") if isinstance(fit, Mapping) else None):  # a fit on few scenes or frames
+        if not warning:
+            continue
         if log:
-            log(str(subset["warning"]))
+            log(str(warning))
         else:
             import warnings
 
-            warnings.warn(str(subset["warning"]), stacklevel=3)
+            warnings.warn(str(warning), stacklevel=3)
     before = recorded.get("fit") if isinstance(recorded, Mapping) else None
     if run_dir is not None and isinstance(fit, Mapping) and isinstance(before, Mapping) \
             and fit.get("predictions_sha256") != before.get("predictions_sha256"):

@@ -14,12 +14,16 @@ any other ``--api-base`` is an OpenAI-compatible server, batched by the OpenAI a
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 from typing import Any
 
 from lightemma.backends.batch.base import (
+    CLOCK_SKEW_S,
     ENDED,
+    MAX_LIST_PAGES,
     BatchHTTPError,
     BatchStatus,
+    BatchUnconfirmed,
     batch_client,
     batch_state,
     count,
@@ -28,6 +32,7 @@ from lightemma.backends.batch.base import (
     item_result,
     jsonl_rows,
     split_data_url,
+    tally,
     url_id,
 )
 
@@ -82,8 +87,13 @@ class AnthropicBatches:
     async def status(self, batch_id: str) -> BatchStatus:
         data = (await self._request("GET", f"{self.base}/v1/messages/batches/{url_id(batch_id)}")).json()
         state = str(data.get("processing_status"))
+        counts = data.get("request_counts")
         return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state,
-                           counts=dict(data.get("request_counts") or {}), handle={"results_url": data.get("results_url")})
+                           counts=dict(counts) if isinstance(counts, dict) else {},
+                           handle={"results_url": data.get("results_url")},
+                           answered=tally(counts, ("succeeded", "errored", "canceled", "expired")),
+                           unrun=0 if isinstance(counts, dict) else None,  # every request of an ended batch has a line
+                           canceled=bool(data.get("cancel_initiated_at")) or state == "canceling")
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         url = status.handle.get("results_url") or f"{self.base}/v1/messages/batches/{url_id(batch_id)}/results"
@@ -103,8 +113,47 @@ class AnthropicBatches:
                 out.append(item_result(cid, error="BatchRequestError", error_message=f"{err.get('type')}: {err.get('message')}"))
         return out
 
-    async def find(self, token: str) -> str | None:
-        return None  # Anthropic batches carry no name or metadata to find one by
+    async def find(self, token: str, since: float, n_requests: int, known: Collection[str] = ()) -> str | None:
+        """Anthropic batches carry no name or metadata to find one by: every page of ``GET /v1/messages/batches``
+        (newest first, ``after_id`` the last id of a page) down to ``since`` is read for a batch of ``n_requests``
+        requests, other than the ``known`` ones (this run's journaled batches). None when there is none (nothing was created: safe to create); :class:`BatchUnconfirmed`, naming
+        them, when there is one (it may be this submission's, or another of the account's: lightemma cannot tell)."""
+        from datetime import datetime
+
+        params: dict[str, Any] = {"limit": 100}
+        candidates: list[str] = []
+        for _ in range(MAX_LIST_PAGES):
+            page = (await self._request("GET", f"{self.base}/v1/messages/batches", params=params)).json()
+            data = page.get("data")
+            if not isinstance(data, list):
+                raise BatchHTTPError(0, "the batch list has no data list", answer=True)
+            older = False
+            for batch in data:
+                if not isinstance(batch, dict):
+                    continue
+                try:
+                    created = datetime.fromisoformat(str(batch.get("created_at"))).timestamp()
+                except ValueError:
+                    created = None  # unknown: it may be recent
+                if created is not None and created < since - CLOCK_SKEW_S:
+                    older = True
+                    continue
+                if str(batch.get("id")) in known:  # this run's own batches, journaled
+                    continue
+                if tally(batch.get("request_counts"), ("processing", "succeeded", "errored", "canceled", "expired")) \
+                        in (n_requests, None):
+                    candidates.append(str(batch.get("id")))
+            last = page.get("last_id") or (data[-1].get("id") if data and isinstance(data[-1], dict) else None)
+            if older or page.get("has_more") is not True or not last:
+                break
+            params = {"limit": 100, "after_id": str(last)}
+        else:
+            raise BatchHTTPError(0, f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
+                                    "submission; lightemma cannot tell whether the batch exists", answer=True)
+        if candidates:
+            raise BatchUnconfirmed(f"Anthropic batches cannot be looked up by name, and {len(candidates)} batch(es) of "
+                                   f"{n_requests} request(s) were created since: {', '.join(candidates[:5])}")
+        return None
 
     async def aclose(self) -> None:
         await self._client.aclose()

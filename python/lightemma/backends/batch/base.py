@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 from dataclasses import dataclass, field
-from collections.abc import Iterator, Sequence
+from collections.abc import Collection, Iterator, Sequence
 from typing import Any, Protocol
 
 #: states of a batch as lightemma sees it: still running, or one terminal state
@@ -45,6 +45,12 @@ def batch_state(batch_id: str, state: str, terminal: dict[str, str], running: Se
     raise ValueError(f"batch {batch_id}: state {state[:60]!r} is none of {', '.join([*running, *terminal])}")
 
 
+#: seconds the provider's clock may run behind this machine's: a look-up reads back this far before a submission
+CLOCK_SKEW_S = 600.0
+#: the most pages of a provider's batch list one look-up reads (a list that never ends, or never reaches ``since``)
+MAX_LIST_PAGES = 1000
+
+
 def _utf8_over(text: str, limit: int) -> bool:
     """``text`` takes more than ``limit`` bytes as UTF-8 (encoded only when its length allows it)."""
     return len(text) > limit // 4 and len(text.encode("utf-8", "surrogatepass")) > limit
@@ -74,15 +80,41 @@ class BatchHTTPError(Exception):
         return self.status in (401, 403)
 
 
+class BatchUnconfirmed(Exception):
+    """A look-up cannot tell whether a cut-off submission created a batch (a provider without a name to find it by,
+    and a batch of the same size created since): lightemma neither creates it again nor takes a stranger's."""
+
+
 @dataclass
 class BatchStatus:
-    """Where a batch stands: ``state`` (pending / ended / failed), the provider's own word, counts, a reason."""
+    """Where a batch stands: ``state`` (pending / ended / failed), the provider's own word, counts, a reason.
+
+    ``answered``: how many result lines the provider says it holds (requests it ran, answered or errored, plus
+    those it lists as expired or canceled); ``unrun``: how many requests it says got no result line at all
+    (Gemini's unreached requests); None where the provider reported no counts. ``canceled``: the batch was
+    canceled (in the provider's console or API). ``retryable``: a batch failed as a whole for a reason that
+    passes (OpenAI's enqueued-token limit), so its requests may go out again."""
 
     state: str
     provider_state: str
     counts: dict[str, Any] = field(default_factory=dict)
     reason: str | None = None  # why a batch failed (validation errors, …)
     handle: dict[str, Any] = field(default_factory=dict)  # what reading its results needs (file ids, URLs)
+    answered: int | None = None
+    unrun: int | None = None
+    canceled: bool = False
+    retryable: bool = False
+
+
+def tally(counts: Any, names: Sequence[str]) -> int | None:
+    """The sum of the counts ``names`` in a provider's ``counts`` object (missing ones as 0), or None when it is no
+    object or any of them is not a non-negative int (unknown, never zero)."""
+    if not isinstance(counts, dict) or not any(n in counts for n in names):
+        return None
+    values = [counts.get(n, 0) for n in names]
+    if not all(isinstance(v, int) and not isinstance(v, bool) and v >= 0 for v in values):
+        return None
+    return sum(values)
 
 
 def item_result(custom_id: str, *, text: str | None = None, finish_reason: str | None = None,
@@ -180,7 +212,7 @@ def jsonl_rows(data: bytes, where: str) -> Iterator[dict[str, Any]]:
         text = data.decode("utf-8")
     except UnicodeDecodeError:
         raise BatchHTTPError(0, f"{where}: the results are not UTF-8 text", answer=True) from None
-    for number, line in enumerate(text.splitlines(), 1):
+    for number, line in enumerate(text.split("\n"), 1):  # "\n" only: U+2028, U+0085 are text inside a JSON string
         if not line.strip():
             continue
         if _utf8_over(line, limit):
@@ -240,8 +272,12 @@ class BatchAdapter(Protocol):
         """Every result of an ended batch (:func:`item_result` dicts), in whatever order the provider gives them."""
         ...
 
-    async def find(self, token: str) -> str | None:
-        """The id of a batch created with ``token`` (a submission cut off before its id was journaled), if found."""
+    async def find(self, token: str, since: float, n_requests: int, known: Collection[str] = ()) -> str | None:
+        """The id of a batch created with ``token`` (a submission whose answer was lost, or cut off before its id was
+        journaled), else None: every page of the provider's batch list is read, newest first, down to batches
+        created before ``since`` (the local time the submission was journaled, less :data:`CLOCK_SKEW_S`); ``known``:
+        this run's journaled batch ids.
+        :class:`BatchUnconfirmed` when the provider cannot tell (see there)."""
         ...
 
     async def aclose(self) -> None:

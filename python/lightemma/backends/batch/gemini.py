@@ -5,7 +5,8 @@
 at most 20 MB per batch request (ai.google.dev/gemini-api/docs/batch-mode); ``GET /v1beta/{batches/ID}`` returns
 an operation whose ``metadata.state`` goes ``BATCH_STATE_PENDING`` → ``RUNNING`` → ``SUCCEEDED`` (or ``FAILED``,
 ``CANCELLED``, ``EXPIRED``), with ``response.inlinedResponses.inlinedResponses[]`` (``response`` or ``error``,
-each with its request's ``metadata``) once done. Results are matched by the metadata key, never by position.
+each with its request's ``metadata``) once done — or in a JSONL ``response.responsesFile``, which is read too;
+``metadata.batchStats`` counts what it ran. Results are matched by the metadata key, never by position.
 The base URL is ``--api-base`` when it is Gemini's own host (or one ``LIGHTEMMA_PROVIDER_HOSTS`` declares; any
 other ``--api-base`` is an OpenAI-compatible server, batched by the OpenAI adapter), else ``GEMINI_API_BASE`` when
 set (as litellm reads it), else ``https://generativelanguage.googleapis.com``; the key the run's API backend
@@ -15,11 +16,14 @@ decided goes only there, in ``x-goog-api-key``.
 from __future__ import annotations
 
 import os
+from collections.abc import Collection
 from typing import Any
 
 from lightemma.backends.batch.base import (
+    CLOCK_SKEW_S,
     ENDED,
     FAILED,
+    MAX_LIST_PAGES,
     BatchHTTPError,
     BatchStatus,
     batch_client,
@@ -28,7 +32,9 @@ from lightemma.backends.batch.base import (
     endpoint,
     http_call,
     item_result,
+    jsonl_rows,
     split_data_url,
+    tally,
     url_id,
 )
 
@@ -85,16 +91,30 @@ class GeminiBatches:
         meta = data.get("metadata") or {}
         state = str(meta.get("state"))
         error = data.get("error")
-        return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state, counts=dict(meta.get("batchStats") or {}),
+        stats = {k: _int(v) for k, v in (meta.get("batchStats") or {}).items()} if isinstance(meta.get("batchStats"), dict) else None
+        zero = {"successfulRequestCount": 0, "failedRequestCount": 0}  # proto3 JSON leaves zero counts out
+        answered = tally({**zero, **stats} if stats is not None else None, tuple(zero))
+        total = tally(stats, ("requestCount",))
+        return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state, counts=dict(stats or {}),
                            reason=f"{error.get('code')}: {error.get('message')}" if isinstance(error, dict) else None,
-                           handle={"operation": data})
+                           handle={"operation": data}, answered=answered,
+                           unrun=None if answered is None or total is None else max(0, total - answered),
+                           canceled=state == "BATCH_STATE_CANCELLED")
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
+        """The batch's responses from every place Gemini documents: inlined in the operation
+        (``response.inlinedResponses``) and the JSONL ``response.responsesFile`` (``GET /download/v1beta/{file}:download
+        ?alt=media``, one ``{"key", "response" | "error"}`` per line)."""
         data = status.handle.get("operation") or await self._request("GET", f"{self.base}/v1beta/{url_id(batch_id, slash=True)}")
-        rows = (((data.get("response") or {}).get("inlinedResponses") or {}).get("inlinedResponses")) or []
+        output = data.get("response") or {}
+        rows = list(((output.get("inlinedResponses") or {}).get("inlinedResponses")) or [])
+        if output.get("responsesFile"):
+            name = url_id(output["responsesFile"], slash=True)
+            response = await http_call(self._client, "GET", f"{self.base}/download/v1beta/{name}:download", params={"alt": "media"})
+            rows.extend(jsonl_rows(response.content, f"batch {batch_id} responses file"))
         out = []
         for row in rows:
-            cid = (row.get("metadata") or {}).get("key")
+            cid = (row.get("metadata") or {}).get("key") or row.get("key")
             if not cid:
                 raise BatchHTTPError(0, f"batch {batch_id}: a response without its request's metadata key; cannot match it", answer=True)
             if "error" in row:
@@ -104,15 +124,43 @@ class GeminiBatches:
                 out.append(_response_result(str(cid), row.get("response") or {}))
         return out
 
-    async def find(self, token: str) -> str | None:
-        data = await self._request("GET", f"{self.base}/v1beta/batches")
-        for op in data.get("operations") or []:
-            if (op.get("metadata") or {}).get("displayName") == token:
-                return str(op.get("name"))
-        return None
+    async def find(self, token: str, since: float, n_requests: int, known: Collection[str] = ()) -> str | None:
+        """Every page of ``GET /v1beta/batches`` (``pageToken`` the last page's ``nextPageToken``), newest first, down
+        to ``since``, for the batch whose display name is ``token``."""
+        from datetime import datetime
+
+        params: dict[str, Any] = {"pageSize": 100}
+        for _ in range(MAX_LIST_PAGES):
+            data = await self._request("GET", f"{self.base}/v1beta/batches", params=params)
+            operations = data.get("operations") or []
+            if not isinstance(operations, list):
+                raise BatchHTTPError(0, "the batch list has no operations list", answer=True)
+            older = False
+            for op in operations:
+                meta = op.get("metadata") if isinstance(op, dict) else None
+                if not isinstance(meta, dict):
+                    continue
+                if meta.get("displayName") == token and op.get("name"):
+                    return str(op["name"])
+                try:
+                    created = datetime.fromisoformat(str(meta.get("createTime"))).timestamp()
+                    older = older or created < since - CLOCK_SKEW_S
+                except ValueError:
+                    pass
+            following = data.get("nextPageToken")
+            if older or not following:
+                return None
+            params = {"pageSize": 100, "pageToken": str(following)}
+        raise BatchHTTPError(0, f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
+                                "submission; lightemma cannot tell whether the batch exists", answer=True)
 
     async def aclose(self) -> None:
         await self._client.aclose()
+
+
+def _int(value: Any) -> Any:
+    """A count as Gemini sends it (int64 fields are JSON strings, ``"16"``): an int, else the value unchanged."""
+    return int(value) if isinstance(value, str) and value.isdigit() and len(value) < 19 else value
 
 
 def _response_result(custom_id: str, response: dict[str, Any]) -> dict[str, Any]:

@@ -17,11 +17,14 @@ from __future__ import annotations
 
 import json
 import os
+from collections.abc import Collection
 from typing import Any
 
 from lightemma.backends.batch.base import (
+    CLOCK_SKEW_S,
     ENDED,
     FAILED,
+    MAX_LIST_PAGES,
     BatchHTTPError,
     BatchStatus,
     batch_client,
@@ -30,12 +33,14 @@ from lightemma.backends.batch.base import (
     http_call,
     item_result,
     jsonl_rows,
+    tally,
     url_id,
 )
 
 TERMINAL = {"completed": ENDED, "expired": ENDED, "cancelled": ENDED, "failed": FAILED}
 RUNNING = ("validating", "in_progress", "finalizing", "cancelling")  # any other status: not documented
 UNRUN = ("batch_expired", "batch_cancelled")  # error codes of requests the batch never ran
+RETRYABLE = {"token_limit_exceeded"}  # a failed batch's error codes that pass: the enqueued-token limit
 DEFAULT_BASE = "https://api.openai.com/v1"
 
 
@@ -98,9 +103,14 @@ class OpenAIBatches:
             reason = "; ".join(f"{e.get('code')}: {e.get('message')}" + (f" (line {e['line']})" if e.get("line") else "")
                                for e in errors[:3] if isinstance(e, dict))
         counts = batch.get("request_counts")
+        answered = tally(counts, ("completed", "failed"))
+        total = tally(counts, ("total",))
+        codes = {str(e.get("code")) for e in errors or () if isinstance(e, dict)}
         return BatchStatus(state=ours, provider_state=state,
                            counts=dict(counts) if isinstance(counts, dict) else {}, reason=reason,
-                           handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")})
+                           handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")},
+                           answered=answered, unrun=None if answered is None or total is None else max(0, total - answered),
+                           canceled=state in ("cancelled", "cancelling"), retryable=bool(codes) and codes <= RETRYABLE)
 
     async def _content(self, file_id: str | None) -> bytes:
         if not file_id:
@@ -131,12 +141,29 @@ class OpenAIBatches:
             out.append(_completion_result(cid, body))
         return out
 
-    async def find(self, token: str) -> str | None:
-        page = await self._json("GET", "/batches", params={"limit": 100})
-        for batch in page.get("data") or []:
-            if isinstance(batch, dict) and (batch.get("metadata") or {}).get("lightemma_token") == token:
-                return str(batch.get("id"))
-        return None
+    async def find(self, token: str, since: float, n_requests: int, known: Collection[str] = ()) -> str | None:
+        """Every page of ``GET /batches`` (newest first, ``after`` the last id of a page) down to ``since``."""
+        params: dict[str, Any] = {"limit": 100}
+        for _ in range(MAX_LIST_PAGES):
+            page = await self._json("GET", "/batches", params=params)
+            data = page.get("data")
+            if not isinstance(data, list):
+                raise BatchHTTPError(0, "the batch list has no data list", answer=True)
+            older = False
+            for batch in data:
+                if not isinstance(batch, dict):
+                    continue
+                metadata = batch.get("metadata")
+                if isinstance(metadata, dict) and metadata.get("lightemma_token") == token and batch.get("id"):
+                    return str(batch["id"])
+                created = batch.get("created_at")
+                older = older or (isinstance(created, (int, float)) and created < since - CLOCK_SKEW_S)
+            last = page.get("last_id") or (data[-1].get("id") if data and isinstance(data[-1], dict) else None)
+            if older or page.get("has_more") is not True or not last:
+                return None
+            params = {"limit": 100, "after": str(last)}
+        raise BatchHTTPError(0, f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
+                                "submission; lightemma cannot tell whether the batch exists", answer=True)
 
     async def aclose(self) -> None:
         await self._client.aclose()
