@@ -13,7 +13,7 @@ import pytest
 import lightemma
 from lightemma.backends.base import ChatRequest
 from lightemma.backends.baseline import BaselineBackend
-from lightemma.backends.ego import FEATURES, TARGETS, EgoFit, ego_features
+from lightemma.backends.ego import FEATURES, MIN_FIT_FRAMES, MIN_FIT_SCENES, TARGETS, EgoFit, ego_features
 from lightemma.cli import main as cli_main
 from lightemma.errors import UserError
 from lightemma.pipeline import resume, run
@@ -174,7 +174,11 @@ def test_lightemma_run_baseline_ego_records_the_fit_and_resumes_under_it(four_sc
     contents = read_run(run_dir)
     fit = contents.manifest["backend"]["fit"]
     assert fit["features"] == list(FEATURES) and len(fit["folds"]) == 4 and fit["frames_without_prediction"] == 0
-    assert "subset" not in fit and "cross-fitted on the" not in err  # the whole set: no warning
+    assert "subset" not in fit and "cross-fitted on the" not in err  # the whole set: no subset warning
+    # but 4 scenes are few: each fold fits on 3 of them, and the run says so in one line (recorded as fit.warning)
+    warned = [line for line in err.splitlines() if "baseline:ego is fitted on few frames" in line]
+    assert warned == ["lightemma run: " + fit["warning"]]
+    assert "as few as 3 scene(s)" in fit["warning"]
     assert all(r["status"] == "ok" for r in contents.records.values())
     frames = lightemma.load_frames(four_scenes, "v1.0-mini", split="all")
     expected = EgoFit.cross_fit(list(frames))
@@ -220,3 +224,22 @@ def test_fit_split_is_for_baseline_ego_only_and_checks_its_split(four_scenes, tm
     with pytest.raises(UserError, match="in the training split too"):
         run("baseline:ego", dataroot=four_scenes, version="v1.0-mini", split="all", output=tmp_path, progress=False,
             backend_options={"fit_split": "all"})
+
+
+def test_a_fit_on_few_scenes_or_frames_carries_a_warning_and_a_large_one_none():
+    """Before: the demo's ego baseline, cross-fitted on 8 synthetic scenes, predicted stopped cars accelerating (the
+    worst baseline) with no word; a fit below MIN_FIT_SCENES scenes or MIN_FIT_FRAMES frames now says so."""
+    small = EgoFit.cross_fit(make_frames(n_scenes=6, per_scene=5))
+    per_fold = [(f["fit_scenes"], f["fit_frames"]) for f in small.record["folds"]]
+    assert small.record["warning"].startswith(
+        "warning: baseline:ego is fitted on few frames: each fold's fit sees as few as "
+        f"{min(s for s, _ in per_fold)} scene(s) and {min(n for _, n in per_fold)} frame(s)")
+    assert "\n" not in small.record["warning"] and "--fit-split train" in small.record["warning"]
+    # 30 scenes of 10 frames: each of the 5 folds fits on 24 scenes and 240 frames, above both limits
+    large = EgoFit.cross_fit(make_frames(n_scenes=30, per_scene=10))
+    assert min(f["fit_scenes"] for f in large.record["folds"]) >= MIN_FIT_SCENES
+    assert min(f["fit_frames"] for f in large.record["folds"]) >= MIN_FIT_FRAMES and "warning" not in large.record
+    # one fit on a training split: judged by its own scenes and frames
+    frames = make_frames(n_scenes=8, per_scene=5)
+    few = EgoFit.fit_split(frames[:30], frames[30:], split="train")
+    assert "the fit on 'train' sees as few as 6 scene(s) and 30 frame(s)" in few.record["warning"]

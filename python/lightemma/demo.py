@@ -10,12 +10,18 @@
 3. evaluates them and writes the report to ``OUT/report/index.md`` — with the
    "does the model look at the road?" tables (the ablation against the full run,
    each model's gain over the best baseline) when a model ran.
+
+The baselines run on every frame, an API model on its first ``api_limit``. When an API model ran, every model is
+scored on the frames scored in every run (``common``, as ``lightemma evaluate --common``), and the demo says so: a
+model on 12 frames is never ranked against baselines on 80. Warnings of the runs (the ego baseline's fit on the
+demo's few scenes) are passed on as one line each.
 """
 
 from __future__ import annotations
 
 import os
 import shutil
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -50,6 +56,7 @@ class DemoResult:
     run_dirs: list[Path]
     index: Path
     skipped: dict[str, str] = field(default_factory=dict)  # paper model -> why it did not run
+    common: bool = False  # every model scored on the frames scored in every run (an API model ran)
 
 
 def _prepare(out: Path) -> None:
@@ -123,8 +130,13 @@ def run_demo(
         log(f"2/3 run {i}/{len(models)}: {model} ({method}{shown})" + (f", first {limit} frames" if limit else ""))
         try:
             api = {"timeout": 60.0, "max_retries": 2, "api_base": api_base} if limit else {}  # a demo should not wait long
-            result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32, inputs=inputs,
-                                   **api, **common)
+            with warnings.catch_warnings(record=True) as caught:  # the run's warnings (the ego baseline's small fit)
+                warnings.simplefilter("always", UserWarning)  # the others as the filters in place say
+                result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32,
+                                       inputs=inputs, **api, **common)
+            for warning in caught:  # one line each; the runner's own warnings are UserWarnings that start "warning: "
+                shown = "" if issubclass(warning.category, UserWarning) else f"{warning.category.__name__}: "
+                log(f"    {shown}{warning.message}")
         except UserError as exc:
             if model.startswith("baseline:") and model != "baseline:ego":  # the ego baseline's cross-fit needs 3 scenes
                 raise
@@ -133,6 +145,19 @@ def run_demo(
             continue
         log(f"    frames: {summary_line(result.manifest['dataset'])}")
         run_dirs.append(Path(result.run_dir))
-    log(f"3/3 evaluating and writing the report to {out / 'report'}")
-    index = write_report([out / "runs"], out / "report", convention="all", with_paper=True, top=3)
-    return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index, skipped=skipped)
+    api_ran = any(not model.startswith("baseline:") for model, _, _ in models if model not in skipped)
+    if api_ran:
+        log(f"3/3 evaluating and writing the report to {out / 'report'}: every model is scored on the frames scored in "
+            f"every run (the API models ran on the first {api_limit} frames, the baselines on all)")
+    else:
+        log(f"3/3 evaluating and writing the report to {out / 'report'}")
+    try:
+        index = write_report([out / "runs"], out / "report", convention="all", common=api_ran, with_paper=True, top=3)
+    except UserError as exc:
+        if not api_ran or "no frame is valid for every run" not in str(exc):
+            raise
+        api_ran = False  # the runs share no scored frame: each is scored on its own, and the report's warnings say so
+        log("    warning: no frame is scored in every run, so the report scores each model on its own frames, which "
+            "differ between the API models and the baselines: do not rank them against each other")
+        index = write_report([out / "runs"], out / "report", convention="all", with_paper=True, top=3)
+    return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index, skipped=skipped, common=api_ran)

@@ -22,6 +22,11 @@ docs/definitions.md#the-ego-status-baseline.
   on a ``--sample`` / ``--limit`` subset, each fold fits on that subset's other folds only (a few frames):
   the run warns in one line and records it as ``fit.subset`` (:meth:`BaselineBackend.prepare`).
 
+* **Small fits**: a fit on fewer than :data:`MIN_FIT_SCENES` scenes or :data:`MIN_FIT_FRAMES` frames (10 per feature)
+  has seen few kinds of driving and extrapolates to the others (``lightemma demo``'s few synthetic scenes, one per
+  kind of driving, are such a set). The record then holds ``warning`` (one line: the smallest fit's scenes and
+  frames), which the run prints; the baseline's ADE then overstates its error, and every gain over it.
+
 Everything is deterministic: the same frames give the same folds, λ and predictions.
 """
 
@@ -41,6 +46,23 @@ LAMBDAS: tuple[float, ...] = tuple(float(x) for x in np.logspace(-3, 3, 13))
 FEATURES: tuple[str, ...] = (*(f"v{k}" for k in range(1, 7)), *(f"kappa{k}" for k in range(1, 7)),
                              *(f"a{k}" for k in range(1, 6)), *(f"yaw_rate{k}" for k in range(1, 7)))
 TARGETS: tuple[str, ...] = tuple(f"{name}{k}" for k in range(1, 7) for name in ("v", "kappa"))  # gt_actions row-major
+MIN_FIT_SCENES = 20  # a fit on fewer scenes has seen few kinds of driving: the run warns (see the module docstring)
+MIN_FIT_FRAMES = 10 * len(FEATURES)  # 230: ten frames per feature, or the run warns
+
+
+def small_fit_warning(fits: Sequence[tuple[int, int]], where: str) -> str | None:
+    """One warning line when the smallest of ``fits`` ((scenes, frames) of each fit, e.g. each cross-fit fold's) has
+    fewer than :data:`MIN_FIT_SCENES` scenes or :data:`MIN_FIT_FRAMES` frames; None when every fit is large enough.
+    ``where`` says what the fits are (``each fold's fit``, ``the fit on 'train'``)."""
+    if not fits:
+        return None
+    scenes, frames = min(s for s, _ in fits), min(f for _, f in fits)
+    if scenes >= MIN_FIT_SCENES and frames >= MIN_FIT_FRAMES:
+        return None
+    return (f"warning: baseline:ego is fitted on few frames: {where} sees as few as {scenes} scene(s) and "
+            f"{frames} frame(s) (fewer than {MIN_FIT_SCENES} scenes or {MIN_FIT_FRAMES} frames); it extrapolates to "
+            "kinds of driving it has not seen, so its ADE overstates the baseline's error and every model's gain over "
+            "it; fit it on more scenes (--fit-split train, or run it on a larger set)")
 
 
 def ego_features(history: np.ndarray) -> np.ndarray:
@@ -169,8 +191,10 @@ class EgoFit:
             held_out = sorted(str(s) for s in np.unique(scenes[test]))
             assert not set(held_out) & set(fit.scenes)  # a fold is never predicted by a fit that saw its scenes
             fold_records.append({"fold": number, "predicted_scenes": held_out, "predicted_frames": int(len(test)), **fit.record()})
-        return cls._make(ids, X, pred, {"method": f"cross-fit by scene ({k} folds, GroupKFold), λ by nested scene CV",
-                                        "folds": fold_records})
+        record: dict[str, Any] = {"method": f"cross-fit by scene ({k} folds, GroupKFold), λ by nested scene CV",
+                                  "folds": fold_records}
+        warning = small_fit_warning([(f["fit_scenes"], f["fit_frames"]) for f in fold_records], "each fold's fit")
+        return cls._make(ids, X, pred, {**record, "warning": warning} if warning else record)
 
     @classmethod
     def fit_split(cls, train_frames: Sequence[Any], frames: Sequence[Any], *, split: str, folds: int = FOLDS,
@@ -190,5 +214,7 @@ class EgoFit:
         usable = _usable(X)
         if usable.any():
             pred[usable] = fit.predict(X[usable])
-        return cls._make(ids, X, pred, {"method": f"one fit on the {split!r} split, λ by {fit.inner_folds}-fold scene CV",
-                                        "fit_split": split, "fit": fit.record()})
+        record: dict[str, Any] = {"method": f"one fit on the {split!r} split, λ by {fit.inner_folds}-fold scene CV",
+                                  "fit_split": split, "fit": fit.record()}
+        warning = small_fit_warning([(len(fit.scenes), fit.frames)], f"the fit on {split!r}")
+        return cls._make(ids, X, pred, {**record, "warning": warning} if warning else record)

@@ -18,7 +18,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     parser.add_argument("--scenes", type=int, default=None, metavar="N", help="synthetic scenes (default: one per scenario kind)")
     parser.add_argument("--keyframes", type=int, default=24, metavar="N", help="keyframes per scene (default: 24, i.e. 10 frames per scene)")
     parser.add_argument("--no-api", action="store_true", help="run no API model even when a key is set")
-    parser.add_argument("--api-limit", type=int, default=12, metavar="N", help="frames per API model (default: 12; they cost money)")
+    parser.add_argument("--api-limit", type=int, default=12, metavar="N",
+                        help="frames per API model (default: 12; they cost money); when one runs, every model is "
+                        "scored on the frames scored in every run")
     parser.add_argument("--api-base", metavar="URL", help="send the API models to this OpenAI-compatible server")
     parser.set_defaults(func=run)
     return parser

@@ -5,6 +5,9 @@ as ``np.float64(4.512)`` and never in exponent notation; ``-0.0`` is written
 ``0.0``. ``{speeds}`` / ``{curvatures}``: the two lists as the LightEMMA
 reference scripts printed them, Python's own ``repr`` of a list of floats
 (``[1.299, 1.845, 2.68]``, ``-0.0`` kept).
+
+A history given in float32 (or float16) is written with the shortest decimal that round-trips in its own
+precision: ``np.float32(4.512)`` is ``4.512``, not ``4.51200008392334``, the float64 it widens to.
 """
 
 from __future__ import annotations
@@ -12,6 +15,7 @@ from __future__ import annotations
 import math
 from decimal import Decimal
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -39,12 +43,35 @@ def format_number(x: float) -> str:
     return text
 
 
+def _narrow_float(value: Any, dtype: np.dtype | None = None) -> Any:
+    """A float32 / float16 value (a NumPy scalar, or a Python float read from an array of ``dtype``) as the Python
+    float of its shortest round-tripping decimal in that precision (``np.float32(4.512)`` → ``4.512``); any other
+    value unchanged."""
+    if isinstance(value, np.floating) and value.dtype.itemsize < 8:
+        return float(str(value))
+    if dtype is not None and isinstance(value, float):
+        return float(str(dtype.type(value)))
+    return value
+
+
+def _rows(actions: np.ndarray | Sequence[Sequence[float]]) -> list[Any]:
+    """``actions`` as nested Python lists, float32 / float16 values narrowed by :func:`_narrow_float`."""
+    if isinstance(actions, np.ndarray):
+        narrow = actions.dtype if actions.dtype.kind == "f" and actions.dtype.itemsize < 8 else None
+        rows = actions.tolist()
+    else:
+        narrow, rows = None, [list(row) if isinstance(row, (Sequence, np.ndarray)) else row for row in actions]
+    return [[_narrow_float(v, narrow) for v in row] if isinstance(row, list) else _narrow_float(row, narrow)
+            for row in rows]
+
+
 def format_history(actions: np.ndarray | Sequence[Sequence[float]]) -> str:
     """Render (speed, curvature) actions as ``[(4.512, 0.0), (4.6, -0.012), ...]``.
 
-    ``actions`` has shape ``(T, 2)``; the order is kept (most recent last).
+    ``actions`` has shape ``(T, 2)``; the order is kept (most recent last). Float32 / float16 values are written
+    as the shortest decimal that round-trips in their own precision (see the module docstring).
     """
-    arr = np.asarray(actions, dtype=np.float64)
+    arr = np.asarray(_rows(actions), dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 2:
         raise ValueError(f"history actions must have shape (T, 2), got {arr.shape}")
     pairs = (f"({format_number(v)}, {format_number(c)})" for v, c in arr.tolist())
@@ -76,9 +103,10 @@ def format_python_list(values: np.ndarray | Sequence[float]) -> str:
 
 def history_placeholders(actions: np.ndarray | Sequence[Sequence[float]]) -> dict[str, str]:
     """The prompt placeholders of a frame's history actions (T, 2): ``history``, ``speeds``, ``curvatures``."""
-    rows = actions.tolist() if isinstance(actions, np.ndarray) else [list(row) for row in actions]
-    if any(len(row) != 2 for row in rows):
-        raise ValueError(f"history actions must have shape (T, 2), got rows of length {sorted({len(r) for r in rows})}")
+    rows = _rows(actions)
+    if any(not isinstance(row, list) or len(row) != 2 for row in rows):
+        raise ValueError(f"history actions must have shape (T, 2), got rows of length "
+                         f"{sorted({len(r) if isinstance(r, list) else 0 for r in rows})}")
     return {
         "history": format_history(np.asarray(rows, dtype=np.float64).reshape(-1, 2)),
         "speeds": format_python_list([row[0] for row in rows]),

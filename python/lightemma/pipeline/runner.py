@@ -462,6 +462,9 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
         from lightemma.frames.sample import describe_sample
 
         out["sample"] = {**describe_sample(frames, dataset["sample"]["n"], dataset["sample"].get("seed") or 0)}
+    from lightemma.frames.fingerprint import of_dataset  # which frames, as one checkable id (docs/evaluate.md)
+
+    out["fingerprint"] = of_dataset(out, getattr(frames, "frame_ids", None) or [f.frame_id for f in frames])
     return out
 
 

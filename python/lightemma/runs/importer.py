@@ -26,11 +26,11 @@ import hashlib
 import math
 import os
 import re
+import secrets
 import shutil
 import signal
 import sys
 import threading
-import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -400,10 +400,13 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
         raise UserError(f"{final} exists but was not imported from {folder.path}; move it away and import again")
     prices = _prices(info)
     created = [d for d in (model_dir, *model_dir.parents) if not d.exists()]  # removed again if no run comes of it
-    model_dir.mkdir(parents=True, exist_ok=True)
-    remove_stale_partials(model_dir, warn)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{run_id}.{os.getpid()}.", suffix=PARTIAL_SUFFIX, dir=model_dir))
+    # The partial folder is named before it is made, and every folder is made inside the ``try``: a stop signal raises
+    # Interrupted at the first instruction after a ``mkdir``, and the cleanup below already knows what to remove.
+    tmp = model_dir / f".{run_id}.{os.getpid()}.{secrets.token_hex(8)}{PARTIAL_SUFFIX}"
     try:
+        model_dir.mkdir(parents=True, exist_ok=True)
+        remove_stale_partials(model_dir, warn)
+        tmp.mkdir(mode=0o700)  # 64 random bits after this process's pid: no other import makes this name
         tally, scenes, seen, templates = _Tally(), [], set(), PromptTemplates()
         files_skipped: list[str] = []
         for entry, why in folder.skipped:
@@ -453,6 +456,9 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
             return result
         manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
                              frames_skipped, dataset_kind, prices, templates)
+        from lightemma.frames.fingerprint import of_dataset  # the frames imported, as one checkable id
+
+        manifest["dataset"]["fingerprint"] = {**of_dataset(manifest["dataset"], seen), "derived": True, "from": "import"}
         write_json_atomic(tmp / MANIFEST_FILE, manifest)
         write_sidecar(tmp, columns.finish(), source_key(tmp))
         os.rename(tmp, final)
