@@ -608,8 +608,9 @@ def test_a_frame_whose_ground_truth_is_in_no_lane_has_no_ddc(tmp_path):
     assert math.isnan(v["ddc"][0]) and "on the route" in why["ddc"][0]
 
 
-def test_the_synthetic_expansion_has_no_lanes(synth_root):
+def test_the_synthetic_expansion_has_lanes(synth_root):
+    # synth_root's two scenes (cruise, accelerate) are straight: lanes, no intersection (tests/test_synth_lanes.py)
     paths = sorted((synth_root / "maps" / "expansion").glob("*.json"))
     assert paths
     m = read_planning_map(paths[0])
-    assert m.drivable is not None and m.lanes is None and m.intersections is None
+    assert m.drivable is not None and m.lanes is not None and m.intersections is None

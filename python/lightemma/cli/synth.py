@@ -34,7 +34,9 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
         help="write a small synthetic nuScenes-format dataset (offline demos and tests)",
         description=(
             "Write a synthetic nuScenes-format dataset that the unmodified nuscenes-devkit loads: "
-            "the 13 tables, a placeholder map, CAM_FRONT keyframes (2 Hz) and sweeps (12 Hz) as JPEGs. "
+            "the 13 tables, a base map mask and a map expansion (drivable area, lanes, lane connectors, road "
+            "segments, car parks), CAN-bus-like pose messages (can_bus/<scene>_pose.json), CAM_FRONT keyframes "
+            "(2 Hz) and sweeps (12 Hz) as JPEGs. "
             "Scenes cycle through: cruise, accelerate, brake-red-light, wait-then-go-green, "
             "stopped-behind-lead-green, left-turn, right-turn, straight-after-turn. "
             "As v1.0-mini (the default) it loads with all its scenes; under another --version name, "

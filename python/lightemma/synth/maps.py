@@ -4,8 +4,26 @@
   :data:`ROAD_LEFT` (the far edge of the opposite lane) metres to the side — the drivable area;
   with the sidewalks (:data:`SIDEWALK` wide on each side) it is the *semantic prior* of the base
   map mask, as in nuScenes' ``maps/*.png`` (drivable surface and sidewalks).
-* **Map expansion** ``maps/expansion/<location>.json`` (version 1.3, every layer present, only
-  ``drivable_area`` / ``polygon`` / ``node`` filled): one polygon per scene.
+* **Map expansion** ``maps/expansion/<location>.json`` (version 1.3, every layer present): per scene one
+  ``drivable_area`` polygon (the road above), and the road cut into *pieces* at the path's curvature changes
+  (:func:`road_pieces`), the first :data:`CARPARK_LENGTH` metres of the road excepted:
+
+  - ``lane`` (straight pieces) and ``lane_connector`` (curved pieces): per piece the **ego lane** (lateral
+    −:data:`LANE_WIDTH`/2 … +:data:`LANE_WIDTH`/2, centreline = the ego path, driven along it) and the **oncoming
+    lane** (+:data:`LANE_WIDTH`/2 … :data:`ROAD_LEFT`, centreline :data:`LANE_WIDTH` to the left, driven the other
+    way); lanes carry ``from_edge_line_token`` / ``to_edge_line_token`` (``line`` records across the lane at its
+    start and end in its driving direction); ``arcline_path_3`` holds each lane's and connector's centreline as
+    arcline paths in the devkit's format (``start_pose``, ``end_pose`` [x, y, yaw], ``shape``, ``radius``,
+    ``segment_length`` [a, b, c]): a straight piece is ``LSR`` with lengths [0, L, 0] and radius
+    :data:`STRAIGHT_RADIUS`, a curve ``LSL`` / ``RSR`` with lengths [L, 0, 0] and its radius; ``connectivity``
+    links each direction's chain (``incoming`` / ``outgoing``);
+  - ``road_segment``: per piece the whole road width, ``is_intersection`` true on curved pieces (where the
+    scenario turns: left-turn, right-turn, straight-after-turn), ``drivable_area_token`` the scene's drivable area;
+  - ``carpark_area``: the first :data:`CARPARK_LENGTH` m of the road (behind the ego's start, inside the drivable
+    area), ``orientation`` the road's heading there, no road block (``road_block_token`` "").
+
+  Lane and road-segment polygons lie inside the drivable-area polygon (same lateral edges), so the
+  drivable area — and every number computed from it — is what it was before the lanes were added.
 * **Base map mask** ``maps/<token>.png``, one per location (the ``map`` table lists its logs), at
   0.1 m/px with the devkit's ``MapMask`` transform: global (x, y) → pixel (x / 0.1, H − y / 0.1);
   255 drivable-or-sidewalk, 0 elsewhere.
@@ -118,8 +136,90 @@ def place_scenarios(scenarios: list[Scenario]) -> list[Scenario]:
     return out
 
 
+#: metres of each road, from its start, that are a car park instead of lanes (behind every ego position)
+CARPARK_LENGTH = 10.0
+#: radius (m) written for straight arcline paths (their arcs have length 0: the value only avoids a division by 0)
+STRAIGHT_RADIUS = 1000.0
+#: lateral offsets (m, left of the ego path) of the lane edges: ego lane right edge, the centre line between the
+#: two lanes, the oncoming lane's far edge
+_EDGES = {"r": ROAD_RIGHT, "m": LANE_WIDTH / 2, "l": ROAD_LEFT}
+
+
+@dataclass(frozen=True)
+class Piece:
+    """A stretch of a scene's road between arc lengths ``s_from`` < ``s_to`` (m, along the ego path) of constant
+    ``curvature`` (1/m, left positive): a lane per direction, or a lane connector in an intersection when curved."""
+
+    s_from: float
+    s_to: float
+    curvature: float
+
+    @property
+    def curved(self) -> bool:
+        return self.curvature != 0.0
+
+
+def road_pieces(scn: Scenario) -> list[Piece]:
+    """The road of ``scn`` after its car park (:data:`CARPARK_LENGTH`), cut where the path's curvature changes."""
+    a, b = _arc_range(scn)
+    a += CARPARK_LENGTH
+    cuts = np.cumsum([0.0] + [length for length, _ in scn.path.segments])
+    edges = [a, *sorted(float(c) for c in cuts if a < c < b), b]
+    pieces: list[Piece] = []
+    for lo, hi in zip(edges[:-1], edges[1:]):
+        k = float(scn.path.curvature(0.5 * (lo + hi)))
+        if pieces and pieces[-1].curvature == k:
+            pieces[-1] = Piece(pieces[-1].s_from, hi, k)
+        else:
+            pieces.append(Piece(lo, hi, k))
+    return pieces
+
+
+def _samples(lo: float, hi: float) -> np.ndarray:
+    return np.linspace(lo, hi, max(2, int(math.ceil((hi - lo) / STEP)) + 1))
+
+
+def _beside(scn: Scenario, s: np.ndarray, lateral: float) -> np.ndarray:
+    """(M, 3) poses ``lateral`` metres left of the ego path at arc lengths ``s`` (heading of the path)."""
+    p = scn.path.pose(s)
+    return np.column_stack([p[:, 0] - lateral * np.sin(p[:, 2]), p[:, 1] + lateral * np.cos(p[:, 2]), p[:, 2]])
+
+
+def lane_centreline(scn: Scenario, piece: Piece, oncoming: bool, step: float = 0.1) -> np.ndarray:
+    """(M, 3) exact centreline poses (x, y, yaw in [−π, π)) of a piece's ego (``oncoming`` False) or oncoming lane,
+    in its driving direction, every ``step`` m or less of the ego path."""
+    s = np.linspace(piece.s_from, piece.s_to, max(2, int(math.ceil((piece.s_to - piece.s_from) / step)) + 1))
+    if oncoming:
+        pts = _beside(scn, s[::-1], LANE_WIDTH)
+        pts[:, 2] += math.pi
+    else:
+        pts = _beside(scn, s, 0.0)
+    pts[:, 2] = (pts[:, 2] + math.pi) % (2 * math.pi) - math.pi
+    return pts
+
+
+def arcline_path(scn: Scenario, piece: Piece, oncoming: bool) -> dict:
+    """The arcline path (devkit ``arcline_path_3`` format) of a piece's ego or oncoming lane centreline.
+
+    Ego lane: the path itself. Oncoming lane: :data:`LANE_WIDTH` to the left, driven backwards, so its curvature is
+    −κ / (1 − κ·LANE_WIDTH) (a left turn of the ego path is a right turn of radius R − LANE_WIDTH for it)."""
+    line = lane_centreline(scn, piece, oncoming, step=piece.s_to - piece.s_from)
+    start, end = [float(v) for v in line[0]], [float(v) for v in line[-1]]
+    ds = piece.s_to - piece.s_from
+    if not piece.curved:
+        return {"start_pose": start, "end_pose": end, "shape": "LSR", "radius": STRAIGHT_RADIUS,
+                "segment_length": [0.0, float(ds), 0.0]}
+    k = piece.curvature
+    if oncoming:
+        k = -k / (1.0 - k * LANE_WIDTH)
+    length = abs(piece.curvature * ds / k)  # the same turn angle on the offset curve
+    return {"start_pose": start, "end_pose": end, "shape": "LSL" if k > 0 else "RSR", "radius": float(1.0 / abs(k)),
+            "segment_length": [float(length), 0.0, 0.0]}
+
+
 def expansion_json(scenarios: list[Scenario], location: str, token) -> dict:
-    """The map expansion of ``location``: one drivable_area polygon per scene (devkit ``NuScenesMap`` format)."""
+    """The map expansion of ``location`` (devkit ``NuScenesMap`` format, version 1.3; the layers are described in
+    this module's docstring). ``token(*parts)`` makes a record token; same scenarios, same document."""
     nodes, polygons, areas = [], [], []
     for scn in scenarios:
         outline = road_outline(scn, ROAD_RIGHT, ROAD_LEFT)
@@ -138,7 +238,68 @@ def expansion_json(scenarios: list[Scenario], location: str, token) -> dict:
     doc: dict = {"version": "1.3", "canvas_edge": [max(xs) + MARGIN, max(ys) + MARGIN], "node": nodes, "polygon": polygons,
                  "drivable_area": areas, "arcline_path_3": {}, "connectivity": {}}
     doc.update({name: [] for name in layers})
+    for scn in scenarios:
+        _road_layers(doc, scn, location, token)
     return doc
+
+
+def _road_layers(doc: dict, scn: Scenario, location: str, token) -> None:
+    """Add the lanes, lane connectors, road segments and car park of one scene to ``doc`` (nodes on the lane edges
+    are shared: a node's token names its scene, edge and arc length)."""
+    known = {n["token"] for n in doc["node"]}
+
+    def node(edge: str, s: float) -> str:
+        key = f"{s:.6f}"
+        t = token("node", location, scn.index, "edge", edge, key)
+        if t not in known:
+            x, y, _ = _beside(scn, np.array([float(key)]), _EDGES[edge])[0]
+            doc["node"].append({"token": t, "x": float(x), "y": float(y)})
+            known.add(t)
+        return t
+
+    def polygon(name: str, lo: float, hi: float, right: str, left: str) -> str:
+        s = _samples(lo, hi)
+        ring = [node(right, v) for v in s] + [node(left, v) for v in s[::-1]]
+        t = token("polygon", location, scn.index, name)
+        doc["polygon"].append({"token": t, "exterior_node_tokens": ring, "holes": []})
+        return t
+
+    def line(name: str, s: float, a: str, b: str) -> str:
+        t = token("line", location, scn.index, name)
+        doc["line"].append({"token": t, "node_tokens": [node(a, s), node(b, s)]})
+        return t
+
+    a, _ = _arc_range(scn)
+    area = token("drivable_area", location, scn.index)
+    yaw = float(scn.path.pose(a)[2])
+    doc["carpark_area"].append({"token": token("carpark_area", location, scn.index),
+                                "polygon_token": polygon("carpark", a, a + CARPARK_LENGTH, "r", "l"),
+                                "orientation": float((yaw + math.pi) % (2 * math.pi) - math.pi),
+                                "road_block_token": ""})
+    chains: dict[bool, list[str]] = {False: [], True: []}
+    for i, piece in enumerate(road_pieces(scn)):
+        doc["road_segment"].append({"token": token("road_segment", location, scn.index, i),
+                                    "polygon_token": polygon(f"road_segment-{i}", piece.s_from, piece.s_to, "r", "l"),
+                                    "is_intersection": piece.curved, "drivable_area_token": area})
+        for oncoming in (False, True):
+            name = f"{'oncoming' if oncoming else 'ego'}-{i}"
+            t = token("lane", location, scn.index, name)
+            right, left = ("l", "m") if oncoming else ("r", "m")  # the lane's edges, in its driving direction
+            ptok = polygon(name, piece.s_from, piece.s_to, *(("m", "l") if oncoming else ("r", "m")))
+            if piece.curved:
+                doc["lane_connector"].append({"token": t, "polygon_token": ptok})
+            else:
+                start, end = (piece.s_to, piece.s_from) if oncoming else (piece.s_from, piece.s_to)
+                doc["lane"].append({"token": t, "polygon_token": ptok, "lane_type": "CAR",
+                                    "from_edge_line_token": line(f"{name}-from", start, right, left),
+                                    "to_edge_line_token": line(f"{name}-to", end, right, left),
+                                    "left_lane_divider_segments": [], "right_lane_divider_segments": []})
+            doc["arcline_path_3"][t] = [arcline_path(scn, piece, oncoming)]
+            chains[oncoming].append(t)
+    chains[True].reverse()  # the oncoming lane is driven from the road's far end
+    for chain in chains.values():
+        for j, t in enumerate(chain):
+            doc["connectivity"][t] = {"incoming": chain[j - 1 : j] if j else [], "outgoing": chain[j + 1 : j + 2]}
 
 
 def mask_image(scenarios: list[Scenario]) -> np.ndarray | None:

@@ -5,7 +5,8 @@ Layout under ``outdir``::
     <version>/{category,attribute,visibility,instance,sensor,calibrated_sensor,
                ego_pose,log,scene,sample,sample_data,sample_annotation,map}.json
     maps/<token>.png                          # base map mask per location: road + sidewalks (lightemma.synth.maps)
-    maps/expansion/<location>.json            # map expansion with the drivable_area layer
+    maps/expansion/<location>.json            # map expansion: drivable area, lanes, road segments (lightemma.synth.maps)
+    can_bus/<scene>_pose.json                 # CAN-bus-like pose messages at 50 Hz (lightemma.synth.can_bus)
     samples/CAM_FRONT/<log>__CAM_FRONT__<µs>.jpg   # keyframes, 2 Hz
     sweeps/CAM_FRONT/<log>__CAM_FRONT__<µs>.jpg    # sweeps, 12 Hz between keyframes
     lightemma-synth.json                      # what was generated (seed, scenes, parameters)
@@ -32,6 +33,7 @@ from lightemma.errors import UserError
 from lightemma.frames.loader import TABLES
 from lightemma.frames.model import SYNTH_MARKER
 from lightemma.synth.camera import Camera
+from lightemma.synth import can_bus as synth_can
 from lightemma.synth import maps as synth_maps
 from lightemma.synth.render import render_frame
 from lightemma.synth.scenarios import Scenario, build_scenarios, sweep_times_us
@@ -316,6 +318,8 @@ def write_dataset(
         rec = next(r for r in tables["map"] if r["token"] == token(seed, "map", location))
         write_atomic(root / rec["filename"], _png(mask) if mask is not None else _png_placeholder())
         masks[location] = mask is not None
+    for scn in scenarios:
+        write_atomic(root / "can_bus" / f"{scn.name}_pose.json", _json_bytes(synth_can.pose_messages(scn)))
     if images:
         it = todo
         if progress:
