@@ -432,6 +432,8 @@ class _ImageCache:
             return item
         data = read_image_bytes(path)  # a file, or a blank image (--inputs blank-image)
         mime = _MIME.get(os.path.splitext(path)[1].lower(), "image/jpeg")
+        if path.startswith("corrupt:"):  # a corrupted image is a JPEG (lightemma.corruptions), whatever its source was
+            mime = "image/jpeg"
         if self._too_big(data):
             data, done = fit_image(data, self.max_b64 or len(data) * 2, self.max_side)
             mime = "image/jpeg"

@@ -8,6 +8,16 @@ import math
 from lightemma.prompts import DEFAULT_PROMPT_SET
 
 
+def _inputs_arg(value: str) -> str:
+    """--inputs, checked when parsed: one line naming what is wrong, before any work."""
+    from lightemma.inputs import check_inputs
+
+    try:
+        return check_inputs(value)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc).removeprefix("--inputs ")) from None
+
+
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     p = subparsers.add_parser(
         "run",
@@ -107,10 +117,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     gen.add_argument("--chain", choices=("independent", "conversation"),
                      help="independent stages, each with the image (default, the paper's), or one conversation continued "
                      "through stages 2 and 3, the image in its first turn (docs/run.md#request-variants-and-prompt-caching)")
-    gen.add_argument("--inputs", choices=("full", "no-image", "blank-image", "no-history"),
+    gen.add_argument("--inputs", type=_inputs_arg, metavar="INPUTS",
                      help="what the model is shown: full (default, the paper's), no-image (no image in any stage), "
                      "blank-image (a uniform grey image of the frame's size), no-history (the prompt set's no-history "
-                     "variant: no history numbers) (docs/run.md#input-ablations)")
+                     "variant: no history numbers), corrupt:NAME@SEVERITY (the image corrupted, severity 1-5), "
+                     "history-noise@SIGMA[,SIGMA_K] (noise on the printed speeds m/s [and curvatures 1/m]), "
+                     "history-stale@K (the history K steps of 0.5 s late) (docs/definitions.md#input-ablations)")
     base = p.add_argument_group("baselines")
     base.add_argument("--fit-split", metavar="SPLIT",
                       help="baseline:ego: fit on this split of --version (train on v1.0-trainval) instead of cross-fitting "

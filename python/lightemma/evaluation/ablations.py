@@ -24,6 +24,7 @@ import numpy as np
 
 from lightemma.evaluation.loading import RunData
 from lightemma.evaluation.stats import Resampling, bootstrap_ci, holm, sign_flip_p
+from lightemma.inputs import is_perturbation
 
 ABLATIONS: tuple[str, ...] = ("no-image", "blank-image", "no-history")
 GAIN_BASELINES: tuple[str, ...] = ("baseline:constant", "baseline:cv", "baseline:ego")
@@ -130,7 +131,7 @@ def input_ablations(runs: Sequence[RunData], labels: Sequence[str], convention: 
             full.setdefault(_variant_key(run), []).append(i)
     pairs = []
     for i, run in enumerate(runs):
-        if run.info.inputs not in ABLATIONS:
+        if run.info.inputs not in ABLATIONS and not is_perturbation(run.info.inputs):  # corrupt:…, history-…
             continue
         candidates = full.get(_variant_key(run), [])
         if len(candidates) == 1:

@@ -42,7 +42,7 @@ import numpy as np
 
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, ResponseSchema, is_truncated
 from lightemma.frames import history_placeholders
-from lightemma.inputs import request_image
+from lightemma.inputs import request_image, shown_history
 from lightemma.prompts import ANSWER_FORMATS, CHAINS, PromptSet
 from lightemma.runs.records import attempt_received
 
@@ -106,9 +106,12 @@ class ChainPolicy:
         return {"mode": self.parse_mode, **plausibility(self.speed_range, self.max_abs_curvature)}
 
     def to_dict(self) -> dict[str, Any]:
-        return {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
-                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "chain": self.chain,
-                "answer_format": self.answer_format, "inputs": self.inputs, "parse": self.parse_record()}
+        from lightemma.inputs import describe_perturbation
+
+        out = {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
+               "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "chain": self.chain,
+               "answer_format": self.answer_format, "inputs": self.inputs, "parse": self.parse_record()}
+        return out | describe_perturbation(self.inputs)  # a corruption's or history perturbation's definition
 
 
 def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
@@ -216,8 +219,9 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     cannot succeed (a rejected API key, the same failure on frame after frame).
     """
     start = time.perf_counter()
-    history = history_placeholders(frame.history_actions)  # {history}, {speeds}, {curvatures}
-    image = request_image(frame, policy.inputs)  # the frame's image, a blank one, or none (--inputs)
+    shown = shown_history(frame, policy.inputs)  # the frame's history, or its perturbation (--inputs history-*)
+    history = history_placeholders(shown)  # {history}, {speeds}, {curvatures}
+    image = request_image(frame, policy.inputs)  # the frame's image, a blank or corrupted one, or none (--inputs)
 
     async def ask(stage: str, text: str, turns: tuple[tuple[str, str], ...] = ()) -> ChatResult:
         request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
@@ -257,7 +261,7 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             else:
                 attempts.append(attempt.finish(None, "failed", f"API error: {attempt.error}", "api_error"))
             continue
-        status, reason, failure, parsed = _parse(answer, policy, frame.history_actions)
+        status, reason, failure, parsed = _parse(answer, policy, shown)
         attempts.append(attempt.finish(answer, status, reason, failure))
         if status != "failed":
             actions = parsed
