@@ -2,10 +2,12 @@
 //!
 //! * [`parse`] (with [`lexer`], [`lenient`], [`paper`], [`json`]): a model's stage-3 answer → (speed, curvature)
 //!   actions, a status, a failure kind and a reason;
+//! * [`intent`]: a stage-2 text → the stated longitudinal and lateral intent (`intent@lightemma/1`);
 //! * [`kinematics`]: actions → trajectories (`euler`, `midpoint`), batched;
 //! * [`metrics`]: per-step displacement errors, ADE/FDE under three conventions, miss rate;
 //! * [`safety`]: the ego footprint along a trajectory (SE(2), nalgebra), exact rotated-rectangle
 //!   collisions with agents' boxes, drivable-area tests against a raster mask or polygons;
+//! * [`planning`]: NAVSIM's planning score on nuScenes (re-simulation, comfort, sub-scores);
 //! * [`stats`]: scene-level bootstrap intervals and sign-flip p-values (deterministic, parallel);
 //! * [`error`]: the one error type, mapped to Python's `ValueError` in `python.rs`.
 //!
@@ -13,6 +15,7 @@
 
 pub mod error;
 pub mod fastmath;
+pub mod intent;
 pub mod json;
 pub mod kinematics;
 pub mod lenient;
@@ -20,6 +23,7 @@ pub mod lexer;
 pub mod metrics;
 pub mod paper;
 pub mod parse;
+pub mod planning;
 mod python;
 pub mod safety;
 pub mod stats;

@@ -15,6 +15,10 @@ use pyo3::types::{PyList, PyString};
 use crate::error::CoreError;
 use crate::{kinematics, metrics, parse, safety, stats};
 
+mod intent;
+mod planning_scores;
+mod planning_sim;
+
 /// Batches at least this large run with the GIL released.
 const DETACH_MIN_FRAMES: usize = 2048;
 
@@ -650,6 +654,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mask_area, m)?)?;
     m.add_function(wrap_pyfunction!(polygon_area, m)?)?;
     m.add_function(wrap_pyfunction!(mask_lookup, m)?)?;
+    intent::register(m)?;
+    planning_sim::register(m)?;
+    planning_scores::register(m)?;
     m.add("METHODS", kinematics::Method::NAMES.to_vec())?;
     m.add("CONVENTIONS", metrics::Convention::NAMES.to_vec())?;
     m.add("PARSE_MODES", parse::Mode::NAMES.to_vec())?;

@@ -38,6 +38,11 @@ _EXPORTS: dict[str, str] = {
     "evaluate_runs": "lightemma.evaluation",
     "write_report": "lightemma.report",
     "run_demo": "lightemma.demo",
+    "simulate": "lightemma.planning.simulation",
+    "comfort": "lightemma.planning.simulation",
+    "drive_scores": "lightemma.planning.scores",
+    "read_intents": "lightemma.explanations",
+    "intent_consistency": "lightemma.explanations",
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
@@ -95,6 +100,7 @@ if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
     from lightemma.actions import ParsedActions, parse_actions
     from lightemma.demo import run_demo
     from lightemma.evaluation import evaluate_runs
+    from lightemma.explanations import intent_consistency, read_intents
     from lightemma.frames import Frame, FrameSet, load_frames
     from lightemma.kinematics import integrate
     from lightemma.metrics import CONVENTIONS, Metrics, displacement_errors, evaluate, evaluate_all

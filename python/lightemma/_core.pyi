@@ -123,3 +123,93 @@ def mask_lookup(
     points: npt.NDArray[np.float64], mask: npt.NDArray[np.uint8], resolution: float = 0.1, foreground: int = 255
 ) -> npt.NDArray[np.uint8]:
     """(M,) lookups of global points (M, 2) in a MapMask raster: 0 off, 1 on, 2 outside the image."""
+
+# planning: simulation and comfort (rust/planning/simulate.rs, comfort.rs; docs/definitions.md#re-simulation-and-comfort)
+
+COMFORT_BOUNDS: list[str]  # lon_acceleration, lat_acceleration, jerk, lon_jerk, yaw_acceleration, yaw_rate
+COMFORT_LIMITS: list[tuple[float, float]]  # exclusive (lower, upper): m/s², m/s², m/s³, m/s³, rad/s², rad/s
+EXTENDED_COMFORT_FEATURES: list[str]  # acceleration, jerk, yaw_rate, yaw_acceleration
+EXTENDED_COMFORT_LIMITS: list[float]  # inclusive RMS-difference limits: 0.7, 0.5, 0.1, 0.1
+
+def simulate(
+    poses: npt.NDArray[np.float64],
+    initial: npt.NDArray[np.float64],
+    plan_dt: float = 0.5,
+    dt: float = 0.1,
+    vehicle: tuple[float, float, float, float, float] = (2.588, 1.444, 1.0471975511965976, 0.2, 0.05),
+) -> npt.NDArray[np.float64]:
+    """(N, T+1, 11) states in NAVSIM's layout: plans (N, K, 3) x, y, heading at plan_dt … K plan_dt resampled at dt
+    and tracked by nuPlan's LQR on a kinematic bicycle from initial (N, 11); T = K plan_dt / dt. vehicle = (wheel_base,
+    rear_axle_to_center, max_steering_angle, accel_time_constant, steering_angle_time_constant). A frame with a
+    non-finite input is NaN throughout; ValueError for shapes, a horizon not a whole number of steps, bad vehicle."""
+
+def comfort(
+    states: npt.NDArray[np.float64],
+    dt: float = 0.1,
+    rear_axle_to_center: float = 1.444,
+    history: npt.NDArray[np.float64] | None = None,
+) -> tuple[npt.NDArray[np.bool_], npt.NDArray[np.float64]]:
+    """nuPlan's six comfort bounds on states (N, T, 11) at dt, each frame preceded by its history (N, H, 11) when
+    given (H + T ≥ 4): (within (N, 6), extremes (N, 6, 2) min, max of each filtered signal). A non-finite frame: no
+    bound met, NaN extremes."""
+
+def extended_comfort(
+    now: npt.NDArray[np.float64], prev: npt.NDArray[np.float64], dt: float = 0.1, shift: int = 5
+) -> npt.NDArray[np.float64]:
+    """(N, 4) RMS differences of NAVSIM v2's extended-comfort features between now[:, :T-shift] and prev[:, shift:]
+    (both (N, T, 11)); NaN for a non-finite pair."""
+
+# explanations: intents (rust/intent.rs; docs/parsing.md#intents, rules intent@lightemma/1)
+
+INTENT_RULES: str  # "intent@lightemma/1"
+INTENT_LONGITUDINAL: list[str]  # accelerate, keep_speed, decelerate, stop, stay_stopped, start (code order)
+INTENT_LATERAL: list[str]  # follow_lane, turn_left, turn_right, change_lane_left, change_lane_right (code order)
+INTENT_UNKNOWN: int  # 255: the code of "unknown"
+INTENT_MAX_BYTES: int  # texts longer than this (bytes) are unknown, "text too long"
+
+def read_intents(
+    texts: list[str],
+) -> tuple[npt.NDArray[np.uint8], npt.NDArray[np.uint8], list[str], list[str], list[str]]:
+    """(longitudinal codes (N,), lateral codes (N,), reasons, longitudinal sentences, lateral sentences) of the
+    planned part of stage-2 texts; code INTENT_UNKNOWN where an axis is unknown (the reason says why). ValueError
+    names the first item that is not str; a bad text never raises."""
+
+# planning: sub-scores (rust/planning/scores.rs; docs/definitions.md#sub-scores-and-aggregates)
+
+PLANNING_SCORE_NAMES: list[str]  # columns of planning_subscores: nc, dac, ddc, ep_raw, ttc, lk
+PLANNING_REASONS: list[str]  # reason code names, indexed by code (0 "ok")
+
+def planning_subscores(
+    states: npt.NDArray[np.float64],
+    frame: npt.NDArray[np.int64],
+    *,
+    agents: npt.NDArray[np.float64] | None = None,
+    drivable_mask: npt.NDArray[np.uint8] | None = None,
+    mask_resolution: float = 0.1,
+    mask_foreground: int = 255,
+    drivable: tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
+    lanes: tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
+    lane_offsets: npt.NDArray[np.int64] | None = None,
+    lane_ids: npt.NDArray[np.int64] | None = None,
+    lane_on_route: npt.NDArray[np.uint8] | None = None,
+    intersections: tuple[npt.NDArray[np.float64], npt.NDArray[np.int64], npt.NDArray[np.int64]] | None = None,
+    route: npt.NDArray[np.float64] | None = None,
+    centreline: npt.NDArray[np.float64] | None = None,
+    n_frames: int | None = None,
+    length: float = 4.084,
+    width: float = 1.85,
+    rear_axle_to_center: float = 1.444,
+    dt: float = 0.1,
+) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.uint8]]:
+    """NAVSIM's sub-scores of N plans: (values (N, 6) float64 with NaN where n/a, reason codes (N, 6) uint8), columns
+    PLANNING_SCORE_NAMES (ep_raw in metres, clipped at 0). states (N, S, 11) float64 in NAVSIM's StateIndex layout
+    (rear axle, global frame, m, rad, m/s), S ≥ 2 states dt s apart; frame (N,) the scene frame of each plan, indexing
+    the per-frame inputs: agents (F, S, A, 8) = centre x, y, yaw, length, width, velocity x, y, kind (0 agent,
+    1 static object; NaN centre x = absent slot); route, centreline (F, R, 2) polylines padded with NaN rows; lane
+    lists lane_offsets (F + 1,), lane_ids (K,), lane_on_route (K,) into the lane polygons. Map layers: drivable as a
+    devkit MapMask raster or polygons, lanes and intersections as polygons (xy (V, 2), ring offsets (R + 1,), polygon
+    offsets (P + 1,)). A missing input makes the sub-scores needing it n/a (a reason code); ValueError on shapes that
+    disagree, a frame index ≥ F, S < 2. GIL released for large batches."""
+
+def planning_first_bad_box(agents: npt.NDArray[np.float64], frame: int) -> tuple[int, int] | None:
+    """(step, slot) of the first degenerate box of that frame of agents (F, S, A, 8), or None."""
