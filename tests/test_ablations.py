@@ -228,7 +228,7 @@ def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_eac
     ade_full, ade_blind, ade_blank = per_frame_ade(full), per_frame_ade(blind), per_frame_ade(blank)
     common = sorted(ade_blind)  # the no-image run covers 6 of the 9 frames: paired on those only
     r = rows["no-image"]
-    assert (r["model"], r["frames"], r["scenes"]) == ("openai/gpt-4o [full]", 6, 3)
+    assert (r["model"], r["frames"], r["scenes"]) == ("openai/gpt-4o", 6, 3)
     assert r["ade_avg_full"] == pytest.approx(np.mean([ade_full[f] for f in common]))
     assert r["ade_avg_diff"] == pytest.approx(np.mean([ade_full[f] - ade_blind[f] for f in common]))
     assert r["ade_avg_diff"] < -1 and r["ade_avg_ci95"][1] < 0  # it uses the image
@@ -238,9 +238,9 @@ def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_eac
     assert abs(b["ade_avg_diff"]) < 1e-9 and b["ade_avg_significant"] is False  # a grey image does as well: no image use shown
     # every model run against the best of constant, cv and ego on the frames scored in both
     gains = {g["model"]: g for g in evaluation.baseline_gains}
-    assert set(gains) == {"openai/gpt-4o [full]", "openai/gpt-4o [no-image]", "openai/gpt-4o [blank-image]"}
+    assert set(gains) == {"openai/gpt-4o", "openai/gpt-4o [no-image]", "openai/gpt-4o [blank-image]"}
     base_ade = {kind: per_frame_ade(d) for kind, d in bases.items()}
-    for label, ade, ids in (("openai/gpt-4o [full]", ade_full, sorted(ade_full)), ("openai/gpt-4o [no-image]", ade_blind, common)):
+    for label, ade, ids in (("openai/gpt-4o", ade_full, sorted(ade_full)), ("openai/gpt-4o [no-image]", ade_blind, common)):
         means = {kind: np.mean([v[f] for f in ids]) for kind, v in base_ade.items()}
         best = min(means, key=means.get)
         g = gains[label]

@@ -252,10 +252,10 @@ def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
     rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[1:-1]] for line in table.splitlines()
             if line.startswith("| ") and "Model" not in line}
     header = [c.strip() for c in next(line for line in table.splitlines() if "Model" in line).split("|")[1:-1]]
-    assert set(rows) == {"openai/gpt-4o [half-price]", "Baseline (constant velocity) [reference ego]"}
-    batch_row = dict(zip(header, rows["openai/gpt-4o [half-price]"]))
+    assert set(rows) == {'openai/gpt-4o "half-price"', 'Baseline (constant velocity) "reference ego"'}
+    batch_row = dict(zip(header, rows['openai/gpt-4o "half-price"']))
     assert batch_row["Time/frame (s)"] == "n/a" and batch_row["Batch turnaround (s)"] not in ("-", "n/a")
-    other = dict(zip(header, rows["Baseline (constant velocity) [reference ego]"]))
+    other = dict(zip(header, rows['Baseline (constant velocity) "reference ego"']))
     assert other["Time/frame (s)"] != "n/a" and other["Batch turnaround (s)"] == "-"
     assert "Batch runs" in table
 

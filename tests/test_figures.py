@@ -167,7 +167,7 @@ def test_history_bias_figure_draws_ablated_runs_beside_the_full_ones(tmp_path):
         runs.append(load_run(run_dir, details=True))
     fig = history_bias_figure(runs)
     scatter, slopes, bars = fig.axes
-    assert [t.get_text() for t in slopes.get_yticklabels()] == ["m [full]", "m [no-image]", "other"]
+    assert [t.get_text() for t in slopes.get_yticklabels()] == ["m", "m [no-image]", "other"]
     points = [line for line in slopes.lines if line.get_marker() in INPUT_MARKERS.values()]
     assert [p.get_marker() for p in points] == ["o", "s", "o"]  # top to bottom as the labels
     full, ablated = points[0], points[1]

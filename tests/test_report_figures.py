@@ -218,4 +218,5 @@ def test_an_empty_run_is_left_out_with_a_warning_not_every_picture(disagreement_
     monkeypatch.setattr(sys.stderr, "isatty", lambda: False)  # a log file or a pipe: no bar and its \r redraws
     assert main(["report", str(disagreement_report), "--out", str(tmp_path / "rep2"), "--top", "2", "--no-paper"]) == 0
     err = capsys.readouterr().err
-    assert "report:" not in err and "frame pictures" not in err and "\r" not in err
+    assert not re.search(r"(?<!lightemma )report:", err) and "frame pictures" not in err and "\r" not in err  # no bar
+    assert re.search(r"lightemma report: warning: left out .*claude-3-7-sonnet.*: no scored frame", err)  # the warning, on stderr too

@@ -77,22 +77,23 @@ def test_a_killed_report_leaves_the_old_one_whole_and_its_leftovers_go_next_time
     assert "(paper)" in (out / "index.md").read_text()
 
 
-def test_a_folder_that_is_not_a_report_is_refused_without_force(runs, tmp_path, capsys):
+def test_a_folder_that_is_not_a_report_is_refused_even_with_force(runs, tmp_path, capsys):
     mine = tmp_path / "notes"
     mine.mkdir()
     (mine / "index.md").write_text("# my own notes\n")
     (mine / "data.csv").write_text("1,2\n")
     before = _snapshot(mine)
-    assert main(["report", str(runs), "--out", str(mine), "--no-pictures"]) == 2
-    err = capsys.readouterr().err.strip()
-    assert err == f"lightemma report: error: --out {mine} is not empty and holds no lightemma report: refusing to overwrite it (--force replaces it)"
-    assert _snapshot(mine) == before
-    assert main(["report", str(runs), "--out", str(mine), "--no-pictures", "--force"]) == 0
-    assert (mine / "index.md").read_text().startswith("# lightemma report") and not (mine / "data.csv").exists()
+    for force in ([], ["--force"]):
+        assert main(["report", str(runs), "--out", str(mine), "--no-pictures", *force]) == 2
+        err = capsys.readouterr().err.strip()
+        assert err == (f"lightemma report: error: --out {mine} is not empty and holds no lightemma report: refusing to write over it; "
+                       "choose a new or empty folder")
+        assert _snapshot(mine) == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes", "runs"]  # no hidden folder left
     # an empty folder, or a report lightemma wrote, is fine without --force
     (tmp_path / "empty").mkdir()
     assert main(["report", str(runs), "--out", str(tmp_path / "empty"), "--no-pictures"]) == 0
-    assert main(["report", str(runs), "--out", str(mine), "--no-pictures"]) == 0
+    assert main(["report", str(runs), "--out", str(tmp_path / "empty"), "--no-pictures"]) == 0
     (tmp_path / "afile").write_text("x")
     assert main(["report", str(runs), "--out", str(tmp_path / "afile"), "--no-pictures"]) == 2
     assert "is a file, not a folder" in capsys.readouterr().err
@@ -191,14 +192,79 @@ def test_files_added_to_a_report_are_not_replaced_without_force(runs, tmp_path, 
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
     err = capsys.readouterr().err.strip()
     assert err == (f"lightemma report: error: --out {out} holds 2 file(s) its report did not write (figures/myfig.png, notes.txt): "
-                   "refusing to replace it (--force replaces it)")
+                   "refusing to replace it (--force replaces only the report's own files and keeps these)")
     assert _snapshot(out) == before
-    # a report whose marker has no file list (an older lightemma's) cannot be told apart from added files: refused too
+    # --force replaces the report's own files and keeps the others, byte for byte; they stay not the report's
+    (out / "index.md").write_text("stale")
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 0
+    assert (out / "notes.txt").read_text() == "mine" and (out / "figures" / "myfig.png").read_bytes() == b"png"
+    assert (out / "index.md").read_text().startswith("# lightemma report")
+    assert "notes.txt" not in json.loads((out / ".lightemma-report").read_text())["files"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["rep2", "runs"]  # the old report gone, nothing hidden left
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
+    assert "holds 2 file(s) its report did not write" in capsys.readouterr().err
+    # a file of the user's that the new report would write over is not replaced, --force or not
+    (out / "tables" / "history_bias.md").unlink()
+    (out / ".lightemma-report").write_text(json.dumps({"files": [f for f in marker["files"] if f != "tables/history_bias.md"]}))
+    (out / "tables" / "history_bias.md").write_text("my own table")
+    mine = _snapshot(out)
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 2
+    assert "--force cannot keep tables/history_bias.md: the new report writes a file of that name" in capsys.readouterr().err
+    assert _snapshot(out) == mine and sorted(p.name for p in tmp_path.iterdir()) == ["rep2", "runs"]
+    # a report whose marker has no file list (an older lightemma's) cannot be told apart from added files: refused, --force too
     (out / "notes.txt").unlink()
     (out / "figures" / "myfig.png").unlink()
     (out / ".lightemma-report").write_text('{"written_by": "lightemma report"}\n')
-    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
-    assert "without the list of its files" in capsys.readouterr().err
+    for force in ([], ["--force"]):
+        assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", *force]) == 2
+        err = capsys.readouterr().err
+        assert "without the list of its files" in err and "delete it yourself or choose another folder" in err and "--force" not in err
+    assert (out / "tables" / "history_bias.md").read_text() == "my own table"
+
+
+def test_the_dataroot_a_run_records_is_never_replaced_even_with_force(tmp_path, capsys):
+    """Issue 32.6: `report RUNS --out <the runs' own dataroot> --force` deleted the dataset."""
+    data = tmp_path / "ds" / "data"
+    (data / "v1.0-mini").mkdir(parents=True)
+    (data / "v1.0-mini" / "scene.json").write_text("[]")
+    (data / "samples").mkdir()
+    (data / "samples" / "a.jpg").write_bytes(b"jpg")
+    runs = tmp_path / "runs"
+    write_synthetic_run(runs, "baseline:cv", 20, seed=2, manifest={"dataset": {"dataroot": str(data), "version": "v1.0-mini"}})
+    # recorded only in the run's request (config.dataset), as a resume reads it
+    write_synthetic_run(runs, "baseline:constant", 20, seed=3, manifest={"config": {"dataset": {"dataroot": str(tmp_path / "other")}}})
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "keep.json").write_text("{}")
+    before = _snapshot(tmp_path)
+    for out, relation in ((data, "is the dataroot"), (tmp_path / "ds", "contains the dataroot"), (tmp_path / "other", "is the dataroot")):
+        assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--force"]) == 2
+        err = capsys.readouterr().err.strip()
+        assert len(err.splitlines()) == 1 and f"--out {out} {relation} " in err and "recorded by the run" in err, err
+        assert "--force does not override this" in err and "--force replaces" not in err
+        assert _snapshot(tmp_path) == before
+    # a report beside the dataset, or inside it, replaces nothing of it and is written
+    assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--no-pictures", "--top", "0"]) == 0
+    assert main(["report", str(runs), "--out", str(data / "rep"), "--no-pictures", "--top", "0"]) == 0
+    assert (data / "v1.0-mini" / "scene.json").read_text() == "[]" and (data / "samples" / "a.jpg").read_bytes() == b"jpg"
+
+
+def test_a_folder_holding_a_run_is_never_replaced(runs, tmp_path, capsys):
+    out = tmp_path / "rep"
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 0
+    write_synthetic_run(out / "parked", "baseline:cv", 10, seed=4)  # a run parked in the report, not one of the inputs
+    before = _snapshot(out)
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith(f"lightemma report: error: --out {out} holds the lightemma run {out / 'parked'}") and "--force replaces" not in err
+    assert _snapshot(out) == before
+
+
+def test_a_report_killed_between_its_renames_is_put_back(runs, tmp_path):
+    out = tmp_path / "rep"
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 0
     (out / "notes.txt").write_text("mine")
-    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 0
-    assert not (out / "notes.txt").exists() and (out / "index.md").is_file()
+    before = _snapshot(out)
+    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True, capture_output=True, text=True).stdout.strip()
+    os.rename(out, tmp_path / f".rep.old-{dead}")  # what a report killed after moving the old one aside leaves
+    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2  # the old one is back, with notes.txt
+    assert _snapshot(out) == before and not list(tmp_path.glob(".rep.*"))

@@ -232,3 +232,161 @@ def test_a_new_column_needs_no_html_change():
     assert '<section class="table" id="table-safety">' in page and ">Collision (%)</th>" in page
     assert '<td data-sort="0.512" class="num">0.51</td>' in page and '<td class="num">-</td>' in page
     assert '<a href="#frames?model=0&amp;sort=worst" class="frames-link">GPT-4o</a>' in page
+
+
+def test_the_frame_browser_shows_hostile_names_as_visible_text(browser, tmp_path):
+    """Issue 32.7: a right-to-left override or an ESC in a frame id, scene or model name is shown as an escape, never
+    obeyed; markup in them is text. The answer's lines stay lines."""
+    from selenium.webdriver.common.by import By
+
+    runs = tmp_path / "runs"
+    run_dir = write_synthetic_run(runs, "openai/gpt-4o", 30, seed=1, noise=0.3)
+    records = [json.loads(line) for line in (run_dir / "frames.jsonl").read_text().splitlines()]
+    for r in records:
+        r["frame_id"] = r["frame_id"].replace("scene-", "sc\u202eene-<b>")
+        r["scene_name"] = "scene \u202eevil\x1b[2J"
+        r["attempts"][-1]["answer"] = "line one\u202e\nline two"
+        r["answer"] = "line one\u202e\nline two"
+    (run_dir / "frames.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    from lightemma.runs.store import update_manifest
+
+    update_manifest(run_dir, display_name="GPT <i>x</i>\u202e")
+    out = tmp_path / "rep"
+    write_report([runs], out, top=0, case_tags=(), pictures=False, with_paper=False)
+    d = browser
+    d.get((out / "index.html").as_uri() + "#frame/0")
+    _wait(d, lambda d: d.execute_script("return window.LE && window.LE.ready === true"))
+    _wait(d, lambda d: d.find_element(By.ID, "frame-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#texts .model-texts"))
+    title = d.find_element(By.ID, "frame-title").text
+    assert title.startswith("sc\\u202eene-<b>0000/") and "\u202e" not in title
+    page = d.find_element(By.ID, "frame-view").text
+    assert "scene \\u202eevil\\x1b[2J" in page and "GPT <i>x</i>\\u202e" in page and "\u202e" not in page
+    assert not d.find_elements(By.CSS_SELECTOR, "#frame-view b, #frame-view i:not([style])")  # markup stayed text
+    answer = d.find_elements(By.CSS_SELECTOR, "#texts .model-texts dd")[2].text
+    assert answer == "line one\\u202e\nline two"
+    assert _errors(d) == []
+
+
+@pytest.fixture(scope="module")
+def safety_report(tmp_path_factory):
+    """A synthetic dataset, an oracle run changed on two frames — one swerves 1.5 m right into the parked car of the
+    accelerate scene (collides), one veers 8 m/step left (off road) — and an untouched constant-velocity run."""
+    from lightemma.cli import main
+    from lightemma.evaluation import safety as S
+    from lightemma.evaluation.loading import SIDECAR_FILE
+    from lightemma.runs.store import find_run_dirs
+    from lightemma.synth import write_dataset
+
+    base = tmp_path_factory.mktemp("safety_html")
+    root = write_dataset(base / "data", scenes=2, keyframes=20, image_size=(64, 36), sweeps=False)
+    for kind in ("oracle", "cv"):
+        assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(root), "--version", "v1.0-mini", "--split", "all",
+                     "--out", str(base / "runs" / kind)]) == 0
+    run_dir = find_run_dirs(base / "runs" / "oracle")[0]
+    data = S.load_safety_data(root, "v1.0-mini")
+    records = [json.loads(line) for line in (run_dir / "frames.jsonl").read_text().splitlines()]
+    swerve = np.array([[4.0 * k, -1.5] for k in range(1, 7)])
+    veer = np.array([[2.0 * k, 8.0 * k] for k in range(1, 7)])
+    hit = off = None
+    for r in records:
+        tok = S.sample_token_of(r["frame_id"])
+        if hit is None and r["frame_id"].startswith("synth-0001-accelerate/"):
+            fs = S.frame_safety(swerve[None], [tok], data)
+            if fs.collide[0].any():
+                hit, r["trajectory"] = r["frame_id"], swerve.tolist()
+                continue
+        if off is None and r["frame_id"].startswith("synth-0000-cruise/"):
+            fs = S.frame_safety(veer[None], [tok], data)
+            if fs.off_steps[0].any() and not fs.collide[0].any():
+                off, r["trajectory"] = r["frame_id"], veer.tolist()
+    assert hit and off
+    (run_dir / "frames.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
+    (run_dir / SIDECAR_FILE).unlink(missing_ok=True)
+    out = base / "rep"
+    write_report([base / "runs"], out, top=0, case_tags=(), dataroot=str(root), version="v1.0-mini", convention="lightemma")
+    return out, hit, off
+
+
+def test_safety_filter_and_per_model_flags_in_the_frame_browser(browser, safety_report, tmp_path):
+    """Issue 32.12: the frame browser filters on collides / off road (any model, or the chosen one), and the frame
+    view says per model whether it collides and whether it leaves the road."""
+    from selenium.webdriver.common.by import By
+    from selenium.webdriver.support.ui import Select
+
+    out, hit, off = safety_report
+    d = browser
+    d.get((out / "index.html").as_uri() + "#frames")
+    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList") is not None)
+    labels = [o.text for o in Select(d.find_element(By.ID, "f-model")).options][1:]
+    oracle = next(i for i, lab in enumerate(labels) if "oracle" in lab)
+    Select(d.find_element(By.ID, "f-safe")).select_by_value("collides")
+    _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "safe=collides")
+    assert d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))") == [hit]
+    Select(d.find_element(By.ID, "f-safe")).select_by_value("off_road")
+    _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "safe=off_road")
+    assert sorted(d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")) == sorted([hit, off])  # the swerve leaves the lane too
+    Select(d.find_element(By.ID, "f-safe")).select_by_value("unsafe")
+    _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "safe=unsafe")
+    assert sorted(d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")) == sorted([hit, off])
+    assert len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) == 2
+    # the other model has neither: filtered on it, nothing is left
+    d.get((out / "index.html").as_uri() + f"#frames?model={1 - oracle}&safe=unsafe")
+    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query") == f"model={1 - oracle}&safe=unsafe")
+    assert d.execute_script("return LE.lastList.list") == []
+    # the frame view: each model's row says yes / no
+    j = d.execute_script(f"return [...Array(1000).keys()].find((k) => LE.frameId(k) === {json.dumps(hit)})")
+    d.get((out / "index.html").as_uri() + f"#frame/{j}")
+    _wait(d, lambda d: d.find_element(By.ID, "frame-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#frame-metrics tbody tr"))
+    heads = [th.text for th in d.find_elements(By.CSS_SELECTOR, "#frame-metrics thead th")]
+    c, o = heads.index("Collides"), heads.index("Off-road")
+
+    def flags(model):
+        row = d.find_element(By.CSS_SELECTOR, f'#frame-metrics tbody tr[data-model="{model}"]')
+        cells = row.find_elements(By.TAG_NAME, "td")
+        return cells[c].text, cells[o].text
+
+    assert flags(oracle) == ("yes", "yes") and flags(1 - oracle) == ("no", "no")
+    red = d.find_element(By.CSS_SELECTOR, f'#frame-metrics tbody tr[data-model="{oracle}"] td.unsafe')
+    assert red.value_of_css_property("color") == "rgba(176, 0, 0, 1)"
+    d.save_screenshot(str(tmp_path / "safety_frame.png"))
+    assert _errors(d) == []
+
+
+def test_without_safety_values_the_filter_says_why_once(browser, html_report):
+    """Runs without a dataroot: the safety filter is off and says why, instead of an empty list on every choice."""
+    from selenium.webdriver.common.by import By
+
+    html_report, _ = html_report
+    d = browser
+    d.get((html_report / "index.html").as_uri() + "#frames")
+    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready === true"))
+    select = d.find_element(By.ID, "f-safe")
+    assert not select.is_enabled() and "pass --dataroot" in select.text
+
+
+def test_the_model_column_stays_in_view_when_a_wide_table_scrolls(browser, safety_report):
+    """Issue 32.14: the first (model) column of a table wider than the window is frozen while the rest scrolls."""
+    from selenium.webdriver.common.by import By
+
+    out, _, _ = safety_report
+    d = browser
+    d.set_window_size(700, 900)
+    try:
+        d.get((out / "index.html").as_uri())
+        _wait(d, lambda d: d.execute_script("return window.LE && LE.ready === true"))
+        box = d.find_element(By.CSS_SELECTOR, "#table-accuracy_lightemma .scroll")
+        assert d.execute_script("return arguments[0].scrollWidth > arguments[0].clientWidth + 300", box)  # wide: it scrolls
+        d.execute_script("arguments[0].scrollIntoView({block: 'center'})", box)
+        first = box.find_element(By.CSS_SELECTOR, "tbody tr td:first-child")
+        second = box.find_element(By.CSS_SELECTOR, "tbody tr td:nth-child(2)")
+        left = lambda e: d.execute_script("return arguments[0].getBoundingClientRect().left", e)  # noqa: E731
+        before, second_before = left(first), left(second)
+        d.execute_script("arguments[0].scrollLeft = 300", box)
+        _wait(d, lambda d: left(second) < second_before - 250)
+        assert abs(left(first) - before) < 1.0
+        # and it is on top: the point at its middle is the model cell, not a scrolled cell under it
+        hit = d.execute_script("const r = arguments[0].getBoundingClientRect(); const e = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);"
+                               " return arguments[0].contains(e)", first)
+        assert hit
+    finally:
+        d.set_window_size(1400, 1000)

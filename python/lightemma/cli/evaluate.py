@@ -28,8 +28,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                         help="average implausible actions too (every answer the parse definition reads, as the paper's evaluation did; one can dominate a mean)")
     parser.add_argument("--miss-threshold", type=float, default=2.0, metavar="M", help="miss if any error exceeds M metres (default: 2.0)")
     add_safety_arguments(parser)
+    parser.add_argument("--no-planning", dest="planning", action="store_false",
+                        help="skip the planning score (NAVSIM's PDMS / EPDMS and sub-scores; docs/definitions.md#planning-score)")
     add_statistics_arguments(parser, pairwise_default=False)
-    parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout")
+    parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout (its folder must exist)")
     parser.set_defaults(func=run)
     return parser
 
@@ -91,24 +93,50 @@ def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, impor
 
 def run(args: argparse.Namespace) -> int:
     from lightemma._text import printable
+    from lightemma.errors import UserError
     from lightemma.evaluation import evaluate_runs, evaluation_tables
     from lightemma.report.tables import render
 
     parse = _parse_definition(args)
+    if args.output is not None:  # before any work; a missing folder is a typo more often than a wish
+        folder = args.output.parent
+        if not folder.is_dir():
+            raise UserError(f"-o {printable(args.output)}: the folder {printable(folder)} {'is not a folder' if folder.exists() else 'does not exist'} "
+                            "(create it first)")
+        if args.output.is_dir():
+            raise UserError(f"-o {printable(args.output)} is a folder, not a file")
     evaluation = evaluate_runs(
         args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold, parse=parse,
         keep_implausible=args.keep_implausible,
-        resampling=resampling_of(args), pairwise=args.pairwise, **safety_options(args),
+        resampling=resampling_of(args), pairwise=args.pairwise, planning=args.planning, **safety_options(args),
     )
     for warning in evaluation.warnings:
         print(f"lightemma evaluate: warning: {printable(warning)}", file=sys.stderr)  # names from outside: one line
+    held = [m.label for m in evaluation.models if m.parse.get("mode") != "paper"]  # their parser holds answers to the limits
+    if args.keep_implausible and held:
+        print(f"lightemma evaluate: note: --keep-implausible changes nothing for {printable(', '.join(held))}: parsed with "
+              "plausibility limits, an implausible answer failed when read (Failed, not Implausible); --parse paper reads them "
+              "by the paper's rules, without limits", file=sys.stderr)
     tables = evaluation_tables(evaluation, with_paper=args.with_paper)
     extra = {"common": evaluation.common, "n_common": evaluation.n_common, "parse": parse.to_dict() if parse else "each run's own",
              "keep_implausible": args.keep_implausible,
              "resampling": evaluation.resampling.to_dict(), "warnings": evaluation.warnings}
+    from lightemma.evaluation.descriptors import evaluation_document, footer_lines
+    from lightemma.report.evaluation_tables import provenance_footer
+
+    if args.format == "json":  # every column's descriptor, the frame sets and the software (docs/evaluate.md)
+        extra = {**evaluation_document(tables, evaluation, with_paper=args.with_paper, dataroot=args.dataroot,
+                                       version=args.dataset_version), **extra}
     text = render(tables, args.format, extra=extra)
+    if args.format == "json":  # a value its descriptor does not allow (a rate above 1) is a bug: said, never printed
+        import json
+
+        from lightemma.evaluation.descriptors import check_evaluation_json
+
+        check_evaluation_json(json.loads(text), "lightemma evaluate --format json")
+    else:
+        text += provenance_footer(footer_lines(evaluation), args.format)
     if args.output:
-        args.output.parent.mkdir(parents=True, exist_ok=True)
         args.output.write_text(text, encoding="utf-8")
         print(f"wrote {args.output}", file=sys.stderr)
     else:

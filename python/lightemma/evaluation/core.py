@@ -55,6 +55,9 @@ class ModelResult:
     answer_format: str = "text"  # stage-3 answers as text or structured JSON
     inputs: str = "full"  # input ablation (docs/run.md#input-ablations): full, no-image, blank-image, no-history
     safety: dict[str, dict[str, Any]] = field(default_factory=dict)  # convention -> off-road / collision keys (evaluation/safety.py)
+    planning: dict[str, Any] = field(default_factory=dict)  # planning-score keys (evaluation/planning.py ROW_KEYS)
+    fingerprint: dict[str, Any] | None = None  # the run's frame set (lightemma.frames.fingerprint.run_fingerprint)
+    manifest: dict[str, Any] = field(default_factory=dict)  # the run's manifest, for provenance (evaluation/descriptors.py)
 
     @property
     def scored_pct(self) -> float | None:
@@ -77,7 +80,8 @@ class ModelResult:
             "model": self.label,
             "family": self.family,
             "convention": convention,
-            "frames": self.frames_evaluated,
+            "frames": self.frames_evaluated,  # behind the means
+            "frames_accounted": self.frames_accounted,  # = scored + failed + implausible + api_errors (+ unscorable)
             "frames_in_run": self.frames_in_run,
             **{key: self.outcomes.get(key) for key in ("scored", "failed", "implausible", "api_errors")},
             **self._coverage(),
@@ -117,6 +121,8 @@ class Evaluation:
     baseline_gains: list[dict[str, Any]] = field(default_factory=list)
     safety: Any = None  # lightemma.evaluation.safety.SafetyResult when safety metrics were computed
     pairwise_safety: list[dict[str, Any]] | None = None  # see lightemma.evaluation.safety.pairwise_safety
+    planning: Any = None  # lightemma.evaluation.planning.PlanningResult when the planning score was computed
+    miss_threshold: float = 2.0  # metres, behind miss_rate (its descriptor: miss@<threshold>m/1)
 
     @property
     def main_convention(self) -> str:
@@ -160,6 +166,8 @@ class Evaluation:
             out["safety"] = self.safety.to_dict()
         if self.pairwise_safety is not None:
             out["pairwise_safety"] = self.pairwise_safety
+        if self.planning is not None:
+            out["planning"] = {**self.planning.to_dict(), "pairwise": self.planning.pairwise}
         return out
 
 
@@ -192,30 +200,56 @@ def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
     return names
 
 
-def _variant_parts(info: Any) -> dict[str, str]:
-    """What tells runs of one model apart: integrator, chain, answer format, inputs (docs/run.md)."""
-    return {"integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format,
-            "inputs": getattr(info, "inputs", "full")}
+#: the paper's protocol: a run's label names each setting in which it departs from these (docs/evaluate.md)
+PAPER_SETTINGS: tuple[tuple[str, str], ...] = (("window", "reference"), ("integrator", "euler"), ("chain", "independent"),
+                                               ("answer_format", "text"), ("inputs", "full"))
+
+
+def _window(info: Any) -> str:
+    """The run's frame window (``reference``, the paper's, or ``full``) as its manifest records it."""
+    manifest = getattr(info, "manifest", None) or {}
+    config = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+    for dataset in (manifest.get("dataset"), config.get("dataset")):
+        window = dataset.get("window") if isinstance(dataset, dict) else None
+        if isinstance(window, str) and window:
+            return window
+    return "reference"
+
+
+def _compose(info: Any, extra: Sequence[str] = ()) -> str:
+    from lightemma._text import printable
+
+    settings = {"window": _window(info), "integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format,
+                "inputs": getattr(info, "inputs", "full")}
+    parts = [f"{settings[key]} window" if key == "window" else settings[key] for key, paper in PAPER_SETTINGS if settings[key] != paper]
+    parts += extra
+    name = getattr(info, "name", None)
+    return printable(info.label + (f" [{', '.join(parts)}]" if parts else "") + (f' "{name}"' if name else ""))
+
+
+def run_label(info: Any) -> str:
+    """A run's display label, from the run alone: the model's display name, then in brackets every setting in which the
+    run departs from the paper's protocol (:data:`PAPER_SETTINGS`, in that order: ``full window``, the integrator, the
+    chain, the answer format, the inputs), then its name (``lightemma run --name``) in double quotes:
+    ``GPT-4o``, ``GPT-4o [no-image]``, ``Baseline (oracle actions) [midpoint]``,
+    ``GPT-4o [full window, conversation, structured] "second try"``. One line (:func:`~lightemma._text.printable`)."""
+    return _compose(info)
 
 
 def unique_labels(runs: list[RunData]) -> list[str]:
-    """Display labels, made distinct where two runs share one: by the variant settings that differ among them
-    (integrator, chain, answer format, inputs: ``GPT-4o [conversation, structured]``, ``GPT-4o [no-image]``),
-    else by run id.
-
-    A named run (``lightemma run --name NAME``) is always ``<model> [NAME]``, its name in place of the id."""
-    original = [f"{r.info.label} [{r.info.name}]" if r.info.name else r.info.label for r in runs]
-    labels = list(original)
+    """Display labels (:func:`run_label`), each from its own run alone, so a run keeps its label (and its bootstrap
+    stream, which is keyed by it) whatever other runs are evaluated beside it. Only runs alike in model, every setting
+    and name share a label; those get their run id (their folder's path where the ids are alike too) as a last part:
+    ``GPT-4o [run 20261130T025909Z-e2c662]``."""
+    labels = [run_label(r.info) for r in runs]
+    out = list(labels)
     for i, run in enumerate(runs):
-        clashes = [j for j, lab in enumerate(original) if lab == original[i]]
+        clashes = [j for j, lab in enumerate(labels) if lab == labels[i]]
         if len(clashes) > 1:
-            parts = [_variant_parts(runs[j].info) for j in clashes]
-            differing = [k for k in parts[0] if len({p[k] for p in parts}) > 1]
-            variants = {tuple(p[k] for k in differing) for p in parts}
-            own = _variant_parts(run.info)
-            suffix = ", ".join(own[k] for k in differing) if differing and len(variants) == len(clashes) else run.info.run_dir.name
-            labels[i] = f"{original[i]} [{suffix}]"
-    return labels
+            ids = [runs[j].info.run_dir.name for j in clashes]
+            own = run.info.run_dir.name if ids.count(run.info.run_dir.name) == 1 else str(run.info.run_dir)
+            out[i] = _compose(run.info, [f"run {own}"])
+    return out
 
 
 def frame_set_warning(runs: Sequence[RunData]) -> str | None:
@@ -279,6 +313,7 @@ def evaluate_loaded(
     resampling: Resampling = Resampling(),
     pairwise: bool = False,
     safety: bool = True,
+    planning: bool = True,
     dataroot: str | os.PathLike[str] | None = None,
     version: str | None = None,
 ) -> Evaluation:
@@ -288,8 +323,11 @@ def evaluate_loaded(
     every run; FE, efficiency and outcome counts use all frames of a run, or with
     ``common`` the frames present in every run.
     """
+    from lightemma.frames.fingerprint import run_fingerprint
+
     conventions = _conventions(convention)
     runs = sorted(runs, key=lambda r: (family_rank(r.info.family), r.info.generation or 99, r.info.label))
+    fingerprints = [run_fingerprint(r.info.run_dir, r.info.manifest or {}, r.frame_ids) for r in runs]  # a bad one: refused
     warnings = [w for r in runs for w in r.warnings]
     shared: list[str] | None = None
     present: set[str] | None = None
@@ -333,21 +371,42 @@ def evaluate_loaded(
                 chain=run.info.chain,
                 answer_format=run.info.answer_format,
                 inputs=run.info.inputs,
+                fingerprint=fingerprints[len(results)],
+                manifest=dict(run.info.manifest or {}),
             )
         )
         entries.append((label, run, scored))
-    evaluation = _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling), entries, shared, pairwise)
+    evaluation = _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling,
+                                              miss_threshold=miss_threshold), entries, shared, pairwise)
     if safety:
-        _with_safety(evaluation, entries, shared, pairwise, dataroot, version)
+        _with_safety(evaluation, entries, shared, pairwise, dataroot, version, history=_PLANNING_HISTORY if planning else 0)
+    if planning:
+        _with_planning(evaluation, entries, shared, pairwise, dataroot, version)
     return evaluation
 
 
+_PLANNING_HISTORY = 4  # earlier keyframes the planning score reads (lightemma.evaluation.planning.HISTORY_KEYFRAMES)
+
+
+def _with_planning(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
+                   pairwise: bool, dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
+    """NAVSIM's planning score (PDMS / EPDMS and sub-scores) per model and the ground truth's (docs/definitions.md#planning-score)."""
+    from lightemma.evaluation.planning import evaluate_planning
+
+    result = evaluate_planning(entries, evaluation.resampling, dataroot=dataroot, version=version, safety=evaluation.safety,
+                               pairwise=pairwise, only=set(shared) if shared is not None else None)
+    for model in evaluation.models:
+        model.planning = result.rows.get(model.label, {})
+    evaluation.planning = result
+    evaluation.warnings.extend(result.warnings)
+
+
 def _with_safety(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool,
-                 dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
+                 dataroot: str | os.PathLike[str] | None, version: str | None, history: int = 0) -> None:
     """Off-road and collision rates beside ADE, the ground-truth floor, and paired tests (docs/definitions.md#safety)."""
     from lightemma.evaluation.safety import evaluate_safety, pairwise_safety
 
-    result = evaluate_safety(entries, evaluation.conventions, evaluation.resampling, dataroot=dataroot, version=version)
+    result = evaluate_safety(entries, evaluation.conventions, evaluation.resampling, dataroot=dataroot, version=version, history=history)
     for model in evaluation.models:
         model.safety = result.rows.get(model.label, {})
     evaluation.safety = result
@@ -392,6 +451,7 @@ def evaluate_runs(
     pairwise: bool = False,
     keep_implausible: bool = False,
     safety: bool = True,
+    planning: bool = True,
     dataroot: str | os.PathLike[str] | None = None,
     version: str | None = None,
 ) -> Evaluation:
@@ -411,9 +471,15 @@ def evaluate_runs(
     evaluation did. Unfinished runs are evaluated on their finished frames; corrupt lines
     are skipped; both are reported in ``Evaluation.warnings``. ``safety`` adds off-road and collision
     rates beside ADE (docs/definitions.md#safety) from ``dataroot``/``version`` (default: each run's
-    manifest's dataset); without one the columns say why they are empty.
+    manifest's dataset); without one the columns say why they are empty. ``planning`` adds NAVSIM's planning
+    score (``Evaluation.planning``, docs/definitions.md#planning-score) from the same dataset.
     """
+    from lightemma.evaluation.loading import discover_runs
+
     conventions = _conventions(convention)  # check the arguments before reading any run
-    runs = [load_run(d, parse=parse, keep_implausible=keep_implausible) for d in expand_run_dirs(run_dirs)]
-    return evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling, pairwise=pairwise,
-                           safety=safety, dataroot=dataroot, version=version)
+    dirs, left_out = discover_runs(run_dirs)  # a corrupt manifest or a linked run: left out with a warning
+    runs = [load_run(d, parse=parse, keep_implausible=keep_implausible, details=planning) for d in dirs]  # actions: plan headings
+    evaluation = evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling,
+                                 pairwise=pairwise, safety=safety, planning=planning, dataroot=dataroot, version=version)
+    evaluation.warnings[:0] = left_out
+    return evaluation

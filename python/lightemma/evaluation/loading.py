@@ -553,3 +553,46 @@ def read_frame_records(run_dir: str | os.PathLike[str], frame_ids: Iterable[str]
         if record["frame_id"] in wanted:
             found[record["frame_id"]] = record
     return found
+
+
+def discover_runs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], list[str]]:
+    """The run directories named by ``paths`` (each a run directory or a folder holding runs), and warnings.
+
+    Within a folder, a run whose manifest cannot be read is left out with a warning naming it and why (one corrupt
+    manifest does not block the others), and so is a symbolic link to a folder holding runs (never followed: a link
+    can lead anywhere, or in a circle; give the run by its own path to include it). A run directory named itself
+    whose manifest cannot be read raises :class:`RunStoreError`, as does a path holding no run.
+    """
+    from lightemma._text import printable
+    from lightemma.evaluation.core import expand_run_dirs
+    from lightemma.runs.store import MANIFEST_FILE, find_run_dirs, read_manifest
+
+    given = [Path(p) for p in paths]
+    warnings: list[str] = []
+    for path in given:
+        if not path.is_dir() or (path / MANIFEST_FILE).is_file():
+            continue
+        for root, dirs, _files in os.walk(path):
+            for name in sorted(dirs):
+                link = Path(root) / name
+                if link.is_symlink() and not name.startswith("."):
+                    with suppress(OSError, RunStoreError):
+                        held = find_run_dirs(link)
+                        if held:
+                            warnings.append(f"left out {printable(link)}: a symbolic link to {printable(os.readlink(link))} holding "
+                                            f"{len(held)} run(s), not followed; give it by its own path to include it")
+    found = expand_run_dirs(given)
+    named = {Path(os.path.abspath(p)) for p in given if (p / MANIFEST_FILE).is_file()}
+    dirs: list[Path] = []
+    for run_dir in found:
+        try:
+            read_manifest(run_dir)
+        except RunStoreError as exc:
+            if Path(os.path.abspath(run_dir)) in named:
+                raise
+            warnings.append(f"left out {printable(run_dir)}: {printable(exc)}")
+            continue
+        dirs.append(run_dir)
+    if not dirs:
+        raise RunStoreError(f"no readable lightemma run in {', '.join(printable(p) for p in given)}: {warnings[-1]}")
+    return dirs, warnings

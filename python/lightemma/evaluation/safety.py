@@ -369,6 +369,12 @@ class SafetyData:
     pose_reasons: dict[str, str] = field(default_factory=dict)
     bad_boxes: dict[str, str] = field(default_factory=dict)
     agents: str = "all"
+    #: with ``history`` > 0 (the planning score): sample → its earlier keyframes, nearest first; the poses of those
+    #: and of the later keyframes are in ``poses`` too, ``box_instances`` holds each box's instance token and
+    #: ``timestamps`` each read sample's timestamp (µs)
+    past: dict[str, list[str]] = field(default_factory=dict)
+    box_instances: dict[str, list[str | None]] = field(default_factory=dict)
+    timestamps: dict[str, float] = field(default_factory=dict)
 
     def area_kinds(self) -> list[str]:
         """The kinds of drivable area in use (``expansion``, ``mask``), sorted."""
@@ -476,7 +482,7 @@ _MAP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,99}")
 
 
 def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples: set[str] | None = None,
-                     agents: str = "all") -> SafetyData:
+                     agents: str = "all", history: int = 0) -> SafetyData:
     """Read poses, agents and drivable areas of ``dataroot/version`` (only ``samples`` and their futures if given).
 
     The drivable area of a log is the map expansion's ``drivable_area`` (``maps/expansion/<location>.json``)
@@ -485,8 +491,11 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
     silent fall-back to the mask. Maps that cannot be read, ego poses that are not poses (rotation under the
     frame reader's unit-quaternion rule) and annotation boxes that are not boxes (:func:`_box`) are
     recorded as reasons (the frames they touch get n/a), not raised. ``agents``: which boxes count
-    (:data:`AGENT_FILTERS`). A table that is missing, unreadable or holds a record that is not an object
-    raises :class:`DatasetError` naming the file.
+    (:data:`AGENT_FILTERS`). ``history`` > 0 (the planning score, :mod:`lightemma.evaluation.planning`) also
+    reads up to that many earlier keyframes of each sample (``past``), the poses of the earlier and later
+    keyframes, the boxes of the keyframe just before, each box's instance token and the samples' timestamps;
+    what the safety metrics read is the same either way. A table that is missing, unreadable or holds a record
+    that is not an object raises :class:`DatasetError` naming the file.
     """
     if agents not in AGENT_FILTERS:
         raise ValueError(f"unknown agent filter {agents!r}; choose one of {', '.join(AGENT_FILTERS)}")
@@ -509,12 +518,26 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
             nxt = by_token[nxt].get("next", "")
         data.future[tok] = chain
     needed = wanted | {t for c in data.future.values() for t in c}
+    posed, boxed = wanted, needed
+    if history > 0:
+        for tok in wanted:
+            chain, prv = [], by_token[tok].get("prev", "")
+            while isinstance(prv, str) and prv and len(chain) < history and prv in by_token:
+                chain.append(prv)
+                prv = by_token[prv].get("prev", "")
+            data.past[tok] = chain
+        posed = needed | {t for c in data.past.values() for t in c}
+        boxed = needed | {c[0] for c in data.past.values() if c}
+        for tok in posed:
+            stamp = by_token[tok].get("timestamp")
+            if isinstance(stamp, (int, float)) and not isinstance(stamp, bool) and math.isfinite(stamp):
+                data.timestamps[tok] = float(stamp)
     pose_token: dict[str, str] = {}
     for sd in _table(tables, "sample_data"):
         st, cs = sd.get("sample_token"), sd.get("calibrated_sensor_token")
         front = isinstance(cs, str) and channel_of_cs.get(cs) == "CAM_FRONT"
         ep_token = sd.get("ego_pose_token")
-        if sd.get("is_key_frame") and isinstance(st, str) and st in wanted and front and isinstance(ep_token, str):
+        if sd.get("is_key_frame") and isinstance(st, str) and st in posed and front and isinstance(ep_token, str):
             pose_token[st] = ep_token
     by_pose = {tok: st for st, tok in pose_token.items()}
     for ep in _table(tables, "ego_pose"):
@@ -585,10 +608,10 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
         if agents == "visible":
             v0_40 = {v["token"] for v in _table(tables, "visibility") if v.get("level") == "v0-40"}
         where = os.fspath(tables / "sample_annotation.json")
-        gathered: dict[str, tuple[list, list, list]] = {}
+        gathered: dict[str, tuple[list, list, list, list]] = {}
         for ann in annotations:
             st = _ref(ann, "sample_token")
-            if st not in needed:
+            if st not in boxed:
                 continue
             cls = klass.get(_ref(ann, "instance_token"), OTHER)
             if cls == OTHER:
@@ -603,15 +626,18 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
             except ValueError as exc:
                 data.bad_boxes.setdefault(st, f"{where} {ann['token']}: {exc}")
                 continue
-            b, c, t = gathered.setdefault(st, ([], [], []))
+            b, c, t, inst = gathered.setdefault(st, ([], [], [], []))
             b.append(box)
             c.append(cls)
             t.append(ann["token"])
-        for st in needed:
-            b, c, t = gathered.get(st, ([], [], []))
+            inst.append(_ref(ann, "instance_token"))
+        for st in boxed:
+            b, c, t, inst = gathered.get(st, ([], [], [], []))
             data.boxes[st] = np.asarray(b, dtype=np.float64).reshape(-1, 5)
             data.classes[st] = np.asarray(c, dtype=np.int8)
             data.box_tokens[st] = t
+            if history > 0:
+                data.box_instances[st] = inst
     return data
 
 
@@ -929,6 +955,7 @@ def evaluate_safety(
     version: str | None = None,
     ego: EgoModel = EGO,
     agents: str = "all",
+    history: int = 0,
 ) -> SafetyResult:
     """Safety rows for evaluated runs: ``entries`` = (label, RunData, scored rows) as in :func:`evaluate_loaded`.
 
@@ -936,7 +963,8 @@ def evaluate_safety(
     off-road values are the same in every table. Intervals: :func:`_rate_intervals`. The floor is the
     ground truth's own (unmasked) rates over every frame with usable ground truth in any run. ``agents``:
     which annotation boxes count (:data:`AGENT_FILTERS`). A run whose ground truth moves faster than
-    :data:`lightemma.frames.geometry.POSE_JUMP_SPEED` between keyframes gets a warning (a pose jump).
+    :data:`lightemma.frames.geometry.POSE_JUMP_SPEED` between keyframes gets a warning (a pose jump). ``history``:
+    as :func:`load_safety_data` (the planning score reuses the data read here).
     """
     warnings: list[str] = []
     for label, run, _ in entries:  # every frame with ground truth, scored or not
@@ -952,7 +980,7 @@ def evaluate_safety(
     for ds, members in datasets.items():
         tokens = {sample_token_of(f) for i in members for f in entries[i][1].frame_ids}
         try:
-            loaded[ds] = load_safety_data(ds[0], ds[1], samples=tokens, agents=agents)
+            loaded[ds] = load_safety_data(ds[0], ds[1], samples=tokens, agents=agents, history=history)
         except DatasetError as exc:
             loaded[ds] = str(exc)
             warnings.append(f"safety metrics: {exc}")

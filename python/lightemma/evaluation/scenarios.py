@@ -47,6 +47,9 @@ TAGS: tuple[str, ...] = (
 )
 #: tags from a model's own safety outcomes (need the evaluation's ``safety``)
 SAFETY_TAGS: tuple[str, ...] = ("collides", "off_road")
+#: tags from a model's own planning sub-scores (need the evaluation's ``planning``; lightemma.evaluation.planning.frame_tags):
+#: ``wrong-way``, ``uncomfortable``, ``no-progress``
+from lightemma.evaluation.planning import PLANNING_TAGS  # noqa: E402  (beside the other tag lists)
 # tags whose worst frames illustrate the paper's failure cases
 CASE_TAGS: tuple[str, ...] = ("straight_after_right_turn", "straight_after_left_turn", "turning_left", "turning_right", "braking", "starting")
 
@@ -173,13 +176,34 @@ def _safety_masks(safety: Any, label: str, run: RunData, rows: np.ndarray) -> di
     return out
 
 
-def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None, safety: Any = None) -> list[dict[str, Any]]:
+def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """``wrong-way`` / ``uncomfortable`` / ``no-progress`` of ``rows`` of a run from its planning sub-scores (False where n/a)."""
+    from lightemma.evaluation.planning import frame_tags
+
+    rp = planning.runs.get(label) if planning is not None else None
+    out = {tag: np.zeros(len(rows), dtype=bool) for tag in PLANNING_TAGS}
+    if rp is None:
+        return out
+    tags = frame_tags(rp)
+    where = {f: i for i, f in enumerate(rp.frame_ids)}
+    for j, r in enumerate(rows):
+        i = where.get(run.frame_ids[r])
+        if i is not None:
+            for tag in PLANNING_TAGS:
+                out[tag][j] = tags[tag][i]
+    return out
+
+
+def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None, safety: Any = None,
+                    planning: Any = None) -> list[dict[str, Any]]:
     """One row per tag (and ``all``): frames and, per model, ADE avg / FDE / miss rate on them.
 
     Each model is scored on its valid frames, or on ``frame_ids`` (e.g. the
     common frames) when given; one batched core call per model and tag. With ``safety``
     (an evaluation's :class:`~lightemma.evaluation.safety.SafetyResult`) the tags ``collides`` and
-    ``off_road`` follow, per model from its own outcomes ("frames" counts the first model's).
+    ``off_road`` follow, per model from its own outcomes ("frames" counts the first model's); with ``planning`` (an
+    evaluation's :class:`~lightemma.evaluation.planning.PlanningResult`) the tags ``wrong-way``, ``uncomfortable`` and
+    ``no-progress`` the same way.
     """
     from lightemma import evaluate
 
@@ -190,9 +214,11 @@ def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", f
         masks = tag_frames(run.gt_positions[rows], _require_history(run)[rows])
         if safety is not None:
             masks.update(_safety_masks(safety, label, run, rows))
+        if planning is not None:
+            masks.update(_planning_masks(planning, label, run, rows))
         per_model.append((run, rows, {"all": np.ones(len(rows), dtype=bool), **masks}))
     out = []
-    for tag in ("all", *TAGS, *(SAFETY_TAGS if safety is not None else ())):
+    for tag in ("all", *TAGS, *(SAFETY_TAGS if safety is not None else ()), *(PLANNING_TAGS if planning is not None else ())):
         row: dict[str, Any] = {"tag": tag, "frames": int(per_model[0][2][tag].sum()) if per_model else 0}
         for label, (run, rows, masks) in zip(labels, per_model):
             chosen = rows[masks[tag]]

@@ -3,6 +3,7 @@ plus the paired comparisons (``pairwise_ade``) and the per-family generation ver
 
 from __future__ import annotations
 
+from lightemma._text import printable
 from lightemma.evaluation.core import LOW_COVERAGE, Evaluation
 from lightemma.evaluation.paper import (
     ACCURACY_DIFF_KEYS,
@@ -44,14 +45,33 @@ def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool 
             # the row is computed; only its interval is missing, and the note says why
             flags[row["model"]] = flags.get(row["model"], "") + " (no interval)"
             notes.append(f"{row['model']}: {row['ci95_unavailable']}.")
+    columns, count_notes = _outcome_columns(rows)
+    notes = [*count_notes, *notes]
     if with_paper and convention == PAPER_CONVENTION:
         rows = beside_paper(evaluation.models, rows, paper_accuracy_rows(), ACCURACY_DIFF_KEYS)
+        for row in rows:
+            if row.get("source") == "paper":  # the paper scored every frame it counts: its 3,908 are its frames
+                row.setdefault("frames_accounted", row.get("frames"))
         # the paper has no safety columns: its table stays as it was, safety goes in a table of its own
-        return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
+        return Table(title, columns, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
     if evaluation.safety is None:
-        return Table(title, ACCURACY_COLUMNS, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
-    return Table(title, (*ACCURACY_COLUMNS, *SAFETY_COLUMNS), _with_floor(evaluation, rows, convention), name=f"accuracy_{convention}",
+        return Table(title, columns, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
+    return Table(title, (*columns, *SAFETY_COLUMNS), _with_floor(evaluation, rows, convention), name=f"accuracy_{convention}",
                  flags=flags, notes=notes + safety_notes(evaluation, convention))
+
+
+def _outcome_columns(rows: list[dict]) -> tuple[tuple[Column, ...], list[str]]:
+    """Table II's columns: "Frames" (the frames accounted, as in Table I) = Scored + Failed + Implausible + API errors
+    (+ "Other unscored", shown only where a run has such frames: no usable ground truth or no finite trajectory)."""
+    for row in rows:
+        counted = [row.get(k) for k in ("scored", "failed", "implausible", "api_errors")]
+        if row.get("frames_accounted") is not None and all(isinstance(c, int) for c in counted):
+            row["unscored_other"] = row["frames_accounted"] - sum(counted)
+    if not any(row.get("unscored_other") for row in rows):
+        return ACCURACY_COLUMNS, []
+    at = next(i for i, c in enumerate(ACCURACY_COLUMNS) if c.key == "api_errors") + 1
+    columns = (*ACCURACY_COLUMNS[:at], Column("unscored_other", "Other unscored"), *ACCURACY_COLUMNS[at:])
+    return columns, ["Other unscored: frames neither scored nor failed, implausible or lost to API errors (no usable ground truth, or no finite trajectory)."]
 
 
 def _with_floor(evaluation: Evaluation, rows: list[dict], convention: str) -> list[dict]:
@@ -75,7 +95,8 @@ def safety_notes(evaluation: Evaluation, convention: str) -> list[str]:
         f"(centre {EGO_OFFSET:.3f} m ahead of the rear axle, heading along the trajectory, kept for steps < {MIN_STEP:g} m) off the drivable area "
         "at some step; Off-road Ts at T; centre: the reference point only (the devkit's test). Vehicles and vulnerable road users (VRU: "
         f"pedestrians, cyclists, motorcyclists) apart. '{FLOOR_LABEL}': the ground truth's own unmasked rates on every evaluated frame. "
-        "Drivable area: map expansion polygons (expansion) or the base map mask (mask: drivable surface and sidewalks)."
+        "Drivable area: map expansion polygons (expansion) or the base map mask (mask: drivable surface and sidewalks). "
+        "Off-road and Collision intervals: exact binomial on the scene-clustered effective sample size (never [0, 0] at 0 %)."
     ]
 
 
@@ -105,7 +126,8 @@ def pairwise_safety_table(evaluation: Evaluation) -> Table:
     r = evaluation.resampling
     cc = (evaluation.pairwise_safety or [{}])[0].get("convention", "")
     notes = [f"A − B in percentage points (< 0: A is safer), paired on the frames where both have a value; {100 * r.confidence:g} % "
-             f"scene-bootstrap interval; p from {r.n_resamples} sign flips of scene-level differences; Holm over all rows. Collision: {cc} convention."]
+             f"scene-bootstrap interval; p from {r.n_resamples} sign flips of scene-level differences; Holm family: the {len(evaluation.pairwise_safety or [])} rows of this table "
+             f"(every pair, off-road and collision together). Collision: {cc} convention.", HOLM_FAMILIES]
     return Table(f"Paired comparisons — off-road and collision, {evaluation.main_convention} table", PAIRWISE_SAFETY_COLUMNS,
                  list(evaluation.pairwise_safety or []), name="pairwise_safety", flags=coverage_flags(evaluation), notes=notes)
 
@@ -146,13 +168,18 @@ GENERATION_COLUMNS: tuple[Column, ...] = (
 )
 
 
+#: said under every table with a "p (Holm)" column: its family is its own rows, so one comparison can differ between tables
+HOLM_FAMILIES = ("Each table corrects over its own family (its rows, as said above): the same comparison can be significant in "
+                 "one table and not in another, whose family is larger or smaller.")
+
+
 def pairwise_table(evaluation: Evaluation) -> Table:
     """Every pair of runs: mean paired ADE-avg difference on common frames, interval, p-values (``pairwise_ade``)."""
     r = evaluation.resampling
     notes = [
         f"A − B < 0: A is better. Paired on the frames scored in both runs; {100 * r.confidence:g} % scene-bootstrap interval; "
-        f"p from {r.n_resamples} sign flips of scene-level differences; Holm-adjusted over all {len(evaluation.pairwise or [])} pairs; "
-        f"significant: p (Holm) ≤ {1 - r.confidence:.2f}.",
+        f"p from {r.n_resamples} sign flips of scene-level differences; Holm family: all {len(evaluation.pairwise or [])} pairs of this table; "
+        f"significant: p (Holm) ≤ {1 - r.confidence:.2f}.", HOLM_FAMILIES,
         *_notes(evaluation)[:1],
     ]
     title = f"Paired comparisons — ADE avg, {evaluation.main_convention} convention"
@@ -162,7 +189,8 @@ def pairwise_table(evaluation: Evaluation) -> Table:
 def generations_table(evaluation: Evaluation) -> Table:
     """Per family, each generation against its predecessor: better, worse or not distinguishable."""
     notes = ["Change = newer − older (negative: the newer generation is better); a verdict needs p (Holm) ≤ "
-             f"{1 - evaluation.resampling.confidence:.2f}, else not distinguishable.", *_notes(evaluation)[:1]]
+             f"{1 - evaluation.resampling.confidence:.2f}, else not distinguishable. p (Holm) is the paired-comparisons table's (Holm family: "
+             f"all {len(evaluation.pairwise or [])} pairs of runs).", *_notes(evaluation)[:1]]
     return Table("Generations — is each generation better than its predecessor?", GENERATION_COLUMNS, evaluation.generations(), name="generations", flags=coverage_flags(evaluation), notes=notes)
 
 
@@ -187,8 +215,8 @@ def _paired_metric_columns(diff: str, sides: tuple[tuple[str, str], tuple[str, s
 def _paired_note(evaluation: Evaluation, rows: int) -> str:
     r = evaluation.resampling
     return (f"Paired on the frames scored in both runs; {100 * r.confidence:g} % scene-bootstrap interval; p from {r.n_resamples} "
-            f"sign flips of scene-level differences, Holm-adjusted over the {rows} row(s) of this table (per metric); significant: "
-            f"p (Holm) ≤ {1 - r.confidence:.2f}.")
+            f"sign flips of scene-level differences; Holm family: the {rows} row(s) of this table, per metric; significant: "
+            f"p (Holm) ≤ {1 - r.confidence:.2f}. " + HOLM_FAMILIES)
 
 
 def input_ablation_table(evaluation: Evaluation) -> Table:
@@ -240,4 +268,104 @@ def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> li
             tables.append(generations_table(evaluation))
     if any(r["diff"] is not None for r in evaluation.pairwise_safety or []):  # some pair has common frames with values
         tables.append(pairwise_safety_table(evaluation))
+    if evaluation.planning is not None and evaluation.planning.shown:  # the planning score (NAVSIM), after the safety columns
+        tables.append(planning_table(evaluation))
+        if any(r["diff"] is not None for r in evaluation.planning.pairwise or []):
+            tables.append(pairwise_planning_table(evaluation))
     return tables + ablation_tables(evaluation)
+
+
+def provenance_footer(lines: list[str], fmt: str) -> str:
+    """The compact provenance footer under Markdown, LaTeX or CSV tables (``lines``:
+    :func:`lightemma.evaluation.descriptors.footer_lines`): a ``####`` block, ``%`` or ``#`` comment lines."""
+    from lightemma.report.tables import markdown_text
+
+    if fmt == "md":
+        return "\n#### Provenance\n\n" + "".join(f"- {markdown_text(line)}\n" for line in lines)
+    mark = {"latex": "%", "csv": "#"}[fmt]
+    return "\n" + "".join(f"{mark} {printable(line)}\n" for line in [f"provenance:", *lines])
+
+
+
+def provenance_table(evaluation: Evaluation) -> Table:
+    """The report's "Provenance" panel: software, each frame set's fingerprint with its runs, each run's prompt set, parse
+    mode and the source of its safety columns, and the ids of the metrics shown (lightemma.evaluation.descriptors)."""
+    from lightemma.evaluation.descriptors import footer_lines, provenance
+
+    from lightemma.frames.fingerprint import describe_fingerprint
+
+    prov = provenance(evaluation)
+    lines = footer_lines(evaluation)
+    rows: list[dict[str, str]] = [{"item": "Software", "value": lines[0]}]
+    for fp in prov["frame_sets"].values():
+        users = ", ".join(r["model"] for r in prov["runs"] if r["frame_set"] == fp["id"])
+        rows.append({"item": f"Frame set {describe_fingerprint(fp)}", "value": users})
+    rows.append({"item": "Metrics", "value": lines[-1].removeprefix("Metrics: ")})
+    for run in prov["runs"]:
+        prompt = run["prompt_set"]
+        source = run["safety_source"] or {}
+        value = (f"frames {run['frame_set']}; prompts {prompt.get('name')} {prompt.get('hash') or ''}; parse {run['parse']}; "
+                 f"{run['integrator']}; drivable area {source.get('drivable_area') or 'n/a'}; lightemma "
+                 f"{run['lightemma_version'] or '?'}" + (" (imported)" if run["imported"] else ""))
+        rows.append({"item": run["model"], "value": value})
+    return Table("Provenance", (Column("item", "What"), Column("value", "Which")), rows, name="provenance",
+                 notes=["What each number is: docs/evaluate.md#what-each-number-is; every column's descriptor: "
+                        "lightemma evaluate --format json."])
+
+
+#: the planning score's columns (docs/definitions.md#planning-score): means in [0, 1], n/a with the reason
+_PLANNING_TITLES = {"pdms": "PDMS", "epdms": "EPDMS", "epdms_map": "EPDMS-map", "nc": "NC", "dac": "DAC", "ddc": "DDC",
+                    "tlc": "TLC", "ep": "EP", "ttc": "TTC", "lk": "LK", "c": "C", "hc": "HC", "ec": "EC"}
+
+
+def planning_columns(headline: str) -> tuple[Column, ...]:
+    """Model, frames, the headline aggregate and PDMS with their intervals, then the other aggregate and every sub-score."""
+    from lightemma.evaluation.planning import KEYS
+
+    lead = [headline] + [k for k in ("pdms",) if k != headline]
+    rest = [k for k in KEYS if k not in lead]
+    cols = [Column("model", "Model"), Column("planning_frames", "Frames")]
+    cols += [Column(k, f"{_PLANNING_TITLES[k]} [95% CI]", fixed(3), ci=f"{k}_ci95", na=f"{k}_na") for k in lead]
+    cols += [Column(k, _PLANNING_TITLES[k], fixed(3), na=f"{k}_na") for k in rest]
+    return (*cols, Column("planning_map", "Drivable area"))
+
+
+def planning_table(evaluation: Evaluation) -> Table:
+    """"Planning score (NAVSIM)": per model its PDMS / EPDMS (or EPDMS-map) and sub-scores, and the ground truth's own row
+    scored by the same code (``Evaluation.planning``, lightemma.evaluation.planning)."""
+    from lightemma.evaluation.planning import GT_LABEL
+
+    result = evaluation.planning
+    rows = [{"model": m.label, **m.planning} for m in evaluation.models]
+    if result.ground_truth:
+        rows.append({**result.ground_truth, "source": "ground truth"})
+    r = evaluation.resampling
+    notes = [
+        "NAVSIM's planning score on each model's scored frames, re-simulated (LQR tracker on a kinematic bicycle, 0.1 s, 3 s) "
+        "from the initial state derived from the ego poses: PDMS = NC·DAC·(5EP + 5TTC + 2C)/12; EPDMS = NC·DAC·DDC·TLC·"
+        "(5EP + 5TTC + 2LK + 2HC + 2EC)/16 with the human-penalty filter (with annotations); EPDMS-map = DAC·DDC·(5EP + 2LK + "
+        "2HC + 2EC)/11 (without annotations). TLC is n/a (nuScenes has no traffic-light states) and counted as 1. Means in "
+        "[0, 1] over the frames that have a value; n/a (why) where none has (docs/definitions.md#planning-score).",
+        f"'{GT_LABEL}': the ground truth scored by the same code on every evaluated frame (NAVSIM's human agent scores about "
+        "0.94 PDMS on navtest; here the ground truth also stands in for PDM-Closed in EP, so its EP is 1 wherever it moves "
+        "more than 5 m).",
+    ]
+    if r.n_resamples:
+        notes.append(f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed}).")
+    return Table("Planning score (NAVSIM)", planning_columns(result.headline), rows, name="planning",
+                 flags=coverage_flags(evaluation), notes=notes)
+
+
+def pairwise_planning_table(evaluation: Evaluation) -> Table:
+    """Every pair of runs on the headline planning aggregate (``PlanningResult.pairwise``)."""
+    result = evaluation.planning
+    r = evaluation.resampling
+    title = _PLANNING_TITLES.get(result.headline, result.headline)
+    cols = (Column("model_a", "Model A"), Column("model_b", "Model B"), Column("frames", "Common frames"),
+            Column("scenes", "Scenes"), Column("diff", f"{title} A − B [95% CI]", fixed(3), ci="ci95"),
+            Column("p_value", "p", fixed(4)), Column("p_holm", "p (Holm)", fixed(4)), Column("significant", "Significant", _significant))
+    notes = [f"A − B > 0: A scores higher. Paired on the frames where both have a value; {100 * r.confidence:g} % scene-bootstrap "
+             f"interval; p from {r.n_resamples} sign flips of scene-level differences; Holm family: the {len(result.pairwise or [])} rows of "
+             "this table.", HOLM_FAMILIES]
+    return Table(f"Paired comparisons — planning score ({title})", cols, list(result.pairwise or []), name="pairwise_planning",
+                 flags=coverage_flags(evaluation), notes=notes)

@@ -31,7 +31,7 @@ from lightemma._text import printable
 from lightemma.evaluation.loading import RunData
 from lightemma.evaluation.outcomes import FAILURES
 from lightemma.evaluation.scenarios import TAGS, tag_frames
-from lightemma.report.tables import MODEL_KEYS, Table, _cells
+from lightemma.report.tables import MODEL_KEYS, Table, _cells, table_notes
 
 TEXT_CHUNK = 64  # frames per html/texts/<k>.js file
 THUMB_WIDTH = 480  # px: camera thumbnails (the frame view scales them up)
@@ -128,16 +128,71 @@ class FrameTable:
         return np.where(d >= 0, d, np.nan)
 
 
-def frame_data(ft: FrameTable, models: Sequence[Mapping[str, Any]], images: Mapping[int, str]) -> dict[str, Any]:
-    """The payload of ``html/data.js``: columns over frames, one list per model for per-model values."""
+def safety_flags(ft: FrameTable, safety: Any) -> dict[str, list[list[int | None]]]:
+    """Per model and frame, ``collides`` and ``off_road`` (docs/definitions.md#safety: the model's own footprints
+    overlap an annotated agent at some step / a footprint corner leaves the drivable area at some step) as 1 or 0;
+    None where the frame has no value (not scored, not in the run, no dataroot, or no map / annotations for it).
+    ``safety``: the evaluation's :class:`~lightemma.evaluation.safety.SafetyResult`, or None (every value None)."""
+    m, n = len(ft.labels), len(ft)
+    out: dict[str, list[list[int | None]]] = {key: [[None] * n for _ in range(m)] for key in ("collides", "off_road")}
+    if safety is None:
+        return out
+    index = {fid: j for j, fid in enumerate(ft.frame_ids)}
+    for i, label in enumerate(ft.labels):
+        rs = safety.runs.get(label)
+        if rs is None or rs.model is None:
+            continue
+        hit = rs.model.collide.any(axis=(1, 2))
+        off = rs.model.off_steps.any(axis=1)
+        for k, fid in enumerate(rs.frame_ids):
+            j = index.get(fid)
+            if j is None:
+                continue
+            if rs.model.coll_ok[k]:
+                out["collides"][i][j] = int(hit[k])
+            if rs.model.area_ok[k]:
+                out["off_road"][i][j] = int(off[k])
+    return out
+
+
+#: the frame view draws every SIM_STRIDE-th re-simulated state of the planning score (0.3 s apart: 11 points)
+SIM_STRIDE = 3
+
+
+def simulated_paths(ft: FrameTable, planning: Any) -> list[list[float | None]] | None:
+    """Per model a flat list over frames of the planning score's re-simulated path (docs/definitions.md#planning-score):
+    11 points 0.3 s apart from 0 to 3 s, x, y (m) in the keyframe's ego frame; None where the frame was not simulated.
+    ``planning``: the evaluation's :class:`~lightemma.evaluation.planning.PlanningResult`, or None (then None)."""
+    if planning is None:
+        return None
+    points = 30 // SIM_STRIDE + 1
+    out = np.full((len(ft.labels), len(ft), points, 2), np.nan)
+    index = {fid: j for j, fid in enumerate(ft.frame_ids)}
+    for i, label in enumerate(ft.labels):
+        rp = planning.runs.get(label)
+        if rp is None or rp.path is None:
+            continue
+        for k, fid in enumerate(rp.frame_ids):
+            j = index.get(fid)
+            if j is not None:
+                out[i, j] = rp.path[k, ::SIM_STRIDE]
+    return [_round(p, 2) for p in out]
+
+
+def frame_data(ft: FrameTable, models: Sequence[Mapping[str, Any]], images: Mapping[int, str], safety: Any = None,
+               planning: Any = None) -> dict[str, Any]:
+    """The payload of ``html/data.js``: columns over frames, one list per model for per-model values
+    (``collides`` / ``off_road``: :func:`safety_flags`; ``sim``: :func:`simulated_paths`)."""
     return {
+        **safety_flags(ft, safety),
+        "sim": simulated_paths(ft, planning),
         "models": list(models),
         "tags": list(TAGS),
         "failures": [name or "scored" for name in FAILURES],
         "bands": [[lo, None if math.isinf(hi) else hi, name] for lo, hi, name in ERROR_BANDS],
         "chunk": TEXT_CHUNK,
-        "ids": ft.frame_ids,
-        "scene": ft.scene,
+        "ids": [printable(fid) for fid in ft.frame_ids],  # shown only: a control or bidirectional character as a visible escape
+        "scene": [printable(scene) for scene in ft.scene],
         "tagbits": ft.tags().tolist(),
         "spread": _round(ft.spread(), 2),
         "gt": _round(ft.gt, 2),
@@ -168,7 +223,7 @@ def table_html(table: Table, links: Mapping[str, str]) -> str:
     num = ' class="num"'
     head = "".join(f'<th scope="col" data-col="{k}"{num if numeric[k] else ""}>{html.escape(h)}</th>' for k, h in enumerate(table.headers()))
     body = []
-    for row, cells in zip(table.rows, _cells(table)):
+    for row, cells in zip(table.rows, _cells(table, na_once=True)):
         tds = []
         for k, (col, cell) in enumerate(zip(table.columns, cells)):
             value = row.get(col.key)
@@ -183,7 +238,7 @@ def table_html(table: Table, links: Mapping[str, str]) -> str:
             tds.append(f"<td{attr}>{text}</td>")
         cls = f' class="{row["source"]}"' if row.get("source") in ("paper", "diff") else ""
         body.append(f"<tr{cls}>" + "".join(tds) + "</tr>")
-    notes = "".join(f'<p class="note">{html.escape(printable(n))}</p>' for n in table.notes)
+    notes = "".join(f'<p class="note">{html.escape(printable(n))}</p>' for n in table_notes(table))
     return (f'<section class="table" id="table-{html.escape(table.name)}"><h3>{html.escape(printable(table.title))}</h3>'
             f'<div class="scroll"><table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>{notes}</section>')
 
@@ -249,16 +304,22 @@ def write_html(
     texts: Mapping[str, Mapping[str, Sequence[str]]],
     cameras: Mapping[str, Any] | None = None,
     progress: bool = False,
+    safety: Any = None,
+    planning: Any = None,
 ) -> Path:
     """Write ``index.html`` and ``html/`` into ``out`` (see the module docstring); returns the page.
 
     ``texts`` maps a model label to {frame id: (scene, intent, answer)}; ``cameras``
     maps a frame id to a :class:`~lightemma.report.figures.frame_view.Camera` (or None);
     ``figures`` are (path relative to ``out``, caption) of PNGs already written; ``progress``
-    shows a progress bar over the camera thumbnails.
+    shows a progress bar over the camera thumbnails; ``safety`` (the evaluation's
+    :class:`~lightemma.evaluation.safety.SafetyResult`, or None) gives each model's per-frame
+    ``collides`` / ``off_road`` flags: a frame-browser filter and columns of the frame view; ``planning`` (the
+    evaluation's :class:`~lightemma.evaluation.planning.PlanningResult`, or None) the re-simulated path each model's
+    plan is scored on, dotted in the frame view's bird's-eye view.
     """
     ft = FrameTable(runs, labels)
-    models = [{"label": lab, "color": colors.get(lab, "#444444"), "family": run.info.family, "baseline": run.info.family == "Baseline"}
+    models = [{"label": printable(lab), "color": colors.get(lab, "#444444"), "family": run.info.family, "baseline": run.info.family == "Baseline"}
               for lab, run in zip(labels, runs)]
     data_dir = out / "html"
     (data_dir / "texts").mkdir(parents=True, exist_ok=True)
@@ -275,7 +336,7 @@ def write_html(
         if written is not None:
             scales[j], sizes[j] = written
             images[j] = name
-    (data_dir / "data.js").write_text(_script("LE.data", frame_data(ft, models, images)), encoding="utf-8")
+    (data_dir / "data.js").write_text(_script("LE.data", frame_data(ft, models, images, safety, planning)), encoding="utf-8")
     for k in range(0, max(1, -(-len(ft) // TEXT_CHUNK))):
         chunk: dict[str, Any] = {}
         for j in range(k * TEXT_CHUNK, min(len(ft), (k + 1) * TEXT_CHUNK)):

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from lightemma._text import printable
 from lightemma.evaluation.loading import RunData, read_frame_records
 from lightemma.report.figures.frame_view import Camera, camera_from_frame, load_image
 from lightemma.frames.geometry import extrinsic_matrix
@@ -92,7 +93,13 @@ class CameraSource:
                       extrinsic=extrinsic_matrix(params["translation"], params["rotation"]), path=path)
 
 
+def visible_lines(text: Any) -> str:
+    """A model's text as it may be shown: its lines kept, every other control or bidirectional character a visible
+    escape (:func:`~lightemma._text.printable` per line: an ESC is no SVG text, a right-to-left override no reorder)."""
+    return "\n".join(printable(line) for line in str(text).split("\n"))
+
+
 def stage_texts(record: Mapping[str, Any] | None) -> dict[str, str]:
-    """The three stage texts of a record: scene, intent and the stage-3 answer."""
+    """The three stage texts of a record: scene, intent and the stage-3 answer (:func:`visible_lines`)."""
     record = record or {}
-    return {"scene": record.get("scene_text") or "", "intent": record.get("intent_text") or "", "answer": record.get("answer") or ""}
+    return {key: visible_lines(record.get(field) or "") for key, field in (("scene", "scene_text"), ("intent", "intent_text"), ("answer", "answer"))}

@@ -12,6 +12,7 @@ import csv
 import io
 import json
 import math
+import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -55,11 +56,27 @@ class Column:
     na: str | None = None
 
 
-def _na_cell(col: Column, row: dict[str, Any]) -> str | None:
-    """``n/a (why)`` for a missing value whose row says why, else None."""
+def _na_cell(col: Column, row: dict[str, Any], keys: dict[str, str] | None = None) -> str | None:
+    """``n/a (why)`` for a missing value whose row says why, else None; with ``keys`` (:func:`na_reasons`) the
+    cell is ``n/a`` or ``n/a [k]`` and the reason is said once, in the table's notes (:func:`table_notes`)."""
     if col.na and row.get(col.key) is None and row.get(col.na):
-        return f"n/a ({row[col.na]})"
+        return f"n/a ({row[col.na]})" if keys is None else "n/a" + keys[str(row[col.na])]
     return None
+
+
+def na_reasons(table: "Table") -> dict[str, str]:
+    """Each distinct reason of the table's ``n/a (why)`` cells, in order, mapped to its cell marker: ``""`` when the
+    table has one reason (every n/a cell says the same), else ``" [1]"``, ``" [2]"``, …"""
+    found = list(dict.fromkeys(str(row[col.na]) for row in table.rows for col in table.columns
+                               if col.na and row.get(col.key) is None and row.get(col.na)))
+    return {why: "" if len(found) == 1 else f" [{k}]" for k, why in enumerate(found, 1)}
+
+
+def table_notes(table: "Table") -> list[str]:
+    """The table's notes, then one line per n/a reason (:func:`na_reasons`): a reason is said once per table,
+    not in each of its cells."""
+    keys = na_reasons(table)
+    return [*table.notes, *(f"Every n/a{k} in this table: n/a ({why})." for why, k in keys.items())]
 
 
 def with_interval(value: Any, interval: Any, fmt: Callable[[Any], str]) -> str:
@@ -78,9 +95,11 @@ def coverage_note(scored_pct: float | None) -> str:
 MODEL_KEYS = ("model", "model_a", "model_b", "predecessor", "baseline")  # columns whose cells name a model
 
 
+#: Table II: "Frames" are the frames accounted (all of the run's, with --common those in every run), as in Table I;
+#: Scored + Failed + Implausible + API errors add up to them (evaluation_tables adds "Other unscored" where they do not)
 ACCURACY_COLUMNS: tuple[Column, ...] = (
     Column("model", "Model"),
-    Column("frames", "Frames"),
+    Column("frames_accounted", "Frames"),
     Column("scored", "Scored"),
     Column("failed", "Failed"),
     Column("implausible", "Implausible"),
@@ -144,14 +163,16 @@ class Table:
         return [printable(c.header + self.flags.get(c.header, "")) for c in self.columns]  # a header can name a model
 
 
-def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
-    """Formatted cells; intervals inline (``1.07 [0.99, 1.15]``) or, with ``split_intervals``, in two cells of their own."""
+def _cells(table: Table, *, split_intervals: bool = False, na_once: bool = False) -> list[list[str]]:
+    """Formatted cells; intervals inline (``1.07 [0.99, 1.15]``) or, with ``split_intervals``, in two cells of their own;
+    with ``na_once`` an n/a cell leaves its reason to :func:`table_notes` (CSV cells keep theirs: a CSV has no notes)."""
+    keys = na_reasons(table) if na_once else None
     out = []
     for row in table.rows:
         marked = set(row.get("anomalous") or ())
         cells = []
         for col in table.columns:
-            na = _na_cell(col, row)
+            na = _na_cell(col, row, keys)
             if col.ci and split_intervals:
                 interval = row.get(col.ci) or (None, None)
                 cells += [na or col.fmt(row.get(col.key)), col.fmt(interval[0]), col.fmt(interval[1])]
@@ -175,18 +196,39 @@ def _cells(table: Table, *, split_intervals: bool = False) -> list[list[str]]:
     return out
 
 
+_MARKDOWN_ESCAPES = {"&": "&amp;", "<": "&lt;", ">": "&gt;"}
+
+
+def markdown_text(text: Any) -> str:
+    """``text`` as inert Markdown inline text: one line (:func:`~lightemma._text.printable`: control and bidirectional
+    characters as visible escapes), ``&``, ``<``, ``>`` as entities (no raw HTML, no autolink) and ``](`` as ``]\\(``
+    (no link). Renders as the text itself; for names from outside (models, scenes, runs, frames) in ``index.md``."""
+    return "".join(_MARKDOWN_ESCAPES.get(ch, ch) for ch in printable(text)).replace("](", "]\\(")
+
+
+def markdown_code(text: Any) -> str:
+    """``text`` as a Markdown code span (shown as it is: no HTML, no entity, no link is read inside one), one line: its
+    fence is one backtick longer than the longest run of backticks in it, so no backtick in the text can end it."""
+    text = printable(text)
+    runs = [len(r) for r in re.findall("`+", text)]
+    fence = "`" * (max(runs, default=0) + 1)
+    pad = " " if not text or text.startswith("`") or text.endswith("`") or (text.startswith(" ") and text.endswith(" ")) else ""
+    return f"{fence}{pad}{text}{pad}{fence}"
+
+
 def markdown_cell(text: Any) -> str:
-    """``text`` as one Markdown table cell: one line (:func:`~lightemma._text.printable`), ``|`` escaped."""
-    return printable(text).replace("|", "\\|")
+    """``text`` as one Markdown table cell: :func:`markdown_text` with ``|`` escaped, so it cannot split the row."""
+    return markdown_text(text).replace("|", "\\|")
 
 
 def to_markdown(table: Table) -> str:
-    """A GitHub-flavoured Markdown table under a ``###`` title; every cell one line (:func:`markdown_cell`)."""
+    """A GitHub-flavoured Markdown table under a ``###`` title; every cell one line of inert text (:func:`markdown_cell`:
+    no raw HTML, no link), title and notes too."""
     headers = [markdown_cell(h) for h in table.headers()]
-    lines = [f"### {printable(table.title)}", "", "| " + " | ".join(headers) + " |", "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
-    lines += ["| " + " | ".join(markdown_cell(c) for c in cells) + " |" for cells in _cells(table)]
-    if table.notes:
-        lines += [""] + [printable(note) for note in table.notes]
+    lines = [f"### {markdown_text(table.title)}", "", "| " + " | ".join(headers) + " |", "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
+    lines += ["| " + " | ".join(markdown_cell(c) for c in cells) + " |" for cells in _cells(table, na_once=True)]
+    if table_notes(table):
+        lines += [""] + [markdown_text(note) for note in table_notes(table)]
     return "\n".join(lines) + "\n"
 
 
@@ -214,8 +256,8 @@ def _latex_escape(text: str) -> str:
 def to_latex(table: Table) -> str:
     """A ``tabular`` in the style of the paper (``\\hline`` rules, model column left)."""
     spec = "l" + "c" * (len(table.columns) - 1)
-    lines = [f"% {printable(table.title)}", *(f"% {printable(note)}" for note in table.notes), f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(h) for h in table.headers()) + r" \\", r"\hline"]
-    lines += [" & ".join(_latex_escape(cell) for cell in cells) + r" \\" for cells in _cells(table)]
+    lines = [f"% {printable(table.title)}", *(f"% {printable(note)}" for note in table_notes(table)), f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(h) for h in table.headers()) + r" \\", r"\hline"]
+    lines += [" & ".join(_latex_escape(cell) for cell in cells) + r" \\" for cells in _cells(table, na_once=True)]
     lines += [r"\hline", r"\end{tabular}"]
     return "\n".join(lines) + "\n"
 

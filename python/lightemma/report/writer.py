@@ -10,16 +10,19 @@ Layout of ``OUT``::
     figures/bubble.{png,svg}, figures/pairwise.{png,svg}, figures/history_bias.{png,svg}, figures/input_ablations.{png,svg}
     figures/frames/<kind>_<frame>.{png,svg}     model grids and single-model pictures
 
-Every model keeps one colour in every figure; only scored frames enter a mean,
+Every run keeps one colour of its own in every figure that draws runs together (the bubble chart colours by
+family); only scored frames enter a mean,
 a figure or the frame picker (docs/statistics.md).
 """
 
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
 import re
+import sys
 from glob import escape as glob_escape
 from collections.abc import Iterable, Sequence
 from pathlib import Path
@@ -30,11 +33,12 @@ import numpy as np
 from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, expand_run_dirs, load_run, read_frame_records
 from lightemma._text import printable
 from lightemma.evaluation.core import unique_labels
+from lightemma.evaluation.loading import discover_runs
 from lightemma.errors import UserError
 from lightemma.evaluation.stats import Resampling
 from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.runs.store import pid_alive
-from lightemma.report.tables import Column, Table, fixed, markdown_cell, to_csv, to_latex, to_markdown
+from lightemma.report.tables import Column, Table, fixed, markdown_cell, markdown_code, markdown_text, to_csv, to_latex, to_markdown
 
 
 SLUG_MAX = 80  # characters of a name kept in a file name (a frame id from a reference file can be any length)
@@ -81,20 +85,33 @@ class _Writer:
         from lightemma.report.figures import save_figure
 
         caption = printable(caption)  # it names frames and models: one line in index.md and index.html
+        text = markdown_text(caption)  # inert in index.md: no raw HTML, no link
+        alt = text.replace("[", "\\[").replace("]", "\\]")
 
         paths = save_figure(fig, self.out / "figures" / stem, formats=("png", "svg") if self.svg else ("png",))
         png = paths[0]
-        self.lines += [f"![{caption}]({self.rel(png)})", f"*{caption}*" + (f" ([svg]({self.rel(paths[1])}))" if self.svg else ""), ""]
+        self.lines += [f"![{alt}]({self.rel(png)})", f"*{text}*" + (f" ([svg]({self.rel(paths[1])}))" if self.svg else ""), ""]
         self.figures.append((self.rel(png), caption))
         return png
 
 
 def _scenario_table(rows: list[dict[str, Any]], labels: Sequence[str], flags: dict[str, str]) -> Table:
-    def cell(value: Any) -> str:
-        return "-" if not value else f"{value['ade_avg']:.2f}"
-
-    columns = [Column("tag", "Tag"), Column("frames", "Frames")] + [Column(label, label, cell) for label in labels]
-    return Table("ADE avg by scenario tag", columns, rows, name="scenarios", flags=flags)
+    """ADE avg per tag and model. "Frames" is each model's count of the tag's frames when it is the same for every
+    model, else their range (``0–12``: the ``collides`` and ``off_road`` tags, or runs scored on their own frames); then
+    each model's cell says its own count (``1.23 (n 12)``), so that no value stands beside a count it was not made on."""
+    shown = []
+    for row in rows:
+        counts = [row.get(f"{label} frames", 0) for label in labels]
+        same = len(set(counts)) <= 1
+        out = {"tag": row["tag"], "frames": (counts[0] if counts else row.get("frames", 0)) if same else f"{min(counts)}–{max(counts)}"}
+        for label, n in zip(labels, counts):
+            value = row.get(label)
+            out[label] = "-" if not value else f"{value['ade_avg']:.2f}" + ("" if same else f" (n {n})")
+        shown.append(out)
+    columns = [Column("tag", "Tag"), Column("frames", "Frames")] + [Column(label, label) for label in labels]
+    notes = [] if all(isinstance(r["frames"], int) for r in shown) else [
+        "Frames: the tag's frames per model where models differ in them (a range); each model's own count is in its cell (n)."]
+    return Table("ADE avg by scenario tag", columns, shown, name="scenarios", flags=flags, notes=notes)
 
 
 def _share(value: Any) -> str:
@@ -130,8 +147,9 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
         ci = r["ci95"]
         p = r["p_holm"]
         detail = f"{r['change']:+.3f} m" + (f" [{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "") + ("" if p is None else f", p (Holm) {p:.3f}" if p >= 0.001 else ", p (Holm) < 0.001")
-        by_family.setdefault(r["family"], []).append(f"{r['model']} is **{r['verdict']}** than {r['predecessor']} ({detail})" if r["verdict"] != "not distinguishable" else f"{r['model']} is **not distinguishable** from {r['predecessor']} ({detail})")
-    return [printable(f"- **{family}**: " + "; ".join(parts) + ".") for family, parts in by_family.items()]
+        model, predecessor = markdown_text(r["model"]), markdown_text(r["predecessor"])  # names from outside: inert Markdown
+        by_family.setdefault(markdown_text(r["family"]), []).append(f"{model} is **{r['verdict']}** than {predecessor} ({detail})" if r["verdict"] != "not distinguishable" else f"{model} is **not distinguishable** from {predecessor} ({detail})")
+    return [f"- **{family}**: " + "; ".join(parts) + "." for family, parts in by_family.items()]
 
 
 def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str], *,
@@ -161,14 +179,14 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
             errors[label] = float(displacement_errors(run.trajectory[row], gt).mean())
         if gt is None:
             continue
-        w.lines.append(printable(f"**{caption}** — frame `{fid}`"))
+        w.lines.append(f"**{markdown_text(caption)}** — frame {markdown_code(fid)}")
         w.lines.append("")
-        w.figure(model_grid(gt, preds, camera=cameras.get(fid), title=f"{fid}: {caption}", errors=errors, colors=colors), f"frames/{kind}_{_slug(fid)}_grid", f"all models on {fid}")
+        w.figure(model_grid(gt, preds, camera=cameras.get(fid), title=printable(f"{fid}: {caption}"), errors=errors, colors=colors), f"frames/{kind}_{_slug(fid)}_grid", f"all models on {fid}")
         models = [lab for lab, run in zip(labels, runs) if lab in errors and run.info.family != "Baseline"] or list(errors)
         worst = max(models, key=errors.get)  # stage texts of a baseline say nothing
         run = runs[list(labels).index(worst)]
         texts = stage_texts(records[id(run)].get(fid))
-        fig = frame_figure(gt, {worst: preds[worst]}, camera=cameras.get(fid), texts=texts, title=f"{fid}: {worst} (ADE {errors[worst]:.2f} m)", colors=colors)
+        fig = frame_figure(gt, {worst: preds[worst]}, camera=cameras.get(fid), texts=texts, title=printable(f"{fid}: {worst} (ADE {errors[worst]:.2f} m)"), colors=colors)
         w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
 
 
@@ -265,8 +283,8 @@ def _report_files(folder: Path) -> list[str]:
     return sorted(found)
 
 
-def _foreign_files(out: Path) -> list[str] | None:
-    """Files in the report ``out`` that its own report did not write (its marker's file list); None: no list to compare."""
+def _marker_files(out: Path) -> list[str] | None:
+    """The files the report ``out`` wrote, as its marker lists them; None when the marker is missing or has no list."""
     try:
         marker = json.loads((out / REPORT_MARKER).read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError):
@@ -274,67 +292,163 @@ def _foreign_files(out: Path) -> list[str] | None:
     own = marker.get("files") if isinstance(marker, dict) else None
     if not isinstance(own, list) or not all(isinstance(f, str) for f in own):
         return None
+    return own
+
+
+def _foreign_files(out: Path) -> list[str] | None:
+    """Files in the report ``out`` that its own report did not write (its marker's file list); None: no list to compare."""
+    own = _marker_files(out)
+    if own is None:
+        return None
     own_set = set(own)
     return [f for f in _report_files(out) if f not in own_set]
 
 
-def _check_target(out: Path, force: bool) -> None:
-    """Refuse (UserError) an ``out`` that is a file, or — unless ``force`` — a non-empty folder that is not a lightemma
-    report, or a report that holds files its report did not write (the marker's file list), or one without that list."""
+def _holds_runs(folder: Path) -> Path | None:
+    """The first lightemma run directory at or below ``folder`` (a ``manifest.json`` of the run store), else None."""
+    from lightemma.runs.store import MANIFEST_FILE
+
+    for root, dirs, files in os.walk(folder):
+        if MANIFEST_FILE in files:
+            return Path(root)
+    return None
+
+
+def _check_target(out: Path, force: bool) -> list[str]:
+    """Refuse (UserError) an ``out`` the report may not replace; returns the files ``force`` keeps (relative paths).
+
+    ``out`` may be missing, an empty folder, or a lightemma report whose marker lists the files it wrote. Refused
+    whatever ``force``: a file, a non-empty folder that is no lightemma report, a folder holding a run, and a report
+    whose marker has no file list (an older lightemma's: its own files cannot be told from others). A report holding
+    files it did not write is refused unless ``force``, which replaces the report's own files and keeps those."""
     if not out.exists() and not out.is_symlink():
-        return
+        return []
     if not out.is_dir():
         raise UserError(f"report folder {out} is a file, not a folder", cli=f"--out {out} is a file, not a folder")
-    if force or not any(out.iterdir()):
-        return
+    if not any(out.iterdir()):
+        return []
     if not _is_report(out):
-        raise UserError(f"{out} is not empty and holds no lightemma report: refusing to overwrite it (force=True to replace it)",
-                        cli=f"--out {out} is not empty and holds no lightemma report: refusing to overwrite it (--force replaces it)")
+        why = "is not empty and holds no lightemma report: refusing to write over it; choose a new or empty folder"
+        raise UserError(f"report folder {out} {why}", cli=f"--out {out} {why}")
+    run = _holds_runs(out)
+    if run is not None:
+        why = f"holds the lightemma run {printable(run)}: the report would replace it; choose another folder"
+        raise UserError(f"report folder {out} {why}", cli=f"--out {out} {why}")
     foreign = _foreign_files(out)
     if foreign is None:
-        why = "is a lightemma report without the list of its files (an older lightemma wrote it), so files added to it cannot be told apart"
-        raise UserError(f"{out} {why}: refusing to replace it (force=True replaces it)", cli=f"--out {out} {why}: refusing to replace it (--force replaces it)")
-    if foreign:
-        named = ", ".join(foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
-        why = f"holds {len(foreign)} file(s) its report did not write ({named})"
-        raise UserError(f"{out} {why}: refusing to replace it (force=True replaces it)", cli=f"--out {out} {why}: refusing to replace it (--force replaces it)")
+        why = ("is a lightemma report without the list of its files (an older lightemma wrote it), so files added to it "
+               "cannot be told apart: refusing to replace it; delete it yourself or choose another folder")
+        raise UserError(f"report folder {out} {why}", cli=f"--out {out} {why}")
+    if foreign and not force:
+        named = ", ".join(printable(f) for f in foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        why = f"holds {len(foreign)} file(s) its report did not write ({named}): refusing to replace it"
+        raise UserError(f"report folder {out} {why} (force=True replaces only the report's own files and keeps these)",
+                        cli=f"--out {out} {why} (--force replaces only the report's own files and keeps these)")
+    return foreign
 
 
 def _within(inner: Path, outer: Path) -> bool:
     return inner == outer or outer in inner.parents
 
 
+def _recorded_dataroots(run_dirs: Sequence[Path]) -> list[tuple[Path, str]]:
+    """Every dataroot a run's manifest records (``dataset.dataroot``, ``config.dataset.dataroot``), with the run's name.
+
+    A manifest that cannot be read records nothing (evaluation skips its run with a warning)."""
+    from lightemma.runs.store import read_manifest
+
+    found: dict[str, tuple[Path, str]] = {}
+    for run_dir in run_dirs:
+        try:
+            manifest = read_manifest(run_dir)
+        except (UserError, OSError):
+            continue
+        config = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+        for dataset in (manifest.get("dataset"), config.get("dataset")):
+            root = dataset.get("dataroot") if isinstance(dataset, dict) else None
+            if isinstance(root, str) and root and root not in found:
+                found[root] = (Path(root), f" (recorded by the run {printable(run_dir)})")
+    return list(found.values())
+
+
 def _check_inputs(out: Path, given: Sequence[Path], run_dirs: Sequence[Path], dataroot: str | None) -> None:
     """Refuse (UserError, whatever ``force``) an ``out`` (as the user gave it) that is, contains or lies inside an input: a
-    run directory, a folder of runs given, or the dataroot — the swap would replace it. Resolved real paths are compared."""
+    run directory, a folder of runs given or the dataroot given; or that is or contains a dataroot any run records —
+    the swap would replace it. Resolved real paths are compared."""
     target = Path(os.path.realpath(out))
-    inputs = [(Path(d), "input run directory") for d in run_dirs] + [(Path(g), "runs folder") for g in given if Path(g).is_dir()]
+    inputs = [(Path(d), "input run directory", "", True) for d in run_dirs] + [(Path(g), "runs folder", "", True) for g in given if Path(g).is_dir()]
     if dataroot is not None:
-        inputs.append((Path(dataroot), "dataroot"))
-    clashes = []  # (rank, relation, what, path): "is" named before "contains" before "lies inside"
-    for path, what in inputs:
+        inputs.append((Path(dataroot), "dataroot", "", True))
+    inputs += [(path, "dataroot", note, False) for path, note in _recorded_dataroots(run_dirs)]  # a report inside one replaces nothing of it
+    clashes = []  # (rank, relation, what, path, note): "is" named before "contains" before "lies inside"
+    for path, what, note, inside in inputs:
         real = Path(os.path.realpath(path))
         if target == real:
-            clashes.append((0, "is", what, path))
+            clashes.append((0, "is", what, path, note))
         elif _within(real, target):
-            clashes.append((1, "contains", what, path))
-        elif _within(target, real):
-            clashes.append((2, "lies inside", what, path))
+            clashes.append((1, "contains", what, path, note))
+        elif inside and _within(target, real):
+            clashes.append((2, "lies inside", what, path, note))
     if clashes:
-        _, relation, what, path = min(clashes, key=lambda c: c[0])
-        message = f"{out} {relation} the {what} {path}: the report would replace it; choose another folder"
+        _, relation, what, path, note = min(clashes, key=lambda c: c[0])
+        message = f"{out} {relation} the {what} {printable(path)}{note}: the report would replace it; choose another folder"
         raise UserError(f"report folder {message} (force does not override this)", cli=f"--out {message} (--force does not override this)")
 
 
-def _swap_in(tmp: Path, out: Path) -> None:
-    """Put the finished report ``tmp`` at ``out`` whole: the old folder is moved aside, then removed."""
+def _keep_files(old: Path, new: Path, keep: Sequence[str]) -> None:
+    """Copy the files ``keep`` (relative paths) that the old report ``old`` holds but did not write into the new report
+    ``new`` (links as links). Refused (UserError) where the new report writes a file of that name or the entry is not a
+    regular file or a link: nothing the report did not write is replaced or lost."""
     import shutil
 
+    for rel in keep:
+        src, dst = old / rel, new / rel
+        if dst.exists() or dst.is_symlink():
+            why = f"--force cannot keep {printable(rel)}: the new report writes a file of that name; move it away first"
+            raise UserError(f"report folder {old}: {why}", cli=f"--out {old}: {why}")
+        if not src.is_symlink() and not src.is_file():
+            why = f"holds {printable(rel)}, which is not a regular file: refusing to replace it; move it away first"
+            raise UserError(f"report folder {old} {why}", cli=f"--out {old} {why}")
+        dst.parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(src, dst, follow_symlinks=False)
+
+
+def _delete_own(old: Path, kept_in: Path | None) -> list[str]:
+    """Delete from the replaced report ``old`` only what it wrote (its marker's list, the marker) and the files kept as
+    identical copies in ``kept_in``; then its empty folders. Returns what is left (then ``old`` stays where it is)."""
+    import filecmp
+
+    own = set(_marker_files(old) or [])
+    for rel in _report_files(old):
+        path = old / rel
+        copy = kept_in / rel if kept_in is not None else None
+        same = copy is not None and (
+            (path.is_symlink() and copy.is_symlink() and os.readlink(path) == os.readlink(copy))
+            or (not path.is_symlink() and path.is_file() and copy.is_file() and not copy.is_symlink() and filecmp.cmp(path, copy, shallow=False)))
+        if rel in own or same:
+            with contextlib.suppress(FileNotFoundError):
+                path.unlink()
+    with contextlib.suppress(FileNotFoundError):
+        (old / REPORT_MARKER).unlink()
+    for root, dirs, _files in os.walk(old, topdown=False):
+        for name in dirs:
+            with contextlib.suppress(OSError):
+                (Path(root) / name).rmdir()  # only an empty one goes
+    left = _report_files(old) if old.exists() else []
+    if old.is_symlink() and not left:  # ``out`` was a link to the old report: its folder is emptied, the link goes
+        old.unlink()
+    with contextlib.suppress(OSError):
+        old.rmdir()
+    return left
+
+
+def _swap_in(tmp: Path, out: Path) -> None:
+    """Put the finished report ``tmp`` at ``out`` whole: the old folder is moved aside, then what it wrote removed."""
     old = None
     if out.exists():
         old = out.with_name(f".{out.name}.old-{os.getpid()}")
-        if old.exists():
-            shutil.rmtree(old)
+        if old.exists() or old.is_symlink():  # kept by an earlier report of this process: it holds files no report wrote
+            raise UserError(f"{old} is in the way of replacing the report {out}: move it away first")
         os.rename(out, old)
     try:
         os.rename(tmp, out)
@@ -343,18 +457,63 @@ def _swap_in(tmp: Path, out: Path) -> None:
             os.rename(old, out)  # put the old report back
         raise
     if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+        left = _delete_own(old, out)
+        if left:
+            print(f"lightemma report: warning: kept {printable(old)}: it holds {len(left)} file(s) the old report did not write "
+                  f"and that are not in the new one ({printable(left[0])}{', …' if len(left) > 1 else ''})", file=sys.stderr)
 
 
 def _remove_stale(out: Path) -> None:
-    """Hidden folders left beside ``out`` by a report that was killed (its process is gone)."""
+    """Hidden folders left beside ``out`` by a report that was killed (its process is gone): a half-written report is
+    removed; a replaced one is put back when ``out`` is missing (killed between the two renames), else only what it
+    wrote and what ``out`` holds identical copies of is removed."""
     import shutil
 
     for kind in ("partial", "old"):
         for path in out.parent.glob(f".{glob_escape(out.name)}.{kind}-*"):
             pid = path.name.rsplit("-", 1)[-1]
-            if pid.isdigit() and int(pid) != os.getpid() and not pid_alive(int(pid)):
-                shutil.rmtree(path, ignore_errors=True)
+            if not pid.isdigit() or int(pid) == os.getpid() or pid_alive(int(pid)):
+                continue
+            if kind == "partial":
+                shutil.rmtree(path, ignore_errors=True)  # only what a report wrote, and copies of files kept
+            elif not out.exists() and not out.is_symlink():
+                os.rename(path, out)
+            else:
+                _delete_own(path, out)
+
+
+WARNING_EXAMPLES = 3  # warnings of one kind shown in full before the rest are counted
+WARNINGS_FILE = "warnings.txt"  # every warning of a report, one a line, where some were summarised
+# what differs between warnings of one kind: frame ids (scene/token), sample tokens, paths, counts and sizes
+_VARYING = re.compile(r"\S+/[0-9a-f]{8,}|[0-9a-f]{8,}|(?<![\w.])/\S+|\d+(?:\.\d+)?")
+
+
+def warning_kind(text: str, names: Sequence[str] = ()) -> str:
+    """What a warning says without what varies between warnings of one kind: each of ``names`` (the run labels),
+    frame ids, sample tokens, absolute paths and numbers replaced by a placeholder."""
+    for name in sorted((n for n in names if n), key=len, reverse=True):
+        text = text.replace(name, "\0")
+    return _VARYING.sub("#", text)
+
+
+def summarise_warnings(warnings: Sequence[str], examples: int = WARNING_EXAMPLES,
+                       names: Sequence[str] = ()) -> list[tuple[str, list[str]]]:
+    """Warnings grouped by :func:`warning_kind` (``names``: the run labels), in order of first appearance:
+    (headline, examples) per group.
+
+    A kind seen at most ``examples`` times gives each warning as a headline with no examples; a kind seen more often
+    gives one headline, ``"N warnings like: <first>"``, and the next ``examples - 1`` warnings as examples (the rest
+    are counted, not repeated). A warning given twice (the same text) counts once."""
+    groups: dict[str, list[str]] = {}
+    for text in dict.fromkeys(warnings):
+        groups.setdefault(warning_kind(text, names), []).append(text)
+    out: list[tuple[str, list[str]]] = []
+    for members in groups.values():
+        if len(members) <= examples:
+            out += [(text, []) for text in members]
+        else:
+            out.append((f"{len(members)} warnings like: {members[0]}", members[1:examples]))
+    return out
 
 
 def _drop_empty_runs(runs: list[RunData]) -> tuple[list[RunData], list[str]]:
@@ -418,7 +577,7 @@ def write_report(
     if dataroot is not None and version and not os.path.isdir(os.path.join(dataroot, version)):
         raise UserError(f"dataroot {dataroot} has no folder {version}", cli=f"--version {version}: --dataroot {dataroot} has no folder {version}")
     given_dirs = [Path(d) for d in run_dirs]  # an iterator is read once
-    dirs = expand_run_dirs(given_dirs)
+    dirs = expand_run_dirs(given_dirs)  # every run found, a corrupt one too: none may be replaced
     _check_inputs(given, given_dirs, dirs, dataroot)
     _check_target(out, force)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -428,12 +587,13 @@ def write_report(
         shutil.rmtree(tmp)
     tmp.mkdir()
     try:
-        _write(tmp, dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
+        _write(tmp, given_dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
                frames=frames, case_tags=case_tags, pairwise=pairwise, resampling=resampling, svg=svg, progress=progress,
                version=version, safety=safety)
         marker = {"written_by": "lightemma report", "files": _report_files(tmp)}  # what a re-report may replace
         (tmp / REPORT_MARKER).write_text(json.dumps(marker) + "\n", encoding="utf-8")
-        _check_target(out, force)  # again: files added to the old report while this one was written
+        keep = _check_target(out, force)  # again: files added to the old report while this one was written
+        _keep_files(out, tmp, keep)  # with force: what the old report did not write goes into the new one
         _swap_in(tmp, out)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -464,9 +624,24 @@ class _Steps:
 def _runs_table(evaluation: Evaluation, flags: dict[str, str]) -> Table:
     rows = [{"model": m.label, "family": m.family, "run": str(m.run_dir), "frames": m.frames_in_run, "complete": "yes" if m.complete else "no",
              "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format, "inputs": m.inputs} for m in evaluation.models]
-    columns = [Column("model", "Model"), Column("family", "Family"), Column("run", "Run"), Column("frames", "Frames"), Column("complete", "Finished"),
+    columns = [Column("model", "Model"), Column("family", "Family"), Column("run", "Run"), Column("frames", "Frames in run"), Column("complete", "Finished"),
                Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format"), Column("inputs", "Inputs")]
     return Table("Runs", columns, rows, name="runs", flags=flags)
+
+
+def _planning_section(w: _Writer, evaluation: Evaluation, colors: dict[str, str], flags: dict[str, str]) -> None:
+    """The planning score by sub-score: one bar per model and the ground truth (when some value is there)."""
+    from lightemma.evaluation.planning import GT_LABEL, KEYS
+    from lightemma.report.figures.planning import planning_figure
+
+    result = evaluation.planning
+    rows = [{"model": m.label, **m.planning} for m in evaluation.models] + ([result.ground_truth] if result.ground_truth else [])
+    if not any(r.get(k) is not None for r in rows for k in KEYS):
+        return
+    w.lines += ["## Planning score by sub-score", ""]
+    w.figure(planning_figure(rows, colors=colors, notes=flags, gt_label=GT_LABEL), "planning",
+             "NAVSIM's planning score per model and the ground truth's own: the aggregates, then each sub-score, means over "
+             "the frames with a value and their 95 % scene-bootstrap intervals; n/a where no frame has one (the table says why)")
 
 
 def _write(
@@ -492,11 +667,12 @@ def _write(
 
     from lightemma.evaluation.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
     from lightemma.report.evaluation_tables import coverage_flags
-    from lightemma.report.figures import bubble_chart, bubble_points, history_bias_figure, model_colors, pairwise_figure
+    from lightemma.report.figures import bubble_chart, bubble_points, history_bias_figure, pairwise_figure
+    from lightemma.report.figures._mpl import RUN_PALETTE, run_colors
     from lightemma.report.html import write_html
-    from lightemma.report.pictures import CameraSource
+    from lightemma.report.pictures import CameraSource, visible_lines
 
-    dirs = expand_run_dirs(run_dirs)
+    dirs, left_out = discover_runs(run_dirs)  # a corrupt manifest or a linked run: left out with a warning
     steps = _Steps(progress, total=len(dirs) + 7)
     runs = []
     for d in dirs:
@@ -509,33 +685,59 @@ def _write(
         raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
     evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1,
                                              safety=safety, dataroot=dataroot if version else None, version=version)
-    evaluation.warnings[:0] = skipped
+    evaluation.warnings[:0] = [*left_out, *skipped]
     steps.step("evaluated")
     order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
     runs.sort(key=lambda r: order[r.info.run_dir])
     labels = unique_labels(runs)
-    colors = model_colors(evaluation.models)
+    colors = run_colors(labels)  # one colour per run, distinct in every figure that draws runs together (not per family)
+    if len(labels) > len(RUN_PALETTE):
+        evaluation.warnings.append(f"{len(labels)} runs, {len(RUN_PALETTE)} distinct colours: from run {len(RUN_PALETTE) + 1} on, "
+                                   "the figures repeat colours (tell runs apart by their legends' order)")
     flags = coverage_flags(evaluation)
     w = _Writer(out, svg=svg)
     w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
-                "| Model | Family | Run | Frames | Finished | Integrator | Chain | Answer format | Inputs |",
+                "| Model | Family | Run | Frames in run | Finished | Integrator | Chain | Answer format | Inputs |",
                 "|---|---|---|---:|---|---|---|---|---|"]
-    w.lines += ["| " + " | ".join(markdown_cell(c) for c in (m.label + flags.get(m.label, ""), m.family, f"`{m.run_dir}`", m.frames_in_run,
+    w.lines += ["| " + " | ".join(markdown_cell(c) for c in (m.label + flags.get(m.label, ""), m.family, m.run_dir, m.frames_in_run,
                                                              "yes" if m.complete else "no", m.integrator, m.chain, m.answer_format, m.inputs)) + " |"
                 for m in evaluation.models]  # every cell one line: names from outside cannot split a row
     w.lines.append("")
+    from lightemma.evaluation.safety import FLOOR_LABEL
+
+    summary = summarise_warnings(evaluation.warnings, names=[*labels, FLOOR_LABEL, "ground truth"])
     if evaluation.warnings:
-        w.lines += ["**Warnings**", ""] + [f"- {printable(x)}" for x in evaluation.warnings] + [""]
+        w.lines += ["**Warnings**", ""]
+        for head, more in summary:
+            w.lines += [f"- {markdown_text(head)}"] + [f"  - e.g. also: {markdown_text(x)}" for x in more]
+        if len(summary) < len(dict.fromkeys(evaluation.warnings)):
+            every = "".join(printable(x) + "\n" for x in dict.fromkeys(evaluation.warnings))
+            (out / WARNINGS_FILE).write_text(every, encoding="utf-8")
+            w.lines += ["", f"Every warning, one a line: [{WARNINGS_FILE}]({WARNINGS_FILE})."]
+        w.lines += [""]
+    for head, more in summary:  # on stderr too: a report's warnings are not only in index.md
+        print(f"lightemma report: warning: {printable(head)}", file=sys.stderr)
+        for x in more:
+            print(f"lightemma report:   e.g. also: {printable(x)}", file=sys.stderr)
+    if len(summary) < len(dict.fromkeys(evaluation.warnings)):
+        print(f"lightemma report: every warning: {WARNINGS_FILE} in the report", file=sys.stderr)
 
     if flags:
-        w.lines += [f"**Fewer than half of the frames scored** for {printable(', '.join(flags))}: their numbers describe only the frames they managed; every table flags them.", ""]
+        w.lines += [f"**Fewer than half of the frames scored** for {markdown_text(', '.join(flags))}: their numbers describe only the frames they managed; every table flags them.", ""]
     w.lines += ["## Tables I and II", ""]
     tables = evaluation_tables(evaluation, with_paper=with_paper)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations", "pairwise_safety", *_ABLATION_TABLES):
+        if table.name in ("pairwise_ade", "generations", "pairwise_safety", "pairwise_planning", *_ABLATION_TABLES):
             continue
         w.table(table)
-    (out / "tables" / "evaluation.json").write_text(json.dumps(evaluation.to_dict(), indent=2, default=str) + "\n", encoding="utf-8")
+    from lightemma.evaluation.descriptors import provenance
+    from lightemma.report.evaluation_tables import provenance_table  # frame sets, software, metric ids: a panel
+
+    numbers = {**evaluation.to_dict(), "provenance": provenance(evaluation, with_paper=with_paper,
+                                                                 dataroot=dataroot if version else None, version=version)}
+    (out / "tables" / "evaluation.json").write_text(json.dumps(numbers, indent=2, default=str) + "\n", encoding="utf-8")
+
+    w.table(provenance_table(evaluation))
     w.lines += [f"All numbers as JSON: [tables/evaluation.json](tables/evaluation.json)", ""]
 
     w.lines += ["## Fig. 1 — ADE by family and generation", ""]
@@ -547,6 +749,9 @@ def _write(
     else:
         w.lines += ["No model has a scored frame yet; no chart.", ""]
 
+    if evaluation.planning is not None:  # the planning score broken into its sub-scores (report/figures/planning.py)
+        _planning_section(w, evaluation, colors, flags)
+
     if evaluation.pairwise is not None:
         w.lines += ["## Paired comparisons", ""]
         generations = evaluation.generations()
@@ -554,7 +759,7 @@ def _write(
             w.lines += ["Is each generation better than its predecessor? (ADE avg change newer − older, 95 % scene-bootstrap interval, Holm-adjusted p over all pairs)", ""]
             w.lines += _generation_lines(generations) + [""]
         for table in tables:
-            if table.name in ("pairwise_ade", "generations", "pairwise_safety"):
+            if table.name in ("pairwise_ade", "generations", "pairwise_safety", "pairwise_planning"):
                 w.table(table)
         labels_shown = [m.label for m in evaluation.models]
         w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
@@ -565,7 +770,8 @@ def _write(
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     steps.step("tables and charts")
-    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None, safety=evaluation.safety), labels, flags), latex=False)
+    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None, safety=evaluation.safety,
+                                     planning=evaluation.planning), labels, flags), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
     w.table(_bias_table(bias, flags), latex=False)
@@ -581,7 +787,7 @@ def _write(
     if pictures and picks:
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
-        w.lines += [f"> {printable(p)}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
+        w.lines += [f"> {markdown_text(p)}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
         _frame_pictures(w, runs, labels, picks, cameras, colors, shown={d["frame_id"]: d["models"] for d in spread}, progress=progress)
     if pictures and evaluation.safety is not None:
         _safety_views(w, runs, labels, evaluation.safety, colors)
@@ -594,14 +800,17 @@ def _write(
     for label, run in zip(labels, runs):
         own = texts[label] = {}
         for fid, r in read_frame_records(run.info.run_dir, run.frame_ids).items():
-            own[fid] = (r.get("scene_text") or "", r.get("intent_text") or "", r.get("answer") or "")
+            own[fid] = tuple(visible_lines(r.get(key) or "") for key in ("scene_text", "intent_text", "answer"))
             if run.info.imported and pictures and fid not in calibrations:
                 calibrations[fid] = {k: r.get(k) for k in ("camera_params", "image_name", "image_path")}
     steps.step("stage texts")
     all_ids = list(dict.fromkeys(fid for run in runs for fid in run.frame_ids))
     html_cameras = source.cameras(runs, all_ids, load=False, records=calibrations) if pictures else {}
-    intro = "".join(f'<p class="note">{html_escape.escape(printable(x))}</p>' for x in [*evaluation.warnings, *dict.fromkeys(source.problems)])
+    notes = [*summary, *summarise_warnings(list(dict.fromkeys(source.problems)))]
+    intro = "".join(f'<p class="note">{html_escape.escape(printable(head))}'
+                    + "".join(f"<br>e.g. also: {html_escape.escape(printable(x))}" for x in more) + "</p>" for head, more in notes)
     write_html(out, title="lightemma report", intro_html=intro, tables=[_runs_table(evaluation, flags), *w.tables], figures=w.figures, runs=runs, labels=labels,
-               colors=colors, texts=texts, cameras=html_cameras, progress=progress)
+               colors=colors, texts=texts, cameras=html_cameras, progress=progress, safety=evaluation.safety,
+               planning=evaluation.planning)
     steps.step("index.html")
     steps.close()

@@ -96,6 +96,11 @@
   }
   const frameError = (j, m) => (m === "" ? meanAde(j) : D.ade[m][j]);
   const hasTag = (j, t) => (D.tagbits[j] >> t) & 1;
+  // safety flags of model m on frame j (docs/definitions.md#safety): 1, 0, or null where it has no value
+  const SAFETY = { collides: ["collides"], off_road: ["off_road"], unsafe: ["collides", "off_road"] };
+  const flagged = (m, j, which) => SAFETY[which].some((k) => D[k][m][j] === 1);
+  const hasSafety = () => ["collides", "off_road"].some((k) => D[k].some((row) => row.some((v) => v != null)));
+  const yesNo = (v) => (v == null ? "n/a" : v ? "yes" : "no");
   const tagsOf = (j) => D.tags.filter((_, t) => hasTag(j, t));
 
   // ---- filters and routing ---------------------------------------------------------------------
@@ -108,10 +113,17 @@
     D.tags.forEach((t) => $("f-tag").append(el("option", { value: t, text: t.replace(/_/g, " ") })));
     D.failures.forEach((f, i) => { if (i > 0) $("f-fail").append(el("option", { value: f, text: f.replace(/_/g, " ") })); });
     D.bands.forEach((b, i) => $("f-band").append(el("option", { value: String(i), text: b[2] })));
-    for (const id of ["f-model", "f-tag", "f-fail", "f-band", "f-dis", "f-sort"]) {
+    LE.hasSafety = hasSafety();
+    if (!LE.hasSafety) { // no dataroot (or no map and annotations): nothing to filter on, said once here
+      const safe = $("f-safe");
+      safe.textContent = "";
+      safe.append(el("option", { value: "", text: "no safety values (pass --dataroot)" }));
+      safe.disabled = true;
+    }
+    for (const id of ["f-model", "f-tag", "f-fail", "f-band", "f-safe", "f-dis", "f-sort"]) {
       $(id).addEventListener("change", () => {
         const q = new URLSearchParams();
-        for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
+        for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["safe", "f-safe"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
           if ($(fid).value && !(key === "sort" && $(fid).value === "frame")) q.set(key, $(fid).value);
         }
         location.hash = "#frames" + (q.toString() ? "?" + q.toString() : "");
@@ -126,6 +138,7 @@
     const fail = p.get("fail") ? D.failures.indexOf(p.get("fail")) : -1;
     const band = p.get("band") ? D.bands[Number(p.get("band"))] : null;
     const dis = p.get("dis") ? Number(p.get("dis")) : null;
+    const safe = LE.hasSafety && SAFETY[p.get("safe")] ? p.get("safe") : null; // no values: the filter is off
     const out = [];
     for (let j = 0; j < D.ids.length; j++) {
       if (mi !== "" && D.fail[mi][j] < 0) continue; // not in that model's run
@@ -138,6 +151,7 @@
         if (e == null || e < band[0] || (band[1] != null && e >= band[1])) continue;
       }
       if (dis != null && !(D.spread[j] >= dis)) continue;
+      if (safe && !(mi !== "" ? flagged(mi, j, safe) : D.models.some((_, m) => flagged(m, j, safe)))) continue;
       out.push(j);
     }
     const sort = p.get("sort") || "frame";
@@ -164,7 +178,7 @@
   let lastQuery = null;
   function showFrames() {
     const p = params();
-    for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
+    for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["safe", "f-safe"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
       $(fid).value = p.get(key) || (key === "sort" ? "frame" : "");
     }
     const q = p.toString();
@@ -237,6 +251,12 @@
       for (let k = 0; k < 6; k++) d.push([-t[2 * k + 1], t[2 * k]]);
       svg.append(svgEl("polyline", { points: d.map((p) => `${X(p[0]).toFixed(1)},${Y(p[1]).toFixed(1)}`).join(" "), fill: "none", stroke: color, "stroke-width": width, "stroke-dasharray": dash || "", "stroke-linejoin": "round", class: cls }));
     };
+    if (axes && D.sim) for (const m of list) { // the planning score's re-simulated path: dotted, the model's colour
+      const a = D.sim[m], o = j * 22, d = [];
+      if (!a) continue;
+      for (let k = 0; k < 11; k++) if (a[o + 2 * k] != null) d.push([-a[o + 2 * k + 1], a[o + 2 * k]]);
+      if (d.length > 1) svg.append(svgEl("polyline", { points: d.map((p) => `${X(p[0]).toFixed(1)},${Y(p[1]).toFixed(1)}`).join(" "), fill: "none", stroke: D.models[m].color, "stroke-width": 1.4, "stroke-dasharray": "1 3", class: `sim model-${m}` }));
+    }
     for (const [color, t, m] of paths) line(t, color, axes ? 2 : 1.6, "", `pred model-${m}`);
     if (gt) line(gt, GT, axes ? 2.5 : 2, "6 3", "gt"); // dashed on top: never hides a prediction
     svg.append(svgEl("path", { d: `M ${X(0)} ${Y(0) - 6} l -4 9 l 8 0 z`, fill: "#000" }));
@@ -262,20 +282,23 @@
       el("h2", { id: "frame-title", text: D.ids[j] }),
       el("span", { class: "muted", text: [D.scene[j], tagsOf(j).join(", ") || "no tag", D.spread[j] != null ? `models disagree by ${D.spread[j].toFixed(1)} m at 3 s` : ""].filter(Boolean).join(" · ") }));
     const legend = el("div", { class: "legend" }, el("span", {}, el("i", { style: `background:${GT}` }), "ground truth (dashed)"),
-      ...D.models.map((m) => el("span", {}, el("i", { style: `background:${m.color}` }), m.label)));
+      ...D.models.map((m) => el("span", {}, el("i", { style: `background:${m.color}` }), m.label)),
+      D.sim ? el("span", { class: "muted", text: "dotted: the plan as the planning score re-simulates it" }) : null);
     const camera = el("div", { class: D.image[j] ? "camera" : "camera empty", id: "camera" });
     if (D.image[j]) camera.append(el("img", { src: D.image[j], alt: `camera image of ${D.ids[j]}` }));
     else camera.append(el("p", { class: "muted", text: "No camera image for this frame (imported runs or a dataset not found: pass --dataroot)." }));
     const bev = el("div", { class: "bev" }, bevSvg(j, null, true));
     const metrics = el("table", { id: "frame-metrics", class: "sortable" });
-    metrics.append(el("thead", {}, el("tr", {}, ...["Model", "ADE (m)", "FDE (m)", "Outcome", "Time (s)", "Tokens in", "Tokens out", "Cost (¢)"].map((h) => el("th", { text: h })))));
+    metrics.append(el("thead", {}, el("tr", {}, ...["Model", "ADE (m)", "FDE (m)", "Outcome", "Collides", "Off-road", "Time (s)", "Tokens in", "Tokens out", "Cost (¢)"].map((h) => el("th", { text: h })))));
     const tb = el("tbody");
     D.models.forEach((m, i) => {
       const f = D.fail[i][j];
-      const cells = [fmt(D.ade[i][j], 2), fmt(D.fde[i][j], 2), f < 0 ? "not in run" : D.failures[f], fmt(D.seconds[i][j], 2), fmt(D.tok_in[i][j], 0), fmt(D.tok_out[i][j], 0), fmt(D.cost[i][j], 3)];
-      const sorts = [D.ade[i][j], D.fde[i][j], null, D.seconds[i][j], D.tok_in[i][j], D.tok_out[i][j], D.cost[i][j]];
-      tb.append(el("tr", {}, el("td", {}, el("span", { class: "swatch", style: `background:${m.color}` }), m.label),
-        ...cells.map((c, k) => el("td", sorts[k] == null ? { text: c } : { text: c, "data-sort": String(sorts[k]) }))));
+      const cells = [fmt(D.ade[i][j], 2), fmt(D.fde[i][j], 2), f < 0 ? "not in run" : D.failures[f], yesNo(D.collides[i][j]), yesNo(D.off_road[i][j]),
+        fmt(D.seconds[i][j], 2), fmt(D.tok_in[i][j], 0), fmt(D.tok_out[i][j], 0), fmt(D.cost[i][j], 3)];
+      const sorts = [D.ade[i][j], D.fde[i][j], null, D.collides[i][j], D.off_road[i][j], D.seconds[i][j], D.tok_in[i][j], D.tok_out[i][j], D.cost[i][j]];
+      const cls = (k) => (k === 3 || k === 4 ? (cells[k] === "yes" ? "flag unsafe" : "flag") : null);
+      tb.append(el("tr", { "data-model": String(i) }, el("td", {}, el("span", { class: "swatch", style: `background:${m.color}` }), m.label),
+        ...cells.map((c, k) => el("td", Object.assign({ text: c }, sorts[k] == null ? {} : { "data-sort": String(sorts[k]) }, cls(k) ? { class: cls(k) } : {})))));
     });
     metrics.append(tb);
     makeSortable(metrics);

@@ -1,9 +1,11 @@
 """Matplotlib set-up shared by the figure modules: headless backend, colours, saving.
 
-Colours: ground truth is always green; every model has **one colour everywhere**
-(bubble chart, history bias, frame pictures), a shade of its family's hue —
-older generations darker, newer lighter — so that a family reads as a family
-and each model stays recognisable. No model colour is green.
+Colours: ground truth is always green. Figures that draw runs against each other (bird's-eye views, the
+history-bias figure, frame pictures, the HTML frame browser) give each run of the report its own colour
+from :data:`RUN_PALETTE` (:func:`run_colors`: every pair at least :data:`MIN_DELTA_E` apart in CIELAB, so
+two runs of one family never look alike). The bubble chart colours by family (:func:`model_colors`: a
+shade of its family's hue, older generations darker), so that a family reads as a family there.
+No run colour is green, white or the collision red.
 """
 
 from __future__ import annotations
@@ -27,6 +29,12 @@ FAMILY_COLORS = {
 }
 # models of no known family: distinct colours that show on camera images and are no family's hue (no pink, brown, green)
 OTHER_COLORS = ("#7f7f7f", "#3d3d3d", "#a39e7a", "#b5b5b5", "#5f6b7a", "#8a7f99")
+# one colour per run in a figure: tab10 without its green (the truth) and red (collisions), then high-contrast
+# extras; every pair is >= MIN_DELTA_E apart (CIE76, D65), and each as far from GT_COLOR, white and COLLISION_RED
+RUN_PALETTE = ("#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f", "#000080",
+               "#ff1493", "#000000", "#aec7e8", "#ffbb78", "#6a0000", "#808000", "#b15928", "#1a1a66", "#ff9896")
+MIN_DELTA_E = 25.0
+COLLISION_RED = "#e00000"
 PAPER_GENERATIONS = 3  # the paper's families have three generations each
 FORMATS = ("png", "svg")
 DPI = 150
@@ -59,6 +67,34 @@ def _shade(color: str, position: int, count: int, extra: float = 0.0) -> str:
     offset = 0.0 if count <= 1 else (position / (count - 1) - 0.5) * 0.3
     r, g, b = colorsys.hls_to_rgb(h, min(0.8, max(0.2, lightness + offset + extra)), sat)
     return "#" + "".join(f"{round(255 * v):02x}" for v in (r, g, b))
+
+
+def srgb_to_lab(color: str) -> tuple[float, float, float]:
+    """CIELAB (L*, a*, b*) of an sRGB colour (any matplotlib colour spec), D65 white; L* in 0…100."""
+    from matplotlib.colors import to_rgb
+
+    linear = [c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4 for c in to_rgb(color)]
+    m = ((0.4124564, 0.3575761, 0.1804375), (0.2126729, 0.7151522, 0.0721750), (0.0193339, 0.1191920, 0.9503041))
+    white = (0.95047, 1.0, 1.08883)
+    x, y, z = (sum(m[i][k] * linear[k] for k in range(3)) / white[i] for i in range(3))
+    f = [t ** (1 / 3) if t > (6 / 29) ** 3 else t / (3 * (6 / 29) ** 2) + 4 / 29 for t in (x, y, z)]
+    return 116 * f[1] - 16, 500 * (f[0] - f[1]), 200 * (f[1] - f[2])
+
+
+def delta_e(a: str, b: str) -> float:
+    """CIE76 colour difference ΔE*ab between two colours (about 2.3: just noticeable; 25: clearly different hues)."""
+    return sum((p - q) ** 2 for p, q in zip(srgb_to_lab(a), srgb_to_lab(b))) ** 0.5
+
+
+def run_colors(labels: Iterable[str]) -> dict[str, str]:
+    """One colour per run label, in the given order, from :data:`RUN_PALETTE` — per run, not per family, so that
+    every pair of runs in one figure is at least :data:`MIN_DELTA_E` apart (up to ``len(RUN_PALETTE)`` = 18 runs;
+    beyond that the palette repeats: the 19th run shares the first one's colour). A label given twice keeps its
+    first colour."""
+    out: dict[str, str] = {}
+    for label in labels:
+        out.setdefault(str(label), RUN_PALETTE[len(out) % len(RUN_PALETTE)])
+    return out
 
 
 def model_colors(models: Iterable[Mapping[str, Any] | Any]) -> dict[str, str]:

@@ -142,9 +142,13 @@ def bev_limits(trajectories: list[np.ndarray], *, min_extent: float = 5.0, margi
 def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None, units: bool = True) -> None:
     """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now; axes in metres.
 
-    The view is sized to hold the ground truth and every prediction; the ground
-    truth is a thin dashed line on top (a prediction under it shows through).
+    As the camera image shows it (nuScenes ego frame: x forward, y left): a point on the left is left of the
+    origin, and the lateral ticks read its y (positive on the left, as the HTML frame view's). The view is sized
+    to hold the ground truth and every prediction; the ground truth is a thin dashed line on top (a prediction
+    under it shows through).
     """
+    from matplotlib.ticker import FuncFormatter
+
     def plot(traj: np.ndarray, color: str, width: float, label: str, z: float, **style: Any) -> None:
         pts = np.concatenate([np.zeros((1, 2)), traj])
         ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label, zorder=z, **style)
@@ -160,8 +164,9 @@ def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, 
     ax.plot([0], [0], marker="^", color="black", markersize=6, zorder=5)
     ax.set_facecolor("#f4f4f4")
     ax.tick_params(labelsize=6)
+    ax.xaxis.set_major_formatter(FuncFormatter(lambda h, _: f"{-h + 0.0:g}"))  # drawn at −y, labelled y (+ 0.0: no "-0")
     if units:
-        ax.set_xlabel("lateral (m), left −y → right", fontsize=6, labelpad=1)
+        ax.set_xlabel("y, left ← lateral (m) → right", fontsize=6, labelpad=1)
         ax.set_ylabel("forward x (m)", fontsize=6, labelpad=1)
     ax.set_title("bird's-eye (m)", fontsize=7)
 
