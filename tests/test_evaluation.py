@@ -241,7 +241,7 @@ def test_csv_latex_json_formats(two_runs, capsys):
     tables = evaluation_tables(ev)
     csv_text = render(tables, "csv")
     blocks = [blk for blk in csv_text.split("\n\n") if blk.strip()]
-    assert len(blocks) == 5  # efficiency + three conventions + the model's gain over the baseline
+    assert len(blocks) == 6  # efficiency + three conventions + explanations + the model's gain over the baseline
     rows = list(csv.reader(io.StringIO(blocks[1].split("\n", 1)[1])))
     assert rows[0][:3] == ["Model", "Frames", "Scored"] and len(rows) == 3
     col = rows[0].index("ADE avg (m)")
@@ -250,9 +250,10 @@ def test_csv_latex_json_formats(two_runs, capsys):
     assert float(rows[1][col]) == pytest.approx(first["ade_avg"], abs=0.005)
     assert [float(v) for v in rows[1][col + 1 : col + 3]] == pytest.approx(first["ade_avg_ci95"], abs=0.005)
     latex = render(tables, "latex")
-    assert latex.count(r"\begin{tabular}") == 5 and r"FE (\%)" in latex and r"\textcent{}" in latex
+    assert latex.count(r"\begin{tabular}") == 6 and r"FE (\%)" in latex and r"\textcent{}" in latex
     doc = json.loads(render(tables, "json", extra={"common": False}))
-    assert [t["name"] for t in doc["tables"]] == ["efficiency", "accuracy_lightemma", "accuracy_stp3", "accuracy_uniad", "baseline_gains"]
+    assert [t["name"] for t in doc["tables"]] == ["efficiency", "accuracy_lightemma", "accuracy_stp3", "accuracy_uniad", "explanations",
+                                                  "baseline_gains"]
     assert doc["tables"][1]["rows"][0]["ade_avg"] == ev.accuracy_rows("lightemma")[0]["ade_avg"]
     low, high = doc["tables"][1]["rows"][0]["ade_avg_ci95"]
     assert low < doc["tables"][1]["rows"][0]["ade_avg"] < high and len(doc["tables"][1]["rows"][0]["fde_ci95"]) == 2

@@ -1,5 +1,5 @@
 """The planning score in ``lightemma evaluate`` and ``lightemma report`` end to end, on synthetic data
-(lightemma.evaluation.planning; docs/definitions.md#planning-score)."""
+(lightemma.evaluation.planning_score; docs/definitions.md#planning-score)."""
 
 import json
 import shutil

@@ -1,5 +1,5 @@
 """The synthetic map expansion's lanes, lane connectors, road segments and car parks, the CAN-bus-like history and
-the plans with known faults (lightemma.synth.maps, lightemma.synth.can_bus, lightemma.frames.can_bus,
+the plans with known faults (lightemma.synth.maps, lightemma.synth.can_pose, lightemma.frames.can_bus,
 lightemma.synth.planning_cases)."""
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from lightemma.frames import can_bus
 from lightemma.planning import simulation as sim
 from lightemma.planning.scores import read_planning_map, route_lanes, subscores
 from lightemma.synth import build_scenarios, write_dataset
-from lightemma.synth import can_bus as synth_can
+from lightemma.synth import can_pose as synth_can
 from lightemma.synth import maps as synth_maps
 from lightemma.synth import planning_cases as pc
 from lightemma.synth.scenarios import LANE_WIDTH, build_scenario

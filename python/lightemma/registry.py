@@ -408,7 +408,8 @@ class ImageRule:
     * ``per-image``: ``tokens`` per image whatever its size (``exact`` False: a documented maximum).
 
     ``source`` is where the rule is published and when it was read; ``exact`` is False where the rule gives a
-    maximum rather than the count.
+    maximum rather than the count; ``provider`` is whose rule it is (``openai``, ``anthropic``, ``gemini``), what the
+    estimate line names (``anthropic rule``) whichever server the model is reached through.
     """
 
     name: str
@@ -419,6 +420,7 @@ class ImageRule:
     multiplier: float = 1.0
     tokens_per_image: int = 0
     exact: bool = True
+    provider: str = "openai"  # whose rule it is (the estimate line names it: 'anthropic rule')
 
     def tokens(self, width: int, height: int) -> int:
         """Input tokens of one ``width`` × ``height`` image (pixels) under this rule; ValueError for a size below 1."""
@@ -502,15 +504,17 @@ IMAGE_RULES: tuple[tuple[str, ImageRule], ...] = (
     (rf"o4-mini{_DATE}", _openai_patch("o4-mini", 1.72)),
     (_CLAUDE,
      ImageRule(name=f"Anthropic: long side ≤ {ANTHROPIC_MAX_SIDE} px, area ≤ 1092 × 1092 px, width × height / 750",
-               kind="anthropic", source=f"{ANTHROPIC_VISION_DOC} (stored copies of docs.anthropic.com/en/docs/vision "
+               kind="anthropic", provider="anthropic",
+               source=f"{ANTHROPIC_VISION_DOC} (stored copies of docs.anthropic.com/en/docs/vision "
                f"and platform.claude.com/docs/*/build-with-claude/vision), read {IMAGE_RULES_READ}")),
     (r"gemini-2\.(0|5)-[a-z0-9.-]+",
      ImageRule(name="Gemini 2.x: 258 within 384 × 384 px, else 258 per 768 × 768 tile", kind="gemini-tile",
+               provider="gemini",
                source=f"{GEMINI_TOKENS_DOC}; as quoted by geminibyexample.com/027-calculate-input-tokens (stored "
                f"copy), read {IMAGE_RULES_READ}")),
     (r"gemini-3(\.\d+)?-[a-z0-9.-]+",
      ImageRule(name="Gemini 3: at most 1120 per image (media resolution high, the default for images)",
-               kind="per-image", tokens_per_image=1120, exact=False,
+               kind="per-image", tokens_per_image=1120, exact=False, provider="gemini",
                source=f"{GEMINI_MEDIA_RESOLUTION_DOC}; as quoted by fastgptplus.com/en/posts/gemini-3-pro-media-"
                f"resolution-parameter (stored copy), read {IMAGE_RULES_READ}")),
 )

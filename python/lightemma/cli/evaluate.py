@@ -15,10 +15,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="score runs: FE, ADE/FDE per convention, time, cost, tokens (Tables I and II)",
         description="Score run directories (or folders holding runs) and print the paper's Tables I and II.",
     )
-    parser.add_argument("run_dirs", nargs="+", metavar="RUN_DIR", help="run directory, or a folder holding runs")
+    parser.add_argument("run_dirs", nargs="*", metavar="RUN_DIR", help="run directory, or a folder holding runs")
+    parser.add_argument("--merge", nargs="+", metavar="JSON",
+                        help="join tables written by earlier `evaluate --format json` calls (same metric ids, versions and frame set; "
+                             "docs/evaluate.md#merging-evaluations); --format json or md")
     parser.add_argument("--convention", default="lightemma", choices=["lightemma", "stp3", "uniad", "all"], help="ADE convention (default: lightemma, the paper's; docs/definitions.md#metrics)")
     parser.add_argument("--common", action="store_true", help="score every model on the frames valid for all of them")
-    parser.add_argument("--format", default="md", choices=FORMATS, help="output format (default: md)")
+    parser.add_argument("--format", choices=FORMATS, help="output format (default: md; with --merge json)")
     parser.add_argument("--with-paper", action="store_true", help="put each run beside the paper's row of its model, with the difference")
     parser.add_argument("--parse", choices=["lenient", "strict", "paper", "json"],
                         help="re-score every run's stored answers under this definition (default: each run's own; paper for imported runs)")
@@ -30,6 +33,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_safety_arguments(parser)
     parser.add_argument("--no-planning", dest="planning", action="store_false",
                         help="skip the planning score (NAVSIM's PDMS / EPDMS and sub-scores; docs/definitions.md#planning-score)")
+    parser.add_argument("--no-explanations", dest="explanations", action="store_false",
+                        help="skip the explanation audit (stated intent against plan and ground truth; docs/definitions.md#explanation-audit)")
     add_statistics_arguments(parser, pairwise_default=False)
     parser.add_argument("-o", "--output", type=Path, metavar="FILE", help="write the tables to FILE instead of stdout (its folder must exist)")
     parser.set_defaults(func=run)
@@ -91,13 +96,11 @@ def resampling_of(args: argparse.Namespace):  # noqa: ANN201 - Resampling, impor
         raise UserError(str(exc).replace("n_resamples", "--resamples").replace("seed", "--seed")) from None
 
 
-def run(args: argparse.Namespace) -> int:
+def _check_output(args: argparse.Namespace) -> None:
+    """-o's folder must exist and -o must not be a folder (UserError), checked before any work."""
     from lightemma._text import printable
     from lightemma.errors import UserError
-    from lightemma.evaluation import evaluate_runs, evaluation_tables
-    from lightemma.report.tables import render
 
-    parse = _parse_definition(args)
     if args.output is not None:  # before any work; a missing folder is a typo more often than a wish
         folder = args.output.parent
         if not folder.is_dir():
@@ -105,10 +108,154 @@ def run(args: argparse.Namespace) -> int:
                             "(create it first)")
         if args.output.is_dir():
             raise UserError(f"-o {printable(args.output)} is a folder, not a file")
+
+
+def _merge(args: argparse.Namespace) -> int:
+    """``evaluate --merge``: the merged JSON (or Markdown with --format md); nothing written on a refusal."""
+    import json
+
+    from lightemma.errors import UserError
+    from lightemma.evaluation.merge import merge_documents, merged_markdown
+
+    if args.run_dirs:
+        raise UserError(f"lightemma evaluate --merge joins JSON files only; {args.run_dirs[0]} is a RUN_DIR (evaluate the runs first)")
+    given = [flag for flag, on in (("--common", args.common), ("--pairwise", args.pairwise), ("--with-paper", args.with_paper),
+                                   ("--parse", args.parse is not None), ("--keep-implausible", args.keep_implausible)) if on]
+    if given:
+        raise UserError(f"lightemma evaluate --merge joins tables as written; {given[0]} belongs to evaluating runs")
+    if args.format is None:
+        args.format = "json"
+    if args.format not in ("json", "md"):
+        raise UserError(f"lightemma evaluate --merge writes --format json or md, not {args.format}")
+    _check_output(args)
+    doc = merge_documents(args.merge)
+    text = json.dumps(doc, indent=2) + "\n" if args.format == "json" else merged_markdown(doc)
+    if args.output:
+        args.output.write_text(text, encoding="utf-8")
+        print(f"wrote {args.output}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def refuse_disjoint_pairs(evaluation) -> None:  # noqa: ANN001 - Evaluation, imported lazily
+    """``--pairwise`` between two runs without a frame scored in both is refused (UserError), in one line naming both
+    runs and their frame-set fingerprints (docs/evaluate.md#runs-on-different-frame-sets)."""
+    from lightemma.errors import UserError
+
+    fps = {m.label: (m.fingerprint or {}).get("id", "an unrecorded frame set") for m in evaluation.models}
+    for row in evaluation.pairwise or []:
+        if row.get("frames") == 0:
+            a, b = row["model_a"], row["model_b"]
+            raise UserError(f"--pairwise: {a} (frame set {fps.get(a)}) and {b} (frame set {fps.get(b)}) "
+                            "have no frame scored in both; evaluate them apart, or without --pairwise")
+
+
+def frame_set_tables(tables: list, evaluation) -> list:  # noqa: ANN001 - Table, Evaluation, imported lazily
+    """Tables in which runs on different frame sets are never ranked in one column
+    (docs/evaluate.md#runs-on-different-frame-sets).
+
+    With one frame set, or with ``--common`` (every run scored on the same frames), ``tables`` unchanged. Otherwise each
+    table whose rows are runs becomes one table per frame set, its fingerprint in the title, and one more for its
+    reference rows (the ground truth's, computed on every evaluated frame, or the paper's); tables of pairs stay whole
+    (each pair is scored on the frames scored in both). Where the runs' parse definitions or prompt sets differ, a note
+    under each run table says which run used which prompt set."""
+    from dataclasses import replace
+
+    from lightemma.frames.fingerprint import describe_fingerprint
+
+    groups: dict[str, list[str]] = {}
+    described: dict[str, str] = {}
+    for m in evaluation.models:
+        fp = m.fingerprint
+        key = fp["id"] if fp is not None else "unrecorded"
+        described[key] = describe_fingerprint(fp) if fp is not None else "unrecorded (no fingerprint)"
+        groups.setdefault(key, []).append(m.label)
+    notes = _mixed_settings_notes(evaluation)
+    if evaluation.common or len(groups) <= 1:
+        if not notes:
+            return list(tables)
+        return [replace(t, notes=[*t.notes, *notes]) if _run_rows(t, evaluation) else t for t in tables]
+    out = []
+    for table in tables:
+        if not _run_rows(table, evaluation):
+            out.append(table)
+            continue
+        for key, labels in groups.items():
+            rows = [r for r in table.rows if r.get("model") in labels]
+            if rows:
+                title = f"{table.title} — frame set {described[key]}"
+                out.append(replace(table, title=title, rows=rows, notes=[*table.notes, *notes]))
+        labels = {m.label for m in evaluation.models}
+        rest = [r for r in table.rows if r.get("model") not in labels]
+        if rest:
+            title = f"{table.title} — reference rows (on every evaluated frame, all frame sets)"
+            out.append(replace(table, title=title, rows=rest))
+    return out
+
+
+def frame_set_groups(evaluation) -> list[dict] | None:  # noqa: ANN001 - Evaluation, imported lazily
+    """``[{"frame_set": id, "models": [label, …]}, …]`` where runs' frame sets differ and ``--common`` was not given,
+    else None (``evaluate --format json``'s ``frame_set_groups``; docs/evaluate.md#runs-on-different-frame-sets)."""
+    groups: dict[str | None, list[str]] = {}
+    for m in evaluation.models:
+        groups.setdefault(m.fingerprint["id"] if m.fingerprint is not None else None, []).append(m.label)
+    if evaluation.common or len(groups) <= 1:
+        return None
+    return [{"frame_set": key, "models": labels} for key, labels in groups.items()]
+
+
+def json_frame_set_rows(tables: list, evaluation) -> list:  # noqa: ANN001 - Table, Evaluation, imported lazily
+    """``tables`` whose run rows carry ``frame_set``, their run's fingerprint id (for runs on different frame sets)."""
+    from dataclasses import replace
+
+    fps = {m.label: m.fingerprint["id"] if m.fingerprint is not None else None for m in evaluation.models}
+    return [replace(t, rows=[{**r, "frame_set": fps[r["model"]]} if r.get("model") in fps else r for r in t.rows])
+            if _run_rows(t, evaluation) else t for t in tables]
+
+
+def _run_rows(table, evaluation) -> bool:  # noqa: ANN001
+    labels = {m.label for m in evaluation.models}
+    return any(r.get("model") in labels for r in table.rows)
+
+
+def _mixed_settings_notes(evaluation) -> list[str]:  # noqa: ANN001
+    """A note naming which run used which prompt set where they differ; [] if none. (The parse definition is the
+    accuracy tables' Parse column, the integrator and the other protocol settings are in each run's label.)"""
+    prompts: dict[str, list[str]] = {}
+    for m in evaluation.models:
+        manifest = m.manifest or {}
+        prompt = manifest.get("prompt_set") if isinstance(manifest.get("prompt_set"), dict) else {}
+        name = f"{prompt.get('name')} ({str(prompt.get('hash'))[:19]})" if prompt else "unrecorded"
+        if prompt.get("variant"):
+            name += f", variant {prompt.get('variant')}"
+        prompts.setdefault(name, []).append(m.label)
+    notes = []
+    for what, seen in (("prompt sets", prompts),):  # parse definitions: the accuracy tables' Parse column
+        if len(seen) > 1:
+            which = "; ".join(f"{k}: {', '.join(v)}" for k, v in seen.items())
+            notes.append(f"Runs differ in {what}: {which} (not one protocol).")
+    return notes
+
+
+def run(args: argparse.Namespace) -> int:
+    from lightemma._text import printable
+    from lightemma.errors import UserError
+    from lightemma.evaluation import evaluate_runs, evaluation_tables
+    from lightemma.report.tables import render
+
+    if args.merge:
+        return _merge(args)
+    if args.format is None:
+        args.format = "md"
+    if not args.run_dirs:
+        raise UserError("lightemma evaluate: give a RUN_DIR (or --merge A.json B.json …)")
+    parse = _parse_definition(args)
+    _check_output(args)
     evaluation = evaluate_runs(
         args.run_dirs, convention=args.convention, common=args.common, miss_threshold=args.miss_threshold, parse=parse,
         keep_implausible=args.keep_implausible,
-        resampling=resampling_of(args), pairwise=args.pairwise, planning=args.planning, **safety_options(args),
+        resampling=resampling_of(args), pairwise=args.pairwise, planning=args.planning, explanations=args.explanations, **safety_options(args),
     )
     for warning in evaluation.warnings:
         print(f"lightemma evaluate: warning: {printable(warning)}", file=sys.stderr)  # names from outside: one line
@@ -117,10 +264,18 @@ def run(args: argparse.Namespace) -> int:
         print(f"lightemma evaluate: note: --keep-implausible changes nothing for {printable(', '.join(held))}: parsed with "
               "plausibility limits, an implausible answer failed when read (Failed, not Implausible); --parse paper reads them "
               "by the paper's rules, without limits", file=sys.stderr)
+    if args.pairwise:
+        refuse_disjoint_pairs(evaluation)
     tables = evaluation_tables(evaluation, with_paper=args.with_paper)
+    if args.format != "json":  # JSON keeps one table per name, its rows say their frame set (below)
+        tables = frame_set_tables(tables, evaluation)
     extra = {"common": evaluation.common, "n_common": evaluation.n_common, "parse": parse.to_dict() if parse else "each run's own",
              "keep_implausible": args.keep_implausible,
              "resampling": evaluation.resampling.to_dict(), "warnings": evaluation.warnings}
+    groups = frame_set_groups(evaluation)
+    if args.format == "json" and groups is not None:  # each run row says its frame set; the top lists the groups
+        tables = json_frame_set_rows(tables, evaluation)
+        extra["frame_set_groups"] = groups
     from lightemma.evaluation.descriptors import evaluation_document, footer_lines
     from lightemma.report.evaluation_tables import provenance_footer
 

@@ -261,7 +261,7 @@ def main(args: argparse.Namespace) -> int:
     check_limits(args)
     if args.batch is False:
         args.batch = None  # a flag not given: --resume takes the run's own mode
-    if args.batch_poll is not None and not args.batch:
+    if args.batch_poll is not None and not args.batch and not args.resume:  # a resume: the manifest decides (below)
         raise UserError("--batch-poll goes with --batch")
     if args.sample_seed is not None and args.sample is None:
         raise UserError("--sample-seed goes with --sample N")

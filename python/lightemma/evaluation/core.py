@@ -55,7 +55,8 @@ class ModelResult:
     answer_format: str = "text"  # stage-3 answers as text or structured JSON
     inputs: str = "full"  # input ablation (docs/run.md#input-ablations): full, no-image, blank-image, no-history
     safety: dict[str, dict[str, Any]] = field(default_factory=dict)  # convention -> off-road / collision keys (evaluation/safety.py)
-    planning: dict[str, Any] = field(default_factory=dict)  # planning-score keys (evaluation/planning.py ROW_KEYS)
+    planning: dict[str, Any] = field(default_factory=dict)  # planning-score keys (evaluation/planning_score.py ROW_KEYS)
+    explanations: dict[str, Any] = field(default_factory=dict)  # explanation-audit keys (evaluation/intent_audit.py ROW_KEYS)
     fingerprint: dict[str, Any] | None = None  # the run's frame set (lightemma.frames.fingerprint.run_fingerprint)
     manifest: dict[str, Any] = field(default_factory=dict)  # the run's manifest, for provenance (evaluation/descriptors.py)
 
@@ -121,7 +122,8 @@ class Evaluation:
     baseline_gains: list[dict[str, Any]] = field(default_factory=list)
     safety: Any = None  # lightemma.evaluation.safety.SafetyResult when safety metrics were computed
     pairwise_safety: list[dict[str, Any]] | None = None  # see lightemma.evaluation.safety.pairwise_safety
-    planning: Any = None  # lightemma.evaluation.planning.PlanningResult when the planning score was computed
+    planning: Any = None  # lightemma.evaluation.planning_score.PlanningResult when the planning score was computed
+    explanations: Any = None  # lightemma.evaluation.intent_audit.ExplanationResult when the explanation audit was computed
     miss_threshold: float = 2.0  # metres, behind miss_rate (its descriptor: miss@<threshold>m/1)
 
     @property
@@ -168,6 +170,8 @@ class Evaluation:
             out["pairwise_safety"] = self.pairwise_safety
         if self.planning is not None:
             out["planning"] = {**self.planning.to_dict(), "pairwise": self.planning.pairwise}
+        if self.explanations is not None:
+            out["explanations"] = self.explanations.to_dict()
         return out
 
 
@@ -316,6 +320,7 @@ def evaluate_loaded(
     planning: bool = True,
     dataroot: str | os.PathLike[str] | None = None,
     version: str | None = None,
+    explanations: bool = True,
 ) -> Evaluation:
     """Evaluate already loaded runs (see :func:`evaluate_runs`).
 
@@ -382,22 +387,40 @@ def evaluate_loaded(
         _with_safety(evaluation, entries, shared, pairwise, dataroot, version, history=_PLANNING_HISTORY if planning else 0)
     if planning:
         _with_planning(evaluation, entries, shared, pairwise, dataroot, version)
+    if explanations:
+        _with_explanations(evaluation, entries, shared, dataroot, version)
     return evaluation
 
 
-_PLANNING_HISTORY = 4  # earlier keyframes the planning score reads (lightemma.evaluation.planning.HISTORY_KEYFRAMES)
+_PLANNING_HISTORY = 4  # earlier keyframes the planning score reads (lightemma.evaluation.planning_score.HISTORY_KEYFRAMES)
 
 
 def _with_planning(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
                    pairwise: bool, dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
     """NAVSIM's planning score (PDMS / EPDMS and sub-scores) per model and the ground truth's (docs/definitions.md#planning-score)."""
-    from lightemma.evaluation.planning import evaluate_planning
+    from lightemma.evaluation.planning_score import evaluate_planning
 
     result = evaluate_planning(entries, evaluation.resampling, dataroot=dataroot, version=version, safety=evaluation.safety,
                                pairwise=pairwise, only=set(shared) if shared is not None else None)
     for model in evaluation.models:
         model.planning = result.rows.get(model.label, {})
     evaluation.planning = result
+    evaluation.warnings.extend(result.warnings)
+
+
+def _with_explanations(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
+                       dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
+    """The explanation audit: stated intent against the plan, the ground truth and the ablations
+    (docs/definitions.md#explanation-audit)."""
+    from lightemma.evaluation.intent_audit import evaluate_explanations
+
+    only = None
+    if shared is not None:  # the frames present in every run, as FE and efficiency count them
+        only = set.intersection(*(set(run.frame_ids) for _, run, _ in entries))
+    result = evaluate_explanations(entries, evaluation.resampling, dataroot=dataroot, version=version, only=only)
+    for model in evaluation.models:
+        model.explanations = result.rows.get(model.label, {})
+    evaluation.explanations = result
     evaluation.warnings.extend(result.warnings)
 
 
@@ -454,6 +477,7 @@ def evaluate_runs(
     planning: bool = True,
     dataroot: str | os.PathLike[str] | None = None,
     version: str | None = None,
+    explanations: bool = True,
 ) -> Evaluation:
     """Evaluate run directories (or folders holding runs): Tables I and II as rows of dicts.
 
@@ -472,7 +496,8 @@ def evaluate_runs(
     are skipped; both are reported in ``Evaluation.warnings``. ``safety`` adds off-road and collision
     rates beside ADE (docs/definitions.md#safety) from ``dataroot``/``version`` (default: each run's
     manifest's dataset); without one the columns say why they are empty. ``planning`` adds NAVSIM's planning
-    score (``Evaluation.planning``, docs/definitions.md#planning-score) from the same dataset.
+    score (``Evaluation.planning``, docs/definitions.md#planning-score) from the same dataset. ``explanations`` adds
+    the explanation audit (``Evaluation.explanations``, docs/definitions.md#explanation-audit).
     """
     from lightemma.evaluation.loading import discover_runs
 
@@ -480,6 +505,7 @@ def evaluate_runs(
     dirs, left_out = discover_runs(run_dirs)  # a corrupt manifest or a linked run: left out with a warning
     runs = [load_run(d, parse=parse, keep_implausible=keep_implausible, details=planning) for d in dirs]  # actions: plan headings
     evaluation = evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling,
-                                 pairwise=pairwise, safety=safety, planning=planning, dataroot=dataroot, version=version)
+                                 pairwise=pairwise, safety=safety, planning=planning, dataroot=dataroot, version=version,
+                                 explanations=explanations)
     evaluation.warnings[:0] = left_out
     return evaluation

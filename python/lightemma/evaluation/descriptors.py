@@ -94,6 +94,8 @@ _E = f"{_DEFS}#efficiency"
 _F = f"{_DEFS}#format-errors"
 _P = f"{_DEFS}#planning-score"
 _A = f"{_DEFS}#input-ablations"
+_FRAME_SETS = "docs/evaluate.md#runs-on-different-frame-sets"
+_X = f"{_DEFS}#explanation-audit"
 _METERS = (0.0, None)
 _SHARE = (0.0, 1.0)
 _PCT = (0.0, 100.0)
@@ -274,7 +276,7 @@ METRICS: dict[str, Descriptor] = {
     )
 }
 
-#: the planning score's columns (lightemma.evaluation.planning.KEYS) -> descriptor id
+#: the planning score's columns (lightemma.evaluation.planning_score.KEYS) -> descriptor id
 PLANNING_BY_KEY: dict[str, str] = {
     "pdms": "pdms@nuscenes/1",
     "epdms": "epdms@nuscenes/1",
@@ -394,6 +396,25 @@ FIELDS: dict[str, Descriptor] = {
         ),
         "offroad_frames": _d(
             "offroad_frames/1", "Frames with an off-road value", "count", "frames", (0, None), None, "lightemma", _S
+        ),
+        # the explanation audit (lightemma.evaluation.intent_audit.KEYS): shares of frames
+        **{
+            key: _d(f"{key}@intent_lightemma/1", title, "rate", "share", _SHARE, lower, "lightemma (rules intent@lightemma/1)", _X)
+            for key, title, lower in (
+                ("consistent", "Share of frames whose stated intent is consistent with the plan", False),
+                ("contradicts", "Share of frames whose stated intent contradicts the plan", True),
+                ("intent_unknown", "Share of frames whose stated intent cannot be checked against the plan", True),
+                ("intent_accuracy", "Share of frames whose stated intent is consistent with the ground truth's behaviour", False),
+                ("intent_changed", "Share of frames whose stated intent changes under the ablation", None),
+            )
+        },
+        **{f"{key}_na": _d("na/1", "Why the value is missing", "label", None, None, None, "lightemma", _X)
+           for key in ("consistent", "contradicts", "intent_unknown", "intent_accuracy", "intent_changed")},
+        **{f"{key}_ci95": _d("ci95@scene_bootstrap/1", "95 % scene-level bootstrap interval of the share", "interval", "share",
+                             _SHARE, None, "lightemma (cluster bootstrap over scenes)", _U)
+           for key in ("consistent", "contradicts", "intent_unknown", "intent_accuracy", "intent_changed")},
+        "explanation_frames": _d(
+            "explanation_frames/1", "Frames behind the explanation audit", "count", "frames", (0, None), None, "lightemma", _X
         ),
         "planning_frames": _d(
             "planning_frames/1", "Frames behind the planning score", "count", "frames", (0, None), None, "lightemma", _P
@@ -579,6 +600,7 @@ FIELDS: dict[str, Descriptor] = {
                 ("inputs", "Input ablation", _A),
                 ("dataset_kind", "nuscenes or synthetic", f"{_DEFS}#frames-and-windows"),
                 ("source", "paper, diff, floor or ground-truth rows (none: a run)", _M),
+                ("frame_set", "Frame-set fingerprint id of the row's run", _FRAME_SETS),
                 ("note", "Note after the model's name", _M),
                 ("anomalous", "Cells the paper marks with a dagger", _E),
                 ("ci95_unavailable", "Why a row has no interval", _U),
@@ -716,6 +738,12 @@ def column_descriptors(
     out: dict[str, dict[str, Any] | None] = {}
     for key in keys:
         d = describe(key, convention=conv, collision_convention=cc, miss_threshold=miss_threshold)
+        if table_name in ("input_ablations", "baseline_gains") and key.endswith("_ci95") and d is not None:
+            # these tables' intervals are of the paired difference (lightemma.evaluation.ablations): any sign
+            base = describe(key[: -len("_ci95")], convention=conv, collision_convention=cc, miss_threshold=miss_threshold)
+            if base is not None:
+                d = _d("ci95@scene_bootstrap/1", f"95 % scene-level bootstrap interval of the paired difference of {base.id}",
+                       "interval", base.unit, (None, None), None, "lightemma (cluster bootstrap over scenes)", _U)
         out[key] = d.to_dict() if d is not None else None
     return out
 

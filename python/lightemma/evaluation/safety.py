@@ -491,7 +491,7 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
     silent fall-back to the mask. Maps that cannot be read, ego poses that are not poses (rotation under the
     frame reader's unit-quaternion rule) and annotation boxes that are not boxes (:func:`_box`) are
     recorded as reasons (the frames they touch get n/a), not raised. ``agents``: which boxes count
-    (:data:`AGENT_FILTERS`). ``history`` > 0 (the planning score, :mod:`lightemma.evaluation.planning`) also
+    (:data:`AGENT_FILTERS`). ``history`` > 0 (the planning score, :mod:`lightemma.evaluation.planning_score`) also
     reads up to that many earlier keyframes of each sample (``past``), the poses of the earlier and later
     keyframes, the boxes of the keyframe just before, each box's instance token and the samples' timestamps;
     what the safety metrics read is the same either way. A table that is missing, unreadable or holds a record

@@ -47,9 +47,13 @@ TAGS: tuple[str, ...] = (
 )
 #: tags from a model's own safety outcomes (need the evaluation's ``safety``)
 SAFETY_TAGS: tuple[str, ...] = ("collides", "off_road")
-#: tags from a model's own planning sub-scores (need the evaluation's ``planning``; lightemma.evaluation.planning.frame_tags):
+#: tags from a model's own planning sub-scores (need the evaluation's ``planning``; lightemma.evaluation.planning_score.frame_tags):
 #: ``wrong-way``, ``uncomfortable``, ``no-progress``
-from lightemma.evaluation.planning import PLANNING_TAGS  # noqa: E402  (beside the other tag lists)
+from lightemma.evaluation.planning_score import PLANNING_TAGS  # noqa: E402  (beside the other tag lists)
+#: tags from a model's explanation audit (need the evaluation's ``explanations``; lightemma.evaluation.intent_audit):
+#: ``says-stop-drives-on`` (its stage-2 text says stop, its plan does not stop). ``hallucinated-pedestrian`` needs the
+#: scene-description audit, not built yet.
+EXPLANATION_TAGS: tuple[str, ...] = ("says-stop-drives-on",)
 # tags whose worst frames illustrate the paper's failure cases
 CASE_TAGS: tuple[str, ...] = ("straight_after_right_turn", "straight_after_left_turn", "turning_left", "turning_right", "braking", "starting")
 
@@ -178,7 +182,7 @@ def _safety_masks(safety: Any, label: str, run: RunData, rows: np.ndarray) -> di
 
 def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
     """``wrong-way`` / ``uncomfortable`` / ``no-progress`` of ``rows`` of a run from its planning sub-scores (False where n/a)."""
-    from lightemma.evaluation.planning import frame_tags
+    from lightemma.evaluation.planning_score import frame_tags
 
     rp = planning.runs.get(label) if planning is not None else None
     out = {tag: np.zeros(len(rows), dtype=bool) for tag in PLANNING_TAGS}
@@ -194,16 +198,32 @@ def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -
     return out
 
 
+def _explanation_masks(explanations: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """``says-stop-drives-on`` of ``rows`` of a run from its explanation audit (False where it has none)."""
+    from lightemma.evaluation.intent_audit import says_stop_drives_on
+
+    audit = explanations.runs.get(label) if explanations is not None else None
+    out = np.zeros(len(rows), dtype=bool)
+    if audit is not None:
+        tag = says_stop_drives_on(audit)
+        where = {f: i for i, f in enumerate(audit.frame_ids)}
+        for j, r in enumerate(rows):
+            i = where.get(run.frame_ids[r])
+            out[j] = i is not None and bool(tag[i])
+    return {"says-stop-drives-on": out}
+
+
 def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None, safety: Any = None,
-                    planning: Any = None) -> list[dict[str, Any]]:
+                    planning: Any = None, explanations: Any = None) -> list[dict[str, Any]]:
     """One row per tag (and ``all``): frames and, per model, ADE avg / FDE / miss rate on them.
 
     Each model is scored on its valid frames, or on ``frame_ids`` (e.g. the
     common frames) when given; one batched core call per model and tag. With ``safety``
     (an evaluation's :class:`~lightemma.evaluation.safety.SafetyResult`) the tags ``collides`` and
     ``off_road`` follow, per model from its own outcomes ("frames" counts the first model's); with ``planning`` (an
-    evaluation's :class:`~lightemma.evaluation.planning.PlanningResult`) the tags ``wrong-way``, ``uncomfortable`` and
-    ``no-progress`` the same way.
+    evaluation's :class:`~lightemma.evaluation.planning_score.PlanningResult`) the tags ``wrong-way``, ``uncomfortable`` and
+    ``no-progress`` the same way; with ``explanations`` (an evaluation's
+    :class:`~lightemma.evaluation.intent_audit.ExplanationResult`) the tag ``says-stop-drives-on``.
     """
     from lightemma import evaluate
 
@@ -216,9 +236,12 @@ def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", f
             masks.update(_safety_masks(safety, label, run, rows))
         if planning is not None:
             masks.update(_planning_masks(planning, label, run, rows))
+        if explanations is not None:
+            masks.update(_explanation_masks(explanations, label, run, rows))
         per_model.append((run, rows, {"all": np.ones(len(rows), dtype=bool), **masks}))
     out = []
-    for tag in ("all", *TAGS, *(SAFETY_TAGS if safety is not None else ()), *(PLANNING_TAGS if planning is not None else ())):
+    for tag in ("all", *TAGS, *(SAFETY_TAGS if safety is not None else ()), *(PLANNING_TAGS if planning is not None else ()),
+                *(EXPLANATION_TAGS if explanations is not None else ())):
         row: dict[str, Any] = {"tag": tag, "frames": int(per_model[0][2][tag].sum()) if per_model else 0}
         for label, (run, rows, masks) in zip(labels, per_model):
             chosen = rows[masks[tag]]

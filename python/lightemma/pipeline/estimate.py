@@ -272,7 +272,9 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
         bounds = {key: frame_cost_upper_bound(info, max_tokens=max_tokens, batch=is_batch, given_price=given_price,
                                               served_from=served_from)
                   for key, is_batch in (("bound", False), ("batch_bound", True))}
-    return Estimate(model=info.key, provider=rule_provider, frames=n, calls=3 * n, input_tokens=total_in,
+    # the label names the rule counted (the model's own), not the route: Claude behind --api-base is 'anthropic rule'
+    label = rule.provider if rule is not None else rule_provider
+    return Estimate(model=info.key, provider=label, frames=n, calls=3 * n, input_tokens=total_in,
                     image_tokens=images, output_tokens=output, image_sizes=sizes, missing_images=missing,
                     cost_cents=cost(list_price), batch_cost_cents=cost(batch), price_source=list_price["source"],
                     batch_price_source=batch["source"], output_source=output_source, image_rule=rule_text,

@@ -272,6 +272,10 @@ def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> li
         tables.append(planning_table(evaluation))
         if any(r["diff"] is not None for r in evaluation.planning.pairwise or []):
             tables.append(pairwise_planning_table(evaluation))
+    if evaluation.explanations is not None and evaluation.explanations.shown:  # some run has stage-2 texts
+        tables.append(explanations_table(evaluation))
+        if evaluation.explanations.ablations:
+            tables.append(intent_ablation_table(evaluation))
     return tables + ablation_tables(evaluation)
 
 
@@ -313,6 +317,45 @@ def provenance_table(evaluation: Evaluation) -> Table:
                         "lightemma evaluate --format json."])
 
 
+#: the explanation audit's columns (docs/definitions.md#explanation-audit): rates in [0, 1], n/a with the reason
+EXPLANATION_COLUMNS: tuple[Column, ...] = (
+    Column("model", "Model"),
+    Column("explanation_frames", "Frames"),
+    Column("consistent", "Consistent [95% CI]", fixed(3), ci="consistent_ci95", na="consistent_na"),
+    Column("contradicts", "Contradicts [95% CI]", fixed(3), ci="contradicts_ci95", na="contradicts_na"),
+    Column("intent_unknown", "Unknown [95% CI]", fixed(3), ci="intent_unknown_ci95", na="intent_unknown_na"),
+    Column("intent_accuracy", "Intent accuracy [95% CI]", fixed(3), ci="intent_accuracy_ci95", na="intent_accuracy_na"),
+)
+
+
+def explanations_table(evaluation: Evaluation) -> Table:
+    """"Explanations": per model the shares of frames whose stated intent (stage 2) is consistent with, contradicts or
+    cannot be checked against its plan (stage 3), and its intent accuracy against the ground truth's behaviour
+    (``Evaluation.explanations``, lightemma.evaluation.intent_audit)."""
+    rows = [{"model": m.label, **m.explanations} for m in evaluation.models]
+    r = evaluation.resampling
+    notes = [
+        "The stated intent of stage 2, read without a judge (rules intent@lightemma/1), against the plan of stage 3 "
+        "(Consistent / Contradicts / Unknown: shares of the frames) and against what the car did, the same classes "
+        "from the ground truth (Intent accuracy: share of the frames whose stated intent is consistent with it). "
+        "Rates in [0, 1]; runs without stage-2 texts (baselines) are n/a (docs/definitions.md#explanation-audit).",
+    ]
+    if r.n_resamples:
+        notes.append(f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed}).")
+    return Table("Explanations", EXPLANATION_COLUMNS, rows, name="explanations", flags=coverage_flags(evaluation), notes=notes)
+
+
+def intent_ablation_table(evaluation: Evaluation) -> Table:
+    """"Stated intent without the image": per ablation run, the share of frames whose stated intent differs from the
+    full run's (``ExplanationResult.ablations``)."""
+    cols = (Column("model", "Model"), Column("ablation", "Ablation"), Column("ablated", "Ablated run"), Column("frames", "Frames"),
+            Column("intent_changed", "Intent changed [95% CI]", fixed(3), ci="intent_changed_ci95", na="intent_changed_na"))
+    return Table("Stated intent without the image", cols, list(evaluation.explanations.ablations), name="intent_ablations",
+                 notes=["Share of the frames both runs answered with a stage-2 text whose stated intent (longitudinal and "
+                        "lateral class, unknown included) differs between the full run and its ablation "
+                        "(docs/definitions.md#explanation-audit)."])
+
+
 #: the planning score's columns (docs/definitions.md#planning-score): means in [0, 1], n/a with the reason
 _PLANNING_TITLES = {"pdms": "PDMS", "epdms": "EPDMS", "epdms_map": "EPDMS-map", "nc": "NC", "dac": "DAC", "ddc": "DDC",
                     "tlc": "TLC", "ep": "EP", "ttc": "TTC", "lk": "LK", "c": "C", "hc": "HC", "ec": "EC"}
@@ -320,7 +363,7 @@ _PLANNING_TITLES = {"pdms": "PDMS", "epdms": "EPDMS", "epdms_map": "EPDMS-map", 
 
 def planning_columns(headline: str) -> tuple[Column, ...]:
     """Model, frames, the headline aggregate and PDMS with their intervals, then the other aggregate and every sub-score."""
-    from lightemma.evaluation.planning import KEYS
+    from lightemma.evaluation.planning_score import KEYS
 
     lead = [headline] + [k for k in ("pdms",) if k != headline]
     rest = [k for k in KEYS if k not in lead]
@@ -332,8 +375,8 @@ def planning_columns(headline: str) -> tuple[Column, ...]:
 
 def planning_table(evaluation: Evaluation) -> Table:
     """"Planning score (NAVSIM)": per model its PDMS / EPDMS (or EPDMS-map) and sub-scores, and the ground truth's own row
-    scored by the same code (``Evaluation.planning``, lightemma.evaluation.planning)."""
-    from lightemma.evaluation.planning import GT_LABEL
+    scored by the same code (``Evaluation.planning``, lightemma.evaluation.planning_score)."""
+    from lightemma.evaluation.planning_score import GT_LABEL
 
     result = evaluation.planning
     rows = [{"model": m.label, **m.planning} for m in evaluation.models]

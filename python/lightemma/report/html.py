@@ -162,7 +162,7 @@ SIM_STRIDE = 3
 def simulated_paths(ft: FrameTable, planning: Any) -> list[list[float | None]] | None:
     """Per model a flat list over frames of the planning score's re-simulated path (docs/definitions.md#planning-score):
     11 points 0.3 s apart from 0 to 3 s, x, y (m) in the keyframe's ego frame; None where the frame was not simulated.
-    ``planning``: the evaluation's :class:`~lightemma.evaluation.planning.PlanningResult`, or None (then None)."""
+    ``planning``: the evaluation's :class:`~lightemma.evaluation.planning_score.PlanningResult`, or None (then None)."""
     if planning is None:
         return None
     points = 30 // SIM_STRIDE + 1
@@ -315,7 +315,7 @@ def write_html(
     shows a progress bar over the camera thumbnails; ``safety`` (the evaluation's
     :class:`~lightemma.evaluation.safety.SafetyResult`, or None) gives each model's per-frame
     ``collides`` / ``off_road`` flags: a frame-browser filter and columns of the frame view; ``planning`` (the
-    evaluation's :class:`~lightemma.evaluation.planning.PlanningResult`, or None) the re-simulated path each model's
+    evaluation's :class:`~lightemma.evaluation.planning_score.PlanningResult`, or None) the re-simulated path each model's
     plan is scored on, dotted in the frame view's bird's-eye view.
     """
     ft = FrameTable(runs, labels)

@@ -631,8 +631,8 @@ def _runs_table(evaluation: Evaluation, flags: dict[str, str]) -> Table:
 
 def _planning_section(w: _Writer, evaluation: Evaluation, colors: dict[str, str], flags: dict[str, str]) -> None:
     """The planning score by sub-score: one bar per model and the ground truth (when some value is there)."""
-    from lightemma.evaluation.planning import GT_LABEL, KEYS
-    from lightemma.report.figures.planning import planning_figure
+    from lightemma.evaluation.planning_score import GT_LABEL, KEYS
+    from lightemma.report.figures.subscores import planning_figure
 
     result = evaluation.planning
     rows = [{"model": m.label, **m.planning} for m in evaluation.models] + ([result.ground_truth] if result.ground_truth else [])
@@ -749,8 +749,16 @@ def _write(
     else:
         w.lines += ["No model has a scored frame yet; no chart.", ""]
 
-    if evaluation.planning is not None:  # the planning score broken into its sub-scores (report/figures/planning.py)
+    if evaluation.planning is not None:  # the planning score broken into its sub-scores (report/figures/subscores.py)
         _planning_section(w, evaluation, colors, flags)
+    if evaluation.explanations is not None and evaluation.explanations.shown:  # report/figures/consistency.py
+        from lightemma.report.figures.consistency import explanations_figure
+
+        w.lines += ["## Explanations", ""]
+        w.figure(explanations_figure([{"model": m.label, **m.explanations} for m in evaluation.models], colors=colors,
+                                     notes=flags), "explanations",
+                 "Per model the share of frames whose stated intent is consistent with its own plan, and with what the car "
+                 "did (intent accuracy), with 95 % scene-bootstrap intervals; n/a for runs without stage-2 texts")
 
     if evaluation.pairwise is not None:
         w.lines += ["## Paired comparisons", ""]
@@ -771,7 +779,7 @@ def _write(
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     steps.step("tables and charts")
     w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None, safety=evaluation.safety,
-                                     planning=evaluation.planning), labels, flags), latex=False)
+                                     planning=evaluation.planning, explanations=evaluation.explanations), labels, flags), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
     w.table(_bias_table(bias, flags), latex=False)

@@ -6,7 +6,7 @@ Layout under ``outdir``::
                ego_pose,log,scene,sample,sample_data,sample_annotation,map}.json
     maps/<token>.png                          # base map mask per location: road + sidewalks (lightemma.synth.maps)
     maps/expansion/<location>.json            # map expansion: drivable area, lanes, road segments (lightemma.synth.maps)
-    can_bus/<scene>_pose.json                 # CAN-bus-like pose messages at 50 Hz (lightemma.synth.can_bus)
+    can_bus/<scene>_pose.json                 # CAN-bus-like pose messages at 50 Hz (lightemma.synth.can_pose)
     samples/CAM_FRONT/<log>__CAM_FRONT__<µs>.jpg   # keyframes, 2 Hz
     sweeps/CAM_FRONT/<log>__CAM_FRONT__<µs>.jpg    # sweeps, 12 Hz between keyframes
     lightemma-synth.json                      # what was generated (seed, scenes, parameters)
@@ -33,7 +33,7 @@ from lightemma.errors import UserError
 from lightemma.frames.loader import TABLES
 from lightemma.frames.model import SYNTH_MARKER
 from lightemma.synth.camera import Camera
-from lightemma.synth import can_bus as synth_can
+from lightemma.synth import can_pose as synth_can
 from lightemma.synth import maps as synth_maps
 from lightemma.synth.render import render_frame
 from lightemma.synth.scenarios import Scenario, build_scenarios, sweep_times_us

@@ -20,7 +20,7 @@ def planning_figure(rows: Sequence[Mapping[str, Any]], *, colors: Mapping[str, s
                     notes: Mapping[str, str] | None = None, gt_label: str | None = None) -> Any:
     """Grouped bars of each row's planning means (values in [0, 1]) with their 95 % intervals as error bars.
 
-    ``rows``: planning rows (``model`` and the keys of :data:`lightemma.evaluation.planning.ROW_KEYS`), the ground
+    ``rows``: planning rows (``model`` and the keys of :data:`lightemma.evaluation.planning_score.ROW_KEYS`), the ground
     truth's last; ``colors``: model label → colour (the ground truth is green); ``notes``: a flag after a model's name.
     A value that is n/a is drawn as no bar with "n/a" at its foot; keys no row has are left out. Raises ``ValueError``
     when there is no row.
