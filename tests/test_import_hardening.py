@@ -303,3 +303,17 @@ def test_folder_and_file_names_that_are_not_utf8_are_imported_with_replacement_c
     assert read_manifest(result.run_dir)["imported"]["source_model"] == "my-model-\ufffd"
     capsys.readouterr()
     assert main(["evaluate", str(tmp_path / "runs")]) == 0 and "my-model-\ufffd" in capsys.readouterr().out
+
+
+def test_a_file_repeating_many_frames_is_one_warning_line_with_its_count(tmp_path):
+    model = tmp_path / "res" / "gpt-4o"
+    original = _scene(model, "scene-0001", 1, frames=12)
+    (original.parent / "scene-0002.json").write_bytes(original.read_bytes())  # a copy: every frame already read
+    warnings: list[str] = []
+    (folder,) = reference.find_model_folders(tmp_path / "res")
+    result = importer.import_folder(folder, tmp_path / "runs", warn=warnings.append)
+    repeated = [w for w in warnings if "already read" in w]
+    assert len(repeated) == 1, repeated
+    (line,) = repeated
+    assert "scene-0002.json" in line and "12 frame(s) already read from another file (first 3:" in line
+    assert result.frames == 12 and result.frames_skipped == 12

@@ -73,6 +73,7 @@ IMPORT_INTEGRATOR = "euler"
 CALL_FAILURE = "ReferenceCallError"  # error class of a call whose "text" is the reference's error message
 DATASET_KINDS = ("nuscenes", "synthetic")
 MAX_FRAME_WARNINGS = 20  # per file; the rest are counted in one line
+DUPLICATE_EXAMPLES = 3  # frame ids named in the one line about a file's frames already read from another file
 TRAJECTORY_TOLERANCE = 1e-6  # metres: the reference's own stored trajectory vs ours
 
 Warn = Callable[[str], None]
@@ -430,9 +431,10 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                 metadata_model = metadata_model or scene.metadata_model
                 lines = []
                 unknown_named = False
+                duplicates: list[str] = []
                 for record in _scene_records(scene, prices, warn, templates):
                     if record["frame_id"] in seen:
-                        warn(f"{path}: frame {record['frame_id']} was already read from another file; frame skipped")
+                        duplicates.append(record["frame_id"])
                         frames_skipped += 1
                         continue
                     seen.add(record["frame_id"])
@@ -445,6 +447,10 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                     tally.add(record)
                     columns.add(record)
                     lines.append(encode_line(record, bounded=True))
+                if duplicates:  # one line per file, however many frames it repeats
+                    first = ", ".join(duplicates[:DUPLICATE_EXAMPLES])
+                    more = f" (first {DUPLICATE_EXAMPLES}: {first})" if len(duplicates) > DUPLICATE_EXAMPLES else f" ({first})"
+                    warn(f"{path}: {len(duplicates)} frame(s) already read from another file{more}; skipped")
                 if lines:
                     scenes.append(scene.scene_name)
                     fh.write(b"".join(lines))
