@@ -9,7 +9,7 @@ import pytest
 
 from lightemma.cli import main
 from lightemma.evaluation import evaluate_loaded, load_run
-from lightemma.evaluation import planning as P
+from lightemma.evaluation import planning_score as P
 from lightemma.evaluation.stats import Resampling
 from lightemma.runs.store import find_run_dirs
 
