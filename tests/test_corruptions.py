@@ -245,6 +245,8 @@ def test_history_noise_has_the_documented_sigma_per_frame_seeds_and_is_the_same_
     for f in frames:
         shown = shown_history(f, "history-noise@0.5,0.01")
         assert any(np.allclose(p, shown, atol=1e-3) for p in printed.values())
+        assert np.array_equal(shown, np.round(shown, 3))  # the history's own 3 decimals, never 16 digits
+    assert not any(re.search(r"\d\.\d{4,}", t) for t in texts)  # no noisy value prints beyond 3 decimals
     perturbation = result.manifest["params"]["history_perturbation"]
     assert (perturbation["sigma_speed_m_s"], perturbation["sigma_curvature_per_m"]) == (0.5, 0.01)
     # the draw's spread is the documented sigma (2,000 frames' worth of noise)

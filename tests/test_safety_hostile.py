@@ -470,3 +470,14 @@ class _Run:
         self.gt_positions = np.asarray(frames.gt_positions, dtype=np.float64)
         self.trajectory = self.gt_positions.copy()
         self.info = SimpleNamespace(dataset=dataset, imported=False)
+
+
+def test_an_expansion_with_an_empty_drivable_area_layer_gives_that_map_na_not_all_off_road(root):
+    """A drivable_area layer with no polygon would put every position off-road (100 %): that map is n/a instead."""
+    (expansion,) = sorted((root / "maps" / "expansion").glob("boston*.json"))
+    doc = json.loads(expansion.read_text())
+    doc["drivable_area"] = []
+    expansion.write_text(json.dumps(doc))
+    data = S.load_safety_data(root, VERSION)
+    (reason,) = [a for a in data.areas.values() if isinstance(a, str)]
+    assert reason == f"map expansion {expansion}: its drivable_area layer holds no polygon", reason

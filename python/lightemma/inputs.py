@@ -122,14 +122,18 @@ def shown_history(frame: Any, inputs: str) -> np.ndarray:
 
     The frame's own history except under ``history-noise`` (plus N(0, SV²) on each speed and N(0, SK²) on each
     curvature, drawn from :func:`perturbation_seed` of the frame's sample token: one standard-normal (6, 2)
-    array of ``numpy.random.default_rng``) and ``history-stale@K`` (pair j is the frame's pair max(1, j − K)).
+    array of ``numpy.random.default_rng``; a perturbed column rounded to 3 decimals) and ``history-stale@K`` (pair j is the frame's pair max(1, j − K)).
     """
     actions = np.asarray(frame.history_actions, dtype=np.float64)
     noise = history_noise(inputs)
     if noise is not None:
         token = str(getattr(frame, "sample_token", None) or frame.frame_id)
         rng = np.random.default_rng(perturbation_seed("history-noise", inputs, token))
-        return actions + rng.standard_normal(actions.shape) * np.array(noise)
+        from lightemma.frames.geometry import round_like_python
+
+        noisy = actions + rng.standard_normal(actions.shape) * np.array(noise)
+        # a perturbed column to 3 decimals (the paper's history precision), never 16 digits of noise in a prompt
+        return np.where(np.array(noise) > 0, round_like_python(noisy), actions)
     k = history_stale(inputs)
     if k is not None:
         return actions[np.maximum(np.arange(len(actions)) - k, 0)]

@@ -334,6 +334,8 @@ def read_expansion(path: str | os.PathLike[str]) -> DrivableArea:
                 polygons.append(len(rings) - 1)
     except (KeyError, TypeError, AttributeError) as exc:
         raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer ({type(exc).__name__}: {exc})") from None
+    if len(polygons) == 1:  # every position would be off-road: no number, as for a mask without a drivable pixel
+        raise DatasetError(f"map expansion {path}: its drivable_area layer holds no polygon")
     return DrivableArea("expansion", os.fspath(path), xy=np.asarray(xy, dtype=np.float64).reshape(-1, 2),
                         rings=np.asarray(rings, dtype=np.int64), polygons=np.asarray(polygons, dtype=np.int64))
 

@@ -226,7 +226,8 @@ def input_ablation_table(evaluation: Evaluation) -> Table:
                *_paired_metric_columns("diff", (("full", "full"), ("ablated", "ablated")), "full − ablated")]
     notes = ["full − ablated < 0: the model is better with what the ablation takes away (the image, or the history) — it uses it; "
              "≈ 0: it does not. no-image: no image in any stage; blank-image: a uniform grey image of the frame's size; "
-             "no-history: the prompts without the history numbers (docs/run.md#input-ablations).",
+             "no-history: the prompts without the history numbers; corrupt:NAME@S: the image corrupted at severity S; "
+             "history-noise@SV[,SK] / history-stale@K: a perturbed history (docs/definitions.md#input-ablations).",
              _paired_note(evaluation, len(evaluation.input_ablations)), *_notes(evaluation)[:1]]
     return Table(f"Does the image matter? — input ablations, {evaluation.main_convention} convention", columns,
                  list(evaluation.input_ablations), name="input_ablations", flags=coverage_flags(evaluation), notes=notes)
