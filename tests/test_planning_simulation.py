@@ -383,6 +383,126 @@ def test_bad_input_is_not_available_with_a_reason():
     assert hc[0] in (0.0, 1.0) and np.isnan(hc[1])
 
 
+@pytest.fixture(scope="module")
+def uneven(tmp_path_factory):
+    """A synthetic dataset (keyframes 0.46–0.53 s apart, as nuScenes') with its scenarios' exact kinematics."""
+    from lightemma.frames import load_frames
+    from lightemma.synth import build_scenarios, write_dataset
+
+    scenes, keyframes = 3, 20  # cruise, accelerate, brake at a red light
+    root = write_dataset(tmp_path_factory.mktemp("uneven"), scenes=scenes, keyframes=keyframes, images=False,
+                         sweeps=False)
+    by_name = {s.name: s for s in build_scenarios(scenes, keyframes=keyframes)}
+    frames = load_frames(root, "v1.0-mini", on_missing_image="keep")
+    # the history keyframes' timestamps (s), oldest first, as the frames' history_positions
+    times = np.array([np.asarray(by_name[n].keyframe_times_us)[k - 7 : k + 1]
+                      for n, k in zip(frames.scene_names, frames.keyframe_indices)]) / 1e6
+    return root, by_name, frames, times
+
+
+def _constant_acceleration_rows(by_name, frames, times):
+    """Frames moving straight (> 1 m/s) with one acceleration over their last three keyframes: there the quadratic
+    through the three positions is the motion itself, so the derived speed and acceleration are exact."""
+    from lightemma.synth import can_pose as synth_can
+
+    rows = []
+    for i, (name, t) in enumerate(zip(frames.scene_names, times)):
+        kin = synth_can.kinematics(by_name[name], np.round(t[-3:] * 1e6).astype(np.int64))
+        if (kin[:, 0] > 1.0).all() and np.ptp(kin[:, 1]) < 1e-12 and not kin[:, 2:].any():
+            rows.append(i)
+    return np.array(rows)
+
+
+def test_initial_state_uses_the_real_keyframe_spacing(uneven):
+    from lightemma.frames import can_bus
+
+    root, by_name, frames, times = uneven
+    spacing = np.diff(times[:, -3:], axis=1)
+    assert np.abs(spacing - sim.KEYFRAME_DT).max() > 0.02  # the spacing is uneven, as in nuScenes
+    rows = _constant_acceleration_rows(by_name, frames, times)
+    assert len(rows) >= 6 and {frames.scene_names[i] for i in rows} >= {"synth-0000-cruise", "synth-0001-accelerate"}
+    can = can_bus.frame_can_readings(frames)
+    assert can is not None and can.available[rows].all()
+    got = sim.initial_state(frames.history_positions[rows], times=times[rows])
+    assert got.reasons == [None] * len(rows)
+    # the CAN reading is the 50 Hz message nearest the keyframe (≤ 10 ms away: |Δv| ≤ 3.2 m/s² · 0.01 s); its
+    # accelerations are exact on these frames (up to the timestamps' whole microseconds: 1e-4 m/s²)
+    np.testing.assert_allclose(got.states[:, VX], can.values[rows, 0], rtol=0, atol=0.035)
+    np.testing.assert_allclose(got.states[:, [AX, AY]], can.values[rows, 1:3], rtol=0, atol=1e-4)
+    # the 0.5 s assumption is off on the same frames (by up to ~0.9 m/s and ~2 m/s²)
+    assumed = sim.initial_state(frames.history_positions[rows]).states
+    assert np.abs(assumed[:, VX] - can.values[rows, 0]).max() > 0.2
+    assert np.abs(assumed[:, AX] - can.values[rows, 1]).max() > 0.5
+    # even spacing given as times is the default
+    even = np.tile(np.arange(-7, 1) * sim.KEYFRAME_DT + 3.0, (len(rows), 1))
+    np.testing.assert_allclose(sim.initial_state(frames.history_positions[rows], times=even).states, assumed,
+                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(sim.history_states(frames.history_positions[rows], times=even).states,
+                               sim.history_states(frames.history_positions[rows]).states, rtol=0, atol=1e-9)
+
+
+def test_history_states_use_the_real_keyframe_spacing(uneven):
+    root, by_name, frames, times = uneven
+    rows = np.array([i for i, n in enumerate(frames.scene_names) if n == "synth-0001-accelerate"])
+    # the accelerating scene keeps one acceleration over its whole history: every keyframe state is exact, and the
+    # linear interpolation between them is exact for the speed (linear in time)
+    from lightemma.synth import can_pose as synth_can
+
+    past = sim.history_states(frames.history_positions[rows], times=times[rows])
+    assert past.reasons == [None] * len(rows)
+    instants = np.arange(-sim.HISTORY_SECONDS, 0.0, 0.1)[:-1]
+    for j, i in enumerate(rows):
+        scn = by_name[frames.scene_names[i]]
+        start = times[i, -4:]
+        assert (np.diff(times[i, -5:]) > 0).all()
+        when = np.round((times[i, -1] + instants) * 1e6).astype(np.int64)
+        kin = synth_can.kinematics(scn, when)
+        inside = instants >= start[0] - times[i, -1]  # an instant before the oldest keyframe is extrapolated
+        np.testing.assert_allclose(past.states[j, inside, VX], kin[inside, 0], rtol=0, atol=1e-4)
+        np.testing.assert_allclose(past.states[j, :, AX], kin[:, 1], rtol=0, atol=1e-4)
+
+
+def test_the_planning_score_takes_the_keyframe_timestamps(uneven, tmp_path):
+    """The caller passes each history keyframe's timestamp: without a CAN bus the initial speed is the exact one."""
+    import shutil
+
+    from lightemma.evaluation import planning_score as P
+    from lightemma.evaluation import safety as S
+    from lightemma.synth import can_pose as synth_can
+
+    root, by_name, frames, times = uneven
+    data_root = tmp_path / "data"
+    shutil.copytree(root, data_root, ignore=shutil.ignore_patterns("can_bus"))
+    rows = _constant_acceleration_rows(by_name, frames, times)
+    tokens = [frames.sample_tokens[i] for i in rows]
+    data = S.load_safety_data(data_root, "v1.0-mini", samples=set(tokens), history=P.HISTORY_KEYFRAMES)
+    got = P._frames(data, tokens, [frames.scene_names[i] for i in rows])
+    ok = np.array([r is None for r in got.reason])
+    assert ok.sum() >= 4
+    truth = np.array([synth_can.kinematics(by_name[frames.scene_names[i]], [int(frames.timestamps[i])])[0]
+                      for i in rows])
+    # exact up to the timestamps' whole microseconds (1e-4)
+    np.testing.assert_allclose(got.init[ok, VX], truth[ok, 0], rtol=0, atol=1e-4)
+    np.testing.assert_allclose(got.init[ok, AX], truth[ok, 1], rtol=0, atol=1e-4)
+
+
+def test_times_that_cannot_be_used():
+    hist = np.zeros((3, 8, 2))
+    hist[:, :, 0] = np.arange(-7, 1) * 2.0
+    times = np.tile(np.arange(-7, 1) * 0.5, (3, 1))
+    times[1, -2] = np.nan
+    times[2, -2] = times[2, -1]
+    got = sim.initial_state(hist, times=times)
+    assert got.reasons[0] is None and "frame 1" in got.reasons[1] and "times" in got.reasons[1]
+    assert "not increasing" in got.reasons[2] and np.isnan(got.states[1:]).all()
+    past = sim.history_states(hist, times=times)
+    assert past.reasons[0] is None and "not increasing" in past.reasons[2] and np.isnan(past.states[1:]).all()
+    with pytest.raises(ValueError, match=r"times must have shape \(3, 8\)"):
+        sim.initial_state(hist, times=times[:, 1:])
+    with pytest.raises(ValueError, match="dt must be a positive"):
+        sim.history_states(hist, dt=0.0)
+
+
 @pytest.mark.parametrize(
     ("call", "message"),
     [

@@ -8,8 +8,8 @@ them once per batch for every run together:
   the six later keyframes (tracked by instance), and the map layers (:func:`lightemma.planning.scores.read_planning_map`
   for a map expansion, the base map mask otherwise);
 * per frame: the initial ego state and the recorded past (:func:`~lightemma.planning.simulation.initial_state`,
-  :func:`~lightemma.planning.simulation.history_states`) from the earlier keyframes' poses; the ground truth's poses
-  (positions and headings of the six later keyframes) simulated from that state like a plan;
+  :func:`~lightemma.planning.simulation.history_states`) from the earlier keyframes' poses and timestamps; the
+  ground truth's poses (positions and headings of the six later keyframes) simulated from that state like a plan;
 * per run: each scored frame's plan (its actions integrated with headings, :func:`plan_poses`), simulated
   (:func:`simulate`), its comfort ``c``, history comfort ``hc``, extended comfort ``ec`` against the same run's plan
   of the previous keyframe, then :func:`~lightemma.planning.scores.drive_scores` for the sub-scores and aggregates.
@@ -152,6 +152,7 @@ def _frames(data: Any, tokens: list[str], scenes: list[str]) -> _Frames:
     f = len(tokens)
     pose = np.full((f, 3), np.nan)
     hist = np.full((f, HISTORY_KEYFRAMES + 1, 2), np.nan)
+    hist_t = np.full((f, HISTORY_KEYFRAMES + 1), np.nan)  # the history keyframes' timestamps, s
     gt = np.full((f, STEPS, 3), np.nan)
     reason: list[str | None] = [None] * f
     past_reason: list[str | None] = [None] * f
@@ -177,6 +178,8 @@ def _frames(data: Any, tokens: list[str], scenes: list[str]) -> _Frames:
         local = to_ego_frame(pts[None], pose[i, None, :2], pose[i, 2:3])[0]
         hist[i, -len(local):] = local
         hist[i, -1] = 0.0  # exactly the origin
+        stamps = [data.timestamps.get(k, np.nan) for k in [tok, *data.past.get(tok, [])[: len(earlier)]]]
+        hist_t[i, -len(local):] = np.array(stamps, dtype=np.float64)[::-1] / 1e6  # oldest first, as pts
         if len(earlier) < 2:
             reason[i] = (f"sample {tok} has {len(earlier)} earlier keyframe(s) with a pose; the initial ego state "
                          "needs 2 (the first second of a scene)")
@@ -192,14 +195,15 @@ def _frames(data: Any, tokens: list[str], scenes: list[str]) -> _Frames:
         gt[i, :, :2] = to_ego_frame(fut[None, :, :2], pose[i, None, :2], pose[i, 2:3])[0]
         gt[i, :, 2] = _wrap(fut[:, 2] - pose[i, 2])
     can, broken = _can(data, tokens, scenes)
-    init = initial_state(hist, can=can)  # the CAN bus replaces the derived speed, accelerations and yaw rate
+    # the keyframes' real spacing (0.47–0.52 s); the CAN bus replaces the derived speed, accelerations and yaw rate
+    init = initial_state(hist, can=can, times=hist_t)
     states = init.states.copy()
     for i, why in broken.items():
         reason[i] = reason[i] or why
     for i, why in enumerate(init.reasons):
         if why is not None and reason[i] is None:
             reason[i] = f"no initial ego state: {why.split(': ', 1)[-1]}"
-    past = history_states(hist)
+    past = history_states(hist, times=hist_t)
     for i, why in enumerate(past.reasons):
         if why is not None and past_reason[i] is None:
             past_reason[i] = reason[i] or f"no recorded past: {why.split(': ', 1)[-1]}"

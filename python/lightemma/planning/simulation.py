@@ -37,7 +37,8 @@ COMFORT_LIMITS: tuple[tuple[float, float], ...] = tuple(tuple(b) for b in _core.
 EXTENDED_COMFORT_FEATURES: tuple[str, ...] = tuple(_core.EXTENDED_COMFORT_FEATURES)
 EXTENDED_COMFORT_LIMITS: tuple[float, ...] = tuple(_core.EXTENDED_COMFORT_LIMITS)
 
-#: nuScenes' keyframe spacing, seconds (a plan's and a history's step).
+#: nuScenes' nominal keyframe spacing, seconds (a plan's step; a history's when no timestamps are given: real keyframes
+#: are 0.47–0.52 s apart).
 KEYFRAME_DT = 0.5
 #: NAVSIM's bound on the spacing of the two frames of extended comfort, seconds (exclusive).
 MAX_INTERVAL = 0.55
@@ -270,32 +271,67 @@ class DerivedStates:
 _STANDSTILL = 0.2
 
 
-def _check_history(history_positions: ArrayLike, need: int) -> tuple[np.ndarray, list[str | None]]:
+def _check_history(
+    history_positions: ArrayLike, need: int, times: ArrayLike | None, dt: float
+) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
+    """Positions (N, P, 2), their times (N, P) in seconds relative to the last one (``dt`` apart when ``times`` is
+    ``None``) and per frame why its last ``need`` positions cannot be used (``None`` when they can)."""
     h = _array(history_positions, "history_positions", 3, 2, "(N, P, 2)")
     if h.shape[1] < need:
         raise ValueError(f"history_positions must hold at least {need} positions per frame, got {h.shape[1]}")
+    if times is None:
+        dt = float(dt)
+        if not (np.isfinite(dt) and dt > 0.0):
+            raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+        t = np.broadcast_to(np.arange(1 - h.shape[1], 1) * dt, h.shape[:2]).copy()
+    else:
+        t = np.asarray(times, dtype=np.float64)
+        if t.shape != h.shape[:2]:
+            raise ValueError(f"times must have shape {h.shape[:2]} (one per history position), got {t.shape}")
+        with np.errstate(invalid="ignore"):
+            t = t - t[:, -1:]
     reasons: list[str | None] = []
     for i, frame in enumerate(h):
         if not np.isfinite(frame[-need:]).all():
             reasons.append(f"frame {i}: the last {need} history positions hold a NaN or infinity")
         elif np.abs(frame[-1]).max() > 1e-6:
             reasons.append(f"frame {i}: the last history position {frame[-1].tolist()} is not the ego-frame origin")
+        elif not np.isfinite(t[i, -need:]).all():
+            reasons.append(f"frame {i}: the times of the last {need} history positions hold a NaN or infinity")
+        elif not (np.diff(t[i, -need:]) > 0.0).all():
+            reasons.append(f"frame {i}: the times of the last {need} history positions are not increasing")
         else:
             reasons.append(None)
-    return h, reasons
+    return h, t, reasons
 
 
-def _keyframe_states(h: np.ndarray, dt: float, vehicle: Vehicle) -> np.ndarray:
-    """(N, 4, 11) states at the last four keyframes (−1.5, −1.0, −0.5, 0 s) from positions (N, P ≥ 5, 2)."""
+def _quadratic_weights(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Weights (…, 3) of three samples at times ``t`` (…, 3) giving the first derivative at ``at`` (…) and the second
+    derivative of the quadratic through them (Lagrange; exact for any spacing, the usual central/backward
+    differences when the spacing is even)."""
+    t0, t1, t2 = t[..., 0], t[..., 1], t[..., 2]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        d0, d1, d2 = (t0 - t1) * (t0 - t2), (t1 - t0) * (t1 - t2), (t2 - t0) * (t2 - t1)
+        first = np.stack([(2 * at - t1 - t2) / d0, (2 * at - t0 - t2) / d1, (2 * at - t0 - t1) / d2], axis=-1)
+        second = np.stack([2 / d0, 2 / d1, 2 / d2], axis=-1)
+    return first, second
+
+
+def _keyframe_states(h: np.ndarray, times: np.ndarray, vehicle: Vehicle) -> np.ndarray:
+    """(N, 4, 11) states at the last four keyframes (nominally −1.5, −1.0, −0.5, 0 s) from positions (N, P ≥ 5, 2)
+    at ``times`` (N, P) seconds."""
     n = h.shape[0]
-    p = h[:, -5:]  # t = -2.0 … 0
+    p = h[:, -5:]  # nominally t = -2.0 … 0
+    tt = times[:, -5:]
     vel = np.empty((n, 4, 2))
     acc = np.empty((n, 4, 2))
-    # keyframes −1.5, −1.0, −0.5: central differences; the present: the backward three-point formulas
-    vel[:, :3] = (p[:, 2:] - p[:, :-2]) / (2 * dt)
-    acc[:, :3] = (p[:, 2:] - 2 * p[:, 1:-1] + p[:, :-2]) / dt**2
-    vel[:, 3] = (3 * p[:, 4] - 4 * p[:, 3] + p[:, 2]) / (2 * dt)
-    acc[:, 3] = (p[:, 4] - 2 * p[:, 3] + p[:, 2]) / dt**2
+    # keyframes −1.5, −1.0, −0.5: the quadratic through each and its neighbours, at it (central differences for even
+    # spacing); the present: the quadratic through the last three (the backward three-point formulas)
+    for k in range(4):
+        lo = min(k, 2)
+        first, second = _quadratic_weights(tt[:, lo : lo + 3], tt[:, k + 1])
+        vel[:, k] = np.einsum("nj,njc->nc", first, p[:, lo : lo + 3])
+        acc[:, k] = np.einsum("nj,njc->nc", second, p[:, lo : lo + 3])
     speed = np.hypot(vel[..., 0], vel[..., 1])
     moving = speed > _STANDSTILL
     heading = np.where(moving, np.arctan2(vel[..., 1], vel[..., 0]), np.nan)
@@ -333,13 +369,16 @@ def initial_state(
     *,
     can: ArrayLike | None = None,
     dt: float = KEYFRAME_DT,
+    times: ArrayLike | None = None,
     vehicle: Vehicle | None = None,
 ) -> DerivedStates:
     """A frame's initial ego state (t = 0) derived from its recorded past positions, and from the CAN bus if given.
 
     The ego frame puts the rear axle at the origin heading along +x, so x = y = heading = 0. With p₀ = the present
-    and p₋₁, p₋₂ the two keyframes before (``dt`` apart), the quadratic through them gives the velocity
-    v = (3p₀ − 4p₋₁ + p₋₂) / 2dt and the acceleration a = (p₀ − 2p₋₁ + p₋₂) / dt² (ego frame). velocity_x = vₓ,
+    and p₋₁, p₋₂ the two keyframes before, at their ``times`` (``dt`` apart when ``times`` is ``None``), the
+    quadratic through them gives the velocity at t = 0 and its acceleration — for even spacing
+    v = (3p₀ − 4p₋₁ + p₋₂) / 2dt and a = (p₀ − 2p₋₁ + p₋₂) / dt²; for uneven spacing (nuScenes keyframes are
+    0.47–0.52 s apart) the same quadratic with the real intervals (ego frame). velocity_x = vₓ,
     acceleration_x = aₓ, acceleration_y = a_y (velocity_y = 0: the bicycle model has none); yaw rate = (v × a) / |v|²
     and steering angle = atan(wheel_base · (v × a) / |v|³) (the bicycle model's yaw rate v tan δ / L); both 0 below
     0.2 m/s. Steering rate and yaw acceleration are 0.
@@ -349,8 +388,8 @@ def initial_state(
     a reading whose speed differs from the positions' by more than :data:`CAN_SPEED_TOLERANCE` makes the frame not
     available (two readings disagree: neither is chosen).
 
-    Limits: keyframes are 0.5 s apart, so positions give averages over the last second — a brake or a steering input
-    that began within it is seen late and smoothed; this function reads no files (the caller passes the CAN bus
+    Limits: keyframes are about 0.5 s apart, so positions give averages over the last second — a brake or a steering
+    input that began within it is seen late and smoothed; this function reads no files (the caller passes the CAN bus
     readings of the frames whose dataroot has them).
 
     Args:
@@ -359,20 +398,24 @@ def initial_state(
         can: optional (N, 4) CAN bus readings at the keyframe: speed (m/s), longitudinal and lateral acceleration
             (m/s²), yaw rate (rad/s) — nuScenes' ``can_bus`` ``pose`` message ``vel[0]``, ``accel[0]``, ``accel[1]``,
             ``rotation_rate[2]``; a row with a NaN is not used (the positions' values stand).
-        dt: seconds between positions.
+        dt: seconds between positions when ``times`` is ``None``.
+        times: optional (N, P) timestamps of the positions, seconds (any origin; the keyframes' ``timestamp`` / 1e6);
+            they replace ``dt``.
         vehicle: for the wheelbase; ``None`` is :data:`ZOE`.
 
     Returns:
-        :class:`DerivedStates` with ``states`` (N, 11); a frame with a non-finite position among its last three, whose
-        last position is not the origin, or whose CAN bus speed disagrees, has a NaN row and its reason.
+        :class:`DerivedStates` with ``states`` (N, 11); a frame with a non-finite position or time among its last
+        three, times not increasing, a last position that is not the origin, or a CAN bus speed that disagrees, has a
+        NaN row and its reason.
 
     Raises:
-        ValueError: shapes (fewer than 3 positions, ``can`` not (N, 4)).
+        ValueError: shapes (fewer than 3 positions, ``can`` not (N, 4), ``times`` not (N, P)), ``dt`` not positive.
     """
-    h, reasons = _check_history(history_positions, 3)
+    h, t, reasons = _check_history(history_positions, 3, times, dt)
     veh = vehicle or ZOE
     padded = np.concatenate([np.zeros((h.shape[0], 2, 2)), h[:, -3:]], axis=1)
-    states = _keyframe_states(padded, float(dt), veh)[:, 3].copy()
+    padded_t = np.concatenate([t[:, -3:-2] - 2.0, t[:, -3:-2] - 1.0, t[:, -3:]], axis=1)  # unused earlier slots
+    states = _keyframe_states(padded, padded_t, veh)[:, 3].copy()
     states[:, 2] = 0.0
     if can is not None:
         readings = _array(can, "can", 2, 4, "(N, 4)")
@@ -397,7 +440,12 @@ def initial_state(
 
 
 def history_states(
-    history_positions: ArrayLike, *, sim_dt: float = 0.1, dt: float = KEYFRAME_DT, vehicle: Vehicle | None = None
+    history_positions: ArrayLike,
+    *,
+    sim_dt: float = 0.1,
+    dt: float = KEYFRAME_DT,
+    times: ArrayLike | None = None,
+    vehicle: Vehicle | None = None,
 ) -> DerivedStates:
     """The recorded past that NAVSIM puts before the simulated states for history comfort (``hc``).
 
@@ -407,29 +455,39 @@ def history_states(
     does the same with keyframe states derived from positions: velocity and acceleration by central differences
     (the present keyframe by the backward formulas of :func:`initial_state`), heading = direction of motion (the
     present: 0; a car below 0.2 m/s keeps the next keyframe's heading), yaw rate (v × a)/|v|², steering angle
-    atan(L κ); steering rate and yaw acceleration 0 (not derivable at 2 Hz).
+    atan(L κ); steering rate and yaw acceleration 0 (not derivable at 2 Hz). With ``times`` the derivatives use the
+    real keyframe spacing (the quadratic through each keyframe and its neighbours) and the keyframe states are placed
+    at their real times before the linear interpolation; an instant before the oldest keyframe (at most a few
+    hundredths of a second for nuScenes) extends its first segment linearly.
 
     Args:
         history_positions: (N, P ≥ 5, 2) positions at ``dt`` spacing, the last one the ego-frame origin.
         sim_dt: the simulation step, seconds.
-        dt: seconds between positions.
+        dt: seconds between positions when ``times`` is ``None``.
+        times: optional (N, P) timestamps of the positions, seconds (any origin); they replace ``dt``.
         vehicle: for the wheelbase; ``None`` is :data:`ZOE`.
 
     Returns:
         :class:`DerivedStates` with ``states`` (N, 14, 11) for NAVSIM's spacing; NaN where not derivable (a non-finite
-        position among the last five, or a last position that is not the origin).
+        position or time among the last five, times not increasing, or a last position that is not the origin).
+
+    Raises:
+        ValueError: shapes (fewer than 5 positions, ``times`` not (N, P)), ``dt`` not positive.
     """
-    h, reasons = _check_history(history_positions, 5)
+    h, t, reasons = _check_history(history_positions, 5, times, dt)
     veh = vehicle or ZOE
-    keys = _keyframe_states(h, float(dt), veh)  # (N, 4, 11) at -1.5 … 0
-    times = np.arange(-HISTORY_SECONDS, 0.0, sim_dt)[:-1]
-    knots = np.arange(-3, 1) * float(dt)
+    keys = _keyframe_states(h, t, veh)  # (N, 4, 11) at nominally -1.5 … 0
+    instants = np.arange(-HISTORY_SECONDS, 0.0, sim_dt)[:-1]  # (S,)
+    knots = t[:, -4:]  # (N, 4) the keyframes' times, the present 0
     keys = keys.copy()
     keys[..., 2] = np.unwrap(keys[..., 2], axis=1)
-    position = (times - knots[0]) / float(dt)  # fractional keyframe index of each instant
-    index = np.minimum(np.floor(position).astype(np.int64), len(knots) - 2)
-    fraction = (position - index)[None, :, None]
-    states = keys[:, index] + (keys[:, index + 1] - keys[:, index]) * fraction
+    # the segment of each instant: the last knot at or before it (the first segment before the oldest knot)
+    index = np.clip((instants[None, :] >= knots[:, 1:2]).astype(np.int64) + (instants[None, :] >= knots[:, 2:3]), 0, 2)
+    rows = np.arange(h.shape[0])[:, None]
+    lo, hi = knots[rows, index], knots[rows, index + 1]
+    with np.errstate(invalid="ignore", divide="ignore"):
+        fraction = ((instants[None, :] - lo) / (hi - lo))[..., None]
+    states = keys[rows, index] + (keys[rows, index + 1] - keys[rows, index]) * fraction
     states[..., 2] = np.arctan2(np.sin(states[..., 2]), np.cos(states[..., 2]))
     states[np.array([r is not None for r in reasons], dtype=bool)] = np.nan
     return DerivedStates(states=states, reasons=reasons)
