@@ -202,6 +202,50 @@ def test_refuses_to_overwrite_unless_asked(tmp_path):
     assert len(read_table(tmp_path / "d", VERSION, "scene")) == 2
 
 
+def _shared_digest(root) -> dict[str, str]:
+    """sha256 of every file outside the version folders (maps, expansion, can_bus, images)."""
+    return {k: v for k, v in _digest(root).items() if not k.startswith("v1.0-") and k != "lightemma-synth.json"}
+
+
+def test_another_dataset_never_overwrites_the_shared_files_of_a_root(tmp_path, capsys):
+    """The new-user repro: a second synth of another seed under a new --version into the same root rewrote
+    maps, expansion, CAN bus and images of the first (its run's off-road went from 0 % to 100 %); now refused
+    in one line naming the file, before anything is written, with or without --force."""
+    d3 = tmp_path / "d3"
+    small = ["--scenes", "3", "--no-sweeps", "--keyframes", "15", "--image-size", "160x90"]
+    assert main(["synth", str(d3), *small]) == 0
+    capsys.readouterr()
+    before = _digest(d3)
+    shared_before = _shared_digest(d3)
+    assert any(k.startswith("maps/expansion/") for k in shared_before)
+    assert any(k.startswith("can_bus/") for k in shared_before)
+    assert any(k.startswith("samples/") for k in shared_before)
+    for force in ([], ["--force"]):
+        rc = main(["synth", str(d3), "--version", "v1.0-other", "--seed", "7", *small, *force])
+        err = capsys.readouterr().err.strip()
+        assert rc == 2 and "\n" not in err
+        assert "already exists with other contents" in err and "another dataset" in err and str(d3) in err
+        assert _digest(d3) == before  # nothing written, not even the other version's folder
+    # --force on the same version with another seed may not rewrite the shared files either
+    with pytest.raises(UserError, match=r"(maps|can_bus|samples)/.* already exists with other contents"):
+        write_dataset(d3, scenes=3, seed=7, keyframes=15, sweeps=False, image_size=(160, 90), overwrite=True)
+    assert _digest(d3) == before
+    # a real-looking map expansion that the synthetic one would replace: refused, kept byte for byte
+    real = tmp_path / "real"
+    (real / "maps" / "expansion").mkdir(parents=True)
+    for loc in ("boston-seaport", "singapore-onenorth"):
+        (real / "maps" / "expansion" / f"{loc}.json").write_text('{"version": "1.3"}')
+    with pytest.raises(UserError, match=r"expansion/.*\.json already exists with other contents"):
+        write_dataset(real, scenes=3, keyframes=15, images=False, version="v1.0-new")
+    assert sorted(p.name for p in real.rglob("*")) == ["boston-seaport.json", "expansion", "maps",
+                                                       "singapore-onenorth.json"]
+    # the same dataset under another version keeps identical shared files and adds its own folder
+    write_dataset(d3, scenes=3, seed=0, keyframes=15, sweeps=False, image_size=(160, 90), version="v1.0-same")
+    assert _shared_digest(d3) == shared_before and (d3 / "v1.0-same" / "scene.json").is_file()
+    assert {k: v for k, v in _digest(d3).items() if k.startswith(VERSION + "/")} == {
+        k: v for k, v in before.items() if k.startswith(VERSION + "/")}
+
+
 def test_tables_only_mode_writes_no_images(tmp_path):
     root = write_dataset(tmp_path / "t", scenes=2, keyframes=16, images=False)
     assert not (root / "samples").exists() and not (root / "sweeps").exists()
@@ -276,8 +320,17 @@ def test_cli_synth_writes_a_loadable_dataset(tmp_path, capsys):
     assert len(load_frames(out, VERSION, split="all")) == 2 * 2
     rc = main(["synth", str(out), "--scenes", "2"])
     assert rc == 2 and "already exists" in capsys.readouterr().err
-    rc = main(["synth", str(out), "--scenes", "1", "--keyframes", "15", "--version", "v1.0-test", "--no-images"])
-    assert rc == 0 and len(read_table(out, "v1.0-test", "scene")) == 1
+    # a second version of the same dataset (same seed, scenes, keyframes) shares the files outside its folder
+    rc = main(["synth", str(out), "--scenes", "2", "--seed", "4", "--keyframes", "16", "--version", "v1.0-test",
+               "--no-images"])
+    assert rc == 0 and len(read_table(out, "v1.0-test", "scene")) == 2
+    # another dataset (other seed and keyframes) would rewrite them: refused, nothing written, --force or not
+    for force in ([], ["--force"]):
+        rc = main(["synth", str(out), "--scenes", "1", "--keyframes", "15", "--version", "v1.0-other", "--no-images",
+                   *force])
+        err = capsys.readouterr().err
+        assert rc == 2 and "already exists with other contents" in err and "another dataset" in err
+        assert not (out / "v1.0-other").exists()
 
 
 def test_cli_rejects_bad_arguments(tmp_path, capsys):

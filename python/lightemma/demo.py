@@ -110,12 +110,14 @@ def run_demo(
     out = Path(out).resolve()
     _prepare(out)
     import lightemma
-    from lightemma.frames.model import summary_line
+    from lightemma.frames.model import SYNTH_MARKER, summary_line
     from lightemma.report import write_report
     from lightemma.synth import KINDS, write_dataset
 
     scenes = scenes or len(KINDS)
     log(f"1/3 writing a synthetic dataset ({scenes} scenes × {keyframes} keyframes) to {out / 'data'}")
+    if (out / "data" / SYNTH_MARKER).is_file():  # an earlier demo's dataset, maybe of other --scenes/--keyframes:
+        shutil.rmtree(out / "data")  # write_dataset never rewrites the shared files of another dataset
     dataroot = Path(write_dataset(out / "data", scenes=scenes, seed=0, version=VERSION, keyframes=keyframes, images=True, sweeps=False, overwrite=True))
     common = dict(dataroot=dataroot, version=VERSION, split="all", output=out / "runs", progress=False)
     run_dirs = []

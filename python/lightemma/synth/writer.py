@@ -12,7 +12,8 @@ Layout under ``outdir``::
     lightemma-synth.json                      # what was generated (seed, scenes, parameters)
 
 Every table and image is written atomically (temporary file + rename), and
-the whole output is a pure function of the arguments.
+the whole output is a pure function of the arguments. Files outside ``<version>/`` are shared by every version
+written into the root: the writer refuses, before writing anything, when one exists with other bytes.
 """
 
 from __future__ import annotations
@@ -266,6 +267,34 @@ def _png_placeholder() -> bytes:
     return buf.getvalue()
 
 
+def _check_shared_files(root: Path, shared: list[tuple[str, Any]]) -> list[tuple[str, Any]]:
+    """The entries of ``shared`` (``(path relative to root, () -> bytes)``) whose file does not exist yet.
+
+    Raises:
+        UserError: one of them exists with other bytes than this dataset's (the root holds another dataset,
+            e.g. real nuScenes or a synthetic one of another seed, scene count, keyframes or image size);
+            nothing has been written then.
+    """
+    missing = []
+    for rel, produce in shared:
+        path = root / rel
+        if not path.exists():
+            missing.append((rel, produce))
+            continue
+        if not path.is_file() or path.read_bytes() != produce():
+            raise UserError(
+                f"cannot write a synthetic dataset to {root}: {path} already exists with other contents, so the "
+                "root holds another dataset (real nuScenes, or synthetic with a different seed, scenes, keyframes "
+                "or image size); overwrite=True only replaces the version folder, never these shared files: "
+                "write to a new folder",
+                cli=f"cannot write a synthetic dataset to {root}: {path} already exists with other contents, so the "
+                "root holds another dataset (real nuScenes, or synthetic with a different seed, --scenes, "
+                "--keyframes or --image-size); --force only replaces the version folder, never these shared files: "
+                "write to a new folder",
+            )
+    return missing
+
+
 def write_dataset(
     outdir: str | os.PathLike[str],
     *,
@@ -292,6 +321,10 @@ def write_dataset(
         image_size: (width, height); the intrinsics are scaled to it.
         overwrite: rewrite the tables of an existing ``outdir/version`` instead of refusing
             (images of scenes no longer in the tables are left in place).
+
+    Files outside the version folder (maps, map expansion, CAN bus, images) are shared by every version in
+    ``outdir``: one that exists with the same bytes is kept, and one with other bytes makes this raise
+    :class:`UserError` (the root holds another dataset) before anything is written, ``overwrite`` or not.
     """
     if not isinstance(version, str) or not version or os.sep in version or version in (".", ".."):
         raise UserError(f"invalid version folder name {version!r}")
@@ -309,25 +342,31 @@ def write_dataset(
     scenarios = build_scenarios(scenes, seed=seed, keyframes=keyframes)
     tables, todo = build_tables(scenarios, seed=seed, camera=camera, sweeps=sweeps)
 
+    # Files outside the version folder are shared by every version written into this root: compute them all,
+    # refuse before writing anything if one exists with other bytes, and write only the missing ones.
     masks: dict[str, bool] = {}
+    shared: list[tuple[str, Any]] = []  # (path relative to root, () -> bytes)
     for location in sorted({s.location for s in scenarios}):
         here = [s for s in scenarios if s.location == location]
         doc = synth_maps.expansion_json(here, location, lambda *parts: token(seed, *parts))
-        write_atomic(root / "maps" / "expansion" / f"{location}.json", _json_bytes(doc))
+        shared.append((f"maps/expansion/{location}.json", lambda doc=doc: _json_bytes(doc)))
         mask = synth_maps.mask_image(here)
         rec = next(r for r in tables["map"] if r["token"] == token(seed, "map", location))
-        write_atomic(root / rec["filename"], _png(mask) if mask is not None else _png_placeholder())
+        shared.append((rec["filename"], lambda mask=mask: _png(mask) if mask is not None else _png_placeholder()))
         masks[location] = mask is not None
     for scn in scenarios:
-        write_atomic(root / "can_bus" / f"{scn.name}_pose.json", _json_bytes(synth_can.pose_messages(scn)))
+        shared.append((f"can_bus/{scn.name}_pose.json", lambda scn=scn: _json_bytes(synth_can.pose_messages(scn))))
     if images:
-        it = todo
-        if progress:
-            from tqdm import tqdm
+        for filename, secs, scn in todo:
+            shared.append((filename, lambda secs=secs, scn=scn: _jpeg(render_frame(scn, secs, camera))))
+    missing = _check_shared_files(root, shared)
+    it: Any = missing
+    if progress:
+        from tqdm import tqdm
 
-            it = tqdm(todo, desc="images", unit="img")
-        for filename, secs, scn in it:
-            write_atomic(root / filename, _jpeg(render_frame(scn, secs, camera)))
+        it = tqdm(missing, desc="shared files", unit="file")
+    for rel, produce in it:
+        write_atomic(root / rel, produce())
     for name, rows in tables.items():
         write_atomic(table_root / f"{name}.json", _json_bytes(rows))
     info = {
