@@ -121,3 +121,83 @@ def test_a_table_mixing_collision_conventions_is_refused():
 def test_a_miss_threshold_that_is_no_distance_is_refused(bad):
     with pytest.raises(ValueError, match="miss threshold must be a positive number of metres"):
         miss_descriptor(bad)
+
+
+def _evaluation_doc(rows: list[dict], table: str = "accuracy_lightemma") -> dict:
+    """A minimal ``lightemma evaluate --format json`` document: one table, its descriptors, no frame sets."""
+    from lightemma.evaluation.descriptors import EVALUATE_FORMAT
+
+    return {
+        "format": EVALUATE_FORMAT,
+        "provenance": {"frame_sets": {}, "miss_threshold_m": 2.0},
+        "columns": {table: column_descriptors(table, rows)},
+        "tables": [{"name": table, "title": table, "rows": rows}],
+    }
+
+
+_VALID_ROW = {
+    "model": "baseline:cv",
+    "convention": "lightemma",
+    "frames": 8,
+    "frames_accounted": 12,
+    "frames_in_run": 12,
+    "scored": 10,  # more than "frames" (the frames behind the means) as under --common: allowed
+    "failed": 2,
+    "ade_avg": 1.25,
+    "offroad": 0.0,
+    "fde": None,
+    "ade_avg_ci95": [1.0, 1.5],
+    "fde_ci95": None,
+    "offroad_ci95": [0.0, None],
+}
+
+
+def _read(doc: dict, tmp_path: Path) -> tuple[Path, dict]:
+    import json
+
+    from lightemma.evaluation.descriptors import read_evaluation_json
+
+    path = tmp_path / "ev.json"
+    path.write_text(json.dumps(doc), encoding="utf-8")
+    return path, read_evaluation_json(path)
+
+
+def test_a_valid_evaluation_document_is_read_back(tmp_path):
+    doc = _evaluation_doc([dict(_VALID_ROW)])
+    assert _read(doc, tmp_path)[1] == doc
+    # a paired difference's interval may lie below zero, ordered
+    rows = [{"model": "a", "ablation": "no_image", "frames": 4, "ade_avg_diff": -0.3, "ade_avg_ci95": [-0.5, -0.1]}]
+    doc = _evaluation_doc(rows, "input_ablations")
+    assert _read(doc, tmp_path)[1] == doc
+
+
+@pytest.mark.parametrize(
+    ("key", "value", "why"),
+    [
+        ("ade_avg", "abc", r"'abc' is not a finite number \(ade@lightemma/1, unit m\)"),
+        ("ade_avg", True, r"True is not a finite number"),
+        ("ade_avg", [1, 2], r"\[1, 2\] is not a finite number"),
+        ("offroad", "1.5", r"'1.5' is not a finite number \(offroad@footprint/1, unit share\)"),
+        ("frames", 2.5, r"2.5 is not a whole number \(frames/1, unit frames\)"),
+        ("scored", 13, r"13 is more than frames_accounted 12"),
+        ("frames_accounted", 13, r"13 is more than frames_in_run 12"),
+        ("ade_avg_ci95", [2.0, 1.0], r"\[2.0, 1.0\] is reversed: low 2.0 > high 1.0"),
+        ("ade_avg_ci95", [1.0], r"\[1.0\] is not an interval \[low, high\]"),
+        ("ade_avg_ci95", "1.0-2.0", r"'1.0-2.0' is not an interval"),
+        ("ade_avg_ci95", [1.0, "2"], r"'2' is not a finite number"),
+    ],
+)
+def test_an_evaluation_value_of_the_wrong_type_is_refused(tmp_path, key, value, why):
+    row = {**_VALID_ROW, key: value}
+    doc = _evaluation_doc([row])
+    with pytest.raises(UserError) as info:
+        _read(doc, tmp_path)
+    message = str(info.value)
+    assert "\n" not in message
+    assert re.match(rf"^{re.escape(str(tmp_path / 'ev.json'))}: tables\[0\]\.rows\[0\]\.{key}: {why}", message), message
+
+
+def test_a_reversed_paired_difference_interval_is_refused(tmp_path):
+    rows = [{"model": "a", "ablation": "no_image", "frames": 4, "ade_avg_diff": -0.3, "ade_avg_ci95": [-0.1, -0.5]}]
+    with pytest.raises(UserError, match=r"tables\[0\]\.rows\[0\]\.ade_avg_ci95: \[-0.1, -0.5\] is reversed"):
+        _read(_evaluation_doc(rows, "input_ablations"), tmp_path)

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -900,9 +900,10 @@ def _refuse(path: Any, field: str, why: str) -> UserError:
 def check_evaluation_json(doc: Any, path: str | Path = "<json>") -> dict[str, Any]:
     """Check a ``lightemma evaluate --format json`` document and return it; a document of another format (an older or
     newer lightemma), a frame-set fingerprint whose id does not match its fields (hand-edited), a column without a
-    descriptor or whose descriptor is not this version's, or a value outside its descriptor's range (a rate above 1)
-    raises :class:`~lightemma.errors.UserError` in one line naming ``path`` and the field. Nothing is returned
-    half-read: the whole document is checked first."""
+    descriptor or whose descriptor is not this version's, a value its descriptor does not allow (:func:`_check_range`:
+    a rate above 1, a string or bool for a number, a fractional count, a reversed interval) or counts out of order
+    (:func:`_check_counts`: more frames scored than accounted) raises :class:`~lightemma.errors.UserError` in one
+    line naming ``path`` and the field. Nothing is returned half-read: the whole document is checked first."""
     from lightemma.frames.fingerprint import check_fingerprint
 
     if not isinstance(doc, dict):
@@ -965,9 +966,12 @@ def check_evaluation_json(doc: Any, path: str | Path = "<json>") -> dict[str, An
                     f"{have.get(differs)!r} is not this lightemma's {want[differs]!r} ({want['id']})",
                 )
         for r, row in enumerate(rows):
+            diff = row.get("source") == "diff"
             for key, value in row.items():
                 d = describe_dict(expected[key])
-                _check_range(path, f"tables[{t}].rows[{r}].{key}", value, d, row.get("source") == "diff")
+                _check_range(path, f"tables[{t}].rows[{r}].{key}", value, d, diff)
+            if not diff:
+                _check_counts(path, f"tables[{t}].rows[{r}]", row)
     return doc
 
 
@@ -986,10 +990,43 @@ def describe_dict(d: Mapping[str, Any]) -> Descriptor:
     )
 
 
+#: descriptor kinds whose values are numbers (or null); ``label`` values are free
+_NUMERIC_KINDS = ("metric", "rate", "count", "test")
+#: (smaller, larger) count columns of one row that must be ordered: the accounting identity
+#: ``frames_accounted = scored + failed + implausible + api_errors (+ other)`` over frames of the run. ``frames`` is
+#: not among them: in an accuracy row it is the frames behind the means, which under ``--common`` can be fewer than
+#: ``scored``.
+_ORDERED_COUNTS = (("scored", "frames_accounted"), ("frames_accounted", "frames_in_run"))
+
+
+def _is_number(v: Any) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
 def _check_range(path: Any, field: str, value: Any, d: Descriptor, diff: bool) -> None:
-    values: Iterable[Any] = value if d.kind == "interval" and isinstance(value, list) else [value]
+    """Refuse (one line naming ``path`` and ``field``) a value its descriptor does not allow: a value of a numeric kind
+    (``metric``, ``rate``, ``count``, ``test``) must be a finite number (not a bool) or null, a ``count`` an integer; an
+    ``interval`` is null or a list of two such numbers (either null) with low ≤ high (an interval of a paired
+    difference may be negative, still ordered); every number within the descriptor's ``range`` (a ``diff`` row's
+    within ± the range's width). ``label`` values are not checked."""
+    if d.kind == "interval":
+        if value is None:
+            return
+        if not isinstance(value, list) or len(value) != 2:
+            raise _refuse(path, field, f"{value!r} is not an interval [low, high] ({d.id})")
+        values: list[Any] = value
+    elif d.kind in _NUMERIC_KINDS:
+        values = [value]
+    else:
+        return
     for v in values:
-        if v is None or isinstance(v, bool) or not isinstance(v, (int, float)) or d.range is None:
+        if v is None:
+            continue
+        if not _is_number(v) or not math.isfinite(v):
+            raise _refuse(path, field, f"{v!r} is not a finite number ({d.id}, unit {d.unit})")
+        if d.kind == "count" and not (isinstance(v, int) or float(v).is_integer()):
+            raise _refuse(path, field, f"{v!r} is not a whole number ({d.id}, unit {d.unit})")
+        if d.range is None:
             continue
         lo, hi = d.range
         if diff:  # a difference from the paper's row: within the width of the range
@@ -997,9 +1034,20 @@ def _check_range(path: Any, field: str, value: Any, d: Descriptor, diff: bool) -
             if width is not None and abs(v) > width:
                 raise _refuse(path, field, f"{v!r} is outside ±{width:g} ({d.id}, unit {d.unit})")
             continue
-        if not math.isfinite(v) or (lo is not None and v < lo) or (hi is not None and v > hi):
+        if (lo is not None and v < lo) or (hi is not None and v > hi):
             span = f"[{'-inf' if lo is None else f'{lo:g}'}, {'inf' if hi is None else f'{hi:g}'}]"
             raise _refuse(path, field, f"{v!r} is outside {span} ({d.id}, unit {d.unit})")
+    if d.kind == "interval" and value[0] is not None and value[1] is not None and value[0] > value[1]:
+        raise _refuse(path, field, f"{value!r} is reversed: low {value[0]!r} > high {value[1]!r} ({d.id})")
+
+
+def _check_counts(path: Any, where: str, row: Mapping[str, Any]) -> None:
+    """Refuse a row whose counts break the accounting (:data:`_ORDERED_COUNTS`), e.g. more frames scored than
+    accounted; the counts were each checked by :func:`_check_range` before."""
+    for small, large in _ORDERED_COUNTS:
+        a, b = row.get(small), row.get(large)
+        if _is_number(a) and _is_number(b) and a > b:
+            raise _refuse(path, f"{where}.{small}", f"{a!r} is more than {large} {b!r}")
 
 
 def read_evaluation_json(path: str | Path) -> dict[str, Any]:
