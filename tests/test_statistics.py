@@ -112,7 +112,7 @@ def test_the_low_coverage_flag_is_in_every_table(study):
     out, dirs = study
     ev = evaluate_runs([out], resampling=FAST, pairwise=True)
     tables = evaluation_tables(ev)
-    assert [t.name for t in tables] == ["efficiency", "accuracy_lightemma", "pairwise_ade", "generations"]
+    assert [t.name for t in tables] == ["efficiency", "accuracy_lightemma", "pairwise_ade", "generations", "explanations"]
     text = render(tables, "md")
     for block in text.split("### ")[1:]:
         if "LLaMA" in block:
