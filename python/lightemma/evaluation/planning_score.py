@@ -761,7 +761,7 @@ def pairwise_planning(result: PlanningResult, labels: Sequence[str], resampling:
     """Every pair of runs (a before b) on the headline aggregate, on the frames where both have a value: mean paired
     difference a − b, scene-bootstrap interval, sign-flip p over scenes, Holm over all pairs. Rows as
     :func:`lightemma.evaluation.safety.pairwise_safety`'s (``metric`` is the aggregate's key)."""
-    from lightemma.evaluation.stats import bootstrap_ci, holm, sign_flip_p
+    from lightemma.evaluation.stats import bootstrap_ci, mark_holm, sign_flip_p
 
     key = result.headline
     per: dict[str, dict[str, float]] = {}
@@ -795,11 +795,7 @@ def pairwise_planning(result: PlanningResult, labels: Sequence[str], resampling:
             pair = ci[k, 0]
             out[i]["ci95"] = [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
             out[i]["p_value"] = None if np.isnan(p[k]) else float(p[k])
-    adjusted = holm([np.nan if r["p_value"] is None else r["p_value"] for r in out]) if out else []
-    alpha = 1.0 - resampling.confidence
-    for row, adj in zip(out, adjusted):
-        row["p_holm"] = None if np.isnan(adj) else float(adj)
-        row["significant"] = bool(row["p_holm"] is not None and row["p_holm"] <= alpha)
+    mark_holm(out, resampling.confidence)
     return out
 
 

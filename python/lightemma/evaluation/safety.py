@@ -1140,7 +1140,7 @@ def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str
     ``offroad`` and of ``collision`` (the collision convention of ``convention``'s table), scene-bootstrap
     interval, sign-flip p-value over scenes, Holm over all pairs and both metrics. Rows as :func:`pairwise_ade`'s,
     with ``metric`` and ``diff``."""
-    from lightemma.evaluation.stats import holm, sign_flip_p
+    from lightemma.evaluation.stats import mark_holm, sign_flip_p
 
     cc = COLLISION_FOR_ADE[convention]
     per: dict[str, dict[str, dict[str, float]]] = {}
@@ -1179,11 +1179,7 @@ def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str
             pair = ci[k, 0]
             out[i]["ci95"] = [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
             out[i]["p_value"] = None if np.isnan(p[k]) else float(p[k])
-    adjusted = holm([np.nan if r["p_value"] is None else r["p_value"] for r in out]) if out else []
-    alpha = 1.0 - resampling.confidence
-    for row, adj in zip(out, adjusted):
-        row["p_holm"] = None if np.isnan(adj) else float(adj)
-        row["significant"] = bool(row["p_holm"] is not None and row["p_holm"] <= alpha)
+    mark_holm(out, resampling.confidence)
     return out
 
 

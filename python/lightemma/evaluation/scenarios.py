@@ -162,22 +162,28 @@ def _rows_of(run: RunData, frame_ids: Sequence[str] | None) -> np.ndarray:
     return np.fromiter((index[f] for f in frame_ids), dtype=np.int64, count=len(frame_ids))
 
 
+def _aligned_tags(result: Any, names: Sequence[str], tags_of: Any, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
+    """Tags ``names`` of ``rows`` of a run from ``tags_of(result)`` (arrays over ``result.frame_ids``), aligned by
+    frame id; False where ``result`` is None or lacks the frame."""
+    out = {tag: np.zeros(len(rows), dtype=bool) for tag in names}
+    if result is None:
+        return out
+    tags = tags_of(result)
+    where = {f: i for i, f in enumerate(result.frame_ids)}
+    for j, r in enumerate(rows):
+        i = where.get(run.frame_ids[r])
+        if i is not None:
+            for tag in names:
+                out[tag][j] = tags[tag][i]
+    return out
+
+
 def _safety_masks(safety: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
     """``collides`` / ``off_road`` of ``rows`` of a run from its safety outcomes (False where it has none)."""
     from lightemma.evaluation.safety import frame_tags
 
     rs = safety.runs.get(label) if safety is not None else None
-    out = {tag: np.zeros(len(rows), dtype=bool) for tag in SAFETY_TAGS}
-    if rs is None:
-        return out
-    tags = frame_tags(rs)
-    where = {f: i for i, f in enumerate(rs.frame_ids)}
-    for j, r in enumerate(rows):
-        i = where.get(run.frame_ids[r])
-        if i is not None:
-            for tag in SAFETY_TAGS:
-                out[tag][j] = tags[tag][i]
-    return out
+    return _aligned_tags(rs, SAFETY_TAGS, frame_tags, run, rows)
 
 
 def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
@@ -185,17 +191,7 @@ def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -
     from lightemma.evaluation.planning_score import frame_tags
 
     rp = planning.runs.get(label) if planning is not None else None
-    out = {tag: np.zeros(len(rows), dtype=bool) for tag in PLANNING_TAGS}
-    if rp is None:
-        return out
-    tags = frame_tags(rp)
-    where = {f: i for i, f in enumerate(rp.frame_ids)}
-    for j, r in enumerate(rows):
-        i = where.get(run.frame_ids[r])
-        if i is not None:
-            for tag in PLANNING_TAGS:
-                out[tag][j] = tags[tag][i]
-    return out
+    return _aligned_tags(rp, PLANNING_TAGS, frame_tags, run, rows)
 
 
 def _explanation_masks(explanations: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:

@@ -209,3 +209,13 @@ def holm(p_values: ArrayLike) -> np.ndarray:
     scaled = (m - np.arange(m)) * p[order]
     out[order] = np.minimum(1.0, np.maximum.accumulate(scaled))
     return out
+
+
+def mark_holm(rows: Sequence[dict], confidence: float) -> None:
+    """Set each row's ``p_holm`` (Holm over the rows' ``p_value``, None where a row has none) and ``significant``
+    (``p_holm`` ≤ 1 − ``confidence``), in place: one family, the rows given (docs/statistics.md)."""
+    adjusted = holm([np.nan if r["p_value"] is None else r["p_value"] for r in rows]) if rows else []
+    alpha = 1.0 - confidence
+    for row, adj in zip(rows, adjusted):
+        row["p_holm"] = None if np.isnan(adj) else float(adj)
+        row["significant"] = bool(row["p_holm"] is not None and row["p_holm"] <= alpha)

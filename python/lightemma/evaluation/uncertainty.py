@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.evaluation.loading import RunData
-from lightemma.evaluation.stats import Resampling, bootstrap_ci, holm, sign_flip_p
+from lightemma.evaluation.stats import Resampling, bootstrap_ci, mark_holm, sign_flip_p
 
 INTERVAL_KEYS: tuple[str, ...] = ("ade_avg", "fde")
 _COLUMNS = (3, 4)  # ade_avg, fde in lightemma.metrics.FRAME_METRICS
@@ -147,11 +147,7 @@ def pairwise_ade(runs: Sequence[RunData], labels: Sequence[str], convention: str
         else:
             row.update(ade_avg_diff=None, ci95=None, p_value=None)
         rows.append(row)
-    adjusted = holm([np.nan if r["p_value"] is None else r["p_value"] for r in rows])
-    alpha = 1.0 - resampling.confidence
-    for row, adj in zip(rows, adjusted):
-        row["p_holm"] = None if np.isnan(adj) else float(adj)
-        row["significant"] = bool(row["p_holm"] is not None and row["p_holm"] <= alpha)
+    mark_holm(rows, resampling.confidence)
     return rows
 
 
