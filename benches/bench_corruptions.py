@@ -49,7 +49,7 @@ def photos(n_distinct: int, source: str) -> list[tuple[str, np.ndarray]]:
         frames = make_frames(Path(tempfile.mkdtemp(prefix="bench-corrupt-")), n_distinct, image_size=(1600, 900))
         return [(f.sample_token, np.asarray(Image.open(f.image_path).convert("RGB"))) for f in frames]
     import lightemma.synth
-    from lightemma.frames import load_frames
+    from lightemma.nuscenes import load_frames
 
     root = Path(tempfile.mkdtemp(prefix="bench-corrupt-"))
     lightemma.synth.write_dataset(root, scenes=max(1, -(-n_distinct // 4)), keyframes=18, image_size=(1600, 900),

@@ -3,7 +3,7 @@
 Writes (once, tables only, no images) 150 scenes x 40 keyframes with CAM_FRONT
 sweeps, then reports separately:
 
-* lightemma's table read (``lightemma.frames.load_tables``: the JSON tables, indexed as the devkit does),
+* lightemma's table read (``lightemma.nuscenes.load_tables``: the JSON tables, indexed as the devkit does),
   and, where nuscenes-devkit is installed, the devkit's own ``NuScenes(...)`` load for comparison,
 * lightemma's frame extraction (``extract_frames``: scene chains, windows, geometry,
   image existence checks) — wall time (best of ``--repeat``) and peak Python/NumPy
@@ -39,7 +39,7 @@ def main(argv: list[str] | None = None) -> int:
 
     import logging
 
-    from lightemma.frames import extract_frames, load_tables
+    from lightemma.nuscenes import extract_frames, load_tables
 
     logging.getLogger("lightemma.frames").setLevel(logging.ERROR)  # no images on purpose
     from lightemma.synth import write_dataset

@@ -67,7 +67,7 @@ def vllm_missing(on_gpu: bool) -> str | None:
 def synthetic_frames(root: Path, n_frames: int, image_size: tuple[int, int]) -> Any:
     """``n_frames`` reference frames from synthetic scenes of 30 keyframes (16 frames each)."""
     from lightemma import load_frames
-    from lightemma.frames import window_range
+    from lightemma.nuscenes import window_range
     from lightemma.synth import write_dataset
 
     keyframes = 30

@@ -65,11 +65,17 @@ class MemorySampler(threading.Thread):
         self.join()
 
 
-class InstantBackend:
+from lightemma.backends import Backend  # noqa: E402
+
+
+class InstantBackend(Backend):
     """Answers every stage at once with the loopback server's default texts (no HTTP, no litellm)."""
 
     name = "instant"
-    info = {"kind": "instant"}
+
+    @property
+    def info(self):
+        return {"kind": "instant"}
 
     async def generate(self, requests):
         import asyncio
@@ -90,14 +96,14 @@ def pipeline_cpu_ms_per_frame(frames, output: Path, concurrency: int) -> float:
     """CPU per frame of lightemma alone: chain, parse, integrate, records, summary — over an instant backend."""
     import lightemma.pipeline.runner as runner
 
-    original = runner.create_backend
-    runner.create_backend = lambda *args, **kwargs: InstantBackend()
+    original = runner.run_backend
+    runner.run_backend = lambda *args, **kwargs: InstantBackend()
     try:
         cpu0 = time.process_time()
         runner.run("openai/bench-model", api_base="http://unused", frames=frames, output=output, concurrency=concurrency, progress=False)
         return 1000 * (time.process_time() - cpu0) / len(frames)
     finally:
-        runner.create_backend = original
+        runner.run_backend = original
 
 
 def start_server(latency: float) -> tuple[subprocess.Popen, str]:

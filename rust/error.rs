@@ -1,5 +1,6 @@
-//! The one error type of the core. The Python binding maps every variant to
-//! `ValueError` in a single place (`python.rs`); Rust callers match on it.
+//! The one error type of the core. The Python binding maps each variant to one of lightemma's
+//! exception classes (`lightemma.errors`, all `ValueError` subclasses) in a single place
+//! (`python/errors.rs`); Rust callers match on it.
 
 use std::fmt;
 

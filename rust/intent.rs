@@ -1273,7 +1273,7 @@ pub fn read_intent(text: &str) -> Intent {
     }
     // reasoning blocks are not the answer: blank them (same byte length, so offsets hold)
     let mut ranges = Vec::new();
-    let blocks = crate::lenient::answer_ranges(text, &mut ranges);
+    let blocks = crate::parse::lenient::answer_ranges(text, &mut ranges);
     if blocks.unclosed {
         return Intent::unknown("text ends inside a reasoning block (truncated)".to_owned());
     }

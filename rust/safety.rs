@@ -11,11 +11,12 @@
 //! segment p_{k−1} → p_k (p_0 = the origin, θ_0 = 0, the ego's own heading), kept from the step
 //! before when that segment is shorter than `min_step` metres (BEV-Planner's rule).
 //!
-//! Everything here is plain Rust, tested without Python; `python.rs` binds it.
+//! Everything here is plain Rust, tested without Python; `python/safety.rs` binds it.
 
 use nalgebra::{Isometry2, Point2, Vector2};
 use rayon::prelude::*;
 
+use crate::definitions;
 use crate::error::{CoreError, CoreResult};
 
 /// Frames per parallel task.
@@ -45,6 +46,18 @@ pub struct EgoShape {
     pub offset: f64,
     /// A step shorter than this keeps the previous heading, metres.
     pub min_step: f64,
+}
+
+impl Default for EgoShape {
+    /// lightemma's ego box and heading rule ([`crate::definitions`]).
+    fn default() -> Self {
+        EgoShape {
+            length: definitions::EGO_LENGTH,
+            width: definitions::EGO_WIDTH,
+            offset: definitions::EGO_OFFSET,
+            min_step: definitions::MIN_STEP,
+        }
+    }
 }
 
 impl EgoShape {
@@ -689,6 +702,16 @@ mod tests {
         offset: 1.0,
         min_step: 0.5,
     };
+
+    #[test]
+    fn the_default_ego_box_is_lightemmas() {
+        let d = EgoShape::default();
+        assert_eq!(
+            (d.length, d.width, d.offset, d.min_step),
+            (4.084, 1.85, 0.943713 + 0.5, 1.0)
+        );
+        assert!(d.check().is_ok());
+    }
 
     #[test]
     fn footprint_follows_heading_and_offset() {

@@ -181,6 +181,7 @@ class Reply:
     # "gzip-cut" (its end missing), "gzip-corrupt" (a byte of its data changed), or a name only declared (br, ...)
     encoding: str | None = None
     trailing: int = 0  # bytes of zeros sent after the body (after the end of a compressed stream)
+    choices: list[str] | None = None  # OpenAI protocol: these answers as the completion's choices (a request with n)
 
     @classmethod
     def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
@@ -389,7 +390,8 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
             "object": "chat.completion",
             "created": int(time.time()),
             "model": req.body.get("model", "fake"),
-            "choices": [{"index": 0, "message": {"role": "assistant", "content": reply.content}, "finish_reason": finish}],
+            "choices": [{"index": i, "message": {"role": "assistant", "content": text}, "finish_reason": finish}
+                        for i, text in enumerate(reply.choices if reply.choices is not None else [reply.content])],
             "usage": usage,
         }
     if not reply.usage:
@@ -440,6 +442,8 @@ class FakeOpenAIServer:
         self.cache = PrefixCache() if prefix_cache else None
         self._lock = threading.Lock()
         self._counter = itertools.count()
+        self.in_flight = 0  # requests being served now
+        self.max_in_flight = 0  # the most served at once (replies waiting out their delay included)
         if script is None:
             self._next: Callable[[Received], Reply] = default_reply
         elif callable(script):
@@ -490,7 +494,14 @@ class FakeOpenAIServer:
                 reply = server._account(req, server._next(req))
                 wait = server.latency + reply.delay
                 if wait > 0:
-                    time.sleep(wait)
+                    with server._lock:
+                        server.in_flight += 1
+                        server.max_in_flight = max(server.max_in_flight, server.in_flight)
+                    try:
+                        time.sleep(wait)
+                    finally:
+                        with server._lock:
+                            server.in_flight -= 1
                 if reply.reset:
                     self.connection.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
                     self.connection.close()  # RST instead of FIN

@@ -207,7 +207,8 @@ def per_frame_ade(run_dir):
 
 
 def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_each_model_meets_the_best_baseline(tmp_path):
-    from lightemma.evaluation import evaluate_runs, evaluation_tables
+    from lightemma.evaluation import evaluate_runs
+    from lightemma.report.evaluation_tables import evaluation_tables
     from lightemma.evaluation.stats import Resampling
     from lightemma.report.tables import to_markdown
 

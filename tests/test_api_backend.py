@@ -14,7 +14,7 @@ from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import RETRYABLE, RetryPolicy, short_message
 from lightemma.cache import ResponseCache
 from lightemma.errors import UserError
-from lightemma.registry import DEFAULT_REASONING_BUDGET
+from lightemma.models.catalog import DEFAULT_REASONING_BUDGET
 
 FAST = RetryPolicy(max_retries=3, base=0.01, cap=0.05)
 TRANSPORTS = pytest.mark.parametrize("transport", ["litellm", "direct"])

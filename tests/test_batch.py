@@ -240,7 +240,8 @@ def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, syn
 
 
 def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
-    from lightemma.evaluation import efficiency_table, evaluate_runs
+    from lightemma.evaluation import evaluate_runs
+    from lightemma.report.evaluation_tables import efficiency_table
     from lightemma.report.tables import to_markdown
 
     with FakeBatchServer(steps=1) as server:
@@ -406,10 +407,10 @@ def test_a_batch_reply_past_its_limit_stops_the_run_in_one_line_and_a_resume_rea
                                                                                                  monkeypatch, provider):
     """A results file (a Gemini status poll: the results are inlined in it) past the limit for its batch: the run
     stops naming the limit, nothing was read into a record, and the resume polls the same batch, never resubmits."""
-    from lightemma.backends.batch import base
+    from lightemma.backends.batch import adapter
 
-    monkeypatch.setattr(base, "MIN_REPLY_BYTES", 64 << 10)  # 64 KiB + 1 KiB per request, instead of 64 MiB + 256 KiB
-    monkeypatch.setattr(base, "RESULT_BYTES_PER_REQUEST", 1 << 10)
+    monkeypatch.setattr(adapter, "MIN_REPLY_BYTES", 64 << 10)  # 64 KiB + 1 KiB per request, instead of 64 MiB + 256 KiB
+    monkeypatch.setattr(adapter, "RESULT_BYTES_PER_REQUEST", 1 << 10)
     with FakeBatchServer(steps=1, bloat=40 << 10) as server:  # 4 answers of 40 KiB each: 160 KiB > 68 KiB
         with pytest.raises(RunStopped) as stopped:
             _run(synth_root, tmp_path, BATCH_MODEL[provider], api_base=_at(server, provider))
@@ -451,7 +452,7 @@ def test_results_of_the_wrong_shape_stop_the_run_with_the_reason_never_a_traceba
 def test_a_results_line_longer_than_one_answer_is_refused_unparsed(monkeypatch):
     """60 MiB of '[{},{},…]' on one line took 2 GB parsed: a line may be one answer (the reply limit) and 1 MiB more."""
     from lightemma.backends import openai_http
-    from lightemma.backends.batch.base import BatchHTTPError, jsonl_rows
+    from lightemma.backends.batch.adapter import BatchHTTPError, jsonl_rows
 
     monkeypatch.setattr(openai_http, "MAX_BODY_BYTES", 1000)
     ok = b'{"custom_id": "a"}\n\n{"custom_id": "b"}\n'
@@ -617,7 +618,7 @@ def test_an_answer_over_the_reply_limit_is_that_requests_error_not_a_record(monk
     """One 60 MiB answer took 4 GB and a 943 MB frames.jsonl line no reader reads: a batch answer gets the online
     reply limit."""
     from lightemma.backends import openai_http
-    from lightemma.backends.batch.base import checked_results
+    from lightemma.backends.batch.adapter import checked_results
 
     monkeypatch.setattr(openai_http, "MAX_BODY_BYTES", 1000)
     items = checked_results([{"custom_id": "a", "text": "ok"}, {"custom_id": "b", "text": "é" * 600}], ["a", "b"])
@@ -626,7 +627,7 @@ def test_an_answer_over_the_reply_limit_is_that_requests_error_not_a_record(monk
 
 
 def test_provider_ids_stay_one_piece_of_the_url():
-    from lightemma.backends.batch.base import BatchHTTPError, url_id
+    from lightemma.backends.batch.adapter import BatchHTTPError, url_id
 
     assert url_id("../../../x?y#z") == "..%2F..%2F..%2Fx%3Fy%23z"
     assert url_id("batches/abc-123", slash=True) == "batches/abc-123"

@@ -63,7 +63,7 @@ def test_resume_loads_the_split_the_run_started_with_not_todays_default(synth_ro
     result = lightemma.run("baseline:constant", dataroot=synth_root, version="v1.0-mini", output=tmp_path, progress=False)
     assert result.manifest["config"]["dataset"]["split"] is None  # the request named no split
     # were the default for v1.0-mini to change (it was mini_val), the run still resumes its own frames
-    monkeypatch.setitem(lightemma.frames.loader.DEFAULT_SPLITS, "v1.0-mini", "mini_val")
+    monkeypatch.setitem(lightemma.nuscenes.frames.DEFAULT_SPLITS, "v1.0-mini", "mini_val")
     assert main(["run", "--resume", str(result.run_dir), "--no-progress"]) == 0
     err = capsys.readouterr().err
     assert "frames: v1.0-mini, split all: 2 scenes, 12 frames, reference window" in err

@@ -11,7 +11,7 @@ import json
 import pytest
 
 from lightemma.cli import main
-from lightemma.demo import MARKER, api_models, run_demo, skipped_api_models, skipped_line
+from lightemma.offline_demo import MARKER, api_models, run_demo, skipped_api_models, skipped_line
 from lightemma.errors import UserError
 
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from lightemma.frames import load_frames
+from lightemma.nuscenes import load_frames
 from lightemma.pipeline.runner import estimate_run
 
 

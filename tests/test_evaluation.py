@@ -14,7 +14,8 @@ import pytest
 
 from lightemma.cli import main
 from lightemma.errors import RunStoreError, UserError
-from lightemma.evaluation import columns, evaluate_runs, evaluation_tables, load_run
+from lightemma.evaluation import columns, evaluate_runs, load_run
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation.synthetic import make_record, write_synthetic_run
 from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir, update_manifest
 from lightemma.report.tables import render
@@ -124,8 +125,8 @@ def test_models_ordered_by_family_and_labelled(tmp_path):
 
 
 def test_every_registry_id_of_a_paper_model_is_recognised():
-    from lightemma.evaluation.models import known_model
-    from lightemma.registry import PAPER_MODELS
+    from lightemma.models.names import known_model
+    from lightemma.models.catalog import PAPER_MODELS
 
     for info in PAPER_MODELS:
         for name in (info.key, info.display_name, info.model_id):
@@ -355,7 +356,7 @@ def test_loading_restores_the_garbage_collector(two_runs, tmp_path):
 
 
 def test_pairs_array_turns_bad_entries_into_nan():
-    from lightemma.evaluation.loading import pairs_array
+    from lightemma.runs.columns import pairs_array
 
     good = [[1.0, 2], [3, 4.5]] * 3
     np.testing.assert_array_equal(pairs_array([good, good]), np.array([good, good], dtype=float))

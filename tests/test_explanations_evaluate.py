@@ -15,7 +15,7 @@ import pytest
 from fake_openai import FakeOpenAIServer, Reply
 from lightemma.cli import main
 from lightemma.explanations import intent_consistency, read_intents
-from lightemma.frames.loader import load_frames
+from lightemma.nuscenes import load_frames
 from lightemma.pipeline import run
 from lightemma.runs.store import FRAMES_FILE
 
@@ -142,7 +142,7 @@ def test_markdown_table_and_the_switch(runs, capsys):
     assert "### Explanations" in text and "Intent accuracy [95% CI]" in text
     section = text.split("### Explanations", 1)[1].split("\n### ", 1)[0]
     line = next(x for x in section.splitlines() if x.startswith("| Baseline (constant velocity) |"))
-    assert line.count("n/a") == 4 and "0.000" not in line
+    assert line.count("n/a") == 6 and "0.000" not in line  # 4 intent columns, 2 described-objects columns
     assert "n/a (no stage-2 texts" in section
     assert "### Stated intent without the image" in text
     assert "### Explanations" not in _evaluate(capsys, out, "--no-explanations")

@@ -13,7 +13,8 @@ import os
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import numpy as np
-from lightemma.evaluation import evaluate_runs, evaluation_tables
+from lightemma.evaluation import evaluate_runs
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation.synthetic import make_record, write_synthetic_run
 from lightemma.report.tables import to_markdown
 

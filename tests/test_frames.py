@@ -16,8 +16,9 @@ from hypothesis import strategies as st
 import lightemma
 from frames_fixtures import make_small_dataset, read_table, reference_frames, small_copy, small_root  # noqa: F401
 from lightemma.errors import DatasetError
-from lightemma.frames import Frame, FrameSet, format_history, format_number, geometry, load_frames, window_range
-from lightemma.frames.loader import QUATERNION_TOLERANCE, Tables, extract_frames, load_tables, predefined_splits
+from lightemma.frames import Frame, FrameSet, format_history, format_number
+from lightemma.nuscenes import geometry, load_frames, window_range
+from lightemma.nuscenes.frames import QUATERNION_TOLERANCE, Tables, extract_frames, load_tables, predefined_splits
 from lightemma.frames.model import summary_line
 from lightemma.synth import build_scenarios
 

@@ -14,8 +14,8 @@ import pytest
 
 from frames_fixtures import read_table
 from lightemma.errors import DatasetError
-from lightemma.frames import dataset_path, load_frames
-from lightemma.frames.loader import TIMESTAMP_MAX, BadRecordError, _timestamp
+from lightemma.nuscenes import dataset_path, load_frames
+from lightemma.nuscenes.frames import TIMESTAMP_MAX, BadRecordError, _timestamp
 from lightemma.synth import write_dataset
 
 VERSION = "v1.0-mini"

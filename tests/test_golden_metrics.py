@@ -130,7 +130,8 @@ def test_ade_conventions_from_the_evaluation_pipeline():
 
 def test_format_error_rates_paper_rule():
     from lightemma.evaluation.accounting import format_errors
-    from lightemma.evaluation.loading import API_ERROR_STATUS, STATUS_CODES, UNKNOWN_STATUS
+    from lightemma.definitions import STATUS_CODES
+    from lightemma.runs.columns import API_ERROR_STATUS, UNKNOWN_STATUS
 
     first = np.array(
         [
@@ -225,7 +226,7 @@ def test_offroad_footprint_and_centre():
 )
 def test_the_papers_window(n_keyframes, window, frames, first, last):
     """The paper's window keeps keyframes 7 … N−8 (N − 14 frames a scene); ``full`` 7 … N−7 (N − 13)."""
-    from lightemma.frames import window_range
+    from lightemma.nuscenes import window_range
 
     got = window_range(n_keyframes, window)
     assert len(got) == frames

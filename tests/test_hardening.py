@@ -134,7 +134,7 @@ def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(el
 
 
 def test_demo_with_an_api_base_sends_none_of_the_three_keys(elsewhere, monkeypatch, tmp_path):
-    from lightemma.demo import run_demo
+    from lightemma.offline_demo import run_demo
 
     for name, value in KEYS.items():
         monkeypatch.setenv(name, value)
@@ -844,7 +844,7 @@ def test_a_registry_model_of_another_provider_at_an_api_base_speaks_openai_and_h
 
 def test_a_local_model_served_from_an_api_base_shows_no_registry_gpu_count_unless_given(elsewhere, tmp_path, frames):
     from lightemma.evaluation.manifest import _gpus
-    from lightemma.registry import lookup
+    from lightemma.models.catalog import lookup
 
     assert lookup("qwen-2.5-vl-7b").gpus >= 1  # the paper's hardware
     with FakeOpenAIServer() as server:

@@ -12,14 +12,15 @@ import pytest
 from fake_openai import FakeOpenAIServer, Reply, default_reply
 from lightemma.errors import RunStopped, UserError
 from lightemma.pipeline.runner import estimate_run, run
-from lightemma.registry import PAPER_MODELS, reasoning_budget, resolve
+from lightemma.models.catalog import PAPER_MODELS, resolve
+from lightemma.models.prices import reasoning_budget
 from lightemma.runs.store import read_run
 
 # the names this change adds are imported inside the tests, so that each test fails on its own without the change
 
 
 def image_rule(model):
-    from lightemma.registry import image_rule as rule
+    from lightemma.models.tokens import image_rule as rule
 
     return rule(model)
 
@@ -83,7 +84,7 @@ def test_gemini_rules():
 
 
 def test_every_registry_api_model_has_a_cited_rule_or_none_by_a_stated_reason():
-    from lightemma.registry import IMAGE_RULES_READ
+    from lightemma.models.tokens import IMAGE_RULES_READ
 
     with_rule, without = {}, set()
     for info in PAPER_MODELS:

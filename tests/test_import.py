@@ -14,7 +14,8 @@ from reference_fixtures import CALL_FAILED, PROMPT_SET, format_long_text, make_f
 from lightemma.cli import main
 from lightemma.errors import UserError
 from lightemma.evaluation import evaluate_runs
-from lightemma.registry import lookup, price_per_token, reference_model
+from lightemma.models.catalog import lookup, reference_model
+from lightemma.models.prices import price_per_token
 from lightemma.runs import importer
 from lightemma.runs.importer import import_reference
 from lightemma.runs.reference import as_stored, join_lines, split_lines

@@ -12,11 +12,13 @@ from reference_fixtures import euler, write_results
 import lightemma
 from lightemma.cli import main
 from lightemma.errors import UserError
-from lightemma.evaluation import evaluate_runs, evaluation_tables
-from lightemma.evaluation.paper import paper_accuracy_rows, paper_efficiency_rows
+from lightemma.evaluation import evaluate_runs
+from lightemma.report.evaluation_tables import evaluation_tables
+from lightemma.models.paper import paper_accuracy_rows, paper_efficiency_rows
 from lightemma.evaluation.rescore import ParseDefinition
 from lightemma.evaluation.synthetic import make_record
-from lightemma.registry import lookup, price_per_token
+from lightemma.models.catalog import lookup
+from lightemma.models.prices import price_per_token
 from lightemma.runs.importer import import_reference
 from lightemma.runs.store import RunWriter, create_run_dir, read_run, update_manifest
 

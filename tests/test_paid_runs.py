@@ -10,7 +10,9 @@ from fake_openai import FakeOpenAIServer, TokenCounter, image_tokens as oracle_i
 from lightemma.errors import RunStopped, UserError
 from lightemma.frames.sample import sample_indices
 from lightemma.pipeline.runner import estimate_run, resume, run
-from lightemma.registry import PAPER_MODELS, batch_price, image_tokens, lookup, price
+from lightemma.models.catalog import PAPER_MODELS, lookup
+from lightemma.models.prices import batch_price, price
+from lightemma.models.tokens import image_tokens
 from lightemma.runs.store import read_run
 
 
@@ -271,7 +273,7 @@ def test_a_run_name_is_recorded_and_checked(synth_root, tmp_path):
                  sample=2, name="  ego baseline ")
     assert json.loads((result.run_dir / "manifest.json").read_text())["name"] == "ego baseline"
     for bad in ("a\nb", "caf\udce9"):  # a line break; a byte that is not UTF-8 (a Latin-1 terminal's argv)
-        with pytest.raises(UserError, match="--name"):
+        with pytest.raises(UserError, match="^name must be 1 to 80 printable characters"):
             run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, name=bad)
     assert lookup("gpt-4o") is not None
 

@@ -183,10 +183,11 @@ def test_history_rows_and_the_shape_check():
 
 def test_every_parse_failure_kind_is_known_to_evaluation():
     """A new parse failure kind (``ambiguous``) is counted as failed, never mistaken for another kind."""
-    from lightemma.actions import FAILURES
-    from lightemma.evaluation.outcomes import FAILURE_CODES, UNREADABLE, failure_code, outcome_counts
+    from lightemma.definitions import OUTCOME_CODES, PARSE_FAILURES, UNREADABLE
+    from lightemma.evaluation.outcomes import outcome_counts
+    from lightemma.runs.columns import failure_code
 
-    assert set(FAILURES) <= set(FAILURE_CODES)
+    assert set(PARSE_FAILURES) <= set(OUTCOME_CODES)
     assert "ambiguous" in UNREADABLE and failure_code("ambiguous") not in (failure_code("format"), failure_code("implausible"))
     codes = np.array([failure_code(k) for k in ("", "ambiguous", "format", "truncated", "implausible", "api_error")])
     counts = outcome_counts(codes, codes == 0)

@@ -352,3 +352,70 @@ def test_too_little_history_gives_no_initial_state_or_no_history_comfort(world):
     data.past[tok] = data.past[tok][:1]  # a scene's second keyframe: no initial state
     one = P._frames(data, [tok], [scene])
     assert "the initial ego state needs 2" in one.reason[0] and np.isnan(one.init).all()
+
+
+def test_a_cone_in_the_path_is_a_static_object_at_fault_half(world, tmp_path):
+    """NAVSIM counts every tracked object outside nuPlan's AGENT_TYPES as a static object: always "stopped", so
+    the ego that meets one is at fault, and the at-fault score is 0.5 (``pdm_scorer.py`` l. 407–414, commit 0a380a9;
+    ``pdm_scorer_utils.get_collision_type``). A traffic cone annotated (movable_object.trafficcone, all keyframes of
+    its scene, one instance) on the ground truth's path 1.5 s after a cruise keyframe: that frame's ground truth and
+    the oracle (which drives the ground truth) get nc 0.5; a cone seen at one keyframe only is no degenerate box (a
+    static object has no velocity); the safety metrics never see either."""
+    from lightemma.evaluation.safety import load_safety_data
+    from lightemma.synth.dataset import quaternion_from_yaw
+
+    base, root, dirs = world
+    data = _copy(root, tmp_path)
+    run = load_run(dirs["oracle"])
+    rows = [r for r in np.flatnonzero(run.valid) if "cruise" in run.frame_ids[r]]
+    frame = run.frame_ids[rows[6]]
+    tok = frame.rsplit("/", 1)[-1]
+    samples = {s["token"]: s for s in json.loads((data / VERSION / "sample.json").read_text())}
+    chain, nxt = [], tok
+    for _ in range(4):  # the keyframe and the next three
+        chain.append(nxt)
+        nxt = samples[nxt]["next"]
+    scene = [t for t, s in samples.items() if s["scene_token"] == samples[tok]["scene_token"]]
+    lone = scene[0] if scene[0] not in chain else scene[-1]
+    sd = json.loads((data / VERSION / "sample_data.json").read_text())
+    poses = {p["token"]: p for p in json.loads((data / VERSION / "ego_pose.json").read_text())}
+    pose = next(poses[r["ego_pose_token"]] for r in sd if r["sample_token"] == chain[3] and r["is_key_frame"])
+    w, x, y, z = pose["rotation"]
+    yaw = float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+    at = [pose["translation"][0] + 1.444 * np.cos(yaw), pose["translation"][1] + 1.444 * np.sin(yaw)]
+    cat = "cone-category"
+
+    def add_category(rs):
+        rs.append({"token": cat, "name": "movable_object.trafficcone", "description": "cone"})
+
+    def add_instances(rs):
+        rs.append({"token": "cone", "category_token": cat, "nbr_annotations": len(scene)})
+        rs.append({"token": "lone-cone", "category_token": cat, "nbr_annotations": 1})
+
+    def add_annotations(rs):
+        for i, s in enumerate(scene + [lone]):
+            rs.append({"token": f"cone-{i}", "sample_token": s, "instance_token": "cone" if i < len(scene) else
+                       "lone-cone", "visibility_token": "4", "attribute_tokens": [],
+                       "translation": [at[0] if i < len(scene) else at[0] + 500.0, at[1], 0.4],
+                       "size": [0.4, 0.4, 0.8], "rotation": quaternion_from_yaw(0.0), "prev": "", "next": "",
+                       "num_lidar_pts": 5, "num_radar_pts": 0})
+
+    _edit_table(data, "category", add_category)
+    _edit_table(data, "instance", add_instances)
+    _edit_table(data, "sample_annotation", add_annotations)
+    before = evaluate_loaded([run], resampling=Resampling(n_resamples=0), dataroot=root, version=VERSION).planning
+    after = evaluate_loaded([run], resampling=Resampling(n_resamples=0), dataroot=data, version=VERSION).planning
+    label = next(k for k in after.runs if k != P.GT_LABEL)
+    for who in (label, P.GT_LABEL):
+        b, a = before.runs[who], after.runs[who]
+        j = a.frame_ids.index(frame)
+        assert b.values["nc"][j] == 1.0 and a.values["nc"][j] == 0.5, who
+        assert a.reasons["nc"][j] is None
+        other = np.array(["cruise" not in f for f in a.frame_ids])  # the other scenes: unchanged, none n/a
+        np.testing.assert_array_equal(a.values["nc"][other], b.values["nc"][other])
+        assert not any(r and "refused" in r for r in a.reasons["nc"])
+    # the safety metrics read the same agents as before
+    s_before, s_after = load_safety_data(root, VERSION), load_safety_data(data, VERSION)
+    assert s_after.objects == {} and all(np.array_equal(s_before.boxes[k], s_after.boxes[k]) for k in s_before.boxes)
+    planning = load_safety_data(data, VERSION, history=P.HISTORY_KEYFRAMES)
+    assert sum(len(v) for v in planning.objects.values()) == len(scene) + 1

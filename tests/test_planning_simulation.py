@@ -386,7 +386,7 @@ def test_bad_input_is_not_available_with_a_reason():
 @pytest.fixture(scope="module")
 def uneven(tmp_path_factory):
     """A synthetic dataset (keyframes 0.46–0.53 s apart, as nuScenes') with its scenarios' exact kinematics."""
-    from lightemma.frames import load_frames
+    from lightemma.nuscenes import load_frames
     from lightemma.synth import build_scenarios, write_dataset
 
     scenes, keyframes = 3, 20  # cruise, accelerate, brake at a red light
@@ -414,11 +414,11 @@ def _constant_acceleration_rows(by_name, frames, times):
 
 
 def test_initial_state_uses_the_real_keyframe_spacing(uneven):
-    from lightemma.frames import can_bus
+    from lightemma.nuscenes import can_bus
 
     root, by_name, frames, times = uneven
     spacing = np.diff(times[:, -3:], axis=1)
-    assert np.abs(spacing - sim.KEYFRAME_DT).max() > 0.02  # the spacing is uneven, as in nuScenes
+    assert np.abs(spacing - sim.STEP_SECONDS).max() > 0.02  # the spacing is uneven, as in nuScenes
     rows = _constant_acceleration_rows(by_name, frames, times)
     assert len(rows) >= 6 and {frames.scene_names[i] for i in rows} >= {"synth-0000-cruise", "synth-0001-accelerate"}
     can = can_bus.frame_can_readings(frames)
@@ -434,7 +434,7 @@ def test_initial_state_uses_the_real_keyframe_spacing(uneven):
     assert np.abs(assumed[:, VX] - can.values[rows, 0]).max() > 0.2
     assert np.abs(assumed[:, AX] - can.values[rows, 1]).max() > 0.5
     # even spacing given as times is the default
-    even = np.tile(np.arange(-7, 1) * sim.KEYFRAME_DT + 3.0, (len(rows), 1))
+    even = np.tile(np.arange(-7, 1) * sim.STEP_SECONDS + 3.0, (len(rows), 1))
     np.testing.assert_allclose(sim.initial_state(frames.history_positions[rows], times=even).states, assumed,
                                rtol=0, atol=1e-9)
     np.testing.assert_allclose(sim.history_states(frames.history_positions[rows], times=even).states,

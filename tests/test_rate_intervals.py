@@ -114,7 +114,8 @@ def test_the_ground_truth_floor_prints_a_real_interval_at_zero(tmp_path):
     """End to end: the floor's off-road and collision are 0 % on the synthetic data; their intervals are the exact
     bound on the floor's scenes, not [0, 0]. ADE keeps its scene bootstrap."""
     from lightemma.cli import main
-    from lightemma.evaluation import evaluate_loaded, evaluation_tables, load_run
+    from lightemma.evaluation import evaluate_loaded, load_run
+    from lightemma.report.evaluation_tables import evaluation_tables
     from lightemma.report.tables import render
     from lightemma.runs.store import find_run_dirs
     from lightemma.synth import write_dataset

@@ -18,9 +18,10 @@ from memframes import make_frames
 from reference_fixtures import make_frame, write_scene
 
 from lightemma.cache import ResponseCache
-from lightemma.evaluation.loading import SIDECAR_FILE, load_run
+from lightemma.evaluation.loading import load_run
 from lightemma.pipeline import run
 from lightemma.runs import records
+from lightemma.runs.columns import SIDECAR_FILE
 from lightemma.runs.importer import import_reference
 from lightemma.runs.store import FRAMES_FILE, RunWriter, encode_line, read_run
 

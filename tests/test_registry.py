@@ -9,7 +9,8 @@ import litellm
 from lightemma.backends import backend_kind, create_backend
 from lightemma.backends.api import litellm_model, require_api_key
 from lightemma.errors import UserError
-from lightemma.registry import BASELINES, PAPER_MODELS, lookup, price_per_token, resolve
+from lightemma.models.catalog import BASELINES, PAPER_MODELS, lookup, resolve
+from lightemma.models.prices import price_per_token
 
 # Display names exactly as in the paper's Tables I and II, in table order.
 PAPER_NAMES = [
@@ -125,7 +126,8 @@ def test_openai_compatible_endpoint_needs_no_key(elsewhere, monkeypatch):
 
 
 def test_prices_come_from_litellms_bundled_list_without_importing_it():
-    from lightemma.registry import PAPER_MODELS, bundled_price_list
+    from lightemma.models.catalog import PAPER_MODELS
+    from lightemma.models.prices import bundled_price_list
 
     bundled = bundled_price_list()
     assert all(bundled.get(k) == v for k, v in litellm.model_cost.items())  # the same list litellm loads offline
@@ -137,7 +139,8 @@ def test_prices_come_from_litellms_bundled_list_without_importing_it():
 
 
 def test_the_registry_knows_which_models_reason_and_agrees_with_litellm():
-    from lightemma.registry import DEFAULT_REASONING_BUDGET, reasoning_budget
+    from lightemma.models.catalog import DEFAULT_REASONING_BUDGET
+    from lightemma.models.prices import reasoning_budget
 
     reasoning = {m.display_name for m in PAPER_MODELS if m.reasoning}
     assert reasoning == {"GPT-5.0", "GPT-5.2", "Gemini-2.5-Flash", "Gemini-3.0-Flash"}
@@ -176,3 +179,21 @@ def test_lightemma_models_lists_the_registry_with_prices_their_sources_and_reaso
     table = capsys.readouterr().out
     assert "| `gpt-5.0` | GPT-5.0 | `gpt-5` | api |" in table and "yes (+8192 output tokens)" in table
     assert "extended thinking not requested" in table
+
+
+def test_the_paper_tables_family_of_each_row_is_the_catalogs():
+    """The paper's tables (leaf data, lightemma.models.paper) name each row's family from the row name; the catalog
+    says it too: both must agree for every row, and every paper row must be a catalog model."""
+    from lightemma.models.paper import paper_accuracy_rows, paper_efficiency_rows
+
+    catalog = {m.display_name: m.family for m in PAPER_MODELS}
+    for rows in (paper_efficiency_rows(), paper_accuracy_rows()):
+        assert [r["model"] for r in rows] == PAPER_NAMES
+        assert {r["model"]: r["family"] for r in rows} == {name: catalog[name] for name in PAPER_NAMES}
+
+
+def test_a_paper_row_without_a_known_family_prefix_is_refused():
+    from lightemma.models import paper
+
+    with pytest.raises(ValueError, match="no known family prefix"):
+        paper._family("Mistral-7B")

@@ -273,7 +273,7 @@ def safety_report(tmp_path_factory):
     accelerate scene (collides), one veers 8 m/step left (off road) — and an untouched constant-velocity run."""
     from lightemma.cli import main
     from lightemma.evaluation import safety as S
-    from lightemma.evaluation.loading import SIDECAR_FILE
+    from lightemma.runs.columns import SIDECAR_FILE
     from lightemma.runs.store import find_run_dirs
     from lightemma.synth import write_dataset
 

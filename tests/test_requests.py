@@ -176,7 +176,7 @@ def test_a_model_that_cannot_follow_a_schema_is_refused_before_the_run_starts(mo
 def test_which_paper_models_can_follow_the_schema(monkeypatch):
     """As docs/run.md says: litellm's list refuses Gemini-2.0-Flash and Claude-3.7-Sonnet, accepts the other API rows."""
     from lightemma.backends import create_backend
-    from lightemma.registry import PAPER_MODELS
+    from lightemma.models.catalog import PAPER_MODELS
 
     for variable in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY"):
         monkeypatch.setenv(variable, KEY)

@@ -65,7 +65,7 @@ def test_birds_eye_view_draws_the_truth_over_a_model_on_it(synth_root):
     from matplotlib.colors import to_rgb
 
     from lightemma.evaluation import safety as S
-    from lightemma.frames import load_frames
+    from lightemma.nuscenes import load_frames
     from lightemma.report.figures.bev import bev_figure, bev_transform
 
     frames = load_frames(synth_root, "v1.0-mini")

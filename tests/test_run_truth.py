@@ -307,7 +307,7 @@ def test_frames_cut_off_before_stage_3_are_not_reported_as_api_errors(tmp_path):
 
 
 def test_reasoning_models_get_room_for_the_answer_and_their_reasoning_tokens_are_recorded(tmp_path):
-    from lightemma.registry import DEFAULT_REASONING_BUDGET
+    from lightemma.models.catalog import DEFAULT_REASONING_BUDGET
 
     with FakeOpenAIServer(lambda req: Reply(default_reply(req).content, completion_tokens=900, reasoning_tokens=700)) as server:
         result = run("gpt-5", api_base=server.url, frames=make_frames(tmp_path, 1), output=tmp_path, backoff_base=0.01,

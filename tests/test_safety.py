@@ -13,6 +13,8 @@ import pytest
 
 from lightemma.errors import DatasetError
 from lightemma.evaluation import safety as S
+from lightemma.nuscenes import annotations as A
+from lightemma.nuscenes import map_files as M
 
 L, W, OFF = S.EGO_LENGTH, S.EGO_WIDTH, S.EGO_OFFSET
 
@@ -82,9 +84,9 @@ def test_degenerate_agent_boxes_are_refused():
     with pytest.raises(ValueError, match="frame 0, step 0, slot 1"):
         S.box_collisions(traj, poses, np.array([[[[9, 0, 0, 4, 2], [9, 0, 0, -1, 2]]]], dtype=float))
     with pytest.raises(DatasetError, match="sample_annotation tok1: degenerate box"):
-        S._box({"token": "tok1", "translation": [0, 0, 0], "size": [1.8, 0.0, 1.5], "rotation": [1, 0, 0, 0]})
+        A._box({"token": "tok1", "translation": [0, 0, 0], "size": [1.8, 0.0, 1.5], "rotation": [1, 0, 0, 0]})
     with pytest.raises(DatasetError, match="sample_annotation tok2"):
-        S._box({"token": "tok2", "translation": [0, float("nan"), 0], "size": [1.8, 4, 1.5], "rotation": [1, 0, 0, 0]})
+        A._box({"token": "tok2", "translation": [0, float("nan"), 0], "size": [1.8, 4, 1.5], "rotation": [1, 0, 0, 0]})
 
 
 # -- conventions -----------------------------------------------------------------------------------
@@ -147,7 +149,7 @@ def test_mask_and_expansion_agree_with_the_devkit(safety_root):
     maps = json.loads((safety_root / "v1.0-mini" / "map.json").read_text())
     rng = np.random.default_rng(0)
     for rec in maps:
-        ours = S.read_map_mask(safety_root / rec["filename"])
+        ours = M.read_map_mask(safety_root / rec["filename"])
         h, w = ours.mask.shape
         pts = rng.uniform([-3, -3], [w * 0.1 + 3, h * 0.1 + 3], size=(100_000, 2))
         # points exactly half a pixel off: NumPy's half-to-even rounding
@@ -158,7 +160,7 @@ def test_mask_and_expansion_agree_with_the_devkit(safety_root):
         assert (got[(pts[:, 0] < -0.05) | (pts[:, 1] > h * 0.1 + 0.05)] == S.OUTSIDE).all()
     for location in ("boston-seaport", "singapore-onenorth"):
         nmap = NuScenesMap(str(safety_root), location)
-        ours = S.read_expansion(safety_root / "maps" / "expansion" / f"{location}.json")
+        ours = M.read_expansion(safety_root / "maps" / "expansion" / f"{location}.json")
         lo, hi = ours.xy.min(axis=0), ours.xy.max(axis=0)
         pts = rng.uniform(lo - 5, hi + 5, size=(600, 2))
         dev = np.array([bool(nmap.layers_on_point(x, y, ["drivable_area"])["drivable_area"]) for x, y in pts])

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from lightemma.cli import main
-from lightemma.evaluation import evaluate_loaded, evaluation_tables, load_run
+from lightemma.evaluation import evaluate_loaded, load_run
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation import safety as S
 from lightemma.runs.store import find_run_dirs
 from lightemma.evaluation.stats import Resampling
@@ -242,7 +243,7 @@ def test_report_has_safety_tags_and_views(world, tmp_path):
 
 
 def test_a_map_mask_named_outside_the_dataroot_is_never_read(tmp_path):
-    """The map table's filename must lie inside the dataroot, as every dataset file name must (lightemma.frames.dataset_path):
+    """The map table's filename must lie inside the dataroot, as every dataset file name must (lightemma.nuscenes.dataset_path):
     one that climbs out gives the frames n/a with the reason, even where a readable mask lies there."""
     import shutil
 

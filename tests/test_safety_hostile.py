@@ -20,7 +20,9 @@ import numpy as np
 import pytest
 from lightemma.errors import DatasetError
 from lightemma.evaluation import safety as S
-from lightemma.frames import geometry, load_frames
+from lightemma.nuscenes import annotations as A
+from lightemma.nuscenes import map_files as M
+from lightemma.nuscenes import geometry, load_frames
 
 VERSION = "v1.0-mini"
 
@@ -116,13 +118,13 @@ def test_a_decompression_bomb_mask_is_refused_from_its_header_and_pil_keeps_its_
     limit = Image.MAX_IMAGE_PIXELS
     maps = _masks_only(root)
     first = root / maps[0]["filename"]
-    assert isinstance(S.read_map_mask(first), S.DrivableArea)
+    assert isinstance(M.read_map_mask(first), S.DrivableArea)
     assert Image.MAX_IMAGE_PIXELS == limit  # never lifted process-wide
     # a 1-bit PNG claiming 60,000² pixels: 437 KB on disk, 3.6 GB decoded
     _png(first, 60_000, 60_000, 1, 0, level=9)
     assert first.stat().st_size < 500_000
     with pytest.raises(DatasetError, match=r"claims 60000 × 60000 pixels, more than the 1,500,000,000 .*not decoded"):
-        S.read_map_mask(first)
+        M.read_map_mask(first)
     data = S.load_safety_data(root, VERSION)
     reasons = [a for a in data.areas.values() if isinstance(a, str)]
     assert len(reasons) == 1 and str(first) in reasons[0] and "claims 60000 × 60000" in reasons[0]
@@ -219,7 +221,7 @@ def test_mask_encodings_are_read_right_or_refused(root, frames):
 
     maps = _masks_only(root)
     path = root / maps[0]["filename"]
-    want = S.read_map_mask(path).mask
+    want = M.read_map_mask(path).mask
     assert set(np.unique(want)) == {0, 255}
     truth = S.frame_safety(frames.gt_positions, frames.sample_tokens, S.load_safety_data(root, VERSION))
     on = truth.area_ok.copy()
@@ -230,7 +232,7 @@ def test_mask_encodings_are_read_right_or_refused(root, frames):
         img.convert(mode).save(path)
         with Image.open(path) as check:
             assert check.mode == mode
-        np.testing.assert_array_equal(S.read_map_mask(path).mask, want)
+        np.testing.assert_array_equal(M.read_map_mask(path).mask, want)
         again = S.frame_safety(frames.gt_positions, frames.sample_tokens, S.load_safety_data(root, VERSION))
         np.testing.assert_array_equal(again.area, truth.area)  # the same off-road outcomes, not 100 % off
     # refused, one line naming the file: 16-bit 0/65280, colour, a float TIFF, a mask with no 255
@@ -238,16 +240,16 @@ def test_mask_encodings_are_read_right_or_refused(root, frames):
     sixteen = (want.astype(">u2") << 8).astype(">u2")
     _png(path, w, h, 16, 0, b"".join(b"\0" + sixteen[r].tobytes() for r in range(h)))
     with pytest.raises(DatasetError, match=rf"^map mask {path} is a 16-bit grayscale PNG; a base map mask is 8-bit"):
-        S.read_map_mask(path)
+        M.read_map_mask(path)
     img.convert("RGB").save(path)
     with pytest.raises(DatasetError, match=r"is a 8-bit RGB PNG"):
-        S.read_map_mask(path)
+        M.read_map_mask(path)
     Image.fromarray((want > 0).astype(np.float32)).save(path, format="TIFF")
     with pytest.raises(DatasetError, match=rf"^map mask {path} is not a PNG image"):
-        S.read_map_mask(path)
+        M.read_map_mask(path)
     Image.fromarray((want > 0).astype(np.uint8)).save(path)
     with pytest.raises(DatasetError, match=r"has no pixel of value 255 \(drivable\); its largest value is 1"):
-        S.read_map_mask(path)
+        M.read_map_mask(path)
     data = S.load_safety_data(root, VERSION)
     reasons = [a for a in data.areas.values() if isinstance(a, str)]
     assert len(reasons) == 1 and "has no pixel of value 255" in reasons[0]
@@ -255,7 +257,7 @@ def test_mask_encodings_are_read_right_or_refused(root, frames):
     colours.putpalette([0, 0, 0, 255, 0, 0] + [0] * 762)  # index 1 is red
     colours.save(path)
     with pytest.raises(DatasetError, match=r"palette PNG with colours"):
-        S.read_map_mask(path)
+        M.read_map_mask(path)
 
 
 def test_expansion_that_is_a_fifo_or_a_device_link_says_so(root, frames):
@@ -278,7 +280,7 @@ def test_expansion_that_is_a_fifo_or_a_device_link_says_so(root, frames):
     assert data.areas[key] == f"map expansion {expansion} is not a regular file (a character device)"
     # the mask reader refuses them too (never reads /dev/zero)
     with pytest.raises(DatasetError, match=r"is not a regular file \(a character device\)"):
-        S.read_map_mask(expansion)
+        M.read_map_mask(expansion)
 
 
 # -- item 4: one quaternion rule, refused boxes, pose jumps ----------------------------------------------------------
@@ -291,12 +293,12 @@ def _scaled(q: list[float], k: float) -> list[float]:
 def test_one_quaternion_rule_for_the_frame_reader_and_the_safety_reader(root, frames):
     half = math.radians(15.0)
     unit = [math.cos(half), 0.0, 0.0, math.sin(half)]
-    assert math.degrees(S._yaw(unit)) == pytest.approx(30.0)
+    assert math.degrees(A._yaw(unit)) == pytest.approx(30.0)
     assert math.degrees(float(geometry.yaw_from_quaternion(np.array(_scaled(unit, 2.0))))) == pytest.approx(
         76.9, abs=0.05
     )
     with pytest.raises(ValueError, match=r"is not a unit quaternion \(norm 2; allowed \|norm - 1\| <= 1e-05\)"):
-        S._yaw(_scaled(unit, 2.0))
+        A._yaw(_scaled(unit, 2.0))
     # an annotation whose quaternion is 30° scaled by 2: refused naming file and token; frames whose six later
     # keyframes hold it get collision n/a, the others keep their values
     anns = _table(root, "sample_annotation")
@@ -358,10 +360,10 @@ def test_one_quaternion_rule_for_the_frame_reader_and_the_safety_reader(root, fr
 )
 def test_boxes_that_are_not_boxes_are_refused_naming_file_and_token(field, value, message):
     ann = {"token": "tok9", "translation": [1.0, 2.0, 0.8], "size": [1.9, 4.5, 1.6], "rotation": [1.0, 0.0, 0.0, 0.0]}
-    assert S._box(ann) == pytest.approx((1.0, 2.0, 0.0, 4.5, 1.9))
+    assert A._box(ann) == pytest.approx((1.0, 2.0, 0.0, 4.5, 1.9))
     ann[field] = value
     with pytest.raises(DatasetError, match=r"^sample_annotation tok9: .*" + message):
-        S._box(ann)
+        A._box(ann)
 
 
 def test_a_pose_jump_is_flagged_by_the_frame_reader_run_and_evaluate(root, base, frames, oracle, tmp_path, caplog):
@@ -442,7 +444,7 @@ def test_agent_filters_follow_the_sources(root, frames):
     ann["num_lidar_pts"], ann["num_radar_pts"] = 0, 0
     ann["visibility_token"] = next(v["token"] for v in _table(root, "visibility") if v["level"] == "v0-40")
     _write(root, "sample_annotation", anns)
-    kept = {agents: S.load_safety_data(root, VERSION, agents=agents) for agents in S.AGENT_FILTERS}
+    kept = {agents: S.load_safety_data(root, VERSION, agents=agents) for agents in A.AGENT_FILTERS}
     assert tok in kept["all"].box_tokens[data.future[st][0]]
     assert all(tok not in kept[a].box_tokens[data.future[st][0]] for a in ("valid", "visible"))
     assert S.frame_safety(traj, [st], kept["all"]).collide[0, 0].any()

@@ -9,10 +9,11 @@ from reference_fixtures import write_results
 
 from lightemma.cli import main
 from lightemma.evaluation import evaluate_runs
-from lightemma.evaluation import loading
-from lightemma.evaluation.loading import SIDECAR_FILE, load_run
+from lightemma.evaluation.loading import load_run
 from lightemma.evaluation.rescore import ParseDefinition
 from lightemma.evaluation.synthetic import write_synthetic_run
+from lightemma.runs import columns
+from lightemma.runs.columns import SIDECAR_FILE
 from lightemma.runs.importer import import_reference
 
 FIELDS = ("frame_ids", "trajectory", "gt_positions", "status", "first_status", "seconds", "input_tokens", "output_tokens",
@@ -71,7 +72,7 @@ def test_the_sidecar_gives_the_numbers_of_frames_jsonl(tmp_path, monkeypatch, de
     def no_jsonl(*args, **kw):
         raise AssertionError("frames.jsonl was read although the sidecar is current")
 
-    monkeypatch.setattr(loading, "iter_records", no_jsonl)
+    monkeypatch.setattr(columns, "iter_records", no_jsonl)
     assert_same(load_run(run_dir, details=details), truth)
 
 
@@ -91,7 +92,7 @@ def test_a_changed_frames_jsonl_makes_the_sidecar_stale_and_it_is_rebuilt(tmp_pa
     head, last = frames.read_text().rstrip("\n").rsplit("\n", 1)
     old = f'"seconds": {record["seconds"]!r}'
     new = '"seconds": ' + "7.5".ljust(len(repr(record["seconds"])), "0")
-    assert old in last and len(last) < loading._TAIL_BYTES
+    assert old in last and len(last) < columns._TAIL_BYTES
     frames.write_text(head + "\n" + last.replace(old, new) + "\n")
     os.utime(frames, ns=(stat.st_atime_ns, stat.st_mtime_ns))
     assert frames.stat().st_size == stat.st_size and frames.stat().st_mtime_ns == stat.st_mtime_ns
@@ -127,7 +128,7 @@ def test_an_imported_run_comes_with_its_sidecar_and_evaluates_the_same(tmp_path)
     results = import_reference([tmp_path / "results"], tmp_path / "runs")
     for result in results:
         assert (result.run_dir / SIDECAR_FILE).is_file()  # written from the records in hand, before the rename
-        from_import = loading.read_sidecar(result.run_dir, loading.source_key(result.run_dir))
+        from_import = columns.read_sidecar(result.run_dir, columns.source_key(result.run_dir))
         assert from_import is not None
         assert_same(load_run(result.run_dir), load_run(result.run_dir, sidecar=False))
     # a re-scoring definition reads the answers from frames.jsonl, never the sidecar
@@ -141,5 +142,5 @@ def test_a_session_of_lightemma_run_ends_by_writing_the_sidecar(tmp_path, synth_
                  "--output", str(tmp_path / "runs"), "--no-progress"]) == 0
     (run_dir,) = [p.parent for p in (tmp_path / "runs").rglob("frames.jsonl")]
     assert (run_dir / SIDECAR_FILE).is_file()
-    assert loading.read_sidecar(run_dir, loading.source_key(run_dir)) is not None  # current
+    assert columns.read_sidecar(run_dir, columns.source_key(run_dir)) is not None  # current
     assert_same(load_run(run_dir), load_run(run_dir, sidecar=False))

@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from lightemma.cli import main
-from lightemma.evaluation import evaluate_runs, evaluation_tables, load_run
+from lightemma.evaluation import evaluate_runs, load_run
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation.study import StudyModel, study_scenes, write_study
 from lightemma.evaluation.synthetic import make_record
 from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir

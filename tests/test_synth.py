@@ -16,9 +16,9 @@ from PIL import Image
 from frames_fixtures import SMALL, read_table, small_root  # noqa: F401
 from lightemma.cli import main
 from lightemma.errors import UserError
-from lightemma.frames.loader import TABLES
+from lightemma.nuscenes.json_tables import TABLES
 from lightemma.synth import KINDS, Camera, Path, SpeedProfile, build_scenarios, render_frame, write_dataset
-from lightemma.synth.render import LAMP_ON
+from lightemma.synth.drawing import LAMP_ON
 
 VERSION = "v1.0-mini"
 
@@ -315,7 +315,7 @@ def test_cli_synth_writes_a_loadable_dataset(tmp_path, capsys):
     assert "4 frames in the reference window" in out_text
     names = sorted(s["name"] for s in read_table(out, VERSION, "scene"))
     assert names == ["synth-0000-cruise", "synth-0001-accelerate"]
-    from lightemma.frames import load_frames
+    from lightemma.nuscenes import load_frames
 
     assert len(load_frames(out, VERSION, split="all")) == 2 * 2
     rc = main(["synth", str(out), "--scenes", "2"])

@@ -1,5 +1,5 @@
 """The synthetic map expansion's lanes, lane connectors, road segments and car parks, the CAN-bus-like history and
-the plans with known faults (lightemma.synth.maps, lightemma.synth.can_pose, lightemma.frames.can_bus,
+the plans with known faults (lightemma.synth.maps, lightemma.synth.can_pose, lightemma.nuscenes.can_bus,
 lightemma.synth.planning_cases)."""
 
 from __future__ import annotations
@@ -15,16 +15,15 @@ from scipy.spatial import cKDTree
 
 import lightemma
 from lightemma.errors import DatasetError
-from lightemma.frames import load_frames
-from lightemma.frames import can_bus
+from lightemma.nuscenes import can_bus, load_frames
 from lightemma.planning import simulation as sim
 from lightemma.planning.scores import read_planning_map, route_lanes, subscores
 from lightemma.synth import build_scenarios, write_dataset
 from lightemma.synth import can_pose as synth_can
 from lightemma.synth import maps as synth_maps
 from lightemma.synth import planning_cases as pc
-from lightemma.synth.scenarios import LANE_WIDTH, build_scenario
-from lightemma.synth.writer import token
+from lightemma.synth.situations import LANE_WIDTH, build_scenario
+from lightemma.synth.dataset import token
 
 
 
@@ -252,7 +251,13 @@ def _score(scn, case, tmp_path):
     line = scn.path.pose(np.linspace(scn.profile.s(t0) - 10, scn.profile.s(t0) + 60, 141))[:, :2][None]
     times = t0 + np.arange(31) * 0.1
     boxes = np.full((1, 31, 1, 8), np.nan)
-    if scn.lead is not None:
+    if case.agents is not None:  # the case's own agent, from the keyframe's ego frame
+        a = case.agents
+        c, s = math.cos(p0[2]), math.sin(p0[2])
+        boxes[0, :, 0] = np.column_stack([p0[0] + c * a[:, 0] - s * a[:, 1], p0[1] + s * a[:, 0] + c * a[:, 1],
+                                          a[:, 2] + p0[2], a[:, 3], a[:, 4], c * a[:, 5] - s * a[:, 6],
+                                          s * a[:, 5] + c * a[:, 6], a[:, 7]])
+    elif scn.lead is not None:
         lp, lv = scn.lead_pose(times), scn.lead_speed(times)
         boxes[0, :, 0] = np.column_stack([lp, np.full(31, scn.lead.length), np.full(31, scn.lead.width),
                                           lv * np.cos(lp[:, 2]), lv * np.sin(lp[:, 2]), np.zeros(31)])
@@ -266,8 +271,9 @@ def _score(scn, case, tmp_path):
 
 
 def _case_scene(name):
-    """Scene 0 (cruise) of the first seed whose speed suits the case (swerve needs ≥ 9.5 m/s), keyframe 7."""
-    need = 9.5 if name == "swerve" else 6.0
+    """Scene 0 (cruise) of the first seed whose speed suits the case (swerve needs ≥ 9.5 m/s, follow-too-close
+    7 m/s), keyframe 7."""
+    need = {"swerve": 9.5, "follow-too-close": 7.0}.get(name, 6.0)
     seed = next(s for s in range(100) if build_scenario(0, seed=s, keyframes=KEYFRAMES).params["speed"] >= need)
     return build_scenarios(1, seed=seed, keyframes=KEYFRAMES)[0], 7
 
@@ -278,10 +284,12 @@ def test_each_plan_case_breaks_its_subscore_in_the_simulated_states(name, tmp_pa
     scn, keyframe = _case_scene(name)
     assert scn.kind == kind
     case = fn(scn, keyframe)
-    assert case.poses.shape == (6, 3) and 0 < case.break_step <= 30
+    assert case.poses.shape == (6, 3) and 0 < case.break_step <= 30 or (name == "follow-too-close"
+                                                                         and case.break_step == 0)
     got, truth, states = _score(scn, case, tmp_path)
-    # the ground truth passes everything this case breaks, and nothing leaves the road or collides
-    assert case.subscore == "ep" or truth[case.subscore] == 1.0
+    # the ground truth passes everything this case breaks (but the case's own slow lead is in its way), and nothing
+    # leaves the road or collides
+    assert case.subscore == "ep" or case.agents is not None or truth[case.subscore] == 1.0
     assert got["dac"] == 1.0 and got["nc"] == 1.0
     if case.subscore == "ep":
         assert got["ep_raw"] < truth["ep_raw"] - 5.0  # short of the scene's progress
@@ -302,6 +310,8 @@ def test_each_plan_case_breaks_its_subscore_in_the_simulated_states(name, tmp_pa
         runs = np.convolve(far, np.ones(20, dtype=int), "valid")
         assert np.argmax(runs == 20) + 19 >= case.break_step
         assert got["c"] == 1.0 and got["ttc"] == 1.0
+    elif name == "follow-too-close":
+        assert _navsim_ttc(states, case.agents) == (0.0, 0) and got["ddc"] == got["lk"] == 1.0
     elif name == "hard-brake":
         assert all(got[k] == 1.0 for k in ("ddc", "lk", "ttc"))
         within = sim.comfort_details(states[None]).within[0]  # the longitudinal jerk fails, lateral and yaw hold
@@ -316,3 +326,66 @@ def test_plan_cases_refuse_unsuitable_frames():
         pc.stop_short(scs["accelerate"], 7)
     with pytest.raises(ValueError, match="no keyframe 99"):
         pc.hard_brake(scs["cruise"], 99)
+
+
+def _navsim_ttc(states, lead):
+    """Hand computation of NAVSIM's TTC for a straight run behind a lead on the same line (the ego frame's x axis):
+    (score, first step of an event or -1). ``states`` (31, 11) rear-axle states, ``lead`` (31, 8) boxes.
+
+    Followed: navsim ``pdm_scorer.py`` at commit 0a380a9 (autonomousvision/navsim), ``_calculate_ttc``:
+    l. 504 ``future_time_idcs = np.arange(0, int(1.0 * 10), 3)`` → projections of 0, 3, 6, 9 steps;
+    l. 512–529 each footprint moved by its state's speed × (cos, sin)(heading) × 0.1 s × the projection;
+    l. 536–538 from steps 0 … num_poses − 9 (30 − 9 = 21) against the observation at step + projection;
+    l. 549–554 a step whose speed is below ``stopped_speed_threshold`` (0.005 m/s, l. 56) is skipped;
+    l. 560–575 an overlapping track ahead (nuPlan's ``is_agent_ahead``: its centre within 30° of the heading seen
+    from the unmoved rear axle) sets the score to 0. Here both boxes lie on the x axis (asserted): the footprint's
+    front x is x + 1.444 + 4.084 / 2, the lead's rear its centre − length / 2, and the lead's centre is dead ahead."""
+    assert np.abs(states[:, [1, 2, 4]]).max() < 1e-9 and np.abs(lead[:, [1, 2]]).max() == 0.0
+    front = states[:, 0] + pc.CENTRE_OFFSET + pc.HALF_LENGTH
+    rear = lead[:, 0] - lead[:, 3] / 2
+    speed = np.hypot(states[:, 3], states[:, 4])
+    for s in range(31 - 9):
+        if speed[s] < 0.005:
+            continue
+        for k in (0, 3, 6, 9):
+            if front[s] + speed[s] * k * 0.1 > rear[s + k]:
+                return 0.0, s
+    return 1.0, -1
+
+
+def test_follow_too_close_breaks_ttc_and_a_safe_follow_does_not():
+    """The scorer's ttc against a hand computation of NAVSIM's definition (:func:`_navsim_ttc`) on the re-simulated
+    states, with the case's lead and no map (a track dead ahead needs none); nc by hand: navsim ``pdm_scorer.py``
+    l. 374–415 (commit 0a380a9) — a moving ego whose footprint meets a moving track ahead collides at its front
+    bumper (``get_collision_type``, ``pdm_scorer_utils.py``), at fault, 0 — so nc is 1 exactly when the footprint's
+    front stays behind the lead's rear at every one of the 31 states."""
+    scn, keyframe = _case_scene("follow-too-close")
+    t0 = float(scn.seconds(scn.keyframe_times_us[keyframe]))
+    init = sim.initial_state(_ego(scn, t0, t0 + np.arange(-7, 1) * 0.5)[None, :, :2]).states
+    cases = [pc.follow_too_close(scn, keyframe), pc.safe_follow(scn, keyframe)]
+    states = lightemma.simulate(np.stack([c.poses for c in cases]), np.repeat(init, 2, axis=0))
+    boxes = np.stack([c.agents for c in cases])[:, :, None, :]
+    values, reasons = subscores(states, [0, 1], n_frames=2, agents=boxes)
+    close, safe = cases
+    # the too-close case: NAVSIM's TTC fires from the initial state (0.9 s × the closing speed exceeds the gap) …
+    assert close.known["closing"] > close.known["gap"] > 0 and close.break_step == 0
+    assert _navsim_ttc(states[0], close.agents) == (0.0, 0)
+    assert values["ttc"][0] == 0.0 and reasons["ttc"][0] is None
+    # … while the hard brake keeps the footprint off the lead: no collision, by hand and by the scorer
+    gap = close.agents[:, 0] - close.agents[:, 3] / 2 - (states[0, :, 0] + pc.CENTRE_OFFSET + pc.HALF_LENGTH)
+    assert gap.min() > 0.3, gap.min()
+    assert values["nc"][0] == 1.0
+    # the safe follow: no TTC event by hand or by the scorer, no collision
+    assert math.isnan(safe.break_time) and safe.break_step == -1
+    assert _navsim_ttc(states[1], safe.agents) == (1.0, -1)
+    assert values["ttc"][1] == 1.0 and values["nc"][1] == 1.0
+    # the same lead moved 0.5 m nearer than the too-close case's gap … but with the safe plan's gentle brake: the
+    # collision the scorer must see (nc 0, at fault) is the hand computation's too
+    near = safe.agents.copy()
+    near[:, 0] -= safe.known["gap"] - close.known["gap"] + 0.5
+    v2, _ = subscores(states[1:], [0], n_frames=1, agents=near[None, :, None, :])
+    hand_gap = near[:, 0] - near[:, 3] / 2 - (states[1, :, 0] + pc.CENTRE_OFFSET + pc.HALF_LENGTH)
+    assert hand_gap.min() < 0 and v2["nc"][0] == 0.0 and v2["ttc"][0] == 0.0
+    with pytest.raises(ValueError, match="needs ≥ 7 m/s"):
+        pc.follow_too_close(next(s for s in build_scenarios(SCENES, keyframes=KEYFRAMES)
+                                 if s.kind == "stopped-behind-lead-green"), 0)

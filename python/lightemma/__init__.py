@@ -12,9 +12,6 @@ pulls in heavy dependencies (litellm, torch) until used.
 from __future__ import annotations
 
 import importlib
-import importlib.abc
-import importlib.util
-import sys
 from typing import TYPE_CHECKING, Any
 
 __version__ = "0.1.0"
@@ -29,58 +26,36 @@ _EXPORTS: dict[str, str] = {
     "evaluate_all": "lightemma.metrics",
     "Metrics": "lightemma.metrics",
     "CONVENTIONS": "lightemma.metrics",
-    "load_frames": "lightemma.frames",
+    "load_frames": "lightemma.nuscenes",
     "Frame": "lightemma.frames",
     "FrameSet": "lightemma.frames",
     "run": "lightemma.pipeline",
     "resume": "lightemma.pipeline",
     "RunResult": "lightemma.pipeline",
+    "RunConfig": "lightemma.pipeline.config",
+    "sweep": "lightemma.pipeline.variant_sweep",
     "evaluate_runs": "lightemma.evaluation",
     "write_report": "lightemma.report",
-    "run_demo": "lightemma.demo",
+    "run_demo": "lightemma.offline_demo",
     "simulate": "lightemma.planning.simulation",
     "comfort": "lightemma.planning.simulation",
     "drive_scores": "lightemma.planning.scores",
     "read_intents": "lightemma.explanations",
     "intent_consistency": "lightemma.explanations",
+    "read_objects": "lightemma.explanations",
+    # lightemma's exceptions (lightemma.errors): the Rust core's errors arrive as these too
+    "UserError": "lightemma.errors",
+    "InputError": "lightemma.errors",
+    "ShapeError": "lightemma.errors",
+    "NonFiniteError": "lightemma.errors",
+    "UnknownNameError": "lightemma.errors",
+    "DatasetError": "lightemma.errors",
+    "RunStoreError": "lightemma.errors",
+    "RunFatalError": "lightemma.errors",
+    "RunStopped": "lightemma.errors",
 }
 
 __all__ = sorted([*_EXPORTS, "__version__"])
-
-# Modules that moved into lightemma.report (presentation) and lightemma.evaluation (what a report
-# shows); their old import paths name the same module objects (never a second copy).
-_MOVED: dict[str, str] = {
-    "lightemma.figures": "lightemma.report.figures",
-    "lightemma.pictures": "lightemma.report.pictures",
-    "lightemma.tables": "lightemma.report.tables",
-    "lightemma.evaluation.tables": "lightemma.report.evaluation_tables",
-    "lightemma.scenarios": "lightemma.evaluation.scenarios",
-    "lightemma.stats": "lightemma.evaluation.stats",
-}
-
-
-class _MovedModules(importlib.abc.MetaPathFinder, importlib.abc.Loader):
-    """Resolves an old module path (and its submodules) to the module at its new home."""
-
-    @staticmethod
-    def target(name: str) -> str | None:
-        for old, new in _MOVED.items():
-            if name == old or name.startswith(old + "."):
-                return new + name[len(old):]
-        return None
-
-    def find_spec(self, name: str, path: Any = None, target: Any = None) -> Any:
-        return importlib.util.spec_from_loader(name, self) if self.target(name) else None
-
-    def create_module(self, spec: Any) -> Any:
-        return importlib.import_module(self.target(spec.name))  # type: ignore[arg-type]
-
-    def exec_module(self, module: Any) -> None:
-        pass
-
-
-if not any(isinstance(f, _MovedModules) for f in sys.meta_path):
-    sys.meta_path.insert(0, _MovedModules())
 
 
 def __getattr__(name: str) -> Any:
@@ -97,12 +72,38 @@ def __dir__() -> list[str]:
 
 
 if TYPE_CHECKING:  # pragma: no cover - for type checkers and IDEs only
-    from lightemma.actions import ParsedActions, parse_actions
-    from lightemma.demo import run_demo
-    from lightemma.evaluation import evaluate_runs
-    from lightemma.explanations import intent_consistency, read_intents
-    from lightemma.frames import Frame, FrameSet, load_frames
-    from lightemma.kinematics import integrate
-    from lightemma.metrics import CONVENTIONS, Metrics, displacement_errors, evaluate, evaluate_all
-    from lightemma.pipeline import RunResult, resume, run
-    from lightemma.report import write_report
+    # `X as X`: an explicit re-export (mypy's no_implicit_reexport; __all__ above is computed, so it cannot say)
+    from lightemma.actions import ParsedActions as ParsedActions
+    from lightemma.actions import parse_actions as parse_actions
+    from lightemma.errors import DatasetError as DatasetError
+    from lightemma.errors import InputError as InputError
+    from lightemma.errors import NonFiniteError as NonFiniteError
+    from lightemma.errors import RunFatalError as RunFatalError
+    from lightemma.errors import RunStopped as RunStopped
+    from lightemma.errors import RunStoreError as RunStoreError
+    from lightemma.errors import ShapeError as ShapeError
+    from lightemma.errors import UnknownNameError as UnknownNameError
+    from lightemma.errors import UserError as UserError
+    from lightemma.evaluation import evaluate_runs as evaluate_runs
+    from lightemma.explanations import intent_consistency as intent_consistency
+    from lightemma.explanations import read_intents as read_intents
+    from lightemma.explanations import read_objects as read_objects
+    from lightemma.frames import Frame as Frame
+    from lightemma.frames import FrameSet as FrameSet
+    from lightemma.kinematics import integrate as integrate
+    from lightemma.metrics import CONVENTIONS as CONVENTIONS
+    from lightemma.metrics import Metrics as Metrics
+    from lightemma.metrics import displacement_errors as displacement_errors
+    from lightemma.metrics import evaluate as evaluate
+    from lightemma.metrics import evaluate_all as evaluate_all
+    from lightemma.nuscenes import load_frames as load_frames
+    from lightemma.offline_demo import run_demo as run_demo
+    from lightemma.pipeline import RunResult as RunResult
+    from lightemma.pipeline import resume as resume
+    from lightemma.pipeline import run as run
+    from lightemma.pipeline.config import RunConfig as RunConfig
+    from lightemma.pipeline.variant_sweep import sweep as sweep
+    from lightemma.planning.scores import drive_scores as drive_scores
+    from lightemma.planning.simulation import comfort as comfort
+    from lightemma.planning.simulation import simulate as simulate
+    from lightemma.report import write_report as write_report

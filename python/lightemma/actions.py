@@ -8,18 +8,22 @@ from __future__ import annotations
 from collections.abc import Iterable
 from dataclasses import dataclass
 from numbers import Real
+from typing import TYPE_CHECKING, TypedDict, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from lightemma import _core
+from lightemma.definitions import PARSE_FAILURES, PARSE_MODES, STATUSES
+from lightemma.errors import InputError, ShapeError
 
-STATUSES = ("ok", "corrected", "failed")
-FAILURES = tuple(_core.PARSE_FAILURES)  # "", "truncated", "implausible", "format", "ambiguous"
-MODES = tuple(_core.PARSE_MODES)  # strict, lenient, paper, json
+if TYPE_CHECKING:
+    from lightemma._core import _ParseMode
+
 DEFAULT_SPEED_RANGE = (-10.0, 50.0)
 DEFAULT_MAX_ABS_CURVATURE = 1.0
 _STATUS_NAMES = np.array(STATUSES)
-_FAILURE_NAMES = np.array(FAILURES)
+_FAILURE_NAMES = np.array(PARSE_FAILURES)
 
 
 @dataclass(frozen=True)
@@ -42,34 +46,36 @@ class ParsedActions:
             ``"format"`` (everything else, including empty answers and non-finite values).
     """
 
-    actions: np.ndarray
-    status: np.ndarray
+    actions: npt.NDArray[np.float64]
+    status: npt.NDArray[np.str_]
     reason: list[str]
-    failure: np.ndarray
+    failure: npt.NDArray[np.str_]
 
     def __len__(self) -> int:
         return len(self.reason)
 
     @property
-    def ok(self) -> np.ndarray:
+    def ok(self) -> npt.NDArray[np.bool_]:
         """Boolean mask of answers whose actions are usable (``ok`` or ``corrected``)."""
-        return self.status != "failed"
+        ok: npt.NDArray[np.bool_] = self.status != "failed"
+        return ok
 
 
-def _as_list_of_str(texts: object) -> list:
+def _as_list_of_str(texts: object) -> list[object]:
     """``texts`` as a list for the core, which checks every item is a str."""
     if isinstance(texts, str):
         return [texts]
     if isinstance(texts, np.ndarray):
         if texts.ndim != 1:
-            raise ValueError(f"texts must be a 1-D array of str, got shape {texts.shape}")
+            raise ShapeError(f"texts must be a 1-D array of str, got shape {texts.shape}")
         if texts.dtype.kind not in "UO":
-            raise ValueError(f"texts must be an array of str, got dtype {texts.dtype}")
-        return texts.tolist()
+            raise InputError(f"texts must be an array of str, got dtype {texts.dtype}")
+        items: list[object] = texts.tolist()
+        return items
     if isinstance(texts, list):
         return texts
     if isinstance(texts, (bytes, bytearray, memoryview)) or not isinstance(texts, Iterable):
-        raise ValueError(f"texts must be a str or an iterable of str, got {type(texts).__name__}")
+        raise InputError(f"texts must be a str or an iterable of str, got {type(texts).__name__}")
     return list(texts)
 
 
@@ -77,30 +83,31 @@ def _limit_pair(speed_range: object) -> tuple[float, float] | None:
     if speed_range is None:
         return None
     try:
-        lo, hi = speed_range  # type: ignore[misc]
+        # unpacking is the check: anything but an iterable of two items raises TypeError / ValueError here
+        lo, hi = cast("Iterable[object]", speed_range)
     except (TypeError, ValueError):
-        raise ValueError(f"speed_range must be (lo, hi) in m/s or None, got {speed_range!r}") from None
-    if not all(isinstance(x, Real) and not isinstance(x, bool) for x in (lo, hi)):
-        raise ValueError(f"speed_range must be two numbers (lo, hi) in m/s, got {speed_range!r}")
-    return float(lo), float(hi)
+        raise InputError(f"speed_range must be (lo, hi) in m/s or None, got {speed_range!r}") from None
+    if isinstance(lo, Real) and isinstance(hi, Real) and not isinstance(lo, bool) and not isinstance(hi, bool):
+        return float(lo), float(hi)
+    raise InputError(f"speed_range must be two numbers (lo, hi) in m/s, got {speed_range!r}")
 
 
 def _limit_value(max_abs_curvature: object) -> float | None:
     if max_abs_curvature is None:
         return None
     if not isinstance(max_abs_curvature, Real) or isinstance(max_abs_curvature, bool):
-        raise ValueError(f"max_abs_curvature must be a number (1/m) or None, got {max_abs_curvature!r}")
+        raise InputError(f"max_abs_curvature must be a number (1/m) or None, got {max_abs_curvature!r}")
     return float(max_abs_curvature)
 
 
 def parse_actions(
-    texts: str | Iterable[str] | np.ndarray,
+    texts: str | Iterable[str] | npt.NDArray[np.str_ | np.object_],
     *,
     n: int = 6,
     mode: str = "lenient",
     speed_range: tuple[float, float] | None = DEFAULT_SPEED_RANGE,
     max_abs_curvature: float | None = DEFAULT_MAX_ABS_CURVATURE,
-    history: np.ndarray | None = None,
+    history: npt.ArrayLike | None = None,
 ) -> ParsedActions:
     """Parse model answers into ``n`` (speed m/s, curvature 1/m) actions each.
 
@@ -162,9 +169,9 @@ def parse_actions(
     ('corrected', [5.2, 0.01])
     """
     if isinstance(n, bool) or not isinstance(n, int) or n < 1:
-        raise ValueError(f"n must be a positive integer, got {n!r}")
+        raise InputError(f"n must be a positive integer, got {n!r}")
     if not isinstance(mode, str):
-        raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
+        raise InputError(f"mode must be one of {', '.join(PARSE_MODES)}, got {mode!r}")
     speed = _limit_pair(speed_range)
     curvature = _limit_value(max_abs_curvature)
     items = _as_list_of_str(texts)
@@ -172,19 +179,22 @@ def parse_actions(
     if history is not None:
         hist = np.ascontiguousarray(history, dtype=np.float64)
         if hist.shape != (len(items), n, 2):
-            raise ValueError(f"history must have shape ({len(items)}, {n}, 2) like the texts, got {hist.shape}")
-    actions, codes, failures, reasons = _core.parse_actions(items, n, mode, speed, curvature, hist)
+            raise ShapeError(f"history must have shape ({len(items)}, {n}, 2) like the texts, got {hist.shape}")
+    # the core checks every item is a str and the mode is one of PARSE_MODES (UnknownNameError naming them)
+    actions, codes, failures, reasons = _core.parse_actions(
+        cast("list[str]", items), n, cast("_ParseMode", mode), speed, curvature, hist
+    )
     return ParsedActions(actions=actions, status=_STATUS_NAMES[codes], reason=reasons, failure=_FAILURE_NAMES[failures])
 
 
-def history_rows(histories: Iterable[object], n: int = 6) -> np.ndarray:
+def history_rows(histories: Iterable[object], n: int = 6) -> npt.NDArray[np.float64]:
     """Histories for :func:`parse_actions`'s ``history``: a float64 (N, n, 2) array, one row per item.
 
     An item that is not ``n`` finite (speed, curvature) pairs (None, a record without its
     history, a wrong shape) becomes a row of NaN, which equals no list: that answer is
     parsed as without a history.
     """
-    rows = []
+    rows: list[npt.NDArray[np.float64]] = []
     for item in histories:
         try:
             row = np.asarray(item, dtype=np.float64)
@@ -196,12 +206,22 @@ def history_rows(histories: Iterable[object], n: int = 6) -> np.ndarray:
     return np.stack(rows) if rows else np.zeros((0, n, 2))
 
 
-def plausibility(speed_range: object = DEFAULT_SPEED_RANGE, max_abs_curvature: object = DEFAULT_MAX_ABS_CURVATURE) -> dict:
+class Plausibility(TypedDict):
+    """The plausibility limits as a run manifest records them (:func:`plausibility`)."""
+
+    speed_range: list[float] | None  # [lo, hi], m/s
+    max_abs_curvature: float | None  # 1/m
+
+
+def plausibility(
+    speed_range: object = DEFAULT_SPEED_RANGE, max_abs_curvature: object = DEFAULT_MAX_ABS_CURVATURE
+) -> Plausibility:
     """The plausibility limits as a run manifest records them: ``{"speed_range": [lo, hi] | None,
     "max_abs_curvature": k | None}``.
 
     Raises ValueError for malformed limits, exactly as :func:`parse_actions` does.
     """
-    parse_actions([], speed_range=speed_range, max_abs_curvature=max_abs_curvature)  # validates
     speed = _limit_pair(speed_range)
-    return {"speed_range": None if speed is None else list(speed), "max_abs_curvature": _limit_value(max_abs_curvature)}
+    curvature = _limit_value(max_abs_curvature)
+    parse_actions([], speed_range=speed, max_abs_curvature=curvature)  # validates (finite, lo < hi, > 0)
+    return {"speed_range": None if speed is None else list(speed), "max_abs_curvature": curvature}

@@ -3,7 +3,8 @@
 The key is a SHA-256 over the model string, the API base, the decoding
 parameters and the messages, where an image is represented by the SHA-256 of
 its bytes (so keys are cheap to compute and never hold image data). Only
-deterministic requests (temperature 0) are cached; the caller decides.
+deterministic requests (temperature 0) and the draws of a sampled run
+(``--samples K`` > 1, keyed by sample index) are cached; the caller decides.
 
 Stored per key: the answer text and the provider-reported usage and cost of the
 original call. A hit is reported as such (``ChatResult.cached``) with the time
@@ -32,6 +33,8 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from lightemma.runs.records import MAX_COST_CENTS, in_bounds, token_count
+
 BUSY_TIMEOUT = 5.0  # seconds SQLite waits for another writer's lock before "database is locked"
 
 _SCHEMA = """
@@ -48,13 +51,16 @@ CREATE TABLE IF NOT EXISTS responses (
 
 
 def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None,
-                turns: tuple[tuple[str, str], ...] = (), attempt: int = 1, inputs: str = "full") -> str:
+                turns: tuple[tuple[str, str], ...] = (), attempt: int = 1, inputs: str = "full",
+                sample: int = 0) -> str:
     """The cache key of one request: ``text`` after the earlier ``turns`` (a single-turn request keeps its old key).
 
     ``attempt`` > 1 (a re-ask) is part of the key: a re-ask must reach the provider, not replay the cached
     answer it was asked again for; a first ask keeps its old key. ``inputs`` (an input ablation other than
     ``full``, :mod:`lightemma.inputs`) is part of the key too: an ablated request never shares an answer
     with a full one, even where its text and image happen to match; a full request keeps its old key.
+    ``sample`` > 0 (another of a frame's K independent samples, ``--samples``) is part of the key too: each sample
+    is its own draw; sample 0 keeps the old key, so a cache written before sampling still hits.
     """
     parts: list[Any] = [model, api_base or "", params, text, image_digest or ""]
     if turns:
@@ -63,6 +69,8 @@ def request_key(model: str, api_base: str | None, params: dict[str, Any], text: 
         parts.append({"attempt": attempt})
     if inputs != "full":
         parts.append({"inputs": inputs})
+    if sample > 0:
+        parts.append({"sample": sample})
     payload = json.dumps(parts, sort_keys=True, separators=(",", ":"))
     return hashlib.sha256(payload.encode("utf-8")).hexdigest()
 
@@ -77,8 +85,6 @@ def _text_or_bytes(data: bytes) -> str | bytes:
 
 def _row_problem(row: tuple[Any, ...]) -> str | None:
     """Why a stored row (text, input_tokens, output_tokens, cost_cents) is no answer to replay, else None."""
-    from lightemma.runs.records import MAX_COST_CENTS, in_bounds, token_count
-
     text, input_tokens, output_tokens, cost_cents = row
     if type(text) is not str:
         return f"text is {type(text).__name__}, expected text"

@@ -27,6 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.errors import InputError
+
 SEVERITIES: tuple[int, ...] = (1, 2, 3, 4, 5)
 PREFIX = "corrupt:"
 JPEG_QUALITY = 95
@@ -85,13 +87,13 @@ def parse_corruption(inputs: str) -> tuple[str, int] | None:
         return None
     match = _SPEC.fullmatch(inputs)
     if match is None:
-        raise ValueError(f"--inputs {inputs}: a corruption is corrupt:NAME@SEVERITY (severity 1-5), "
+        raise InputError(f"--inputs {inputs}: a corruption is corrupt:NAME@SEVERITY (severity 1-5), "
                          f"NAME one of {', '.join(NAMES)}")
     name, severity = match[1], match[2]
     if name not in CORRUPTIONS:
-        raise ValueError(f"--inputs {inputs}: unknown corruption {name!r}; one of {', '.join(NAMES)}")
+        raise InputError(f"--inputs {inputs}: unknown corruption {name!r}; one of {', '.join(NAMES)}")
     if not re.fullmatch(r"[1-5]", severity):
-        raise ValueError(f"--inputs {inputs}: severity must be an integer 1-5, got {severity!r}")
+        raise InputError(f"--inputs {inputs}: severity must be an integer 1-5, got {severity!r}")
     return name, int(severity)
 
 
@@ -105,7 +107,7 @@ def corruption_seed(sample_token: str, name: str, severity: int) -> int:
 def corruption_reference(path: str, name: str, severity: int, seed: int) -> str:
     """The image reference of ``path`` corrupted by ``name`` at ``severity`` with ``seed``."""
     if name not in CORRUPTIONS or severity not in SEVERITIES or not 0 <= seed < 2**32:
-        raise ValueError(f"no corruption {name}@{severity} with seed {seed}")
+        raise InputError(f"no corruption {name}@{severity} with seed {seed}")
     return f"{PREFIX}{name}@{severity}:{seed}:{path}"
 
 
@@ -139,7 +141,7 @@ def corrupt_array(rgb: np.ndarray, name: str, severity: int, seed: int) -> np.nd
     The same (image, name, severity, seed) gives the same array in every process.
     """
     if rgb.ndim != 3 or rgb.shape[2] != 3 or rgb.dtype != np.uint8:
-        raise ValueError(f"a corruption needs an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
+        raise InputError(f"a corruption needs an (H, W, 3) uint8 image, got {rgb.shape} {rgb.dtype}")
     compose = _albumentations().Compose([transform(name, severity)], seed=seed, strict=True)
     out = compose(image=np.ascontiguousarray(rgb))["image"]
     return np.ascontiguousarray(out, dtype=np.uint8)

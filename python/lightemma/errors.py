@@ -1,4 +1,17 @@
-"""Exceptions shown to users as one clear line by the CLI."""
+"""lightemma's exceptions: the errors a user can fix, shown by the CLI as one clear line.
+
+Every error lightemma raises for bad input is a :class:`UserError`; the ones about a value (an argument, an
+array, a name, a dataset, a run directory) are also ``ValueError`` s, so ``except ValueError`` keeps catching
+them. The Rust core's errors arrive as these classes too (one mapping, ``rust/python/errors.rs``, polars-style):
+
+* ``CoreError::Shape`` → :class:`ShapeError` (an array of the wrong dimensions, extent or memory layout);
+* ``CoreError::NonFinite`` → :class:`NonFiniteError` (NaN or infinity where only finite numbers go);
+* ``CoreError::UnknownName`` → :class:`UnknownNameError` (a method, convention or mode lightemma lacks);
+* ``CoreError::Argument`` → :class:`InputError` (any other refused argument).
+
+The CLI (``lightemma.cli.main``) catches :class:`UserError` and ``OSError`` only: any other exception is a bug in
+lightemma and prints its traceback.
+"""
 
 from __future__ import annotations
 
@@ -21,6 +34,24 @@ class UserError(Exception):
     def for_cli(self) -> str:
         """The message as the command line prints it."""
         return self.cli or str(self)
+
+
+class InputError(UserError, ValueError):
+    """A value given to lightemma that it refuses: an argument out of its range, a wrong type, a malformed
+    answer or file the caller passed. The message names the parameter (``concurrency must be ≥ 1, got 0``)."""
+
+
+class ShapeError(InputError):
+    """An array of the wrong number of dimensions, extent or memory layout (``pred must have shape (N, T, 2)``)."""
+
+
+class NonFiniteError(InputError):
+    """A NaN or infinity where only finite numbers are allowed (names the array, frame and step)."""
+
+
+class UnknownNameError(InputError):
+    """A name that is not one of the allowed ones (integration method, convention, parse mode …): the message lists
+    the allowed names."""
 
 
 class DatasetError(UserError, ValueError):

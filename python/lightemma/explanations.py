@@ -12,7 +12,10 @@ docs/definitions.md#explanation-audit; rules ``intent@lightemma/1``):
   with a reason;
 * :func:`run_consistency` — the same for a run directory's records;
 * :func:`summarize_consistency` — per model the consistency and contradiction rates with scene-bootstrap
-  intervals, confusion matrices (stated × planned), and paired sign-flip tests between models (Holm-adjusted).
+  intervals, confusion matrices (stated × planned), and paired sign-flip tests between models (Holm-adjusted);
+* :func:`read_objects` — stage-1 texts → the object classes each affirms, negates or hedges about, with stated counts
+  (Rust core, ``rust/objects.rs``, rules ``objects@lightemma/1``, docs/definitions.md#described-objects); the check
+  against the annotations is :mod:`lightemma.evaluation.object_audit`.
 """
 
 from __future__ import annotations
@@ -24,10 +27,19 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from lightemma import _core
+from lightemma.definitions import STEP_SECONDS
+from lightemma.errors import InputError, ShapeError
+from lightemma.evaluation.manifest import _integrator
 from lightemma.evaluation.stats import Resampling, bootstrap_ci, holm, sign_flip_p
+from lightemma.kinematics import integrate
+from lightemma.runs.store import read_run
+
+#: a float64 array (shapes in each docstring)
+FloatArray = npt.NDArray[np.float64]
 
 INTENT_RULES: str = _core.INTENT_RULES
 LONGITUDINAL: tuple[str, ...] = tuple(_core.INTENT_LONGITUDINAL)
@@ -38,7 +50,7 @@ _LON_NAMES = np.array([*LONGITUDINAL, UNKNOWN], dtype=object)
 _LAT_NAMES = np.array([*LATERAL, UNKNOWN], dtype=object)
 
 
-def _names(codes: np.ndarray, names: np.ndarray) -> np.ndarray:
+def _names(codes: npt.NDArray[np.uint8], names: npt.NDArray[np.object_]) -> npt.NDArray[np.str_]:
     index = np.where(codes == _core.INTENT_UNKNOWN, len(names) - 1, codes).astype(np.intp)
     return names[index].astype(str)
 
@@ -53,8 +65,8 @@ class Intents:
     ``longitudinal_sentence`` / ``lateral_sentence``: the sentence each class came from ("" when unknown).
     """
 
-    longitudinal: np.ndarray
-    lateral: np.ndarray
+    longitudinal: npt.NDArray[np.str_]
+    lateral: npt.NDArray[np.str_]
     reason: list[str]
     longitudinal_sentence: list[str]
     lateral_sentence: list[str]
@@ -64,25 +76,25 @@ class Intents:
         return len(self.longitudinal)
 
 
-def _texts(texts: str | Iterable[str | None] | np.ndarray) -> tuple[list[str], list[int]]:
+def _texts(texts: str | Iterable[str | None] | npt.NDArray[np.str_ | np.object_]) -> tuple[list[str], list[int]]:
     if isinstance(texts, str):
         items: list[Any] = [texts]
     elif isinstance(texts, np.ndarray):
         if texts.ndim != 1:
-            raise ValueError(f"texts must be a 1-D array of str, got shape {texts.shape}")
+            raise ShapeError(f"texts must be a 1-D array of str, got shape {texts.shape}")
         items = texts.tolist()
     elif isinstance(texts, (bytes, bytearray)) or not isinstance(texts, Iterable):
-        raise ValueError(f"texts must be a str or an iterable of str, got {type(texts).__name__}")
+        raise InputError(f"texts must be a str or an iterable of str, got {type(texts).__name__}")
     else:
         items = list(texts)
     missing = [i for i, t in enumerate(items) if t is None]
     for i, t in enumerate(items):
         if t is not None and not isinstance(t, str):
-            raise ValueError(f"texts must be str (or None for a missing text): item {i} is {type(t).__name__}")
+            raise InputError(f"texts must be str (or None for a missing text): item {i} is {type(t).__name__}")
     return ["" if t is None else t for t in items], missing
 
 
-def read_intents(texts: str | Iterable[str | None] | np.ndarray) -> Intents:
+def read_intents(texts: str | Iterable[str | None] | npt.NDArray[np.str_ | np.object_]) -> Intents:
     """Read the stated intent of stage-2 texts (one pass in Rust, all cores for large batches).
 
     ``texts``: one str, an iterable of str, or a 1-D array of str; ``None`` marks a missing text (the stage
@@ -102,7 +114,7 @@ def read_intents(texts: str | Iterable[str | None] | np.ndarray) -> Intents:
 class Thresholds:
     """The documented thresholds that classify a plan (docs/definitions.md#explanation-audit). Units: m/s, m/s², rad, m."""
 
-    dt: float = 0.5  # s per action
+    dt: float = STEP_SECONDS  # s per action
     stopped: float = 0.5  # a speed below this is standing still
     moving: float = 1.0  # "start": from standing, a final speed at least this
     accelerate: float = 0.3  # mean acceleration over the horizon ≥ this: accelerate (≤ −this: decelerate)
@@ -130,25 +142,25 @@ class PlannedIntents:
     heading change, m: what a constant-curvature arc does not explain).
     """
 
-    longitudinal: np.ndarray
-    lateral: np.ndarray
-    side: np.ndarray
+    longitudinal: npt.NDArray[np.str_]
+    lateral: npt.NDArray[np.str_]
+    side: npt.NDArray[np.int8]
     reason: list[str]
-    initial_speed: np.ndarray
-    final_speed: np.ndarray
-    mean_acceleration: np.ndarray
-    path_length: np.ndarray
-    heading_change: np.ndarray
-    lateral_offset: np.ndarray
-    arc_excess: np.ndarray
+    initial_speed: FloatArray
+    final_speed: FloatArray
+    mean_acceleration: FloatArray
+    path_length: FloatArray
+    heading_change: FloatArray
+    lateral_offset: FloatArray
+    arc_excess: FloatArray
     thresholds: Thresholds = field(default_factory=Thresholds)
 
 
-def _frames(array: ArrayLike | None, n: int | None, name: str) -> np.ndarray:
+def _frames(array: ArrayLike | None, n: int | None, name: str) -> FloatArray:
     a = np.asarray(array, dtype=np.float64)
     if a.ndim != 3 or a.shape[2] != 2 or (n is not None and a.shape[0] != n):
         want = f"({n}, T, 2)" if n is not None else "(N, T, 2)"
-        raise ValueError(f"{name} must have shape {want}, got {a.shape}")
+        raise ShapeError(f"{name} must have shape {want}, got {a.shape}")
     return a
 
 
@@ -172,8 +184,6 @@ def planned_intents(
     change to its side; |arc excess| < follow → follow_lane; between → unknown. A frame with a non-finite
     action, history speed or position is unknown on the axes that need it. ``ValueError`` for shapes.
     """
-    from lightemma.kinematics import integrate
-
     t = thresholds
     a = _frames(actions, None, "actions")
     n = a.shape[0]
@@ -184,7 +194,7 @@ def planned_intents(
     else:
         traj = _frames(trajectory, n, "trajectory")
         if traj.shape[1] != a.shape[1]:
-            raise ValueError(f"trajectory must have {a.shape[1]} steps like actions, got {traj.shape[1]}")
+            raise ShapeError(f"trajectory must have {a.shape[1]} steps like actions, got {traj.shape[1]}")
     horizon = a.shape[1] * t.dt
     speed = a[..., 0] if a.shape[1] else np.full((n, 1), np.nan)
     v0 = h[:, -1, 0] if h.shape[1] else np.full(n, np.nan)
@@ -303,9 +313,9 @@ class Consistency:
     ``lateral``: the verdict of each axis. ``reason``: why (e.g. "longitudinal: says stop, plans keep_speed").
     """
 
-    verdict: np.ndarray
-    longitudinal: np.ndarray
-    lateral: np.ndarray
+    verdict: npt.NDArray[np.str_]
+    longitudinal: npt.NDArray[np.str_]
+    lateral: npt.NDArray[np.str_]
     reason: list[str]
     stated: Intents
     planned: PlannedIntents
@@ -316,7 +326,7 @@ class Consistency:
 
 
 def intent_consistency(
-    texts: Intents | str | Iterable[str | None] | np.ndarray,
+    texts: Intents | str | Iterable[str | None] | npt.NDArray[np.str_ | np.object_],
     actions: ArrayLike,
     history: ArrayLike,
     trajectory: ArrayLike | None = None,
@@ -336,7 +346,7 @@ def intent_consistency(
     planned = planned_intents(actions, history, trajectory, thresholds, method)
     n = len(planned.longitudinal)
     if len(stated) != n:
-        raise ValueError(f"{len(stated)} stated intent(s) but {n} plan(s)")
+        raise InputError(f"{len(stated)} stated intent(s) but {n} plan(s)")
     verdict = np.empty(n, dtype=object)
     lon_v = np.empty(n, dtype=object)
     lat_v = np.empty(n, dtype=object)
@@ -386,11 +396,11 @@ class RunConsistency:
     """:func:`intent_consistency` of a run's records, with each frame's id and scene (for the scene bootstrap)."""
 
     frame_ids: list[str]
-    scenes: np.ndarray
+    scenes: npt.NDArray[np.object_]
     consistency: Consistency
 
 
-def _rows(record: Mapping[str, Any], key: str, steps: int) -> np.ndarray:
+def _rows(record: Mapping[str, Any], key: str, steps: int) -> FloatArray:
     value = record.get(key)
     try:
         a = np.asarray(value, dtype=np.float64) if value is not None else None
@@ -408,9 +418,6 @@ def run_consistency(run_dir: str | os.PathLike[str], thresholds: Thresholds = Th
     record (docs/definitions.md#run-records); a missing or malformed array reads as NaN, so that frame's plan is
     unknown. ``RunStoreError`` when the directory holds no ``frames.jsonl``.
     """
-    from lightemma.evaluation.manifest import _integrator
-    from lightemma.runs.store import read_run
-
     contents = read_run(run_dir)
     records = list(contents.records.values())
     method = _integrator(contents.manifest)  # the run's integrator, as evaluation reads it
@@ -432,12 +439,12 @@ def confusion(stated: ArrayLike, planned: ArrayLike, classes: Sequence[str]) -> 
     counts = np.zeros((len(labels), len(labels)), dtype=np.int64)
     for a, b in zip(s, p, strict=True):
         if a not in index or b not in index:
-            raise ValueError(f"confusion: label {a if a not in index else b!r} is not one of {labels}")
+            raise InputError(f"confusion: label {a if a not in index else b!r} is not one of {labels}")
         counts[index[a], index[b]] += 1
     return {"stated": labels, "planned": labels, "counts": counts.tolist()}
 
 
-def _interval(pair: np.ndarray) -> list[float] | None:
+def _interval(pair: FloatArray) -> list[float] | None:
     return [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
 
 
@@ -453,7 +460,7 @@ def summarize_consistency(entries: Sequence[tuple[str, RunConsistency]], resampl
     resampling = resampling or Resampling()
     labels = [label for label, _ in entries]
     if len(set(labels)) != len(labels):
-        raise ValueError(f"duplicate model label(s): {sorted({x for x in labels if labels.count(x) > 1})}")
+        raise InputError(f"duplicate model label(s): {sorted({x for x in labels if labels.count(x) > 1})}")
     groups, keys = [], []
     for label, run in entries:
         v = run.consistency.verdict
@@ -504,3 +511,57 @@ def summarize_consistency(entries: Sequence[tuple[str, RunConsistency]], resampl
                 entry[f"{name}_p"] = float(p[2 * k + m])
                 entry[f"{name}_p_holm"] = float(adjusted[2 * k + m])
     return {"rules": INTENT_RULES, "thresholds": Thresholds().to_dict(), "resampling": resampling.to_dict(), "models": models, "pairs": pairs}
+
+
+# -- described objects (stage 1) --------------------------------------------------------------------------------------
+
+OBJECT_RULES: str = _core.OBJECT_RULES
+#: the classes a scene description is read for (docs/definitions.md#described-objects), in column order
+OBJECT_CLASSES: tuple[str, ...] = tuple(_core.OBJECT_CLASSES)
+#: mention codes 0..3 by name; 255 is "unknown" (the text could not be read)
+MENTIONS: tuple[str, ...] = tuple(_core.OBJECT_MENTIONS)
+_MENTION_NAMES = np.array([*MENTIONS, UNKNOWN], dtype=str)
+
+
+@dataclass(frozen=True)
+class DescribedObjects:
+    """The object classes N stage-1 texts mention (rules :data:`OBJECT_RULES`).
+
+    ``mentions`` (N, C) str, C = len(:data:`OBJECT_CLASSES`): ``affirmed`` (the text says one is there),
+    ``negated`` ("no pedestrians"), ``hedged`` ("watch for any pedestrians": not a claim), ``not_mentioned``, or
+    ``unknown`` on every class of a text that cannot be read; ``counts`` (N, C) int: the stated count of the affirmed
+    mentions, −1 where none is stated; ``reason``: per text why it is unknown or what was hedged ("" otherwise).
+    """
+
+    mentions: npt.NDArray[np.str_]
+    counts: npt.NDArray[np.int64]
+    reason: list[str]
+    rules: str = OBJECT_RULES
+
+    def __len__(self) -> int:
+        return len(self.reason)
+
+    def column(self, name: str) -> npt.NDArray[np.str_]:
+        """(N,) str: the mentions of class ``name``; ``ValueError`` for a class not in :data:`OBJECT_CLASSES`."""
+        if name not in OBJECT_CLASSES:
+            raise InputError(f"unknown object class {name!r}; choose one of {', '.join(OBJECT_CLASSES)}")
+        return self.mentions[:, OBJECT_CLASSES.index(name)]
+
+
+def read_objects(texts: str | Iterable[str | None] | npt.NDArray[np.str_ | np.object_]) -> DescribedObjects:
+    """Read which object classes stage-1 scene descriptions mention (one pass in Rust, ``rust/objects.rs``).
+
+    ``texts`` as for :func:`read_intents`; ``None`` (the stage failed) reads as unknown, "no stage-1 text". Rules:
+    docs/definitions.md#described-objects (negation, hedges, places such as "bus stop", the ego vehicle, counts).
+    Raises ``ValueError`` naming the first item that is not str or None.
+    """
+    items, missing = _texts(texts)
+    codes, counts, reasons = _core.read_objects(items)
+    for i in missing:
+        reasons[i] = "no stage-1 text"
+    codes = np.asarray(codes)
+    index = np.where(codes == _core.OBJECT_UNKNOWN, len(MENTIONS), codes).astype(np.intp)
+    names = _MENTION_NAMES[index] if codes.size else np.zeros((len(items), len(OBJECT_CLASSES)), dtype=str)
+    if missing:
+        names[missing] = UNKNOWN
+    return DescribedObjects(names.reshape(len(items), len(OBJECT_CLASSES)), np.asarray(counts, dtype=np.int64), reasons)

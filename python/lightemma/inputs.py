@@ -33,6 +33,10 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.corruptions import corrupted_jpeg, corruption_reference, corruption_seed, describe, parse_corruption
+from lightemma.errors import InputError
+from lightemma.nuscenes.geometry import round_like_python
+
 INPUTS: tuple[str, ...] = ("full", "no-image", "blank-image", "no-history")
 # the parametrised perturbations, as the choices are named to a user
 PERTURBATIONS: tuple[str, ...] = ("corrupt:NAME@SEVERITY", "history-noise@SIGMA[,SIGMA_K]", "history-stale@K")
@@ -50,13 +54,12 @@ MAX_CURVATURE_SIGMA = 1.0  # 1/m
 def check_inputs(inputs: str) -> str:
     """``inputs`` when it is one of :data:`INPUTS` or a well-formed perturbation; one-line ValueError otherwise."""
     if not isinstance(inputs, str):
-        raise ValueError(f"inputs must be a string, got {type(inputs).__name__}")
+        raise InputError(f"inputs must be a string, got {type(inputs).__name__}")
     if inputs in INPUTS:
         return inputs
-    from lightemma.corruptions import parse_corruption
 
     if parse_corruption(inputs) is None and history_noise(inputs) is None and history_stale(inputs) is None:
-        raise ValueError(f"inputs must be one of {', '.join(INPUTS + PERTURBATIONS)}, got {inputs!r}")
+        raise InputError(f"inputs must be one of {', '.join(INPUTS + PERTURBATIONS)}, got {inputs!r}")
     return inputs
 
 
@@ -74,11 +77,11 @@ def history_noise(inputs: str) -> tuple[float, float] | None:
         return None
     match = _NOISE.fullmatch(inputs)
     if match is None:
-        raise ValueError(f"--inputs {inputs}: history noise is history-noise@SIGMA or history-noise@SIGMA,SIGMA_K "
+        raise InputError(f"--inputs {inputs}: history noise is history-noise@SIGMA or history-noise@SIGMA,SIGMA_K "
                          "(SIGMA m/s on speeds, SIGMA_K 1/m on curvatures, plain decimals)")
     speed, curvature = float(match[1]), float(match[2] or 0.0)
     if not (speed <= MAX_SPEED_SIGMA and curvature <= MAX_CURVATURE_SIGMA) or speed == curvature == 0.0:
-        raise ValueError(f"--inputs {inputs}: needs 0 <= SIGMA <= {MAX_SPEED_SIGMA:g} m/s and 0 <= SIGMA_K <= "
+        raise InputError(f"--inputs {inputs}: needs 0 <= SIGMA <= {MAX_SPEED_SIGMA:g} m/s and 0 <= SIGMA_K <= "
                          f"{MAX_CURVATURE_SIGMA:g} 1/m, not both 0")
     return speed, curvature
 
@@ -89,15 +92,13 @@ def history_stale(inputs: str) -> int | None:
         return None
     match = _STALE.fullmatch(inputs)
     if match is None or not re.fullmatch(r"[1-5]", match[1]):
-        raise ValueError(f"--inputs {inputs}: K of history-stale@K must be an integer 1-5 (steps of 0.5 s)")
+        raise InputError(f"--inputs {inputs}: K of history-stale@K must be an integer 1-5 (steps of 0.5 s)")
     return int(match[1])
 
 
 def describe_perturbation(inputs: str) -> dict[str, Any]:
     """What the run manifest's ``params`` records of a perturbation: ``{"corruption": …}`` (transform, parameters,
     library, seed rule, encoding) or ``{"history_perturbation": …}``; ``{}`` for the other inputs."""
-    from lightemma.corruptions import describe, parse_corruption
-
     corruption = parse_corruption(inputs)
     if corruption is not None:
         return {"corruption": describe(*corruption)}
@@ -129,7 +130,6 @@ def shown_history(frame: Any, inputs: str) -> np.ndarray:
     if noise is not None:
         token = str(getattr(frame, "sample_token", None) or frame.frame_id)
         rng = np.random.default_rng(perturbation_seed("history-noise", inputs, token))
-        from lightemma.frames.geometry import round_like_python
 
         noisy = actions + rng.standard_normal(actions.shape) * np.array(noise)
         # a perturbed column to 3 decimals (the paper's history precision), never 16 digits of noise in a prompt
@@ -143,7 +143,7 @@ def shown_history(frame: Any, inputs: str) -> np.ndarray:
 def blank_reference(width: int, height: int) -> str:
     """The image reference of a blank image of ``width`` × ``height`` pixels (``blank-image:WxH``)."""
     if not (0 < width < 100_000 and 0 < height < 100_000):
-        raise ValueError(f"a blank image needs a positive size below 100000 px, got {width}x{height}")
+        raise InputError(f"a blank image needs a positive size below 100000 px, got {width}x{height}")
     return f"{BLANK_PREFIX}{int(width)}x{int(height)}"
 
 
@@ -173,8 +173,6 @@ def read_image_bytes(reference: str) -> bytes:
     if size is not None:
         return blank_jpeg(*size)
     if reference.startswith(CORRUPT_PREFIX):
-        from lightemma.corruptions import corrupted_jpeg
-
         return corrupted_jpeg(reference)  # the one place a corruption is applied (every backend)
     with open(reference, "rb") as fh:
         return fh.read()
@@ -206,8 +204,6 @@ def request_image(frame: Any, inputs: str) -> str | None:
     if inputs == "no-image" or path is None:
         return None
     if inputs.startswith(CORRUPT_PREFIX):
-        from lightemma.corruptions import corruption_reference, corruption_seed, parse_corruption
-
         name, severity = parse_corruption(inputs) or ("", 0)
         token = str(getattr(frame, "sample_token", None) or frame.frame_id)
         return corruption_reference(path, name, severity, corruption_seed(token, name, severity))

@@ -3,14 +3,19 @@
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass
+from typing import TYPE_CHECKING, cast
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from lightemma import _core
 from lightemma._arrays import as_frames, as_mask
+from lightemma.definitions import CONVENTIONS as CONVENTIONS  # re-exported: lightemma.CONVENTIONS
+from lightemma.errors import ShapeError
 
-CONVENTIONS: tuple[str, ...] = tuple(_core.CONVENTIONS)
+if TYPE_CHECKING:
+    from lightemma._core import _Convention
 
 
 @dataclass(frozen=True)
@@ -40,17 +45,17 @@ class Metrics:
         return asdict(self)
 
 
-def _pair(pred: ArrayLike, gt: ArrayLike) -> tuple[np.ndarray, np.ndarray, bool]:
+def _pair(pred: ArrayLike, gt: ArrayLike) -> tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], bool]:
     p, single_p = as_frames(pred, "pred")
     g, single_g = as_frames(gt, "gt")
     if p.shape != g.shape:
         shown_p = p.shape[1:] if single_p else p.shape
         shown_g = g.shape[1:] if single_g else g.shape
-        raise ValueError(f"pred has shape {shown_p} but gt has shape {shown_g}; they must match")
+        raise ShapeError(f"pred has shape {shown_p} but gt has shape {shown_g}; they must match")
     return p, g, single_p and single_g
 
 
-def displacement_errors(pred: ArrayLike, gt: ArrayLike) -> np.ndarray:
+def displacement_errors(pred: ArrayLike, gt: ArrayLike) -> npt.NDArray[np.float64]:
     """Euclidean error per frame and step: (N, T, 2) × 2 → (N, T); (T, 2) × 2 → (T,).
 
     NaN in ``pred`` or ``gt`` (a failed parse) gives NaN errors for that step; nothing is
@@ -91,7 +96,8 @@ def evaluate(
     """
     p, g, single = _pair(pred, gt)
     m = None if mask is None else as_mask(mask, p.shape[0], single)
-    values = _core.evaluate(p, g, convention, float(miss_threshold), m)
+    # the core checks the convention is one of CONVENTIONS (UnknownNameError naming them)
+    values = _core.evaluate(p, g, cast("_Convention", convention), float(miss_threshold), m)
     return Metrics(*values, convention=convention, miss_threshold=float(miss_threshold))
 
 
@@ -122,7 +128,7 @@ def evaluate_all(
 FRAME_METRICS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde")
 
 
-def frame_metrics(pred: ArrayLike, gt: ArrayLike, *, convention: str = "lightemma") -> np.ndarray:
+def frame_metrics(pred: ArrayLike, gt: ArrayLike, *, convention: str = "lightemma") -> npt.NDArray[np.float64]:
     """Per-frame values (N, 5) — the columns of :data:`FRAME_METRICS` — whose means :func:`evaluate` returns.
 
     Used for intervals and paired comparisons, which need one value per frame.
@@ -134,4 +140,4 @@ def frame_metrics(pred: ArrayLike, gt: ArrayLike, *, convention: str = "lightemm
     [[1.0, 1.0, 1.0, 1.0, 1.0]]
     """
     p, g, _ = _pair(pred, gt)
-    return _core.frame_metrics(p, g, convention)
+    return _core.frame_metrics(p, g, cast("_Convention", convention))  # the core checks the convention

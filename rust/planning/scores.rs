@@ -277,20 +277,104 @@ impl<'a> Layer<'a> {
     /// Whether (x, y) is on the layer; `near` from [`Layer::near`] for a region holding the point. A mask
     /// pixel outside the image is not on it.
     fn contains(&self, near: &[usize], x: f64, y: f64) -> bool {
+        let mut hint = usize::MAX;
+        self.contains_from(near, x, y, &mut hint)
+    }
+
+    /// [`Layer::contains`], testing first the polygon `hint` (the one that held the previous point, when
+    /// it is one of `near`) and leaving in it the polygon that holds this point. The answer is the same in
+    /// any order (membership of the union); successive corners of a plan mostly lie in the same polygon.
+    fn contains_from(&self, near: &[usize], x: f64, y: f64, hint: &mut usize) -> bool {
         match self {
             Layer::Mask(m) => m.lookup(x, y) == ON,
-            Layer::Polygons { polygons, bounds } => near.iter().any(|&p| {
-                let b = bounds[p];
-                x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3] && polygons[p].contains(x, y)
-            }),
+            Layer::Polygons { polygons, bounds } => {
+                let holds = |p: usize| {
+                    let b = bounds[p];
+                    x >= b[0] && x <= b[2] && y >= b[1] && y <= b[3] && polygons[p].contains(x, y)
+                };
+                if *hint < polygons.len() && holds(*hint) {
+                    return true;
+                }
+                match near.iter().find(|&&p| p != *hint && holds(p)) {
+                    Some(&p) => {
+                        *hint = p;
+                        true
+                    }
+                    None => false,
+                }
+            }
         }
     }
 }
 
-/// The polygons of each layer near one frame's plans.
-struct Near {
+/// A polyline (the route, the centreline) with each segment's squared length, length and the arc length at
+/// its start, computed once per frame for every projection onto it ([`Line::project`]).
+struct Line<'a> {
+    xy: &'a [f64],
+    /// Per segment: squared length, length, arc length at its first point (the running sum of the lengths
+    /// before it, in order: the same sums as [`project`]'s).
+    seg: Vec<[f64; 3]>,
+}
+
+impl<'a> Line<'a> {
+    fn new(xy: &'a [f64]) -> Self {
+        let mut walked = 0.0;
+        let seg = (0..xy.len() / 2 - 1)
+            .map(|i| {
+                let d = Vector2::new(xy[2 * i + 2] - xy[2 * i], xy[2 * i + 3] - xy[2 * i + 1]);
+                let len2 = d.norm_squared();
+                let out = [len2, len2.sqrt(), walked];
+                walked += len2.sqrt();
+                out
+            })
+            .collect();
+        Line { xy, seg }
+    }
+
+    /// [`project`], value for value: a segment is skipped only when its squared distance exceeds the best
+    /// distance squared with a margin (so that its distance could not be smaller); the others are compared
+    /// by the same distances as [`project`].
+    fn project(&self, p: Point2<f64>) -> (f64, f64) {
+        let (mut best, mut along) = (f64::INFINITY, 0.0);
+        let mut bound = f64::INFINITY;
+        let line = self.xy;
+        for (i, sg) in self.seg.iter().enumerate() {
+            let a = Point2::new(line[2 * i], line[2 * i + 1]);
+            let d = Point2::new(line[2 * i + 2], line[2 * i + 3]) - a;
+            let len2 = sg[0];
+            let t = if len2 > 0.0 {
+                ((p - a).dot(&d) / len2).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            let d2 = (a + d * t - p).norm_squared();
+            if d2 > bound {
+                continue;
+            }
+            let dist = d2.sqrt();
+            if dist < best {
+                best = dist;
+                along = sg[2] + t * sg[1];
+                bound = best * best * (1.0 + 1e-12);
+            }
+        }
+        (best, along)
+    }
+}
+
+/// The polygons of each layer near one frame's plans, and the frame's route and centreline.
+struct Near<'a> {
     drivable: Vec<usize>,
     intersections: Vec<usize>,
+    route: Option<Line<'a>>,
+    centreline: Option<Line<'a>>,
+}
+
+/// The polygons that held the previous step's points, per layer ([`Layer::contains_from`]).
+#[derive(Clone, Copy)]
+struct Hints {
+    drivable: usize,
+    intersection: usize,
 }
 
 /// Everything the kernel reads. Optional inputs that are `None` make the sub-scores that need them n/a.
@@ -341,11 +425,11 @@ fn in_layer(layer: Option<&Layer<'_>>, near: &[usize], p: Point2<f64>) -> Tri {
     layer.map(|l| l.contains(near, p.x, p.y))
 }
 
-fn ego_area(inp: &Inputs<'_>, near: &Near, f: usize, rect: &Rect) -> EgoArea {
+fn ego_area(inp: &Inputs<'_>, near: &Near, f: usize, rect: &Rect, hints: &mut Hints) -> EgoArea {
     let non_drivable = inp.drivable.map(|a| {
         rect.corners()
             .iter()
-            .any(|c| !a.contains(&near.drivable, c.x, c.y))
+            .any(|c| !a.contains_from(&near.drivable, c.x, c.y, &mut hints.drivable))
     });
     // oncoming: the centre in no on-route lane
     let oncoming = inp.lanes.map(|l| {
@@ -356,7 +440,14 @@ fn ego_area(inp: &Inputs<'_>, near: &Near, f: usize, rect: &Rect) -> EgoArea {
     EgoArea {
         non_drivable,
         oncoming,
-        centre_in_intersection: in_layer(inp.intersections, &near.intersections, rect.centre),
+        centre_in_intersection: inp.intersections.map(|l| {
+            l.contains_from(
+                &near.intersections,
+                rect.centre.x,
+                rect.centre.y,
+                &mut hints.intersection,
+            )
+        }),
     }
 }
 
@@ -489,6 +580,9 @@ struct FrameAgents<'a> {
     rects: Vec<Rect>,
     /// Bounding-circle radius of each rectangle, m.
     radius: Vec<f64>,
+    /// Per slot over its present steps: smallest centre x, y, largest centre x, y, largest radius (an absent
+    /// slot: +inf, +inf, -inf, -inf, -inf).
+    slot_bounds: Vec<[f64; 5]>,
     slots: usize,
 }
 
@@ -536,8 +630,12 @@ fn score_plan(
     let cfg = &inp.config;
     let st = |s: usize| &states[s * STATE_SIZE..(s + 1) * STATE_SIZE];
     let rects: Vec<Rect> = (0..s_n).map(|s| ego_rect(st(s), &inp.shape)).collect();
+    let mut hints = Hints {
+        drivable: usize::MAX,
+        intersection: usize::MAX,
+    };
     let areas: Vec<EgoArea> = (0..s_n)
-        .map(|s| ego_area(inp, near, f, &rects[s]))
+        .map(|s| ego_area(inp, near, f, &rects[s], &mut hints))
         .collect();
     let mut put = |col: usize, v: Result<f64, u8>| match v {
         Ok(x) => {
@@ -598,14 +696,11 @@ fn score_plan(
     // ep (raw): progress of the centre along the route
     put(
         EP,
-        match inp
-            .route
-            .and_then(|(r, len)| polyline(&r[f * len * 2..(f + 1) * len * 2]))
-        {
+        match &near.route {
             None => Err(NO_ROUTE),
             Some(line) => {
-                let (_, a) = project(line, rects[0].centre);
-                let (_, b) = project(line, rects[s_n - 1].centre);
+                let (_, a) = line.project(rects[0].centre);
+                let (_, b) = line.project(rects[s_n - 1].centre);
                 Ok((b - a).max(0.0))
             }
         },
@@ -614,10 +709,7 @@ fn score_plan(
     // lk: deviation from the centreline beyond the limit for a continuous window outside intersections
     put(
         LK,
-        match inp
-            .centreline
-            .and_then(|(r, len)| polyline(&r[f * len * 2..(f + 1) * len * 2]))
-        {
+        match &near.centreline {
             None => Err(NO_CENTRELINE),
             Some(line) => lane_keeping(cfg, line, &rects, &areas),
         },
@@ -642,7 +734,14 @@ fn near_tracks(
     }
     let reach =
         (shape.offset.abs() + shape.length * 0.5).hypot(shape.width * 0.5) + vmax * cfg.ttc_horizon;
+    // a slot whose box of centres over all steps, widened by the reach and its largest radius, misses the
+    // plan's box misses it at every step; the others are tested step by step
     (0..fa.slots)
+        .filter(|&a| {
+            let b = fa.slot_bounds[a];
+            let m = reach + b[4];
+            b[0] <= hi[0] + m && b[2] >= lo[0] - m && b[1] <= hi[1] + m && b[3] >= lo[1] - m
+        })
         .filter(|&a| {
             (0..s_n).any(|s| {
                 let i = s * fa.slots + a;
@@ -811,7 +910,12 @@ fn driving_direction(
 }
 
 /// NAVSIM's `_calculate_lane_keeping` for one plan (steps in an intersection neither count nor reset).
-fn lane_keeping(cfg: &Config, line: &[f64], rects: &[Rect], areas: &[EgoArea]) -> Result<f64, u8> {
+fn lane_keeping(
+    cfg: &Config,
+    line: &Line<'_>,
+    rects: &[Rect],
+    areas: &[EgoArea],
+) -> Result<f64, u8> {
     let need = cfg.lk_steps();
     let mut run = 0usize;
     for (s, r) in rects.iter().enumerate() {
@@ -820,7 +924,7 @@ fn lane_keeping(cfg: &Config, line: &[f64], rects: &[Rect], areas: &[EgoArea]) -
             Some(true) => continue,
             Some(false) => {}
         }
-        let (dev, _) = project(line, r.centre);
+        let (dev, _) = line.project(r.centre);
         run = if dev > cfg.lk_limit { run + 1 } else { 0 };
         if run >= need {
             return Ok(0.0);
@@ -861,7 +965,7 @@ pub fn first_bad_box(
 ///
 /// Errors (a `CoreError`, for the whole batch): array lengths that disagree, a frame index ≥ F, S < 2,
 /// lane lists that do not fit, a bad ego shape or config. Bad values inside a frame are reason codes.
-pub fn subscores(inp: &Inputs<'_>) -> CoreResult<(Vec<f64>, Vec<u8>)> {
+pub fn subscores<'a>(inp: &Inputs<'a>) -> CoreResult<(Vec<f64>, Vec<u8>)> {
     inp.shape.check()?;
     inp.config.check()?;
     let s_n = inp.steps;
@@ -956,14 +1060,39 @@ pub fn subscores(inp: &Inputs<'_>) -> CoreResult<(Vec<f64>, Vec<u8>)> {
                         .chunks_exact(AGENT_VALUES)
                         .map(|b| Rect::new(b[0], b[1], b[2], b[3], b[4]))
                         .collect();
-                    let radius = rects
+                    let radius: Vec<f64> = rects
                         .iter()
                         .map(|r| r.half_length.hypot(r.half_width))
                         .collect();
+                    let mut slot_bounds = vec![
+                        [
+                            f64::INFINITY,
+                            f64::INFINITY,
+                            f64::NEG_INFINITY,
+                            f64::NEG_INFINITY,
+                            f64::NEG_INFINITY
+                        ];
+                        slots
+                    ];
+                    for (i, r) in rects.iter().enumerate() {
+                        let c = r.centre;
+                        if c.x.is_nan() || c.y.is_nan() || radius[i].is_nan() {
+                            continue; // an absent slot at this step
+                        }
+                        let b = &mut slot_bounds[i % slots];
+                        *b = [
+                            b[0].min(c.x),
+                            b[1].min(c.y),
+                            b[2].max(c.x),
+                            b[3].max(c.y),
+                            b[4].max(radius[i]),
+                        ];
+                    }
                     Ok(FrameAgents {
                         boxes,
                         rects,
                         radius,
+                        slot_bounds,
                         slots,
                     })
                 }
@@ -987,9 +1116,15 @@ pub fn subscores(inp: &Inputs<'_>) -> CoreResult<(Vec<f64>, Vec<u8>)> {
                 [lo[0] - reach, lo[1] - reach],
                 [hi[0] + reach, hi[1] + reach],
             );
+            let line = |l: Option<(&'a [f64], usize)>| {
+                l.and_then(|(r, len)| polyline(&r[f * len * 2..(f + 1) * len * 2]))
+                    .map(Line::new)
+            };
             let near = Near {
                 drivable: inp.drivable.map_or_else(Vec::new, |l| l.near(lo, hi)),
                 intersections: inp.intersections.map_or_else(Vec::new, |l| l.near(lo, hi)),
+                route: line(inp.route),
+                centreline: line(inp.centreline),
             };
             g.iter()
                 .map(|&i| {
@@ -1181,6 +1316,32 @@ mod tests {
         assert!(polyline(&[0.0, 0.0, 1.0, 0.0, f64::NAN, f64::NAN]).is_some());
         assert!(polyline(&[0.0, 0.0, f64::NAN, f64::NAN, 1.0, 0.0]).is_none());
         assert!(polyline(&[0.0, 0.0, f64::NAN, f64::NAN]).is_none());
+    }
+
+    #[test]
+    fn line_projection_is_project_value_for_value() {
+        // a zigzag with a repeated point (a zero-length segment) and points on, between and beyond it
+        let xy = [
+            0.0, 0.0, 3.0, 1.0, 3.0, 1.0, 5.0, -2.0, 9.5, -2.0, 12.0, 4.0,
+        ];
+        let line = Line::new(&xy);
+        let mut seed = 12345u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut points: Vec<Point2<f64>> = (0..2000)
+            .map(|_| Point2::new(-5.0 + 22.0 * next(), -8.0 + 16.0 * next()))
+            .collect();
+        points.extend(xy.chunks_exact(2).map(|p| Point2::new(p[0], p[1])));
+        points.push(Point2::new(4.0, -0.5)); // equidistant from two segments: the first wins in both
+        for p in points {
+            let (a, b) = (project(&xy, p), line.project(p));
+            assert_eq!(a.0.to_bits(), b.0.to_bits(), "{p:?}");
+            assert_eq!(a.1.to_bits(), b.1.to_bits(), "{p:?}");
+        }
     }
 
     #[test]

@@ -1,10 +1,10 @@
 //! Bindings of the planning score's sub-score kernels (`rust/planning/scores.rs`).
 
 use numpy::{IntoPyArray, PyArrayDyn, PyReadonlyArray1, PyReadonlyArrayDyn};
-use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 
-use super::{array_nd, mask_of, offsets_of, slice1, view_nd};
+use super::safety::mask_of;
+use super::{array_nd, offsets_of, slice1, view_nd};
 use crate::error::CoreError;
 use crate::planning::scores::{self, Config, Inputs, Lanes, Layer};
 use crate::safety::EgoShape;
@@ -85,7 +85,7 @@ fn planning_subscores<'py>(
         .iter()
         .map(|&f| {
             usize::try_from(f)
-                .map_err(|_| PyValueError::new_err(format!("frame indices must be ≥ 0, got {f}")))
+                .map_err(|_| super::errors::argument(format!("frame indices must be ≥ 0, got {f}")))
         })
         .collect::<PyResult<_>>()?;
 
@@ -154,7 +154,7 @@ fn planning_subscores<'py>(
     let (drivable_parts, inter_parts) = (parts_of(&drivable_set)?, parts_of(&inter_set)?);
     let drivable_layer = match (&drivable_mask, &drivable_set, &drivable_parts) {
         (Some(_), Some(_), _) => {
-            return Err(PyValueError::new_err(
+            return Err(super::errors::argument(
                 "give the drivable area as a mask or as polygons, not both",
             ))
         }
@@ -177,7 +177,7 @@ fn planning_subscores<'py>(
             on_route: slice1(on, "lane_on_route")?,
         }),
         _ => {
-            return Err(PyValueError::new_err(
+            return Err(super::errors::argument(
                 "lanes need lane_offsets, lane_ids and lane_on_route",
             ))
         }
@@ -225,7 +225,7 @@ fn planning_first_bad_box(
         "(F, S, A, 8)",
     )?;
     if frame >= s[0] {
-        return Err(PyValueError::new_err(format!(
+        return Err(super::errors::argument(format!(
             "frame {frame} is out of range for {} frames",
             s[0]
         )));

@@ -117,6 +117,10 @@ pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(simulate, m)?)?;
     m.add_function(wrap_pyfunction!(comfort, m)?)?;
     m.add_function(wrap_pyfunction!(extended_comfort, m)?)?;
+    m.add(
+        "ZOE_REAR_AXLE_TO_CENTER",
+        sim::Vehicle::ZOE.rear_axle_to_center,
+    )?;
     m.add("COMFORT_BOUNDS", comfort_k::BOUND_NAMES.to_vec())?;
     m.add("COMFORT_LIMITS", comfort_k::BOUNDS.to_vec())?;
     m.add(

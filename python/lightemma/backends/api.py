@@ -44,7 +44,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from lightemma._litellm import lazy as litellm  # imported at first use: the direct transport to an unlisted model never does
-from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams, is_truncated
+from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, is_truncated
 from lightemma.backends.local import conversation
 from lightemma.backends.ratelimit import RateLimiter
 from lightemma.backends.retry import (
@@ -63,17 +63,8 @@ from lightemma.backends.retry import (
 from lightemma.cache import ResponseCache, request_key
 from lightemma.errors import RunFatalError, UserError
 from lightemma.inputs import read_image_bytes
-from lightemma.registry import (
-    ModelInfo,
-    _litellm_entry,
-    cache_price_per_token,
-    lookup,
-    price_per_token,
-    reasoning_budget,
-    resolve,
-    run_price,
-    suggest,
-)
+from lightemma.models.catalog import ModelInfo, lookup, resolve, suggest
+from lightemma.models.prices import _litellm_entry, cache_price_per_token, price_per_token, reasoning_budget, run_price
 
 _MIME = {".jpg": "image/jpeg", ".jpeg": "image/jpeg", ".png": "image/png", ".webp": "image/webp"}
 NO_KEY = "sk-no-key-required"
@@ -141,8 +132,8 @@ def require_api_key(model: str, api_base: str | None = None, api_key_env: str | 
         check = litellm.validate_environment(model=model)
         missing = [] if check.get("keys_in_environment") else list(check.get("missing_keys") or [])
     if missing:
-        names = " or ".join(missing)
-        raise UserError(f"no API key for model {model!r}: set the environment variable {names} (or pass --api-base for an OpenAI-compatible server)")
+        joined = " or ".join(missing)
+        raise UserError(f"no API key for model {model!r}: set the environment variable {joined} (or pass --api-base for an OpenAI-compatible server)")
     return None
 
 
@@ -451,7 +442,7 @@ class _ImageCache:
         return item
 
 
-class APIBackend:
+class APIBackend(Backend):
     """A litellm-backed model. See the module docstring for the call semantics."""
 
     name = "api"
@@ -508,7 +499,7 @@ class APIBackend:
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
         self._secrets = tuple(s for s in (*url_secrets(api_base), *_secret_values(), self._api_key or "") if s and s != NO_KEY)
         # a model served from another --api-base is not the provider's: no list price (litellm's or the registry's)
-        self.served_elsewhere = bool(api_base) and not is_provider_host(self.provider, api_base)
+        self.served_elsewhere = bool(api_base and not is_provider_host(self.provider, api_base))
         self.price_given = price
         if price is not None:
             check_price(price)
@@ -525,6 +516,7 @@ class APIBackend:
         self._sends_temperature = self.model_info.supports_temperature and self._supports("temperature")
         self.transport = transport
         # user:password@ in --api-base: sent as Basic auth (the URL litellm gets carries none)
+        self._litellm_base: str | None
         self._litellm_base, basic = split_credentials(api_base) if api_base else (api_base, None)
         self._litellm_extra: dict[str, Any] = {"extra_headers": {"Authorization": basic}} if basic else {}
         self._http = None
@@ -640,7 +632,7 @@ class APIBackend:
                       "max_retry_after_s": self.retry.max_wait},
             "rate_limit": {"rpm": self.limiter.requests.capacity if self.limiter.requests else None,
                            "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None},
-            "cache": str(self.cache.path) if self.cache else None,
+            "cache": str(self.cache.path) if self.cache is not None else None,
             "gpus": 0,
         }
 
@@ -652,13 +644,37 @@ class APIBackend:
         return {"count": self._images.reencoded, "limit_base64_chars": self._images.max_b64,
                 "max_side_px": self._images.max_side, "examples": list(self._images.examples)}
 
+    @property
+    def cache_failure(self) -> str | None:
+        """Why the response cache was switched off mid-session (:attr:`ResponseCache.failure`), or None."""
+        return self.cache.failure if self.cache is not None else None
+
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer every request concurrently, in order; failures come back as error results."""
         if len(requests) == 1:
             return [await self._call(requests[0])]
         return list(await asyncio.gather(*(self._call(r) for r in requests)))
 
+    def sampling(self) -> str | None:
+        """``"n"`` where the provider takes the OpenAI-style ``n`` parameter (litellm's parameter list for the model,
+        or any OpenAI-compatible ``--api-base``), else ``"calls"``: K samples are K requests."""
+        return "n" if self._supports("n") else "calls"
+
+    async def generate_samples(self, request: ChatRequest, k: int) -> list[ChatResult]:
+        """K samples of ``request``: with :meth:`sampling` ``"n"``, the samples not in the response cache in one
+        request with ``n`` (the call's usage and cost on the first of them, 0 on the others), else K requests."""
+        if k == 1 or self.sampling() != "n":
+            return await super().generate_samples(request, k)
+        from dataclasses import replace
+
+        return await self._choices(replace(request, sample=0, samples=k), k)
+
     async def _call(self, req: ChatRequest) -> ChatResult:
+        return (await self._choices(req, 1))[0]
+
+    async def _choices(self, req: ChatRequest, n: int) -> list[ChatResult]:
+        """``n`` = 1: the answer to ``req``; ``n`` > 1: samples 0..n-1 of ``req`` (cached ones replayed, the others
+        asked for in one request with ``n``)."""
         start = time.perf_counter()
         image_part: dict[str, Any] | None = None
         digest = None
@@ -666,8 +682,9 @@ class APIBackend:
             try:
                 url, digest = self._images.get(str(req.image_path))
             except OSError as exc:
-                return self._observe(req, ChatResult(text=None, error="ImageReadError", error_message=short_message(exc),
-                                                     seconds=time.perf_counter() - start))
+                failed = ChatResult(text=None, error="ImageReadError", error_message=short_message(exc),
+                                    seconds=time.perf_counter() - start)
+                return [self._observe(req, failed)] * n
             image_part = {"type": "image_url", "image_url": {"url": url}}
         messages = conversation(req, image_part)
         if self.provider == "anthropic":
@@ -678,21 +695,30 @@ class APIBackend:
 
             params["response_format"] = openai_response_format(req.response_schema)
 
-        key = None
-        if self.cache is not None and params.get("temperature", None) == 0:
-            key = request_key(self.model, self.api_base_shown, params, req.text, digest, req.turns, req.attempt, req.inputs)
-            hit = self.cache.get(key)
-            if hit is not None:
-                return self._observe(req, ChatResult(text=hit["text"], input_tokens=hit["input_tokens"],
-                                                     output_tokens=hit["output_tokens"], seconds=time.perf_counter() - start,
-                                                     cost_cents=0.0, cached=True))
+        keys: list[str | None] = [None] * n
+        found: dict[int, ChatResult] = {}
+        if self.cache is not None and (params.get("temperature", None) == 0 or req.samples > 1):
+            for i in range(n):  # a sampled run's draws are cached too, each by its sample index
+                cache_key = request_key(self.model, self.api_base_shown, params, req.text, digest, req.turns,
+                                        req.attempt, req.inputs, sample=req.sample if n == 1 else i)
+                keys[i] = cache_key
+                hit = self.cache.get(cache_key)
+                if hit is not None:
+                    found[i] = self._observe(req, ChatResult(
+                        text=hit["text"], input_tokens=hit["input_tokens"], output_tokens=hit["output_tokens"],
+                        seconds=time.perf_counter() - start, cost_cents=0.0, cached=True))
+        missing = [i for i in range(n) if i not in found]
+        if not missing:
+            return [found[i] for i in range(n)]
+        if len(missing) > 1:
+            params["n"] = len(missing)
 
         retries = 0
         while True:
             await self.limiter.acquire(ESTIMATED_TOKENS_PER_CALL)
             try:
                 async with asyncio.timeout(self.timeout):  # the whole call, connect to last byte, on every transport
-                    result = await self._send(messages, params, start, retries)
+                    results = await self._send(messages, params, start, retries, len(missing))
             except asyncio.CancelledError:
                 raise
             except Exception as exc:  # noqa: BLE001 - every provider error becomes a recorded error class
@@ -711,14 +737,20 @@ class APIBackend:
                     await asyncio.sleep(self.retry.delay(retries, after))
                     retries += 1
                     continue
-                return self._observe(req, ChatResult(text=None, error=err, error_message=message,
-                                                     seconds=time.perf_counter() - start, retries=retries))
+                failed = self._observe(req, ChatResult(text=None, error=err, error_message=message,
+                                                       seconds=time.perf_counter() - start, retries=retries))
+                return [found.get(i, failed) for i in range(n)]
+            result = results[0]
             reported = [t for t in (result.input_tokens, result.output_tokens) if t is not None]
             # usage the provider did not report is unknown, not zero: the estimate then stays taken
             self.limiter.settle(ESTIMATED_TOKENS_PER_CALL, sum(reported) if reported else None)
-            if key is not None and result.ok and not is_truncated(result.finish_reason):
-                self.cache.put(key, self.model, result.text, result.input_tokens, result.output_tokens, result.cost_cents)
-            return self._observe(req, result)
+            for i, one in zip(missing, results):
+                key = keys[i]
+                if key is not None and self.cache is not None and one.text is not None and one.ok \
+                        and not is_truncated(one.finish_reason):
+                    self.cache.put(key, self.model, one.text, one.input_tokens, one.output_tokens, one.cost_cents)
+                found[i] = self._observe(req, one)
+            return [found[i] for i in range(n)]
 
     def _observe(self, req: ChatRequest, result: ChatResult) -> ChatResult:
         """Feed the call's outcome to the failure streak; raise :class:`RunFatalError` when the run cannot succeed."""
@@ -747,8 +779,8 @@ class APIBackend:
             names = PROVIDER_KEYS.get(self.provider or "", ("OPENAI_API_KEY",))
             return (f"a variable named with --api-key-env (e.g. --api-key-env {names[0]}): no provider key is sent to "
                     f"--api-base {self.api_base_shown} unless its variable is named")
-        names = PROVIDER_KEYS.get(self.provider or "")
-        return " or ".join(names) if names else "the provider's API key variable"
+        known = PROVIDER_KEYS.get(self.provider or "")
+        return " or ".join(known) if known else "the provider's API key variable"
 
     def _fatal(self, err: str, message: str, *, frames: int | None = None, stage: str | None = None) -> RunFatalError:
         """The run-fatal error for ``err``: one line with what happened and what to do about it."""
@@ -803,13 +835,15 @@ class APIBackend:
                                  "(model, --max-tokens, images, the server)", cause="invalid-request", error=err)
         return RunFatalError(f"{what}{seen} — the provider keeps failing; try again later", cause="provider-error", error=err)
 
-    async def _send(self, messages: list[dict[str, Any]], params: dict[str, Any], start: float, retries: int) -> ChatResult:
-        """One call over the configured transport; raises on a failed call."""
+    async def _send(self, messages: list[dict[str, Any]], params: dict[str, Any], start: float, retries: int,
+                    n: int = 1) -> list[ChatResult]:
+        """One call over the configured transport: its ``n`` answers (choices; a reply with fewer gives error
+        results for the rest); the call's usage and cost on the first, 0 on the others. Raises on a failed call."""
         if self._http is not None:
             data = await self._http.chat(self._wire_model, messages, params)
             usage = _usage(data.get("usage"), self.provider)
-            choice = (data.get("choices") or [{}])[0]
-            text, finish = (choice.get("message") or {}).get("content"), choice.get("finish_reason")
+            choices = [c if isinstance(c, dict) else {} for c in (data.get("choices") or [{}])]
+            answers = [((c.get("message") or {}).get("content"), c.get("finish_reason")) for c in choices]
             cost = self._direct_cost(usage)
         else:
             from lightemma.backends.openai_http import body_guard
@@ -820,20 +854,32 @@ class APIBackend:
                     timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **self._bounded_client(), **params,
                 )
             usage = _usage(getattr(response, "usage", None), self.provider)
-            choices = getattr(response, "choices", None) or [None]
-            text = getattr(getattr(choices[0], "message", None), "content", None)
-            finish = getattr(choices[0], "finish_reason", None)
+            answers = [(getattr(getattr(c, "message", None), "content", None), getattr(c, "finish_reason", None))
+                       for c in (getattr(response, "choices", None) or [None])]
             cost = self._litellm_cost(response, usage)
         seconds = time.perf_counter() - start
-        finish = str(finish) if finish is not None else None
-        common = dict(input_tokens=usage.input, output_tokens=usage.output, seconds=seconds, cost_cents=cost, retries=retries,
-                      finish_reason=finish, reasoning_tokens=usage.reasoning, cached_input_tokens=usage.cached,
-                      cache_write_tokens=usage.written)
-        reasoning = usage.reasoning
-        if not text or not str(text).strip():
-            spent = f", {reasoning} reasoning tokens" if reasoning else ""
-            return ChatResult(text=None, error="EmptyResponse", error_message=f"no answer text (finish_reason={finish}{spent})", **common)
-        return ChatResult(text=str(text), **common)
+        out = []
+        for i in range(n):
+            text, finish = answers[i] if i < len(answers) else (None, None)
+            finish = str(finish) if finish is not None else None
+            common: dict[str, Any] = dict(input_tokens=usage.input, output_tokens=usage.output, seconds=seconds,
+                                          cost_cents=cost, retries=retries, finish_reason=finish,
+                                          reasoning_tokens=usage.reasoning, cached_input_tokens=usage.cached,
+                                          cache_write_tokens=usage.written)
+            if i > 0:  # the call is counted once, on its first answer: a share of it is not reported
+                common.update(input_tokens=0, output_tokens=0, cost_cents=0.0, reasoning_tokens=0,
+                              cached_input_tokens=0, cache_write_tokens=0)
+            reasoning = usage.reasoning
+            if i >= len(answers):
+                out.append(ChatResult(text=None, error="EmptyResponse", error_message=f"the reply holds {len(answers)} "
+                                      f"answers, {n} were asked for (n)", **common))
+            elif not text or not str(text).strip():
+                spent = f", {reasoning} reasoning tokens" if reasoning else ""
+                out.append(ChatResult(text=None, error="EmptyResponse",
+                                      error_message=f"no answer text (finish_reason={finish}{spent})", **common))
+            else:
+                out.append(ChatResult(text=str(text), **common))
+        return out
 
     def _bounded_client(self) -> dict[str, Any]:
         """``client=``: the client litellm calls through, reading at most
@@ -977,7 +1023,7 @@ def _mark_cache_breakpoints(messages: list[dict[str, Any]], *, image: bool, end:
 
 def _litellm_lists(model: str) -> bool:
     """Whether litellm's bundled list has ``model`` (as given or without its provider prefix), read without importing litellm."""
-    from lightemma.registry import bundled_price_list
+    from lightemma.models.prices import bundled_price_list
 
     listed = bundled_price_list()
     return model in listed or model.split("/", 1)[-1] in listed

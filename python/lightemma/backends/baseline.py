@@ -23,9 +23,12 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends.base import Backend, ChatRequest, ChatResult
+from lightemma.backends.ego import FOLDS, EgoFit
+from lightemma.errors import InputError, ShapeError, UserError
 from lightemma.frames import format_history
-from lightemma.frames.geometry import round_like_python
+from lightemma.nuscenes import load_frames
+from lightemma.nuscenes.geometry import round_like_python
 
 KINDS: tuple[str, ...] = ("constant", "cv", "oracle", "ego")
 STAGE_TEXTS = {
@@ -37,10 +40,10 @@ STAGE_TEXTS = {
 def _field(frame: Any, name: str) -> np.ndarray:
     value = frame.get(name) if isinstance(frame, Mapping) else getattr(frame, name, None)
     if value is None:
-        raise ValueError(f"frame has no {name}")
+        raise InputError(f"frame has no {name}")
     array = np.asarray(value, dtype=np.float64)
     if array.shape != (6, 2) or not np.isfinite(array).all():
-        raise ValueError(f"frame {name} must be 6 finite (speed, curvature) pairs, got shape {array.shape}")
+        raise ShapeError(f"frame {name} must be 6 finite (speed, curvature) pairs, got shape {array.shape}")
     return array
 
 
@@ -54,8 +57,8 @@ def baseline_actions(kind: str, frame: Any) -> np.ndarray:
     if kind == "oracle":
         return _field(frame, "gt_actions").copy()
     if kind == "ego":
-        raise ValueError("baseline:ego predicts from a fit over the frame set (BaselineBackend.prepare), not from one frame")
-    raise ValueError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
+        raise InputError("baseline:ego predicts from a fit over the frame set (BaselineBackend.prepare), not from one frame")
+    raise InputError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
 
 
 def format_actions(actions: np.ndarray) -> str:
@@ -70,15 +73,13 @@ def format_actions_json(actions: np.ndarray) -> str:
     return json.dumps({"actions": round_like_python(actions, 6).tolist()})
 
 
-class BaselineBackend:
+class BaselineBackend(Backend):
     """A :class:`lightemma.backends.base.Backend` answering from the frame itself."""
 
     def __init__(self, kind: str, *, fit_split: str | None = None, folds: int | None = None) -> None:
         if kind not in KINDS:
-            raise ValueError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
+            raise InputError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
         if kind != "ego" and (fit_split is not None or folds is not None):
-            from lightemma.errors import UserError
-
             raise UserError(f"--fit-split is for baseline:ego; baseline:{kind} is not fitted")
         self.kind = kind
         self.name = f"baseline:{kind}"
@@ -102,7 +103,6 @@ class BaselineBackend:
         """
         if self.kind != "ego":
             return
-        from lightemma.backends.ego import FOLDS, EgoFit
 
         folds = self.folds or FOLDS
         if self.fit_split is None:
@@ -111,12 +111,10 @@ class BaselineBackend:
             if subset:
                 self._fit.record["subset"] = _subset_record(self._fit.record, subset)
             return
-        from lightemma.errors import UserError
 
         dataset = dataset or {}
         if not dataset.get("dataroot") or not dataset.get("version"):
             raise UserError("baseline:ego --fit-split needs a dataset (--dataroot, --version) to load the training split from")
-        from lightemma import load_frames
 
         train = load_frames(dataset["dataroot"], dataset["version"], split=self.fit_split, window=dataset.get("window") or "reference",
                             on_missing_image="keep", on_bad_record=dataset.get("on_bad_record") or "skip")

@@ -43,7 +43,7 @@ from dataclasses import dataclass, field
 
 from lightemma.backends.base import ChatRequest, ChatResult
 from lightemma.backends.retry import short_message
-from lightemma.errors import RunFatalError
+from lightemma.errors import InputError, RunFatalError
 
 RunBatch = Callable[[Sequence[ChatRequest]], list[ChatResult]]
 DescribeFatal = Callable[[BaseException], str]
@@ -101,9 +101,9 @@ class MicroBatcher:
                  name: str = "lightemma-batcher", describe_fatal: DescribeFatal | None = None,
                  deadline: float | None = None) -> None:
         if batch_size < 1:
-            raise ValueError(f"batch_size must be at least 1, got {batch_size}")
+            raise InputError(f"batch_size must be at least 1, got {batch_size}")
         if batch_window < 0:
-            raise ValueError(f"batch_window must be >= 0 seconds, got {batch_window}")
+            raise InputError(f"batch_window must be >= 0 seconds, got {batch_window}")
         self.batch_size = batch_size
         self.batch_window = batch_window
         self.stats = BatchStats()

@@ -33,14 +33,14 @@ Everything is deterministic: the same frames give the same folds, λ and predict
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Sequence
-from typing import Any
+from collections.abc import Iterator, Sequence
+from typing import Any, Protocol
 
 import numpy as np
 
-from lightemma.errors import UserError
+from lightemma.definitions import STEP_SECONDS
+from lightemma.errors import ShapeError, UserError
 
-DT = 0.5  # s between actions
 FOLDS = 5  # scene folds of the cross-fit (and of λ's cross-validation)
 LAMBDAS: tuple[float, ...] = tuple(float(x) for x in np.logspace(-3, 3, 13))
 FEATURES: tuple[str, ...] = (*(f"v{k}" for k in range(1, 7)), *(f"kappa{k}" for k in range(1, 7)),
@@ -69,9 +69,9 @@ def ego_features(history: np.ndarray) -> np.ndarray:
     """(N, 23) features of :data:`FEATURES` from history actions (N, 6, 2) (speed m/s, curvature 1/m)."""
     h = np.asarray(history, dtype=np.float64)
     if h.ndim != 3 or h.shape[1:] != (6, 2):
-        raise ValueError(f"history actions must be (N, 6, 2), got {h.shape}")
+        raise ShapeError(f"history actions must be (N, 6, 2), got {h.shape}")
     v, kappa = h[:, :, 0], h[:, :, 1]
-    return np.concatenate([v, kappa, np.diff(v, axis=1) / DT, v * kappa], axis=1)
+    return np.concatenate([v, kappa, np.diff(v, axis=1) / STEP_SECONDS, v * kappa], axis=1)
 
 
 def _field(frame: Any, name: str) -> np.ndarray:
@@ -79,7 +79,15 @@ def _field(frame: Any, name: str) -> np.ndarray:
     return np.full((6, 2), np.nan) if value is None else np.asarray(value, dtype=np.float64).reshape(6, 2)
 
 
-def _arrays(frames: Sequence[Any]) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
+class Frames(Protocol):
+    """Frames as the fit reads them: a list of frames or records, or a :class:`lightemma.frames.FrameSet`."""
+
+    def __len__(self) -> int: ...
+
+    def __iter__(self) -> Iterator[Any]: ...
+
+
+def _arrays(frames: Frames) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[str]]:
     """(features (N, 23), targets (N, 12), scene names (N,), frame ids) of ``frames``."""
     history = np.stack([_field(f, "history_actions") for f in frames]) if len(frames) else np.zeros((0, 6, 2))
     future = np.stack([_field(f, "gt_actions") for f in frames]) if len(frames) else np.zeros((0, 6, 2))
@@ -197,7 +205,7 @@ class EgoFit:
         return cls._make(ids, X, pred, {**record, "warning": warning} if warning else record)
 
     @classmethod
-    def fit_split(cls, train_frames: Sequence[Any], frames: Sequence[Any], *, split: str, folds: int = FOLDS,
+    def fit_split(cls, train_frames: Frames, frames: Sequence[Any], *, split: str, folds: int = FOLDS,
                   lambdas: Sequence[float] = LAMBDAS) -> EgoFit:
         """One fit on ``train_frames`` (the ``split`` split), predicting ``frames``; UserError when they share a scene."""
         Xt, Yt, scenes_t, _ = _arrays(train_frames)

@@ -25,7 +25,7 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends.base import Backend, ChatRequest, ChatResult
 from lightemma.backends.batching import DEFAULT_BATCH_WINDOW, MicroBatcher, Timeout
 from lightemma.backends.local import DECODING, check_options, conversation, load_image, require, token_counting
 from lightemma.backends.retry import short_message
@@ -34,7 +34,7 @@ from lightemma.errors import UserError
 DTYPES = ("auto", "bfloat16", "float16", "float32")
 
 
-class HFBackend:
+class HFBackend(Backend):
     """A transformers model answering the chain's requests in micro-batches.
 
     Options: ``batch_size`` (requests per forward pass, default 8; 1 is the
@@ -140,6 +140,7 @@ class HFBackend:
         if hasattr(image_processor, "merge_size") and budget.get("longest_edge"):  # Qwen-style: a pixel budget
             shortest = min(budget.get("shortest_edge") or max_pixels, max_pixels)
             budget.update(longest_edge=max_pixels, shortest_edge=shortest)
+            assert size is not None and image_processor is not None  # else: budget is {}, or no merge_size
             image_processor.size = budget if isinstance(size, dict) else type(size)(**budget)
             for attr, value in (("max_pixels", max_pixels), ("min_pixels", shortest)):
                 if getattr(image_processor, attr, None) is not None:
@@ -198,6 +199,10 @@ class HFBackend:
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """Answer ``requests`` (in order) through the micro-batcher; a failed batch gives error results."""
         return await self._batcher.submit(requests)
+
+    def sampling(self) -> str | None:
+        """``--samples K``: K ``generate`` requests, each decoded with temperature sampling (they share micro-batches)."""
+        return "calls"
 
     def structured_output(self) -> dict[str, Any]:
         """How stage 3 is constrained to the actions JSON schema (recorded in the manifest), or a UserError."""
@@ -262,7 +267,7 @@ class HFBackend:
         inputs = self._encode(requests)
         params = requests[0].params
         processors = self._logits_processors(requests)
-        extra = {"logits_processor": processors} if processors else {}
+        extra: dict[str, object] = {"logits_processor": processors} if processors else {}  # generate()'s keywords
         if self.timeout is not None:  # transformers' MaxTimeCriteria: generation stops at the deadline
             extra["max_time"] = max(0.0, self.timeout - (time.perf_counter() - start))
         with self._torch.inference_mode():

@@ -20,6 +20,7 @@ from typing import Any
 
 from lightemma.backends.base import ChatRequest
 from lightemma.errors import UserError
+from lightemma.inputs import open_image
 
 # Llama-3.2-Vision (model_type "mllama") runs on hf only: current vLLM (0.32) does not support it.
 MLLAMA_MODEL_TYPE = "mllama"
@@ -75,13 +76,12 @@ def load_image(path: str, max_pixels: int | None = None) -> Any:
     """The image at ``path`` as an RGB ``PIL.Image``, downscaled to at most ``max_pixels`` pixels when given."""
     from PIL import Image
 
-    from lightemma.inputs import open_image
-
     try:
         image = open_image(path)  # a file, or a blank image (--inputs blank-image)
     except (OSError, ValueError) as exc:
         raise UserError(f"cannot read image {path}: {exc}") from None
-    size = cap_pixels(*image.size, max_pixels)
+    width, height = image.size
+    size = cap_pixels(width, height, max_pixels)
     return image if size == image.size else image.resize(size, Image.Resampling.BICUBIC)
 
 

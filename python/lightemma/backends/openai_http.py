@@ -10,7 +10,7 @@ exceptions named like litellm's (``RateLimitError``, ``Timeout``,
 Every reply, through this client or litellm's (OpenAI SDK, native Anthropic and Gemini), is read
 within :data:`MAX_BODY_BYTES` decoded bytes: here by :meth:`OpenAIHTTPClient._read`, for litellm by
 the httpx hooks of :func:`body_limit_hooks` (docs/run.md, "Limits"); a call may set its own limit with
-:func:`body_guard` (a batch's results: :func:`lightemma.backends.batch.base.results_limit`).
+:func:`body_guard` (a batch's results: :func:`lightemma.backends.batch.adapter.results_limit`).
 """
 
 from __future__ import annotations
@@ -24,6 +24,8 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 import aiohttp
+
+from lightemma.backends.retry import split_credentials
 
 MAX_BODY_BYTES = 8 << 20  # the largest response body read (a chat completion is a few KiB); beyond it the call fails
 
@@ -74,8 +76,6 @@ class OpenAIHTTPClient:
     """POSTs ``/chat/completions`` under ``api_base``; one aiohttp session per event loop."""
 
     def __init__(self, api_base: str, api_key: str | None, timeout: float, max_body: int = MAX_BODY_BYTES) -> None:
-        from lightemma.backends.retry import split_credentials
-
         base, basic = split_credentials(api_base)  # user:password@ in the URL: sent as Basic auth, never in the URL
         self.url = base.rstrip("/") + "/chat/completions"
         # the encodings aiohttp inflates (as it reads: the body limit counts decoded bytes); any other is refused unread

@@ -11,6 +11,8 @@ from __future__ import annotations
 import asyncio
 import time
 
+from lightemma.errors import InputError
+
 MAX_PAUSE = 60.0  # seconds: the longest a server-asked pause (Retry-After) holds the callers (RetryPolicy.cap's default)
 
 
@@ -19,7 +21,7 @@ class _Bucket:
 
     def __init__(self, per_minute: float) -> None:
         if per_minute <= 0:
-            raise ValueError(f"rate limit must be positive, got {per_minute}")
+            raise InputError(f"rate limit must be positive, got {per_minute}")
         self.capacity = float(per_minute)
         self.rate = per_minute / 60.0
         self.level = self.capacity

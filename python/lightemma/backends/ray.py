@@ -53,9 +53,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends import local_backend
+from lightemma.backends.base import Backend, ChatRequest, ChatResult
 from lightemma.backends.retry import short_message
-from lightemma.errors import RunFatalError, UserError
+from lightemma.errors import InputError, RunFatalError, UserError
 
 #: Ray restarts a dead replica this many times (``max_restarts``) before it is out of the run
 DEFAULT_MAX_RESTARTS = 3
@@ -98,15 +99,19 @@ class ReplicaServer:
     """
 
     def __init__(self, kind: str, model: str, options: Mapping[str, Any]) -> None:
-        self._backend: Any = None
+        self._backend: Backend | None = None
         self._failure: dict[str, Any] | None = None
         try:
-            from lightemma.backends import local_backend
-
             self._backend = local_backend(kind, model, **dict(options))
         except BaseException as exc:  # noqa: BLE001 - reported by ready(), never lost in a traceback
             self._failure = {"error": type(exc).__name__, "message": str(exc) or type(exc).__name__,
                              "user_error": isinstance(exc, UserError)}
+
+    def _built(self) -> Backend:
+        """The replica's backend; asked only of a replica that is ready (the driver never uses one that is not)."""
+        if self._backend is None:
+            raise RuntimeError(f"this replica has no backend: {self._failure}")
+        return self._backend
 
     @staticmethod
     def where() -> dict[str, Any]:
@@ -123,29 +128,26 @@ class ReplicaServer:
         """The backend's ``info`` and where it runs, or why it could not be built."""
         if self._failure is not None:
             return {"ok": False, **self._failure, "where": self.where()}
-        return {"ok": True, "info": dict(self._backend.info), "where": self.where()}
+        return {"ok": True, "info": dict(self._built().info), "where": self.where()}
 
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult] | _Fatal:
         """The backend's answers; a run-fatal finding comes back as :class:`_Fatal` (never raised through Ray)."""
         try:
-            return await self._backend.generate(requests)
+            return await self._built().generate(requests)
         except RunFatalError as exc:
             return _Fatal(str(exc), exc.cause, exc.error)
 
     async def structured_output(self) -> dict[str, Any]:
         """How this replica's backend constrains answers to a JSON schema, or why it cannot (as data, never raised)."""
-        check = getattr(self._backend, "structured_output", None)
-        if check is None:
-            return {"ok": False, "message": f"--answer-format structured: the {getattr(self._backend, 'name', '?')} "
-                                            "backend cannot constrain answers to a JSON schema; use --answer-format text"}
         try:
-            return {"ok": True, "how": check()}
+            return {"ok": True, "how": self._built().structured_output()}
         except UserError as exc:
             return {"ok": False, "message": str(exc)}
 
     async def stats(self) -> dict[str, Any] | None:
         """The backend's batching statistics (this incarnation of the replica)."""
-        return dict(self._backend.stats) if self._backend is not None and hasattr(self._backend, "stats") else None
+        stats = self._backend.stats if self._backend is not None else None
+        return dict(stats) if stats is not None else None
 
 
 # -- the driver -----------------------------------------------------------------------------------
@@ -304,7 +306,7 @@ def _actor_error(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {short_message(first, 200)}"
 
 
-class RayBackend:
+class RayBackend(Backend):
     """N replicas of a local model (``kind`` ``hf`` or ``vllm``) as Ray actors, behind one backend.
 
     ``model`` is the checkpoint (hub id or path; every node must be able to load it, and read the frames'
@@ -331,7 +333,7 @@ class RayBackend:
         if gpus_per_replica is not None and not gpus_per_replica >= 0:
             raise UserError(f"--gpus-per-replica must be at least 0, got {gpus_per_replica:g}")
         if max_restarts < 0:
-            raise ValueError(f"max_restarts must be >= 0, got {max_restarts}")
+            raise InputError(f"max_restarts must be >= 0, got {max_restarts}")
         self.name = kind
         self.kind = kind
         self.model_id = model
@@ -475,6 +477,10 @@ class RayBackend:
     def replica_report(self) -> dict[str, Any]:
         """Requests, frames, deaths, restarts and re-dispatches per replica in this session."""
         return {**self.router.report(), **({"batching": self._batching} if self._batching else {})}
+
+    def sampling(self) -> str | None:
+        """``--samples K``: K requests, spread over the replicas like any others."""
+        return "calls"
 
     def structured_output(self) -> dict[str, Any]:
         """How every replica constrains stage 3 to the actions JSON schema (asked of each), or a :class:`UserError`."""

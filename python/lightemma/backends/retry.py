@@ -19,6 +19,9 @@ from __future__ import annotations
 import random
 import re
 from dataclasses import dataclass
+from typing import overload
+
+from lightemma.errors import InputError
 
 # Retried: rate limits, server errors, timeouts, dropped or truncated connections.
 RETRYABLE = frozenset({
@@ -55,8 +58,8 @@ def error_class(exc: BaseException) -> str:
     return name
 
 
-def short_message(exc: BaseException, limit: int = 300, secrets: tuple[str, ...] = ()) -> str:
-    """A short, single-line, secret-free description of ``exc``."""
+def short_message(exc: BaseException | str, limit: int = 300, secrets: tuple[str, ...] = ()) -> str:
+    """A short, single-line, secret-free description of ``exc`` (an exception or its text)."""
     text = " ".join(str(exc).split())
     for secret in secrets:
         if secret:
@@ -68,6 +71,10 @@ def short_message(exc: BaseException, limit: int = 300, secrets: tuple[str, ...]
 _SECRET_QUERY = re.compile(r"(?i)(key|token|secret|passw|auth|sig|credential)")
 
 
+@overload
+def redact_url(url: str) -> str: ...
+@overload
+def redact_url(url: None) -> None: ...
 def redact_url(url: str | None) -> str | None:
     """``url`` as it may be shown or recorded: credentials in it (``user:pw@``) and secret-named query
     values (``?api_key=…``, ``token``, ``sig``, …) replaced by ``***``; anything else as given."""
@@ -238,7 +245,7 @@ class FailureStreak:
 
     def __init__(self, cold: int = 3, warm: int = 5) -> None:
         if not 1 <= cold <= warm:
-            raise ValueError(f"need 1 <= cold <= warm, got cold={cold}, warm={warm}")
+            raise InputError(f"need 1 <= cold <= warm, got cold={cold}, warm={warm}")
         self.cold = cold
         self.warm = warm
         self.succeeded = False

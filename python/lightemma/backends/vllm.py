@@ -28,7 +28,7 @@ import time
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from lightemma.backends.base import ChatRequest, ChatResult
+from lightemma.backends.base import Backend, ChatRequest, ChatResult
 from lightemma.backends.batching import MicroBatcher
 from lightemma.backends.local import DECODING, check_options, conversation, is_mllama, load_image, require, token_counting
 from lightemma.backends.retry import short_message
@@ -39,7 +39,7 @@ DEFAULT_BATCH_WINDOW = 0.02
 MLLAMA_REFUSAL = "{model} is Llama-3.2-Vision (mllama), which vLLM 0.32 does not support; run it with --backend hf"
 
 
-class VLLMBackend:
+class VLLMBackend(Backend):
     """A vLLM engine answering the chain's requests, one ``LLM.chat`` per micro-batch.
 
     Options: ``batch_size`` (requests per ``LLM.chat`` call, default 64),
@@ -157,6 +157,10 @@ class VLLMBackend:
         self._llm = None
 
     # -- one batch, on the worker thread ----------------------------------------------------------
+
+    def sampling(self) -> str | None:
+        """``--samples K``: K requests, each decoded with vLLM's temperature sampling."""
+        return "calls"
 
     def structured_output(self) -> dict[str, Any]:
         """How stage 3 is constrained to the actions JSON schema (recorded in the manifest), or a UserError."""

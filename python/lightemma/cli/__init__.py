@@ -5,9 +5,11 @@ Each subcommand lives in its own module under ``lightemma.cli`` and exposes
 subcommand and sets ``func`` (a callable taking the parsed namespace and
 returning an exit code) via ``parser.set_defaults(func=...)``.
 
-Errors meant for the user are raised as :class:`lightemma.errors.UserError`
-(or ``ValueError``/``OSError``) and printed as one clear line (a ``UserError``'s
-command-line wording when it has one), never as a traceback (set ``LIGHTEMMA_DEBUG=1`` to see the traceback).
+Errors meant for the user are raised as :class:`lightemma.errors.UserError` (its subclasses
+``InputError``, ``ShapeError``, ``DatasetError``, … — the Rust core's errors included) or ``OSError``, and
+printed as one clear line (a ``UserError``'s command-line wording when it has one), never as a traceback
+(set ``LIGHTEMMA_DEBUG=1`` to see the traceback). Any other exception — a plain ``ValueError`` or
+``TypeError`` included — is a bug in lightemma and prints its traceback.
 """
 
 from __future__ import annotations
@@ -20,7 +22,7 @@ import warnings
 from collections.abc import Sequence
 
 # subcommand modules, in the order `lightemma --help` lists them
-SUBCOMMANDS: list[str] = ["demo", "synth", "run", "import", "evaluate", "report", "prompts", "models"]
+SUBCOMMANDS: list[str] = ["demo", "synth", "run", "sweep", "import", "evaluate", "report", "prompts", "models"]
 
 
 MODULES: dict[str, str] = {"import": "import_"}  # subcommand -> module where the name is a Python keyword
@@ -32,7 +34,7 @@ class _Parser(argparse.ArgumentParser):
     Subcommand parsers are of this class too (``add_subparsers`` makes them of the parent's class).
     """
 
-    def error(self, message: str):  # type: ignore[override]
+    def error(self, message: str):
         self.exit(2, f"{self.prog}: error: {' '.join(message.split())} (see {self.prog} --help)\n")
 
 
@@ -41,7 +43,7 @@ class _SubParser(_Parser):
     than leaving them to the top-level parser, which would blame ``lightemma`` (``add_subparsers`` of a
     subcommand makes its own subcommands of this class too)."""
 
-    def parse_known_args(self, args=None, namespace=None):  # type: ignore[override]
+    def parse_known_args(self, args=None, namespace=None):
         namespace, extras = super().parse_known_args(args, namespace)
         if extras:
             self.error(f"unrecognized arguments: {' '.join(extras)}")
@@ -82,10 +84,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         if not getattr(exc, "reported", False):  # a run says it in its own line, with the resume command
             print(f"lightemma: interrupted{' by ' + exc.name if hasattr(exc, 'name') else ''}", file=sys.stderr)
         return 128 + signum
-    except (UserError, ValueError) as exc:
+    except UserError as exc:
         if os.environ.get("LIGHTEMMA_DEBUG"):
             raise
-        message = exc.for_cli() if isinstance(exc, UserError) else str(exc)
+        message = exc.for_cli()
         print(f"lightemma {args.command}: error: {printable(' '.join(message.split()))}", file=sys.stderr)
         return 2
     except OSError as exc:  # disk full, permissions, … met where no caller gave it context

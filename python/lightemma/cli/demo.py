@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+from lightemma.errors import InputError
+
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     parser = subparsers.add_parser(
@@ -32,10 +34,10 @@ def _progress(message: str) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lightemma.demo import run_demo
+    from lightemma.offline_demo import run_demo
 
     if args.keyframes < 15:
-        raise ValueError(f"--keyframes must be at least 15 (the reference window needs 15 keyframes for one frame), got {args.keyframes}")
+        raise InputError(f"--keyframes must be at least 15 (the reference window needs 15 keyframes for one frame), got {args.keyframes}")
     result = run_demo(args.out, scenes=args.scenes, keyframes=args.keyframes, use_api=not args.no_api, api_limit=args.api_limit, api_base=args.api_base, log=_progress)
     print(f"demo report: {result.index}")
     print(f"runs: {result.out / 'runs'}   dataset: {result.dataroot}")

@@ -115,7 +115,8 @@ def _merge(args: argparse.Namespace) -> int:
     import json
 
     from lightemma.errors import UserError
-    from lightemma.evaluation.merge import merge_documents, merged_markdown
+    from lightemma.evaluation.merge import merge_documents
+    from lightemma.report.merged import merged_markdown
 
     if args.run_dirs:
         raise UserError(f"lightemma evaluate --merge joins JSON files only; {args.run_dirs[0]} is a RUN_DIR (evaluate the runs first)")
@@ -151,97 +152,11 @@ def refuse_disjoint_pairs(evaluation) -> None:  # noqa: ANN001 - Evaluation, imp
                             "have no frame scored in both; evaluate them apart, or without --pairwise")
 
 
-def frame_set_tables(tables: list, evaluation) -> list:  # noqa: ANN001 - Table, Evaluation, imported lazily
-    """Tables in which runs on different frame sets are never ranked in one column
-    (docs/evaluate.md#runs-on-different-frame-sets).
-
-    With one frame set, or with ``--common`` (every run scored on the same frames), ``tables`` unchanged. Otherwise each
-    table whose rows are runs becomes one table per frame set, its fingerprint in the title, and one more for its
-    reference rows (the ground truth's, computed on every evaluated frame, or the paper's); tables of pairs stay whole
-    (each pair is scored on the frames scored in both). Where the runs' parse definitions or prompt sets differ, a note
-    under each run table says which run used which prompt set."""
-    from dataclasses import replace
-
-    from lightemma.frames.fingerprint import describe_fingerprint
-
-    groups: dict[str, list[str]] = {}
-    described: dict[str, str] = {}
-    for m in evaluation.models:
-        fp = m.fingerprint
-        key = fp["id"] if fp is not None else "unrecorded"
-        described[key] = describe_fingerprint(fp) if fp is not None else "unrecorded (no fingerprint)"
-        groups.setdefault(key, []).append(m.label)
-    notes = _mixed_settings_notes(evaluation)
-    if evaluation.common or len(groups) <= 1:
-        if not notes:
-            return list(tables)
-        return [replace(t, notes=[*t.notes, *notes]) if _run_rows(t, evaluation) else t for t in tables]
-    out = []
-    for table in tables:
-        if not _run_rows(table, evaluation):
-            out.append(table)
-            continue
-        for key, labels in groups.items():
-            rows = [r for r in table.rows if r.get("model") in labels]
-            if rows:
-                title = f"{table.title} — frame set {described[key]}"
-                out.append(replace(table, title=title, rows=rows, notes=[*table.notes, *notes]))
-        labels = {m.label for m in evaluation.models}
-        rest = [r for r in table.rows if r.get("model") not in labels]
-        if rest:
-            title = f"{table.title} — reference rows (on every evaluated frame, all frame sets)"
-            out.append(replace(table, title=title, rows=rest))
-    return out
-
-
-def frame_set_groups(evaluation) -> list[dict] | None:  # noqa: ANN001 - Evaluation, imported lazily
-    """``[{"frame_set": id, "models": [label, …]}, …]`` where runs' frame sets differ and ``--common`` was not given,
-    else None (``evaluate --format json``'s ``frame_set_groups``; docs/evaluate.md#runs-on-different-frame-sets)."""
-    groups: dict[str | None, list[str]] = {}
-    for m in evaluation.models:
-        groups.setdefault(m.fingerprint["id"] if m.fingerprint is not None else None, []).append(m.label)
-    if evaluation.common or len(groups) <= 1:
-        return None
-    return [{"frame_set": key, "models": labels} for key, labels in groups.items()]
-
-
-def json_frame_set_rows(tables: list, evaluation) -> list:  # noqa: ANN001 - Table, Evaluation, imported lazily
-    """``tables`` whose run rows carry ``frame_set``, their run's fingerprint id (for runs on different frame sets)."""
-    from dataclasses import replace
-
-    fps = {m.label: m.fingerprint["id"] if m.fingerprint is not None else None for m in evaluation.models}
-    return [replace(t, rows=[{**r, "frame_set": fps[r["model"]]} if r.get("model") in fps else r for r in t.rows])
-            if _run_rows(t, evaluation) else t for t in tables]
-
-
-def _run_rows(table, evaluation) -> bool:  # noqa: ANN001
-    labels = {m.label for m in evaluation.models}
-    return any(r.get("model") in labels for r in table.rows)
-
-
-def _mixed_settings_notes(evaluation) -> list[str]:  # noqa: ANN001
-    """A note naming which run used which prompt set where they differ; [] if none. (The parse definition is the
-    accuracy tables' Parse column, the integrator and the other protocol settings are in each run's label.)"""
-    prompts: dict[str, list[str]] = {}
-    for m in evaluation.models:
-        manifest = m.manifest or {}
-        prompt = manifest.get("prompt_set") if isinstance(manifest.get("prompt_set"), dict) else {}
-        name = f"{prompt.get('name')} ({str(prompt.get('hash'))[:19]})" if prompt else "unrecorded"
-        if prompt.get("variant"):
-            name += f", variant {prompt.get('variant')}"
-        prompts.setdefault(name, []).append(m.label)
-    notes = []
-    for what, seen in (("prompt sets", prompts),):  # parse definitions: the accuracy tables' Parse column
-        if len(seen) > 1:
-            which = "; ".join(f"{k}: {', '.join(v)}" for k, v in seen.items())
-            notes.append(f"Runs differ in {what}: {which} (not one protocol).")
-    return notes
-
-
 def run(args: argparse.Namespace) -> int:
     from lightemma._text import printable
     from lightemma.errors import UserError
-    from lightemma.evaluation import evaluate_runs, evaluation_tables
+    from lightemma.evaluation import evaluate_runs
+    from lightemma.report.evaluation_tables import evaluation_tables, frame_set_groups, frame_set_tables, json_frame_set_rows
     from lightemma.report.tables import render
 
     if args.merge:
@@ -282,6 +197,8 @@ def run(args: argparse.Namespace) -> int:
     if args.format == "json":  # every column's descriptor, the frame sets and the software (docs/evaluate.md)
         extra = {**evaluation_document(tables, evaluation, with_paper=args.with_paper, dataroot=args.dataroot,
                                        version=args.dataset_version), **extra}
+        if evaluation.robustness is not None:  # a sweep: each variant against its clean run, with metric ids
+            extra["robustness"] = evaluation.robustness.to_dict()
     text = render(tables, args.format, extra=extra)
     if args.format == "json":  # a value its descriptor does not allow (a rate above 1) is a bug: said, never printed
         import json

@@ -43,7 +43,7 @@ def run(args: argparse.Namespace) -> int:
         results = import_reference(args.sources, args.output, dataset_kind=args.dataset_kind, warn=warn,
                                    progress=not args.quiet and sys.stderr.isatty(), jobs=jobs)
     except KeyboardInterrupt as exc:  # SIGINT, SIGTERM or SIGHUP: the workers are stopped, no partial folder is left
-        if not hasattr(exc, "runs_total"):
+        if not hasattr(exc, "runs_total") or not hasattr(exc, "runs_done"):  # the importer sets both together
             raise
         name, signum = getattr(exc, "name", "SIGINT"), getattr(exc, "signum", signal.SIGINT)
         print(f"lightemma import: interrupted by {name}; {exc.runs_done} of {exc.runs_total} model folder(s) imported, "

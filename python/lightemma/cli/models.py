@@ -24,7 +24,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def rows() -> list[dict[str, Any]]:
     """One plain dict per registry entry: what ``lightemma models`` prints."""
-    from lightemma.registry import MODELS, batch_price, list_models
+    from lightemma.models.catalog import MODELS
+    from lightemma.models.prices import batch_price, list_models
 
     out = []
     for entry, info in zip(list_models(), MODELS):

@@ -4,8 +4,46 @@ from __future__ import annotations
 
 import argparse
 import math
+from typing import Any
 
+from lightemma.pipeline.config import InvalidSetting, default, problem, requirement, setting, shown, span_text
 from lightemma.prompts import DEFAULT_PROMPT_SET
+
+#: each run setting (the parameter of lightemma.run, a row of lightemma.pipeline.config.SETTINGS) -> its flag; the
+#: flag's argparse attribute is the flag without its dashes ("--max-cost" -> args.max_cost)
+FLAGS: dict[str, str] = {
+    "model": "--model", "backend": "--backend", "api_base": "--api-base", "api_key_env": "--api-key-env",
+    "price": "--price", "gpus": "--gpus", "dataroot": "--dataroot", "version": "--version", "split": "--split",
+    "scenes": "--scenes", "window": "--window", "limit": "--limit", "sample": "--sample",
+    "sample_seed": "--sample-seed", "on_bad_record": "--on-bad-record", "concurrency": "--concurrency", "timeout": "--timeout",
+    "max_retries": "--max-retries", "backoff_base": "--backoff", "rpm": "--rpm", "tpm": "--tpm", "cache": "--cache",
+    "transport": "--transport", "name": "--name", "batch": "--batch", "batch_poll": "--batch-poll",
+    "max_cost_cents": "--max-cost", "batch_size": "--batch-size", "max_pixels": "--max-pixels",
+    "tensor_parallel_size": "--tensor-parallel-size", "gpu_memory_utilization": "--gpu-memory-utilization",
+    "pipeline_parallel_size": "--pipeline-parallel-size", "replicas": "--replicas", "ray_address": "--ray-address",
+    "gpus_per_replica": "--gpus-per-replica", "prompt_set": "--prompt-set", "temperature": "--temperature",
+    "max_tokens": "--max-tokens", "reask": "--reask", "max_attempts": "--max-attempts",
+    "integrate_method": "--integrate", "speed_range": "--speed-range", "max_abs_curvature": "--max-curvature",
+    "answer_format": "--answer-format", "chain": "--chain", "inputs": "--inputs", "samples": "--samples",
+}
+
+
+def _attr(parameter: str) -> str:
+    return FLAGS[parameter][2:].replace("-", "_")
+
+
+def _range(parameter: str) -> str:
+    """`` (1..4096)``: a flag's range for its help, read from the settings table."""
+    return f" (range {span_text(parameter)})" if span_text(parameter) else ""
+
+
+def for_cli(exc: InvalidSetting) -> Exception:
+    """The library's error naming a parameter (``concurrency must be…``), as the command line says it: naming the
+    flag (``--concurrency must be…``)."""
+    from lightemma.errors import UserError
+
+    flag = FLAGS.get(exc.parameter, exc.parameter)
+    return UserError(f"{flag} must be {exc.requirement}, got {shown(exc.value)}")
 
 
 def _inputs_arg(value: str) -> str:
@@ -55,16 +93,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     data.add_argument("--on-bad-record", choices=("skip", "error"),
                       help="a scene with an unusable pose or timestamp: skip it with a warning (default) or stop loading")
     ex = p.add_argument_group("execution")
-    ex.add_argument("--concurrency", type=int, help="frames in flight at once (default 16; on --resume, the run's own)")
+    ex.add_argument("--concurrency", type=int,
+        help="frames in flight at once (default 16; on --resume, the run's own)" + _range("concurrency"))
     ex.add_argument("--output", help="output directory (default ./runs)")
     ex.add_argument("--resume", metavar="RUN_DIR", help="finish this run (everything else is read from its manifest)")
     ex.add_argument("--retry-failed", action="store_true", help="with --resume: also re-run frames that ended failed")
     ex.add_argument("--timeout", type=float, help="deadline per call in seconds, connect to last byte (default 120; on "
-                    "--resume, the run's own unless given)")
-    ex.add_argument("--max-retries", type=int, help="retries of 429/5xx/timeouts/dropped connections per call (default 6)")
-    ex.add_argument("--backoff", type=float, help="base of the exponential backoff in seconds (default 1)")
-    ex.add_argument("--rpm", type=float, help="client-side limit: requests per minute")
-    ex.add_argument("--tpm", type=float, help="client-side limit: tokens per minute")
+                    "--resume, the run's own unless given)" + _range("timeout"))
+    ex.add_argument("--max-retries", type=int,
+        help="retries of 429/5xx/timeouts/dropped connections per call (default 6)" + _range("max_retries"))
+    ex.add_argument("--backoff", type=float,
+        help="base of the exponential backoff in seconds (default 1)" + _range("backoff_base"))
+    ex.add_argument("--rpm", type=float, help="client-side limit: requests per minute" + _range("rpm"))
+    ex.add_argument("--tpm", type=float, help="client-side limit: tokens per minute" + _range("tpm"))
     ex.add_argument("--cache", nargs="?", const=True, default=None, metavar="PATH",
                     help="SQLite response cache for temperature-0 requests (default path OUTPUT/cache.sqlite)")
     ex.add_argument("--transport", choices=("litellm", "direct"),
@@ -75,7 +116,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     paid.add_argument("--batch", action="store_true", help="through the provider's batch API (OpenAI, Anthropic, Gemini) at "
                       "its batch price (about 50 %%); results within 24 h; a killed run resumes by polling the same batches")
     paid.add_argument("--batch-poll", type=float, metavar="SECONDS", help="with --batch: first poll after SECONDS "
-                      "(default 30), then ×1.5 per poll up to 10 min")
+                      "(default 30), then ×1.5 per poll up to 10 min" + _range("batch_poll"))
     paid.add_argument("--estimate", action="store_true", help="print the frames, calls, tokens and expected cost "
                       "(normal and --batch) without calling anything, and exit; image tokens by the model's published "
                       "rule, 'unknown' where none is published")
@@ -95,17 +136,21 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                        "that need it; only for checkpoints you trust. A resume of such a run needs it again")
     ray = p.add_argument_group("replicas over Ray (--backend hf | vllm; pip install 'lightemma[ray]'; docs/local.md)")
     ray.add_argument("--replicas", type=int, metavar="N", help="model replicas, each a Ray actor with its own GPU(s), frames spread across "
-                     "them (default 1: in this process, no Ray)")
+                     "them (default 1: in this process, no Ray)" + _range("replicas"))
     ray.add_argument("--ray-address", metavar="ADDRESS", help="join this running Ray cluster (auto, HOST:PORT, ray://HOST:PORT); "
                      "default: start a local Ray sized to the replicas")
     ray.add_argument("--gpus-per-replica", type=float, metavar="G", help="hf: GPUs per replica (default 1 where the cluster has GPUs, else 0); "
                      "vllm uses --tensor-parallel-size × --pipeline-parallel-size")
     gen = p.add_argument_group("prompting")
     gen.add_argument("--prompt-set", help=f"prompt set name or JSON file (default {DEFAULT_PROMPT_SET})")
-    gen.add_argument("--temperature", type=float, help="sampling temperature where the provider allows it (default 0)")
-    gen.add_argument("--max-tokens", type=int, help="max output tokens per stage (default 512)")
+    gen.add_argument("--temperature", type=float,
+        help="sampling temperature where the provider allows it (default 0)" + _range("temperature"))
+    gen.add_argument("--max-tokens", type=int, help="max output tokens per stage (default 512)" + _range("max_tokens"))
+    gen.add_argument("--samples", type=int, metavar="K",
+                     help="K independent chains per frame, scored as minADE@K / minFDE@K (default 1; give "
+                     "--temperature above 0; docs/run.md#k-samples)" + _range("samples"))
     gen.add_argument("--reask", choices=("actions", "chain"), help="on a failed answer re-ask stage 3 (default) or the whole chain (docs/definitions.md#re-asks)")
-    gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)")
+    gen.add_argument("--max-attempts", type=int, help="attempts per frame in all (default 5)" + _range("max_attempts"))
     gen.add_argument("--integrate", choices=("euler", "midpoint"), help="actions → trajectory (default euler, the paper's; docs/definitions.md#integration)")
     gen.add_argument("--speed-range", nargs=2, type=float, metavar=("LO", "HI"),
                      help="plausible speeds in m/s; an answer outside fails as implausible (default -10 50)")
@@ -131,14 +176,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return p
 
 
-# Run settings and their defaults. On the command line they default to None, so that
+# Run settings and their defaults (RunConfig's own). On the command line they default to None, so that
 # `--resume` can tell a setting that was given (and would be ignored) from one that was not.
-RUN_DEFAULTS: dict[str, object] = {
-    "version": "v1.0-test", "window": "reference", "output": "runs", "timeout": 120.0, "max_retries": 6,
-    "backoff": 1.0, "transport": "litellm", "prompt_set": DEFAULT_PROMPT_SET, "temperature": 0.0,
-    "max_tokens": 512, "reask": "actions", "max_attempts": 5, "integrate": "euler", "on_bad_record": "skip",
-    "speed_range": (-10.0, 50.0), "max_curvature": 1.0, "answer_format": "text", "chain": "independent",
-    "inputs": "full",
+RUN_DEFAULTS: dict[str, Any] = {
+    **{_attr(p): default(p) for p in ("version", "window", "timeout", "max_retries", "backoff_base", "transport",
+                                      "prompt_set", "temperature", "max_tokens", "reask", "max_attempts",
+                                      "integrate_method", "on_bad_record", "speed_range", "max_abs_curvature",
+                                      "answer_format", "chain", "inputs", "samples")},
+    "output": "runs",
 }
 # what `--resume` may be given: everything else comes from the run's manifest
 RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "no_progress",
@@ -148,48 +193,24 @@ RESUME_OPTIONS = {"command", "func", "resume", "retry_failed", "concurrency", "n
                   "timeout", "rpm", "tpm"}  # how long and how fast calls go: the fixes a timeout or rate-limit stop names
 
 
-def run_settings(args: argparse.Namespace) -> dict[str, object]:
+def run_settings(args: argparse.Namespace) -> dict[str, Any]:
     """The run settings: what was given on the command line, else the defaults."""
     return {name: default if getattr(args, name) is None else getattr(args, name) for name, default in RUN_DEFAULTS.items()}
 
 
-# numeric options and the smallest value each takes (inclusive, or exclusive when marked ">")
-LIMITS: dict[str, tuple[float, bool]] = {
-    "concurrency": (1, False), "limit": (1, False), "max_attempts": (1, False), "max_tokens": (1, False),
-    "max_retries": (0, False), "backoff": (0, False), "temperature": (0, False), "timeout": (0, True),
-    "rpm": (0, True), "tpm": (0, True), "batch_size": (1, False), "max_pixels": (1, False),
-    "tensor_parallel_size": (1, False), "gpu_memory_utilization": (0, True),
-    "pipeline_parallel_size": (1, False), "replicas": (1, False), "gpus_per_replica": (0, False), "gpus": (0, False),
-    "sample": (1, False), "max_cost": (0, True), "batch_poll": (0, True),
-}
-
-
 def check_limits(args: argparse.Namespace) -> None:
-    """Refuse a numeric option below its range, naming the flag (before anything is loaded or sent)."""
+    """Refuse a numeric option out of its setting's kind or range (:data:`lightemma.pipeline.config.SETTINGS`), naming
+    the flag, before anything is loaded or sent."""
     from lightemma.errors import UserError
 
-    for name, (low, exclusive) in LIMITS.items():
-        value = getattr(args, name, None)
-        if value is None:
+    for parameter, flag in FLAGS.items():
+        value = getattr(args, _attr(parameter), None)
+        row = setting(parameter)
+        if value is None or row is None or row.kind not in ("int", "number"):
             continue
-        flag = "--" + name.replace("_", "-")
-        if value != value or (value <= low if exclusive else value < low):  # NaN fails too
-            shown = f"greater than {low:g}" if exclusive else f"at least {low:g}"
-            raise UserError(f"{flag} must be {shown}, got {value:g}")
-        if isinstance(value, float) and math.isinf(value):  # inf: no limit is no setting a manifest can hold (JSON null)
-            raise UserError(f"{flag} must be a finite number, got {value:g}")
-        if name in RANGED:  # the range a manifest's setting is held to as well (beyond it, waits or retries without end)
-            from lightemma.pipeline.runner import SETTING_RANGES
-
-            low, high = SETTING_RANGES[RANGED[name]]
-            if not low <= value <= high:
-                raise UserError(f"{flag} must be between {low:g} and {high:g}, got {value:g}")
-
-
-#: flags held to :data:`lightemma.pipeline.runner.SETTING_RANGES` (flag -> the manifest's setting)
-RANGED = {"timeout": "timeout", "rpm": "rpm", "tpm": "tpm", "max_retries": "max_retries", "max_attempts": "max_attempts",
-          "backoff": "backoff_base", "concurrency": "concurrency", "max_tokens": "max_tokens", "batch_poll": "batch_poll",
-          "replicas": "replicas", "temperature": "temperature"}
+        what = problem(row, value)
+        if what is not None:
+            raise UserError(f"{flag} must be {requirement(row, what)}, got {shown(value)}")
 
 
 # option -> backends that take it
@@ -230,7 +251,7 @@ def print_estimate(args: argparse.Namespace) -> int:
                "sample": {"n": args.sample, "seed": args.sample_seed or 0} if args.sample is not None else None}
     from lightemma.backends import backend_kind
     from lightemma.pipeline.estimate import no_bill
-    from lightemma.registry import resolve
+    from lightemma.models.catalog import resolve
 
     resolve(args.model)  # an unknown baseline is refused as a run refuses it
     kind = backend_kind(args.model, args.backend, args.api_base)
@@ -245,7 +266,7 @@ def print_estimate(args: argparse.Namespace) -> int:
     planned = estimate_run(args.model, frames=frames, prompt_set=settings["prompt_set"], chain=settings["chain"],
                            answer_format=settings["answer_format"], inputs=settings["inputs"],
                            max_tokens=settings["max_tokens"], api_base=args.api_base, backend=args.backend,
-                           price=tuple(args.price) if args.price else None)
+                           price=tuple(args.price) if args.price else None, samples=settings["samples"])
     print(planned.report())
     return 0
 
@@ -276,12 +297,15 @@ def main(args: argparse.Namespace) -> int:
             raise UserError(f"--resume takes every setting from the run's manifest; drop {', '.join(given)}")
         if args.batch:
             raise UserError("--resume takes the run's mode (batch or not) from its manifest; drop --batch")
-        result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
-                        concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
-                        gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost, api_base=args.api_base,
-                        api_key_env=args.api_key_env, cache=args.cache,
-                        backend_options={"trust_remote_code": True} if args.trust_remote_code else None,
-                        timeout=args.timeout, rpm=args.rpm, tpm=args.tpm)
+        try:
+            result = resume(args.resume, retry_failed=args.retry_failed, progress=progress, log=stderr_log,
+                            concurrency=args.concurrency, replicas=args.replicas, ray_address=args.ray_address,
+                            gpus_per_replica=args.gpus_per_replica, max_cost_cents=args.max_cost, api_base=args.api_base,
+                            api_key_env=args.api_key_env, cache=args.cache,
+                            backend_options={"trust_remote_code": True} if args.trust_remote_code else None,
+                            timeout=args.timeout, rpm=args.rpm, tpm=args.tpm)
+        except InvalidSetting as exc:
+            raise for_cli(exc) from None
     else:
         if args.retry_failed:
             raise UserError("--retry-failed needs --resume RUN_DIR")
@@ -296,30 +320,35 @@ def main(args: argparse.Namespace) -> int:
             options["fit_split"] = args.fit_split
         # local backends batch across frames in flight: keep at least one batch's worth of frames going (per replica)
         replicas = args.replicas or 1
-        concurrency = args.concurrency if args.concurrency is not None else max(16, int(options.get("batch_size", 0))) * replicas
+        batch_size = options.get("batch_size", 0)
+        assert isinstance(batch_size, int)  # --batch-size is type=int
+        concurrency = args.concurrency if args.concurrency is not None else max(16, batch_size) * replicas
         settings = run_settings(args)
         lo, hi = settings["speed_range"]
         if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
             raise UserError(f"--speed-range LO HI needs two finite numbers with LO < HI, got {lo:g} {hi:g}")
         if not (math.isfinite(settings["max_curvature"]) and settings["max_curvature"] > 0):
             raise UserError(f"--max-curvature must be a finite number > 0, got {settings['max_curvature']:g}")
-        result = run(
-            args.model, dataroot=args.dataroot, version=settings["version"], split=args.split, scenes=args.scenes,
-            window=settings["window"], limit=args.limit, output=settings["output"], backend=args.backend,
-            api_base=args.api_base, concurrency=concurrency, temperature=settings["temperature"],
-            max_tokens=settings["max_tokens"], reask=settings["reask"], max_attempts=settings["max_attempts"],
-            integrate_method=settings["integrate"], speed_range=tuple(settings["speed_range"]),
-            max_abs_curvature=settings["max_curvature"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
-            max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
-            cache=args.cache, transport=settings["transport"], api_key_env=args.api_key_env, progress=progress, log=stderr_log,
-            price=tuple(args.price) if args.price else None, gpus=args.gpus,
-            backend_options=options, on_bad_record=settings["on_bad_record"],
-            replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
-            chain=settings["chain"], answer_format=settings["answer_format"],
-            batch=bool(args.batch), batch_poll=args.batch_poll or 30.0, max_cost_cents=args.max_cost,
-            sample=args.sample, sample_seed=args.sample_seed or 0, name=args.name,
-            inputs=settings["inputs"],
-        )
+        try:
+            result = run(
+                args.model, dataroot=args.dataroot, version=settings["version"], split=args.split, scenes=args.scenes,
+                window=settings["window"], limit=args.limit, output=settings["output"], backend=args.backend,
+                api_base=args.api_base, concurrency=concurrency, temperature=settings["temperature"],
+                max_tokens=settings["max_tokens"], reask=settings["reask"], max_attempts=settings["max_attempts"],
+                integrate_method=settings["integrate"], speed_range=tuple(settings["speed_range"]),
+                max_abs_curvature=settings["max_curvature"], prompt_set=settings["prompt_set"], timeout=settings["timeout"],
+                max_retries=settings["max_retries"], backoff_base=settings["backoff"], rpm=args.rpm, tpm=args.tpm,
+                cache=args.cache, transport=settings["transport"], api_key_env=args.api_key_env, progress=progress, log=stderr_log,
+                price=tuple(args.price) if args.price else None, gpus=args.gpus,
+                backend_options=options, on_bad_record=settings["on_bad_record"],
+                replicas=replicas, ray_address=args.ray_address, gpus_per_replica=args.gpus_per_replica,
+                chain=settings["chain"], answer_format=settings["answer_format"],
+                batch=bool(args.batch), batch_poll=args.batch_poll or 30.0, max_cost_cents=args.max_cost,
+                sample=args.sample, sample_seed=args.sample_seed or 0, name=args.name,
+                inputs=settings["inputs"], samples=settings["samples"],
+            )
+        except InvalidSetting as exc:
+            raise for_cli(exc) from None
     print(result.report())
     summary = result.summary
     if summary.get("frames") and not summary.get("ade_frames"):

@@ -58,7 +58,7 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
 
 
 def run(args: argparse.Namespace) -> int:
-    from lightemma.frames import window_range
+    from lightemma.nuscenes import window_range
     from lightemma.synth import write_dataset
 
     root = write_dataset(

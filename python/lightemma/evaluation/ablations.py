@@ -24,6 +24,7 @@ import numpy as np
 
 from lightemma.evaluation.loading import RunData
 from lightemma.evaluation.stats import Resampling, bootstrap_ci, holm, sign_flip_p
+from lightemma.evaluation.uncertainty import frame_values
 from lightemma.inputs import is_perturbation
 
 ABLATIONS: tuple[str, ...] = ("no-image", "blank-image", "no-history")
@@ -41,8 +42,6 @@ class PairedMetric:
 
 
 def _ade_avg(run: RunData, rows: np.ndarray, convention: str) -> np.ndarray:
-    from lightemma.evaluation.uncertainty import frame_values
-
     return frame_values(run, rows, convention)[:, 0]
 
 
@@ -98,7 +97,7 @@ def _with_statistics(rows: list[dict[str, Any]], groups: dict[str, list[tuple[np
     for metric in PAIRED_METRICS:
         k = metric.key
         present = [i for i, g in enumerate(groups[k]) if g is not None]
-        data = [groups[k][i] for i in present]
+        data = [g for g in groups[k] if g is not None]  # the groups of present, in order
         ci = bootstrap_ci(data, [keys[k][i] for i in present], resampling) if data else np.zeros((0, 1, 2))
         p = sign_flip_p(data, [keys[k][i] for i in present], resampling) if data else np.zeros(0)
         p_all = np.full(len(rows), np.nan)

@@ -10,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.evaluation.loading import API_ERROR_STATUS, STATUS_CODES, RunData
+from lightemma.definitions import STATUS_CODES
+from lightemma.evaluation.loading import RunData
+from lightemma.runs.columns import API_ERROR_STATUS
 
 
 def _pct(mask: np.ndarray) -> float | None:

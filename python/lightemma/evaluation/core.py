@@ -16,15 +16,18 @@ from typing import Any
 
 import numpy as np
 
+from lightemma._text import printable
+from lightemma.definitions import CONVENTIONS
 from lightemma.errors import RunStoreError, UserError
 from lightemma.evaluation.accounting import efficiency, format_errors
 from lightemma.evaluation.loading import RunData, load_run
-from lightemma.evaluation.models import family_rank
 from lightemma.evaluation.rescore import ParseDefinition
-from lightemma.runs.store import find_run_dirs
 from lightemma.evaluation.stats import Resampling
+from lightemma.frames.fingerprint import run_fingerprint
+from lightemma.metrics import evaluate, evaluate_all
+from lightemma.models.names import family_rank
+from lightemma.runs.store import find_run_dirs
 
-CONVENTION_NAMES: tuple[str, ...] = ("lightemma", "stp3", "uniad")
 METRIC_KEYS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde", "miss_rate")
 LOW_COVERAGE = 0.5  # a model with fewer scored frames than this share is flagged in every table
 
@@ -43,7 +46,7 @@ class ModelResult:
     frames_in_run: int
     frames_accounted: int  # frames behind FE and efficiency: all, or with --common those in every run
     frames_evaluated: int  # frames behind the metrics
-    metrics: dict[str, dict[str, float]]  # convention -> metric -> value
+    metrics: dict[str, dict[str, float | None]]  # convention -> metric -> value (None: no scored frame)
     accounting: dict[str, Any]  # fe_pct, fe_corr_pct (over frames with an answer), failed_final, api_error_frames
     efficiency: dict[str, Any]
     parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
@@ -59,6 +62,9 @@ class ModelResult:
     explanations: dict[str, Any] = field(default_factory=dict)  # explanation-audit keys (evaluation/intent_audit.py ROW_KEYS)
     fingerprint: dict[str, Any] | None = None  # the run's frame set (lightemma.frames.fingerprint.run_fingerprint)
     manifest: dict[str, Any] = field(default_factory=dict)  # the run's manifest, for provenance (evaluation/descriptors.py)
+    # --samples K > 1: convention -> samples, minade, minfde, spread_m, sampled_frames (lightemma.evaluation.samples);
+    # "best" / "mean" -> the safety and planning keys of the best sample and of the mean trajectory; empty for K = 1
+    sampling: dict[str, Any] = field(default_factory=dict)
 
     @property
     def scored_pct(self) -> float | None:
@@ -98,6 +104,8 @@ class ModelResult:
             "fde_ci95": ci.get("fde"),
             **self.safety.get(convention, {}),
             "ci95_unavailable": ci.get("unavailable"),
+            **self.sampling.get(convention, {}),  # minade, minfde with samples: K (only for a run of K > 1 samples)
+            **{key: self.sampling[key] for key in ("best", "mean") if key in self.sampling},
         }
 
     def efficiency_row(self) -> dict[str, Any]:
@@ -125,6 +133,7 @@ class Evaluation:
     planning: Any = None  # lightemma.evaluation.planning_score.PlanningResult when the planning score was computed
     explanations: Any = None  # lightemma.evaluation.intent_audit.ExplanationResult when the explanation audit was computed
     miss_threshold: float = 2.0  # metres, behind miss_rate (its descriptor: miss@<threshold>m/1)
+    robustness: Any = None  # lightemma.evaluation.robustness.RobustnessResult when sweep runs were evaluated
 
     @property
     def main_convention(self) -> str:
@@ -172,6 +181,8 @@ class Evaluation:
             out["planning"] = {**self.planning.to_dict(), "pairwise": self.planning.pairwise}
         if self.explanations is not None:
             out["explanations"] = self.explanations.to_dict()
+        if self.robustness is not None:
+            out["robustness"] = self.robustness.to_dict()
         return out
 
 
@@ -197,10 +208,10 @@ def expand_run_dirs(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
 
 
 def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
-    names = CONVENTION_NAMES if convention == "all" else ((convention,) if isinstance(convention, str) else tuple(convention))
+    names = CONVENTIONS if convention == "all" else ((convention,) if isinstance(convention, str) else tuple(convention))
     for name in names:
-        if name not in CONVENTION_NAMES:
-            raise UserError(f"unknown convention {name!r} (choose from {', '.join(CONVENTION_NAMES)} or all)")
+        if name not in CONVENTIONS:
+            raise UserError(f"unknown convention {name!r} (choose from {', '.join(CONVENTIONS)} or all)")
     return names
 
 
@@ -212,7 +223,8 @@ PAPER_SETTINGS: tuple[tuple[str, str], ...] = (("window", "reference"), ("integr
 def _window(info: Any) -> str:
     """The run's frame window (``reference``, the paper's, or ``full``) as its manifest records it."""
     manifest = getattr(info, "manifest", None) or {}
-    config = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+    config_value = manifest.get("config")
+    config: dict[str, Any] = config_value if isinstance(config_value, dict) else {}
     for dataset in (manifest.get("dataset"), config.get("dataset")):
         window = dataset.get("window") if isinstance(dataset, dict) else None
         if isinstance(window, str) and window:
@@ -221,8 +233,6 @@ def _window(info: Any) -> str:
 
 
 def _compose(info: Any, extra: Sequence[str] = ()) -> str:
-    from lightemma._text import printable
-
     settings = {"window": _window(info), "integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format,
                 "inputs": getattr(info, "inputs", "full")}
     parts = [f"{settings[key]} window" if key == "window" else settings[key] for key, paper in PAPER_SETTINGS if settings[key] != paper]
@@ -280,16 +290,15 @@ def common_frames(runs: Sequence[RunData]) -> list[str]:
 SCORE_BLOCK = 1 << 16  # frames per core call: bounded copies, still one call per large batch
 
 
-def score(run: RunData, rows: np.ndarray, conventions: Sequence[str], miss_threshold: float) -> dict[str, dict[str, float]]:
+def score(
+    run: RunData, rows: np.ndarray, conventions: Sequence[str], miss_threshold: float
+) -> dict[str, dict[str, float | None]]:
     """Metrics of ``rows`` of a run per convention through the Rust core.
 
     Frames go to the core in blocks of :data:`SCORE_BLOCK` (one batched call per
     block, all conventions from one error matrix) and the block results are combined frame-weighted,
     which is exact for these means; memory for the copies stays bounded.
     """
-    from lightemma import evaluate
-    from lightemma.metrics import evaluate_all
-
     if len(rows) == 0:
         return {c: {key: None for key in METRIC_KEYS} for c in conventions}
     sums = {c: dict.fromkeys(METRIC_KEYS, 0.0) for c in conventions}
@@ -328,8 +337,6 @@ def evaluate_loaded(
     every run; FE, efficiency and outcome counts use all frames of a run, or with
     ``common`` the frames present in every run.
     """
-    from lightemma.frames.fingerprint import run_fingerprint
-
     conventions = _conventions(convention)
     runs = sorted(runs, key=lambda r: (family_rank(r.info.family), r.info.generation or 99, r.info.label))
     fingerprints = [run_fingerprint(r.info.run_dir, r.info.manifest or {}, r.frame_ids) for r in runs]  # a bad one: refused
@@ -345,7 +352,7 @@ def evaluate_loaded(
         note = frame_set_warning(runs)
         if note:
             warnings.append(note)
-    results = []
+    results: list[ModelResult] = []
     entries: list[tuple[str, RunData, np.ndarray]] = []
     for run, label in zip(runs, unique_labels(runs)):
         if shared is not None and present is not None:
@@ -381,15 +388,89 @@ def evaluate_loaded(
             )
         )
         entries.append((label, run, scored))
+    _with_samples(results, entries, conventions)
     evaluation = _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling,
                                               miss_threshold=miss_threshold), entries, shared, pairwise)
     if safety:
         _with_safety(evaluation, entries, shared, pairwise, dataroot, version, history=_PLANNING_HISTORY if planning else 0)
     if planning:
         _with_planning(evaluation, entries, shared, pairwise, dataroot, version)
+    if safety or planning:
+        _with_sample_scores(evaluation, entries, shared, dataroot, version, safety=safety, planning=planning)
+    _refuse_mixed_maps(evaluation)
     if explanations:
         _with_explanations(evaluation, entries, shared, dataroot, version)
+    _with_robustness(evaluation, entries, shared)
     return evaluation
+
+
+def _with_samples(results: list[ModelResult], entries: list[tuple[str, RunData, np.ndarray]], conventions: tuple[str, ...]) -> None:
+    """--samples K runs: minADE@K, minFDE@K and the spread of the samples per convention (lightemma.evaluation.samples)."""
+    from lightemma.evaluation.samples import sample_metrics
+
+    for result, (_, run, scored) in zip(results, entries):
+        result.sampling = sample_metrics(run, scored, conventions)
+
+
+def _with_sample_scores(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
+                        dataroot: str | os.PathLike[str] | None, version: str | None, *, safety: bool, planning: bool) -> None:
+    """--samples K runs: the safety and planning scores of the best sample (by ADE) and of the mean trajectory, as
+    ``sampling["best"]`` / ``sampling["mean"]`` (the keys of the run's own safety and planning rows)."""
+    from lightemma.evaluation.samples import best_and_mean, run_samples
+
+    sampled = [(label, run, scored) for label, run, scored in entries if run_samples(run) > 1]
+    if not sampled:
+        return
+    only = set(shared) if shared is not None else None
+    no_intervals = Resampling(n_resamples=0, seed=evaluation.resampling.seed, confidence=evaluation.resampling.confidence)
+    for label, run, scored in sampled:
+        pair = best_and_mean(run, scored, evaluation.main_convention)
+        if pair is None:
+            continue
+        model = next(m for m in evaluation.models if m.label == label)
+        for name, variant in zip(("best", "mean"), pair):
+            row: dict[str, Any] = {}
+            derived = [(label, variant, scored)]
+            if safety:
+                from lightemma.evaluation.safety import evaluate_safety
+
+                result = evaluate_safety(derived, (evaluation.main_convention,), no_intervals, dataroot=dataroot,
+                                         version=version, history=_PLANNING_HISTORY if planning else 0)
+                row.update(result.rows.get(label, {}).get(evaluation.main_convention, {}))
+            if planning:
+                from lightemma.evaluation.planning_score import evaluate_planning
+
+                planning_result = evaluate_planning(derived, no_intervals, dataroot=dataroot, version=version,
+                                                    safety=None, pairwise=False, only=only)
+                row.update(planning_result.rows.get(label, {}))
+            model.sampling[name] = row
+
+
+def _with_robustness(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None) -> None:
+    """Sweep runs: each variant paired with its sweep's clean run (lightemma.evaluation.robustness)."""
+    from lightemma.evaluation.robustness import evaluate_robustness
+
+    evaluation.robustness = evaluate_robustness(entries, evaluation.main_convention, evaluation.resampling, safety=evaluation.safety,
+                                                planning=evaluation.planning, only=set(shared) if shared is not None else None)
+    if evaluation.robustness is not None:
+        evaluation.warnings.extend(evaluation.robustness.warnings)
+
+
+def _refuse_mixed_maps(evaluation: Evaluation) -> None:
+    """Runs whose off-road or planning values were scored against different versions of one map expansion are not
+    compared: :class:`UserError` in one line naming both runs and versions (docs/evaluate.md#what-each-number-is)."""
+    from lightemma.evaluation.safety import map_version_conflict, run_map_versions
+
+    per_run: dict[str, dict[str, str]] = {}
+    for model in evaluation.models:
+        found = per_run.setdefault(model.label, {})
+        if evaluation.safety is not None and model.label in evaluation.safety.runs:
+            found.update(run_map_versions(evaluation.safety.runs[model.label]))
+        if evaluation.planning is not None and model.label in evaluation.planning.runs:
+            found.update(evaluation.planning.runs[model.label].map_versions)
+    conflict = map_version_conflict(per_run)
+    if conflict:
+        raise UserError(conflict)
 
 
 _PLANNING_HISTORY = 4  # earlier keyframes the planning score reads (lightemma.evaluation.planning_score.HISTORY_KEYFRAMES)

@@ -19,9 +19,9 @@ import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
-from lightemma.errors import UserError
+from lightemma.errors import InputError, UserError
 
 #: the ``format`` of ``lightemma evaluate --format json`` documents (bumped when a key changes meaning or goes away)
 EVALUATE_FORMAT = "lightemma-evaluate/1"
@@ -96,6 +96,7 @@ _P = f"{_DEFS}#planning-score"
 _A = f"{_DEFS}#input-ablations"
 _FRAME_SETS = "docs/evaluate.md#runs-on-different-frame-sets"
 _X = f"{_DEFS}#explanation-audit"
+_O = f"{_DEFS}#described-objects"
 _METERS = (0.0, None)
 _SHARE = (0.0, 1.0)
 _PCT = (0.0, 100.0)
@@ -291,7 +292,7 @@ MISS_VERSION = 1
 def miss_descriptor(threshold: float) -> Descriptor:
     """The miss rate at ``threshold`` metres: ``miss@2m/1`` (a share of frames; docs/definitions.md#metrics)."""
     if not (isinstance(threshold, (int, float)) and math.isfinite(threshold) and threshold > 0):
-        raise ValueError(f"miss threshold must be a positive number of metres, got {threshold!r}")
+        raise InputError(f"miss threshold must be a positive number of metres, got {threshold!r}")
     return _d(
         f"miss@{threshold:g}m/{MISS_VERSION}",
         f"Miss rate: share of frames whose largest error exceeds {threshold:g} m",
@@ -306,6 +307,24 @@ def miss_descriptor(threshold: float) -> Descriptor:
 
 #: the ADE / L2 descriptor of each convention (``lightemma evaluate --convention``)
 ADE_BY_CONVENTION: dict[str, str] = {"lightemma": "ade@lightemma/1", "stp3": "l2@stp3/1", "uniad": "l2@uniad/1"}
+#: the columns of a ``--samples K`` run (docs/definitions.md#k-samples), by row key; ``minade`` per ADE convention
+_K = f"{_DEFS}#k-samples"
+_BEST_OF_K = "best of K samples (Alpamayo-R1 minADE over sampled trajectories; WOD-E2E)"
+SAMPLE_METRICS: dict[str, Descriptor] = {
+    **{f"minade@{c}": _d(f"minade@{c}/1", f"minADE@K: per frame the lowest ADE avg ({c} convention) of its K samples",
+                         "metric", "m", _METERS, True, _BEST_OF_K, _K) for c in ("lightemma", "stp3", "uniad")},
+    "minfde": _d("minfde/1", "minFDE@K: per frame the lowest FDE of its K samples", "metric", "m", _METERS, True,
+                 _BEST_OF_K, _K),
+    "spread_m": _d("spread@final/1", "Mean pairwise distance of the K samples' final points", "metric", "m", _METERS,
+                   None, "lightemma", _K),
+    "samples": _d("samples/1", "Samples per frame (K)", "count", None, (1, None), None, "lightemma", _K),
+    "sampled_frames": _d("sampled_frames/1", "Scored frames with a usable sample beyond sample 0", "count", "frames",
+                         (0, None), None, "lightemma", _K),
+    "best": _d("best_sample/1", "Safety and planning keys of the best sample (by ADE avg)", "label", None, None, None,
+               "lightemma", _K),
+    "mean": _d("mean_sample/1", "Safety and planning keys of the mean of the K samples", "label", None, None, None,
+               "lightemma", _K),
+}
 #: the collision descriptor of each collision convention (a row's ``collision_convention``)
 COLLISION_BY_CONVENTION: dict[str, str] = {
     "uniad": "collision@uniad/1",
@@ -416,11 +435,46 @@ FIELDS: dict[str, Descriptor] = {
         "explanation_frames": _d(
             "explanation_frames/1", "Frames behind the explanation audit", "count", "frames", (0, None), None, "lightemma", _X
         ),
+        # the described objects (lightemma.evaluation.object_audit): shares of frames / of mentions
+        **{
+            key: _d(f"{key}@objects_lightemma/1", title, "rate", "share", _SHARE, lower,
+                    "lightemma (rules objects@lightemma/1; nuScenes annotations in view of CAM_FRONT)", _O)
+            for key, title, lower in (
+                ("hallucinated_pedestrian", "Share of frames whose description affirms a pedestrian none of the image's boxes is", True),
+                ("missed_pedestrian", "Share of frames with a pedestrian in view whose description does not affirm one", True),
+                ("mention_precision", "Share of affirmed class mentions whose class is in view", False),
+                ("mention_recall", "Share of frames with the class in view whose description affirms it", False),
+            )
+        },
+        **{f"{key}_na": _d("na/1", "Why the value is missing", "label", None, None, None, "lightemma", _O)
+           for key in ("hallucinated_pedestrian", "missed_pedestrian", "mention_precision", "mention_recall")},
+        **{f"{key}_ci95": _d("ci95@scene_bootstrap/1", "95 % scene-level bootstrap interval of the share", "interval", "share",
+                             _SHARE, None, "lightemma (cluster bootstrap over scenes)", _U)
+           for key in ("hallucinated_pedestrian", "missed_pedestrian", "mention_precision", "mention_recall")},
+        "object_frames": _d(
+            "object_frames/1", "Frames with a readable description and annotation states", "count", "frames", (0, None), None,
+            "lightemma", _O
+        ),
+        "mentions": _d("mentions@objects_lightemma/1", "Frames whose description affirms the class", "count", "frames", (0, None),
+                       None, "lightemma (rules objects@lightemma/1)", _O),
+        "in_view": _d("in_view@objects_lightemma/1", "Frames with the class in view of CAM_FRONT", "count", "frames", (0, None),
+                      None, "lightemma (nuScenes annotations)", _O),
+        "class": _d("class/1", "Object class", "label", None, None, None, "lightemma", _O),
         "planning_frames": _d(
             "planning_frames/1", "Frames behind the planning score", "count", "frames", (0, None), None, "lightemma", _P
         ),
         "planning_map": _d(
             "planning_map/1", "Map layers the planning score read", "label", None, None, None, "lightemma", _P
+        ),
+        "map_version": _d(
+            "map_version/1",
+            "Version(s) of the map expansion behind the row's off-road or planning values (None: a mask, or no value)",
+            "label",
+            None,
+            None,
+            None,
+            "nuScenes map expansion (its JSON's version field)",
+            _S,
         ),
         "collision_frames": _d(
             "collision_frames/1", "Frames with a collision value", "count", "frames", (0, None), None, "lightemma", _S
@@ -580,6 +634,16 @@ FIELDS: dict[str, Descriptor] = {
             "lightemma",
             _U,
         ),
+        "reliance_pct": _d(
+            "reliance@ade/1",
+            "Visual reliance: 100 · (ADE avg without the image − clean) / clean ADE avg, paired frames",
+            "metric",
+            "%",
+            (None, None),
+            None,
+            "lightemma",
+            f"{_DEFS}#robustness-sweeps",
+        ),
         "change": _d(
             "diff@paired/1", "Newer − older generation, ADE avg", "metric", "m", (None, None), None, "lightemma", _U
         ),
@@ -613,6 +677,11 @@ FIELDS: dict[str, Descriptor] = {
                 ("ablated", "The ablated run", _A),
                 ("baseline", "The best baseline on the common frames", _A),
                 ("not_applicable", "Columns that do not apply to the row", _E),
+                ("sweep", "The sweep folder of the row's runs", f"{_DEFS}#robustness-sweeps"),
+                ("variant", "The sweep variant of the row's run", f"{_DEFS}#robustness-sweeps"),
+                ("clean", "The sweep's clean run the variant is paired with", f"{_DEFS}#robustness-sweeps"),
+                ("corruption", "The image corruption of the variant (none: not a corruption)", f"{_DEFS}#robustness-sweeps"),
+                ("severity", "The corruption's severity, 1-5 (none: not a corruption)", f"{_DEFS}#robustness-sweeps"),
             )
         },
     }.items()
@@ -622,6 +691,8 @@ FIELDS: dict[str, Descriptor] = {
 _PAIRED_SUFFIXES: dict[str, str] = {
     "full": "value",
     "ablated": "value",
+    "clean": "value",
+    "variant": "value",
     "model": "value",
     "baseline": "value",
     "diff": "diff",
@@ -650,6 +721,10 @@ def describe(
         return METRICS[ADE_BY_CONVENTION[convention or "lightemma"]]
     if key == "fde":
         return METRICS["fde/1"]
+    if key == "minade":
+        return SAMPLE_METRICS[f"minade@{convention or 'lightemma'}"]
+    if key in SAMPLE_METRICS:
+        return SAMPLE_METRICS[key]
     if key == "miss_rate":
         return miss_descriptor(miss_threshold)
     if key == "fe_pct":
@@ -707,6 +782,25 @@ def describe(
     return None
 
 
+#: columns whose values depend on the map they were scored against: their descriptors carry ``map`` (:func:`map_block`)
+MAP_KEYS: frozenset[str] = frozenset(
+    (*_OFFROAD_KEYS, "offroad_centre", "offroad_ci95", *PLANNING_BY_KEY, *(f"{k}_ci95" for k in PLANNING_BY_KEY))
+)
+
+
+def map_block(rows: Sequence[Mapping[str, Any]]) -> dict[str, str | None]:
+    """The ``map`` of a map-dependent column's descriptor (:data:`MAP_KEYS`): ``drivable_area``, the kinds of drivable
+    area behind the table's values (the rows' ``area_source`` or ``planning_map``: ``expansion``, ``mask``, joined by
+    ``+``), and ``expansion_version``, the map expansion's version(s) (the rows' ``map_version``, joined by ``+``);
+    None where no row has one. Two evaluations whose maps differ have different descriptors: they are not merged."""
+
+    def joined(keys: tuple[str, ...]) -> str | None:
+        found = sorted({part for r in rows for k in keys if isinstance(r.get(k), str) for part in r[k].split("+")})
+        return "+".join(found) if found else None
+
+    return {"drivable_area": joined(("area_source", "planning_map")), "expansion_version": joined(("map_version",))}
+
+
 def _table_convention(name: str) -> str | None:
     for convention in ADE_BY_CONVENTION:
         if name.endswith(f"_{convention}"):
@@ -732,19 +826,25 @@ def column_descriptors(
     ccs = {r.get("collision_convention") for r in rows if r.get("collision_convention")}
     if len(ccs) > 1:
         raise UserError(
-            f"table {table_name}: rows under different collision conventions ({', '.join(sorted(ccs))}) in one table"
+            f"table {table_name}: rows under different collision conventions "
+            f"({', '.join(sorted(str(c) for c in ccs))}) in one table"
         )
     cc = next(iter(ccs), None)
+    maps = map_block(rows) if any(k in MAP_KEYS for k in keys) else None
     out: dict[str, dict[str, Any] | None] = {}
     for key in keys:
         d = describe(key, convention=conv, collision_convention=cc, miss_threshold=miss_threshold)
-        if table_name in ("input_ablations", "baseline_gains") and key.endswith("_ci95") and d is not None:
+        if table_name in ("input_ablations", "baseline_gains", "robustness", "visual_reliance") and key.endswith("_ci95") \
+                and d is not None:
             # these tables' intervals are of the paired difference (lightemma.evaluation.ablations): any sign
             base = describe(key[: -len("_ci95")], convention=conv, collision_convention=cc, miss_threshold=miss_threshold)
             if base is not None:
                 d = _d("ci95@scene_bootstrap/1", f"95 % scene-level bootstrap interval of the paired difference of {base.id}",
                        "interval", base.unit, (None, None), None, "lightemma (cluster bootstrap over scenes)", _U)
-        out[key] = d.to_dict() if d is not None else None
+        entry = d.to_dict() if d is not None else None
+        out[key] = entry
+        if entry is not None and key in MAP_KEYS and maps is not None:
+            entry["map"] = maps  # the map the values were scored against (docs/evaluate.md#what-each-number-is)
     return out
 
 
@@ -766,7 +866,7 @@ def provenance(
     software that made it and the map / annotation source of its safety columns, and with ``with_paper`` the paper's
     own definitions behind its rows. ``dataroot``/``version``: the ones given for every run (``--dataroot``), else each
     run's manifest's."""
-    from lightemma.evaluation.paper import PAPER_CONVENTION, PAPER_FRAMES
+    from lightemma.models.paper import PAPER_CONVENTION, PAPER_FRAMES
 
     frame_sets: dict[str, Any] = {}
     runs = []
@@ -776,10 +876,12 @@ def provenance(
         if fp is not None:
             frame_sets[fp["id"]] = fp
         manifest = model.manifest or {}
-        dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), dict) else {}
-        prompt = manifest.get("prompt_set") if isinstance(manifest.get("prompt_set"), dict) else {}
+        dataset_value = manifest.get("dataset")
+        dataset: dict[str, Any] = dataset_value if isinstance(dataset_value, dict) else {}
+        prompt_value = manifest.get("prompt_set")
+        prompt: dict[str, Any] = prompt_value if isinstance(prompt_value, dict) else {}
         rows = {c: model.safety.get(c, {}) for c in evaluation.conventions} if model.safety else {}
-        first = next(iter(rows.values()), {}) if rows else {}
+        first: Mapping[str, Any] = next(iter(rows.values()), {}) if rows else {}
         runs.append(
             {
                 "model": model.label,
@@ -802,6 +904,7 @@ def provenance(
                     "dataroot": str(dataroot) if dataroot else dataset.get("dataroot"),
                     "version": version if dataroot else dataset.get("version"),
                     "drivable_area": first.get("area_source"),
+                    "map_expansion_version": first.get("map_version"),
                     "offroad_na": first.get("offroad_na"),
                     "annotations": "sample_annotation.json" if first.get("collision_na") is None else None,
                     "collision_na": first.get("collision_na"),
@@ -812,6 +915,7 @@ def provenance(
                 if getattr(evaluation, "planning", None) is None
                 else {
                     "map": (getattr(model, "planning", None) or {}).get("planning_map"),
+                    "map_expansion_version": (getattr(model, "planning", None) or {}).get("map_version"),
                     "annotations": "sample_annotation.json"
                     if getattr(evaluation.planning, "headline", None) == "epdms"
                     else None,
@@ -875,7 +979,7 @@ def footer_lines(evaluation: Any) -> list[str]:
         "fe@paper/1",
     ]
     if getattr(evaluation, "safety", None) is not None:
-        from lightemma.evaluation.safety import COLLISION_FOR_ADE
+        from lightemma.definitions import COLLISION_FOR_ADE
 
         ids += sorted({COLLISION_BY_CONVENTION[COLLISION_FOR_ADE[c]] for c in evaluation.conventions})
         ids += ["offroad@footprint/1", "offroad@centre/1"]
@@ -886,8 +990,29 @@ def footer_lines(evaluation: Any) -> list[str]:
             for k in dict.fromkeys((getattr(planning, "headline", "epdms"), "pdms"))
             if k in PLANNING_BY_KEY
         ]
+    maps = map_line(evaluation)
+    if maps:
+        lines.append(maps)
     lines.append("Metrics: " + ", ".join(dict.fromkeys(ids)) + " (docs/evaluate.md#what-each-number-is)")
     return lines
+
+
+def map_line(evaluation: Any) -> str | None:
+    """One line saying which maps the off-road and planning values were scored against: ``Maps: drivable area
+    expansion, map expansion 1.3`` (``mask``: base map masks, which carry no version); None when neither was computed
+    or no run has a value."""
+    rows: list[Mapping[str, Any]] = []
+    for model in evaluation.models:
+        if getattr(evaluation, "safety", None) is not None:
+            rows += list((model.safety or {}).values())
+        if getattr(evaluation, "planning", None) is not None:
+            rows.append(getattr(model, "planning", None) or {})
+    block = map_block(rows)
+    if block["drivable_area"] is None:
+        return None
+    version = block["expansion_version"]
+    return (f"Maps: drivable area {block['drivable_area']}, "
+            + (f"map expansion {version}" if version else "no map expansion (base map masks carry no version)"))
 
 
 # ------------------------------------------------------------------------------------------------------- reading back
@@ -947,6 +1072,7 @@ def check_evaluation_json(doc: Any, path: str | Path = "<json>") -> dict[str, An
                 if not isinstance(described, dict)
                 else "rows are not a list of objects",
             )
+        assert isinstance(name, str)  # described is looked up by a str name only
         expected = column_descriptors(name, rows, miss_threshold=threshold)
         for key, want in expected.items():
             have = described.get(key)
@@ -968,7 +1094,9 @@ def check_evaluation_json(doc: Any, path: str | Path = "<json>") -> dict[str, An
         for r, row in enumerate(rows):
             diff = row.get("source") == "diff"
             for key, value in row.items():
-                d = describe_dict(expected[key])
+                described_key = expected[key]
+                assert described_key is not None  # a column without a descriptor was refused above
+                d = describe_dict(described_key)
                 _check_range(path, f"tables[{t}].rows[{r}].{key}", value, d, diff)
             if not diff:
                 _check_counts(path, f"tables[{t}].rows[{r}]", row)
@@ -983,7 +1111,7 @@ def describe_dict(d: Mapping[str, Any]) -> Descriptor:
         d["title"],
         d["kind"],
         d["unit"],
-        tuple(rng) if rng is not None else None,  # type: ignore[arg-type]
+        tuple(rng) if rng is not None else None,
         d["lower_is_better"],
         d["source"],
         d["anchor"],
@@ -999,7 +1127,7 @@ _NUMERIC_KINDS = ("metric", "rate", "count", "test")
 _ORDERED_COUNTS = (("scored", "frames_accounted"), ("frames_accounted", "frames_in_run"))
 
 
-def _is_number(v: Any) -> bool:
+def _is_number(v: Any) -> TypeGuard[int | float]:
     return isinstance(v, (int, float)) and not isinstance(v, bool)
 
 

@@ -15,6 +15,10 @@ each a rate in [0, 1] over the run's accounted frames (all its frames, or with `
 scene-bootstrap interval ``<key>_ci95`` and ``<key>_na`` (why there is no value, else None). A run without stage-2
 texts (a baseline) is n/a on every key, never 0.
 
+and from the stage-1 texts (:mod:`lightemma.evaluation.object_audit`, docs/definitions.md#described-objects) the shares
+``hallucinated_pedestrian`` / ``missed_pedestrian`` and the "Described objects" rows (per class mention precision and
+recall against the annotations in view of CAM_FRONT).
+
 Per ablation run (``no-image`` / ``blank-image``) paired with the full run of the same model and variant
 (:func:`lightemma.evaluation.ablations.comparison_key`): ``intent_changed``, the share of the frames both runs answered
 with a stage-2 text whose stated intent (longitudinal and lateral class, ``unknown`` included) differs.
@@ -29,15 +33,25 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.evaluation.ablations import comparison_key
+from lightemma.evaluation.object_audit import RANGE_M, audit_run, load_front, object_rows
+from lightemma.evaluation.safety import _resolve_dataset, sample_token_of
 from lightemma.evaluation.stats import Resampling, bootstrap_ci
+from lightemma.explanations import INTENT_RULES, OBJECT_RULES, Intents, Thresholds, intent_consistency, run_consistency
+from lightemma.nuscenes import load_frames
+from lightemma.runs.store import read_run
 
 #: the JSON / row keys of the audit (rates in [0, 1])
 KEYS: tuple[str, ...] = ("consistent", "contradicts", "intent_unknown", "intent_accuracy")
 #: every key an explanations row has
-ROW_KEYS: tuple[str, ...] = (*KEYS, *(f"{k}_ci95" for k in KEYS), *(f"{k}_na" for k in KEYS), "explanation_frames")
+ROW_KEYS: tuple[str, ...] = (*KEYS, *(f"{k}_ci95" for k in KEYS), *(f"{k}_na" for k in KEYS), "explanation_frames",
+                             # the described objects (lightemma.evaluation.object_audit.ROW_KEYS)
+                             *(f"{k}{s}" for k in ("hallucinated_pedestrian", "missed_pedestrian")
+                               for s in ("", "_ci95", "_na")), "object_frames")
 #: the ablations whose stated intents are compared with the full run's
 INTENT_ABLATIONS: tuple[str, ...] = ("no-image", "blank-image")
 NO_TEXTS = "no stage-2 texts (a baseline, or a run without them)"  # a baseline's placeholder texts are none
+NO_SCENE_TEXTS = "no stage-1 texts (a baseline)"
 #: a run's recorded ground truth further than this from the dataroot's is another dataset: n/a (m)
 GT_TOLERANCE_M = 1e-3
 
@@ -68,18 +82,27 @@ class ExplanationResult:
     ablations: list[dict[str, Any]] = field(default_factory=list)
     runs: dict[str, RunAudit] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
+    #: per label the described-objects audit (lightemma.evaluation.object_audit.RunObjects)
+    objects: dict[str, Any] = field(default_factory=dict)
+    #: the "Described objects" rows: model × class mention precision and recall
+    object_classes: list[dict[str, Any]] = field(default_factory=list)
 
     @property
     def shown(self) -> bool:
         """Whether some run has stage-2 texts (else the table would hold only n/a)."""
         return any(row.get("explanation_frames") and row.get("consistent_na") is None for row in self.rows.values())
 
+    @property
+    def objects_shown(self) -> bool:
+        """Whether some run has a frame with a readable stage-1 text and annotation states (else the "Described
+        objects" table would hold only n/a)."""
+        return any(bool(a.check.checked.any()) for a in self.objects.values())
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-able: the rules, the thresholds, each model's row (by label) and the ablation rows."""
-        from lightemma.explanations import INTENT_RULES, Thresholds
-
         return {"rules": INTENT_RULES, "thresholds": Thresholds().to_dict(), "rows": self.rows,
-                "ablations": self.ablations}
+                "ablations": self.ablations,
+                "objects": {"rules": OBJECT_RULES, "range_m": RANGE_M, "classes": self.object_classes}}
 
 
 def says_stop_drives_on(audit: RunAudit) -> np.ndarray:
@@ -96,8 +119,6 @@ def _interval(pair: np.ndarray) -> list[float] | None:
 
 
 def _audit(run: Any, keep: set[str]) -> RunAudit:
-    from lightemma.explanations import run_consistency
-
     rc = run_consistency(run.info.run_dir)
     rows = [i for i, fid in enumerate(rc.frame_ids) if fid in keep]
     idx = np.array(rows, dtype=np.intp)
@@ -113,10 +134,6 @@ def _truth(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[
            version: str | None) -> None:
     """Fill each audit's ``truth_verdict`` from its dataset's frames (loaded once per dataset), or its
     ``truth_reason``."""
-    from lightemma.evaluation.safety import _resolve_dataset
-    from lightemma.explanations import Intents, intent_consistency
-    from lightemma.frames.loader import load_frames
-
     wanted: dict[tuple[str, str], set[str]] = {}
     where: dict[str, tuple[str, str]] = {}
     for label, (run, audit) in audits.items():
@@ -186,8 +203,6 @@ def _rates(audit: RunAudit, label: str, resampling: Resampling) -> dict[str, Any
 
 def _ablations(entries: Sequence[tuple[str, Any, np.ndarray]], audits: dict[str, RunAudit],
                resampling: Resampling) -> list[dict[str, Any]]:
-    from lightemma.evaluation.ablations import comparison_key
-
     full: dict[tuple[Any, ...], list[str]] = {}
     for label, run, _ in entries:
         if run.info.inputs == "full":
@@ -226,6 +241,29 @@ def _ablations(entries: Sequence[tuple[str, Any, np.ndarray]], audits: dict[str,
     return rows
 
 
+def _objects(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[str] | None,
+             version: str | None) -> dict[str, Any]:
+    """Per label the described-objects audit (:func:`lightemma.evaluation.object_audit.audit_run`) of the audited
+    frames: stage-1 texts (``scene_text``) of the run's records against the annotations of its dataset (loaded
+    once per dataset), or n/a with the reason."""
+    where: dict[str, tuple[str, str] | str] = {}
+    wanted: dict[tuple[str, str], set[str]] = {}
+    for label, (run, audit) in audits.items():
+        ds = _resolve_dataset(run, dataroot, version)
+        where[label] = ds
+        if not isinstance(ds, str):
+            wanted.setdefault(ds, set()).update(sample_token_of(f) for f in audit.frame_ids)
+    loaded = {ds: load_front(ds[0], ds[1], samples) for ds, samples in wanted.items()}
+    out = {}
+    for label, (run, audit) in audits.items():
+        records = read_run(run.info.run_dir).records
+        texts = [r.get("scene_text") if isinstance(r.get("scene_text"), str) else None
+                 for r in (records.get(fid, {}) for fid in audit.frame_ids)]
+        ds = where[label]
+        out[label] = audit_run(audit.frame_ids, audit.scenes, texts, ds if isinstance(ds, str) else loaded[ds])
+    return out
+
+
 def evaluate_explanations(entries: Sequence[tuple[str, Any, np.ndarray]], resampling: Resampling, *,
                           dataroot: str | os.PathLike[str] | None = None, version: str | None = None,
                           only: set[str] | None = None) -> ExplanationResult:
@@ -244,8 +282,14 @@ def evaluate_explanations(entries: Sequence[tuple[str, Any, np.ndarray]], resamp
     texted = {label: pair for label, pair in audits.items() if pair[1].has_text.any()}
     _truth(texted, dataroot, version)
     rows = {label: _rates(audit, label, resampling) for label, (_, audit) in audits.items()}
+    objects = _objects(audits, dataroot, version)
+
+    baselines = {label: NO_SCENE_TEXTS for label, (run, _) in audits.items() if run.info.family == "Baseline"}
+    object_row, object_classes = object_rows(objects, resampling, baselines)
+    for label, row in rows.items():
+        row.update(object_row[label])
     result = ExplanationResult(rows, _ablations(entries, {k: a for k, (_, a) in audits.items()}, resampling),
-                               {k: a for k, (_, a) in audits.items()})
+                               {k: a for k, (_, a) in audits.items()}, objects=objects, object_classes=object_classes)
     for label, row in rows.items():
         reason = row.get("intent_accuracy_na")
         if reason and row.get("consistent_na") is None and not reason.startswith("no dataroot"):

@@ -10,13 +10,8 @@ texts are fetched later, only for the frames a figure needs
 
 from __future__ import annotations
 
-import itertools
-import math
 import os
-import tempfile
-import time
-import zipfile
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from contextlib import suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -24,18 +19,22 @@ from typing import Any
 
 import numpy as np
 
+from lightemma._text import printable
+from lightemma.definitions import OUTCOME_CODES, STATUS_CODES
 from lightemma.errors import RunStoreError
 from lightemma.evaluation.manifest import RunInfo, run_info
-from lightemma.evaluation.outcomes import FAILURE_CODES, Plausibility, failure_code, final_failure, implausible_actions, outcome_counts, plausibility_for
+from lightemma.evaluation.outcomes import (
+    Plausibility,
+    final_failure,
+    implausible_actions,
+    outcome_counts,
+    plausibility_for,
+)
 from lightemma.evaluation.rescore import ParseDefinition, recorded_parse, rescored
-from lightemma.runs.store import FRAMES_FILE, RunContents, iter_records, read_frame_ids
-from lightemma.runs.records import MAX_POSITION_M, answer_received, first_answer_status, gc_paused
-
-STATUS_CODES = {"ok": 0, "corrected": 1, "failed": 2}
-UNKNOWN_STATUS = -1
-API_ERROR_STATUS = -2  # first_status of a frame whose calls all failed at the provider: no answer, not a format error
-_NAN6x2 = [[math.nan, math.nan]] * 6
-_CHUNK = 2048
+from lightemma.kinematics import integrate
+from lightemma.runs.columns import RawColumns, key_unchanged, read_columns, read_sidecar, source_key, write_sidecar
+from lightemma.runs.records import MAX_POSITION_M
+from lightemma.runs.store import MANIFEST_FILE, find_run_dirs, iter_records, read_frame_ids, read_manifest
 
 
 @dataclass
@@ -55,7 +54,7 @@ class RunData:
     cached_input_tokens: np.ndarray | None = None  # (N,) float64 of input_tokens served from a prompt cache, NaN unknown
     history_actions: np.ndarray | None = None  # (N, 6, 2) with details=True
     actions: np.ndarray | None = None  # (N, 6, 2) predicted, with details=True
-    failure: np.ndarray | None = None  # (N,) int8 code of outcomes.FAILURES: why a frame is not scored (0: it is)
+    failure: np.ndarray | None = None  # (N,) int8 outcome code (definitions.OUTCOMES): why a frame is not scored (0: it is)
     scene_index: np.ndarray | None = None  # (N,) int32 into scene_names
     scene_names: list[str] = field(default_factory=list)
     caught_implausible: int = 0  # frames evaluation found implausible that the run had not marked
@@ -84,7 +83,7 @@ class RunData:
 
     def outcomes(self, rows: np.ndarray | None = None) -> dict[str, int]:
         """Frames (of ``rows``, default all) scored / failed / implausible / lost to API errors."""
-        failure = self.failure if self.failure is not None else np.where(self.status == STATUS_CODES["failed"], FAILURE_CODES["format"], 0)
+        failure = self.failure if self.failure is not None else np.where(self.status == STATUS_CODES["failed"], OUTCOME_CODES["format"], 0)
         valid = self.valid
         if rows is not None:
             failure, valid = failure[rows], valid[rows]
@@ -99,264 +98,11 @@ class RunData:
         return {fid: i for i, fid in enumerate(self.frame_ids)}
 
 
-_NUMERIC = (int, float)
-
-
-def _number(value: Any) -> float:
-    return value if type(value) in _NUMERIC else math.nan  # exact types: bool is not a number here
-
-
-def pairs_array(values: list[Any]) -> np.ndarray:
-    """(n, 6, 2) float64 from a list of 6×2 nested lists; an entry that is mis-shaped or not numeric becomes NaN.
-
-    When every entry has 6 pairs of 2 the numbers are streamed into one array at
-    once; otherwise (or when a value is not a number) entries are converted one by one.
-    """
-    chain = itertools.chain.from_iterable
-    try:
-        if set(map(len, values)) == {6} and set(map(len, chain(values))) == {2}:
-            return np.fromiter(chain(chain(values)), dtype=np.float64, count=12 * len(values)).reshape(-1, 6, 2)
-    except (TypeError, ValueError):
-        pass
-    out = np.full((len(values), 6, 2), np.nan)
-    for i, value in enumerate(values):
-        try:
-            array = np.array(value, dtype=np.float64)
-        except (ValueError, TypeError):
-            continue
-        if array.shape == (6, 2):
-            out[i] = array
-    return out
-
-
-class _Columns:
-    """Accumulates per-record values in lists and flushes them to NumPy chunks of :data:`_CHUNK` rows.
-
-    Every well-formed record becomes a row (the frame set, ground truth and
-    duplicates are judged later, in :func:`_assemble`), so that the columns depend
-    on ``frames.jsonl`` alone and can be kept in the sidecar.
-    """
-
-    PAIRS = ("trajectory", "actions", "gt", "history")
-    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "cached", "failure", "scene", "traj_none", "gt_ok")
-    DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "traj_none": bool, "gt_ok": bool}
-
-    def __init__(self) -> None:
-        self.pending: dict[str, list[Any]] = {n: [] for n in self.NAMES}
-        self.chunks: dict[str, list[np.ndarray]] = {n: [] for n in self.NAMES}
-        self.frame_ids: list[str] = []
-        self.scenes: dict[str, int] = {}
-
-    def add(self, record: Mapping[str, Any]) -> None:
-        p = self.pending
-        fid = record["frame_id"]
-        self.frame_ids.append(fid)
-        gt = record.get("gt_positions")
-        gt_ok = type(gt) is list and len(gt) == 6  # deeper damage (a bad pair) shows as NaN ground truth
-        p["gt_ok"].append(gt_ok)
-        p["gt"].append(gt if gt_ok else _NAN6x2)
-        trajectory = record.get("trajectory")
-        p["traj_none"].append(trajectory is None)
-        p["trajectory"].append(_NAN6x2 if trajectory is None else trajectory)
-        actions = record.get("actions")
-        p["actions"].append(_NAN6x2 if actions is None else actions)
-        history = record.get("history_actions")
-        p["history"].append(_NAN6x2 if history is None else history)
-        scene = record.get("scene_name")
-        if not isinstance(scene, str) or not scene:
-            scene = fid.rpartition("/")[0] or fid
-        p["scene"].append(self.scenes.setdefault(scene, len(self.scenes)))
-        failure = record.get("failure")
-        if failure is None and record.get("status") == "failed" and not answer_received(record):
-            failure = "api_error"  # a record older than `failure`: failed without ever receiving an answer
-        p["failure"].append(failure_code(failure))
-        p["status"].append(STATUS_CODES.get(record.get("status"), UNKNOWN_STATUS))
-        p["first"].append(STATUS_CODES.get(first_answer_status(record), UNKNOWN_STATUS) if answer_received(record)
-                          else API_ERROR_STATUS)
-        p["seconds"].append(_number(record.get("seconds")))
-        p["inp"].append(_number(record.get("input_tokens")))
-        p["out"].append(_number(record.get("output_tokens")))
-        p["cost"].append(_number(record.get("cost_cents")))
-        p["cached"].append(_number(record.get("cached_input_tokens")))
-        if len(p["status"]) >= _CHUNK:
-            self.flush()
-
-    def flush(self) -> None:
-        for name, values in self.pending.items():
-            if values:
-                if name in self.PAIRS:
-                    chunk = pairs_array(values)
-                    if name == "gt":  # beyond 100 km is no position (1e308 overflows every distance): no usable ground truth
-                        with np.errstate(invalid="ignore"):
-                            far = (np.abs(chunk) > MAX_POSITION_M).any(axis=(1, 2))
-                        if far.any():
-                            chunk[far] = np.nan
-                else:
-                    chunk = np.asarray(values, dtype=self.DTYPES.get(name, np.float64))
-                self.chunks[name].append(chunk)
-                values.clear()
-
-    def finish(self, corrupt_lines: int = 0, truncated_tail: bool = False, corrupt_example: str | None = None) -> RawColumns:
-        self.flush()
-        columns = {}
-        for name in self.NAMES:
-            parts = self.chunks.pop(name)
-            shape = (6, 2) if name in self.PAIRS else ()
-            dtype = self.DTYPES.get(name, np.float64)
-            columns[name] = np.concatenate(parts) if parts else np.empty((0, *shape), dtype=dtype)
-        return RawColumns(self.frame_ids, columns, list(self.scenes), corrupt_lines, truncated_tail, corrupt_example)
-
-
-@dataclass
-class RawColumns:
-    """Every well-formed record of ``frames.jsonl`` as columns, in file order: what the sidecar holds."""
-
-    frame_ids: list[str]
-    columns: dict[str, np.ndarray]  # the names of _Columns.NAMES, one row per record
-    scene_names: list[str]  # scene code -> name, in first-seen order over all rows
-    corrupt_lines: int = 0
-    truncated_tail: bool = False
-    corrupt_example: str | None = None  # why the first corrupt line was skipped (records.record_problem)
-
-
-RecordColumns = _Columns  # for writers that hold their records: add() each, finish(), then write_sidecar()
-
-
-# ---------------------------------------------------------------- the columnar sidecar
-
-SIDECAR_FILE = "frames.columns.npz"
-SIDECAR_FORMAT = 2  # bump when RawColumns or the reading of a record changes: older sidecars are rebuilt
-_TAIL_BYTES = 1 << 16
-
-
-def source_key(run_dir: str | os.PathLike[str]) -> np.ndarray | None:
-    """What identifies the current ``frames.jsonl``: format, size, mtime (ns), inode and a digest of its last 64 KiB.
-
-    None when the file cannot be read. A sidecar whose key differs is stale.
-    """
-    import hashlib
-
-    path = Path(run_dir) / FRAMES_FILE
-    try:
-        with open(path, "rb") as fh:
-            st = os.fstat(fh.fileno())
-            fh.seek(max(0, st.st_size - _TAIL_BYTES))
-            tail = hashlib.sha256(fh.read(_TAIL_BYTES)).digest()
-    except OSError:
-        return None
-    head = np.array([SIDECAR_FORMAT, st.st_size, st.st_mtime_ns, st.st_ino], dtype=np.int64).view(np.uint8)
-    return np.concatenate([head, np.frombuffer(tail, dtype=np.uint8)])
-
-
-def _join_names(names: list[str]) -> np.ndarray | None:
-    if any("\n" in name for name in names):
-        return None  # never met in practice; such a run is simply read from frames.jsonl each time
-    return np.frombuffer("\n".join(names).encode("utf-8", "surrogatepass"), dtype=np.uint8)
-
-
-def _split_names(blob: np.ndarray, n: int) -> list[str]:
-    names = blob.tobytes().decode("utf-8", "surrogatepass").split("\n") if n else []
-    if len(names) != n:
-        raise ValueError("names do not match the rows")
-    return names
-
-
-def write_sidecar(run_dir: str | os.PathLike[str], raw: RawColumns, key: np.ndarray | None) -> bool:
-    """Write ``raw`` as ``run_dir``/:data:`SIDECAR_FILE` (temporary file + rename); False when it cannot be written.
-
-    ``key`` is :func:`source_key` of the ``frames.jsonl`` that ``raw`` was read from. A
-    run folder that cannot be written to (read-only, full) just has no sidecar.
-    """
-    ids, scenes = _join_names(raw.frame_ids), _join_names(raw.scene_names)
-    if key is None or ids is None or scenes is None:
-        return False
-    run_dir = Path(run_dir)
-    _remove_stale_temporaries(run_dir)
-    arrays = {f"col_{name}": value for name, value in raw.columns.items()}
-    counts = np.array([len(raw.frame_ids), len(raw.scene_names), raw.corrupt_lines, int(raw.truncated_tail)], dtype=np.int64)
-    example = np.frombuffer((raw.corrupt_example or "").encode("utf-8", "surrogatepass"), dtype=np.uint8)
-    fd, tmp = tempfile.mkstemp(prefix=f".{SIDECAR_FILE}.", suffix=".tmp", dir=run_dir) if run_dir.is_dir() else (None, None)
-    if fd is None:
-        return False
-    try:
-        with os.fdopen(fd, "wb") as fh:
-            np.savez(fh, key=key, counts=counts, frame_ids=ids, scene_names=scenes, corrupt_example=example, **arrays)
-        os.replace(tmp, run_dir / SIDECAR_FILE)
-        return True
-    except OSError:
-        with suppress(OSError):
-            os.unlink(tmp)
-        return False
-
-
-_STALE_TEMPORARY_SECONDS = 600.0
-
-
-def _remove_stale_temporaries(run_dir: Path) -> None:
-    """Remove sidecar temporaries that a killed writer left (older than 10 minutes: not another writer's, still in use)."""
-    now = time.time()
-    for leftover in run_dir.glob(f".{SIDECAR_FILE}.*.tmp"):
-        with suppress(OSError):
-            if now - leftover.lstat().st_mtime > _STALE_TEMPORARY_SECONDS:
-                leftover.unlink()
-
-
-def read_sidecar(run_dir: str | os.PathLike[str], key: np.ndarray | None) -> RawColumns | None:
-    """The sidecar's columns when it exists and was made from the ``frames.jsonl`` that ``key`` identifies, else None.
-
-    Anything unexpected in it (another format, wrong shapes, a damaged file) makes it stale, never an error.
-    """
-    path = Path(run_dir) / SIDECAR_FILE
-    if key is None or not path.is_file():
-        return None
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            if not np.array_equal(z["key"], key):
-                return None
-            n, n_scenes, corrupt, truncated = (int(v) for v in z["counts"])
-            columns = {}
-            for name in _Columns.NAMES:
-                value = z[f"col_{name}"]
-                shape = (n, 6, 2) if name in _Columns.PAIRS else (n,)
-                if value.shape != shape or value.dtype != np.dtype(_Columns.DTYPES.get(name, np.float64)):
-                    return None
-                columns[name] = value
-            example = z["corrupt_example"].tobytes().decode("utf-8", "surrogatepass") or None
-            raw = RawColumns(_split_names(z["frame_ids"], n), columns, _split_names(z["scene_names"], n_scenes), corrupt, bool(truncated),
-                             example)
-        if n and (columns["scene"].min() < 0 or columns["scene"].max() >= n_scenes):
-            return None
-        return raw
-    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, UnicodeDecodeError):
-        return None
-
-
-def refresh_sidecar(run_dir: str | os.PathLike[str]) -> bool:
-    """Write the sidecar of ``run_dir`` from its ``frames.jsonl`` unless a current one exists (end of a session)."""
-    key = source_key(run_dir)
-    if key is None or read_sidecar(run_dir, key) is not None:
-        return False
-    raw = _read_records(Path(run_dir), None)
-    return key_unchanged(run_dir, key) and write_sidecar(run_dir, raw, key)
-
-
-def key_unchanged(run_dir: str | os.PathLike[str], key: np.ndarray) -> bool:
-    now = source_key(run_dir)
-    return now is not None and np.array_equal(now, key)
 
 
 def _read_records(run_dir: Path, parse: ParseDefinition | None) -> RawColumns:
-    """Stream ``frames.jsonl`` into :class:`RawColumns` (re-parsed under ``parse`` when given)."""
-    counts = RunContents(run_dir=run_dir, manifest={}, records={})
-    columns = _Columns()
-    try:
-        with gc_paused():  # decoded records hold no cycles; collecting while streaming only costs time
-            records = iter_records(run_dir, counts=counts)
-            for record in records if parse is None else rescored(records, parse):
-                columns.add(record)
-    except OSError as exc:
-        raise RunStoreError(f"{run_dir}: cannot read frames: {exc}") from None
-    return columns.finish(len(counts.corrupt_lines), counts.truncated_tail, counts.corrupt_example)
+    """Stream ``frames.jsonl`` into :class:`~lightemma.runs.columns.RawColumns` (re-parsed under ``parse`` when given)."""
+    return read_columns(run_dir, None if parse is None else (lambda records: rescored(records, parse)))
 
 
 def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None,
@@ -456,6 +202,7 @@ def _assemble(info: RunInfo, raw: RawColumns, *, details: bool, definition: Pars
     trajectory = col("trajectory")
     all_actions = col("actions")
     gate = implausible_actions(all_actions, limits)
+    actions: np.ndarray | None
     if details:
         actions = all_actions
     else:
@@ -481,7 +228,7 @@ def _assemble(info: RunInfo, raw: RawColumns, *, details: bool, definition: Pars
         cost_cents=take(col("cost")),
         cached_input_tokens=take(col("cached")),
         history_actions=take(col("history")) if details else None,
-        actions=take(actions) if details else None,
+        actions=take(all_actions) if details else None,  # actions is all_actions with details
         corrupt_lines=raw.corrupt_lines,
         corrupt_example=raw.corrupt_example,
         truncated_tail=raw.truncated_tail,
@@ -538,8 +285,6 @@ def _fill_from_actions(trajectory: np.ndarray, actions: np.ndarray, method: str)
     """Integrate actions (through the Rust core) for records that carry actions but no trajectory."""
     missing = ~np.isfinite(trajectory).all(axis=(1, 2)) & np.isfinite(actions).all(axis=(1, 2))
     if missing.any():
-        from lightemma import integrate
-
         trajectory = trajectory.copy()
         trajectory[missing] = integrate(np.ascontiguousarray(actions[missing]), method=method)
     return trajectory
@@ -563,17 +308,15 @@ def discover_runs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], 
     can lead anywhere, or in a circle; give the run by its own path to include it). A run directory named itself
     whose manifest cannot be read raises :class:`RunStoreError`, as does a path holding no run.
     """
-    from lightemma._text import printable
     from lightemma.evaluation.core import expand_run_dirs
-    from lightemma.runs.store import MANIFEST_FILE, find_run_dirs, read_manifest
 
     given = [Path(p) for p in paths]
     warnings: list[str] = []
     for path in given:
         if not path.is_dir() or (path / MANIFEST_FILE).is_file():
             continue
-        for root, dirs, _files in os.walk(path):
-            for name in sorted(dirs):
+        for root, subdirs, _files in os.walk(path):
+            for name in sorted(subdirs):
                 link = Path(root) / name
                 if link.is_symlink() and not name.startswith("."):
                     with suppress(OSError, RunStoreError):

@@ -4,7 +4,7 @@ Manifests written by the run pipeline carry ``display_name``, ``model_info``
 (family, generation, GPUs), ``backend``, ``config`` (integrate method,
 concurrency), ``sessions`` (wall time of each run/resume) and ``dataset``;
 older or foreign manifests may lack any of them. The display name and family
-fall back to the paper's models (:mod:`lightemma.evaluation.models`) or the
+fall back to the paper's models (:mod:`lightemma.models.names`) or the
 model string.
 """
 
@@ -17,7 +17,7 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from lightemma.evaluation.models import FAMILIES, infer_family, known_model
+from lightemma.models.names import FAMILIES, infer_family, known_model
 from lightemma.frames.model import SYNTH_MARKER
 from lightemma.runs.store import read_manifest
 
@@ -87,8 +87,9 @@ def _wall_seconds(manifest: Mapping[str, Any]) -> float | None:
     if isinstance(sessions, list):
         walls = [s.get("wall_seconds") for s in sessions if isinstance(s, Mapping)]
         if walls:
-            if all(isinstance(w, (int, float)) and not isinstance(w, bool) for w in walls) and sum(walls) > 0:
-                return float(sum(walls))
+            numbers = [w for w in walls if isinstance(w, (int, float)) and not isinstance(w, bool)]
+            if len(numbers) == len(walls) and sum(numbers) > 0:
+                return float(sum(numbers))
             return None
     for value in (manifest.get("wall_seconds"), _get(manifest, "summary", "wall_seconds")):
         if isinstance(value, (int, float)) and not isinstance(value, bool) and value > 0:
@@ -146,7 +147,8 @@ def dataset_kind(manifest: Mapping[str, Any]) -> str | None:
     ``nuscenes``; runs of synthetic records (``backend.kind == "synthetic"``)
     are ``synthetic``.
     """
-    dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), Mapping) else {}
+    dataset_value = manifest.get("dataset")
+    dataset: Mapping[str, Any] = dataset_value if isinstance(dataset_value, Mapping) else {}
     kind = dataset.get("kind")
     if isinstance(kind, str) and kind:
         return kind

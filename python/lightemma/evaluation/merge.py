@@ -10,8 +10,8 @@ of re-reading every run. Documents are merged only where nothing differs that wo
   (its scores are on the frames common to its own runs, a subset that differs from file to file);
 * the same tables, in the same order, with the same columns and the same descriptor (id, version, unit, range …) for
   each column; the same miss threshold, parse definition, ``--keep-implausible`` and resampling;
-* only per-run tables (efficiency, accuracy, safety, planning, explanations): paired comparisons, generations and
-  ablations compare runs within one file, and the paper's rows (``--with-paper``) are not runs;
+* only per-run tables (efficiency, accuracy, safety, planning, explanations, described objects): paired comparisons,
+  generations and ablations compare runs within one file, and the paper's rows (``--with-paper``) are not runs;
 * no model label in two files; the reference rows (the ground truth's) are equal in every file.
 
 Anything else raises :class:`~lightemma.errors.UserError` in one line naming both files and the field; the merged
@@ -26,9 +26,10 @@ from pathlib import Path
 from typing import Any
 
 from lightemma.errors import UserError
+from lightemma.evaluation.descriptors import _software, check_evaluation_json, read_evaluation_json
 
 #: tables whose rows are one per run (plus the ground truth's reference rows): the only ones that can be merged
-_PER_RUN = re.compile(r"^(efficiency|accuracy_[a-z0-9]+|safety_[a-z0-9]+|planning|explanations)$")
+_PER_RUN = re.compile(r"^(efficiency|accuracy_[a-z0-9]+|safety_[a-z0-9]+|planning|explanations|described_objects)$")
 #: top-level keys that must be equal in every merged document
 _SAME = ("parse", "keep_implausible", "resampling")
 
@@ -48,10 +49,11 @@ def _frame_set(path: Path, doc: dict[str, Any]) -> str:
         raise _fail(
             path, None, "provenance.runs[].frame_set", "a run without a frame set recorded in provenance.frame_sets"
         )
-    if len(used) != 1:
+    names = {u for u in used if u is not None}  # all of used: None was ruled out above
+    if len(names) != 1:
         raise _fail(
             path, None, "provenance.frame_sets",
-            f"its runs cover {len(used)} frame sets ({', '.join(sorted(used))}); "
+            f"its runs cover {len(names)} frame sets ({', '.join(sorted(names))}); "
             "only evaluations of one frame set merge",
         )
     if doc.get("common"):
@@ -59,7 +61,7 @@ def _frame_set(path: Path, doc: dict[str, Any]) -> str:
             path, None, "common",
             "scored with --common (on the frames common to its own runs); evaluate without --common to merge",
         )
-    return next(iter(used))
+    return next(iter(names))
 
 
 def _check_tables(path: Path, doc: dict[str, Any]) -> None:
@@ -82,8 +84,6 @@ def merge_documents(paths: Sequence[str | Path]) -> dict[str, Any]:
     file, ``merged_from`` naming each file with its software and models, warnings prefixed with their file. Raises
     :class:`~lightemma.errors.UserError` (one line, both files and the field) on any mismatch listed in the module's
     docstring; nothing is returned half-merged."""
-    from lightemma.evaluation.descriptors import _software, check_evaluation_json, read_evaluation_json
-
     if len(paths) < 2:
         raise UserError("--merge: give two or more JSON files written by lightemma evaluate --format json")
     docs = [(Path(p), read_evaluation_json(p)) for p in paths]
@@ -169,45 +169,3 @@ def merge_documents(paths: Sequence[str | Path]) -> dict[str, Any]:
         "tables": tables,
     }
     return check_evaluation_json(merged, "merged document")
-
-
-def merged_markdown(doc: dict[str, Any]) -> str:
-    """A merged document as Markdown: one table per merged table, a column per row key (its descriptor id under the
-    table), values as stored (floats to 3 decimals, intervals as ``[low, high]``), then which run used which prompt set
-    where they differ, then the files it came from."""
-    from lightemma.report.tables import markdown_cell, markdown_text
-
-    def cell(value: Any) -> str:
-        if value is None:
-            return "-"
-        if isinstance(value, float):
-            return f"{value:.3f}"
-        if isinstance(value, list):
-            return "[" + ", ".join(cell(v) for v in value) + "]"
-        return str(value)
-
-    out = []
-    for table in doc["tables"]:
-        keys: list[str] = []
-        for row in table["rows"]:
-            keys.extend(k for k in row if k not in keys)
-        lines = [f"### {markdown_text(table['title'])}", "", "| " + " | ".join(markdown_cell(k) for k in keys) + " |",
-                 "|" + "|".join(["---"] + ["---:"] * (len(keys) - 1)) + "|"]
-        lines += ["| " + " | ".join(markdown_cell(cell(row.get(k))) for k in keys) + " |" for row in table["rows"]]
-        ids = [f"{k}: {d['id']}" for k, d in doc["columns"][table["name"]].items() if isinstance(d, dict)]
-        lines += ["", markdown_text("Columns: " + "; ".join(ids))]
-        lines += [markdown_text(n) for n in table.get("notes", [])]
-        out.append("\n".join(lines) + "\n")
-    prompts: dict[str, list[str]] = {}
-    for run in doc["provenance"]["runs"]:
-        prompt = run.get("prompt_set") or {}
-        key = f"{prompt.get('name')} ({str(prompt.get('hash'))[:19]})" if prompt else "unrecorded"
-        prompts.setdefault(key, []).append(str(run.get("model")))
-    if len(prompts) > 1:  # marked, as lightemma evaluate marks them
-        which = "; ".join(f"{k}: {', '.join(v)}" for k, v in prompts.items())
-        out.append(markdown_text(f"Runs differ in prompt sets: {which} (not one protocol).") + "\n")
-    fs = next(iter(doc["provenance"]["frame_sets"]))
-    sources = "; ".join(f"{m['file']} (lightemma {m['lightemma_version']}: {', '.join(map(str, m['models']))})"
-                        for m in doc["merged_from"])
-    out.append(markdown_text(f"Merged on frame set {fs} from {sources}") + "\n")
-    return "\n".join(out)

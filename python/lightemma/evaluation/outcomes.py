@@ -22,20 +22,12 @@ from the start than the fastest allowed speed could carry it
 from __future__ import annotations
 
 import math
-
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-# failure codes in RunData.failure; 0 = not failed (new kinds go at the end: the codes stay stable)
-FAILURES: tuple[str, ...] = ("", "format", "truncated", "implausible", "api_error", "ambiguous")
-# the kinds counted as "failed" (the answer could not be read), apart from implausible and API errors
-UNREADABLE: tuple[str, ...] = ("format", "truncated", "ambiguous")
-FAILURE_CODES: dict[str, int] = {name: code for code, name in enumerate(FAILURES)}
-NOT_RECORDED = -1  # the record has no failure field (older runs)
-DT = 0.5  # seconds per step (docs/definitions.md#integration: actions at 0.5 s spacing)
+from lightemma.definitions import OUTCOME_CODES, STEP_SECONDS, UNREADABLE
 
 
 @dataclass(frozen=True)
@@ -73,13 +65,6 @@ def plausibility_for(definition: Any, *, keep_implausible: bool = False) -> Plau
     )
 
 
-def failure_code(value: Any) -> int:
-    """Code of a record's ``failure`` field: -1 when absent, 1 (format) for an unknown non-empty reason."""
-    if value is None:
-        return NOT_RECORDED
-    return FAILURE_CODES.get(value, FAILURE_CODES["format"]) if value else 0
-
-
 def implausible_actions(actions: np.ndarray, limits: Plausibility) -> np.ndarray:
     """(N,) True where finite (N, 6, 2) actions leave the limits (NaN actions are not judged)."""
     speed, curvature = actions[..., 0], actions[..., 1]
@@ -91,14 +76,14 @@ def implausible_actions(actions: np.ndarray, limits: Plausibility) -> np.ndarray
 def implausible_trajectory(trajectory: np.ndarray, limits: Plausibility) -> np.ndarray:
     """(N,) True where a finite (N, T, 2) trajectory goes further than the fastest allowed speed reaches."""
     steps = np.arange(1, trajectory.shape[1] + 1)
-    reach = limits.reach_speed * DT * steps * (1.0 + 1e-9) + 1e-6
+    reach = limits.reach_speed * STEP_SECONDS * steps * (1.0 + 1e-9) + 1e-6
     with np.errstate(invalid="ignore", over="ignore"):
         # hypot: a huge finite position (1e200 m) has a finite distance, and no overflow warning
         return (np.hypot(trajectory[..., 0], trajectory[..., 1]) > reach).any(axis=1)
 
 
 def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarray, actions_gate: np.ndarray, limits: Plausibility) -> tuple[np.ndarray, np.ndarray]:
-    """Per frame, why it is not scored (a code of :data:`FAILURES`; 0 = scored if ground truth is usable).
+    """Per frame, why it is not scored (an outcome code, :data:`lightemma.definitions.OUTCOMES`; 0 = scored if ground truth is usable).
 
     ``recorded`` holds the records' own codes (-1 when absent), ``failed`` whether
     the final status is ``failed``, ``actions_gate`` the frames whose actions
@@ -107,12 +92,12 @@ def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarr
     """
     codes = np.where(recorded > 0, recorded, 0).astype(np.int8)
     unmarked = recorded <= 0
-    codes[unmarked & failed] = FAILURE_CODES["format"]
+    codes[unmarked & failed] = OUTCOME_CODES["format"]
     open_ = unmarked & ~failed
     finite = np.isfinite(trajectory).all(axis=(1, 2))
     caught = open_ & (actions_gate | (finite & implausible_trajectory(np.where(finite[:, None, None], trajectory, 0.0), limits)))
-    codes[caught] = FAILURE_CODES["implausible"]
-    codes[open_ & ~caught & ~finite] = FAILURE_CODES["format"]  # "ok" yet no usable trajectory
+    codes[caught] = OUTCOME_CODES["implausible"]
+    codes[open_ & ~caught & ~finite] = OUTCOME_CODES["format"]  # "ok" yet no usable trajectory
     return codes, caught
 
 
@@ -120,7 +105,7 @@ def outcome_counts(failure: np.ndarray, valid: np.ndarray) -> dict[str, int]:
     """Frames scored / failed (format, truncated or ambiguous) / implausible / lost to API errors."""
     return {
         "scored": int(valid.sum()),
-        "failed": int(np.isin(failure, [FAILURE_CODES[k] for k in UNREADABLE]).sum()),
-        "implausible": int((failure == FAILURE_CODES["implausible"]).sum()),
-        "api_errors": int((failure == FAILURE_CODES["api_error"]).sum()),
+        "failed": int(np.isin(failure, [OUTCOME_CODES[k] for k in UNREADABLE]).sum()),
+        "implausible": int((failure == OUTCOME_CODES["implausible"]).sum()),
+        "api_errors": int((failure == OUTCOME_CODES["api_error"]).sum()),
     }

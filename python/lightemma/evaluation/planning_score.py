@@ -5,7 +5,8 @@ them once per batch for every run together:
 
 * from the dataroot (read by :func:`lightemma.evaluation.safety.load_safety_data`, no second reader): each keyframe's
   CAM_FRONT ego pose, the poses of its four earlier and six later keyframes, the annotated agents of the present and
-  the six later keyframes (tracked by instance), and the map layers (:func:`lightemma.planning.scores.read_planning_map`
+  the six later keyframes (tracked by instance; static objects — barriers, cones, … — among them as NAVSIM's
+  ``StaticObject``: :func:`lightemma.evaluation.safety.static_object`), and the map layers (:func:`lightemma.planning.scores.read_planning_map`
   for a map expansion, the base map mask otherwise);
 * per frame: the initial ego state and the recorded past (:func:`~lightemma.planning.simulation.initial_state`,
   :func:`~lightemma.planning.simulation.history_states`) from the earlier keyframes' poses and timestamps; the
@@ -37,7 +38,7 @@ KEYS: tuple[str, ...] = ("pdms", "epdms", "epdms_map", "nc", "dac", "ddc", "tlc"
 AGGREGATE_KEYS: tuple[str, ...] = ("pdms", "epdms", "epdms_map")
 #: every key a planning row has: ``<key>``, ``<key>_ci95``, ``<key>_na`` per key, and the frame counts
 ROW_KEYS: tuple[str, ...] = (*KEYS, *(f"{k}_ci95" for k in KEYS), *(f"{k}_na" for k in KEYS), "planning_frames",
-                             "planning_map")
+                             "planning_map", "map_version")
 GT_LABEL = "Ground truth (human)"
 #: earlier keyframes read per frame: 2 for the initial state, 4 for the 1.5 s of recorded past of history comfort
 HISTORY_KEYFRAMES = 4
@@ -69,6 +70,8 @@ class RunPlanning:
     states: np.ndarray | None = None
     reason: str | None = None
     map_kinds: list[str] = field(default_factory=list)  # drivable area behind the values: expansion, mask
+    #: map key (``expansion:<location>``) -> the map expansion's version behind the values (safety.DrivableArea.version)
+    map_versions: dict[str, str] = field(default_factory=dict)
     path: np.ndarray | None = None  # (n, 31, 2) the simulated plans' x, y in their keyframes' ego frames (m), NaN where none
 
 
@@ -123,7 +126,7 @@ class _Frames:
 def _can(data: Any, tokens: list[str], scenes: list[str]) -> tuple[np.ndarray | None, dict[int, str]]:
     """CAN bus readings (F, 4) of the frames (NaN rows where none; ``None`` without the dataroot's ``can_bus`` folder)
     and per frame why its scene's file cannot be read (those frames get no initial state: never a silent fall-back)."""
-    from lightemma.frames.can_bus import can_bus_folder, can_readings
+    from lightemma.nuscenes.can_bus import can_bus_folder, can_readings
 
     if can_bus_folder(data.dataroot) is None:
         return None, {}
@@ -146,7 +149,7 @@ def _can(data: Any, tokens: list[str], scenes: list[str]) -> tuple[np.ndarray | 
 
 
 def _frames(data: Any, tokens: list[str], scenes: list[str]) -> _Frames:
-    from lightemma.frames.geometry import to_ego_frame
+    from lightemma.nuscenes.geometry import to_ego_frame
     from lightemma.planning.simulation import history_states, initial_state
 
     f = len(tokens)
@@ -226,15 +229,26 @@ def _to_global(states: np.ndarray, pose: np.ndarray) -> np.ndarray:
 
 
 def _instance_codes(data: Any, sample: str, cache: dict[str, np.ndarray], ids: dict[str, int]) -> np.ndarray:
-    """(K,) int64 code of each box's instance in ``data.boxes[sample]`` (one code per instance token of the dataset)."""
+    """(K,) int64 code of each box's instance in :func:`_keyframe_boxes` (one code per instance token of the
+    dataset)."""
     codes = cache.get(sample)
     if codes is None:
-        codes = np.array([ids.setdefault(inst, len(ids)) for inst in data.box_instances.get(sample, [])], dtype=np.int64)
+        insts = [*data.box_instances.get(sample, []), *getattr(data, "object_instances", {}).get(sample, [])]
+        codes = np.array([ids.setdefault(inst, len(ids)) for inst in insts], dtype=np.int64)
         cache[sample] = codes
     return codes
 
 
 _NO_BOXES = np.zeros((0, 5))
+
+
+def _keyframe_boxes(data: Any, sample: str) -> tuple[np.ndarray, np.ndarray]:
+    """A keyframe's boxes (K, 5): its agents (vehicles, pedestrians, cyclists: kind 0), then its static objects
+    (``data.objects``: barriers, cones, …: kind 1, NAVSIM's ``StaticObject``), and their kinds (K,)."""
+    agents = data.boxes.get(sample, _NO_BOXES)
+    objects = getattr(data, "objects", {}).get(sample, _NO_BOXES)
+    kinds = np.concatenate([np.zeros(len(agents)), np.ones(len(objects))])
+    return (np.concatenate([agents, objects]) if len(objects) else agents), kinds
 
 
 def _agents(data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.ndarray],
@@ -248,7 +262,9 @@ def _agents(data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.n
     for r, i in enumerate(idx.tolist()):
         tok = tokens[i]
         keys = [tok, *data.future.get(tok, [])[:STEPS]]
-        refused = next((data.bad_boxes[k] for k in keys if k in data.bad_boxes), None)
+        bad_objects = getattr(data, "bad_objects", {})
+        refused = next((data.bad_boxes[k] if k in data.bad_boxes else bad_objects[k] for k in keys
+                        if k in data.bad_boxes or k in bad_objects), None)
         if refused is not None:
             bad[r] = f"a refused annotation: {refused}"
         if len(keys) < STEPS + 1:
@@ -258,19 +274,21 @@ def _agents(data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.n
         chain = ([prev[0]] if prev else []) + keys
         first = 1 if prev else 0
         codes = [_instance_codes(data, k, cache, ids) for k in chain]
-        boxes = [data.boxes.get(k, _NO_BOXES) for k in chain]
+        boxes, kinds = zip(*(_keyframe_boxes(data, k) for k in chain), strict=True)
         window = np.unique(np.concatenate(codes[first:]))  # the instances seen at the keyframe or later
         t, a = len(chain), len(window)
         centres = np.full((t, a, 2), np.nan)
         out = np.full((STEPS + 1, a, 8), np.nan)
-        for j, (c, b) in enumerate(zip(codes, boxes)):
+        static = np.zeros(a, dtype=bool)
+        for j, (c, b, kd) in enumerate(zip(codes, boxes, kinds, strict=True)):
             pos = np.searchsorted(window, c)
             ok = pos < a
             ok[ok] = window[pos[ok]] == c[ok]
             centres[j, pos[ok]] = b[ok, :2]
+            static[pos[ok]] |= kd[ok] == 1.0
             if j >= first:
                 out[j - first, pos[ok], :5] = b[ok]
-                out[j - first, pos[ok], 7] = 0.0  # vehicle / pedestrian / bicycle: an agent
+                out[j - first, pos[ok], 7] = kd[ok]  # 0: vehicle / pedestrian / bicycle, 1: a static object
         times = np.array([data.timestamps.get(k, np.nan) for k in chain]) / 1e6
         seen = np.isfinite(centres[..., 0])  # (t, a)
         before = np.zeros_like(seen)
@@ -284,6 +302,7 @@ def _agents(data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.n
         with np.errstate(invalid="ignore", divide="ignore"):
             velocity = (centres[hi, slot] - centres[lo, slot]) / dt[..., None]
         velocity[~(seen & (hi > lo) & np.isfinite(dt) & (dt > 0))] = np.nan
+        velocity[:, static] = np.where(seen[:, static, None], 0.0, np.nan)  # NAVSIM's static objects have no velocity
         out[..., 5:7] = velocity[first:]
         per_frame.append(out)
     slots = max([1, *(b.shape[1] for b in per_frame if b is not None)])
@@ -416,7 +435,9 @@ def _comforts(states: np.ndarray, frame: np.ndarray, frames: _Frames, prev_row: 
         value = extended_comfort(now, before)
         for (i, _), v in zip(pairs, value.tolist()):
             ec[i] = v
-    out = {"c": (c, [None] * n), "hc": (hc, hc_reason), "ec": (ec, ec_reason)}
+    out: dict[str, tuple[np.ndarray, list[str | None]]] = {
+        "c": (c, [None] * n), "hc": (hc, hc_reason), "ec": (ec, ec_reason)
+    }
     for name, (v, why) in out.items():
         for i in np.flatnonzero(~np.isfinite(v)).tolist():
             if why[i] is None:
@@ -433,7 +454,9 @@ def _planning_map(area: Any, cache: dict[str, Any]) -> tuple[Any, str | None]:
         return PlanningMap(), f"no drivable area: {area}"
     if area.source in cache:
         return cache[area.source]
+    found: tuple[PlanningMap, str | None]
     if area.kind == "mask":
+        assert area.mask is not None  # a mask area holds its mask (read_map_mask)
         found = (PlanningMap(drivable=DrivableMask(area.mask)), None)
     else:
         try:
@@ -510,12 +533,18 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
     for i, f in enumerate(plans.frame.tolist()):
         plans_of_frame.setdefault(f, []).append(i)
     kind_of = [""] * f_count
+    map_of = [""] * f_count  # the map key of a frame whose map layers were read
+    versions: dict[str, str] = {}  # map key -> the expansion's version
     for key, fs in by_map.items():
         area = data.areas.get(key, f"sample has no log/map in {data.version}") if key else \
             f"sample has no log/map in {data.version}"
         pmap, map_reason = _planning_map(area, map_cache)
         for f in fs:
             kind_of[f] = getattr(area, "kind", "") if map_reason is None else ""
+            map_of[f] = key if map_reason is None else ""
+        version = getattr(area, "version", None) if map_reason is None else None  # area: a DrivableArea here
+        if version:
+            versions[key] = version
         for start in range(0, len(fs), CHUNK_FRAMES):
             idx = np.asarray(fs[start:start + CHUNK_FRAMES], dtype=np.int64)
             local = {int(f): j for j, f in enumerate(idx.tolist())}
@@ -527,7 +556,8 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
                                     np.arange(len(idx), dtype=np.int64)])
             h = gt_chunk[..., 2]
             centres = gt_chunk[..., :2] + ego.rear_axle_to_center * np.stack([np.cos(h), np.sin(h)], -1)
-            agents, bad = (None, {})
+            bad: dict[int, str] = {}
+            agents = None
             if data.annotated:
                 boxes, bad = _agents(data, tokens, idx, code_cache, instance_ids)
                 agents = interpolate_boxes(boxes)
@@ -584,9 +614,13 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
                                  {k: values[k][order] for k in KEYS}, {k: [reasons[k][i] for i in sel] for k in KEYS},
                                  plan_global[order] if n else np.zeros((0, 31, 11)),
                                  map_kinds=sorted({kind_of[int(plans.frame[i])] for i in sel} - {""}),
+                                 map_versions={k: versions[k]
+                                               for k in sorted({map_of[int(plans.frame[i])] for i in sel})
+                                               if k in versions},
                                  path=plans.states[order][..., :2] if n else np.zeros((0, 31, 2)))
     gt = {"frame_ids": [fid_of[t] for t in tokens], "values": gt_values, "reasons": gt_reasons, "path": gt_ego[..., :2],
-          "map_kinds": sorted(set(kind_of) - {""})}
+          "map_kinds": sorted(set(kind_of) - {""}),
+          "map_versions": {k: versions[k] for k in sorted(set(map_of)) if k in versions}}
     return per_run, gt
 
 
@@ -613,7 +647,7 @@ def _commonest(reasons: Sequence[str | None]) -> str | None:
     for r in reasons:
         if r:
             counts[r] = counts.get(r, 0) + 1
-    return max(counts, key=counts.get) if counts else None
+    return max(counts, key=lambda r: counts[r]) if counts else None
 
 
 def _warnings(rp: RunPlanning, label: str) -> list[str]:
@@ -664,7 +698,7 @@ def evaluate_planning(
     with ``history``) is reused. ``pairwise`` compares every pair of runs on the headline aggregate (paired on the
     frames both have; ``only``: the common frames of ``--common``). Never raises for bad data: n/a with reasons.
     """
-    from lightemma.evaluation.safety import _resolve_dataset, load_safety_data, sample_token_of
+    from lightemma.evaluation.safety import _resolve_dataset, load_safety_data, map_versions, sample_token_of
     from lightemma.evaluation.stats import bootstrap_ci
     from lightemma.planning.scores import EgoBox
 
@@ -711,13 +745,14 @@ def evaluate_planning(
             rp = RunPlanning([run.frame_ids[r] for r in scored.tolist()], scored, reason=why)
             result.runs[label] = rp
             result.rows[label] = {"planning_frames": 0, **{k: None for k in KEYS}, **{f"{k}_ci95": None for k in KEYS},
-                                  **{f"{k}_na": why for k in KEYS}, "planning_map": None}
+                                  **{f"{k}_na": why for k in KEYS}, "planning_map": None, "map_version": None}
             continue
         rp = per_run[m]
         result.runs[label] = rp
         warnings.extend(_warnings(rp, label))
         row = _row(rp.values, rp.reasons, len(rp.frame_ids))
         row["planning_map"] = "+".join(rp.map_kinds) or None
+        row["map_version"] = map_versions(list(rp.map_versions.values()))
         result.rows[label] = row
         scenes = _scenes(rp.frame_ids)
         for k in KEYS:
@@ -729,14 +764,16 @@ def evaluate_planning(
     if gt_parts:
         fids = [f for g in gt_parts for f in g["frame_ids"]]
         values = {k: np.concatenate([g["values"][k] for g in gt_parts]) for k in KEYS}
-        why = {k: [r for g in gt_parts for r in g["reasons"][k]] for k in KEYS}
+        gt_why = {k: [r for g in gt_parts for r in g["reasons"][k]] for k in KEYS}
         kinds = sorted({k for g in gt_parts for k in g["map_kinds"]})
-        gt_rp = RunPlanning(fids, np.arange(len(fids)), values, why, map_kinds=kinds,
+        gt_versions = {k: v for g in gt_parts for k, v in g["map_versions"].items()}
+        gt_rp = RunPlanning(fids, np.arange(len(fids)), values, gt_why, map_kinds=kinds, map_versions=gt_versions,
                             path=np.concatenate([g["path"] for g in gt_parts]))
         result.runs[GT_LABEL] = gt_rp
         warnings.extend(_warnings(gt_rp, GT_LABEL))
-        result.ground_truth = {"model": GT_LABEL, **_row(values, why, len(fids)),
-                               "planning_map": "+".join(kinds) or None}
+        result.ground_truth = {"model": GT_LABEL, **_row(values, gt_why, len(fids)),
+                               "planning_map": "+".join(kinds) or None,
+                               "map_version": map_versions(list(gt_versions.values()))}
         scenes = _scenes(fids)
         for k in KEYS:
             ok = np.isfinite(values[k])
@@ -772,7 +809,10 @@ def pairwise_planning(result: PlanningResult, labels: Sequence[str], resampling:
         per[label] = {f: float(v) for f, v in zip(rp.frame_ids, rp.values[key])
                       if math.isfinite(v) and (only is None or f in only)}
     codes: dict[str, int] = {}
-    out, groups, keys, where = [], [], [], []
+    out: list[dict[str, Any]] = []
+    groups: list[tuple[np.ndarray, np.ndarray]] = []
+    keys: list[str] = []
+    where: list[int] = []
     for a in range(len(labels)):
         for b in range(a + 1, len(labels)):
             la, lb = labels[a], labels[b]

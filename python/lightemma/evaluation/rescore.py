@@ -27,9 +27,10 @@ from collections.abc import Iterable, Iterator, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from lightemma.actions import DEFAULT_MAX_ABS_CURVATURE, DEFAULT_SPEED_RANGE, history_rows, parse_actions
+from lightemma.definitions import PARSE_MODES
 from lightemma.errors import UserError
 
-PARSE_MODES: tuple[str, ...] = ("lenient", "strict", "paper", "json")  # json: structured runs record it
 _BLOCK = 2048  # records re-parsed per parser call
 
 
@@ -53,14 +54,10 @@ class ParseDefinition:
             if self.speed_range is not None or self.max_abs_curvature is not None:
                 raise UserError("--speed-range and --max-curvature apply to lenient, strict and json parsing; the paper's rules have no plausibility limits")
         else:
-            from lightemma.actions import DEFAULT_MAX_ABS_CURVATURE, DEFAULT_SPEED_RANGE
-
-            if self.speed_range is None:
-                object.__setattr__(self, "speed_range", DEFAULT_SPEED_RANGE)
-            if self.max_abs_curvature is None:
-                object.__setattr__(self, "max_abs_curvature", DEFAULT_MAX_ABS_CURVATURE)
-            object.__setattr__(self, "speed_range", (float(self.speed_range[0]), float(self.speed_range[1])))
-            object.__setattr__(self, "max_abs_curvature", float(self.max_abs_curvature))
+            speed = DEFAULT_SPEED_RANGE if self.speed_range is None else self.speed_range
+            curvature = DEFAULT_MAX_ABS_CURVATURE if self.max_abs_curvature is None else self.max_abs_curvature
+            object.__setattr__(self, "speed_range", (float(speed[0]), float(speed[1])))
+            object.__setattr__(self, "max_abs_curvature", float(curvature))
         if self.speed_range is not None:
             lo, hi = self.speed_range
             if not lo < hi:
@@ -89,10 +86,10 @@ class ParseDefinition:
         """Short text for tables: ``paper``, ``lenient``; limits only where not the defaults (``strict v∈[0, 30] |κ|≤0.5``)."""
         if self.mode == "paper":
             return "paper"
-        from lightemma.actions import DEFAULT_MAX_ABS_CURVATURE, DEFAULT_SPEED_RANGE
 
         extra = []
         if self.speed_range != DEFAULT_SPEED_RANGE:
+            assert self.speed_range is not None  # __post_init__ sets it outside paper mode
             extra.append(f"v∈[{self.speed_range[0]:g}, {self.speed_range[1]:g}]")
         if self.max_abs_curvature != DEFAULT_MAX_ABS_CURVATURE:
             extra.append(f"|κ|≤{self.max_abs_curvature:g}")
@@ -112,7 +109,8 @@ class ParseDefinition:
 
 def recorded_parse(manifest: Mapping[str, Any]) -> ParseDefinition:
     """The definition a run's records were parsed with (``params.parse`` in its manifest; ``lenient`` if absent)."""
-    params = manifest.get("params") if isinstance(manifest.get("params"), Mapping) else {}
+    params_value = manifest.get("params")
+    params: Mapping[str, Any] = params_value if isinstance(params_value, Mapping) else {}
     return ParseDefinition.from_dict(params.get("parse"))
 
 
@@ -151,8 +149,6 @@ def _apply(record: dict[str, Any], attempts: list[dict[str, Any]], parsed: list[
 
 def rescored(records: Iterable[dict[str, Any]], definition: ParseDefinition, *, block: int = _BLOCK) -> Iterator[dict[str, Any]]:
     """Stream ``records`` re-parsed under ``definition`` (see the module docstring); one parser call per block."""
-    from lightemma.actions import history_rows, parse_actions
-
     options = definition.parser_options()
     pending: list[tuple[dict[str, Any], list[dict[str, Any]]]] = []
 

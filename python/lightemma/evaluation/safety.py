@@ -1,12 +1,13 @@
 """Does it drive safely? Collision with annotated agents and leaving the drivable area (docs/definitions.md#safety).
 
-Three layers, one home:
+Three layers:
 
 * geometry (Rust core, :mod:`lightemma._core`): :func:`ego_poses`, :func:`footprints`,
-  :func:`box_collisions`, :class:`DrivableArea` ``.lookup`` — whole batches, the GIL released;
-* the dataset (:func:`load_safety_data`): per keyframe its CAM_FRONT ego pose, the annotated
-  agents of the next six keyframes and the drivable area of its log's map, read from the
-  dataroot's JSON tables and map files directly (the devkit's conventions, no devkit needed);
+  :func:`box_collisions`, :class:`~lightemma.nuscenes.map_files.DrivableArea` ``.lookup`` — whole batches, the GIL
+  released;
+* the dataset (:func:`lightemma.nuscenes.annotations.load_safety_data`, the one reader of a dataroot): per keyframe its
+  CAM_FRONT ego pose, the annotated agents of the next six keyframes and the drivable area of its log's map (the
+  devkit's conventions, no devkit needed); this module receives it parsed and opens no dataset file;
 * outcomes and rates (:func:`frame_safety`, :func:`safety_values`): per frame and step, the
   footprint's corners on or off the drivable area and its overlap with vehicles and vulnerable
   road users; the rates of the conventions ``uniad``, ``stp3`` and ``any``.
@@ -27,12 +28,8 @@ centre lies :data:`EGO_OFFSET` ahead of it.
 
 from __future__ import annotations
 
-import json
 import math
 import os
-import re
-import stat
-import struct
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,56 +37,13 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.errors import DatasetError
+from lightemma.definitions import COLLISION_CONVENTIONS, COLLISION_FOR_ADE, EGO_LENGTH, EGO_OFFSET, EGO_WIDTH, MIN_STEP
+from lightemma.errors import DatasetError, InputError, ShapeError
+from lightemma.nuscenes.annotations import CLASS_NAMES, VEHICLE, VRU, SafetyData, load_safety_data
+from lightemma.nuscenes.map_files import DrivableArea, EgoKwargs
 
-#: ego box of ST-P3 / UniAD: length × width, metres (the Renault Zoe is 4.084 m long and 1.73 m wide
-#: without mirrors; 1.85 m is their margin)
-EGO_LENGTH = 4.084
-EGO_WIDTH = 1.85
-#: the box centre lies this far ahead of the ego_pose reference point (the rear-axle centre), metres:
-#: nuScenes' LIDAR_TOP sits 0.943713 m ahead of the rear axle (calibrated_sensor) and UniAD shifts the
-#: ego box 0.5 m forward in the LiDAR frame
-EGO_OFFSET = 0.943713 + 0.5
-#: a step shorter than this keeps the previous heading (BEV-Planner's rule), metres
-MIN_STEP = 1.0
-#: the base map masks' native resolution (the devkit's MapMask), metres per pixel
-MASK_RESOLUTION = 0.1
-MASK_FOREGROUND = 255
-#: the largest base map mask read, pixels (width × height from the PNG header, checked before decoding):
-#: nuScenes' largest map, singapore-queenstown, spans about 3,229 m × 3,687 m, 1.19 G pixels at 0.1 m/px;
-#: a larger header is refused (a 437 KB 1-bit PNG can claim 60,000² pixels: 3.6 GB decoded)
-MAX_MASK_PIXELS = 1_500_000_000
-#: map node and annotation coordinates beyond ± this are refused, metres (nuScenes' maps span under 4 km)
-MAX_COORDINATE_M = 1e6
-#: annotation boxes longer or wider than this are refused, metres (articulated buses are about 18 m long)
-MAX_AGENT_SIZE_M = 100.0
 STEPS = 6
 SECONDS = (1, 2, 3)
-
-COLLISION_CONVENTIONS: tuple[str, ...] = ("uniad", "stp3", "any")
-#: which annotation boxes count as agents (docs/definitions.md#safety): ``all`` (default: every vehicle and
-#: VRU box, as UniAD's occupancy labels — ``occ_filter_by_valid_flag=False``, ``filter_invisible=False``),
-#: ``valid`` (boxes with ``num_lidar_pts + num_radar_pts > 0``: mmdet3d's ``valid_flag``, VAD's ground-truth
-#: boxes), ``visible`` (boxes whose visibility is not ``v0-40``: ST-P3's ``FILTER_INVISIBLE_VEHICLES``)
-AGENT_FILTERS: tuple[str, ...] = ("all", "valid", "visible")
-#: which collision convention an ADE table shows beside it (the ADE conventions carry the same names)
-COLLISION_FOR_ADE = {"uniad": "uniad", "stp3": "stp3", "lightemma": "any"}
-
-# agent classes
-VEHICLE, VRU, OTHER = 0, 1, 2
-CLASS_NAMES = ("vehicle", "vru")
-_VRU_VEHICLES = ("vehicle.bicycle", "vehicle.motorcycle")
-
-
-def agent_class(category: str) -> int:
-    """``VEHICLE`` (``vehicle.*`` but bicycles and motorcycles), ``VRU`` (``human.pedestrian.*``,
-    ``vehicle.bicycle``, ``vehicle.motorcycle``: pedestrians, cyclists, motorcyclists) or ``OTHER``
-    (barriers, cones, debris, animals, static objects: never counted)."""
-    if category.startswith("human.pedestrian") or category.startswith(_VRU_VEHICLES):
-        return VRU
-    if category.startswith("vehicle."):
-        return VEHICLE
-    return OTHER
 
 
 @dataclass(frozen=True)
@@ -101,8 +55,10 @@ class EgoModel:
     offset: float = EGO_OFFSET
     min_step: float = MIN_STEP
 
-    def kwargs(self) -> dict[str, float]:
+    def kwargs(self) -> EgoKwargs:
+        """The box as the safety kernels' keyword arguments (``_core.ego_poses`` and the like)."""
         return {"length": self.length, "width": self.width, "offset": self.offset, "min_step": self.min_step}
+
 
 
 EGO = EgoModel()
@@ -145,502 +101,9 @@ def box_collisions(traj: Any, poses: Any, agents: Any, ego: EgoModel = EGO) -> n
     return _core.box_collisions(t, p, np.ascontiguousarray(agents, dtype=np.float64), **ego.kwargs())
 
 
-# -- the drivable area --------------------------------------------------------------------------
+# -- the drivable area (read by lightemma.nuscenes.map_files): outcome codes of DrivableArea.lookup ----------------
 
 ON, OFF, OUTSIDE = 1, 0, 2
-
-
-@dataclass
-class DrivableArea:
-    """A map's drivable area: the map expansion's ``drivable_area`` polygons, or a base map mask.
-
-    ``kind``: ``expansion`` (exact point-in-polygon against the union of the layer's polygons,
-    holes honoured) or ``mask`` (the devkit's ``MapMask``: pixel (round(x/0.1), round(−y/0.1 + H)),
-    NumPy's round, drivable where the pixel is 255 — the *semantic prior*, drivable surface and
-    sidewalks). ``source``: the file read.
-    """
-
-    kind: str
-    source: str
-    mask: np.ndarray | None = None  # (H, W) uint8
-    xy: np.ndarray | None = None  # (V, 2)
-    rings: np.ndarray | None = None  # (R + 1,) int64
-    polygons: np.ndarray | None = None  # (P + 1,) int64
-
-    def lookup(self, traj: Any, poses: Any, ego: EgoModel = EGO) -> np.ndarray:
-        """(N, T, 5) uint8 of ``ON`` / ``OFF`` / ``OUTSIDE`` (the point is not covered by the mask
-        image: counted off the drivable area, and reported) for the footprint's 4 corners (front-left,
-        front-right, rear-right, rear-left) and then its reference point, at every step."""
-        from lightemma import _core
-
-        t, p = _traj_poses(traj, poses)
-        if self.kind == "mask":
-            return _core.mask_area(t, p, self.mask, MASK_RESOLUTION, MASK_FOREGROUND, **ego.kwargs())
-        return _core.polygon_area(t, p, self.xy, self.rings, self.polygons, **ego.kwargs())
-
-    def contains(self, points: Any) -> np.ndarray:
-        """(M,) uint8 ``ON`` / ``OFF`` / ``OUTSIDE`` codes of global points (M, 2)."""
-        pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 2)
-        from lightemma import _core
-
-        if self.kind == "mask":
-            return _core.mask_lookup(pts, self.mask, MASK_RESOLUTION, MASK_FOREGROUND)
-        poses = np.column_stack([pts, np.zeros(len(pts))])  # a one-step trajectory at the origin of each point
-        return self.lookup(np.zeros((len(pts), 1, 2)), poses, EgoModel(offset=0.0))[:, 0, 4]
-
-
-_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
-#: PNG colour types (IHDR) -> what they are
-_PNG_COLOUR = {0: "grayscale", 2: "RGB", 3: "palette", 4: "grayscale with alpha", 6: "RGBA"}
-
-
-def _regular_file(path: str | os.PathLike[str], what: str) -> None:
-    """Raise :class:`DatasetError` unless ``path`` (links followed) is a regular file: a FIFO would block the
-    reader and ``/dev/zero`` never ends."""
-    try:
-        mode = os.stat(path).st_mode
-    except OSError as exc:
-        raise DatasetError(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
-    if not stat.S_ISREG(mode):
-        raise DatasetError(f"{what} {path} is not a regular file ({_file_kind(mode)})")
-
-
-def _file_kind(mode: int) -> str:
-    for test, name in ((stat.S_ISDIR, "a folder"), (stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket")):
-        if test(mode):
-            return name
-    return "not a regular file"
-
-
-def _png_header(path: str | os.PathLike[str]) -> tuple[int, int, int, int]:
-    """(width, height, bit depth, colour type) from a PNG's IHDR chunk; a file that is not a PNG raises."""
-    with open(path, "rb") as f:
-        head = f.read(26)
-    if len(head) < 26 or head[:8] != _PNG_SIGNATURE or head[12:16] != b"IHDR":
-        raise DatasetError(f"map mask {path} is not a PNG image (nuScenes' base map masks are PNG files)")
-    width, height, depth, colour = struct.unpack(">IIBB", head[16:26])
-    return width, height, depth, colour
-
-
-def read_map_mask(path: str | os.PathLike[str]) -> DrivableArea:
-    """A base map mask (``maps/<token>.png``) as the devkit's ``MapMask`` reads it at 0.1 m/px (no resize).
-
-    Returns an (H, W) uint8 mask, drivable where 255. Read: 8-bit grayscale PNGs as they are (the devkit's
-    encoding, 255 drivable), and the encodings PNG optimisers give a two-valued image, mapped to the same
-    values: 1-bit grayscale (1 → 255) and palette images whose colours are grays (index → its gray level).
-    Refused with :class:`DatasetError` (one line naming the file): a file that is not a regular file or not a
-    PNG, a header claiming more than :data:`MAX_MASK_PIXELS` pixels (checked before decoding; PIL's own
-    pixel limit is left as it is), 16-bit, colour or alpha images, palettes with colours, and a mask with
-    no pixel of 255 (every point would be off the drivable area).
-    """
-    from PIL import PngImagePlugin
-
-    _regular_file(path, "map mask")
-    width, height, depth, colour = _png_header(path)
-    if width * height > MAX_MASK_PIXELS:
-        raise DatasetError(f"map mask {path} claims {width} × {height} pixels, more than the {MAX_MASK_PIXELS:,} "
-                           "a base map mask can have (nuScenes' largest is 1.19 G pixels); not decoded")
-    if colour not in (0, 3) or depth == 16:
-        kind = f"{depth}-bit {_PNG_COLOUR.get(colour, f'colour type {colour}')}"
-        raise DatasetError(f"map mask {path} is a {kind} PNG; a base map mask is 8-bit grayscale (255 drivable), "
-                           "1-bit grayscale or a gray palette")
-    try:
-        with open(path, "rb") as f:
-            img = PngImagePlugin.PngImageFile(f)  # Image.open's pixel limit is replaced by the bound above
-            img.load()
-            mode = img.mode
-            palette = img.getpalette() if mode == "P" else None
-            used = np.flatnonzero(img.histogram()) if mode == "P" else None  # palette indices in use (C, no copy)
-            mask = np.array(img)
-            img.close()
-            del img
-    except (OSError, ValueError, SyntaxError, struct.error) as exc:
-        raise DatasetError(f"map mask {path} cannot be read: {exc}") from None
-    if mode == "1":
-        mask = mask.view(np.uint8)  # in place (masks are up to 1.5 G pixels); PIL's True bytes are not always 1
-        np.minimum(mask, 1, out=mask)
-        mask *= np.uint8(MASK_FOREGROUND)
-    elif mode == "P":
-        rgb = np.asarray(palette or [], dtype=np.int64).reshape(-1, 3)
-        assert used is not None
-        if len(used) and (used.max() >= len(rgb) or not (rgb[used] == rgb[used, :1]).all()):
-            raise DatasetError(f"map mask {path} is a palette PNG with colours (or indices beyond its palette); "
-                               "a base map mask is grayscale")
-        lut = np.zeros(256, dtype=np.uint8)
-        lut[: len(rgb)] = rgb[:256, 0]
-        mask = lut[mask]
-    elif mode != "L":
-        raise DatasetError(f"map mask {path} decodes to PIL mode {mode}; a base map mask is 8-bit grayscale")
-    if mask.ndim != 2:
-        raise DatasetError(f"map mask {path} has shape {mask.shape}; expected a one-channel image")
-    top = int(mask.max()) if mask.size else None  # a reduction: no mask-sized temporary
-    if top != MASK_FOREGROUND:
-        raise DatasetError(f"map mask {path} has no pixel of value {MASK_FOREGROUND} (drivable); its largest value is "
-                           f"{top}: not a drivable-area mask in the devkit's encoding")
-    return DrivableArea("mask", os.fspath(path), mask=np.ascontiguousarray(mask, dtype=np.uint8))
-
-
-def _map_coordinate(value: Any, path: Any, node: Any, axis: str) -> float:
-    """A map node coordinate: a finite number within :data:`MAX_COORDINATE_M` (bools and text refused)."""
-    if isinstance(value, (int, float)) and not isinstance(value, bool):
-        try:
-            v = float(value)
-        except OverflowError:
-            v = math.inf
-        if math.isfinite(v) and abs(v) <= MAX_COORDINATE_M:
-            return v
-    shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
-    raise DatasetError(f"map expansion {path}: node {node} has {axis} = {shown}; a coordinate must be a finite number "
-                       f"within ±{MAX_COORDINATE_M:g} m")
-
-
-def read_expansion(path: str | os.PathLike[str]) -> DrivableArea:
-    """The ``drivable_area`` layer of a map-expansion JSON (``maps/expansion/<location>.json``) as polygons.
-
-    Each drivable_area record lists ``polygon_tokens``; each polygon has ``exterior_node_tokens``
-    and ``holes`` (``node_tokens``); nodes carry global ``x``, ``y`` (the devkit's ``NuScenesMap``).
-    Raises :class:`DatasetError` naming the file (and the node or polygon) for a file that is not a regular
-    file or not readable JSON (nesting too deep included), a missing record, a node coordinate that is not
-    a finite number within :data:`MAX_COORDINATE_M`, or a ring of fewer than 3 nodes.
-    """
-    _regular_file(path, "map expansion")
-    try:
-        with open(path, encoding="utf-8") as f:
-            doc = json.load(f)
-    except RecursionError:
-        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
-                           "(the JSON is nested too deep)") from None
-    except (OSError, ValueError) as exc:
-        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
-                           f"({type(exc).__name__}: {exc})") from None
-    try:
-        nodes = {n["token"]: n for n in doc["node"]}
-        polys = {p["token"]: p for p in doc["polygon"]}
-        xy: list[tuple[float, float]] = []
-        rings, polygons = [0], [0]
-        for record in doc["drivable_area"]:
-            for ptok in record["polygon_tokens"]:
-                poly = polys[ptok]
-                for ring in [poly["exterior_node_tokens"], *(h["node_tokens"] for h in poly.get("holes", []))]:
-                    if not isinstance(ring, list) or len(ring) < 3:
-                        n = len(ring) if isinstance(ring, list) else "no list of"
-                        raise DatasetError(f"map expansion {path}: polygon {ptok} has a ring of {n} node(s); "
-                                           "a ring needs at least 3")
-                    for t in ring:
-                        node = nodes[t]
-                        xy.append((_map_coordinate(node["x"], path, t, "x"), _map_coordinate(node["y"], path, t, "y")))
-                    rings.append(len(xy))
-                polygons.append(len(rings) - 1)
-    except (KeyError, TypeError, AttributeError) as exc:
-        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer ({type(exc).__name__}: {exc})") from None
-    if len(polygons) == 1:  # every position would be off-road: no number, as for a mask without a drivable pixel
-        raise DatasetError(f"map expansion {path}: its drivable_area layer holds no polygon")
-    return DrivableArea("expansion", os.fspath(path), xy=np.asarray(xy, dtype=np.float64).reshape(-1, 2),
-                        rings=np.asarray(rings, dtype=np.int64), polygons=np.asarray(polygons, dtype=np.int64))
-
-
-# -- the dataset ----------------------------------------------------------------------------------
-
-
-@dataclass
-class SafetyData:
-    """What the safety metrics need from one nuScenes version, keyed by sample token.
-
-    ``poses``: CAM_FRONT keyframe ego pose (x, y, yaw) — the pose the trajectories are relative to;
-    ``future``: the next keyframes of the scene (up to 6); ``map_of``: the map key of the sample's
-    log; ``areas``: map key → :class:`DrivableArea`, or the reason there is none; ``boxes`` /
-    ``classes`` / ``box_tokens``: the sample's annotated agents (K, 5) (global x, y, yaw, length,
-    width), their class codes (K,) and tokens (those the ``agents`` filter keeps); ``annotated``: the version
-    has any annotation; ``pose_reasons``: sample → why its ego pose is unusable; ``bad_boxes``: sample → why
-    one of its annotations is refused (frames whose six later keyframes include it get collision n/a);
-    ``agents``: the filter of :data:`AGENT_FILTERS` applied.
-    """
-
-    dataroot: str
-    version: str
-    poses: dict[str, tuple[float, float, float]] = field(default_factory=dict)
-    future: dict[str, list[str]] = field(default_factory=dict)
-    map_of: dict[str, str] = field(default_factory=dict)
-    areas: dict[str, DrivableArea | str] = field(default_factory=dict)
-    boxes: dict[str, np.ndarray] = field(default_factory=dict)
-    classes: dict[str, np.ndarray] = field(default_factory=dict)
-    box_tokens: dict[str, list[str]] = field(default_factory=dict)
-    annotated: bool = False
-    warnings: list[str] = field(default_factory=list)
-    pose_reasons: dict[str, str] = field(default_factory=dict)
-    bad_boxes: dict[str, str] = field(default_factory=dict)
-    agents: str = "all"
-    #: with ``history`` > 0 (the planning score): sample → its earlier keyframes, nearest first; the poses of those
-    #: and of the later keyframes are in ``poses`` too, ``box_instances`` holds each box's instance token and
-    #: ``timestamps`` each read sample's timestamp (µs)
-    past: dict[str, list[str]] = field(default_factory=dict)
-    box_instances: dict[str, list[str | None]] = field(default_factory=dict)
-    timestamps: dict[str, float] = field(default_factory=dict)
-
-    def area_kinds(self) -> list[str]:
-        """The kinds of drivable area in use (``expansion``, ``mask``), sorted."""
-        return sorted({a.kind for a in self.areas.values() if isinstance(a, DrivableArea)})
-
-
-def _table(root: Path, name: str) -> list[dict[str, Any]]:
-    path = root / f"{name}.json"
-    try:
-        with open(path, encoding="utf-8") as f:
-            rows = json.load(f)
-    except FileNotFoundError:
-        raise DatasetError(f"nuScenes table {path} is missing") from None
-    except RecursionError:
-        raise DatasetError(f"nuScenes table {path} cannot be read: the JSON is nested too deep") from None
-    except (OSError, ValueError) as exc:
-        raise DatasetError(f"nuScenes table {path} cannot be read: {exc}") from None
-    if not isinstance(rows, list):
-        raise DatasetError(f"nuScenes table {path} is not a list of records")
-    for i, row in enumerate(rows):
-        if not isinstance(row, dict) or not isinstance(row.get("token"), str):
-            raise DatasetError(f"nuScenes table {path}: record {i} is not an object with a string token")
-    return rows
-
-
-def _yaw(q: Any) -> float:
-    """Yaw (rad) of a nuScenes rotation under the frame reader's rule
-    (:func:`lightemma.frames.geometry.unit_quaternion`): a quaternion that is not a unit one raises ``ValueError``."""
-    from lightemma.frames.geometry import unit_quaternion, yaw_from_quaternion
-
-    return float(yaw_from_quaternion(unit_quaternion(q)))
-
-
-def _finite(values: Any, n: int) -> list[float] | None:
-    """The first ``n`` entries of ``values`` as floats when they are finite numbers (bools, text refused), else None."""
-    if not isinstance(values, (list, tuple)) or len(values) < n:
-        return None
-    out = []
-    for v in values[:n]:
-        if not isinstance(v, (int, float)) or isinstance(v, bool):
-            return None
-        try:
-            f = float(v)
-        except OverflowError:
-            return None
-        if not math.isfinite(f):
-            return None
-        out.append(f)
-    return out
-
-
-def _box(ann: Mapping[str, Any], where: str = "sample_annotation") -> tuple[float, float, float, float, float]:
-    """(x, y, yaw, length, width) of a sample_annotation; a box that is not a box raises :class:`DatasetError`
-    naming ``where`` (the table file) and the token: a centre that is not finite or beyond
-    :data:`MAX_COORDINATE_M`, a size not in (0, :data:`MAX_AGENT_SIZE_M`] m, a rotation that is not a unit
-    quaternion (the frame reader's rule)."""
-    tok = ann.get("token", "?")
-    xy, size = _finite(ann.get("translation"), 2), _finite(ann.get("size"), 2)
-    shown = f"size {ann.get('size')}, translation {ann.get('translation')}, rotation {ann.get('rotation')}"
-    if xy is None or size is None:
-        raise DatasetError(f"{where} {tok}: degenerate box ({shown}); translation and size must be finite numbers")
-    w, length = size  # nuScenes size = (width, length, height)
-    sized = 0 < w <= MAX_AGENT_SIZE_M and 0 < length <= MAX_AGENT_SIZE_M
-    if not sized or max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE_M:
-        raise DatasetError(f"{where} {tok}: degenerate box ({shown}); sizes must be in (0, {MAX_AGENT_SIZE_M:g}] m "
-                           f"and the centre within ±{MAX_COORDINATE_M:g} m")
-    try:
-        yaw = _yaw(ann.get("rotation"))
-    except ValueError as exc:
-        raise DatasetError(f"{where} {tok}: field rotation = {ann.get('rotation')!r} {exc}") from None
-    return xy[0], xy[1], yaw, length, w
-
-
-def _keeps(ann: Mapping[str, Any], agents: str, v0_40: set[str]) -> bool:
-    """Whether the ``agents`` filter (:data:`AGENT_FILTERS`) keeps an annotation; counts that are not counts
-    raise ``ValueError``."""
-    if agents == "valid":
-        counts = [ann.get("num_lidar_pts"), ann.get("num_radar_pts")]
-        if not all(isinstance(c, int) and not isinstance(c, bool) and c >= 0 for c in counts):
-            raise ValueError(f"num_lidar_pts / num_radar_pts = {counts} are not counts "
-                             "(the 'valid' agent filter needs them)")
-        return counts[0] + counts[1] > 0
-    if agents == "visible":
-        return _ref(ann, "visibility_token") not in v0_40
-    return True
-
-
-def _ref(record: Mapping[str, Any], field: str) -> str | None:
-    """A token a record refers to, or None when the field is not text (a list would not even be a dict key)."""
-    value = record.get(field)
-    return value if isinstance(value, str) else None
-
-
-def _file_problem(path: Path) -> str | None:
-    """Why a map file that is there cannot be read as one (a FIFO, a device, a folder), or None."""
-    try:
-        mode = os.stat(path).st_mode
-    except OSError as exc:
-        return f"{path} cannot be read: {exc.strerror or exc}"
-    return None if stat.S_ISREG(mode) else f"{path} is not a regular file ({_file_kind(mode)})"
-
-
-#: a map location as nuScenes names them (singapore-onenorth, boston-seaport): letters, digits, - and _, no path
-_MAP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,99}")
-
-
-def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples: set[str] | None = None,
-                     agents: str = "all", history: int = 0) -> SafetyData:
-    """Read poses, agents and drivable areas of ``dataroot/version`` (only ``samples`` and their futures if given).
-
-    The drivable area of a log is the map expansion's ``drivable_area`` (``maps/expansion/<location>.json``)
-    where the dataroot has it, else the base map mask of the ``map`` table that lists the log; an expansion
-    path that is there but not a regular file (a FIFO, a link to a device) is that map's n/a reason, not a
-    silent fall-back to the mask. Maps that cannot be read, ego poses that are not poses (rotation under the
-    frame reader's unit-quaternion rule) and annotation boxes that are not boxes (:func:`_box`) are
-    recorded as reasons (the frames they touch get n/a), not raised. ``agents``: which boxes count
-    (:data:`AGENT_FILTERS`). ``history`` > 0 (the planning score, :mod:`lightemma.evaluation.planning_score`) also
-    reads up to that many earlier keyframes of each sample (``past``), the poses of the earlier and later
-    keyframes, the boxes of the keyframe just before, each box's instance token and the samples' timestamps;
-    what the safety metrics read is the same either way. A table that is missing, unreadable or holds a record
-    that is not an object raises :class:`DatasetError` naming the file.
-    """
-    if agents not in AGENT_FILTERS:
-        raise ValueError(f"unknown agent filter {agents!r}; choose one of {', '.join(AGENT_FILTERS)}")
-    root = Path(dataroot).expanduser()
-    tables = root / version
-    if not tables.is_dir():
-        raise DatasetError(f"{tables} is not a folder: no nuScenes version {version!r} under {root}")
-    data = SafetyData(os.fspath(root), version, agents=agents)
-    channel_of_sensor = {s["token"]: s.get("channel") for s in _table(tables, "sensor")}
-    channel_of_cs = {c["token"]: channel_of_sensor.get(_ref(c, "sensor_token"))
-                     for c in _table(tables, "calibrated_sensor")}
-    sample_rows = _table(tables, "sample")
-    by_token = {s["token"]: s for s in sample_rows}
-    wanted = set(by_token) if samples is None else {t for t in samples if t in by_token}
-    # the scene's next keyframes
-    for tok in list(wanted):
-        chain, nxt = [], by_token[tok].get("next", "")
-        while isinstance(nxt, str) and nxt and len(chain) < STEPS and nxt in by_token:
-            chain.append(nxt)
-            nxt = by_token[nxt].get("next", "")
-        data.future[tok] = chain
-    needed = wanted | {t for c in data.future.values() for t in c}
-    posed, boxed = wanted, needed
-    if history > 0:
-        for tok in wanted:
-            chain, prv = [], by_token[tok].get("prev", "")
-            while isinstance(prv, str) and prv and len(chain) < history and prv in by_token:
-                chain.append(prv)
-                prv = by_token[prv].get("prev", "")
-            data.past[tok] = chain
-        posed = needed | {t for c in data.past.values() for t in c}
-        boxed = needed | {c[0] for c in data.past.values() if c}
-        for tok in posed:
-            stamp = by_token[tok].get("timestamp")
-            if isinstance(stamp, (int, float)) and not isinstance(stamp, bool) and math.isfinite(stamp):
-                data.timestamps[tok] = float(stamp)
-    pose_token: dict[str, str] = {}
-    for sd in _table(tables, "sample_data"):
-        st, cs = sd.get("sample_token"), sd.get("calibrated_sensor_token")
-        front = isinstance(cs, str) and channel_of_cs.get(cs) == "CAM_FRONT"
-        ep_token = sd.get("ego_pose_token")
-        if sd.get("is_key_frame") and isinstance(st, str) and st in posed and front and isinstance(ep_token, str):
-            pose_token[st] = ep_token
-    by_pose = {tok: st for st, tok in pose_token.items()}
-    for ep in _table(tables, "ego_pose"):
-        st = by_pose.get(ep["token"])
-        if st is None:
-            continue
-        xy = _finite(ep.get("translation"), 2)
-        try:
-            yaw = _yaw(ep.get("rotation"))
-        except ValueError as exc:  # no usable pose: the frame reads n/a with the reason
-            data.pose_reasons[st] = f"{tables / 'ego_pose.json'}: ego_pose {ep['token']}: field rotation {exc}"
-            continue
-        if xy is None or max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE_M:
-            data.pose_reasons[st] = (f"{tables / 'ego_pose.json'}: ego_pose {ep['token']}: field translation = "
-                                     f"{ep.get('translation')!r} is not finite numbers within ±{MAX_COORDINATE_M:g} m")
-            continue
-        data.poses[st] = (xy[0], xy[1], yaw)
-    # maps: scene → log → location, map record of the log
-    scene_log = {s["token"]: _ref(s, "log_token") for s in _table(tables, "scene")}
-    logs = {lg["token"]: lg for lg in _table(tables, "log")}
-    mask_of_log: dict[str, str] = {}
-    map_record: dict[str, dict] = {}
-    for rec in _table(tables, "map"):
-        log_tokens = rec.get("log_tokens", [])
-        for lt in log_tokens if isinstance(log_tokens, list) else []:
-            if isinstance(lt, str):
-                mask_of_log[lt] = rec.get("filename", "")
-                map_record[lt] = rec
-    for tok in wanted:
-        log_token = scene_log.get(_ref(by_token[tok], "scene_token"))
-        log = logs.get(log_token or "")
-        if log is None:
-            continue
-        location = str(log.get("location", ""))
-        if not _MAP_NAME.fullmatch(location):  # a name, never a path: "../../x" would read a file outside the dataroot
-            key = f"location:{location}"
-            data.map_of[tok] = key
-            data.areas[key] = f"log {log.get('logfile', log_token)}: location {location!r} is not a map name"
-            continue
-        expansion = root / "maps" / "expansion" / f"{location}.json"
-        there = os.path.lexists(expansion)
-        key = f"expansion:{location}" if there else f"mask:{mask_of_log.get(log_token, '')}"
-        data.map_of[tok] = key
-        if key in data.areas:
-            continue
-        try:
-            if key.startswith("expansion:"):
-                problem = _file_problem(expansion)  # never a silent fall-back to the mask
-                data.areas[key] = f"map expansion {problem}" if problem else read_expansion(expansion)
-            elif not mask_of_log.get(log_token):
-                data.areas[key] = f"log {log.get('logfile', log_token)} has no map record"
-            else:
-                from lightemma.frames import dataset_path
-
-                mask_path = Path(dataset_path(root, map_record[log_token], "map"))  # inside the dataroot, or n/a with why
-                there = os.path.lexists(mask_path)
-                data.areas[key] = read_map_mask(mask_path) if there else f"map mask {mask_path} is missing"
-        except DatasetError as exc:
-            data.areas[key] = str(exc)
-    # agents
-    annotations = _table(tables, "sample_annotation")
-    data.annotated = bool(annotations)
-    if data.annotated:
-        categories = {c["token"]: str(c.get("name", "")) for c in _table(tables, "category")}
-        klass = {i["token"]: agent_class(categories.get(_ref(i, "category_token"), ""))
-                 for i in _table(tables, "instance")}
-        v0_40 = set()
-        if agents == "visible":
-            v0_40 = {v["token"] for v in _table(tables, "visibility") if v.get("level") == "v0-40"}
-        where = os.fspath(tables / "sample_annotation.json")
-        gathered: dict[str, tuple[list, list, list, list]] = {}
-        for ann in annotations:
-            st = _ref(ann, "sample_token")
-            if st not in boxed:
-                continue
-            cls = klass.get(_ref(ann, "instance_token"), OTHER)
-            if cls == OTHER:
-                continue
-            try:
-                if not _keeps(ann, agents, v0_40):
-                    continue
-                box = _box(ann, where)
-            except DatasetError as exc:
-                data.bad_boxes.setdefault(st, str(exc))
-                continue
-            except ValueError as exc:
-                data.bad_boxes.setdefault(st, f"{where} {ann['token']}: {exc}")
-                continue
-            b, c, t, inst = gathered.setdefault(st, ([], [], [], []))
-            b.append(box)
-            c.append(cls)
-            t.append(ann["token"])
-            inst.append(_ref(ann, "instance_token"))
-        for st in boxed:
-            b, c, t, inst = gathered.get(st, ([], [], [], []))
-            data.boxes[st] = np.asarray(b, dtype=np.float64).reshape(-1, 5)
-            data.classes[st] = np.asarray(c, dtype=np.int8)
-            data.box_tokens[st] = t
-            if history > 0:
-                data.box_instances[st] = inst
-    return data
 
 
 # -- per-frame outcomes ------------------------------------------------------------------------
@@ -653,7 +116,8 @@ class FrameSafety:
     ``area``: (N, 6, 5) uint8 lookups (4 corners, then the reference point), valid where
     ``area_ok``; ``collide``: (N, 6, 2) bool overlap with a vehicle / a vulnerable road user at each
     step, valid where ``coll_ok``; ``area_reason`` / ``coll_reason``: why a frame has no value ("" when
-    it has one); ``area_kind``: per frame ``expansion`` / ``mask`` / "".
+    it has one); ``area_kind``: per frame ``expansion`` / ``mask`` / ""; ``area_version``: per frame the map
+    expansion's version (:attr:`DrivableArea.version`), "" for a mask or no value (empty: not recorded).
     """
 
     area: np.ndarray
@@ -663,6 +127,7 @@ class FrameSafety:
     collide: np.ndarray
     coll_ok: np.ndarray
     coll_reason: list[str]
+    area_version: list[str] = field(default_factory=list)
 
     @property
     def off_steps(self) -> np.ndarray:
@@ -684,7 +149,7 @@ def frame_safety(traj: Any, sample_tokens: Sequence[str], data: SafetyData, ego:
     traj = np.ascontiguousarray(traj, dtype=np.float64)
     n = len(sample_tokens)
     if traj.shape != (n, STEPS, 2):
-        raise ValueError(f"trajectories must have shape ({n}, {STEPS}, 2), got {traj.shape}")
+        raise ShapeError(f"trajectories must have shape ({n}, {STEPS}, 2), got {traj.shape}")
     finite = np.isfinite(traj).all(axis=(1, 2))
     poses = np.zeros((n, 3))
     has_pose = np.zeros(n, dtype=bool)
@@ -707,6 +172,7 @@ def frame_safety(traj: Any, sample_tokens: Sequence[str], data: SafetyData, ego:
     area_ok = np.zeros(n, dtype=bool)
     area_reason = [base_reason(i) for i in range(n)]
     area_kind = [""] * n
+    area_version = [""] * n
     by_map: dict[str, list[int]] = {}
     for i, st in enumerate(sample_tokens):
         key = data.map_of.get(st)
@@ -725,6 +191,7 @@ def frame_safety(traj: Any, sample_tokens: Sequence[str], data: SafetyData, ego:
         area_ok[idx] = True
         for i in rows:
             area_kind[i] = found.kind
+            area_version[i] = found.version or ""
 
     # collisions
     collide = np.zeros((n, STEPS, 2), dtype=bool)
@@ -759,7 +226,7 @@ def frame_safety(traj: Any, sample_tokens: Sequence[str], data: SafetyData, ego:
             collide[idx, :, 0] = (hits & (classes == VEHICLE)).any(axis=2)
             collide[idx, :, 1] = (hits & (classes == VRU)).any(axis=2)
             coll_ok[idx] = True
-    return FrameSafety(area, area_ok, area_reason, area_kind, collide, coll_ok, coll_reason)
+    return FrameSafety(area, area_ok, area_reason, area_kind, collide, coll_ok, coll_reason, area_version)
 
 
 # -- rates ---------------------------------------------------------------------------------------
@@ -778,7 +245,7 @@ def _collision_seconds(c: np.ndarray, convention: str) -> np.ndarray:
         return np.column_stack([c[:, : 2 * s].mean(axis=1) for s in SECONDS])
     if convention == "any":
         return np.column_stack([c[:, : 2 * s].max(axis=1) for s in SECONDS])
-    raise ValueError(f"unknown collision convention {convention!r} (choose from {', '.join(COLLISION_CONVENTIONS)})")
+    raise InputError(f"unknown collision convention {convention!r} (choose from {', '.join(COLLISION_CONVENTIONS)})")
 
 
 def _summary(sec: np.ndarray, convention: str) -> np.ndarray:
@@ -840,12 +307,12 @@ def na_reason(fs: FrameSafety, which: str) -> str | None:
     for r in reasons:
         if r:
             counts[r] = counts.get(r, 0) + 1
-    return max(counts, key=counts.get) if counts else None
+    return max(counts, key=lambda r: counts[r]) if counts else None
 
 
 def frame_warnings(fs: FrameSafety, frame_ids: Sequence[str], what: str) -> list[str]:
     """One warning per kind of missing value, with a count and an example frame; mask coverage too."""
-    out = []
+    out: list[str] = []
     for which, ok, reasons in (("off-road", fs.area_ok, fs.area_reason), ("collision", fs.coll_ok, fs.coll_reason)):
         groups: dict[str, list[int]] = {}
         for i in np.flatnonzero(~ok):
@@ -864,7 +331,7 @@ def frame_warnings(fs: FrameSafety, frame_ids: Sequence[str], what: str) -> list
 
 #: row keys this module adds to every accuracy row (values are shares 0..1; tables print %)
 ROW_KEYS = (*AREA_KEYS, *COLLISION_KEYS, "offroad_ci95", "collision_ci95", "safety_frames", "offroad_frames", "collision_frames",
-            "area_source", "offroad_na", "collision_na", "collision_convention")
+            "area_source", "map_version", "offroad_na", "collision_na", "collision_convention")
 FLOOR_LABEL = "Ground truth (floor)"
 _NO_DATAROOT = "no dataroot (pass --dataroot and --version)"
 
@@ -901,6 +368,37 @@ class SafetyResult:
         return {"floor": self.floor, "gt_off_road_scenes": self.gt_off_scenes, "gt_collision_scenes": self.gt_collision_scenes}
 
 
+def run_map_versions(rs: RunSafety) -> dict[str, str]:
+    """Map key (``expansion:<location>``) -> the version of the map expansion (:attr:`DrivableArea.version`) behind a
+    run's off-road values, over the frames that have one; {} for a run without values or scored on masks only."""
+    if rs.model is None or rs.data is None:
+        return {}
+    out: dict[str, str] = {}
+    for fid, ok in zip(rs.frame_ids, rs.model.area_ok, strict=True):
+        key = rs.data.map_of.get(sample_token_of(fid)) if ok else None
+        area = rs.data.areas.get(key) if key is not None else None
+        if key is not None and isinstance(area, DrivableArea) and area.version:  # area is None when key is
+            out[key] = area.version
+    return out
+
+
+def map_version_conflict(per_run: Mapping[str, Mapping[str, str]]) -> str | None:
+    """One line naming the first two runs of ``per_run`` (label -> map key -> expansion version:
+    :func:`run_map_versions`, ``RunPlanning.map_versions``) whose numbers were scored against different versions of
+    the same map expansion, or None when every map was read at one version. Such runs' off-road and planning scores
+    are not comparable."""
+    seen: dict[str, tuple[str, str]] = {}  # map key -> (version, first label)
+    for label, versions in per_run.items():
+        for key, v in sorted(versions.items()):
+            first = seen.setdefault(key, (v, label))
+            if first[0] != v:
+                location = key.removeprefix("expansion:")
+                return (f"{first[1]} and {label} were scored against different versions of the {location} map "
+                        f"expansion ({first[0]} and {v}); their off-road and planning scores are not comparable: "
+                        "score every run against one dataset (--dataroot DIR --version V) or evaluate them apart")
+    return None
+
+
 def _resolve_dataset(run: Any, dataroot: str | os.PathLike[str] | None, version: str | None) -> tuple[str, str] | str:
     """(dataroot, version) for a run: the given ones, else the run's manifest's; or the reason there is none
     (none recorded, or the recorded folder is gone)."""
@@ -918,12 +416,20 @@ def _resolve_dataset(run: Any, dataroot: str | os.PathLike[str] | None, version:
     return _NO_DATAROOT
 
 
+def map_versions(versions: Sequence[str]) -> str | None:
+    """The map expansion versions behind some values, one string: the distinct versions sorted and joined by ``+``
+    (``"1.3"``, ``"1.2+1.3"``); None when no value came from an expansion (a mask, or no value)."""
+    found = sorted({v for v in versions if v})
+    return "+".join(found) if found else None
+
+
 def _row(values: Mapping[str, np.ndarray], fs: FrameSafety, convention: str) -> dict[str, Any]:
     r = rates(values)
     area_ok, coll_ok = np.isfinite(values["offroad"]), np.isfinite(values["collision"])
     kinds = sorted({k for k in fs.area_kind if k})
     return {**r, "safety_frames": int(len(fs.area_ok)), "offroad_frames": int(area_ok.sum()), "collision_frames": int(coll_ok.sum()),
-            "area_source": "+".join(kinds) if kinds else None, "offroad_na": None if area_ok.any() else (na_reason(fs, "area") or "no frame"),
+            "area_source": "+".join(kinds) if kinds else None, "map_version": map_versions(fs.area_version),
+            "offroad_na": None if area_ok.any() else (na_reason(fs, "area") or "no frame"),
             "collision_na": None if coll_ok.any() else (na_reason(fs, "collision") or "no frame"), "collision_convention": convention}
 
 
@@ -965,7 +471,7 @@ def evaluate_safety(
     off-road values are the same in every table. Intervals: :func:`_rate_intervals`. The floor is the
     ground truth's own (unmasked) rates over every frame with usable ground truth in any run. ``agents``:
     which annotation boxes count (:data:`AGENT_FILTERS`). A run whose ground truth moves faster than
-    :data:`lightemma.frames.geometry.POSE_JUMP_SPEED` between keyframes gets a warning (a pose jump). ``history``:
+    :data:`lightemma.nuscenes.geometry.POSE_JUMP_SPEED` between keyframes gets a warning (a pose jump). ``history``:
     as :func:`load_safety_data` (the planning score reuses the data read here).
     """
     warnings: list[str] = []
@@ -980,9 +486,9 @@ def evaluate_safety(
             datasets.setdefault(ds, []).append(i)
     loaded: dict[tuple[str, str], SafetyData | str] = {}
     for ds, members in datasets.items():
-        tokens = {sample_token_of(f) for i in members for f in entries[i][1].frame_ids}
+        wanted = {sample_token_of(f) for i in members for f in entries[i][1].frame_ids}
         try:
-            loaded[ds] = load_safety_data(ds[0], ds[1], samples=tokens, agents=agents, history=history)
+            loaded[ds] = load_safety_data(ds[0], ds[1], samples=wanted, agents=agents, history=history)
         except DatasetError as exc:
             loaded[ds] = str(exc)
             warnings.append(f"safety metrics: {exc}")
@@ -1070,9 +576,9 @@ KEYFRAME_SECONDS = 0.5
 
 def pose_jump_warnings(gt: Any, frame_ids: Sequence[str], label: str) -> list[str]:
     """One warning when some frame's ground truth (N, 6, 2) (m, ego frame; p_0 the origin) moves faster than
-    :data:`lightemma.frames.geometry.POSE_JUMP_SPEED` over a :data:`KEYFRAME_SECONDS` step: an ego pose that
+    :data:`lightemma.nuscenes.geometry.POSE_JUMP_SPEED` over a :data:`KEYFRAME_SECONDS` step: an ego pose that
     jumps in the dataset (its frames' ADE and safety values are then measured against a wrong ground truth)."""
-    from lightemma.frames.geometry import POSE_JUMP_SPEED
+    from lightemma.nuscenes.geometry import POSE_JUMP_SPEED
 
     if not len(frame_ids):
         return []
@@ -1132,7 +638,8 @@ def _concat(parts: Sequence[FrameSafety]) -> FrameSafety:
         return parts[0]
     return FrameSafety(np.concatenate([p.area for p in parts]), np.concatenate([p.area_ok for p in parts]), [r for p in parts for r in p.area_reason],
                        [k for p in parts for k in p.area_kind], np.concatenate([p.collide for p in parts]),
-                       np.concatenate([p.coll_ok for p in parts]), [r for p in parts for r in p.coll_reason])
+                       np.concatenate([p.coll_ok for p in parts]), [r for p in parts for r in p.coll_reason],
+                       [v for p in parts for v in (p.area_version or [""] * len(p.area_ok))])
 
 
 def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str, resampling: Any, *, only: set[str] | None = None) -> list[dict[str, Any]]:
@@ -1156,7 +663,10 @@ def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str
         for f in rs.frame_ids:
             scene_of.setdefault(f, f.rsplit("/", 1)[0])
     codes: dict[str, int] = {}
-    out, groups, keys, where = [], [], [], []
+    out: list[dict[str, Any]] = []
+    groups: list[tuple[np.ndarray, np.ndarray]] = []
+    keys: list[str] = []
+    where: list[int] = []
     for key in ("offroad", "collision"):
         for a in range(len(labels)):
             for b in range(a + 1, len(labels)):

@@ -30,10 +30,14 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.definitions import STEP_SECONDS
+from lightemma.errors import InputError
 from lightemma.evaluation.core import common_frames, unique_labels
+from lightemma.evaluation.intent_audit import says_stop_drives_on
 from lightemma.evaluation.loading import RunData
+from lightemma.evaluation.safety import frame_tags
+from lightemma.metrics import evaluate
 
-DT = 0.5
 TAGS: tuple[str, ...] = (
     "stopped",
     "starting",
@@ -50,10 +54,12 @@ SAFETY_TAGS: tuple[str, ...] = ("collides", "off_road")
 #: tags from a model's own planning sub-scores (need the evaluation's ``planning``; lightemma.evaluation.planning_score.frame_tags):
 #: ``wrong-way``, ``uncomfortable``, ``no-progress``
 from lightemma.evaluation.planning_score import PLANNING_TAGS  # noqa: E402  (beside the other tag lists)
+
 #: tags from a model's explanation audit (need the evaluation's ``explanations``; lightemma.evaluation.intent_audit):
-#: ``says-stop-drives-on`` (its stage-2 text says stop, its plan does not stop). ``hallucinated-pedestrian`` needs the
-#: scene-description audit, not built yet.
-EXPLANATION_TAGS: tuple[str, ...] = ("says-stop-drives-on",)
+#: ``says-stop-drives-on`` (its stage-2 text says stop, its plan does not stop); from the described-objects audit
+#: (lightemma.evaluation.object_audit) ``hallucinated-pedestrian`` (its stage-1 text affirms a pedestrian, none in the
+#: image) and ``missed-pedestrian`` (a pedestrian in view, not affirmed).
+EXPLANATION_TAGS: tuple[str, ...] = ("says-stop-drives-on", "hallucinated-pedestrian", "missed-pedestrian")
 # tags whose worst frames illustrate the paper's failure cases
 CASE_TAGS: tuple[str, ...] = ("straight_after_right_turn", "straight_after_left_turn", "turning_left", "turning_right", "braking", "starting")
 
@@ -78,7 +84,7 @@ def _with_origin(positions: np.ndarray) -> np.ndarray:
 
 def future_speeds(gt_positions: np.ndarray) -> np.ndarray:
     """(N, 6) speeds of the segments origin→p1 … p5→p6."""
-    return np.linalg.norm(np.diff(_with_origin(gt_positions), axis=1), axis=2) / DT
+    return np.linalg.norm(np.diff(_with_origin(gt_positions), axis=1), axis=2) / STEP_SECONDS
 
 
 def heading_change(positions: np.ndarray, *, min_step: float = 0.05) -> np.ndarray:
@@ -151,7 +157,7 @@ def tag_frames(gt_positions: np.ndarray, history_actions: np.ndarray, thresholds
 
 def _require_history(run: RunData) -> np.ndarray:
     if run.history_actions is None:
-        raise ValueError(f"{run.info.run_dir}: load the run with details=True for scenario analysis")
+        raise InputError(f"{run.info.run_dir}: load the run with details=True for scenario analysis")
     return run.history_actions
 
 
@@ -180,8 +186,6 @@ def _aligned_tags(result: Any, names: Sequence[str], tags_of: Any, run: RunData,
 
 def _safety_masks(safety: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
     """``collides`` / ``off_road`` of ``rows`` of a run from its safety outcomes (False where it has none)."""
-    from lightemma.evaluation.safety import frame_tags
-
     rs = safety.runs.get(label) if safety is not None else None
     return _aligned_tags(rs, SAFETY_TAGS, frame_tags, run, rows)
 
@@ -195,18 +199,25 @@ def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -
 
 
 def _explanation_masks(explanations: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
-    """``says-stop-drives-on`` of ``rows`` of a run from its explanation audit (False where it has none)."""
-    from lightemma.evaluation.intent_audit import says_stop_drives_on
-
-    audit = explanations.runs.get(label) if explanations is not None else None
-    out = np.zeros(len(rows), dtype=bool)
-    if audit is not None:
-        tag = says_stop_drives_on(audit)
-        where = {f: i for i, f in enumerate(audit.frame_ids)}
+    """:data:`EXPLANATION_TAGS` of ``rows`` of a run from its explanation audit (False where it has none)."""
+    def aligned(frame_ids: Sequence[str], tag: np.ndarray) -> np.ndarray:
+        out = np.zeros(len(rows), dtype=bool)
+        where = {f: i for i, f in enumerate(frame_ids)}
         for j, r in enumerate(rows):
             i = where.get(run.frame_ids[r])
             out[j] = i is not None and bool(tag[i])
-    return {"says-stop-drives-on": out}
+        return out
+
+    audit = explanations.runs.get(label) if explanations is not None else None
+    none = np.zeros(len(rows), dtype=bool)
+    masks = {tag: none for tag in EXPLANATION_TAGS}
+    if audit is not None:
+        masks["says-stop-drives-on"] = aligned(audit.frame_ids, says_stop_drives_on(audit))
+    objects = getattr(explanations, "objects", {}).get(label) if explanations is not None else None
+    if objects is not None:
+        masks["hallucinated-pedestrian"] = aligned(objects.frame_ids, objects.check.hallucinated_pedestrian)
+        masks["missed-pedestrian"] = aligned(objects.frame_ids, objects.check.missed_pedestrian)
+    return masks
 
 
 def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None, safety: Any = None,
@@ -219,10 +230,8 @@ def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", f
     ``off_road`` follow, per model from its own outcomes ("frames" counts the first model's); with ``planning`` (an
     evaluation's :class:`~lightemma.evaluation.planning_score.PlanningResult`) the tags ``wrong-way``, ``uncomfortable`` and
     ``no-progress`` the same way; with ``explanations`` (an evaluation's
-    :class:`~lightemma.evaluation.intent_audit.ExplanationResult`) the tag ``says-stop-drives-on``.
+    :class:`~lightemma.evaluation.intent_audit.ExplanationResult`) the tags of :data:`EXPLANATION_TAGS`.
     """
-    from lightemma import evaluate
-
     labels = unique_labels(list(runs))
     per_model = []
     for run, label in zip(runs, labels):
@@ -323,12 +332,12 @@ def truth_over_runs(runs: Sequence[RunData], thresholds: Thresholds = Thresholds
         return {"history": np.zeros(0), "true": np.zeros(0), "after_turn": np.zeros(0, dtype=bool)}
     gt_all, hist_all = np.concatenate(gt), np.concatenate(hist)
     usable = np.isfinite(gt_all).all(axis=(1, 2)) & np.isfinite(hist_all).all(axis=(1, 2))
-    rows = np.flatnonzero(usable & (hist_all[:, -1, 0] >= thresholds.moving_speed))
-    rows = rows[path_length(gt_all[rows]) >= thresholds.min_path]
-    k_hist = hist_all[rows, -1, 1]
-    tags = tag_frames(gt_all[rows], hist_all[rows], thresholds)
+    keep = np.flatnonzero(usable & (hist_all[:, -1, 0] >= thresholds.moving_speed))
+    keep = keep[path_length(gt_all[keep]) >= thresholds.min_path]
+    k_hist = hist_all[keep, -1, 1]
+    tags = tag_frames(gt_all[keep], hist_all[keep], thresholds)
     after = (tags["straight_after_left_turn"] | tags["straight_after_right_turn"]) & (np.abs(k_hist) > 1e-6)
-    return {"history": k_hist, "true": mean_curvature(gt_all[rows]), "after_turn": after}
+    return {"history": k_hist, "true": mean_curvature(gt_all[keep]), "after_turn": after}
 
 
 def history_bias(runs: Sequence[RunData], thresholds: Thresholds = Thresholds()) -> list[dict[str, Any]]:

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from lightemma import _core
+from lightemma.errors import InputError, ShapeError
 
 
 @dataclass(frozen=True)
@@ -35,11 +36,11 @@ class Resampling:
 
     def __post_init__(self) -> None:
         if self.n_resamples < 0:
-            raise ValueError(f"n_resamples must be 0 (no intervals) or positive, got {self.n_resamples}")
+            raise InputError(f"n_resamples must be 0 (no intervals) or positive, got {self.n_resamples}")
         if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f"confidence must lie strictly between 0 and 1, got {self.confidence}")
+            raise InputError(f"confidence must lie strictly between 0 and 1, got {self.confidence}")
         if not 0 <= self.seed < 2**64:
-            raise ValueError(f"seed must be an integer in [0, 2**64), got {self.seed}")
+            raise InputError(f"seed must be an integer in [0, 2**64), got {self.seed}")
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -67,7 +68,7 @@ def cluster_sums(values: ArrayLike, clusters: ArrayLike) -> tuple[np.ndarray, np
     v = v[:, None] if v.ndim == 1 else v
     labels = np.asarray(clusters)
     if v.ndim != 2 or labels.shape != (len(v),):
-        raise ValueError(f"values must be (N,) or (N, M) and clusters (N,), got {np.shape(values)} and {labels.shape}")
+        raise ShapeError(f"values must be (N,) or (N, M) and clusters (N,), got {np.shape(values)} and {labels.shape}")
     _, inverse = np.unique(labels, return_inverse=True)
     inverse = inverse.reshape(-1)
     n = int(inverse.max()) + 1 if len(inverse) else 0
@@ -80,7 +81,7 @@ def _stack(groups: Sequence[tuple[ArrayLike, ArrayLike]], metrics: int | None = 
     for values, clusters in groups:
         s, c = cluster_sums(values, clusters)
         if metrics is not None and s.shape[1] != metrics:
-            raise ValueError(f"expected {metrics} value(s) per frame, got {s.shape[1]}")
+            raise ShapeError(f"expected {metrics} value(s) per frame, got {s.shape[1]}")
         sums.append(s)
         counts.append(c)
         offsets.append(offsets[-1] + len(c))
@@ -93,7 +94,7 @@ def _stack(groups: Sequence[tuple[ArrayLike, ArrayLike]], metrics: int | None = 
 
 def _streams(keys: Sequence[str], rows: int) -> np.ndarray:
     if len(keys) != rows:
-        raise ValueError(f"{rows} group(s) need {rows} key(s), got {len(keys)}")
+        raise InputError(f"{rows} group(s) need {rows} key(s), got {len(keys)}")
     return np.fromiter((stream_id(k) for k in keys), dtype=np.uint64, count=rows)
 
 
@@ -138,12 +139,12 @@ def rate_interval(values: ArrayLike, clusters: ArrayLike, confidence: float = 0.
 
     v = np.asarray(values, dtype=np.float64)
     if v.ndim != 1:
-        raise ValueError(f"rate values must be (N,), got shape {v.shape}")
+        raise ShapeError(f"rate values must be (N,), got shape {v.shape}")
     bad = np.flatnonzero(~np.isfinite(v) | (v < 0.0) | (v > 1.0))
     if len(bad):
-        raise ValueError(f"rate values must be finite numbers in [0, 1]: value {v[bad[0]]!r} at index {int(bad[0])}")
+        raise InputError(f"rate values must be finite numbers in [0, 1]: value {v[bad[0]]!r} at index {int(bad[0])}")
     if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must lie strictly between 0 and 1, got {confidence}")
+        raise InputError(f"confidence must lie strictly between 0 and 1, got {confidence}")
     sums, counts = cluster_sums(v, clusters)
     k, n = len(counts), float(counts.sum())
     if k < 2:
@@ -214,7 +215,8 @@ def holm(p_values: ArrayLike) -> np.ndarray:
 def mark_holm(rows: Sequence[dict], confidence: float) -> None:
     """Set each row's ``p_holm`` (Holm over the rows' ``p_value``, None where a row has none) and ``significant``
     (``p_holm`` ≤ 1 − ``confidence``), in place: one family, the rows given (docs/statistics.md)."""
-    adjusted = holm([np.nan if r["p_value"] is None else r["p_value"] for r in rows]) if rows else []
+    p_values = [np.nan if r["p_value"] is None else r["p_value"] for r in rows]
+    adjusted: np.ndarray | list[float] = holm(p_values) if rows else []
     alpha = 1.0 - confidence
     for row, adj in zip(rows, adjusted):
         row["p_holm"] = None if np.isnan(adj) else float(adj)

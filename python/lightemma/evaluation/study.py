@@ -32,10 +32,11 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.frames import geometry
+from lightemma.definitions import STEP_SECONDS
+from lightemma.kinematics import integrate
+from lightemma.nuscenes import geometry
 from lightemma.runs.store import FRAMES_FILE, create_run_dir, update_manifest
 
-DT = 0.5
 POSE_NOISE = 0.01  # m, per keyframe position
 GARBAGE_SPEED = 1e12
 
@@ -128,7 +129,7 @@ def _scene_drive(rng: np.random.Generator, steps: int) -> np.ndarray:
             start = int(rng.integers(0, max(1, steps - 6)))
             k = rng.choice([-1.0, 1.0]) * rng.uniform(0.04, 0.15)
             turn_speed = rng.uniform(3.0, 7.0)
-            length = int(np.clip(round((np.pi / 2) / (abs(k) * turn_speed * DT)), 3, 16))
+            length = int(np.clip(round((np.pi / 2) / (abs(k) * turn_speed * STEP_SECONDS)), 3, 16))
             kappa[start : start + length] += k
             v[start : start + length] = np.minimum(v[start : start + length], turn_speed)
     if kind in ("stop", "stop_turn"):
@@ -146,15 +147,13 @@ def _scene_drive(rng: np.random.Generator, steps: int) -> np.ndarray:
 
 def study_scenes(n_scenes: int = 150, frames_per_scene: int = 26, *, seed: int = 0, scene_sd: float = 0.35) -> StudyScenes:
     """Simulate ``n_scenes`` drives and cut them into frames (reference window: c = 7 … K − 8)."""
-    from lightemma import integrate
-
     rng = np.random.default_rng([seed, 7001])
     keyframes = frames_per_scene + 14
     ids, names, index, gts, hists, futures = [], [], [], [], [], []
     for s in range(n_scenes):
         actions = _scene_drive(rng, keyframes - 1)
         positions = np.concatenate([np.zeros((1, 2)), integrate(np.ascontiguousarray(actions), method="midpoint")])
-        heading = np.concatenate([[0.0], np.cumsum(actions[:, 0] * actions[:, 1] * DT)])
+        heading = np.concatenate([[0.0], np.cumsum(actions[:, 0] * actions[:, 1] * STEP_SECONDS)])
         turn = rng.uniform(-np.pi, np.pi)  # the scene's direction on the map
         rot = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
         world = positions @ rot.T + rng.uniform(-500, 500, 2) + rng.normal(0.0, POSE_NOISE, positions.shape)
@@ -176,8 +175,6 @@ def study_scenes(n_scenes: int = 150, frames_per_scene: int = 26, *, seed: int =
 
 def predict(scenes: StudyScenes, model: StudyModel, *, seed: int = 0, model_scene_sd: float = 0.15) -> dict[str, np.ndarray]:
     """A model's predicted actions and trajectories (N, 6, 2) and outcome masks, reproducible per model string."""
-    from lightemma import integrate
-
     rng = np.random.default_rng([seed, *model.model.encode()])
     n = len(scenes)
     own = np.exp(rng.normal(0.0, model_scene_sd, len(scenes.scene_names)))

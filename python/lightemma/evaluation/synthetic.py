@@ -16,9 +16,8 @@ from typing import Any
 import numpy as np
 
 from lightemma import integrate
+from lightemma.definitions import STEP_SECONDS
 from lightemma.runs.store import FRAMES_FILE, create_run_dir, update_manifest
-
-DT = 0.5
 
 
 def make_record(
@@ -85,7 +84,7 @@ def synthetic_records(
         v0 = truth.uniform(0.0, 14.0, batch)[:n]
         acc = truth.uniform(-2.0, 1.5, batch)[:n]
         curv = (truth.normal(0.0, 0.03, batch) * (truth.random(batch) < 0.4))[:n]
-        steps = np.arange(1, 7) * DT
+        steps = np.arange(1, 7) * STEP_SECONDS
         gt_act = np.stack([np.clip(v0[:, None] + acc[:, None] * steps, 0.0, None), np.repeat(curv[:, None], 6, 1)], axis=2)
         hist = np.stack([np.clip(v0[:, None] - acc[:, None] * steps[::-1], 0.0, None), np.repeat(curv[:, None] * 0.8, 6, 1)], axis=2)
         pred_act = gt_act + np.stack([rng.normal(0, noise, (n, 6)), rng.normal(0, noise * 0.01, (n, 6))], axis=2)

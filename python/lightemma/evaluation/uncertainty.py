@@ -18,6 +18,7 @@ import numpy as np
 
 from lightemma.evaluation.loading import RunData
 from lightemma.evaluation.stats import Resampling, bootstrap_ci, mark_holm, sign_flip_p
+from lightemma.metrics import frame_metrics
 
 INTERVAL_KEYS: tuple[str, ...] = ("ade_avg", "fde")
 _COLUMNS = (3, 4)  # ade_avg, fde in lightemma.metrics.FRAME_METRICS
@@ -26,8 +27,6 @@ BLOCK = 1 << 16
 
 def frame_values(run: RunData, rows: np.ndarray, convention: str) -> np.ndarray:
     """(len(rows), 2): per-frame ADE avg and FDE of scored ``rows`` under ``convention`` (Rust core, in blocks)."""
-    from lightemma.metrics import frame_metrics
-
     out = np.empty((len(rows), len(_COLUMNS)))
     for start in range(0, len(rows), BLOCK):
         block = rows[start : start + BLOCK]

@@ -147,7 +147,8 @@ def run_fingerprint(run_dir: str | Path, manifest: Mapping[str, Any], recorded_i
     from lightemma.runs.store import FRAME_IDS_FILE, read_frame_ids
 
     run_dir = Path(run_dir)
-    dataset = manifest.get("dataset") if isinstance(manifest.get("dataset"), Mapping) else {}
+    dataset_value = manifest.get("dataset")
+    dataset: Mapping[str, Any] = dataset_value if isinstance(dataset_value, Mapping) else {}
     where = f"{run_dir / 'manifest.json'}: dataset.fingerprint"
     listed = read_frame_ids(run_dir)
     if "fingerprint" in dataset:

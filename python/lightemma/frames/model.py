@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from lightemma.errors import DatasetError
+from lightemma.errors import DatasetError, InputError, ShapeError
 
 SYNTH_MARKER = "lightemma-synth.json"  # written by lightemma.synth at the root of a synthetic dataset
 
@@ -115,16 +115,16 @@ class FrameSet:
             shape = (n, *entry)
             arr = np.asarray(getattr(self, name))
             if arr.shape != shape:
-                raise ValueError(f"FrameSet.{name} has shape {arr.shape}, expected {shape}")
+                raise ShapeError(f"FrameSet.{name} has shape {arr.shape}, expected {shape}")
             dtype = np.int64 if name in self._INTEGER_ARRAYS else np.float64
             object.__setattr__(self, name, _readonly(arr.astype(dtype, copy=False)))
         for name in self._LISTS:
             value = list(getattr(self, name))
             if len(value) != n:
-                raise ValueError(f"FrameSet.{name} has {len(value)} entries, expected {n}")
+                raise InputError(f"FrameSet.{name} has {len(value)} entries, expected {n}")
             object.__setattr__(self, name, value)
         if len(set(self.frame_ids)) != n:
-            raise ValueError("FrameSet frame ids are not unique")
+            raise InputError("FrameSet frame ids are not unique")
         object.__setattr__(self, "_index", {fid: i for i, fid in enumerate(self.frame_ids)})
 
     # -- sequence protocol -------------------------------------------------
@@ -169,7 +169,7 @@ class FrameSet:
     def index(self, frame_id: str) -> int:
         """Position of ``frame_id`` in this set (``DatasetError`` if absent)."""
         try:
-            return self._index[frame_id]  # type: ignore[attr-defined]
+            return self._index[frame_id]  # type: ignore[attr-defined]  # set by __post_init__
         except KeyError:
             raise DatasetError(f"frame {frame_id!r} is not in this frame set") from None
 
@@ -201,12 +201,12 @@ class FrameSet:
     def select(self, frame_ids: Iterable[str]) -> FrameSet:
         """The frames with these ids, in this set's order; unknown ids raise ``DatasetError``."""
         wanted = list(frame_ids)
-        unknown = [f for f in wanted if f not in self._index]  # type: ignore[attr-defined]
+        unknown = [f for f in wanted if f not in self._index]  # type: ignore[attr-defined]  # set by __post_init__
         if unknown:
             shown = ", ".join(repr(u) for u in unknown[:5])
             more = f" and {len(unknown) - 5} more" if len(unknown) > 5 else ""
             raise DatasetError(f"{len(unknown)} frame id(s) not in this frame set: {shown}{more}")
-        keep = sorted({self._index[f] for f in wanted})  # type: ignore[attr-defined]
+        keep = sorted({self._index[f] for f in wanted})  # type: ignore[attr-defined]  # set by __post_init__
         return self._take(keep)
 
     def select_scenes(self, scene_names: Iterable[str]) -> FrameSet:
@@ -220,7 +220,7 @@ class FrameSet:
     def head(self, n: int) -> FrameSet:
         """The first ``n`` frames."""
         if n < 0:
-            raise ValueError(f"head(n) needs n >= 0, got {n}")
+            raise InputError(f"head(n) needs n >= 0, got {n}")
         return self._take(list(range(min(n, len(self)))))
 
     # -- description -------------------------------------------------------

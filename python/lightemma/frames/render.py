@@ -19,6 +19,8 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.errors import InputError, ShapeError
+
 
 def format_number(x: float) -> str:
     """Shortest plain decimal that round-trips ``x``: ``4.512``, ``0.0``, ``12.0``, ``0.00001``.
@@ -29,9 +31,9 @@ def format_number(x: float) -> str:
     try:
         value = float(x)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"cannot render {x!r} as a number") from exc
+        raise InputError(f"cannot render {x!r} as a number") from exc
     if not math.isfinite(value):
-        raise ValueError(f"cannot render non-finite number {value!r} in a prompt")
+        raise InputError(f"cannot render non-finite number {value!r} in a prompt")
     if value == 0.0:
         return "0.0"
     text = repr(value)
@@ -73,7 +75,7 @@ def format_history(actions: np.ndarray | Sequence[Sequence[float]]) -> str:
     """
     arr = np.asarray(_rows(actions), dtype=np.float64)
     if arr.ndim != 2 or arr.shape[1] != 2:
-        raise ValueError(f"history actions must have shape (T, 2), got {arr.shape}")
+        raise ShapeError(f"history actions must have shape (T, 2), got {arr.shape}")
     pairs = (f"({format_number(v)}, {format_number(c)})" for v, c in arr.tolist())
     return "[" + ", ".join(pairs) + "]"
 
@@ -94,9 +96,9 @@ def format_python_list(values: np.ndarray | Sequence[float]) -> str:
         if isinstance(value, np.generic):
             value = value.item()
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ValueError(f"cannot render {value!r} as a number")
+            raise InputError(f"cannot render {value!r} as a number")
         if isinstance(value, float) and not math.isfinite(value):
-            raise ValueError(f"cannot render non-finite number {value!r} in a prompt")
+            raise InputError(f"cannot render non-finite number {value!r} in a prompt")
         out.append(repr(value))
     return "[" + ", ".join(out) + "]"
 
@@ -105,7 +107,7 @@ def history_placeholders(actions: np.ndarray | Sequence[Sequence[float]]) -> dic
     """The prompt placeholders of a frame's history actions (T, 2): ``history``, ``speeds``, ``curvatures``."""
     rows = _rows(actions)
     if any(not isinstance(row, list) or len(row) != 2 for row in rows):
-        raise ValueError(f"history actions must have shape (T, 2), got rows of length "
+        raise ShapeError(f"history actions must have shape (T, 2), got rows of length "
                          f"{sorted({len(r) if isinstance(r, list) else 0 for r in rows})}")
     return {
         "history": format_history(np.asarray(rows, dtype=np.float64).reshape(-1, 2)),

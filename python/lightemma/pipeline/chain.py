@@ -29,25 +29,37 @@ model — exactly as an independent re-ask resends the same request.
 An input ablation (``ChainPolicy.inputs``, :mod:`lightemma.inputs`) changes what every stage is shown:
 no image, a blank one of the frame's size, or (through the prompt set's no-history variant, chosen by
 the runner) no history numbers.
+
+K samples (``ChainPolicy.samples`` > 1, ``--samples K``; docs/run.md#k-samples): K independent chains per frame,
+each asked and re-asked as above with its sample index on every request. A fresh frame's first stage-1 request
+is drawn for every sample at once (:meth:`~lightemma.backends.base.Backend.generate_samples`: one request with
+``n`` where the backend supports it, else K requests). Sample 0's record is the frame record as without sampling;
+samples 1..K-1 are in its ``samples`` list; the frame's token, time and cost totals count every sample's calls.
 """
 
 from __future__ import annotations
 
+import asyncio
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
+from lightemma.actions import history_rows, parse_actions, plausibility
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, ResponseSchema, is_truncated
+from lightemma.backends.structured import ACTIONS_SCHEMA
+from lightemma.definitions import INTEGRATION_METHODS, STEP_SECONDS
+from lightemma.errors import InputError
 from lightemma.frames import history_placeholders
-from lightemma.inputs import request_image, shown_history
+from lightemma.inputs import check_inputs, describe_perturbation, request_image, shown_history
+from lightemma.kinematics import integrate
 from lightemma.prompts import ANSWER_FORMATS, CHAINS, PromptSet
 from lightemma.runs.records import attempt_received
+from lightemma.runs.schema import AttemptRecord, CallRecord, FrameRecord, attempt_record, call_record, frame_record
 
 REASK_MODES = ("actions", "chain")
-INTEGRATION_METHODS = ("euler", "midpoint")
 
 
 @dataclass(frozen=True)
@@ -67,22 +79,23 @@ class ChainPolicy:
     chain: str = "independent"  # or "conversation": stages 2 and 3 continue one conversation
     answer_format: str = "text"  # or "structured": stage 3 constrained to the actions JSON schema
     inputs: str = "full"  # input ablation (lightemma.inputs): full, no-image, blank-image, no-history
+    samples: int = 1  # K independent chains per frame (--samples K)
 
     def __post_init__(self) -> None:
+        if type(self.samples) is not int or self.samples < 1:
+            raise InputError(f"samples must be a whole number of at least 1, got {self.samples!r}")
         if self.reask not in REASK_MODES:
-            raise ValueError(f"reask must be one of {', '.join(REASK_MODES)}, got {self.reask!r}")
+            raise InputError(f"reask must be one of {', '.join(REASK_MODES)}, got {self.reask!r}")
         if self.max_attempts < 1:
-            raise ValueError(f"max_attempts must be at least 1, got {self.max_attempts}")
+            raise InputError(f"max_attempts must be at least 1, got {self.max_attempts}")
         if self.integrate_method not in INTEGRATION_METHODS:
-            raise ValueError(f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}")
-        from lightemma.actions import plausibility
+            raise InputError(f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}")
 
         plausibility(self.speed_range, self.max_abs_curvature)  # ValueError for malformed limits
         if self.chain not in CHAINS:
-            raise ValueError(f"chain must be one of {', '.join(CHAINS)}, got {self.chain!r}")
+            raise InputError(f"chain must be one of {', '.join(CHAINS)}, got {self.chain!r}")
         if self.answer_format not in ANSWER_FORMATS:
-            raise ValueError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {self.answer_format!r}")
-        from lightemma.inputs import check_inputs
+            raise InputError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {self.answer_format!r}")
 
         check_inputs(self.inputs)
 
@@ -95,43 +108,40 @@ class ChainPolicy:
         """The JSON schema ``stage``'s answer is constrained to (stage 3 of a structured run), else None."""
         if stage != "actions" or self.answer_format != "structured":
             return None
-        from lightemma.backends.structured import ACTIONS_SCHEMA
 
         return ACTIONS_SCHEMA
 
     def parse_record(self) -> dict[str, Any]:
         """How answers are parsed, as the run manifest records it (``params.parse``)."""
-        from lightemma.actions import plausibility
-
         return {"mode": self.parse_mode, **plausibility(self.speed_range, self.max_abs_curvature)}
 
     def to_dict(self) -> dict[str, Any]:
-        from lightemma.inputs import describe_perturbation
-
         out = {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
                "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "chain": self.chain,
                "answer_format": self.answer_format, "inputs": self.inputs, "parse": self.parse_record()}
+        if self.samples > 1:  # a one-chain run's params are as they always were
+            out["samples"] = self.samples
         return out | describe_perturbation(self.inputs)  # a corruption's or history perturbation's definition
 
 
-def _call_record(stage: str, result: ChatResult) -> dict[str, Any]:
+def _call_record(stage: str, result: ChatResult) -> CallRecord:
     """One call as stored in an attempt: text or error, usage, time, cost."""
-    return {
-        "stage": stage,
-        "text": result.text if result.ok else None,
-        "error": result.error,
-        "error_message": result.error_message,
-        "input_tokens": result.input_tokens,
-        "output_tokens": result.output_tokens,
-        "seconds": round(result.seconds, 4),
-        "cost_cents": result.cost_cents,
-        "cached": result.cached,
-        "retries": result.retries,
-        "finish_reason": result.finish_reason,
-        "reasoning_tokens": result.reasoning_tokens,
-        "cached_input_tokens": result.cached_input_tokens,
-        "cache_write_tokens": result.cache_write_tokens,
-    }
+    return call_record(
+        stage=stage,
+        text=result.text if result.ok else None,
+        error=result.error,
+        error_message=result.error_message,
+        input_tokens=result.input_tokens,
+        output_tokens=result.output_tokens,
+        seconds=round(result.seconds, 4),
+        cost_cents=result.cost_cents,
+        cached=result.cached,
+        retries=result.retries,
+        finish_reason=result.finish_reason,
+        reasoning_tokens=result.reasoning_tokens,
+        cached_input_tokens=result.cached_input_tokens,
+        cache_write_tokens=result.cache_write_tokens,
+    )
 
 
 def _sum(values: list[Any], *, unknown_is_none: bool) -> Any:
@@ -142,14 +152,14 @@ def _sum(values: list[Any], *, unknown_is_none: bool) -> Any:
     return sum(known)
 
 
-def _totals(calls: list[dict[str, Any]]) -> dict[str, Any]:
+def _totals(calls: list[CallRecord]) -> dict[str, Any]:
     return {
         "input_tokens": _sum([c["input_tokens"] for c in calls], unknown_is_none=True),
         "output_tokens": _sum([c["output_tokens"] for c in calls], unknown_is_none=True),
         "reasoning_tokens": _sum([c.get("reasoning_tokens") for c in calls], unknown_is_none=True),
         "cached_input_tokens": _sum([c.get("cached_input_tokens") for c in calls], unknown_is_none=True),
         "cache_write_tokens": _sum([c.get("cache_write_tokens") for c in calls], unknown_is_none=True),
-        "seconds": round(sum(c["seconds"] for c in calls), 4),
+        "seconds": round(sum(c["seconds"] or 0.0 for c in calls), 4),  # a chain's calls always have their time
         "cost_cents": _sum([c["cost_cents"] for c in calls], unknown_is_none=True),
     }
 
@@ -159,7 +169,7 @@ class _Attempt:
 
     def __init__(self, number: int) -> None:
         self.number = number
-        self.calls: list[dict[str, Any]] = []
+        self.calls: list[CallRecord] = []
         self.error: str | None = None
         self.truncated: str | None = None  # the stage whose text was cut off at the output-token limit
 
@@ -174,16 +184,16 @@ class _Attempt:
             return None
         return result.text
 
-    def finish_truncated(self) -> dict[str, Any]:
+    def finish_truncated(self) -> AttemptRecord:
         """This attempt, ended by a text cut off at the output-token limit: ``failed``, ``failure: "truncated"``."""
         if self.truncated == "actions":
             return self.finish(self.calls[-1]["text"], "failed", "truncated", "truncated")
         return self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on",
                            "truncated")
 
-    def finish(self, answer: str | None, status: str, reason: str, failure: str) -> dict[str, Any]:
-        return {"attempt": self.number, "calls": self.calls, "answer": answer, "status": status, "reason": reason,
-                "failure": failure, "error": self.error, **_totals(self.calls)}
+    def finish(self, answer: str | None, status: str, reason: str, failure: str) -> AttemptRecord:
+        return attempt_record(attempt=self.number, calls=self.calls, answer=answer, status=status, reason=reason,
+                              failure=failure, error=self.error, **_totals(self.calls))
 
 
 def _parse(answer: str, policy: ChainPolicy, history: Any = None) -> tuple[str, str, str, np.ndarray]:
@@ -192,8 +202,6 @@ def _parse(answer: str, policy: ChainPolicy, history: Any = None) -> tuple[str, 
     ``history`` is the frame's (6, 2) history the prompt printed: a list in the answer equal to it is a
     quotation beside another list where the text calls it the past (see :func:`lightemma.parse_actions`).
     """
-    from lightemma.actions import history_rows, parse_actions
-
     parsed = parse_actions([answer], n=6, mode=policy.parse_mode, speed_range=policy.speed_range,
                            max_abs_curvature=policy.max_abs_curvature, history=history_rows([history]))
     return (str(parsed.status[0]), str(parsed.reason[0]), str(parsed.failure[0]),
@@ -217,24 +225,91 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
     are made.
     Raises only what the backend raises: :class:`~lightemma.errors.RunFatalError` when the run
     cannot succeed (a rejected API key, the same failure on frame after frame).
+
+    With ``policy.samples`` K > 1 the frame runs K independent chains (see the module docstring); ``earlier``'s
+    ``samples`` give each sample its own earlier attempts.
     """
+    if policy.samples == 1:
+        return await _run_chain(frame, backend, prompts, policy, earlier)
+    start = time.perf_counter()
+    k = policy.samples
+    before: list[Mapping[str, Any] | None] = [earlier] + [None] * (k - 1)
+    for entry in (earlier or {}).get("samples") or ():
+        index = entry.get("sample") if isinstance(entry, Mapping) else None
+        if type(index) is int and 0 < index < k:
+            before[index] = entry
+    first: list[ChatResult] | None = None
+    if not any((b or {}).get("attempts") for b in before):  # a fresh frame: stage 1 of every sample in one go
+        request = _request(frame, policy, "scene", prompts.render("scene"), (), 1, request_image(frame, policy.inputs), 0)
+        first = await backend.generate_samples(request, k)
+    tasks = [asyncio.ensure_future(_run_chain(frame, backend, prompts, policy, before[s], sample=s,
+                                              first=first[s] if first is not None else None)) for s in range(k)]
+    try:
+        records = await asyncio.gather(*tasks)
+    except BaseException:  # a run-fatal error (or a stop) in one sample: the frame's other chains end with it
+        for task in tasks:
+            task.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        raise
+    return _merge_samples(list(records), time.perf_counter() - start)
+
+
+#: the fields of a sample's own entry in a frame record's ``samples`` list (docs/run.md#k-samples)
+SAMPLE_FIELDS = ("status", "failure", "first_status", "n_attempts", "attempts", "actions", "trajectory", "scene_text",
+                 "intent_text", "answer", "error", "seconds", "call_seconds", "input_tokens", "output_tokens",
+                 "reasoning_tokens", "cached_input_tokens", "cache_write_tokens", "cost_cents", "cached", "cached_calls",
+                 "retries")
+_SUMMED = ("input_tokens", "output_tokens", "reasoning_tokens", "cached_input_tokens", "cache_write_tokens", "cost_cents")
+
+
+def _merge_samples(records: list[dict[str, Any]], seconds: float) -> dict[str, Any]:
+    """The frame record of K samples' records: sample 0's fields where a one-chain record has them, the others
+    (their :data:`SAMPLE_FIELDS`) in ``samples``; tokens, cost, call time, cache and retry counts summed over every
+    sample (null when any sample's is); ``seconds`` the frame's wall time."""
+    out = dict(records[0])
+    out["samples"] = [{"sample": s, **{key: r[key] for key in SAMPLE_FIELDS}} for s, r in enumerate(records[1:], 1)]
+    for key in _SUMMED:
+        out[key] = _sum([r[key] for r in records], unknown_is_none=True)
+    out["call_seconds"] = round(sum(r["call_seconds"] for r in records), 4)
+    out["cached"] = any(r["cached"] for r in records)
+    out["cached_calls"] = sum(r["cached_calls"] for r in records)
+    out["retries"] = sum(r["retries"] for r in records)
+    out["seconds"] = round(seconds, 4)
+    return out
+
+
+def _request(frame: Any, policy: ChainPolicy, stage: str, text: str, turns: tuple[tuple[str, str], ...], attempt: int,
+             image: str | None, sample: int) -> ChatRequest:
+    """The request of one stage of one sample's chain."""
+    return ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
+                       turns=turns, response_schema=policy.response_schema(stage),
+                       prefix_of_next=policy.chain == "conversation" and stage != "actions", attempt=attempt,
+                       inputs=policy.inputs, sample=sample, samples=policy.samples)
+
+
+async def _run_chain(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy,
+                     earlier: Mapping[str, Any] | None = None, *, sample: int = 0,
+                     first: ChatResult | None = None) -> dict[str, Any]:
+    """One chain of ``frame`` (sample ``sample``): its record as :func:`run_frame` describes it. ``first``: the
+    answer to its first stage-1 request, already drawn."""
     start = time.perf_counter()
     shown = shown_history(frame, policy.inputs)  # the frame's history, or its perturbation (--inputs history-*)
     history = history_placeholders(shown)  # {history}, {speeds}, {curvatures}
     image = request_image(frame, policy.inputs)  # the frame's image, a blank or corrupted one, or none (--inputs)
+    drawn = [first] if first is not None else []
 
     async def ask(stage: str, text: str, turns: tuple[tuple[str, str], ...] = ()) -> ChatResult:
-        request = ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
-                              turns=turns, response_schema=policy.response_schema(stage),
-                              prefix_of_next=policy.chain == "conversation" and stage != "actions", attempt=attempt.number,
-                              inputs=policy.inputs)
+        if stage == "scene" and drawn:
+            return drawn.pop()
+        request = _request(frame, policy, stage, text, turns, attempt.number, image, sample)
         return (await backend.generate([request]))[0]
 
     def turns(*texts: str) -> tuple[tuple[str, str], ...]:
         return _earlier_turns(policy, prompts, history, *texts)
 
-    before = [a for a in (earlier or {}).get("attempts") or () if isinstance(a, Mapping) and isinstance(a.get("calls"), list)]
-    attempts: list[dict[str, Any]] = []
+    before = [cast(AttemptRecord, a) for a in (earlier or {}).get("attempts") or ()
+              if isinstance(a, Mapping) and isinstance(a.get("calls"), list)]
+    attempts: list[AttemptRecord] = []
     scene: str | None = None
     intent: str | None = None
     actions = None
@@ -268,7 +343,8 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             break
 
     seconds = time.perf_counter() - start + _number((earlier or {}).get("seconds"))
-    return _frame_record(frame, [*before, *attempts], scene, intent, answer, actions, policy, seconds)
+    record = _frame_record(frame, [*before, *attempts], scene, intent, answer, actions, policy, seconds)
+    return cast(dict[str, Any], record)  # the runner and the samples merge still take records as plain dicts
 
 
 def _number(value: Any) -> float:
@@ -284,43 +360,41 @@ def _earlier_turns(policy: ChainPolicy, prompts: PromptSet, history: dict[str, s
     return tuple(zip(prompts_sent, texts))
 
 
-def _frame_record(frame: Any, attempts: list[dict[str, Any]], scene: str | None, intent: str | None, answer: str | None,
-                  actions: np.ndarray | None, policy: ChainPolicy, seconds: float) -> dict[str, Any]:
+def _frame_record(frame: Any, attempts: list[AttemptRecord], scene: str | None, intent: str | None, answer: str | None,
+                  actions: np.ndarray | None, policy: ChainPolicy, seconds: float) -> FrameRecord:
     trajectory = None
     if actions is not None:
-        from lightemma import integrate
-
-        trajectory = integrate(actions, dt=0.5, method=policy.integrate_method)
+        trajectory = integrate(actions, dt=STEP_SECONDS, method=policy.integrate_method)
     calls = [c for a in attempts for c in a["calls"]]
     last = attempts[-1]
     totals = _totals(calls)
-    return {
-        "frame_id": frame.frame_id,
-        "scene_name": frame.scene_name,
-        "sample_token": frame.sample_token,
-        "status": last["status"],
-        "failure": last["failure"],
+    return frame_record(
+        frame_id=frame.frame_id,
+        scene_name=frame.scene_name,
+        sample_token=frame.sample_token,
+        status=last["status"],
+        failure=last["failure"],
         # FE counts the first stage-3 answer received: an API error or a text cut off before stage 3 gives none
-        "first_status": next((a["status"] for a in attempts if attempt_received(a)), None),
-        "n_attempts": len(attempts),
-        "attempts": attempts,
-        "actions": _as_list(actions),
-        "trajectory": _as_list(trajectory),
-        "gt_positions": _as_list(frame.gt_positions),
-        "history_actions": _as_list(frame.history_actions),
-        "scene_text": scene,
-        "intent_text": intent,
-        "answer": answer,
-        "error": last["error"] if last["status"] == "failed" else None,
-        "seconds": round(seconds, 4),
-        "call_seconds": totals["seconds"],
-        "input_tokens": totals["input_tokens"],
-        "output_tokens": totals["output_tokens"],
-        "reasoning_tokens": totals["reasoning_tokens"],
-        "cached_input_tokens": totals["cached_input_tokens"],
-        "cache_write_tokens": totals["cache_write_tokens"],
-        "cost_cents": totals["cost_cents"],
-        "cached": any(c["cached"] for c in calls),
-        "cached_calls": sum(1 for c in calls if c["cached"]),
-        "retries": sum(c["retries"] for c in calls),
-    }
+        first_status=next((a["status"] for a in attempts if attempt_received(a)), None),
+        n_attempts=len(attempts),
+        attempts=attempts,
+        actions=_as_list(actions),
+        trajectory=_as_list(trajectory),
+        gt_positions=_as_list(frame.gt_positions),
+        history_actions=_as_list(frame.history_actions),
+        scene_text=scene,
+        intent_text=intent,
+        answer=answer,
+        error=last["error"] if last["status"] == "failed" else None,
+        seconds=round(seconds, 4),
+        call_seconds=totals["seconds"],
+        input_tokens=totals["input_tokens"],
+        output_tokens=totals["output_tokens"],
+        reasoning_tokens=totals["reasoning_tokens"],
+        cached_input_tokens=totals["cached_input_tokens"],
+        cache_write_tokens=totals["cache_write_tokens"],
+        cost_cents=totals["cost_cents"],
+        cached=any(c["cached"] for c in calls),
+        cached_calls=sum(1 for c in calls if c["cached"]),
+        retries=sum(c["retries"] for c in calls),
+    )

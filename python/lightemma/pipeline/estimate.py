@@ -8,17 +8,17 @@ model (:mod:`lightemma.inputs`): the frame's image (``full``, ``no-history``), a
 (``blank-image``: the same image tokens) or none (``no-image``).
 
 * Image tokens: the model's published rule at each frame's image size, read from the image file's header
-  (:func:`lightemma.registry.image_rule`: per model, each with its source and the date it was read). A model with
+  (:func:`lightemma.models.tokens.image_rule`: per model, each with its source and the date it was read). A model with
   no published rule has unknown image tokens: its input tokens and cost are unknown (None), never a guess, and
   ``--max-cost`` admits its calls at :func:`frame_cost_upper_bound` instead.
 * Text tokens: the prompts of the run's variant (``no-history``: the no-history templates) as rendered for
   the frame (its history), at one token per 4 UTF-8 bytes (OpenAI's
   rule of thumb, platform.openai.com/tokenizer) plus 4 tokens of role markers per message; stages 2 and 3
   also carry the earlier stages' answers, taken as 45 % (scene) and 35 % (intent) of the frame's output.
-* Output tokens: the registry's typical figure per frame (:func:`lightemma.registry.typical_output_tokens`,
+* Output tokens: the registry's typical figure per frame (:func:`lightemma.models.tokens.typical_output_tokens`,
   the paper's Table I for its models), at most three times ``--max-tokens``.
-* Cost: at the list price (:func:`lightemma.registry.price`) and the batch price
-  (:func:`lightemma.registry.batch_price`); prompt-cache discounts are left out, so the figure errs high.
+* Cost: at the list price (:func:`lightemma.models.prices.price`) and the batch price
+  (:func:`lightemma.models.prices.batch_price`); prompt-cache discounts are left out, so the figure errs high.
 
 Re-asks (format errors, API errors) add calls the estimate does not foresee. A run with no provider bill
 (a baseline, a local ``hf`` / ``vllm`` backend) has no estimate: :func:`no_bill` is its one line.
@@ -35,7 +35,11 @@ from collections.abc import Sequence
 from dataclasses import asdict, dataclass
 from typing import Any
 
-from lightemma.registry import ModelInfo, image_rule, run_price, typical_output_tokens
+from lightemma.frames import history_placeholders
+from lightemma.inputs import check_inputs
+from lightemma.models.catalog import ModelInfo
+from lightemma.models.prices import Price, _litellm_entry, reasoning_budget, run_price
+from lightemma.models.tokens import IMAGE_TOKEN_RULES, image_rule, typical_output_tokens
 
 SCENE_SHARE, INTENT_SHARE = 0.45, 0.35  # of a frame's output: the scene and intent answers, pasted into later prompts
 MESSAGE_TOKENS = 4
@@ -83,15 +87,13 @@ class CostBound:
 def frame_cost_upper_bound(info: ModelInfo, *, max_tokens: int, batch: bool = False,
                            given_price: Sequence[float] | None = None, served_from: str | None = None) -> CostBound:
     """The upper bound of what one call (and, ``.cents_per_frame``, one frame's chain) of ``info`` can cost, in US
-    cents, at the price the run bills (:func:`lightemma.registry.run_price`: ``given_price`` is ``--price``; a model
+    cents, at the price the run bills (:func:`lightemma.models.prices.run_price`: ``given_price`` is ``--price``; a model
     ``served_from`` another ``--api-base`` has no list price and no known context window).
 
     For ``--max-cost`` where an estimate is not a bound (image tokens with no published rule): input at the model's
-    whole context window, output at ``max_tokens`` + :func:`lightemma.registry.reasoning_budget`. Where the price or the
+    whole context window, output at ``max_tokens`` + :func:`lightemma.models.prices.reasoning_budget`. Where the price or the
     window is unknown, ``cents_per_call`` is None (no bound), with the reason in ``source``: never a guessed figure.
     """
-    from lightemma.registry import _litellm_entry, reasoning_budget
-
     output = int(max_tokens) + reasoning_budget(info)
     p = run_price(info, batch=batch, given=given_price, served_from=served_from)
     if p["input_usd_per_mtok"] is None or p["output_usd_per_mtok"] is None:
@@ -137,9 +139,13 @@ class Estimate:
     image_rule_exact: bool = True  # False: the rule gives a documented maximum per image (counted at it)
     bound: CostBound | None = None  # per call at the list price, where image tokens are unknown (for --max-cost)
     batch_bound: CostBound | None = None  # the same at the batch price
+    samples: int = 1  # K chains per frame (--samples): calls, tokens and costs count each frame K times
 
     def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
+        out = asdict(self)
+        if self.samples == 1:  # a one-chain run's estimate as it always was recorded
+            del out["samples"]
+        return out
 
     @property
     def cents_per_call(self) -> float | None:
@@ -175,7 +181,8 @@ class Estimate:
             images = ("0 image: --inputs no-image" if self.inputs == "no-image"
                       else f"{at_most}{self.image_tokens:,} image, {sizes}, {self.provider} rule")
             inputs = f"~{self.input_tokens:,} input tokens ({images})"
-        return (f"estimate: {self.frames:,} frames, {self.calls:,} calls, {inputs} + ~{self.output_tokens:,} output "
+        frames = f"{self.frames:,} frames × {self.samples} samples" if self.samples > 1 else f"{self.frames:,} frames"
+        return (f"estimate: {frames}, {self.calls:,} calls, {inputs} + ~{self.output_tokens:,} output "
                 f"tokens: {money(self.cost_cents)} normal, {money(self.batch_cost_cents)} with --batch")
 
     def report(self) -> str:
@@ -208,15 +215,13 @@ def no_bill(model: str, kind: str, frames: int) -> str:
 
 def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, prompts: Any, *, max_tokens: int,
              chain: str = "independent", inputs: str = "full", given_price: Sequence[float] | None = None,
-             served_from: str | None = None) -> Estimate:
+             served_from: str | None = None, samples: int = 1) -> Estimate:
     """The :class:`Estimate` of running ``info`` over ``frames`` with ``prompts`` (a PromptSet selected for the run's
     variant, ``inputs`` included); ``inputs`` ``no-image`` counts no image token. Priced as the run bills its calls
-    (:func:`lightemma.registry.run_price`): at ``given_price`` (``--price``) when given, unknown when the model is
-    served from another ``--api-base`` (``served_from``, as shown), else at the list and batch prices."""
-    from lightemma.frames import history_placeholders
-    from lightemma.inputs import check_inputs
-    from lightemma.registry import IMAGE_TOKEN_RULES
-
+    (:func:`lightemma.models.prices.run_price`): at ``given_price`` (``--price``) when given, unknown when the model is
+    served from another ``--api-base`` (``served_from``, as shown), else at the list and batch prices. ``samples``
+    (K chains per frame, ``--samples``) counts every call, token and cent K times (one request with ``n`` sends
+    stage 1's input once: the figure errs high)."""
     check_inputs(inputs)
     rule_provider = provider if provider in ("anthropic", "gemini", "vertex_ai") else "openai"
     rule = image_rule(info)
@@ -249,14 +254,15 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
             texts[2] += texts[1] + intent_out
         text_total += sum(text_tokens(t) + MESSAGE_TOKENS * m for t, m in zip(texts, messages))
     n = len(frames)
-    output = out_per_frame * n
+    output = out_per_frame * n * samples
+    image_total, text_total = image_total * samples, text_total * samples
     unknown_images = shows_images and rule is None
     images: int | None = None if unknown_images else image_total
     total_in = None if images is None else images + text_total
     list_price = run_price(info, given=given_price, served_from=served_from)
     batch = run_price(info, batch=True, given=given_price, served_from=served_from)
 
-    def cost(p: dict[str, Any]) -> float | None:
+    def cost(p: Price) -> float | None:
         if total_in is None or p["input_usd_per_mtok"] is None or p["output_usd_per_mtok"] is None:
             return None
         return (total_in * p["input_usd_per_mtok"] + output * p["output_usd_per_mtok"]) / 1e6 * 100.0
@@ -265,7 +271,7 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
         rule_text = rule.describe()
     else:
         family = IMAGE_TOKEN_RULES[rule_provider if rule_provider != "vertex_ai" else "gemini"]
-        rule_text = (f"unknown: no published image rule for {info.model_id} (lightemma.registry.IMAGE_RULES says which "
+        rule_text = (f"unknown: no published image rule for {info.model_id} (lightemma.models.tokens.IMAGE_RULES says which "
                      f"rules are and why others are left out; the provider's rules: {family})")
     bounds = {}
     if unknown_images:
@@ -274,7 +280,7 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
                   for key, is_batch in (("bound", False), ("batch_bound", True))}
     # the label names the rule counted (the model's own), not the route: Claude behind --api-base is 'anthropic rule'
     label = rule.provider if rule is not None else rule_provider
-    return Estimate(model=info.key, provider=label, frames=n, calls=3 * n, input_tokens=total_in,
+    return Estimate(model=info.key, provider=label, frames=n, calls=3 * n * samples, samples=samples, input_tokens=total_in,
                     image_tokens=images, output_tokens=output, image_sizes=sizes, missing_images=missing,
                     cost_cents=cost(list_price), batch_cost_cents=cost(batch), price_source=list_price["source"],
                     batch_price_source=batch["source"], output_source=output_source, image_rule=rule_text,
@@ -289,7 +295,8 @@ class Budget:
 
     CHAIN_CALLS = 3
 
-    def __init__(self, limit_cents: float, per_call_cents: float, spent_cents: float = 0.0) -> None:
+    def __init__(self, limit_cents: float, per_call_cents: float, spent_cents: float = 0.0, chain_calls: int = CHAIN_CALLS) -> None:
+        self.chain_calls = int(chain_calls)  # the calls a frame's first call reserves: 3 × K with --samples K
         self.limit_cents = float(limit_cents)
         self.per_call_cents = float(per_call_cents)
         self.spent_cents = float(spent_cents)
@@ -306,7 +313,7 @@ class Budget:
         if held > 0:
             self._held[frame_id] = held - 1
             return self.per_call_cents
-        calls = self.CHAIN_CALLS if first_call and frame_id not in self._held else 1
+        calls = self.chain_calls if first_call and frame_id not in self._held else 1
         if not self._room(calls):
             return None
         self.reserved_cents += self.per_call_cents * calls
@@ -324,4 +331,4 @@ class Budget:
 
     def message(self) -> str:
         return (f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent and {max(self.reserved_cents, 0.0):.2f} ¢ in flight; "
-                f"the next frame (about {self.CHAIN_CALLS * self.per_call_cents:.3f} ¢) would pass the limit")
+                f"the next frame (about {self.chain_calls * self.per_call_cents:.3f} ¢) would pass the limit")

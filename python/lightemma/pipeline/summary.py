@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from lightemma.backends.base import is_truncated
+from lightemma.metrics import evaluate
 from lightemma.runs.records import answer_received, first_answer_status
 
 
@@ -41,8 +42,6 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
     valid = [r for r in records if r.get("trajectory") is not None and r.get("gt_positions") is not None]
     ade = None
     if valid:
-        from lightemma import evaluate
-
         pred = np.asarray([r["trajectory"] for r in valid], dtype=np.float64)
         gt = np.asarray([r["gt_positions"] for r in valid], dtype=np.float64)
         ade = float(evaluate(pred, gt).ade_avg)

@@ -13,14 +13,18 @@ A value that cannot be decided is NaN with a reason (``DriveScores.reasons``), n
 
 from __future__ import annotations
 
-import json
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import TypedDict
 
 import numpy as np
 import numpy.typing as npt
 
 from lightemma import _core
+from lightemma.definitions import EGO_LENGTH, EGO_WIDTH, ZOE_REAR_AXLE_TO_CENTER
+from lightemma.errors import InputError, ShapeError
+from lightemma.nuscenes.map_files import ExpansionLayers, read_expansion_layers
 
 __all__ = [
     "AGENT_KIND",
@@ -35,6 +39,7 @@ __all__ = [
     "PolygonSet",
     "drive_scores",
     "interpolate_boxes",
+    "planning_map",
     "read_planning_map",
     "route_lanes",
     "subscores",
@@ -73,7 +78,7 @@ class PolygonSet:
     polygons: npt.NDArray[np.int64]
 
     @classmethod
-    def from_rings(cls, polygons: list[list[npt.ArrayLike]]) -> PolygonSet:
+    def from_rings(cls, polygons: Sequence[Sequence[npt.ArrayLike]]) -> PolygonSet:
         """Build from a list of polygons, each a list of rings (exterior first), each ring (M, 2) vertices."""
         xy: list[FloatArray] = []
         rings = [0]
@@ -134,11 +139,12 @@ class FrameLanes:
 @dataclass(frozen=True)
 class EgoBox:
     """The ego rectangle: length and width (m) and how far its centre lies ahead of the rear axle (m).
-    Defaults: lightemma's ego box (``docs/definitions.md#safety``)."""
+    Defaults: lightemma's ego box (``docs/definitions.md#safety``), with the planning score's centre offset
+    (:data:`lightemma.definitions.ZOE_REAR_AXLE_TO_CENTER`)."""
 
-    length: float = 4.084
-    width: float = 1.85
-    rear_axle_to_center: float = 1.444
+    length: float = EGO_LENGTH
+    width: float = EGO_WIDTH
+    rear_axle_to_center: float = ZOE_REAR_AXLE_TO_CENTER
 
 
 @dataclass
@@ -166,9 +172,9 @@ def interpolate_boxes(boxes: npt.ArrayLike, factor: int = 5) -> FloatArray:
     Raises ValueError on a shape that is not (F, K ≥ 1, A, 8) or a factor < 1."""
     b = np.asarray(boxes, dtype=np.float64)
     if b.ndim != 4 or b.shape[3] != 8 or b.shape[1] < 1:
-        raise ValueError(f"boxes must have shape (F, K, A, 8) with K ≥ 1, got {b.shape}")
+        raise ShapeError(f"boxes must have shape (F, K, A, 8) with K ≥ 1, got {b.shape}")
     if factor < 1:
-        raise ValueError(f"factor must be ≥ 1, got {factor}")
+        raise InputError(f"factor must be ≥ 1, got {factor}")
     f, k, a, _ = b.shape
     out = np.full((f, (k - 1) * factor + 1, a, 8), np.nan)
     out[:, ::factor] = b
@@ -186,54 +192,27 @@ def interpolate_boxes(boxes: npt.ArrayLike, factor: int = 5) -> FloatArray:
 
 
 def read_planning_map(path: str | os.PathLike[str]) -> PlanningMap:
-    """The layers NAVSIM's sub-scores need from a nuScenes map-expansion JSON (``maps/expansion/<location>.json``).
+    """The layers NAVSIM's sub-scores need from a nuScenes map-expansion JSON (``maps/expansion/<location>.json``),
+    read by :func:`lightemma.nuscenes.map_files.read_expansion_layers` (the one reader of map files).
 
-    ``drivable``: the ``drivable_area`` layer (``lightemma.evaluation.safety.read_expansion``); ``lanes``: the
-    polygons of the ``lane`` and ``lane_connector`` records (in that order); ``intersections``: the polygons of the
-    ``road_segment`` records with ``is_intersection`` true. A layer with no polygon (an expansion before v1.3, or a
-    synthetic one) is ``None``, so the sub-scores needing it are n/a with that reason — never scored on an empty map.
-    Raises ``DatasetError`` naming the file and record for unreadable JSON, a missing node or polygon, a coordinate
-    that is not a finite number, or a ring of fewer than 3 nodes."""
-    from lightemma.errors import DatasetError
-    from lightemma.evaluation.safety import read_expansion
+    ``drivable``: the ``drivable_area`` layer; ``lanes``: the polygons of the ``lane`` and ``lane_connector`` records
+    (in that order); ``intersections``: the polygons of the ``road_segment`` records with ``is_intersection`` true. A
+    layer with no polygon (an expansion before v1.3, or a synthetic one) is ``None``, so the sub-scores needing it are
+    n/a with that reason — never scored on an empty map. Raises ``DatasetError`` naming the file and record for
+    unreadable JSON, a missing node or polygon, a coordinate that is not a finite number within ±1e6 m, or a ring of
+    fewer than 3 nodes."""
+    return planning_map(read_expansion_layers(path))
 
-    area = read_expansion(path)  # checks the file and reads drivable_area
-    drivable = PolygonSet(area.xy, area.rings, area.polygons) if area.polygons is not None and len(area.polygons) > 1 \
-        else None
-    with open(path, encoding="utf-8") as f:
-        doc = json.load(f)
 
-    def layer(records: list[dict], name: str) -> PolygonSet | None:
-        try:
-            nodes = {n["token"]: n for n in doc["node"]}
-            polys = {p["token"]: p for p in doc["polygon"]}
-            rings_xy: list[list[list[FloatArray]]] = []
-            for rec in records:
-                poly = polys[rec["polygon_token"]]
-                rings = []
-                for ring in [poly["exterior_node_tokens"], *(h["node_tokens"] for h in poly.get("holes", []))]:
-                    if not isinstance(ring, list) or len(ring) < 3:
-                        raise DatasetError(f"map expansion {path}: {name} {rec.get('token')} has a ring of fewer than "
-                                           "3 nodes")
-                    pts = np.array([[nodes[t]["x"], nodes[t]["y"]] for t in ring], dtype=np.float64)
-                    if not np.isfinite(pts).all():
-                        raise DatasetError(f"map expansion {path}: {name} {rec.get('token')} has a non-finite node")
-                    rings.append(pts)
-                rings_xy.append(rings)
-        except (KeyError, TypeError, AttributeError, ValueError) as exc:
-            if isinstance(exc, DatasetError):
-                raise
-            raise DatasetError(f"map expansion {path}: cannot read its {name} layer ({type(exc).__name__}: {exc})") \
-                from None
-        return PolygonSet.from_rings(rings_xy) if rings_xy else None
-
-    try:
-        lane_records = list(doc.get("lane", [])) + list(doc.get("lane_connector", []))
-        crossings = [r for r in doc.get("road_segment", []) if r.get("is_intersection") is True]
-    except (TypeError, AttributeError) as exc:
-        raise DatasetError(f"map expansion {path}: cannot read its lane / road_segment layers ({exc})") from None
-    return PlanningMap(drivable=drivable, lanes=layer(lane_records, "lane"),
-                       intersections=layer(crossings, "road_segment"))
+def planning_map(layers: ExpansionLayers) -> PlanningMap:
+    """A :class:`PlanningMap` of map-expansion layers already read (:func:`read_expansion_layers`)."""
+    area = layers.drivable
+    drivable = None
+    if area.polygons is not None and len(area.polygons) > 1:
+        assert area.xy is not None and area.rings is not None  # read_expansion sets xy, rings and polygons together
+        drivable = PolygonSet(area.xy, area.rings, area.polygons)
+    return PlanningMap(drivable=drivable, lanes=PolygonSet.from_rings(layers.lanes) if layers.lanes else None,
+                       intersections=PolygonSet.from_rings(layers.intersections) if layers.intersections else None)
 
 
 def _in_ring(ring: FloatArray, pts: FloatArray) -> npt.NDArray[np.bool_]:
@@ -243,7 +222,8 @@ def _in_ring(ring: FloatArray, pts: FloatArray) -> npt.NDArray[np.bool_]:
     xj, yj = np.roll(xi, 1), np.roll(yi, 1)
     with np.errstate(divide="ignore", invalid="ignore"):
         cross = ((yi > y) != (yj > y)) & (x < (xj - xi) * (y - yi) / (yj - yi) + xi)
-    return cross.sum(axis=1) % 2 == 1
+    inside: npt.NDArray[np.bool_] = cross.sum(axis=1) % 2 == 1
+    return inside
 
 
 def route_lanes(
@@ -257,13 +237,15 @@ def route_lanes(
     states are not finite get no lanes (their ddc is n/a). Raises ValueError on a states shape other than (F, S, 11)."""
     gt = np.asarray(gt_states, dtype=np.float64)
     if gt.ndim != 3 or gt.shape[2] != 11:
-        raise ValueError(f"gt_states must have shape (F, S, 11), got {gt.shape}")
+        raise ShapeError(f"gt_states must have shape (F, S, 11), got {gt.shape}")
     xy, rings, polys = lanes.arrays()
     exteriors = [xy[rings[polys[p]] : rings[polys[p] + 1]] for p in range(len(polys) - 1)]
     bounds = np.array([[*e.min(0), *e.max(0)] for e in exteriors]).reshape(-1, 4)
     h = gt[..., 2]
     centres = gt[..., :2] + ego.rear_axle_to_center * np.stack([np.cos(h), np.sin(h)], -1)
-    offsets, ids, flags = [0], [], []
+    offsets: list[int] = [0]
+    ids: list[int] = []
+    flags: list[int] = []
     for f in range(len(gt)):
         c = centres[f]
         if not np.isfinite(gt[f]).all():
@@ -297,12 +279,29 @@ _REASONS = {
 }
 
 
+class _SubscoreArgs(TypedDict, total=False):
+    """The optional keyword arguments of ``_core.planning_subscores`` that :func:`subscores` passes on."""
+
+    agents: FloatArray
+    drivable_mask: npt.NDArray[np.uint8]
+    mask_resolution: float
+    mask_foreground: int
+    drivable: tuple[FloatArray, npt.NDArray[np.int64], npt.NDArray[np.int64]]
+    lanes: tuple[FloatArray, npt.NDArray[np.int64], npt.NDArray[np.int64]]
+    lane_offsets: npt.NDArray[np.int64]
+    lane_ids: npt.NDArray[np.int64]
+    lane_on_route: npt.NDArray[np.uint8]
+    intersections: tuple[FloatArray, npt.NDArray[np.int64], npt.NDArray[np.int64]]
+    route: FloatArray
+    centreline: FloatArray
+
+
 def _polyline_array(a: npt.ArrayLike | None, name: str) -> FloatArray | None:
     if a is None:
         return None
     arr = np.ascontiguousarray(a, dtype=np.float64)
     if arr.ndim != 3 or arr.shape[2] != 2:
-        raise ValueError(f"{name} must have shape (F, R, 2), got {arr.shape}")
+        raise ShapeError(f"{name} must have shape (F, R, 2), got {arr.shape}")
     return arr
 
 
@@ -329,13 +328,13 @@ def subscores(
     them); bad values inside a frame are n/a with a reason."""
     st = np.ascontiguousarray(states, dtype=np.float64)
     if st.ndim != 3 or st.shape[2] != 11:
-        raise ValueError(f"states must have shape (N, S, 11), got {st.shape}")
+        raise ShapeError(f"states must have shape (N, S, 11), got {st.shape}")
     n = st.shape[0]
     fr = np.arange(n, dtype=np.int64) if frame is None else np.ascontiguousarray(frame, dtype=np.int64)
     if fr.shape != (n,):
-        raise ValueError(f"frame must have shape ({n},), got {fr.shape}")
+        raise ShapeError(f"frame must have shape ({n},), got {fr.shape}")
     m = map or PlanningMap()
-    kwargs: dict[str, object] = {}
+    kwargs: _SubscoreArgs = {}
     if agents is not None:
         kwargs["agents"] = np.ascontiguousarray(agents, dtype=np.float64)
     if isinstance(m.drivable, DrivableMask):
@@ -346,17 +345,19 @@ def subscores(
         kwargs["drivable"] = m.drivable.arrays()
     if m.lanes is not None:
         if frame_lanes is None:
-            raise ValueError("map.lanes needs frame_lanes (each frame's candidate lanes and on-route flags)")
+            raise InputError("map.lanes needs frame_lanes (each frame's candidate lanes and on-route flags)")
         kwargs["lanes"] = m.lanes.arrays()
         kwargs["lane_offsets"] = np.ascontiguousarray(frame_lanes.offsets, dtype=np.int64)
         kwargs["lane_ids"] = np.ascontiguousarray(frame_lanes.ids, dtype=np.int64)
         kwargs["lane_on_route"] = np.ascontiguousarray(frame_lanes.on_route, dtype=np.uint8)
     if m.intersections is not None:
         kwargs["intersections"] = m.intersections.arrays()
-    for name, line in (("route", route), ("centreline", centreline)):
-        arr = _polyline_array(line, name)
-        if arr is not None:
-            kwargs[name] = arr
+    route_arr = _polyline_array(route, "route")
+    if route_arr is not None:
+        kwargs["route"] = route_arr
+    centreline_arr = _polyline_array(centreline, "centreline")
+    if centreline_arr is not None:
+        kwargs["centreline"] = centreline_arr
     values, codes = _core.planning_subscores(
         st,
         fr,
@@ -397,8 +398,8 @@ def _given(
         return np.full(n, np.nan), [f"{name} not given"] * n
     a = np.asarray(x, dtype=np.float64)
     if a.shape != (n,):
-        raise ValueError(f"{name} must have shape ({n},), got {a.shape}")
-    return a.copy(), np.where(np.isfinite(a), None, f"{name} is n/a in its input").tolist()
+        raise ShapeError(f"{name} must have shape ({n},), got {a.shape}")
+    return a.copy(), [None if ok else f"{name} is n/a in its input" for ok in np.isfinite(a).tolist()]
 
 
 def _normalised_progress(
@@ -481,15 +482,15 @@ def drive_scores(
     st = np.asarray(states, dtype=np.float64)
     gt = np.asarray(gt_states, dtype=np.float64)
     if st.ndim != 3 or st.shape[2] != 11:
-        raise ValueError(f"states must have shape (N, S, 11), got {st.shape}")
+        raise ShapeError(f"states must have shape (N, S, 11), got {st.shape}")
     if gt.ndim != 3 or gt.shape[1:] != st.shape[1:]:
-        raise ValueError(f"gt_states must have shape (F, {st.shape[1]}, 11), got {gt.shape}")
+        raise ShapeError(f"gt_states must have shape (F, {st.shape[1]}, 11), got {gt.shape}")
     n, f = st.shape[0], gt.shape[0]
     fr = np.arange(n, dtype=np.int64) if frame is None else np.asarray(frame, dtype=np.int64)
     if fr.shape != (n,):
-        raise ValueError(f"frame must have shape ({n},), got {fr.shape}")
+        raise ShapeError(f"frame must have shape ({n},), got {fr.shape}")
     if n and (fr.min() < 0 or fr.max() >= f):
-        raise ValueError(f"frame indices must lie in 0..{f - 1} (gt_states has {f} frames)")
+        raise InputError(f"frame indices must lie in 0..{f - 1} (gt_states has {f} frames)")
     both = np.concatenate([st, gt])
     both_frame = np.concatenate([fr, np.arange(f, dtype=np.int64)])
     vals, why = subscores(
@@ -508,6 +509,8 @@ def drive_scores(
     parts["hc"] = _given(hc, n, "hc")
     parts["ec"] = _given(ec, n, "ec")
     with_agents = agents is not None
+    epdms: tuple[FloatArray, list[str | None]]
+    epdms_map: tuple[FloatArray, list[str | None]]
     mult_names = ("nc", "dac", "ddc") if with_agents else ("dac", "ddc")
     mult = np.prod([parts[k][0] for k in mult_names], axis=0)
     gt_mult = np.prod([gt_of[k] for k in mult_names], axis=0)

@@ -13,9 +13,16 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 from numpy.typing import ArrayLike
 
 from lightemma import _core
+from lightemma.definitions import STEP_SECONDS, ZOE_REAR_AXLE_TO_CENTER
+from lightemma.errors import InputError, ShapeError
+from lightemma.kinematics import integrate
+
+#: a float64 array (shapes in each docstring)
+FloatArray = npt.NDArray[np.float64]
 
 STATE_COLUMNS: tuple[str, ...] = (
     "x",
@@ -32,14 +39,11 @@ STATE_COLUMNS: tuple[str, ...] = (
 )
 #: NAVSIM's six comfort bounds, in order, with their exclusive (lower, upper) limits.
 COMFORT_BOUNDS: tuple[str, ...] = tuple(_core.COMFORT_BOUNDS)
-COMFORT_LIMITS: tuple[tuple[float, float], ...] = tuple(tuple(b) for b in _core.COMFORT_LIMITS)
+COMFORT_LIMITS: tuple[tuple[float, float], ...] = tuple((lo, hi) for lo, hi in _core.COMFORT_LIMITS)
 #: NAVSIM v2's extended-comfort features, in order, with their inclusive RMS-difference limits.
 EXTENDED_COMFORT_FEATURES: tuple[str, ...] = tuple(_core.EXTENDED_COMFORT_FEATURES)
 EXTENDED_COMFORT_LIMITS: tuple[float, ...] = tuple(_core.EXTENDED_COMFORT_LIMITS)
 
-#: nuScenes' nominal keyframe spacing, seconds (a plan's step; a history's when no timestamps are given: real keyframes
-#: are 0.47–0.52 s apart).
-KEYFRAME_DT = 0.5
 #: NAVSIM's bound on the spacing of the two frames of extended comfort, seconds (exclusive).
 MAX_INTERVAL = 0.55
 #: NAVSIM's recorded past for history comfort: 1.5 s before the present.
@@ -77,24 +81,24 @@ class Vehicle:
 
 #: nuScenes' ego, a Renault Zoe: wheelbase 2.588 m (Renault ZOE technical data), box centre 1.444 m ahead of the
 #: rear axle (lightemma's ego box, docs/definitions.md#safety); nuPlan's motion-model defaults for the rest.
-ZOE = Vehicle(wheel_base=2.588, rear_axle_to_center=1.444)
+ZOE = Vehicle(wheel_base=2.588, rear_axle_to_center=ZOE_REAR_AXLE_TO_CENTER)
 #: nuPlan's Chrysler Pacifica (``get_pacifica_parameters``), NAVSIM's default: for checks against NAVSIM's code.
 PACIFICA = Vehicle(wheel_base=3.089, rear_axle_to_center=1.461)
 
 
-def _array(value: ArrayLike, name: str, ndim: int, last: int, shape_text: str) -> np.ndarray:
+def _array(value: ArrayLike, name: str, ndim: int, last: int, shape_text: str) -> FloatArray:
     try:
         array = np.asarray(value)
     except Exception as exc:  # ragged lists and the like
-        raise ValueError(f"{name} cannot be turned into an array: {exc}") from None
+        raise InputError(f"{name} cannot be turned into an array: {exc}") from None
     if array.dtype == object or not np.issubdtype(array.dtype, np.number) or np.iscomplexobj(array):
-        raise ValueError(f"{name} must hold real numbers, got dtype {array.dtype} (shape {array.shape})")
+        raise InputError(f"{name} must hold real numbers, got dtype {array.dtype} (shape {array.shape})")
     if array.ndim != ndim or array.shape[-1] != last:
-        raise ValueError(f"{name} must have shape {shape_text}, got {array.shape}")
+        raise ShapeError(f"{name} must have shape {shape_text}, got {array.shape}")
     return np.ascontiguousarray(array, dtype=np.float64)
 
 
-def plan_poses(actions: ArrayLike, *, dt: float = KEYFRAME_DT, method: str = "euler") -> np.ndarray:
+def plan_poses(actions: ArrayLike, *, dt: float = STEP_SECONDS, method: str = "euler") -> FloatArray:
     """A plan's poses: the integrated trajectory of (speed, curvature) actions with its headings.
 
     Args:
@@ -106,8 +110,6 @@ def plan_poses(actions: ArrayLike, *, dt: float = KEYFRAME_DT, method: str = "eu
         (N, K, 3) x, y (m, ego frame) and heading (rad) after each step: heading_k = Σ_{j≤k} κ_j v_j dt, the heading
         both integration methods end each step with. NaN actions give NaN poses.
     """
-    from lightemma.kinematics import integrate
-
     array = _array(actions, "actions", 3, 2, "(N, K, 2)")
     positions = integrate(array, dt=dt, method=method)
     headings = np.cumsum(array[..., 0] * array[..., 1] * dt, axis=1)
@@ -118,10 +120,10 @@ def simulate(
     poses: ArrayLike,
     initial_state: ArrayLike,
     *,
-    plan_dt: float = KEYFRAME_DT,
+    plan_dt: float = STEP_SECONDS,
     dt: float = 0.1,
     vehicle: Vehicle | None = None,
-) -> np.ndarray:
+) -> FloatArray:
     """Re-simulate plans as NAVSIM does: resample at ``dt``, track with nuPlan's LQR on a kinematic bicycle.
 
     Args:
@@ -157,9 +159,9 @@ class ComfortResult:
             non-finite frame). A bound holds when lower < min and max < upper (:data:`COMFORT_LIMITS`).
     """
 
-    comfortable: np.ndarray
-    within: np.ndarray
-    extremes: np.ndarray
+    comfortable: FloatArray
+    within: npt.NDArray[np.bool_]
+    extremes: FloatArray
 
 
 def comfort_details(states: ArrayLike, *, dt: float = 0.1, vehicle: Vehicle | None = None) -> ComfortResult:
@@ -177,7 +179,7 @@ def comfort_details(states: ArrayLike, *, dt: float = 0.1, vehicle: Vehicle | No
     return _comfort(states, dt, vehicle, None)
 
 
-def _comfort(states: ArrayLike, dt: float, vehicle: Vehicle | None, history: np.ndarray | None) -> ComfortResult:
+def _comfort(states: ArrayLike, dt: float, vehicle: Vehicle | None, history: FloatArray | None) -> ComfortResult:
     s = _array(states, "states", 3, 11, "(N, T, 11)")
     r = float((vehicle or ZOE).rear_axle_to_center)
     within, extremes = _core.comfort(s, float(dt), r, history)
@@ -186,7 +188,7 @@ def _comfort(states: ArrayLike, dt: float, vehicle: Vehicle | None, history: np.
     return ComfortResult(comfortable=comfortable, within=within, extremes=extremes)
 
 
-def comfort(states: ArrayLike, *, dt: float = 0.1, vehicle: Vehicle | None = None) -> np.ndarray:
+def comfort(states: ArrayLike, *, dt: float = 0.1, vehicle: Vehicle | None = None) -> FloatArray:
     """(N,) 1.0 comfortable / 0.0 not / NaN not available: all six nuPlan bounds (see :func:`comfort_details`)."""
     return comfort_details(states, dt=dt, vehicle=vehicle).comfortable
 
@@ -202,12 +204,12 @@ class ExtendedComfortResult:
             (inclusive).
     """
 
-    comfortable: np.ndarray
-    rms: np.ndarray
+    comfortable: FloatArray
+    rms: FloatArray
 
 
 def extended_comfort_details(
-    states_now: ArrayLike, states_prev: ArrayLike, *, dt: float = 0.1, interval: float = KEYFRAME_DT
+    states_now: ArrayLike, states_prev: ArrayLike, *, dt: float = 0.1, interval: float = STEP_SECONDS
 ) -> ExtendedComfortResult:
     """Two-frame extended comfort (``ec``), NAVSIM's ``SceneAggregator._compute_two_frame_comfort``.
 
@@ -231,10 +233,10 @@ def extended_comfort_details(
     b = _array(states_prev, "states_prev", 3, 11, "(N, T, 11)")
     interval, dt = float(interval), float(dt)
     if not (0.0 < interval < MAX_INTERVAL) or not (np.isfinite(dt) and dt > 0.0):
-        raise ValueError(f"interval must be in (0, {MAX_INTERVAL}) s (NAVSIM's check) and dt > 0, got {interval}, {dt}")
+        raise InputError(f"interval must be in (0, {MAX_INTERVAL}) s (NAVSIM's check) and dt > 0, got {interval}, {dt}")
     shift = round(interval / dt)  # NAVSIM: round(observation_interval / interval_length)
     if shift < 1:
-        raise ValueError(f"interval {interval} s is shorter than half a step of dt = {dt} s")
+        raise InputError(f"interval {interval} s is shorter than half a step of dt = {dt} s")
     rms = _core.extended_comfort(a, b, float(dt), int(shift))
     limits = np.asarray(EXTENDED_COMFORT_LIMITS)
     finite = np.isfinite(rms).all(axis=1)
@@ -243,8 +245,8 @@ def extended_comfort_details(
 
 
 def extended_comfort(
-    states_now: ArrayLike, states_prev: ArrayLike, *, dt: float = 0.1, interval: float = KEYFRAME_DT
-) -> np.ndarray:
+    states_now: ArrayLike, states_prev: ArrayLike, *, dt: float = 0.1, interval: float = STEP_SECONDS
+) -> FloatArray:
     """(N,) 1.0 / 0.0 / NaN: NAVSIM v2's two-frame extended comfort (see :func:`extended_comfort_details`)."""
     return extended_comfort_details(states_now, states_prev, dt=dt, interval=interval).comfortable
 
@@ -258,11 +260,11 @@ class DerivedStates:
         reasons: one entry per frame: ``None`` when derived, else why not (one line).
     """
 
-    states: np.ndarray
+    states: FloatArray
     reasons: list[str | None]
 
     @property
-    def available(self) -> np.ndarray:
+    def available(self) -> npt.NDArray[np.bool_]:
         """(N,) bool: the frame's states were derived."""
         return np.array([r is None for r in self.reasons], dtype=bool)
 
@@ -273,21 +275,21 @@ _STANDSTILL = 0.2
 
 def _check_history(
     history_positions: ArrayLike, need: int, times: ArrayLike | None, dt: float
-) -> tuple[np.ndarray, np.ndarray, list[str | None]]:
+) -> tuple[FloatArray, FloatArray, list[str | None]]:
     """Positions (N, P, 2), their times (N, P) in seconds relative to the last one (``dt`` apart when ``times`` is
     ``None``) and per frame why its last ``need`` positions cannot be used (``None`` when they can)."""
     h = _array(history_positions, "history_positions", 3, 2, "(N, P, 2)")
     if h.shape[1] < need:
-        raise ValueError(f"history_positions must hold at least {need} positions per frame, got {h.shape[1]}")
+        raise ShapeError(f"history_positions must hold at least {need} positions per frame, got {h.shape[1]}")
     if times is None:
         dt = float(dt)
         if not (np.isfinite(dt) and dt > 0.0):
-            raise ValueError(f"dt must be a positive number of seconds, got {dt}")
+            raise InputError(f"dt must be a positive number of seconds, got {dt}")
         t = np.broadcast_to(np.arange(1 - h.shape[1], 1) * dt, h.shape[:2]).copy()
     else:
         t = np.asarray(times, dtype=np.float64)
         if t.shape != h.shape[:2]:
-            raise ValueError(f"times must have shape {h.shape[:2]} (one per history position), got {t.shape}")
+            raise ShapeError(f"times must have shape {h.shape[:2]} (one per history position), got {t.shape}")
         with np.errstate(invalid="ignore"):
             t = t - t[:, -1:]
     reasons: list[str | None] = []
@@ -305,7 +307,7 @@ def _check_history(
     return h, t, reasons
 
 
-def _quadratic_weights(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def _quadratic_weights(t: FloatArray, at: FloatArray) -> tuple[FloatArray, FloatArray]:
     """Weights (…, 3) of three samples at times ``t`` (…, 3) giving the first derivative at ``at`` (…) and the second
     derivative of the quadratic through them (Lagrange; exact for any spacing, the usual central/backward
     differences when the spacing is even)."""
@@ -317,7 +319,7 @@ def _quadratic_weights(t: np.ndarray, at: np.ndarray) -> tuple[np.ndarray, np.nd
     return first, second
 
 
-def _keyframe_states(h: np.ndarray, times: np.ndarray, vehicle: Vehicle) -> np.ndarray:
+def _keyframe_states(h: FloatArray, times: FloatArray, vehicle: Vehicle) -> FloatArray:
     """(N, 4, 11) states at the last four keyframes (nominally −1.5, −1.0, −0.5, 0 s) from positions (N, P ≥ 5, 2)
     at ``times`` (N, P) seconds."""
     n = h.shape[0]
@@ -368,7 +370,7 @@ def initial_state(
     history_positions: ArrayLike,
     *,
     can: ArrayLike | None = None,
-    dt: float = KEYFRAME_DT,
+    dt: float = STEP_SECONDS,
     times: ArrayLike | None = None,
     vehicle: Vehicle | None = None,
 ) -> DerivedStates:
@@ -420,7 +422,7 @@ def initial_state(
     if can is not None:
         readings = _array(can, "can", 2, 4, "(N, 4)")
         if readings.shape[0] != h.shape[0]:
-            raise ValueError(f"can has {readings.shape[0]} rows but history_positions has {h.shape[0]} frames")
+            raise ShapeError(f"can has {readings.shape[0]} rows but history_positions has {h.shape[0]} frames")
         for i, row in enumerate(readings):
             if reasons[i] is not None or not np.isfinite(row).all():
                 continue
@@ -443,7 +445,7 @@ def history_states(
     history_positions: ArrayLike,
     *,
     sim_dt: float = 0.1,
-    dt: float = KEYFRAME_DT,
+    dt: float = STEP_SECONDS,
     times: ArrayLike | None = None,
     vehicle: Vehicle | None = None,
 ) -> DerivedStates:

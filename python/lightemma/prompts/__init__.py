@@ -45,8 +45,8 @@ from importlib import resources
 from typing import Any
 
 from lightemma._text import without_lone_surrogates
-from lightemma.backends.base import STAGES
-from lightemma.errors import UserError
+from lightemma.definitions import STAGES
+from lightemma.errors import InputError, UserError
 
 DEFAULT_PROMPT_SET = "lightemma-v1"
 # placeholders each stage fills in; HISTORY_FORMS: one of these sets must appear where "history" is listed
@@ -70,9 +70,9 @@ def variant_name(chain: str = "independent", answer_format: str = "text", inputs
     from lightemma.inputs import check_inputs
 
     if chain not in CHAINS:
-        raise ValueError(f"chain must be one of {', '.join(CHAINS)}, got {chain!r}")
+        raise InputError(f"chain must be one of {', '.join(CHAINS)}, got {chain!r}")
     if answer_format not in ANSWER_FORMATS:
-        raise ValueError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {answer_format!r}")
+        raise InputError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {answer_format!r}")
     check_inputs(inputs)
     parts = [p for p, on in (("conversation", chain == "conversation"), ("no-history", inputs == "no-history"),
                              ("structured", answer_format == "structured")) if on]

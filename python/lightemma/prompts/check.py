@@ -17,7 +17,7 @@ from pathlib import Path
 from typing import Any
 
 from lightemma._text import unicode_clean
-from lightemma.backends.base import STAGES
+from lightemma.definitions import STAGES
 from lightemma.errors import UserError
 from lightemma.frames import history_placeholders
 from lightemma.prompts import PromptSet
@@ -72,14 +72,17 @@ def first_difference(a: str, b: str) -> int | None:
     return None if len(a) == len(b) else min(len(a), len(b))
 
 
-def _texts(calls: list[Any]) -> dict[str, Mapping[str, Any]]:
+def _texts(calls: list[Any]) -> dict[str | None, Mapping[str, Any]]:
     return {c.get("stage"): c for c in calls if isinstance(c, Mapping)}
 
 
-def _rendered(prompts: PromptSet, stage: str, calls: Mapping[str, Mapping[str, Any]], history: dict[str, str]) -> str:
+def _rendered(
+    prompts: PromptSet, stage: str, calls: Mapping[str | None, Mapping[str, Any]], history: dict[str, str]
+) -> str:
     def text(name: str) -> str:
-        call = calls.get(name) or {}
-        return call.get("text") if call.get("text") is not None else (call.get("error_message") or "")
+        call: Mapping[str, Any] = calls.get(name) or {}
+        text = call.get("text")
+        return text if text is not None else (call.get("error_message") or "")
 
     if stage == "scene":
         return prompts.render("scene")

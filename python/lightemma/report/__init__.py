@@ -3,8 +3,8 @@ table formatting (:mod:`~lightemma.report.tables`), the paper's tables of an eva
 (:mod:`~lightemma.report.evaluation_tables`), figures (:mod:`~lightemma.report.figures`) and
 the cameras and stage texts of frame pictures (:mod:`~lightemma.report.pictures`).
 
-Names are imported lazily: ``lightemma.evaluation`` re-exports the table builders, and the
-writer imports ``lightemma.evaluation`` — neither import may run the other's body first.
+Names are imported lazily, so that importing one of its modules (the table formatting the CLI's
+``evaluate`` uses) does not import the report writer and everything it builds on.
 """
 
 from __future__ import annotations
@@ -29,4 +29,4 @@ def __getattr__(name: str) -> Any:
 
 
 if TYPE_CHECKING:  # pragma: no cover
-    from lightemma.report.writer import write_report
+    from lightemma.report.writer import write_report as write_report  # an explicit re-export

@@ -3,17 +3,37 @@ plus the paired comparisons (``pairwise_ade``) and the per-family generation ver
 
 from __future__ import annotations
 
+from typing import Any
+
 from lightemma._text import printable
+from lightemma.definitions import COLLISION_FOR_ADE, EGO_LENGTH, EGO_OFFSET, EGO_WIDTH, MIN_STEP
+from lightemma.evaluation.ablations import PAIRED_METRICS
 from lightemma.evaluation.core import LOW_COVERAGE, Evaluation
-from lightemma.evaluation.paper import (
+from lightemma.evaluation.descriptors import footer_lines, map_line, provenance
+from lightemma.evaluation.planning_score import GT_LABEL, KEYS
+from lightemma.evaluation.safety import FLOOR_LABEL
+from lightemma.frames.fingerprint import describe_fingerprint
+from lightemma.models.names import beside_paper
+from lightemma.models.paper import (
     ACCURACY_DIFF_KEYS,
     EFFICIENCY_DIFF_KEYS,
     PAPER_CONVENTION,
-    beside_paper,
     paper_accuracy_rows,
     paper_efficiency_rows,
 )
-from lightemma.report.tables import ACCURACY_COLUMNS, BATCH_TURNAROUND_COLUMN, EFFICIENCY_COLUMNS, SAFETY_COLUMNS, Column, Table, coverage_note, fixed
+from lightemma.report.robustness_tables import robustness_tables
+from lightemma.report.tables import (
+    ACCURACY_COLUMNS,
+    BATCH_TURNAROUND_COLUMN,
+    EFFICIENCY_COLUMNS,
+    REFERENCE_FRAME_SET,
+    SAFETY_COLUMNS,
+    Column,
+    Table,
+    coverage_note,
+    fixed,
+    markdown_text,
+)
 
 
 def coverage_flags(evaluation: Evaluation) -> dict[str, str]:
@@ -47,6 +67,12 @@ def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool 
             notes.append(f"{row['model']}: {row['ci95_unavailable']}.")
     columns, count_notes = _outcome_columns(rows)
     notes = [*count_notes, *notes]
+    if any(row.get("samples") for row in rows):  # --samples K runs: minADE@K / minFDE@K beside ADE and FDE
+        at = next(i for i, c in enumerate(columns) if c.key == "fde") + 1
+        columns = (*columns[:at], Column("samples", "K"), Column("minade", "minADE@K (m)", fixed(2)),
+                   Column("minfde", "minFDE@K (m)", fixed(2)), Column("spread_m", "Spread@K (m)", fixed(2)), *columns[at:])
+        notes.append("K: samples per frame (--samples); minADE@K / minFDE@K: per frame the best of its K samples, "
+                     "averaged; Spread@K: mean pairwise distance of the samples' final points (docs/definitions.md#k-samples).")
     if with_paper and convention == PAPER_CONVENTION:
         rows = beside_paper(evaluation.models, rows, paper_accuracy_rows(), ACCURACY_DIFF_KEYS)
         for row in rows:
@@ -64,8 +90,9 @@ def _outcome_columns(rows: list[dict]) -> tuple[tuple[Column, ...], list[str]]:
     """Table II's columns: "Frames" (the frames accounted, as in Table I) = Scored + Failed + Implausible + API errors
     (+ "Other unscored", shown only where a run has such frames: no usable ground truth or no finite trajectory)."""
     for row in rows:
-        counted = [row.get(k) for k in ("scored", "failed", "implausible", "api_errors")]
-        if row.get("frames_accounted") is not None and all(isinstance(c, int) for c in counted):
+        values = [row.get(k) for k in ("scored", "failed", "implausible", "api_errors")]
+        counted = [c for c in values if isinstance(c, int)]
+        if row.get("frames_accounted") is not None and len(counted) == len(values):
             row["unscored_other"] = row["frames_accounted"] - sum(counted)
     if not any(row.get("unscored_other") for row in rows):
         return ACCURACY_COLUMNS, []
@@ -81,8 +108,6 @@ def _with_floor(evaluation: Evaluation, rows: list[dict], convention: str) -> li
 
 def safety_notes(evaluation: Evaluation, convention: str) -> list[str]:
     """What the safety columns mean in a table of ``convention`` (docs/definitions.md#safety)."""
-    from lightemma.evaluation.safety import COLLISION_FOR_ADE, EGO_LENGTH, EGO_OFFSET, EGO_WIDTH, FLOOR_LABEL, MIN_STEP
-
     cc = COLLISION_FOR_ADE[convention]
     how = {
         "uniad": "Col. Ts: share of frames whose footprint overlaps an agent at T (UniAD's obj_box_col); Collision: their mean",
@@ -200,8 +225,6 @@ def _significant(value: object) -> str:
 
 def _paired_metric_columns(diff: str, sides: tuple[tuple[str, str], tuple[str, str]], diff_header: str) -> list[Column]:
     """Per metric of :data:`~lightemma.evaluation.ablations.PAIRED_METRICS`: both sides, the difference [CI], p (Holm), verdict."""
-    from lightemma.evaluation.ablations import PAIRED_METRICS
-
     out: list[Column] = []
     for m in PAIRED_METRICS:
         unit = f" ({m.unit})" if m.unit else ""
@@ -277,14 +300,15 @@ def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> li
         tables.append(explanations_table(evaluation))
         if evaluation.explanations.ablations:
             tables.append(intent_ablation_table(evaluation))
-    return tables + ablation_tables(evaluation)
+        if evaluation.explanations.objects_shown:  # some run has descriptions and annotation states
+            tables.append(described_objects_table(evaluation))
+
+    return tables + ablation_tables(evaluation) + robustness_tables(evaluation)
 
 
 def provenance_footer(lines: list[str], fmt: str) -> str:
     """The compact provenance footer under Markdown, LaTeX or CSV tables (``lines``:
     :func:`lightemma.evaluation.descriptors.footer_lines`): a ``####`` block, ``%`` or ``#`` comment lines."""
-    from lightemma.report.tables import markdown_text
-
     if fmt == "md":
         return "\n#### Provenance\n\n" + "".join(f"- {markdown_text(line)}\n" for line in lines)
     mark = {"latex": "%", "csv": "#"}[fmt]
@@ -295,22 +319,24 @@ def provenance_footer(lines: list[str], fmt: str) -> str:
 def provenance_table(evaluation: Evaluation) -> Table:
     """The report's "Provenance" panel: software, each frame set's fingerprint with its runs, each run's prompt set, parse
     mode and the source of its safety columns, and the ids of the metrics shown (lightemma.evaluation.descriptors)."""
-    from lightemma.evaluation.descriptors import footer_lines, provenance
-
-    from lightemma.frames.fingerprint import describe_fingerprint
-
     prov = provenance(evaluation)
     lines = footer_lines(evaluation)
     rows: list[dict[str, str]] = [{"item": "Software", "value": lines[0]}]
     for fp in prov["frame_sets"].values():
         users = ", ".join(r["model"] for r in prov["runs"] if r["frame_set"] == fp["id"])
         rows.append({"item": f"Frame set {describe_fingerprint(fp)}", "value": users})
+    maps = map_line(evaluation)
+    if maps:
+        rows.append({"item": "Maps", "value": maps.removeprefix("Maps: ")})
     rows.append({"item": "Metrics", "value": lines[-1].removeprefix("Metrics: ")})
     for run in prov["runs"]:
         prompt = run["prompt_set"]
-        source = run["safety_source"] or {}
+        source = run["safety_source"] or run.get("planning_source") or {}
+        area = source.get("drivable_area") or source.get("map")
+        version = source.get("map_expansion_version")
         value = (f"frames {run['frame_set']}; prompts {prompt.get('name')} {prompt.get('hash') or ''}; parse {run['parse']}; "
-                 f"{run['integrator']}; drivable area {source.get('drivable_area') or 'n/a'}; lightemma "
+                 f"{run['integrator']}; drivable area {area or 'n/a'}"
+                 + (f" (map expansion {version})" if version else "") + "; lightemma "
                  f"{run['lightemma_version'] or '?'}" + (" (imported)" if run["imported"] else ""))
         rows.append({"item": run["model"], "value": value})
     return Table("Provenance", (Column("item", "What"), Column("value", "Which")), rows, name="provenance",
@@ -326,6 +352,11 @@ EXPLANATION_COLUMNS: tuple[Column, ...] = (
     Column("contradicts", "Contradicts [95% CI]", fixed(3), ci="contradicts_ci95", na="contradicts_na"),
     Column("intent_unknown", "Unknown [95% CI]", fixed(3), ci="intent_unknown_ci95", na="intent_unknown_na"),
     Column("intent_accuracy", "Intent accuracy [95% CI]", fixed(3), ci="intent_accuracy_ci95", na="intent_accuracy_na"),
+    # the described objects (docs/definitions.md#described-objects)
+    Column("hallucinated_pedestrian", "Hallucinated pedestrian [95% CI]", fixed(3), ci="hallucinated_pedestrian_ci95",
+           na="hallucinated_pedestrian_na"),
+    Column("missed_pedestrian", "Missed pedestrian [95% CI]", fixed(3), ci="missed_pedestrian_ci95",
+           na="missed_pedestrian_na"),
 )
 
 
@@ -340,10 +371,31 @@ def explanations_table(evaluation: Evaluation) -> Table:
         "(Consistent / Contradicts / Unknown: shares of the frames) and against what the car did, the same classes "
         "from the ground truth (Intent accuracy: share of the frames whose stated intent is consistent with it). "
         "Rates in [0, 1]; runs without stage-2 texts (baselines) are n/a (docs/definitions.md#explanation-audit).",
+        "Hallucinated pedestrian: share of the frames whose stage-1 description affirms a pedestrian while no pedestrian "
+        "box projects into the image; Missed pedestrian: share whose description does not affirm one while one is in "
+        "view (docs/definitions.md#described-objects).",
     ]
     if r.n_resamples:
         notes.append(f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed}).")
     return Table("Explanations", EXPLANATION_COLUMNS, rows, name="explanations", flags=coverage_flags(evaluation), notes=notes)
+
+
+def described_objects_table(evaluation: Evaluation) -> Table:
+    """"Described objects": per model and class, how often the stage-1 description affirms the class, how often it is
+    in view, and the mention precision and recall against the annotations (``ExplanationResult.object_classes``,
+    lightemma.evaluation.object_audit)."""
+    cols = (Column("model", "Model"), Column("class", "Class"), Column("frames", "Frames"),
+            Column("mentions", "Mentions"), Column("in_view", "In view"),
+            Column("mention_precision", "Precision [95% CI]", fixed(3), ci="mention_precision_ci95",
+                   na="mention_precision_na"),
+            Column("mention_recall", "Recall [95% CI]", fixed(3), ci="mention_recall_ci95", na="mention_recall_na"))
+    return Table("Described objects", cols, list(evaluation.explanations.object_classes), name="described_objects",
+                 notes=["The object classes the stage-1 description affirms (rules objects@lightemma/1; negated and hedged "
+                        "mentions are not claims) against the annotated boxes in view of CAM_FRONT (some corner in the "
+                        "image, visibility >= 40 %, within the class's nuScenes detection range). Precision: share of the "
+                        "affirmed mentions whose class is in view, over frames where it is in view or absent from the "
+                        "image; recall: share of the frames with the class in view whose description affirms it. Traffic "
+                        "lights and signs are map objects without annotations: n/a (docs/definitions.md#described-objects)."])
 
 
 def intent_ablation_table(evaluation: Evaluation) -> Table:
@@ -364,8 +416,6 @@ _PLANNING_TITLES = {"pdms": "PDMS", "epdms": "EPDMS", "epdms_map": "EPDMS-map", 
 
 def planning_columns(headline: str) -> tuple[Column, ...]:
     """Model, frames, the headline aggregate and PDMS with their intervals, then the other aggregate and every sub-score."""
-    from lightemma.evaluation.planning_score import KEYS
-
     lead = [headline] + [k for k in ("pdms",) if k != headline]
     rest = [k for k in KEYS if k not in lead]
     cols = [Column("model", "Model"), Column("planning_frames", "Frames")]
@@ -377,8 +427,6 @@ def planning_columns(headline: str) -> tuple[Column, ...]:
 def planning_table(evaluation: Evaluation) -> Table:
     """"Planning score (NAVSIM)": per model its PDMS / EPDMS (or EPDMS-map) and sub-scores, and the ground truth's own row
     scored by the same code (``Evaluation.planning``, lightemma.evaluation.planning_score)."""
-    from lightemma.evaluation.planning_score import GT_LABEL
-
     result = evaluation.planning
     rows = [{"model": m.label, **m.planning} for m in evaluation.models]
     if result.ground_truth:
@@ -413,3 +461,135 @@ def pairwise_planning_table(evaluation: Evaluation) -> Table:
              "this table.", HOLM_FAMILIES]
     return Table(f"Paired comparisons — planning score ({title})", cols, list(result.pairwise or []), name="pairwise_planning",
                  flags=coverage_flags(evaluation), notes=notes)
+
+
+# ------------------------------------------------------------------------------------- tables that refuse to mix
+
+
+
+_REFERENCE_LABEL = ("Reference rows, not runs: the ground truth's on every evaluated frame of all frame sets, the "
+                    "paper's on its own")
+
+
+def _is_run_row(row: dict[str, Any], labels: set[str] | dict[str, Any]) -> bool:
+    """A run's own row: its ``model`` is a run's label and it is no paper, difference, floor or ground-truth row."""
+    return row.get("model") in labels and row.get("source") is None
+
+
+def _run_rows(table: Table, evaluation: Evaluation) -> bool:
+    """True when some row of ``table`` is a run's (:func:`_is_run_row`)."""
+    labels = {m.label for m in evaluation.models}
+    return any(_is_run_row(r, labels) for r in table.rows)
+
+
+def _row_frame_sets(rows: list[dict[str, Any]], group_of: dict[str, str]) -> list[str | None]:
+    """Per row its frame set's key (``group_of``: run label -> key), None for a reference row. A run's row is its run's;
+    the paper's row right after it and the difference row right after that (``--with-paper``: lightemma.models.paper
+    .beside_paper) stay beside it, in its group; every other row (the paper's other models, the floor, the ground
+    truth's) is a reference row."""
+    out: list[str | None] = []
+    current, state = None, None
+    for r in rows:
+        source = r.get("source")
+        if _is_run_row(r, group_of):
+            current, state = group_of[r["model"]], "run"
+            out.append(current)
+        elif source == "paper" and state == "run":
+            state = "paper"
+            out.append(current)
+        elif source == "diff" and state == "paper":
+            state = None
+            out.append(current)
+        else:
+            current, state = None, None
+            out.append(None)
+    return out
+
+
+def frame_set_tables(tables: list[Table], evaluation: Evaluation) -> list[Table]:
+    """Tables in which runs on different frame sets are never ranked in one column
+    (docs/evaluate.md#runs-on-different-frame-sets): the one rule of ``lightemma evaluate`` (Markdown, CSV, LaTeX) and
+    ``lightemma report`` (index.md, tables/, index.html).
+
+    With one frame set, or with ``--common`` (every run scored on the same frames), ``tables`` unchanged. Otherwise each
+    table whose rows are runs becomes one table per frame set, in the order of the evaluation's runs: its fingerprint
+    (id, version, split, window, frame count: :func:`~lightemma.frames.fingerprint.describe_fingerprint`) in the title
+    and in ``Table.frame_set`` / ``Table.frame_set_label``, and one more for its reference rows (the ground truth's,
+    computed on every evaluated frame, or the paper's; ``frame_set`` :data:`REFERENCE_FRAME_SET`); tables of pairs stay
+    whole (each pair is scored on the frames scored in both). Where the runs' prompt sets differ, a note under each run
+    table says which run used which prompt set."""
+    from dataclasses import replace
+
+    groups: dict[str, list[str]] = {}
+    described: dict[str, str] = {}
+    group_of: dict[str, str] = {}
+    for m in evaluation.models:
+        fp = m.fingerprint
+        key = fp["id"] if fp is not None else "unrecorded"
+        described[key] = describe_fingerprint(fp) if fp is not None else "unrecorded (no fingerprint)"
+        groups.setdefault(key, []).append(m.label)
+        group_of[m.label] = key
+    notes = _mixed_settings_notes(evaluation)
+    if evaluation.common or len(groups) <= 1:
+        if not notes:
+            return list(tables)
+        return [replace(t, notes=[*t.notes, *notes]) if _run_rows(t, evaluation) else t for t in tables]
+    out = []
+    for table in tables:
+        if not _run_rows(table, evaluation):
+            out.append(table)
+            continue
+        where = _row_frame_sets(table.rows, group_of)
+        for key in groups:
+            rows = [r for r, k in zip(table.rows, where, strict=True) if k == key]
+            if rows:
+                title = f"{table.title} — frame set {described[key]}"
+                out.append(replace(table, title=title, rows=rows, notes=[*table.notes, *notes], frame_set=key,
+                                   frame_set_label=described[key]))
+        rest = [r for r, k in zip(table.rows, where, strict=True) if k is None]
+        if rest:
+            title = f"{table.title} — reference rows (on every evaluated frame, all frame sets)"
+            out.append(replace(table, title=title, rows=rest, frame_set=REFERENCE_FRAME_SET,
+                               frame_set_label=_REFERENCE_LABEL))
+    return out
+
+
+def frame_set_groups(evaluation: Evaluation) -> list[dict[str, Any]] | None:
+    """``[{"frame_set": id, "models": [label, …]}, …]`` where runs' frame sets differ and ``--common`` was not given,
+    else None (``evaluate --format json``'s and the report's ``frame_set_groups``;
+    docs/evaluate.md#runs-on-different-frame-sets)."""
+    groups: dict[str | None, list[str]] = {}
+    for m in evaluation.models:
+        groups.setdefault(m.fingerprint["id"] if m.fingerprint is not None else None, []).append(m.label)
+    if evaluation.common or len(groups) <= 1:
+        return None
+    return [{"frame_set": key, "models": labels} for key, labels in groups.items()]
+
+
+def json_frame_set_rows(tables: list[Table], evaluation: Evaluation) -> list[Table]:
+    """``tables`` whose run rows carry ``frame_set``, their run's fingerprint id (for runs on different frame sets)."""
+    from dataclasses import replace
+
+    fps = {m.label: m.fingerprint["id"] if m.fingerprint is not None else None for m in evaluation.models}
+    return [replace(t, rows=[{**r, "frame_set": fps[r["model"]]} if _is_run_row(r, fps) else r for r in t.rows])
+            if _run_rows(t, evaluation) else t for t in tables]
+
+
+def _mixed_settings_notes(evaluation: Evaluation) -> list[str]:
+    """A note naming which run used which prompt set where they differ; [] if none. (The parse definition is the
+    accuracy tables' Parse column, the integrator and the other protocol settings are in each run's label.)"""
+    prompts: dict[str, list[str]] = {}
+    for m in evaluation.models:
+        manifest = m.manifest or {}
+        prompt_value = manifest.get("prompt_set")
+        prompt: dict[str, Any] = prompt_value if isinstance(prompt_value, dict) else {}
+        name = f"{prompt.get('name')} ({str(prompt.get('hash'))[:19]})" if prompt else "unrecorded"
+        if prompt.get("variant"):
+            name += f", variant {prompt.get('variant')}"
+        prompts.setdefault(name, []).append(m.label)
+    notes = []
+    for what, seen in (("prompt sets", prompts),):  # parse definitions: the accuracy tables' Parse column
+        if len(seen) > 1:
+            which = "; ".join(f"{k}: {', '.join(v)}" for k, v in seen.items())
+            notes.append(f"Runs differ in {what}: {which} (not one protocol).")
+    return notes

@@ -28,10 +28,11 @@ from typing import Any
 import numpy as np
 
 from lightemma._text import printable
+from lightemma.definitions import OUTCOMES
 from lightemma.evaluation.loading import RunData
-from lightemma.evaluation.outcomes import FAILURES
 from lightemma.evaluation.scenarios import TAGS, tag_frames
-from lightemma.report.tables import MODEL_KEYS, Table, _cells, table_notes
+from lightemma.report.figures.projection import densify, project
+from lightemma.report.tables import MODEL_KEYS, REFERENCE_FRAME_SET, Table, _cells, table_notes
 
 TEXT_CHUNK = 64  # frames per html/texts/<k>.js file
 THUMB_WIDTH = 480  # px: camera thumbnails (the frame view scales them up)
@@ -155,6 +156,63 @@ def safety_flags(ft: FrameTable, safety: Any) -> dict[str, list[list[int | None]
     return out
 
 
+def intent_flags(ft: FrameTable, explanations: Any) -> dict[str, list[list[int | None]]]:
+    """Per model and frame, ``contra`` (the stated intent contradicts the model's own plan) and ``contra_gt`` (it
+    contradicts what the car did: the ground truth's behaviour) as 1 or 0 (docs/definitions.md#explanation-audit);
+    None where there is no verdict (no stage-2 text, a baseline, not in the run, no ground truth).
+    ``explanations``: the evaluation's :class:`~lightemma.evaluation.intent_audit.ExplanationResult`, or None."""
+    m, n = len(ft.labels), len(ft)
+    out: dict[str, list[list[int | None]]] = {key: [[None] * n for _ in range(m)] for key in ("contra", "contra_gt")}
+    if explanations is None:
+        return out
+    index = {fid: j for j, fid in enumerate(ft.frame_ids)}
+    for i, label in enumerate(ft.labels):
+        audit = explanations.runs.get(label)
+        if audit is None:
+            continue
+        for k, fid in enumerate(audit.frame_ids):
+            j = index.get(fid)
+            if j is None or not audit.has_text[k]:
+                continue
+            out["contra"][i][j] = int(audit.verdict[k] == "contradicts")
+            if audit.truth_verdict is not None:
+                out["contra_gt"][i][j] = int(audit.truth_verdict[k] == "contradicts")
+    return out
+
+
+def intent_entries(ft: FrameTable, explanations: Any) -> dict[int, list[dict[str, Any] | None]]:
+    """Per frame index, per model what the frame view shows beside the stage-2 text: the read intent
+    (``lon``, ``lat``), the verdict against the plan and its ``reason``, the verdict against the ground truth
+    (``truth``, None without one), and the described-objects tags (``objects``); None where the model has no
+    stage-2 text for the frame. Only frames some model has an entry for are keys."""
+    out: dict[int, list[dict[str, Any] | None]] = {}
+    if explanations is None:
+        return out
+    index = {fid: j for j, fid in enumerate(ft.frame_ids)}
+    for i, label in enumerate(ft.labels):
+        audit = explanations.runs.get(label)
+        if audit is None:
+            continue
+        objects = getattr(explanations, "objects", {}).get(label)
+        tags: dict[str, list[str]] = {}
+        if objects is not None:
+            for k, fid in enumerate(objects.frame_ids):
+                found = [t for t, v in (("hallucinated pedestrian", objects.check.hallucinated_pedestrian[k]),
+                                        ("missed pedestrian", objects.check.missed_pedestrian[k])) if v]
+                if found:
+                    tags[fid] = found
+        for k, fid in enumerate(audit.frame_ids):
+            j = index.get(fid)
+            if j is None or not audit.has_text[k]:
+                continue
+            row = out.setdefault(j, [None] * len(ft.labels))
+            row[i] = {"lon": str(audit.stated_longitudinal[k]), "lat": str(audit.stated_lateral[k]),
+                      "verdict": str(audit.verdict[k]), "reason": printable(audit.reason[k]),
+                      "truth": None if audit.truth_verdict is None else str(audit.truth_verdict[k]),
+                      "objects": tags.get(fid, [])}
+    return out
+
+
 #: the frame view draws every SIM_STRIDE-th re-simulated state of the planning score (0.3 s apart: 11 points)
 SIM_STRIDE = 3
 
@@ -180,15 +238,17 @@ def simulated_paths(ft: FrameTable, planning: Any) -> list[list[float | None]] |
 
 
 def frame_data(ft: FrameTable, models: Sequence[Mapping[str, Any]], images: Mapping[int, str], safety: Any = None,
-               planning: Any = None) -> dict[str, Any]:
+               planning: Any = None, explanations: Any = None) -> dict[str, Any]:
     """The payload of ``html/data.js``: columns over frames, one list per model for per-model values
-    (``collides`` / ``off_road``: :func:`safety_flags`; ``sim``: :func:`simulated_paths`)."""
+    (``collides`` / ``off_road``: :func:`safety_flags`; ``sim``: :func:`simulated_paths`; ``contra`` /
+    ``contra_gt``: :func:`intent_flags`)."""
     return {
         **safety_flags(ft, safety),
+        **intent_flags(ft, explanations),
         "sim": simulated_paths(ft, planning),
         "models": list(models),
         "tags": list(TAGS),
-        "failures": [name or "scored" for name in FAILURES],
+        "failures": [name or "scored" for name in OUTCOMES],
         "bands": [[lo, None if math.isinf(hi) else hi, name] for lo, hi, name in ERROR_BANDS],
         "chunk": TEXT_CHUNK,
         "ids": [printable(fid) for fid in ft.frame_ids],  # shown only: a control or bidirectional character as a visible escape
@@ -239,14 +299,40 @@ def table_html(table: Table, links: Mapping[str, str]) -> str:
         cls = f' class="{row["source"]}"' if row.get("source") in ("paper", "diff") else ""
         body.append(f"<tr{cls}>" + "".join(tds) + "</tr>")
     notes = "".join(f'<p class="note">{html.escape(printable(n))}</p>' for n in table_notes(table))
-    return (f'<section class="table" id="table-{html.escape(table.name)}"><h3>{html.escape(printable(table.title))}</h3>'
+    attr, label = "", ""
+    if table.frame_set is not None:  # one frame set's part of a table split by frame set: labelled, sorted on its own
+        text = printable(table.frame_set_label or table.frame_set)
+        text = text if table.frame_set == REFERENCE_FRAME_SET else f"Frame set {text}"
+        attr = f' data-frame-set="{html.escape(table.frame_set)}"'
+        label = f'<p class="frame-set-label">{html.escape(text)}</p>'
+    title = html.escape(printable(table.title))
+    return (f'<section class="table" id="table-{html.escape(table.stem)}"{attr}>{label}<h3>{title}</h3>'
             f'<div class="scroll"><table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>{notes}</section>')
+
+
+def tables_html(tables: Sequence[Table], links: Mapping[str, str]) -> str:
+    """Every table (:func:`table_html`); the parts of a table split by frame set
+    (:func:`lightemma.report.evaluation_tables.frame_set_tables`) side by side in one ``frame-set-groups`` block, each
+    part its own labelled group with its own sorting, so no run is ranked against a run of another frame set."""
+    out: list[str] = []
+    k = 0
+    while k < len(tables):
+        table = tables[k]
+        if table.frame_set is None:
+            out.append(table_html(table, links))
+            k += 1
+            continue
+        end = k
+        while end < len(tables) and tables[end].name == table.name and tables[end].frame_set is not None:
+            end += 1
+        parts = "\n".join(table_html(t, links) for t in tables[k:end])
+        out.append(f'<div class="frame-set-groups" data-table="{html.escape(table.name)}">{parts}</div>')
+        k = end
+    return "\n".join(out)
 
 
 def _projections(camera: Any, trajectories: Sequence[np.ndarray], scale: float) -> list[list[int] | None]:
     """Each trajectory projected into the camera image (pixels of the thumbnail), as a flat [u, v, …] polyline."""
-    from lightemma.report.figures.projection import densify, project
-
     out: list[list[int] | None] = []
     for traj in trajectories:
         if not np.isfinite(traj).all():
@@ -268,7 +354,7 @@ def write_thumbnail(camera: Any, path: Path) -> tuple[float, list[int]] | None:
     if camera.image is not None:
         full = Image.fromarray(camera.image)
         width = full.width
-        thumb = full.resize((THUMB_WIDTH, max(1, round(full.height * THUMB_WIDTH / full.width))), Image.BILINEAR) if full.width > THUMB_WIDTH else full
+        thumb = full.resize((THUMB_WIDTH, max(1, round(full.height * THUMB_WIDTH / full.width))), Image.Resampling.BILINEAR) if full.width > THUMB_WIDTH else full
     else:
         header = open_image(camera.path)
         if header is None:
@@ -306,6 +392,7 @@ def write_html(
     progress: bool = False,
     safety: Any = None,
     planning: Any = None,
+    explanations: Any = None,
 ) -> Path:
     """Write ``index.html`` and ``html/`` into ``out`` (see the module docstring); returns the page.
 
@@ -316,7 +403,9 @@ def write_html(
     :class:`~lightemma.evaluation.safety.SafetyResult`, or None) gives each model's per-frame
     ``collides`` / ``off_road`` flags: a frame-browser filter and columns of the frame view; ``planning`` (the
     evaluation's :class:`~lightemma.evaluation.planning_score.PlanningResult`, or None) the re-simulated path each model's
-    plan is scored on, dotted in the frame view's bird's-eye view.
+    plan is scored on, dotted in the frame view's bird's-eye view; ``explanations`` (the evaluation's
+    :class:`~lightemma.evaluation.intent_audit.ExplanationResult`, or None) the read intent shown beside each stage-2
+    text with its contradiction highlighted, and the frame-browser filter on contradictions (:func:`intent_flags`).
     """
     ft = FrameTable(runs, labels)
     models = [{"label": printable(lab), "color": colors.get(lab, "#444444"), "family": run.info.family, "baseline": run.info.family == "Baseline"}
@@ -336,12 +425,16 @@ def write_html(
         if written is not None:
             scales[j], sizes[j] = written
             images[j] = name
-    (data_dir / "data.js").write_text(_script("LE.data", frame_data(ft, models, images, safety, planning)), encoding="utf-8")
+    (data_dir / "data.js").write_text(_script("LE.data", frame_data(ft, models, images, safety, planning, explanations)),
+                                      encoding="utf-8")
+    intents = intent_entries(ft, explanations)
     for k in range(0, max(1, -(-len(ft) // TEXT_CHUNK))):
         chunk: dict[str, Any] = {}
         for j in range(k * TEXT_CHUNK, min(len(ft), (k + 1) * TEXT_CHUNK)):
             fid = ft.frame_ids[j]
             entry: dict[str, Any] = {"texts": [list(texts.get(lab, {}).get(fid) or ()) or None for lab in labels]}
+            if j in intents:
+                entry["intent"] = intents[j]
             if j in scales:
                 entry["proj"] = _projections(cameras[fid], [ft.gt[j], *ft.pred[:, j]], scales[j])
                 entry["size"] = sizes[j]
@@ -350,7 +443,7 @@ def write_html(
     links = {f"model:{lab}": f"#frames?model={i}&sort=worst" for i, lab in enumerate(labels)}
     links.update({f"tag:{tag}": f"#frames?tag={tag}" for tag in TAGS})
     links["tag:all"] = "#frames"
-    body_tables = "\n".join(table_html(t, links) for t in tables)
+    body_tables = tables_html(tables, links)
     body_figures = "\n".join(f'<figure><img src="{html.escape(src)}" alt="{html.escape(cap)}" loading="lazy"><figcaption>{html.escape(cap)}</figcaption></figure>' for src, cap in figures)
     replacements = {
         "{{title}}": html.escape(title),

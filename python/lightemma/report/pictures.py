@@ -16,8 +16,9 @@ import numpy as np
 
 from lightemma._text import printable
 from lightemma.evaluation.loading import RunData, read_frame_records
+from lightemma.nuscenes import load_frames
+from lightemma.nuscenes.geometry import extrinsic_matrix
 from lightemma.report.figures.frame_view import Camera, camera_from_frame, load_image
-from lightemma.frames.geometry import extrinsic_matrix
 
 
 class CameraSource:
@@ -40,8 +41,6 @@ class CameraSource:
             self.problems.append("a run's manifest names no dataset (dataroot and version); pictures have no camera view")
             return
         try:
-            from lightemma import load_frames
-
             frames = load_frames(dataroot, dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"), window=dataset.get("window") or "reference")
         except Exception as exc:  # any dataset problem only costs the camera view  # noqa: BLE001
             self.problems.append(f"could not load the dataset at {dataroot} ({type(exc).__name__}: {exc}); pictures have no camera view")

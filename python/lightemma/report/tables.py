@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from lightemma._text import printable
+from lightemma.errors import InputError
 
 FORMATS = ("md", "csv", "latex", "json")
 
@@ -148,6 +149,10 @@ EFFICIENCY_COLUMNS: tuple[Column, ...] = (
 BATCH_TURNAROUND_COLUMN = Column("batch_turnaround_s", "Batch turnaround (s)", fixed(0))
 
 
+#: the ``frame_set`` of a split table holding its reference rows (the ground truth's, the paper's), not a frame set's
+REFERENCE_FRAME_SET = "reference"
+
+
 @dataclass
 class Table:
     """A titled table of rows."""
@@ -158,6 +163,18 @@ class Table:
     name: str = "table"  # file stem in reports
     flags: dict[str, str] = field(default_factory=dict)  # model label -> note after its name (cells and headers)
     notes: list[str] = field(default_factory=list)  # lines printed under the table (Markdown) or as comments
+    #: the frame set of a table split by frame set (report.evaluation_tables.frame_set_tables): a fingerprint id,
+    #: ``unrecorded`` or ``reference`` (the reference rows); None for a table of every run
+    frame_set: str | None = None
+    frame_set_label: str | None = None  # that frame set in words: id, version, split, window, frame count
+
+    @property
+    def stem(self) -> str:
+        """The table's file stem: its ``name``, then ``_`` and its frame set (``frames-3f2a…``) when split by frame
+        set, so that the parts of a split table never share a file (letters, digits, ``_``, ``-`` only)."""
+        if self.frame_set is None:
+            return self.name
+        return f"{self.name}_{re.sub(r'[^A-Za-z0-9_-]+', '-', self.frame_set)}"
 
     def headers(self) -> list[str]:
         return [printable(c.header + self.flags.get(c.header, "")) for c in self.columns]  # a header can name a model
@@ -283,5 +300,5 @@ def render(tables: Sequence[Table], fmt: str, *, extra: dict[str, Any] | None = 
         return to_json(tables, extra)
     one = {"md": to_markdown, "csv": lambda t: f"# {printable(t.title)}\n" + to_csv(t), "latex": to_latex}.get(fmt)
     if one is None:
-        raise ValueError(f"unknown table format {fmt!r} (choose from {', '.join(FORMATS)})")
+        raise InputError(f"unknown table format {fmt!r} (choose from {', '.join(FORMATS)})")
     return "\n".join(one(t) for t in tables)

@@ -23,23 +23,68 @@ import json
 import os
 import re
 import sys
-from glob import escape as glob_escape
 from collections.abc import Iterable, Sequence
+from dataclasses import replace
+from glob import escape as glob_escape
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from lightemma.evaluation import Evaluation, RunData, common_frames, evaluate_loaded, expand_run_dirs, load_run, read_frame_records
 from lightemma._text import printable
-from lightemma.evaluation.core import unique_labels
-from lightemma.evaluation.loading import discover_runs
 from lightemma.errors import UserError
+from lightemma.evaluation import (
+    Evaluation,
+    RunData,
+    common_frames,
+    evaluate_loaded,
+    expand_run_dirs,
+    load_run,
+    read_frame_records,
+)
+from lightemma.evaluation.core import unique_labels
+from lightemma.evaluation.descriptors import footer_lines, provenance
+from lightemma.evaluation.loading import discover_runs
+from lightemma.evaluation.planning_score import GT_LABEL, KEYS
+from lightemma.evaluation.safety import FLOOR_LABEL, frame_tags
+from lightemma.evaluation.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
 from lightemma.evaluation.stats import Resampling
-from lightemma.report.evaluation_tables import evaluation_tables
-from lightemma.runs.store import pid_alive
-from lightemma.report.tables import Column, Table, fixed, markdown_cell, markdown_code, markdown_text, to_csv, to_latex, to_markdown
-
+from lightemma.frames.fingerprint import describe_fingerprint
+from lightemma.metrics import displacement_errors
+from lightemma.report.evaluation_tables import (
+    coverage_flags,
+    evaluation_tables,
+    frame_set_groups,
+    frame_set_tables,
+    provenance_footer,
+    provenance_table,
+)
+from lightemma.report.figures import (
+    ablation_figure,
+    bubble_chart,
+    bubble_points,
+    history_bias_figure,
+    pairwise_figure,
+    save_figure,
+)
+from lightemma.report.figures._mpl import RUN_PALETTE, run_colors
+from lightemma.report.figures.bev import bev_figure
+from lightemma.report.figures.consistency import explanations_figure
+from lightemma.report.figures.subscores import planning_figure
+from lightemma.report.pictures import CameraSource, stage_texts, visible_lines
+from lightemma.report.robustness_tables import robustness_section
+from lightemma.report.tables import (
+    Column,
+    Table,
+    fixed,
+    markdown_cell,
+    markdown_code,
+    markdown_text,
+    to_csv,
+    to_latex,
+    to_markdown,
+)
+from lightemma.runs.store import MANIFEST_FILE, pid_alive, read_manifest
 
 SLUG_MAX = 80  # characters of a name kept in a file name (a frame id from a reference file can be any length)
 
@@ -65,25 +110,30 @@ class _Writer:
         self.lines: list[str] = []
         self.figures: list[tuple[str, str]] = []  # (PNG relative to out, caption), for the HTML page
         self.tables: list[Table] = []  # every table written, in order: the HTML page shows them all
+        #: the provenance footer of every table file (lightemma.evaluation.descriptors.footer_lines); [] for none
+        self.footer: list[str] = []
 
     def rel(self, path: Path) -> str:
         return path.relative_to(self.out).as_posix()
 
     def table(self, table: Table, *, latex: bool = True) -> None:
-        base = self.out / "tables" / table.name
+        """Write ``tables/<stem>.{md,csv,tex}`` (each file ending with the provenance footer, :attr:`footer`, as
+        ``lightemma evaluate``'s output does) and add the table to index.md and the HTML page."""
+        def footer(fmt: str) -> str:
+            return provenance_footer(self.footer, fmt) if self.footer else ""
+
+        base = self.out / "tables" / table.stem  # a table split by frame set: one file per frame set
         base.parent.mkdir(parents=True, exist_ok=True)
-        base.with_suffix(".md").write_text(to_markdown(table), encoding="utf-8")
-        base.with_suffix(".csv").write_text(to_csv(table), encoding="utf-8")
+        base.with_suffix(".md").write_text(to_markdown(table) + footer("md"), encoding="utf-8")
+        base.with_suffix(".csv").write_text(to_csv(table) + footer("csv"), encoding="utf-8")
         links = [f"[csv]({self.rel(base.with_suffix('.csv'))})"]
         if latex:
-            base.with_suffix(".tex").write_text(to_latex(table), encoding="utf-8")
+            base.with_suffix(".tex").write_text(to_latex(table) + footer("latex"), encoding="utf-8")
             links.append(f"[LaTeX]({self.rel(base.with_suffix('.tex'))})")
         self.lines += [to_markdown(table), " · ".join(links), ""]
         self.tables.append(table)
 
     def figure(self, fig: Any, stem: str, caption: str) -> Path:
-        from lightemma.report.figures import save_figure
-
         caption = printable(caption)  # it names frames and models: one line in index.md and index.html
         text = markdown_text(caption)  # inert in index.md: no raw HTML, no link
         alt = text.replace("[", "\\[").replace("]", "\\]")
@@ -112,6 +162,27 @@ def _scenario_table(rows: list[dict[str, Any]], labels: Sequence[str], flags: di
     notes = [] if all(isinstance(r["frames"], int) for r in shown) else [
         "Frames: the tag's frames per model where models differ in them (a range); each model's own count is in its cell (n)."]
     return Table("ADE avg by scenario tag", columns, shown, name="scenarios", flags=flags, notes=notes)
+
+
+def _scenario_parts(evaluation: Evaluation, runs: Sequence[RunData], labels: Sequence[str],
+                    shared: Sequence[str] | None) -> list[tuple[dict[str, Any], list[int]]]:
+    """The scenario table's parts: ``({}, every run)`` when the runs share one frame set or are compared on their common
+    frames (``shared``); else, runs on different frame sets with no frame in common, one part per frame set (title,
+    ``frame_set``, ``frame_set_label`` for :class:`Table`, and the indices of its runs in ``runs``), so that no tag's
+    row sets runs on other frames side by side (as :func:`~lightemma.report.evaluation_tables.frame_set_tables`)."""
+    if shared is not None:
+        return [({}, list(range(len(runs))))]
+    by_label = {m.label: m for m in evaluation.models}
+    parts: dict[str, tuple[dict[str, Any], list[int]]] = {}
+    for i, label in enumerate(labels):
+        fp = by_label[label].fingerprint if label in by_label else None
+        key = fp["id"] if fp is not None else "unrecorded"
+        text = describe_fingerprint(fp) if fp is not None else "unrecorded (no fingerprint)"
+        part = {"title": f"ADE avg by scenario tag — frame set {text}", "frame_set": key, "frame_set_label": text}
+        parts.setdefault(key, (part, []))[1].append(i)
+    if len(parts) <= 1:
+        return [({}, list(range(len(runs))))]
+    return list(parts.values())
 
 
 def _share(value: Any) -> str:
@@ -157,9 +228,6 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
     """For each (kind, frame_id, caption): a grid of the models (those of ``shown[frame_id]`` when given — the
     models a caption's number was measured on — else all), and the worst model's picture with its texts."""
     from lightemma.report.figures import frame_figure, model_grid
-    from lightemma.report.pictures import stage_texts
-
-    from lightemma import displacement_errors
 
     records = {id(run): read_frame_records(run.info.run_dir, [fid for _, fid, _ in picks]) for run in runs}
     indices = [run.index() for run in runs]
@@ -183,7 +251,7 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
         w.lines.append("")
         w.figure(model_grid(gt, preds, camera=cameras.get(fid), title=printable(f"{fid}: {caption}"), errors=errors, colors=colors), f"frames/{kind}_{_slug(fid)}_grid", f"all models on {fid}")
         models = [lab for lab, run in zip(labels, runs) if lab in errors and run.info.family != "Baseline"] or list(errors)
-        worst = max(models, key=errors.get)  # stage texts of a baseline say nothing
+        worst = max(models, key=lambda m: errors[m])  # stage texts of a baseline say nothing
         run = runs[list(labels).index(worst)]
         texts = stage_texts(records[id(run)].get(fid))
         fig = frame_figure(gt, {worst: preds[worst]}, camera=cameras.get(fid), texts=texts, title=printable(f"{fid}: {worst} (ADE {errors[worst]:.2f} m)"), colors=colors)
@@ -203,19 +271,15 @@ def _ablation_section(w: _Writer, tables: Sequence[Table]) -> None:
                 "constant-velocity and ego-status baselines (the history alone), paired on common frames (docs/evaluate.md).", ""]
     for table in shown:
         w.table(table)
-    from lightemma.report.figures import ablation_figure
 
-    ablations = next((t.rows for t in shown if t.name == "input_ablations"), [])
-    gains = next((t.rows for t in shown if t.name == "baseline_gains"), [])
+    ablations = [r for t in shown if t.name == "input_ablations" for r in t.rows]  # every frame set's part
+    gains = [r for t in shown if t.name == "baseline_gains" for r in t.rows]
     w.figure(ablation_figure(ablations, gains), "input_ablations", "full − ablated ADE avg per ablation run, and each model's gain over "
              "the best baseline, with 95 % scene-bootstrap intervals; filled: significant after Holm")
 
 
 def _safety_views(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], safety: Any, colors: dict[str, str], per_model: int = 1) -> None:
     """Bird's-eye views of each model's first colliding and first off-road frames (figures/bev.py)."""
-    from lightemma.evaluation.safety import frame_tags
-    from lightemma.report.figures.bev import bev_figure
-
     picks: dict[str, str] = {}
     for label in labels:
         rs = safety.runs.get(label)
@@ -306,8 +370,6 @@ def _foreign_files(out: Path) -> list[str] | None:
 
 def _holds_runs(folder: Path) -> Path | None:
     """The first lightemma run directory at or below ``folder`` (a ``manifest.json`` of the run store), else None."""
-    from lightemma.runs.store import MANIFEST_FILE
-
     for root, dirs, files in os.walk(folder):
         if MANIFEST_FILE in files:
             return Path(root)
@@ -355,15 +417,14 @@ def _recorded_dataroots(run_dirs: Sequence[Path]) -> list[tuple[Path, str]]:
     """Every dataroot a run's manifest records (``dataset.dataroot``, ``config.dataset.dataroot``), with the run's name.
 
     A manifest that cannot be read records nothing (evaluation skips its run with a warning)."""
-    from lightemma.runs.store import read_manifest
-
     found: dict[str, tuple[Path, str]] = {}
     for run_dir in run_dirs:
         try:
             manifest = read_manifest(run_dir)
         except (UserError, OSError):
             continue
-        config = manifest.get("config") if isinstance(manifest.get("config"), dict) else {}
+        config_value = manifest.get("config")
+        config: dict[str, Any] = config_value if isinstance(config_value, dict) else {}
         for dataset in (manifest.get("dataset"), config.get("dataset")):
             root = dataset.get("dataroot") if isinstance(dataset, dict) else None
             if isinstance(root, str) and root and root not in found:
@@ -621,19 +682,23 @@ class _Steps:
             self.bar.close()
 
 
+def _frame_set_id(model: Any) -> str:
+    """A run's frame-set fingerprint id (``frames:3f2a…``), or ``unrecorded``."""
+    return model.fingerprint["id"] if model.fingerprint is not None else "unrecorded"
+
+
 def _runs_table(evaluation: Evaluation, flags: dict[str, str]) -> Table:
     rows = [{"model": m.label, "family": m.family, "run": str(m.run_dir), "frames": m.frames_in_run, "complete": "yes" if m.complete else "no",
-             "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format, "inputs": m.inputs} for m in evaluation.models]
+             "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format, "inputs": m.inputs,
+             "frame_set": _frame_set_id(m)} for m in evaluation.models]
     columns = [Column("model", "Model"), Column("family", "Family"), Column("run", "Run"), Column("frames", "Frames in run"), Column("complete", "Finished"),
-               Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format"), Column("inputs", "Inputs")]
+               Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format"), Column("inputs", "Inputs"),
+               Column("frame_set", "Frame set")]
     return Table("Runs", columns, rows, name="runs", flags=flags)
 
 
 def _planning_section(w: _Writer, evaluation: Evaluation, colors: dict[str, str], flags: dict[str, str]) -> None:
     """The planning score by sub-score: one bar per model and the ground truth (when some value is there)."""
-    from lightemma.evaluation.planning_score import GT_LABEL, KEYS
-    from lightemma.report.figures.subscores import planning_figure
-
     result = evaluation.planning
     rows = [{"model": m.label, **m.planning} for m in evaluation.models] + ([result.ground_truth] if result.ground_truth else [])
     if not any(r.get(k) is not None for r in rows for k in KEYS):
@@ -665,12 +730,7 @@ def _write(
 ) -> None:
     import html as html_escape
 
-    from lightemma.evaluation.scenarios import CASE_TAGS, disagreements, history_bias, per_tag_metrics, worst_frame_per_tag
-    from lightemma.report.evaluation_tables import coverage_flags
-    from lightemma.report.figures import bubble_chart, bubble_points, history_bias_figure, pairwise_figure
-    from lightemma.report.figures._mpl import RUN_PALETTE, run_colors
     from lightemma.report.html import write_html
-    from lightemma.report.pictures import CameraSource, visible_lines
 
     dirs, left_out = discover_runs(run_dirs)  # a corrupt manifest or a linked run: left out with a warning
     steps = _Steps(progress, total=len(dirs) + 7)
@@ -696,14 +756,16 @@ def _write(
                                    "the figures repeat colours (tell runs apart by their legends' order)")
     flags = coverage_flags(evaluation)
     w = _Writer(out, svg=svg)
+
+    w.footer = footer_lines(evaluation)  # software, frame sets, maps, metric ids: under every table file
     w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
-                "| Model | Family | Run | Frames in run | Finished | Integrator | Chain | Answer format | Inputs |",
-                "|---|---|---|---:|---|---|---|---|---|"]
+                "| Model | Family | Run | Frames in run | Finished | Integrator | Chain | Answer format | Inputs | Frame set |",
+                "|---|---|---|---:|---|---|---|---|---|---|"]
     w.lines += ["| " + " | ".join(markdown_cell(c) for c in (m.label + flags.get(m.label, ""), m.family, m.run_dir, m.frames_in_run,
-                                                             "yes" if m.complete else "no", m.integrator, m.chain, m.answer_format, m.inputs)) + " |"
+                                                             "yes" if m.complete else "no", m.integrator, m.chain, m.answer_format, m.inputs,
+                                                             _frame_set_id(m))) + " |"
                 for m in evaluation.models]  # every cell one line: names from outside cannot split a row
     w.lines.append("")
-    from lightemma.evaluation.safety import FLOOR_LABEL
 
     summary = summarise_warnings(evaluation.warnings, names=[*labels, FLOOR_LABEL, "ground truth"])
     if evaluation.warnings:
@@ -725,16 +787,21 @@ def _write(
     if flags:
         w.lines += [f"**Fewer than half of the frames scored** for {markdown_text(', '.join(flags))}: their numbers describe only the frames they managed; every table flags them.", ""]
     w.lines += ["## Tables I and II", ""]
-    tables = evaluation_tables(evaluation, with_paper=with_paper)
+    groups = frame_set_groups(evaluation)
+    if groups is not None:  # runs on different frame sets: never ranked in one column (docs/evaluate.md)
+        w.lines += [f"**Runs on {len(groups)} frame sets**: every table shows each frame set apart (its fingerprint "
+                    "and frame count in the title), never ranking runs across frame sets; `--common` scores every run "
+                    "on the frames common to all.", ""]
+    tables = frame_set_tables(evaluation_tables(evaluation, with_paper=with_paper), evaluation)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations", "pairwise_safety", "pairwise_planning", *_ABLATION_TABLES):
+        if table.name in ("pairwise_ade", "generations", "pairwise_safety", "pairwise_planning", *_ABLATION_TABLES,
+                          "robustness", "visual_reliance"):  # their own sections below
             continue
         w.table(table)
-    from lightemma.evaluation.descriptors import provenance
-    from lightemma.report.evaluation_tables import provenance_table  # frame sets, software, metric ids: a panel
 
     numbers = {**evaluation.to_dict(), "provenance": provenance(evaluation, with_paper=with_paper,
-                                                                 dataroot=dataroot if version else None, version=version)}
+                                                                 dataroot=dataroot if version else None, version=version),
+               **({"frame_set_groups": groups} if groups is not None else {})}
     (out / "tables" / "evaluation.json").write_text(json.dumps(numbers, indent=2, default=str) + "\n", encoding="utf-8")
 
     w.table(provenance_table(evaluation))
@@ -752,7 +819,6 @@ def _write(
     if evaluation.planning is not None:  # the planning score broken into its sub-scores (report/figures/subscores.py)
         _planning_section(w, evaluation, colors, flags)
     if evaluation.explanations is not None and evaluation.explanations.shown:  # report/figures/consistency.py
-        from lightemma.report.figures.consistency import explanations_figure
 
         w.lines += ["## Explanations", ""]
         w.figure(explanations_figure([{"model": m.label, **m.explanations} for m in evaluation.models], colors=colors,
@@ -774,15 +840,22 @@ def _write(
 
     _ablation_section(w, tables)
 
+    robustness_section(w, tables, evaluation)  # a sweep's variants against its clean run, and the severity figure
+
     shared = common_frames(runs) if len(runs) > 1 else None
     scope = f"the {len(shared)} frames scored in every run" if shared else "each run's scored frames"
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     steps.step("tables and charts")
-    w.table(_scenario_table(per_tag_metrics(runs, convention=main_convention, frame_ids=shared or None, safety=evaluation.safety,
-                                     planning=evaluation.planning, explanations=evaluation.explanations), labels, flags), latex=False)
+    for part, members in _scenario_parts(evaluation, runs, labels, shared if groups is None or shared else None):
+        rows = per_tag_metrics([runs[i] for i in members], convention=main_convention, frame_ids=shared or None,
+                               safety=evaluation.safety, planning=evaluation.planning,
+                               explanations=evaluation.explanations)
+        table = _scenario_table(rows, [labels[i] for i in members], flags)
+        w.table(replace(table, **part), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
-    w.table(_bias_table(bias, flags), latex=False)
+    for table in frame_set_tables([_bias_table(bias, flags)], evaluation):  # each run on its own frames: by frame set
+        w.table(table, latex=False)
     w.figure(history_bias_figure(runs, colors=colors, rows=bias, notes=flags), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
 
     picks = [("frame", fid, "requested frame") for fid in frames]
@@ -808,7 +881,8 @@ def _write(
     for label, run in zip(labels, runs):
         own = texts[label] = {}
         for fid, r in read_frame_records(run.info.run_dir, run.frame_ids).items():
-            own[fid] = tuple(visible_lines(r.get(key) or "") for key in ("scene_text", "intent_text", "answer"))
+            scene, intent, answer = (visible_lines(r.get(key) or "") for key in ("scene_text", "intent_text", "answer"))
+            own[fid] = (scene, intent, answer)
             if run.info.imported and pictures and fid not in calibrations:
                 calibrations[fid] = {k: r.get(k) for k in ("camera_params", "image_name", "image_path")}
     steps.step("stage texts")
@@ -819,6 +893,6 @@ def _write(
                     + "".join(f"<br>e.g. also: {html_escape.escape(printable(x))}" for x in more) + "</p>" for head, more in notes)
     write_html(out, title="lightemma report", intro_html=intro, tables=[_runs_table(evaluation, flags), *w.tables], figures=w.figures, runs=runs, labels=labels,
                colors=colors, texts=texts, cameras=html_cameras, progress=progress, safety=evaluation.safety,
-               planning=evaluation.planning)
+               planning=evaluation.planning, explanations=evaluation.explanations)
     steps.step("index.html")
     steps.close()

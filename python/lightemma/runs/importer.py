@@ -31,7 +31,7 @@ import shutil
 import signal
 import sys
 import threading
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
@@ -39,10 +39,18 @@ from typing import Any
 
 import numpy as np
 
+from lightemma import __version__
 from lightemma._signals import stop_signals
 from lightemma._text import unicode_clean
+from lightemma.actions import history_rows, parse_actions
 from lightemma.errors import UserError
-from lightemma.registry import ModelInfo, reference_model
+from lightemma.frames.fingerprint import of_dataset
+from lightemma.kinematics import integrate
+from lightemma.models.catalog import ModelInfo, reference_model
+from lightemma.models.names import infer_family
+from lightemma.models.prices import price_per_token
+from lightemma.runs.columns import RecordColumns, source_key, write_sidecar
+from lightemma.runs.records import bounded_values, gc_paused, loads_bounded
 from lightemma.runs.reference import (
     SOURCE_FORMAT,
     WINDOW_OFFSET,
@@ -55,7 +63,7 @@ from lightemma.runs.reference import (
     iter_scene_files,
     read_regular_file,
 )
-from lightemma.runs.records import bounded_values, gc_paused, loads_bounded
+from lightemma.runs.schema import CallRecord, FrameRecord, attempt_record, call_record, frame_record
 from lightemma.runs.store import (
     FORMAT,
     FRAMES_FILE,
@@ -155,8 +163,6 @@ def _prices(info: ModelInfo | None) -> tuple[float, float] | None:
     """USD per (input, output) token for a priced API model of the registry, else None."""
     if info is None or info.backend != "api":
         return None
-    from lightemma.registry import price_per_token
-
     return price_per_token(info)
 
 
@@ -169,30 +175,30 @@ def _sum_known(values: Iterable[Any]) -> Any:
     return total if math.isfinite(total) else None
 
 
-def _call_record(call: StageCall, prices: tuple[float, float] | None, prompt: dict[str, Any]) -> dict[str, Any]:
+def _call_record(call: StageCall, prices: tuple[float, float] | None, prompt: dict[str, Any]) -> CallRecord:
     cost = None
     if prices is not None and call.input_tokens is not None and call.output_tokens is not None:
         cost = (call.input_tokens * prices[0] + call.output_tokens * prices[1]) * 100.0
-    return {
-        "stage": call.stage,
+    return call_record(
+        stage=call.stage,
         **prompt,  # the prompt whole, or its template and this frame's fill (lightemma.runs.stored_prompts)
-        "text": None if call.call_failed else call.text,
-        "error": CALL_FAILURE if call.call_failed else None,
-        "error_message": call.text if call.call_failed else None,
-        "input_tokens": call.input_tokens,
-        "output_tokens": call.output_tokens,
-        "seconds": call.seconds,
-        "cost_cents": cost,
-        "cached": False,
-        "retries": 0,
-        "finish_reason": None,
-        "reasoning_tokens": None,
-        "cached_input_tokens": None,
-    }
+        text=None if call.call_failed else call.text,
+        error=CALL_FAILURE if call.call_failed else None,
+        error_message=call.text if call.call_failed else None,
+        input_tokens=call.input_tokens,
+        output_tokens=call.output_tokens,
+        seconds=call.seconds,
+        cost_cents=cost,
+        cached=False,
+        retries=0,
+        finish_reason=None,
+        reasoning_tokens=None,
+        cached_input_tokens=None,
+    )
 
 
 def _record(frame: ReferenceFrame, source_file: str, parse: tuple[str, str, str] | None, actions: Any, trajectory: Any,
-            prices: tuple[float, float] | None, templates: PromptTemplates) -> dict[str, Any]:
+            prices: tuple[float, float] | None, templates: PromptTemplates) -> FrameRecord:
     """The run record of one frame (the chain's fields, plus what only the reference has)."""
     texts = {"scene": frame.calls[0].text, "intent": frame.calls[1].text}  # as the reference had them, failed calls too
     calls = [_call_record(c, prices, templates.encode(c.stage, c.prompt, texts)) for c in frame.calls]
@@ -206,45 +212,45 @@ def _record(frame: ReferenceFrame, source_file: str, parse: tuple[str, str, str]
         status, reason, failure, answer, error = "failed", f"API error: {CALL_FAILURE}", "api_error", None, CALL_FAILURE
     else:
         (status, reason, failure), answer, error = parse, frame.answer, None
-    attempt = {"attempt": 1, "calls": calls, "answer": answer, "status": status, "reason": reason, "failure": failure,
-               "error": error, **totals}
+    attempt = attempt_record(attempt=1, calls=calls, answer=answer, status=status, reason=reason, failure=failure,
+                             error=error, **totals)
     scene_text, intent_text = (None if c.call_failed else c.text for c in frame.calls[:2])
-    return {
-        "frame_id": frame.frame_id,
-        "scene_name": frame.scene_name,
-        "sample_token": frame.sample_token,
-        "status": status,
-        "first_status": status,
-        "failure": failure,
-        "n_attempts": 1,
-        "attempts": [attempt],
-        "actions": actions,
-        "trajectory": trajectory,
-        "gt_positions": frame.gt_positions,
-        "history_actions": frame.history_actions,
-        "history_positions": frame.history_positions,
-        "gt_actions": frame.gt_actions,
-        "scene_text": scene_text,
-        "intent_text": intent_text,
-        "answer": answer,
-        "error": error,
-        "seconds": totals["seconds"],
-        "call_seconds": totals["seconds"],
-        "input_tokens": totals["input_tokens"],
-        "output_tokens": totals["output_tokens"],
-        "cost_cents": totals["cost_cents"],
-        "cached": False,
-        "cached_calls": 0,
-        "retries": 0,
-        "keyframe_index": None if frame.frame_index is None else frame.frame_index + WINDOW_OFFSET,
-        "timestamp": frame.timestamp,
-        "image_name": frame.image_name,
-        "image_path": frame.image_path,
-        "camera_params": frame.camera,
-        "ego_position": frame.position,
-        "ego_heading": frame.heading,
-        "source": {"file": source_file, "frame_index": frame.frame_index},
-    }
+    return frame_record(
+        frame_id=frame.frame_id,
+        scene_name=frame.scene_name,
+        sample_token=frame.sample_token,
+        status=status,
+        first_status=status,
+        failure=failure,
+        n_attempts=1,
+        attempts=[attempt],
+        actions=actions,
+        trajectory=trajectory,
+        gt_positions=frame.gt_positions,
+        history_actions=frame.history_actions,
+        history_positions=frame.history_positions,
+        gt_actions=frame.gt_actions,
+        scene_text=scene_text,
+        intent_text=intent_text,
+        answer=answer,
+        error=error,
+        seconds=totals["seconds"],
+        call_seconds=totals["seconds"],
+        input_tokens=totals["input_tokens"],
+        output_tokens=totals["output_tokens"],
+        cost_cents=totals["cost_cents"],
+        cached=False,
+        cached_calls=0,
+        retries=0,
+        keyframe_index=None if frame.frame_index is None else frame.frame_index + WINDOW_OFFSET,
+        timestamp=frame.timestamp,
+        image_name=frame.image_name,
+        image_path=frame.image_path,
+        camera_params=frame.camera,
+        ego_position=frame.position,
+        ego_heading=frame.heading,
+        source={"file": source_file, "frame_index": frame.frame_index},
+    )
 
 
 class _Tally:
@@ -257,7 +263,7 @@ class _Tally:
         self.first_not_ok = 0
         self.first_failed = 0
 
-    def add(self, record: dict[str, Any]) -> None:
+    def add(self, record: Mapping[str, Any]) -> None:
         self.status[record["status"]] += 1
         if record["failure"] == "api_error":
             self.api_errors += 1
@@ -274,11 +280,8 @@ class _Tally:
 
 
 def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: Warn,
-                   templates: PromptTemplates) -> list[dict[str, Any]]:
+                   templates: PromptTemplates) -> list[FrameRecord]:
     """Records of one scene file's frames: answers parsed in one batch, trajectories integrated in one."""
-    from lightemma import integrate
-    from lightemma.actions import history_rows, parse_actions
-
     frames = scene.frames
     received = [i for i, f in enumerate(frames) if not f.calls[-1].call_failed]
     parses: list[tuple[str, str, str] | None] = [None] * len(frames)
@@ -336,9 +339,6 @@ def _now() -> str:
 def _manifest(folder: ModelFolder, model: str, info: ModelInfo | None, digest: str, run_id: str, metadata_model: str | None,
               stamp: str | None, scenes: list[str], tally: _Tally, files_skipped: list[str], frames_skipped: int,
               dataset_kind: str, prices: tuple[float, float] | None, templates: PromptTemplates) -> dict[str, Any]:
-    from lightemma import __version__
-    from lightemma.evaluation.models import infer_family
-
     return {
         "format": FORMAT,
         "run_id": run_id,
@@ -415,8 +415,6 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
             files_skipped.append(unicode_clean(entry.name))
         frames_skipped = 0
         stamp = None
-        from lightemma.evaluation.loading import RecordColumns, source_key, write_sidecar
-
         columns = RecordColumns()  # the evaluation sidecar, from the records in hand (no second read)
         with open(tmp / FRAMES_FILE, "wb") as fh, gc_paused():  # scene files are trees without cycles
             for path, scene in iter_scene_files(folder):
@@ -432,14 +430,14 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                 lines = []
                 unknown_named = False
                 duplicates: list[str] = []
-                for record in _scene_records(scene, prices, warn, templates):
-                    if record["frame_id"] in seen:
-                        duplicates.append(record["frame_id"])
+                for built in _scene_records(scene, prices, warn, templates):
+                    if built["frame_id"] in seen:
+                        duplicates.append(built["frame_id"])
                         frames_skipped += 1
                         continue
-                    seen.add(record["frame_id"])
+                    seen.add(built["frame_id"])
                     problems: list[str] = []
-                    record = bounded_values(record, problems)  # what frames.jsonl will hold, for the tally and the sidecar too
+                    record = bounded_values(built, problems)  # what frames.jsonl will hold, for the tally and the sidecar too
                     if problems and not unknown_named:  # a frame's totals beyond the bounds (each call was within them)
                         unknown_named = True
                         warn(f"{path}: frame {record['frame_id']}: {'; '.join(problems[:3])}; recorded as unknown "
@@ -462,7 +460,6 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
             return result
         manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
                              frames_skipped, dataset_kind, prices, templates)
-        from lightemma.frames.fingerprint import of_dataset  # the frames imported, as one checkable id
 
         manifest["dataset"]["fingerprint"] = {**of_dataset(manifest["dataset"], seen), "derived": True, "from": "import"}
         write_json_atomic(tmp / MANIFEST_FILE, manifest)
@@ -552,7 +549,7 @@ def _stop_resource_tracker() -> None:
     try:
         from multiprocessing import resource_tracker
 
-        resource_tracker._resource_tracker._stop()  # noqa: SLF001 - the stdlib's own way to end it
+        resource_tracker._resource_tracker._stop()  # type: ignore[attr-defined]  # noqa: SLF001 - private, not typed
     except (AttributeError, OSError, ChildProcessError):
         pass
 
@@ -621,7 +618,7 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
                 _stop_resource_tracker()
             return results
     except KeyboardInterrupt as exc:  # the caller learns how far the import got (the CLI says so in one line)
-        exc.runs_done, exc.runs_total = len(results), len(folders)  # type: ignore[attr-defined]
+        exc.runs_done, exc.runs_total = len(results), len(folders)  # type: ignore[attr-defined]  # for cli/import_
         raise
     finally:
         bar.close()

@@ -15,6 +15,8 @@ from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
 from typing import Any
 
+from lightemma.definitions import STATUSES
+
 MAX_NUMBER_DIGITS = 18  # an integer token longer than this (beyond 10^18) is no count, index or coordinate
 
 # Bounds on a record's numbers (docs/run.md, "Limits"). A value beyond them is no measurement: the writers record it as
@@ -24,7 +26,6 @@ MAX_SECONDS = 2_592_000.0  # seconds of one call, and of one frame: 30 days (a b
                            # batches of up to 24 h each, and their resubmissions)
 MAX_COST_CENTS = 1e9  # cents of one call, and of a frame's calls together (10 million dollars)
 MAX_POSITION_M = 1e5  # |coordinate| of a ground-truth position, metres (100 km from the ego vehicle)
-KNOWN_STATUSES = ("ok", "corrected", "failed")
 
 TOKEN_FIELDS = ("input_tokens", "output_tokens", "reasoning_tokens", "cached_input_tokens", "cache_write_tokens")
 SECONDS_FIELDS = ("seconds", "call_seconds")
@@ -48,7 +49,9 @@ def in_bounds(value: Any, bound: float) -> bool:
     """Whether ``value`` is a number (not a bool; a NumPy scalar is one) in 0..``bound`` (so finite)."""
     if type(value) in _NUMBER_TYPES:
         return 0 <= value <= bound
-    return isinstance(value, numbers.Real) and not isinstance(value, bool) and bool(0 <= value <= bound)
+    if not isinstance(value, numbers.Real) or isinstance(value, bool):
+        return False
+    return bool(0 <= value <= bound)  # type: ignore[operator]  # typeshed's Real compares with a Real only
 
 
 def value_problem(name: str, value: Any) -> str | None:
@@ -126,7 +129,7 @@ def bounded_values(record: Mapping[str, Any], problems: list[str] | None = None)
 def record_problem(record: Mapping[str, Any]) -> str | None:
     """Why a decoded line of ``frames.jsonl`` is no usable record (the line is then skipped, named in a warning), else None.
 
-    Checked: ``frame_id`` a string; ``status`` and ``first_status`` null or one of :data:`KNOWN_STATUSES`; ``failure``
+    Checked: ``frame_id`` a string; ``status`` and ``first_status`` null or one of :data:`STATUSES`; ``failure``
     null or a string; each attempt's ``status`` null or a string; the frame's token counts, times and cost null or
     numbers within :data:`VALUE_BOUNDS`. (Ground-truth positions beyond :data:`MAX_POSITION_M` make the record one
     without usable ground truth, judged with the columns: :mod:`lightemma.evaluation.loading`.)
@@ -137,8 +140,8 @@ def record_problem(record: Mapping[str, Any]) -> str | None:
         return "has no frame_id string"
     for key in ("status", "first_status"):
         value = record.get(key)
-        if value is not None and (type(value) is not str or value not in KNOWN_STATUSES):
-            return f"{key} is {_shown(value)}, expected one of {', '.join(KNOWN_STATUSES)} or null"
+        if value is not None and (type(value) is not str or value not in STATUSES):
+            return f"{key} is {_shown(value)}, expected one of {', '.join(STATUSES)} or null"
     failure = record.get("failure")
     if failure is not None and type(failure) is not str:
         return f"failure is {type(failure).__name__} {_shown(failure)}, expected a string or null"

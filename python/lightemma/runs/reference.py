@@ -26,8 +26,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from lightemma._files import FileRefused, file_kind
+from lightemma._files import read_regular_file as _read_regular_file
 from lightemma._text import unicode_clean, without_lone_surrogates
-from lightemma.errors import UserError
+from lightemma.errors import InputError, UserError
 from lightemma.runs.records import MAX_SECONDS, in_bounds, loads_bounded, token_count
 
 SOURCE_FORMAT = "lightemma-reference-results"
@@ -53,44 +55,18 @@ class ReferenceFileError(Exception):
 
 
 def read_regular_file(path: Path, limit: int = MAX_SCENE_FILE_BYTES) -> bytes:
-    """The bytes of ``path`` if it is a regular file of at most ``limit`` bytes; :class:`ReferenceFileError` otherwise.
-
-    Opened non-blocking (a FIFO put in place of a file never blocks the open) and
-    checked on the open descriptor (a file swapped after listing is still checked);
-    at most ``limit`` + 1 bytes are ever read (a device such as ``/dev/zero`` is
-    refused before any read).
-    """
+    """The bytes of ``path`` if it is a regular file of at most ``limit`` bytes; :class:`ReferenceFileError` otherwise
+    (:func:`lightemma._files.read_regular_file`: opened non-blocking, checked on the descriptor, never read past
+    ``limit`` + 1 bytes)."""
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
-    except OSError as exc:
-        raise ReferenceFileError(f"unreadable ({exc.strerror or exc})") from None
-    try:
-        info = os.fstat(fd)
-        if not stat.S_ISREG(info.st_mode):
-            raise ReferenceFileError(f"not a regular file ({_file_kind(info.st_mode)})")
-        if info.st_size > limit:
-            raise ReferenceFileError(f"{info.st_size} bytes, above the limit of {limit} bytes for a scene file")
-        with os.fdopen(fd, "rb", closefd=False) as fh:
-            data = fh.read(info.st_size + 1)  # sized by fstat: no buffer of the whole limit
-            if len(data) > info.st_size:  # grown since: read on, up to the limit
-                data += fh.read(limit + 1 - len(data))
-        if len(data) > limit:
-            raise ReferenceFileError(f"grew above the limit of {limit} bytes for a scene file while being read")
-        return data
-    except OSError as exc:
-        raise ReferenceFileError(f"unreadable ({exc.strerror or exc})") from None
-    finally:
-        os.close(fd)
-
-
-def _file_kind(mode: int) -> str:
-    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"), (stat.S_ISBLK, "a block device"),
-                       (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder")):
-        if test(mode):
-            return name
-    return "not a plain file"
-
-
+        return _read_regular_file(path, limit)
+    except FileRefused as exc:
+        if exc.kind == "too-large":
+            raise ReferenceFileError(f"{exc.size} bytes, above the limit of {limit} bytes for a scene file") from None
+        if exc.kind == "grew":
+            raise ReferenceFileError(f"grew above the limit of {limit} bytes for a scene file while being read") \
+                from None
+        raise ReferenceFileError(exc.reason.removeprefix("is ")) from None  # unreadable (…), not a regular file (…)
 
 
 @dataclass
@@ -191,7 +167,7 @@ def _model_folder(path: Path) -> ModelFolder:
             skipped.append((entry, f"unreadable ({getattr(exc, 'strerror', None) or exc})"))
             continue
         if not stat.S_ISREG(info.st_mode):
-            skipped.append((entry, f"not a regular file ({_file_kind(info.st_mode)})"))
+            skipped.append((entry, f"not a regular file ({file_kind(info.st_mode)})"))
         elif info.st_size > MAX_SCENE_FILE_BYTES:
             skipped.append((entry, f"{info.st_size} bytes, above the limit of {MAX_SCENE_FILE_BYTES} bytes for a scene file"))
         else:
@@ -199,7 +175,7 @@ def _model_folder(path: Path) -> ModelFolder:
     return ModelFolder(path=path, files=files, skipped=skipped)
 
 
-def find_model_folders(src: str | Path) -> list[ModelFolder]:
+def find_model_folders(src: str | os.PathLike[str]) -> list[ModelFolder]:
     """The model folders ``src`` names: a model folder (``src/output/*.json``), its ``output`` folder,
     or a folder holding model folders. Raises :class:`UserError` when it holds none."""
     src = Path(src)
@@ -425,7 +401,7 @@ def check_frame(scene_name: str, frame: Any) -> ReferenceFrame:
             soft_problems=soft,
         )
     except _Bad as exc:
-        raise ValueError(str(exc)) from None
+        raise InputError(str(exc)) from None
 
 
 @dataclass
@@ -455,9 +431,12 @@ def read_scene_file(path: Path, data: bytes) -> SceneFile:
         raise ReferenceFileError(f"not usable JSON ({exc})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list):
         raise ReferenceFileError("not a reference scene file (no 'frames' list)")
-    info = doc.get("scene_info") if isinstance(doc.get("scene_info"), dict) else {}
-    scene_name = info.get("name") if isinstance(info.get("name"), str) and info.get("name") else unicode_clean(path.stem)
-    metadata = doc.get("metadata") if isinstance(doc.get("metadata"), dict) else {}
+    info_value = doc.get("scene_info")
+    info: dict[str, Any] = info_value if isinstance(info_value, dict) else {}
+    given_name = info.get("name")
+    scene_name = given_name if isinstance(given_name, str) and given_name else unicode_clean(path.stem)
+    metadata_value = doc.get("metadata")
+    metadata: dict[str, Any] = metadata_value if isinstance(metadata_value, dict) else {}
     frames: list[ReferenceFrame] = []
     problems: list[FrameProblem] = []
     seen: set[str] = set()

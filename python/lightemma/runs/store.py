@@ -40,6 +40,7 @@ from typing import Any
 import numpy as np
 import orjson
 
+from lightemma._files import FileRefused, read_regular_file
 from lightemma.errors import RunStoreError, os_error_line
 from lightemma.runs.records import MAX_NUMBER_DIGITS, bounded_values, loads_bounded, record_problem
 
@@ -222,21 +223,18 @@ MAX_SMALL_FILE_BYTES = 256 * 1024 * 1024
 
 def read_small_text(path: Path, limit: int) -> str:
     """The UTF-8 text of a regular file of at most ``limit`` bytes, or a one-line :class:`RunStoreError`: a FIFO, a
-    device (a link to ``/dev/zero``) or a larger file is never read (it would hang or fill the memory)."""
-    import stat
-
+    device (a link to ``/dev/zero``) or a larger file is never read (it would hang or fill the memory;
+    :func:`lightemma._files.read_regular_file`)."""
     try:
-        with open(path, "rb", opener=lambda p, flags: os.open(p, flags | getattr(os, "O_NONBLOCK", 0))) as handle:
-            info = os.fstat(handle.fileno())
-            if not stat.S_ISREG(info.st_mode):
-                raise RunStoreError(f"{path} is not a regular file")
-            if info.st_size > limit:
-                raise RunStoreError(f"{path} is {info.st_size:,} bytes, over the {limit:,} a run directory's file may be")
-            data = handle.read(limit + 1)
-        if len(data) > limit:
-            raise RunStoreError(f"{path} is over the {limit:,} bytes a run directory's file may be")
-        return data.decode("utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
+        return read_regular_file(path, limit).decode("utf-8")
+    except FileRefused as exc:
+        if exc.kind == "too-large":
+            raise RunStoreError(f"{path} is {exc.size:,} bytes, over the {limit:,} a run directory's file may be") \
+                from None
+        if exc.kind == "grew":
+            raise RunStoreError(f"{path} is over the {limit:,} bytes a run directory's file may be") from None
+        raise RunStoreError(f"{path} {exc.reason}") from None  # is unreadable (…), is not a regular file (…)
+    except UnicodeDecodeError as exc:
         raise RunStoreError(f"{path} is unreadable: {exc}") from None
 
 

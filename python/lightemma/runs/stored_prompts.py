@@ -191,7 +191,7 @@ def call_prompt(call: Mapping[str, Any], texts: Mapping[str, str | None], templa
     prompt = call.get("prompt")
     if isinstance(prompt, str) or "prompt_template" not in call:
         return prompt if isinstance(prompt, str) else None
-    stage_templates = (templates or {}).get(call.get("stage"))  # type: ignore[call-overload]
+    stage_templates = (templates or {}).get(call.get("stage"))  # type: ignore[arg-type]  # any other stage: None
     index, fill = call.get("prompt_template"), call.get("prompt_fill")
     if not isinstance(stage_templates, Sequence) or type(index) is not int or not 0 <= index < len(stage_templates) \
             or not isinstance(fill, str) or not isinstance(stage_templates[index], str):

@@ -10,10 +10,11 @@ left and right turns, straight right after a turn) that the unmodified
 from __future__ import annotations
 
 from lightemma.synth.camera import Camera
-from lightemma.synth.kinematics import Path, SpeedProfile
-from lightemma.synth.render import render_frame
-from lightemma.synth.scenarios import KINDS, Scenario, build_scenario, build_scenarios, sweep_times_us
-from lightemma.synth.writer import build_tables, write_dataset
+from lightemma.synth.dataset import build_tables, write_dataset
+from lightemma.synth.drawing import render_frame
+from lightemma.synth.maps import build_scenarios
+from lightemma.synth.motion import Path, SpeedProfile
+from lightemma.synth.situations import KINDS, Scenario, build_scenario, sweep_times_us
 
 __all__ = [
     "KINDS",

@@ -6,7 +6,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lightemma.frames.geometry import quaternion_to_matrix
+from lightemma.errors import InputError
+from lightemma.nuscenes.geometry import quaternion_to_matrix
 
 # a real nuScenes CAM_FRONT calibration (1600 x 900 images)
 NUSCENES_SIZE = (1600, 900)
@@ -27,7 +28,7 @@ class Camera:
 
     def __post_init__(self) -> None:
         if self.width < 16 or self.height < 16:
-            raise ValueError(f"image size {self.width}x{self.height} is too small")
+            raise InputError(f"image size {self.width}x{self.height} is too small")
 
     @property
     def intrinsic(self) -> np.ndarray:

@@ -5,7 +5,7 @@ message at or after its last, in the devkit's format (``nuscenes/can_bus/can_bus
 ``pos`` [x, y, 0] (m, the global rear-axle position of ``ego_pose``), ``orientation`` (w, x, y, z) of the heading,
 and in the ego frame ``vel`` [v, 0, 0] (m/s), ``accel`` [a, v²κ, 0] (m/s²: longitudinal, lateral; gravity is not
 modelled, so z is 0, unlike the real IMU-based messages) and ``rotation_rate`` [0, 0, vκ] (rad/s) — the scene's
-exact kinematics (speed v, acceleration a and curvature κ of :class:`~lightemma.synth.scenarios.Scenario`) at that
+exact kinematics (speed v, acceleration a and curvature κ of :class:`~lightemma.synth.situations.Scenario`) at that
 instant. ``vehicle_monitor`` and the other messages are not written.
 """
 
@@ -15,7 +15,7 @@ import math
 
 import numpy as np
 
-from lightemma.synth.scenarios import Scenario
+from lightemma.synth.situations import Scenario
 
 #: spacing of the pose messages, µs (50 Hz)
 POSE_PERIOD_US = 20_000

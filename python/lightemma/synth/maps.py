@@ -41,8 +41,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from lightemma.synth.kinematics import Path
-from lightemma.synth.scenarios import LANE_WIDTH, Scenario
+from lightemma.errors import InputError
+from lightemma.synth.motion import Path
+from lightemma.synth.situations import LANE_WIDTH, Scenario, build_scenario
 
 ROAD_RIGHT = -LANE_WIDTH / 2  # m, lateral (left positive) of the ego lane's right edge
 ROAD_LEFT = LANE_WIDTH * 1.5  # m, the opposite lane's far edge
@@ -134,6 +135,14 @@ def place_scenarios(scenarios: list[Scenario]) -> list[Scenario]:
         out.append(dataclasses.replace(scn, path=path))
         cursor[scn.location] = x_at + (hi[0] - lo[0]) + GAP
     return out
+
+
+def build_scenarios(scenes: int = 8, *, seed: int = 0, keyframes: int = 40) -> list[Scenario]:
+    """Scenarios of scenes ``0 … scenes−1`` for ``seed`` (kinds cycle through :data:`KINDS`), placed so that
+    each location's roads lie side by side near the map origin (:func:`place_scenarios`)."""
+    if scenes < 1:
+        raise InputError(f"need at least one scene, got {scenes}")
+    return place_scenarios([build_scenario(i, seed=seed, keyframes=keyframes) for i in range(scenes)])
 
 
 #: metres of each road, from its start, that are a car park instead of lanes (behind every ego position)

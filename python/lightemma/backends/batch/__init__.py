@@ -4,7 +4,7 @@
 Every frame of a run is in flight at once; each frame's next request is queued, and once no new request has
 arrived for ``idle_seconds`` the queue goes out as one *wave* — stage 1 of every pending frame, then stage 2,
 then stage 3, re-asks in further waves. A wave is split into batches within the provider's limits (requests
-and bytes per batch, :class:`~lightemma.backends.batch.base.BatchAdapter`), each polled with backoff
+and bytes per batch, :class:`~lightemma.backends.batch.adapter.BatchAdapter`), each polled with backoff
 (``poll_seconds``, ×1.5 per poll, at most ``poll_cap``).
 
 Every request has a custom id derived from what it asks (model, frame, stage, attempt, prompt, earlier turns,
@@ -25,9 +25,9 @@ while the finished waves' provider-reported cost leaves room for every call the 
 (:meth:`BatchBackend._check_budget`).
 
 Adapters: OpenAI (and OpenAI-compatible ``--api-base`` servers), Anthropic Message Batches and Gemini batch mode,
-each over its HTTP API, every reply read within :func:`~lightemma.backends.batch.base.results_limit` (litellm
+each over its HTTP API, every reply read within :func:`~lightemma.backends.batch.adapter.results_limit` (litellm
 1.106.2 creates neither Anthropic nor Gemini batches, and takes no bounded client for OpenAI's). Costs are
-the provider-reported tokens at the registry's batch prices, or at ``--price`` (:func:`lightemma.registry.run_price`).
+the provider-reported tokens at the registry's batch prices, or at ``--price`` (:func:`lightemma.models.prices.run_price`).
 A call's ``seconds`` is its batch's turnaround (submission to results): per-frame latency has no meaning in
 batch mode, and Table I prints it as ``n/a``.
 
@@ -40,6 +40,7 @@ OpenAI batch protocol and gets the key of ``--api-key-env NAME`` or none. Creden
 from __future__ import annotations
 
 import asyncio
+import functools
 import hashlib
 import json
 import secrets
@@ -48,8 +49,8 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
-from lightemma.backends.batch.base import (
+from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams
+from lightemma.backends.batch.adapter import (
     FAILED,
     PENDING,
     BatchAdapter,
@@ -113,7 +114,7 @@ class _Pending:
         return self.base_id if not self.resubmits else f"{self.base_id}-r{self.resubmits}"
 
 
-class BatchBackend:
+class BatchBackend(Backend):
     """API models through their provider's batch interface (see the module docstring)."""
 
     name = "api-batch"
@@ -125,7 +126,7 @@ class BatchBackend:
                  price: tuple[float, float] | None = None) -> None:
         from lightemma.backends.api import APIBackend, IMAGE_LIMITS, DEFAULT_IMAGE_LIMIT, _ImageCache
         from lightemma.backends.retry import RetryPolicy
-        from lightemma.registry import run_price
+        from lightemma.models.prices import run_price
 
         # the model and key checks, the key sent (one decision: APIBackend's), the parameters sent
         self.api = APIBackend(model, api_base=api_base, timeout=timeout, api_key_env=api_key_env, price=price)
@@ -531,7 +532,7 @@ class BatchBackend:
             if tries:
                 await asyncio.sleep(self._pause(tries - 1))
                 status = await self._call(lambda: self.adapter.status(bid), f"poll batch {bid}", requests=len(ids))
-            items = await self._call(lambda status=status: self._results(bid, status), f"read the results of batch {bid}",
+            items = await self._call(functools.partial(self._results, bid, status), f"read the results of batch {bid}",
                                      requests=len(ids))
             seen = {str(i.get("custom_id")) for i in items}
             missing = [cid for cid in ids if cid not in seen]
@@ -585,13 +586,13 @@ class BatchBackend:
             fatal = RunFatalError(f"{self.api.model}: cannot {what}: {said} ({where}"
                                   f"{f', after {tries} retries' if tries else ''})", cause="batch-api",
                                   error="Timeout" if exc.deadline else "BatchAPIError")
-        fatal.http_status = exc.status  # type: ignore[attr-defined]
+        fatal.http_status = exc.status  # type: ignore[attr-defined]  # the failed call's HTTP status, kept on the error
         return fatal
 
     async def _call(self, make: Callable[[], Any], what: str, *, requests: int = 0) -> Any:
         """An adapter call, transient failures (connection, 429, 5xx) retried with backoff; others stop the run.
 
-        The call reads at most :func:`~lightemma.backends.batch.base.results_limit` (``requests``: how many requests
+        The call reads at most :func:`~lightemma.backends.batch.adapter.results_limit` (``requests``: how many requests
         the batch it is about holds) of any reply; a reply past it, or one that is not what the provider documents,
         stops the run in one line (resumable), never a traceback. Never used to create a batch (:meth:`_submit`)."""
         tries = 0

@@ -17,13 +17,14 @@ import os
 from collections.abc import Collection
 from typing import Any
 
-from lightemma.backends.batch.base import (
+from lightemma.backends.batch.adapter import (
     CLOCK_SKEW_S,
     ENDED,
     MAX_LIST_PAGES,
     BatchHTTPError,
     BatchStatus,
     BatchUnconfirmed,
+    ItemUsage,
     batch_client,
     batch_state,
     count,
@@ -167,9 +168,9 @@ def _message_result(custom_id: str, message: dict[str, Any]) -> dict[str, Any]:
     read, written = count(usage, "cache_read_input_tokens") or 0, count(usage, "cache_creation_input_tokens") or 0
     total = None if base is None else base + read + written
     text = "".join(b.get("text", "") for b in message.get("content") or [] if b.get("type") == "text")
-    kw = dict(finish_reason=message.get("stop_reason"), input_tokens=total if total else None,
-              output_tokens=out_tokens if total else None, cached_input_tokens=read if total else None,
-              cache_write_tokens=written if total else None)
+    kw = ItemUsage(finish_reason=message.get("stop_reason"), input_tokens=total if total else None,
+                   output_tokens=out_tokens if total else None, cached_input_tokens=read if total else None,
+                   cache_write_tokens=written if total else None)
     if not text.strip():
         return item_result(custom_id, error="EmptyResponse", error_message=f"no answer text (finish_reason={kw['finish_reason']})", **kw)
     return item_result(custom_id, text=text, **kw)

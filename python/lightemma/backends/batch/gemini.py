@@ -19,7 +19,7 @@ import os
 from collections.abc import Collection
 from typing import Any
 
-from lightemma.backends.batch.base import (
+from lightemma.backends.batch.adapter import (
     CLOCK_SKEW_S,
     ENDED,
     FAILED,
@@ -173,7 +173,8 @@ def _response_result(custom_id: str, response: dict[str, Any]) -> dict[str, Any]
     candidate = (response.get("candidates") or [{}])[0]
     text = "".join(p.get("text", "") for p in (candidate.get("content") or {}).get("parts") or [] if not p.get("thought"))
     kw = dict(finish_reason=candidate.get("finishReason"), input_tokens=prompt if known else None,
-              output_tokens=(answer + (thoughts or 0)) if known else None, reasoning_tokens=thoughts if known else None,
+              output_tokens=(answer + (thoughts or 0)) if known and answer is not None else None,  # known: answer is
+              reasoning_tokens=thoughts if known else None,
               cached_input_tokens=(count(usage, "cachedContentTokenCount") or 0) if known else None,
               cache_write_tokens=0 if known else None)
     if not text.strip():

@@ -37,7 +37,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from lightemma.errors import RunStoreError
+from lightemma.errors import RunStoreError, os_error_line
+from lightemma.runs.records import loads_bounded
+from lightemma.runs.store import read_small_text, write_text_atomic
 
 JOURNAL_FILE = "batches.jsonl"
 RESULTS_DIR = "batches"
@@ -113,9 +115,6 @@ class BatchJournal:
     def open(cls, run_dir: str | os.PathLike[str], *, repair: bool = False) -> BatchJournal:
         """The journal of ``run_dir`` as written so far (empty when there is none); ``repair``: a torn last line is
         cut off the file (a session about to append). Anything else wrong: one :class:`RunStoreError` line."""
-        from lightemma.runs.records import loads_bounded
-        from lightemma.runs.store import read_small_text
-
         journal = cls(Path(run_dir))
         path = journal.path
         if not path.exists() and not path.is_symlink():
@@ -145,7 +144,6 @@ class BatchJournal:
         except (ValueError, RunStoreError):
             whole = False
         if repair:  # the next line must start on a line of its own
-            from lightemma.errors import os_error_line
 
             try:
                 if whole:
@@ -182,22 +180,20 @@ class BatchJournal:
                 self.by_custom_id[cid] = batch.batch_id
         else:
             bid = _text(event, "batch_id", where)
-            batch = self.batches.get(str(bid))
-            if batch is None:
+            ended = self.batches.get(str(bid))
+            if ended is None:
                 raise RunStoreError(f"{where}: ends batch {str(bid)[:80]!r}, which the journal never submitted; "
                                     "the batch journal is damaged")
-            batch.state = _text(event, "state", where)
+            ended.state = _text(event, "state", where)
             if kind == "failed":
-                batch.failed = _text(event, "reason", where, optional=True) or "no reason given"
+                ended.failed = _text(event, "reason", where, optional=True) or "no reason given"
             else:
-                batch.results = _text(event, "results", where)
-                batch.turnaround_s = _number(event, "turnaround_s", where)
+                ended.results = _text(event, "results", where)
+                ended.turnaround_s = _number(event, "turnaround_s", where)
 
     def _append(self, event: dict[str, Any]) -> None:
         """Append one event as one whole line, checked and fsynced; on a short write or any OS error the file is cut
         back to where it was and :class:`RunStoreError` says why (nothing half-written stays, nothing is assumed)."""
-        from lightemma.errors import os_error_line
-
         line = (json.dumps(event, ensure_ascii=True, separators=(",", ":")) + "\n").encode("ascii")
         new = not self.path.exists()
         try:
@@ -249,8 +245,6 @@ class BatchJournal:
 
     def save_results(self, batch_id: str, items: list[dict[str, Any]], state: str, turnaround_s: float | None) -> None:
         """Save a finished batch's results (temp file + rename), then journal it as completed."""
-        from lightemma.runs.store import write_text_atomic
-
         folder = self.run_dir / RESULTS_DIR
         folder.mkdir(exist_ok=True)
         relative = f"{RESULTS_DIR}/{_safe(batch_id)}.jsonl"
@@ -267,8 +261,7 @@ class BatchJournal:
         if relative.is_absolute() or ".." in relative.parts:  # never read outside the run directory
             raise RunStoreError(f"{self.path}: batch {batch_id} names results outside the run directory")
         path = self.run_dir / relative
-        from lightemma.backends.batch.base import BatchHTTPError, checked_results, results_limit
-        from lightemma.runs.store import read_small_text
+        from lightemma.backends.batch.adapter import BatchHTTPError, checked_results, results_limit
 
         if path.is_symlink():
             return None  # not the file lightemma wrote (a link, to /dev/zero or anywhere): poll the batch again

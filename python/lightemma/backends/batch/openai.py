@@ -1,5 +1,5 @@
 """OpenAI's Batch API over HTTP (httpx), as litellm 1.106.2's batch functions call it, but through a client that
-reads at most what :func:`lightemma.backends.batch.base.results_limit` allows (litellm's batch and file functions
+reads at most what :func:`lightemma.backends.batch.adapter.results_limit` allows (litellm's batch and file functions
 take no client of their own for OpenAI, so their replies could not be bounded).
 
 Input: a JSONL file of ``{"custom_id", "method": "POST", "url": "/v1/chat/completions", "body"}`` lines, at most
@@ -20,7 +20,8 @@ import os
 from collections.abc import Collection
 from typing import Any
 
-from lightemma.backends.batch.base import (
+from lightemma.backends.api import _usage
+from lightemma.backends.batch.adapter import (
     CLOCK_SKEW_S,
     ENDED,
     FAILED,
@@ -130,10 +131,10 @@ class OpenAIBatches:
                                        error_message=f"{code}: {error.get('message')}", resubmit=code in UNRUN))
                 continue
             body = response.get("body") or {}
-            code = response.get("status_code")
-            if not isinstance(code, int) or isinstance(code, bool) or not 100 <= code <= 599:
-                raise ValueError(f"request {cid[:80]}: status_code {str(code)[:40]} is no HTTP status")
-            if code >= 400 or not isinstance(body, dict) or "choices" not in body:
+            http_status = response.get("status_code")
+            if not isinstance(http_status, int) or isinstance(http_status, bool) or not 100 <= http_status <= 599:
+                raise ValueError(f"request {cid[:80]}: status_code {str(http_status)[:40]} is no HTTP status")
+            if http_status >= 400 or not isinstance(body, dict) or "choices" not in body:
                 message = ((body.get("error") or {}).get("message") if isinstance(body, dict) else None) or "no completion"
                 out.append(item_result(cid, error="BatchRequestError",
                                        error_message=f"HTTP {response.get('status_code')}: {message}"))
@@ -171,8 +172,6 @@ class OpenAIBatches:
 
 def _completion_result(custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
     """An OpenAI chat completion as an item result (usage as :func:`lightemma.backends.api._usage` reads it)."""
-    from lightemma.backends.api import _usage
-
     choice = (body.get("choices") or [{}])[0]
     text = (choice.get("message") or {}).get("content")
     if text is not None and not isinstance(text, str):  # a chat completion's content is a string (or null)

@@ -101,6 +101,11 @@
   const flagged = (m, j, which) => SAFETY[which].some((k) => D[k][m][j] === 1);
   const hasSafety = () => ["collides", "off_road"].some((k) => D[k].some((row) => row.some((v) => v != null)));
   const yesNo = (v) => (v == null ? "n/a" : v ? "yes" : "no");
+  // the stated intent contradicts the model's own plan ("contra") or what the car did ("contra_gt"): 1, 0 or null
+  // (docs/definitions.md#explanation-audit); older data.js files have neither
+  const INTENT = ["contra", "contra_gt"];
+  const contradicted = (m, j, which) => Boolean(D[which] && D[which][m][j] === 1);
+  const hasIntent = () => INTENT.some((k) => D[k] && D[k].some((row) => row.some((v) => v != null)));
   const tagsOf = (j) => D.tags.filter((_, t) => hasTag(j, t));
 
   // ---- filters and routing ---------------------------------------------------------------------
@@ -120,10 +125,17 @@
       safe.append(el("option", { value: "", text: "no safety values (pass --dataroot)" }));
       safe.disabled = true;
     }
-    for (const id of ["f-model", "f-tag", "f-fail", "f-band", "f-safe", "f-dis", "f-sort"]) {
+    LE.hasIntent = hasIntent();
+    if (!LE.hasIntent) { // no stage-2 texts (or --no-explanations): nothing to filter on, said once here
+      const f = $("f-intent");
+      f.textContent = "";
+      f.append(el("option", { value: "", text: "no stated intents" }));
+      f.disabled = true;
+    }
+    for (const id of ["f-model", "f-tag", "f-fail", "f-band", "f-safe", "f-intent", "f-dis", "f-sort"]) {
       $(id).addEventListener("change", () => {
         const q = new URLSearchParams();
-        for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["safe", "f-safe"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
+        for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["safe", "f-safe"], ["intent", "f-intent"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
           if ($(fid).value && !(key === "sort" && $(fid).value === "frame")) q.set(key, $(fid).value);
         }
         location.hash = "#frames" + (q.toString() ? "?" + q.toString() : "");
@@ -139,6 +151,7 @@
     const band = p.get("band") ? D.bands[Number(p.get("band"))] : null;
     const dis = p.get("dis") ? Number(p.get("dis")) : null;
     const safe = LE.hasSafety && SAFETY[p.get("safe")] ? p.get("safe") : null; // no values: the filter is off
+    const intent = LE.hasIntent && INTENT.includes(p.get("intent")) ? p.get("intent") : null;
     const out = [];
     for (let j = 0; j < D.ids.length; j++) {
       if (mi !== "" && D.fail[mi][j] < 0) continue; // not in that model's run
@@ -152,6 +165,7 @@
       }
       if (dis != null && !(D.spread[j] >= dis)) continue;
       if (safe && !(mi !== "" ? flagged(mi, j, safe) : D.models.some((_, m) => flagged(m, j, safe)))) continue;
+      if (intent && !(mi !== "" ? contradicted(mi, j, intent) : D.models.some((_, m) => contradicted(m, j, intent)))) continue;
       out.push(j);
     }
     const sort = p.get("sort") || "frame";
@@ -178,7 +192,7 @@
   let lastQuery = null;
   function showFrames() {
     const p = params();
-    for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["safe", "f-safe"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
+    for (const [key, fid] of [["model", "f-model"], ["tag", "f-tag"], ["fail", "f-fail"], ["band", "f-band"], ["safe", "f-safe"], ["intent", "f-intent"], ["dis", "f-dis"], ["sort", "f-sort"]]) {
       $(fid).value = p.get(key) || (key === "sort" ? "frame" : "");
     }
     const q = p.toString();
@@ -202,7 +216,9 @@
       const e = frameError(j, mi);
       const card = el("a", { class: "card", href: `#frame/${j}`, "data-frame": String(j) }, thumb,
         el("div", { class: "caption" }, el("span", { class: "id", text: D.ids[j], title: D.ids[j] }),
-          el("span", { class: "muted", text: (e == null ? "not scored" : `ADE ${e.toFixed(2)} m`) + (D.spread[j] != null ? ` · Δ ${D.spread[j].toFixed(1)} m` : "") })));
+          el("span", { class: "muted", text: (e == null ? "not scored" : `ADE ${e.toFixed(2)} m`) + (D.spread[j] != null ? ` · Δ ${D.spread[j].toFixed(1)} m` : "") }),
+          (mi !== "" ? contradicted(mi, j, "contra") : D.models.some((_, m) => contradicted(m, j, "contra")))
+            ? el("span", { class: "intent-flag", text: "says ≠ plans", title: "the stated intent contradicts the plan" }) : null));
       grid.append(card);
       if (observer) observer.observe(thumb); else fillThumb(thumb);
     }
@@ -327,7 +343,19 @@
     D.models.forEach((m, i) => {
       const t = (entry.texts || [])[i];
       const dl = el("dl");
-      for (const [k, name] of [[0, "1 · Scene"], [1, "2 · Intent"], [2, "3 · Answer"]]) dl.append(el("dt", { text: name }), el("dd", { text: t && t[k] ? t[k] : "—" }));
+      const read = (entry.intent || [])[i];
+      for (const [k, name] of [[0, "1 · Scene"], [1, "2 · Intent"], [2, "3 · Answer"]]) {
+        const dd = el("dd", { text: t && t[k] ? t[k] : "—" });
+        if (k === 0 && read && read.objects.length) dd.append(el("p", { class: "read-objects contradicts", text: "Described objects: " + read.objects.join(", ") }));
+        if (k === 1 && read) { // the read intent (rules intent@lightemma/1), its contradiction highlighted
+          const bad = read.verdict === "contradicts";
+          const truth = read.truth == null ? "" : ` · against what the car did: ${read.truth}`;
+          dd.classList.toggle("contradicts", bad);
+          dd.append(el("p", { class: "read-intent" + (bad ? " contradicts" : ""), "data-verdict": read.verdict,
+            text: `Read intent: ${read.lon.replace(/_/g, " ")} / ${read.lat.replace(/_/g, " ")} · against its plan: ${read.verdict}` + (read.reason ? ` (${read.reason})` : "") + truth }));
+        }
+        dl.append(el("dt", { text: name }), dd);
+      }
       box.append(el("section", { class: "model-texts", "data-model": String(i) }, el("h4", {}, el("span", { class: "swatch", style: `background:${m.color}` }), m.label), dl));
     });
   }

@@ -2,7 +2,7 @@
 grids, the history-bias plot, the paired-comparison matrix and the input-ablation intervals. Matplotlib is imported only when a figure is drawn."""
 
 from lightemma.report.figures._mpl import model_colors, save_figure
-from lightemma.report.figures.ablations import ablation_figure
+from lightemma.report.figures.ablation_deltas import ablation_figure
 from lightemma.report.figures.bubble import bubble_chart, bubble_points
 from lightemma.report.figures.frame_view import Camera, camera_from_frame, frame_figure, load_image, model_grid
 from lightemma.report.figures.history_bias import history_bias_figure

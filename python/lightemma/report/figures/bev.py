@@ -13,6 +13,8 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.evaluation import safety as S
+from lightemma.nuscenes.map_files import MASK_RESOLUTION
 from lightemma.report.figures._mpl import COLLISION_RED, GT_COLOR, pyplot
 
 COLLISION_COLOR = COLLISION_RED
@@ -45,8 +47,7 @@ def _map_patch(ax: Any, area: Any, centre: np.ndarray, radius: float, transform:
     if area is None:
         return
     if area.kind == "mask":
-        from lightemma.evaluation.safety import MASK_RESOLUTION as r
-
+        r = MASK_RESOLUTION
         h, w = area.mask.shape
         px0, px1 = int(max(0, (centre[0] - radius) / r)), int(min(w - 1, (centre[0] + radius) / r))
         py0, py1 = int(max(0, h - (centre[1] + radius) / r)), int(min(h - 1, h - (centre[1] - radius) / r))
@@ -79,8 +80,6 @@ def bev_figure(frame_id: str, trajectories: Sequence[tuple[str, np.ndarray, str]
     """
     from matplotlib.patches import Polygon as MplPolygon
     from matplotlib.ticker import FuncFormatter
-
-    from lightemma.evaluation import safety as S
 
     ego = ego or S.EGO
     plt = pyplot()

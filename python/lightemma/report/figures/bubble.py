@@ -8,8 +8,11 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from lightemma.evaluation.models import family_rank
+from lightemma.models.catalog import PAPER_MODELS
+from lightemma.models.names import family_rank
+from lightemma.models.paper import paper_accuracy_rows, paper_efficiency_rows
 from lightemma.report.figures._mpl import FAMILY_COLORS, family_color, model_colors, pyplot
+from lightemma.report.tables import coverage_note
 
 MAX_AREA = 1800.0  # points² of the slowest model's bubble
 MIN_AREA = 25.0
@@ -103,8 +106,6 @@ def _interval(point: Mapping[str, Any]) -> list[float] | None:
 
 def bubble_points(evaluation: Any, *, convention: str = "lightemma", with_paper: bool = False) -> list[dict[str, Any]]:
     """Points for :func:`bubble_chart` from an :class:`~lightemma.evaluation.Evaluation` (scored frames only)."""
-    from lightemma.report.tables import coverage_note
-
     points = [
         {
             "model": m.label,
@@ -118,9 +119,6 @@ def bubble_points(evaluation: Any, *, convention: str = "lightemma", with_paper:
         for m in evaluation.models
     ]
     if with_paper:
-        from lightemma.registry import PAPER_MODELS
-        from lightemma.evaluation.paper import paper_accuracy_rows, paper_efficiency_rows
-
         times = {r["model"]: r["seconds_per_frame"] for r in paper_efficiency_rows()}
         generation = {k.display_name: k.generation for k in PAPER_MODELS}
         points += [

@@ -73,7 +73,7 @@ def load_image(path: str | Path | None, *, max_pixels: int = MAX_IMAGE_PIXELS, w
             if width and img.width > width:
                 height = max(1, round(img.height * width / img.width))
                 img.draft("RGB", (width, height))
-                return np.asarray(img.convert("RGB").resize((width, height), Image.BILINEAR))
+                return np.asarray(img.convert("RGB").resize((width, height), Image.Resampling.BILINEAR))
             return np.asarray(img.convert("RGB"))
     except (OSError, ValueError, Image.DecompressionBombError):
         return None
@@ -247,7 +247,7 @@ def model_grid(
     for k, label in enumerate(labels):
         cell = outer[k // ncols, k % ncols]
         pred = {label: np.asarray(predictions[label], dtype=np.float64)}
-        if with_camera:
+        if camera is not None:  # with_camera
             # the camera view and the bird's-eye view beside it: the BEV never covers the image
             inner = cell.subgridspec(1, 2, width_ratios=[1.78, 1], wspace=0.28)
             cam_ax, bev_ax = fig.add_subplot(inner[0]), fig.add_subplot(inner[1])

@@ -8,6 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from lightemma.evaluation.ablations import comparison_key
+from lightemma.evaluation.core import unique_labels
+from lightemma.evaluation.scenarios import bias_row, curvature_samples, truth_over_runs
 from lightemma.report.figures._mpl import GT_COLOR, pred_color, pyplot
 
 
@@ -24,8 +27,6 @@ INPUT_MARKERS = {"full": "o", "no-image": "s", "blank-image": "D", "no-history":
 
 def _beside_full(runs: Sequence[Any]) -> tuple[list[int], dict[int, int]]:
     """Run order with each full run followed by its ablation runs (same model and variant), and ablated -> full index."""
-    from lightemma.evaluation.ablations import comparison_key
-
     def key(run: Any) -> tuple[Any, ...]:
         return comparison_key(run.info)
 
@@ -72,9 +73,6 @@ def history_bias_figure(
     every panel, in its colour, hollow, with a marker per ablation (:data:`INPUT_MARKERS`), and
     dashed lines / hatched bars.
     """
-    from lightemma.evaluation.core import unique_labels
-    from lightemma.evaluation.scenarios import bias_row, curvature_samples, truth_over_runs
-
     plt = pyplot()
     labels = unique_labels(list(runs))
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
