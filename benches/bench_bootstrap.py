@@ -90,11 +90,25 @@ def main() -> None:
     assert np.all(np.abs(p_ours - p_ref) <= np.maximum(0.01, 0.2 * p_ref)), "p-values disagree"
 
     rows = [
-        ("intervals: 13 models × ADE avg, FDE", lambda: bootstrap_ci(models, keys, resampling), lambda: numpy_intervals(models, n, 1)),
-        ("pairwise: 78 pairs, bootstrap interval", lambda: bootstrap_ci(pairs, pair_keys, resampling), lambda: numpy_intervals(pairs, n, 1)),
-        ("pairwise: 78 pairs, sign-flip p-value", lambda: sign_flip_p(pairs, pair_keys, resampling), lambda: numpy_sign_flip(pairs, n, 1)),
+        (
+            "intervals: 13 models × ADE avg, FDE",
+            lambda: bootstrap_ci(models, keys, resampling),
+            lambda: numpy_intervals(models, n, 1),
+        ),
+        (
+            "pairwise: 78 pairs, bootstrap interval",
+            lambda: bootstrap_ci(pairs, pair_keys, resampling),
+            lambda: numpy_intervals(pairs, n, 1),
+        ),
+        (
+            "pairwise: 78 pairs, sign-flip p-value",
+            lambda: sign_flip_p(pairs, pair_keys, resampling),
+            lambda: numpy_sign_flip(pairs, n, 1),
+        ),
     ]
-    print(f"{MODELS} models × {FRAMES} frames in {SCENES} scenes, {n} resamples, best of {args.repeat}; {os.cpu_count()} CPU(s)\n")
+    print(
+        f"{MODELS} models × {FRAMES} frames in {SCENES} scenes, {n} resamples, best of {args.repeat}; {os.cpu_count()} CPU(s)\n"
+    )
     print("| step | Rust core (s) | NumPy (s) | NumPy / Rust |")
     print("|---|---:|---:|---:|")
     total_rust = total_numpy = 0.0

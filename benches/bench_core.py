@@ -51,8 +51,14 @@ def numpy_evaluate_all(pred: np.ndarray, gt: np.ndarray) -> dict:
     uniad = [e[:, 2 * s - 1].mean() for s in (1, 2, 3)]
     out = {"lightemma": numpy_evaluate(pred, gt)}
     for name, cols in (("stp3", stp3), ("uniad", uniad)):
-        out[name] = {"ade_1s": cols[0], "ade_2s": cols[1], "ade_3s": cols[2], "ade_avg": sum(cols) / 3,
-                     "fde": e[:, 5].mean(), "miss_rate": miss}
+        out[name] = {
+            "ade_1s": cols[0],
+            "ade_2s": cols[1],
+            "ade_3s": cols[2],
+            "ade_avg": sum(cols) / 3,
+            "fde": e[:, 5].mean(),
+            "miss_rate": miss,
+        }
     return out
 
 
@@ -110,6 +116,8 @@ def reset_peak_rss() -> int:
 
 def peak_rss() -> int:
     return _status_bytes("VmHWM")
+
+
 def best_of(fn, repeat: int) -> float:
     best = math.inf
     for _ in range(repeat):
@@ -177,7 +185,9 @@ def main() -> None:
             assert abs(metrics.ade_avg - theirs_all[convention]["ade_avg"]) < 1e-9, convention
             assert metrics == lightemma.evaluate(lightemma.integrate(actions), gt, convention=convention)
         t_numpy_all = best_of(numpy_all, args.repeat)
-        rows.append(("integrate + evaluate_all (3 conventions, out=)", n, best_of(rust_all, args.repeat), t_numpy_all, None))
+        rows.append(
+            ("integrate + evaluate_all (3 conventions, out=)", n, best_of(rust_all, args.repeat), t_numpy_all, None)
+        )
         rows.append(("integrate + 3 × evaluate (before)", n, best_of(rust_three, args.repeat), t_numpy_all, None))
 
         texts = answers(n)
@@ -213,7 +223,9 @@ def main() -> None:
     for name, n, t_rust, t_numpy, t_slow in rows:
         fmt = lambda t: "—" if t is None else f"{t:.4f}"  # noqa: E731
         ratio = lambda t: "—" if t is None else f"{t / t_rust:.1f}×"  # noqa: E731
-        print(f"| {name} | {n:,} | {t_rust:.4f} | {fmt(t_numpy)} | {fmt(t_slow)} | {ratio(t_numpy)} | {ratio(t_slow)} |")
+        print(
+            f"| {name} | {n:,} | {t_rust:.4f} | {fmt(t_numpy)} | {fmt(t_slow)} | {ratio(t_numpy)} | {ratio(t_slow)} |"
+        )
     print(
         f"\nmemory at N={n:,}: peak RSS grew by {peak / 2**20:.1f} MiB "
         f"for an output trajectory array of {traj.nbytes / 2**20:.1f} MiB"

@@ -52,8 +52,9 @@ def photos(n_distinct: int, source: str) -> list[tuple[str, np.ndarray]]:
     from lightemma.nuscenes import load_frames
 
     root = Path(tempfile.mkdtemp(prefix="bench-corrupt-"))
-    lightemma.synth.write_dataset(root, scenes=max(1, -(-n_distinct // 4)), keyframes=18, image_size=(1600, 900),
-                                  sweeps=False)
+    lightemma.synth.write_dataset(
+        root, scenes=max(1, -(-n_distinct // 4)), keyframes=18, image_size=(1600, 900), sweeps=False
+    )
     frames = list(load_frames(root, "v1.0-mini"))[:n_distinct]
     out = []
     for f in frames:
@@ -83,16 +84,21 @@ def main() -> int:
 
     # the source decode, once: what a corrupted request adds before the transform (shared by every corruption)
     sources = [encode_jpeg(rgb) for _, rgb in images]
+
     def decode() -> None:
         for i in range(args.frames):
             np.asarray(Image.open(io.BytesIO(sources[i % len(sources)])).convert("RGB"))
 
     decode_cpu, decode_wall = timed(decode)
     rows = []
-    print(f"{args.frames} {args.source} frames at 1600x900, severity {args.severity}; "
-          f"source JPEG decode {decode_cpu:.2f} s CPU ({decode_wall:.2f} s wall)")
-    print(f"{'corruption':<15} {'corrupt CPU':>12} {'encode CPU':>11} {'ratio':>6} {'corrupt wall':>13} "
-          f"{'encode wall':>12}")
+    print(
+        f"{args.frames} {args.source} frames at 1600x900, severity {args.severity}; "
+        f"source JPEG decode {decode_cpu:.2f} s CPU ({decode_wall:.2f} s wall)"
+    )
+    print(
+        f"{'corruption':<15} {'corrupt CPU':>12} {'encode CPU':>11} {'ratio':>6} {'corrupt wall':>13} "
+        f"{'encode wall':>12}"
+    )
     for name in args.names.split(","):
         corrupted: list[np.ndarray] = []
 
@@ -106,15 +112,31 @@ def main() -> int:
 
         c_cpu, c_wall = timed(corrupt)
         e_cpu, e_wall = timed(encode)
-        rows.append({"name": name, "corrupt_cpu_s": c_cpu, "encode_cpu_s": e_cpu, "corrupt_wall_s": c_wall,
-                     "encode_wall_s": e_wall, "ratio_cpu": c_cpu / e_cpu})
-        print(f"{name:<15} {c_cpu:>12.2f} {e_cpu:>11.2f} {c_cpu / e_cpu:>6.2f} {c_wall:>13.2f} {e_wall:>12.2f}",
-              flush=True)
+        rows.append(
+            {
+                "name": name,
+                "corrupt_cpu_s": c_cpu,
+                "encode_cpu_s": e_cpu,
+                "corrupt_wall_s": c_wall,
+                "encode_wall_s": e_wall,
+                "ratio_cpu": c_cpu / e_cpu,
+            }
+        )
+        print(
+            f"{name:<15} {c_cpu:>12.2f} {e_cpu:>11.2f} {c_cpu / e_cpu:>6.2f} {c_wall:>13.2f} {e_wall:>12.2f}",
+            flush=True,
+        )
     total_c, total_e = sum(r["corrupt_cpu_s"] for r in rows), sum(r["encode_cpu_s"] for r in rows)
     print(f"{'all':<15} {total_c:>12.2f} {total_e:>11.2f} {total_c / total_e:>6.2f}")
     if args.json:
-        summary = {"frames": args.frames, "source": args.source, "severity": args.severity, "rows": rows,
-                   "decode_cpu_s": decode_cpu, "decode_wall_s": decode_wall}
+        summary = {
+            "frames": args.frames,
+            "source": args.source,
+            "severity": args.severity,
+            "rows": rows,
+            "decode_cpu_s": decode_cpu,
+            "decode_wall_s": decode_wall,
+        }
         Path(args.json).write_text(json.dumps(summary, indent=1))
     return 0
 

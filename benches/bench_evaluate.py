@@ -66,7 +66,9 @@ def main() -> int:
     try:
         base = measure("import", root)["maxrss_mb"]
         print(f"baseline process (python + numpy + lightemma): {base:.0f} MB RSS")
-        print(f"{'frames':>10} {'file MB':>8} {'write s':>8} {'json s':>8} {'eval s':>8} {'eval/json':>9} {'json MB':>8} {'eval MB':>8} {'B/frame':>8}")
+        print(
+            f"{'frames':>10} {'file MB':>8} {'write s':>8} {'json s':>8} {'eval s':>8} {'eval/json':>9} {'json MB':>8} {'eval MB':>8} {'B/frame':>8}"
+        )
         for n in args.frames:
             start = time.perf_counter()
             run_dir = write_synthetic_run(root, f"bench/model-{n}", n, seed=1)

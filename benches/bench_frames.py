@@ -99,15 +99,19 @@ def main(argv: list[str] | None = None) -> int:
     if args.json:
         print(json.dumps(figures, indent=2))
     else:
-        print(f"synthetic {VERSION}-sized dataset: {args.scenes} scenes x {args.keyframes} keyframes, "
-              f"{figures['cam_front_keyframes']} CAM_FRONT keyframes -> {len(fs)} frames (reference window)")
+        print(
+            f"synthetic {VERSION}-sized dataset: {args.scenes} scenes x {args.keyframes} keyframes, "
+            f"{figures['cam_front_keyframes']} CAM_FRONT keyframes -> {len(fs)} frames (reference window)"
+        )
         if gen_s is not None:
             print(f"  generate tables (no images):   {gen_s:7.2f} s")
         print(f"  lightemma table read:          {load_s:7.3f} s")
         if devkit_s is not None:
             print(f"  devkit table load (NuScenes):  {devkit_s:7.3f} s (for comparison; not used)")
-        print(f"  lightemma frame extraction:    {min(times):7.3f} s best of {len(times)} "
-              f"(target < 2 s)  runs: {', '.join(f'{t:.3f}' for t in times)}")
+        print(
+            f"  lightemma frame extraction:    {min(times):7.3f} s best of {len(times)} "
+            f"(target < 2 s)  runs: {', '.join(f'{t:.3f}' for t in times)}"
+        )
         print(f"  extraction peak memory:        {peak / 2**20:7.1f} MiB (tracemalloc)")
     if tmp is not None:
         tmp.cleanup()

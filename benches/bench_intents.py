@@ -42,9 +42,17 @@ def make_texts(n: int, seed: int) -> list[str]:
     texts = []
     for _ in range(n):
         v0, v1 = rng.uniform(0, 14, 2)
-        recap = " ".join(RECAPS[r].format(
-            verb=VERBS[rng.integers(len(VERBS))], v0=v0, v1=v1, c=rng.normal(0, 0.02), dv=v1 - v0,
-            turning=TURNING[rng.integers(len(TURNING))]) for r in rng.permutation(len(RECAPS))[: int(rng.integers(1, 3))])
+        recap = " ".join(
+            RECAPS[r].format(
+                verb=VERBS[rng.integers(len(VERBS))],
+                v0=v0,
+                v1=v1,
+                c=rng.normal(0, 0.02),
+                dv=v1 - v0,
+                turning=TURNING[rng.integers(len(TURNING))],
+            )
+            for r in rng.permutation(len(RECAPS))[: int(rng.integers(1, 3))]
+        )
         body = " ".join(plans[k] for k in rng.integers(len(plans), size=int(rng.integers(2, 5))))
         texts.append(f"{recap} {body}")
     return texts
@@ -58,8 +66,10 @@ def main() -> None:
     args = parser.parse_args()
     texts = make_texts(args.frames, args.seed)
     lengths = np.array([len(t) for t in texts])
-    print(f"{len(texts):,} texts, {lengths.sum() / 1e6:.1f} M characters, length median {int(np.median(lengths))} "
-          f"(min {lengths.min()}, max {lengths.max()}) characters")
+    print(
+        f"{len(texts):,} texts, {lengths.sum() / 1e6:.1f} M characters, length median {int(np.median(lengths))} "
+        f"(min {lengths.min()}, max {lengths.max()}) characters"
+    )
     lightemma.read_intents(["warm-up: the ego vehicle should stop."])
     best = None
     for _ in range(args.repeat):
@@ -70,8 +80,10 @@ def main() -> None:
     assert best is not None
     wall, cpu = best
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} CPUs")
-    print(f"read_intents: {wall:.3f} s wall, {cpu:.3f} s CPU (best of {args.repeat}); "
-          f"{wall / len(texts) * 1e6:.1f} µs per text; under 1 s: {'yes' if wall < 1.0 else 'NO'}")
+    print(
+        f"read_intents: {wall:.3f} s wall, {cpu:.3f} s CPU (best of {args.repeat}); "
+        f"{wall / len(texts) * 1e6:.1f} µs per text; under 1 s: {'yes' if wall < 1.0 else 'NO'}"
+    )
     for axis in ("longitudinal", "lateral"):
         counts = Counter(getattr(out, axis).tolist())
         print(f"{axis:>12}: " + ", ".join(f"{k} {v / len(texts):.1%}" for k, v in counts.most_common()))

@@ -50,7 +50,10 @@ def device_name() -> tuple[str, bool]:
     if torch.cuda.is_available():
         n = torch.cuda.device_count()
         return f"{n}× {torch.cuda.get_device_name(0)} (torch {torch.__version__})", True
-    return f"CPU: {platform.processor() or platform.machine()}, {os.cpu_count()} cores (torch {torch.__version__})", False
+    return (
+        f"CPU: {platform.processor() or platform.machine()}, {os.cpu_count()} cores (torch {torch.__version__})",
+        False,
+    )
 
 
 def vllm_missing(on_gpu: bool) -> str | None:
@@ -77,7 +80,9 @@ def synthetic_frames(root: Path, n_frames: int, image_size: tuple[int, int]) -> 
 
 
 SCRIPTED_ANSWER = "[(5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)]"
-TEACHING_STEPS = 300  # Adam steps: enough for the tiny model to say the whole list and end (50 suffice for a short phrase)
+TEACHING_STEPS = (
+    300  # Adam steps: enough for the tiny model to say the whole list and end (50 suffice for a short phrase)
+)
 
 
 def tiny_checkpoint(root: Path, frames: Any = None) -> str:
@@ -92,8 +97,11 @@ def tiny_checkpoint(root: Path, frames: Any = None) -> str:
 
         prompts = load_prompt_set()
         history = history_placeholders(frames[0].history_actions)
-        texts = [prompts.render("scene"), prompts.render("intent", scene=SCRIPTED_ANSWER, **history),
-                 prompts.render("actions", scene=SCRIPTED_ANSWER, intent=SCRIPTED_ANSWER, **history)]
+        texts = [
+            prompts.render("scene"),
+            prompts.render("intent", scene=SCRIPTED_ANSWER, **history),
+            prompts.render("actions", scene=SCRIPTED_ANSWER, intent=SCRIPTED_ANSWER, **history),
+        ]
         teach_to_answer(path, SCRIPTED_ANSWER, prompts=texts, image=frames[0].image_path, steps=TEACHING_STEPS)
     return str(path)
 
@@ -106,13 +114,16 @@ def add_model_and_frames_arguments(ap: argparse.ArgumentParser, *, frames: int) 
     ap.add_argument("--split", default="all")
     ap.add_argument("--frames", type=int, default=frames)
     ap.add_argument("--max-tokens", type=int, default=64, help="output tokens per stage (default 64)")
-    ap.add_argument("--max-attempts", type=int, default=1, help="attempts per frame (default 1: the same work for every row)")
+    ap.add_argument(
+        "--max-attempts", type=int, default=1, help="attempts per frame (default 1: the same work for every row)"
+    )
     ap.add_argument("--dtype", default="auto")
     ap.add_argument("--json", action="store_true", help="print the rows as JSON too")
 
 
-def model_and_frames(args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, measures: str,
-                     scripted_end: bool = False) -> tuple[str, Any, str]:
+def model_and_frames(
+    args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, measures: str, scripted_end: bool = False
+) -> tuple[str, Any, str]:
     """The checkpoint (``--model``; else a tiny random-weight Qwen2-VL on CPU, Qwen2.5-VL-7B on GPU), the frames
     (``--dataroot``; else synthetic ones) and a note for the table when the model is the tiny one.
 
@@ -134,42 +145,76 @@ def model_and_frames(args: argparse.Namespace, tmp_path: Path, on_gpu: bool, *, 
     return model, frames, note
 
 
-def run_config(model: str, frames: Any, output: Path, *, backend: str, batch_size: int, max_tokens: int,
-               max_attempts: int, options: dict[str, Any]) -> dict[str, Any]:
+def run_config(
+    model: str,
+    frames: Any,
+    output: Path,
+    *,
+    backend: str,
+    batch_size: int,
+    max_tokens: int,
+    max_attempts: int,
+    options: dict[str, Any],
+) -> dict[str, Any]:
     """One benchmark row: the run's throughput and its answers (frame id -> stage texts)."""
     from lightemma.pipeline import run
     from lightemma.runs.store import read_run
 
-    result = run(model, backend=backend, frames=frames, output=output, concurrency=batch_size, max_tokens=max_tokens,
-                 max_attempts=max_attempts, progress=False, backend_options={"batch_size": batch_size, **options})
+    result = run(
+        model,
+        backend=backend,
+        frames=frames,
+        output=output,
+        concurrency=batch_size,
+        max_tokens=max_tokens,
+        max_attempts=max_attempts,
+        progress=False,
+        backend_options={"batch_size": batch_size, **options},
+    )
     s = result.summary
     records = read_run(result.run_dir).records
     calls = [sum(len(a.get("calls") or []) for a in r.get("attempts") or []) for r in records.values()]
-    three_stage = sum(1 for r in records.values() for a in (r.get("attempts") or [])[:1] if len(a.get("calls") or []) == 3)
+    three_stage = sum(
+        1 for r in records.values() for a in (r.get("attempts") or [])[:1] if len(a.get("calls") or []) == 3
+    )
     return {
-        "calls_per_frame": sum(calls) / len(calls) if calls else 0.0, "three_stage_frames": three_stage,
-        "backend": backend, "batch_size": batch_size, "frames": s["frames_run"], "wall_s": round(s["wall_seconds"], 3),
-        "frames_per_s": s["frames_per_second"], "s_per_frame": s["mean_seconds_per_frame"],
-        "in_tokens": s["mean_input_tokens"], "out_tokens": s["mean_output_tokens"],
+        "calls_per_frame": sum(calls) / len(calls) if calls else 0.0,
+        "three_stage_frames": three_stage,
+        "backend": backend,
+        "batch_size": batch_size,
+        "frames": s["frames_run"],
+        "wall_s": round(s["wall_seconds"], 3),
+        "frames_per_s": s["frames_per_second"],
+        "s_per_frame": s["mean_seconds_per_frame"],
+        "in_tokens": s["mean_input_tokens"],
+        "out_tokens": s["mean_output_tokens"],
         "answers": {fid: (r["scene_text"], r["intent_text"], r["answer"]) for fid, r in records.items()},
     }
 
 
 def table(rows: list[dict[str, Any]], device: str, model: str, note: str) -> str:
     base = rows[0]["frames_per_s"]
-    lines = [f"device: {device}", f"model: {model}{note}", "",
-             "| backend | batch size | frames | frames/s | speed-up | s/frame (chain) | calls/frame | 3-stage frames "
-             "| in tok/frame | out tok/frame | answers = batch 1 |",
-             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"device: {device}",
+        f"model: {model}{note}",
+        "",
+        "| backend | batch size | frames | frames/s | speed-up | s/frame (chain) | calls/frame | 3-stage frames "
+        "| in tok/frame | out tok/frame | answers = batch 1 |",
+        "|---|---|---|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         same = "yes" if r["answers"] == rows[0]["answers"] else "no"
-        lines.append(f"| {r['backend']} | {r['batch_size']} | {r['frames']} | {r['frames_per_s']:.3f} | "
-                     f"{r['frames_per_s'] / base:.1f}× | {r['s_per_frame']:.2f} | {r['calls_per_frame']:.2f} | "
-                     f"{r['three_stage_frames']}/{r['frames']} | {r['in_tokens']:.0f} | {r['out_tokens']:.0f} | {same} |")
+        lines.append(
+            f"| {r['backend']} | {r['batch_size']} | {r['frames']} | {r['frames_per_s']:.3f} | "
+            f"{r['frames_per_s'] / base:.1f}× | {r['s_per_frame']:.2f} | {r['calls_per_frame']:.2f} | "
+            f"{r['three_stage_frames']}/{r['frames']} | {r['in_tokens']:.0f} | {r['out_tokens']:.0f} | {same} |"
+        )
     partial = [r for r in rows if r["three_stage_frames"] < r["frames"]]
     if partial:
-        lines.append(f"\nWARNING: {len(partial)} row(s) did not run every frame through all three stages (a stage was cut off "
-                     "at --max-tokens): their frames/s are not three-stage frames")
+        lines.append(
+            f"\nWARNING: {len(partial)} row(s) did not run every frame through all three stages (a stage was cut off "
+            "at --max-tokens): their frames/s are not three-stage frames"
+        )
     return "\n".join(lines)
 
 
@@ -177,8 +222,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     add_model_and_frames_arguments(ap, frames=16)
     ap.add_argument("--batch-sizes", type=int, nargs="+", default=[8, 16])
-    ap.add_argument("--threads", type=int, help="torch intra-op threads (default: 1 on CPU, where the tiny model is "
-                    "overhead-bound and more threads only add contention; torch's default on GPU)")
+    ap.add_argument(
+        "--threads",
+        type=int,
+        help="torch intra-op threads (default: 1 on CPU, where the tiny model is "
+        "overhead-bound and more threads only add contention; torch's default on GPU)",
+    )
     ap.add_argument("--no-vllm", action="store_true")
     args = ap.parse_args(argv)
 
@@ -196,15 +245,28 @@ def main(argv: list[str] | None = None) -> int:
         hf_options = {"dtype": args.dtype}
         rows = [run_config(model, frames, tmp_path / "out", backend="hf", batch_size=1, options=hf_options, **common)]
         for b in args.batch_sizes:
-            rows.append(run_config(model, frames, tmp_path / "out", backend="hf", batch_size=b, options=hf_options, **common))
+            rows.append(
+                run_config(model, frames, tmp_path / "out", backend="hf", batch_size=b, options=hf_options, **common)
+            )
         why_not = "--no-vllm" if args.no_vllm else vllm_missing(on_gpu)
         if why_not is None:
-            rows.append(run_config(model, frames, tmp_path / "out", backend="vllm", batch_size=max(args.batch_sizes),
-                                   options={}, **common))
+            rows.append(
+                run_config(
+                    model,
+                    frames,
+                    tmp_path / "out",
+                    backend="vllm",
+                    batch_size=max(args.batch_sizes),
+                    options={},
+                    **common,
+                )
+            )
         print(table(rows, device, model, note))
         print(f"\nvllm: {'measured' if why_not is None else 'not measured — ' + why_not}")
-        print(f"settings: {len(frames)} frames, max {args.max_tokens} output tokens per stage, {args.max_attempts} attempt(s) "
-              "per frame, greedy; frames in flight = batch size; model loading excluded")
+        print(
+            f"settings: {len(frames)} frames, max {args.max_tokens} output tokens per stage, {args.max_attempts} attempt(s) "
+            "per frame, greedy; frames in flight = batch size; model loading excluded"
+        )
         if args.json:
             print(json.dumps([{k: v for k, v in r.items() if k != "answers"} for r in rows], indent=2))
     return 0

@@ -81,7 +81,6 @@ class InstantBackend(Backend):
         import asyncio
 
         from fake_openai import GOOD_ACTIONS, INTENT_TEXT, SCENE_TEXT
-
         from lightemma.backends import ChatResult
 
         await asyncio.sleep(0)
@@ -100,15 +99,25 @@ def pipeline_cpu_ms_per_frame(frames, output: Path, concurrency: int) -> float:
     runner.run_backend = lambda *args, **kwargs: InstantBackend()
     try:
         cpu0 = time.process_time()
-        runner.run("openai/bench-model", api_base="http://unused", frames=frames, output=output, concurrency=concurrency, progress=False)
+        runner.run(
+            "openai/bench-model",
+            api_base="http://unused",
+            frames=frames,
+            output=output,
+            concurrency=concurrency,
+            progress=False,
+        )
         return 1000 * (time.process_time() - cpu0) / len(frames)
     finally:
         runner.run_backend = original
 
 
 def start_server(latency: float) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen([sys.executable, str(ROOT / "tests" / "fake_openai.py"), "--latency", str(latency)],
-                            stdout=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, str(ROOT / "tests" / "fake_openai.py"), "--latency", str(latency)],
+        stdout=subprocess.PIPE,
+        text=True,
+    )
     url = proc.stdout.readline().strip()
     if not url.startswith("http"):
         proc.kill()
@@ -121,8 +130,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--frames", type=int, default=3908)
     parser.add_argument("--latency", type=float, default=1.0)
     parser.add_argument("--concurrency", type=int, default=64)
-    parser.add_argument("--transport", choices=("litellm", "direct"), default="litellm",
-                        help="litellm (default) or the direct aiohttp client for OpenAI-compatible servers")
+    parser.add_argument(
+        "--transport",
+        choices=("litellm", "direct"),
+        default="litellm",
+        help="litellm (default) or the direct aiohttp client for OpenAI-compatible servers",
+    )
     parser.add_argument("--image-size", help="camera-sized JPEGs, e.g. 1600x900 (default: 8x8 images)")
     parser.add_argument("--json", help="also write the figures to this file")
     args = parser.parse_args(argv)
@@ -138,13 +151,28 @@ def main(argv: list[str] | None = None) -> int:
             frames = make_frames(tmp / "img", args.frames, image_size=size)
             image_kib = sum(os.path.getsize(f.image_path) for f in frames) / len(frames) / 1024
             # warm-up: imports, litellm's first-call setup (not timed)
-            run("openai/bench-model", api_base=url, frames=frames[:2], output=tmp / "warm", concurrency=2, progress=False,
-                transport=args.transport)
+            run(
+                "openai/bench-model",
+                api_base=url,
+                frames=frames[:2],
+                output=tmp / "warm",
+                concurrency=2,
+                progress=False,
+                transport=args.transport,
+            )
             sampler = MemorySampler()
             sampler.start()
             cpu0, wall0 = time.process_time(), time.perf_counter()
-            result = run("openai/bench-model", api_base=url, frames=frames, output=tmp / "runs", concurrency=args.concurrency,
-                         progress=False, timeout=60.0, transport=args.transport)
+            result = run(
+                "openai/bench-model",
+                api_base=url,
+                frames=frames,
+                output=tmp / "runs",
+                concurrency=args.concurrency,
+                progress=False,
+                timeout=60.0,
+                transport=args.transport,
+            )
             wall = time.perf_counter() - wall0
             cpu = time.process_time() - cpu0
             sampler.stop()

@@ -59,8 +59,14 @@ def world(rng, n_lanes=2000):
     for _ in range(n_lanes):
         cx, cy, h = rng.uniform(0, 1000), rng.uniform(0, 1000), rng.uniform(-np.pi, np.pi)
         c, s = math.cos(h), math.sin(h)
-        lanes.append(np.array([(cx + lo * c - la * s, cy + lo * s + la * c) for lo, la in
-                               ((25, 1.75), (-25, 1.75), (-25, -1.75), (25, -1.75))]))
+        lanes.append(
+            np.array(
+                [
+                    (cx + lo * c - la * s, cy + lo * s + la * c)
+                    for lo, la in ((25, 1.75), (-25, 1.75), (-25, -1.75), (25, -1.75))
+                ]
+            )
+        )
     inter = []
     for _ in range(80):
         cx, cy = rng.uniform(0, 1000), rng.uniform(0, 1000)
@@ -144,8 +150,10 @@ def shapely_subscores(states, frame, boxes, blobs, lanes, inter, fl, route, ego=
     hl, hw = length / 2, width / 2
     lo = np.array([hl, hl, -hl, -hl])
     la = np.array([hw, -hw, -hw, hw])
-    corners = np.stack([cx[..., None] + lo * c[..., None] - la * s[..., None],
-                        cy[..., None] + lo * s[..., None] + la * c[..., None]], -1)  # (N, S, 4, 2) FL FR RR RL
+    corners = np.stack(
+        [cx[..., None] + lo * c[..., None] - la * s[..., None], cy[..., None] + lo * s[..., None] + la * c[..., None]],
+        -1,
+    )  # (N, S, 4, 2) FL FR RR RL
     ego_poly = shapely.polygons(corners)
     drivable = shapely.union_all([shapely.Polygon(b) for b in blobs])
     shapely.prepare(drivable)
@@ -185,8 +193,15 @@ def shapely_subscores(states, frame, boxes, blobs, lanes, inter, fl, route, ego=
     def box_polys(b):
         bc, bs = np.cos(b[..., 2]), np.sin(b[..., 2])
         bl, bw = b[..., 3:4] / 2 * np.array([1, -1, -1, 1]), b[..., 4:5] / 2 * np.array([1, 1, -1, -1])
-        return shapely.polygons(np.stack([b[..., 0:1] + bl * bc[..., None] - bw * bs[..., None],
-                                          b[..., 1:2] + bl * bs[..., None] + bw * bc[..., None]], -1))
+        return shapely.polygons(
+            np.stack(
+                [
+                    b[..., 0:1] + bl * bc[..., None] - bw * bs[..., None],
+                    b[..., 1:2] + bl * bs[..., None] + bw * bc[..., None],
+                ],
+                -1,
+            )
+        )
 
     agents = boxes[frame]  # (N, S, A, 8)
     present = ~np.isnan(agents[..., 0])
@@ -255,8 +270,11 @@ def shapely_subscores(states, frame, boxes, blobs, lanes, inter, fl, route, ego=
     ddc = np.where(worst < 2, 1.0, np.where(worst < 6, 0.5, 0.0))
     # ep and lk along the frame's polyline
     lines = np.array([shapely.LineString(r[~np.isnan(r[:, 0])]) for r in route], object)[frame]
-    ep = np.maximum(0.0, shapely.line_locate_point(lines, shapely.points(cx[:, -1], cy[:, -1]))
-                    - shapely.line_locate_point(lines, shapely.points(cx[:, 0], cy[:, 0])))
+    ep = np.maximum(
+        0.0,
+        shapely.line_locate_point(lines, shapely.points(cx[:, -1], cy[:, -1]))
+        - shapely.line_locate_point(lines, shapely.points(cx[:, 0], cy[:, 0])),
+    )
     dev = shapely.distance(lines[:, None], shapely.points(cx, cy)) > 0.5
     lk = np.ones(n)
     for p in np.nonzero((dev & ~centre_x).sum(1) >= 20)[0]:
@@ -288,10 +306,25 @@ def main() -> None:
     models = max(1, args.plans // args.frames)
     plans, frame = plans_of(rng, gt, models)
     ones = np.ones(len(plans))
-    wall, cpu, r = timed(lambda: drive_scores(plans, gt, frame=frame, agents=boxes, map=m, frame_lanes=fl,
-                                              route=route, centreline=route, c=ones, hc=ones, ec=ones))
-    print(f"study: {len(plans):,} plans on {args.frames:,} frames, {args.agents} agents, 31 states: "
-          f"drive_scores {wall:.2f} s wall, {cpu:.2f} s CPU")
+    wall, cpu, r = timed(
+        lambda: drive_scores(
+            plans,
+            gt,
+            frame=frame,
+            agents=boxes,
+            map=m,
+            frame_lanes=fl,
+            route=route,
+            centreline=route,
+            c=ones,
+            hc=ones,
+            ec=ones,
+        )
+    )
+    print(
+        f"study: {len(plans):,} plans on {args.frames:,} frames, {args.agents} agents, 31 states: "
+        f"drive_scores {wall:.2f} s wall, {cpu:.2f} s CPU"
+    )
     for k in ("nc", "dac", "ddc", "ep", "ttc", "lk", "pdms", "epdms"):
         v = r[k]
         print(f"  {k:6s} mean {np.nanmean(v):.3f}  n/a {np.isnan(v).sum()}")
@@ -308,11 +341,15 @@ def main() -> None:
     for k, v in want.items():
         same = np.isclose(got[k], v, atol=1e-9) | (np.isnan(got[k]) & np.isnan(v))
         assert same.all(), (k, np.nonzero(~same)[0][:10])
-    print(f"shapely agrees on {sub:,} plans; it took {sw:.2f} s wall, {sc:.2f} s CPU "
-          f"→ {sw * args.big / sub:.1f} s wall at {args.big:,} (linear)")
+    print(
+        f"shapely agrees on {sub:,} plans; it took {sw:.2f} s wall, {sc:.2f} s CPU "
+        f"→ {sw * args.big / sub:.1f} s wall at {args.big:,} (linear)"
+    )
     wall, cpu, _ = timed(lambda: subscores(big, big_frame, **kw))
-    print(f"subscores on {args.big:,} plans: {wall:.2f} s wall, {cpu:.2f} s CPU; "
-          f"speed-up over shapely {sw * args.big / sub / wall:.0f}x (wall), {sc * args.big / sub / cpu:.0f}x (CPU)")
+    print(
+        f"subscores on {args.big:,} plans: {wall:.2f} s wall, {cpu:.2f} s CPU; "
+        f"speed-up over shapely {sw * args.big / sub / wall:.0f}x (wall), {sc * args.big / sub / cpu:.0f}x (CPU)"
+    )
 
 
 if __name__ == "__main__":

@@ -23,9 +23,8 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
-from test_planning_simulation import oracle_comfort, oracle_extended, oracle_simulate, random_plans  # noqa: E402
-
 from lightemma.planning import simulation as sim  # noqa: E402
+from test_planning_simulation import oracle_comfort, oracle_extended, oracle_simulate, random_plans  # noqa: E402
 
 
 def timed(f):

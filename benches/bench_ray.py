@@ -39,33 +39,63 @@ sys.path.insert(0, str(HERE))
 from bench_local import add_model_and_frames_arguments, device_name, model_and_frames  # noqa: E402
 
 
-def run_row(model: str, frames: Any, output: Path, *, backend: str, replicas: int | None, address: str | None,
-            batch_size: int, max_tokens: int, max_attempts: int, options: dict[str, Any]) -> dict[str, Any]:
+def run_row(
+    model: str,
+    frames: Any,
+    output: Path,
+    *,
+    backend: str,
+    replicas: int | None,
+    address: str | None,
+    batch_size: int,
+    max_tokens: int,
+    max_attempts: int,
+    options: dict[str, Any],
+) -> dict[str, Any]:
     """One row: ``replicas`` None = in process, else N Ray replicas (joining ``address``)."""
     from lightemma.pipeline import run
     from lightemma.runs.store import read_run
 
     n = replicas or 1
     placement = {} if replicas is None else {"replicas": replicas, "ray_address": address}
-    result = run(model, backend=backend, frames=frames, output=output, concurrency=batch_size * n, max_tokens=max_tokens,
-                 max_attempts=max_attempts, progress=False, backend_options={"batch_size": batch_size, **options}, **placement)
+    result = run(
+        model,
+        backend=backend,
+        frames=frames,
+        output=output,
+        concurrency=batch_size * n,
+        max_tokens=max_tokens,
+        max_attempts=max_attempts,
+        progress=False,
+        backend_options={"batch_size": batch_size, **options},
+        **placement,
+    )
     s = result.summary
     records = read_run(result.run_dir).records
     report = result.manifest["sessions"][-1].get("replicas") or {}
     return {
-        "where": "in process" if replicas is None else f"Ray, {replicas} replica(s)", "replicas": replicas,
-        "frames": s["frames_run"], "wall_s": round(s["wall_seconds"], 3), "frames_per_s": s["frames_per_second"],
+        "where": "in process" if replicas is None else f"Ray, {replicas} replica(s)",
+        "replicas": replicas,
+        "frames": s["frames_run"],
+        "wall_s": round(s["wall_seconds"], 3),
+        "frames_per_s": s["frames_per_second"],
         "frames_per_replica": report.get("frames"),
-        "answers": {fid: [(c["stage"], c["text"]) for a in r["attempts"] for c in a["calls"]] for fid, r in records.items()},
+        "answers": {
+            fid: [(c["stage"], c["text"]) for a in r["attempts"] for c in a["calls"]] for fid, r in records.items()
+        },
     }
 
 
 def table(rows: list[dict[str, Any]], device: str, model: str, note: str) -> str:
     base = next((r["frames_per_s"] for r in rows if r["replicas"] == 1), None)
-    lines = [f"device: {device}", f"model: {model}{note}", "",
-             "| where | frames | wall s | frames/s | speed-up vs 1 replica | efficiency (speed-up / N) | frames per replica | "
-             "answers = in process |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"device: {device}",
+        f"model: {model}{note}",
+        "",
+        "| where | frames | wall s | frames/s | speed-up vs 1 replica | efficiency (speed-up / N) | frames per replica | "
+        "answers = in process |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for r in rows:
         same = "yes" if r["answers"] == rows[0]["answers"] else "no"
         if r["replicas"] is None or base is None:
@@ -74,8 +104,10 @@ def table(rows: list[dict[str, Any]], device: str, model: str, note: str) -> str
             speedup = f"{r['frames_per_s'] / base:.2f}×"
             efficiency = f"{r['frames_per_s'] / base / r['replicas']:.2f}"
         spread = "/".join(str(n) for n in r["frames_per_replica"]) if r["frames_per_replica"] else "—"
-        lines.append(f"| {r['where']} | {r['frames']} | {r['wall_s']:.2f} | {r['frames_per_s']:.2f} | {speedup} | {efficiency} | "
-                     f"{spread} | {same} |")
+        lines.append(
+            f"| {r['where']} | {r['frames']} | {r['wall_s']:.2f} | {r['frames_per_s']:.2f} | {speedup} | {efficiency} | "
+            f"{spread} | {same} |"
+        )
     return "\n".join(lines)
 
 
@@ -86,7 +118,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--replicas", type=int, nargs="+", default=[1, 2])
     ap.add_argument("--ray-address", help="join this Ray cluster (default: start a local Ray sized to the largest N)")
     ap.add_argument("--batch-size", type=int, default=8, help="requests per forward pass in each replica (default 8)")
-    ap.add_argument("--no-in-process", action="store_true", help="skip the in-process row (e.g. a model too big for this node)")
+    ap.add_argument(
+        "--no-in-process", action="store_true", help="skip the in-process row (e.g. a model too big for this node)"
+    )
     args = ap.parse_args(argv)
 
     import ray
@@ -101,21 +135,33 @@ def main(argv: list[str] | None = None) -> int:
         ray.init(address=args.ray_address, logging_level=logging.WARNING)
     else:
         cpus = max(args.replicas) if not on_gpu else max(os.cpu_count() or 1, max(args.replicas))
-        ray.init(num_cpus=cpus, include_dashboard=False, object_store_memory=256 * 1024**2, logging_level=logging.WARNING)
+        ray.init(
+            num_cpus=cpus, include_dashboard=False, object_store_memory=256 * 1024**2, logging_level=logging.WARNING
+        )
     address = ray.get_runtime_context().gcs_address
     with tempfile.TemporaryDirectory(prefix="lightemma-bench-ray-") as tmp:
         tmp_path = Path(tmp)
-        model, frames, note = model_and_frames(args, tmp_path, on_gpu, measures="the replica machinery", scripted_end=True)
-        common = dict(backend=args.backend, address=address, batch_size=args.batch_size, max_tokens=args.max_tokens,
-                      max_attempts=args.max_attempts, options={} if args.backend == "vllm" else {"dtype": args.dtype})
+        model, frames, note = model_and_frames(
+            args, tmp_path, on_gpu, measures="the replica machinery", scripted_end=True
+        )
+        common = dict(
+            backend=args.backend,
+            address=address,
+            batch_size=args.batch_size,
+            max_tokens=args.max_tokens,
+            max_attempts=args.max_attempts,
+            options={} if args.backend == "vllm" else {"dtype": args.dtype},
+        )
         rows = [] if args.no_in_process else [run_row(model, frames, tmp_path / "out", replicas=None, **common)]
         for n in args.replicas:
             rows.append(run_row(model, frames, tmp_path / "out", replicas=n, **common))
         print(table(rows, device, model, note))
-        print(f"\nsettings: {args.backend}, {len(frames)} frames, batch size {args.batch_size} per replica, frames in flight = "
-              f"batch size × replicas, max {args.max_tokens} output tokens per stage, {args.max_attempts} attempt(s) per frame, "
-              f"greedy; Ray {ray.__version__} ({'joined ' + args.ray_address if args.ray_address else 'local'}); "
-              "starting Ray and loading the models excluded")
+        print(
+            f"\nsettings: {args.backend}, {len(frames)} frames, batch size {args.batch_size} per replica, frames in flight = "
+            f"batch size × replicas, max {args.max_tokens} output tokens per stage, {args.max_attempts} attempt(s) per frame, "
+            f"greedy; Ray {ray.__version__} ({'joined ' + args.ray_address if args.ray_address else 'local'}); "
+            "starting Ray and loading the models excluded"
+        )
         if args.json:
             print(json.dumps([{k: v for k, v in r.items() if k != "answers"} for r in rows], indent=2))
     ray.shutdown()

@@ -32,9 +32,19 @@ import time
 from pathlib import Path
 
 MODELS = (
-    "openai/gpt-4o", "openai/gpt-4.1", "openai/gpt-5.2", "anthropic/claude-3-7-sonnet-20250219", "anthropic/claude-sonnet-4-20250514",
-    "gemini/gemini-2.0-flash", "gemini/gemini-2.5-flash", "gemini/gemini-2.5-pro", "qwen/qwen2.5-vl-7b", "qwen/qwen2.5-vl-72b",
-    "meta/llama-3.2-11b-vision", "baseline:cv", "baseline:constant",
+    "openai/gpt-4o",
+    "openai/gpt-4.1",
+    "openai/gpt-5.2",
+    "anthropic/claude-3-7-sonnet-20250219",
+    "anthropic/claude-sonnet-4-20250514",
+    "gemini/gemini-2.0-flash",
+    "gemini/gemini-2.5-flash",
+    "gemini/gemini-2.5-pro",
+    "qwen/qwen2.5-vl-7b",
+    "qwen/qwen2.5-vl-72b",
+    "meta/llama-3.2-11b-vision",
+    "baseline:cv",
+    "baseline:constant",
 )
 CAMERA = {  # nuScenes CAM_FRONT (scene-0061)
     "camera_intrinsic": [[1266.417, 0.0, 816.267], [0.0, 1266.417, 491.507], [0.0, 0.0, 1.0]],
@@ -69,13 +79,24 @@ def side_by_side(runs: Path, folder: Path, reps: int) -> dict:
         times = []
         for extra, out in (([], "full"), (["--no-pictures"], "bare")):
             start = time.perf_counter()
-            subprocess.run([*base, "--out", str(folder / out), *extra], check=True, env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+            subprocess.run(
+                [*base, "--out", str(folder / out), *extra],
+                check=True,
+                env=env,
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
             times.append(time.perf_counter() - start)
         full.append(times[0])
         bare.append(times[1])
         ratios.append(times[0] / times[1])
     median = lambda xs: sorted(xs)[len(xs) // 2]  # noqa: E731
-    return {"report_s": median(full), "no_pictures_s": median(bare), "ratio": median(ratios), "ratios": [round(r, 2) for r in ratios]}
+    return {
+        "report_s": median(full),
+        "no_pictures_s": median(bare),
+        "ratio": median(ratios),
+        "ratios": [round(r, 2) for r in ratios],
+    }
 
 
 def folder_size(folder: Path) -> int:
@@ -91,7 +112,13 @@ def open_in_browser(index: Path) -> dict:
 
     options = webdriver.ChromeOptions()
     options.binary_location = shutil.which("chromium") or "/usr/bin/chromium"
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,1000"):
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,1000",
+    ):
         options.add_argument(arg)
     driver = webdriver.Chrome(service=Service("/usr/bin/chromedriver"), options=options)
     try:
@@ -101,7 +128,11 @@ def open_in_browser(index: Path) -> dict:
         ready = driver.execute_script("return LE.readyAt") / 1000
         t0 = time.perf_counter()
         driver.execute_script("location.hash = '#frames?sort=spread'")
-        wait.until(lambda d: d.execute_script("return document.querySelectorAll('#grid .card .thumb svg, #grid .card .thumb img').length > 0"))
+        wait.until(
+            lambda d: d.execute_script(
+                "return document.querySelectorAll('#grid .card .thumb svg, #grid .card .thumb img').length > 0"
+            )
+        )
         grid = time.perf_counter() - t0
         t0 = time.perf_counter()
         driver.execute_script("location.hash = '#frame/' + LE.lastList.list[0]")
@@ -110,14 +141,21 @@ def open_in_browser(index: Path) -> dict:
         errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
     finally:
         driver.quit()
-    return {"open_to_ready_s": round(ready, 3), "frames_grid_s": round(grid, 3), "frame_view_s": round(view, 3), "console_errors": len(errors)}
+    return {
+        "open_to_ready_s": round(ready, 3),
+        "frames_grid_s": round(grid, 3),
+        "frame_view_s": round(view, 3),
+        "console_errors": len(errors),
+    }
 
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--models", type=int, default=13)
     parser.add_argument("--frames", type=int, default=3908)
-    parser.add_argument("--reps", type=int, default=1, help="pairs of report runs (default 1: each takes minutes at full size)")
+    parser.add_argument(
+        "--reps", type=int, default=1, help="pairs of report runs (default 1: each takes minutes at full size)"
+    )
     parser.add_argument("--keep", type=Path, help="work folder to keep (runs are reused when there)")
     parser.add_argument("--open-only", action="store_true", help="only open the kept report in the browser")
     args = parser.parse_args()
@@ -137,8 +175,10 @@ def main() -> int:
         result["no_pictures_mb"] = round(folder_size(folder / "bare") / 1e6, 1) if (folder / "bare").is_dir() else None
         result.update(open_in_browser(report / "index.html"))
         print(json.dumps(result, indent=2))
-        print(f"goals: report ≤ 2× --no-pictures ({result.get('ratio', float('nan')):.2f}×), folder < 300 MB ({result['report_mb']} MB), "
-              f"opens < 3 s ({result['open_to_ready_s']} s)")
+        print(
+            f"goals: report ≤ 2× --no-pictures ({result.get('ratio', float('nan')):.2f}×), folder < 300 MB ({result['report_mb']} MB), "
+            f"opens < 3 s ({result['open_to_ready_s']} s)"
+        )
     finally:
         if args.keep is None:
             shutil.rmtree(folder, ignore_errors=True)

@@ -36,15 +36,23 @@ sys.path.insert(0, str(ROOT / "tests"))
 from fake_openai import FakeOpenAIServer, Reply, default_reply  # noqa: E402
 from memframes import make_frames  # noqa: E402
 
-MODELS = (("gpt-4o", "OPENAI_API_KEY"), ("claude-4.6-sonnet", "ANTHROPIC_API_KEY"), ("gemini-2.5-flash", "GEMINI_API_KEY"))
-SCENE = ("A two-lane urban road in daylight with light traffic. A white delivery van is parked at the right curb about "
-         "20 m ahead with its hazard lights on; a cyclist rides in the bike lane to its left. A silver sedan is stopped "
-         "at the traffic light at the intersection ahead, which shows green for our direction. Two pedestrians wait at "
-         "the crosswalk on the left corner; the lane markings are clear, a dashed white centre line and a solid line at "
-         "the curb. Parked cars line the left side of the street and a bus stop with one person waiting is on the right. ")
-INTENT = ("The ego vehicle has been cruising at about 5 m/s in its lane with almost zero curvature, neither accelerating "
-          "nor braking noticeably. Over the next 3 seconds it should keep its lane, pass the parked van with a little "
-          "extra clearance from the cyclist, and accelerate gently toward the green light while watching the crosswalk. ")
+MODELS = (
+    ("gpt-4o", "OPENAI_API_KEY"),
+    ("claude-4.6-sonnet", "ANTHROPIC_API_KEY"),
+    ("gemini-2.5-flash", "GEMINI_API_KEY"),
+)
+SCENE = (
+    "A two-lane urban road in daylight with light traffic. A white delivery van is parked at the right curb about "
+    "20 m ahead with its hazard lights on; a cyclist rides in the bike lane to its left. A silver sedan is stopped "
+    "at the traffic light at the intersection ahead, which shows green for our direction. Two pedestrians wait at "
+    "the crosswalk on the left corner; the lane markings are clear, a dashed white centre line and a solid line at "
+    "the curb. Parked cars line the left side of the street and a bus stop with one person waiting is on the right. "
+)
+INTENT = (
+    "The ego vehicle has been cruising at about 5 m/s in its lane with almost zero curvature, neither accelerating "
+    "nor braking noticeably. Over the next 3 seconds it should keep its lane, pass the parked van with a little "
+    "extra clearance from the cyclist, and accelerate gently toward the green light while watching the crosswalk. "
+)
 
 
 def realistic(req):
@@ -63,21 +71,37 @@ def one(model: str, chain: str, cache: bool, frames, output: Path, concurrency: 
     with FakeOpenAIServer(realistic, count_tokens=True, prefix_cache=cache) as server:
         base = server.url if model.startswith("gpt") else server.root_url
         start = time.perf_counter()
-        result = run(model, api_base=base, frames=frames, output=output, chain=chain, concurrency=concurrency,
-                     progress=False, timeout=60.0)
+        result = run(
+            model,
+            api_base=base,
+            frames=frames,
+            output=output,
+            chain=chain,
+            concurrency=concurrency,
+            progress=False,
+            timeout=60.0,
+        )
         wall = time.perf_counter() - start
     records = list(read_run(result.run_dir).records.values())
     n = len(records)
-    image_chars = sum(len(p["data"]) for r in server.requests for _, parts in r.messages() for p in parts if p["kind"] == "image")
+    image_chars = sum(
+        len(p["data"]) for r in server.requests for _, parts in r.messages() for p in parts if p["kind"] == "image"
+    )
     return {
-        "model": model, "chain": chain, "cache": cache, "frames": n, "requests_per_frame": len(server.requests) / n,
+        "model": model,
+        "chain": chain,
+        "cache": cache,
+        "frames": n,
+        "requests_per_frame": len(server.requests) / n,
         "image_bytes_per_frame": image_chars / n,
         "input_tokens_per_frame": sum(r["input_tokens"] for r in records) / n,
         "cached_tokens_per_frame": sum(r["cached_input_tokens"] for r in records) / n,
-        "cache_write_tokens_per_frame": sum(r["cache_write_tokens"] or 0 for r in records) / n,  # OpenAI: none reported (not billed)
+        "cache_write_tokens_per_frame": sum(r["cache_write_tokens"] or 0 for r in records)
+        / n,  # OpenAI: none reported (not billed)
         "output_tokens_per_frame": sum(r["output_tokens"] for r in records) / n,
         "cost_cents_per_frame": sum(r["cost_cents"] for r in records) / n,
-        "ok": sum(r["status"] == "ok" for r in records), "wall_s": wall,
+        "ok": sum(r["status"] == "ok" for r in records),
+        "wall_s": wall,
     }
 
 
@@ -99,14 +123,18 @@ def main(argv: list[str] | None = None) -> int:
                     rows.append(row)
                     print(json.dumps(row), file=sys.stderr, flush=True)
     print(f"{args.frames} frames, 1600 × 900 JPEG per frame, concurrency {args.concurrency}\n")
-    print("| model | chain | cache hits | image bytes/frame | input tokens/frame | of which cached | cache writes | "
-          "output tokens/frame | cost/frame (¢) |")
+    print(
+        "| model | chain | cache hits | image bytes/frame | input tokens/frame | of which cached | cache writes | "
+        "output tokens/frame | cost/frame (¢) |"
+    )
     print("|---|---|---|---:|---:|---:|---:|---:|---:|")
     for r in rows:
-        print(f"| {r['model']} | {r['chain']} | {'yes' if r['cache'] else 'no'} | {r['image_bytes_per_frame'] / 1e3:,.0f} kB | "
-              f"{r['input_tokens_per_frame']:,.0f} | {r['cached_tokens_per_frame']:,.0f} "
-              f"({100 * r['cached_tokens_per_frame'] / r['input_tokens_per_frame']:.0f} %) | {r['cache_write_tokens_per_frame']:,.0f} | "
-              f"{r['output_tokens_per_frame']:,.0f} | {r['cost_cents_per_frame']:.3f} |")
+        print(
+            f"| {r['model']} | {r['chain']} | {'yes' if r['cache'] else 'no'} | {r['image_bytes_per_frame'] / 1e3:,.0f} kB | "
+            f"{r['input_tokens_per_frame']:,.0f} | {r['cached_tokens_per_frame']:,.0f} "
+            f"({100 * r['cached_tokens_per_frame'] / r['input_tokens_per_frame']:.0f} %) | {r['cache_write_tokens_per_frame']:,.0f} | "
+            f"{r['output_tokens_per_frame']:,.0f} | {r['cost_cents_per_frame']:.3f} |"
+        )
     if args.json:
         Path(args.json).write_text(json.dumps(rows, indent=2) + "\n")
     return 0

@@ -22,7 +22,6 @@ import numpy as np
 from lightemma import integrate
 from lightemma.evaluation import safety as S
 
-
 CPU: list[float] = []  # CPU seconds (all threads) of the best-wall call of each best()
 
 
@@ -85,7 +84,9 @@ def main() -> None:
     t_rust = best(lambda: S.box_collisions(traj, poses, boxes))
     t_shp = best(lambda: shapely_collisions(traj[sub], poses[sub], boxes[sub]), repeat=2) * n / m
     c_rust, c_shp = CPU[-2], CPU[-1] * n / m
-    print(f"  Rust (one call, all frames): {t_rust:.3f} s wall, {c_rust:.3f} s CPU ({t_rust / pairs * 1e9:.1f} ns per pair)")
+    print(
+        f"  Rust (one call, all frames): {t_rust:.3f} s wall, {c_rust:.3f} s CPU ({t_rust / pairs * 1e9:.1f} ns per pair)"
+    )
     print(f"  shapely: {t_shp:.1f} s wall, {c_shp:.1f} s CPU (measured on {m:,} frames, × {n / m:g})")
     print(f"  speed-up: {t_shp / t_rust:.0f}× wall, {c_shp / c_rust:.0f}× CPU")
 
@@ -113,13 +114,23 @@ def main() -> None:
     t_copy = best(lambda: big.copy())
     stream = 2 * big.nbytes / t_copy / 1e9
     traffic = look * 64 / 1e9
-    print(f"mask: {side:,} × {side:,} px ({mask.nbytes / 1e6:.0f} MB); {look:,} lookups (4 corners + reference point × 6 steps × {n:,} frames)")
-    print(f"  mask_area (geometry + lookups): {t_mask:.3f} s wall, {c_mask:.3f} s CPU, {t_mask / look * 1e9:.1f} ns per lookup")
-    print(f"  mask_lookup of the same points (lookups only): {t_points:.3f} s wall, {c_points:.3f} s CPU, {t_points / look * 1e9:.1f} ns per lookup")
-    print(f"  NumPy gather of the same pixels, indices precomputed (the memory traffic alone, one thread): {t_gather:.3f} s wall, "
-          f"{c_gather:.3f} s CPU, {t_gather / look * 1e9:.1f} ns per pixel")
-    print(f"  traffic: one 64-byte line per lookup = {traffic:.2f} GB → {traffic / t_points:.1f} GB/s achieved by mask_lookup; "
-          f"streaming copy bandwidth {stream:.1f} GB/s")
+    print(
+        f"mask: {side:,} × {side:,} px ({mask.nbytes / 1e6:.0f} MB); {look:,} lookups (4 corners + reference point × 6 steps × {n:,} frames)"
+    )
+    print(
+        f"  mask_area (geometry + lookups): {t_mask:.3f} s wall, {c_mask:.3f} s CPU, {t_mask / look * 1e9:.1f} ns per lookup"
+    )
+    print(
+        f"  mask_lookup of the same points (lookups only): {t_points:.3f} s wall, {c_points:.3f} s CPU, {t_points / look * 1e9:.1f} ns per lookup"
+    )
+    print(
+        f"  NumPy gather of the same pixels, indices precomputed (the memory traffic alone, one thread): {t_gather:.3f} s wall, "
+        f"{c_gather:.3f} s CPU, {t_gather / look * 1e9:.1f} ns per pixel"
+    )
+    print(
+        f"  traffic: one 64-byte line per lookup = {traffic:.2f} GB → {traffic / t_points:.1f} GB/s achieved by mask_lookup; "
+        f"streaming copy bandwidth {stream:.1f} GB/s"
+    )
 
 
 if __name__ == "__main__":

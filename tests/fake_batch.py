@@ -72,14 +72,33 @@ class FakeBatch:
 class FakeBatchServer:
     """The loopback batch server; a context manager. ``url`` is an OpenAI ``api_base`` (``…/v1``)."""
 
-    def __init__(self, script: Callable[[Received], Reply] | None = None, *, steps: int = 2, shuffle: bool = True,
-                 seed: int = 0, fail: dict[str, str] | None = None, expire: set[str] | None = None,
-                 batch_state: str | None = None, require_key: str | None = None, hold_from: int | None = None,
-                 refusal: str = "invalid x-api-key", bloat: int = 0, duplicate: bool = False, lose_create: int = 0,
-                 create_delay: float = 0.0, page_size: int | None = None, results_fault: str | None = None,
-                 cancel: set[int] | None = None, fail_code: str = "invalid_request", fail_batches: set[int] | None = None,
-                 raw_text: bool = False, fail_create: int = 0, unrun: Callable[[str, dict[str, Any]], bool] | None = None,
-                 fault_reads: int | None = None) -> None:
+    def __init__(
+        self,
+        script: Callable[[Received], Reply] | None = None,
+        *,
+        steps: int = 2,
+        shuffle: bool = True,
+        seed: int = 0,
+        fail: dict[str, str] | None = None,
+        expire: set[str] | None = None,
+        batch_state: str | None = None,
+        require_key: str | None = None,
+        hold_from: int | None = None,
+        refusal: str = "invalid x-api-key",
+        bloat: int = 0,
+        duplicate: bool = False,
+        lose_create: int = 0,
+        create_delay: float = 0.0,
+        page_size: int | None = None,
+        results_fault: str | None = None,
+        cancel: set[int] | None = None,
+        fail_code: str = "invalid_request",
+        fail_batches: set[int] | None = None,
+        raw_text: bool = False,
+        fail_create: int = 0,
+        unrun: Callable[[str, dict[str, Any]], bool] | None = None,
+        fault_reads: int | None = None,
+    ) -> None:
         self.lose_create = lose_create  # the next N creates make the batch and answer 500
         self.create_delay = create_delay  # seconds before a lost create is answered (the batch exists at once)
         self.fail_create = fail_create  # the next N creates answer 500 and make nothing
@@ -132,8 +151,11 @@ class FakeBatchServer:
 
     # --- the model -------------------------------------------------------------------------------------------
     def _answer(self, protocol: str, custom_id: str, body: dict[str, Any], index: int) -> dict[str, Any]:
-        path = {"openai": "/v1/chat/completions", "anthropic": "/v1/messages",
-                "gemini": "/v1beta/models/m:generateContent"}[protocol]
+        path = {
+            "openai": "/v1/chat/completions",
+            "anthropic": "/v1/messages",
+            "gemini": "/v1beta/models/m:generateContent",
+        }[protocol]
         received = Received(path=path, headers={}, body=body, index=index)
         answer = _completion(received, self.script(received))
         if self.bloat:
@@ -146,9 +168,15 @@ class FakeBatchServer:
             prefix = {"openai": "batch_", "anthropic": "msgbatch_", "gemini": "batches/"}[protocol]
             number = self.created
             failed = self.batch_state == "failed" or number in self.fail_batches
-            batch = FakeBatch(id=f"{prefix}{number:04d}", protocol=protocol, requests=requests, metadata=metadata,
-                              end_state="failed" if failed else (self.batch_state or "completed"), number=number,
-                              canceled=number in self.cancel)
+            batch = FakeBatch(
+                id=f"{prefix}{number:04d}",
+                protocol=protocol,
+                requests=requests,
+                metadata=metadata,
+                end_state="failed" if failed else (self.batch_state or "completed"),
+                number=number,
+                canceled=number in self.cancel,
+            )
             self.batches[batch.id] = batch
             for cid, _ in requests:
                 self.submissions[cid] += 1
@@ -156,17 +184,24 @@ class FakeBatchServer:
 
     def _expired(self, batch: FakeBatch, index: int) -> bool:
         cid, body = batch.requests[index]
-        return (cid in self.expire or (batch.end_state == "expired" and index % 2 == 1)
-                or (self.unrun is not None and self.unrun(cid, body)))
+        return (
+            cid in self.expire
+            or (batch.end_state == "expired" and index % 2 == 1)
+            or (self.unrun is not None and self.unrun(cid, body))
+        )
 
     def add_foreign(self, n: int, protocol: str, size: int = 1) -> None:
         """``n`` batches of another client in the account, created after everything so far (newest first in lists)."""
         with self.lock:
             for i in range(n):
                 prefix = {"openai": "batch_", "anthropic": "msgbatch_", "gemini": "batches/"}[protocol]
-                batch = FakeBatch(id=f"{prefix}x{len(self.batches):05d}", protocol=protocol,
-                                  requests=[(f"other-{i}-{j}", {}) for j in range(size)],
-                                  metadata={"displayName": f"other-{i}", "lightemma_token": f"other-{i}"}, foreign=True)
+                batch = FakeBatch(
+                    id=f"{prefix}x{len(self.batches):05d}",
+                    protocol=protocol,
+                    requests=[(f"other-{i}-{j}", {}) for j in range(size)],
+                    metadata={"displayName": f"other-{i}", "lightemma_token": f"other-{i}"},
+                    foreign=True,
+                )
                 self.batches[batch.id] = batch
 
     def listed(self, protocol: str, after: str | None, limit: int | None) -> tuple[list[FakeBatch], bool]:
@@ -176,7 +211,7 @@ class FakeBatchServer:
             ordered = [b for b in reversed(list(self.batches.values())) if b.protocol == protocol]
         if after is not None:
             ids = [b.id for b in ordered]
-            ordered = ordered[ids.index(after) + 1:] if after in ids else []
+            ordered = ordered[ids.index(after) + 1 :] if after in ids else []
         size = limit or len(ordered) or 1
         return ordered[:size], len(ordered) > size
 
@@ -196,8 +231,9 @@ class FakeBatchServer:
 
     def paid_twice(self) -> list[str]:
         """Requests a batch ran more than once, and custom ids submitted in more than one batch."""
-        return ([f"request {k} billed {n}x" for k, n in self.billed().items() if n > 1]
-                + [f"custom id {k} submitted {n}x" for k, n in self.submissions.items() if n > 1])
+        return [f"request {k} billed {n}x" for k, n in self.billed().items() if n > 1] + [
+            f"custom id {k} submitted {n}x" for k, n in self.submissions.items() if n > 1
+        ]
 
     def _results(self, batch: FakeBatch) -> list[dict[str, Any]]:
         """(custom id, kind, payload) per request once the batch has ended: kind ok / error / expired."""
@@ -251,7 +287,9 @@ class FakeBatchServer:
                 return self.rfile.read(int(self.headers.get("Content-Length") or 0))
 
             def _refused(self) -> bool:
-                key = " ".join(self.headers.get(h, "") for h in ("Authorization", "x-api-key", "x-goog-api-key")).strip()
+                key = " ".join(
+                    self.headers.get(h, "") for h in ("Authorization", "x-api-key", "x-goog-api-key")
+                ).strip()
                 with server.lock:
                     server.keys.append(key)
                 if server.require_key is not None and server.require_key not in key:
@@ -269,8 +307,18 @@ class FakeBatchServer:
                     with server.lock:
                         fid = f"file-{len(server.files) + 1:04d}"
                         server.files[fid] = content
-                    return self._send(200, {"id": fid, "object": "file", "bytes": len(content), "created_at": int(time.time()),
-                                            "filename": "batch.jsonl", "purpose": "batch", "status": "processed"})
+                    return self._send(
+                        200,
+                        {
+                            "id": fid,
+                            "object": "file",
+                            "bytes": len(content),
+                            "created_at": int(time.time()),
+                            "filename": "batch.jsonl",
+                            "purpose": "batch",
+                            "status": "processed",
+                        },
+                    )
                 body = json.loads(raw or b"{}")
                 if path in ("/v1/batches", "/v1/messages/batches") or path.endswith(":batchGenerateContent"):
                     with server.lock:
@@ -279,8 +327,14 @@ class FakeBatchServer:
                     if refuse:
                         return self._send(503, {"error": {"message": "overloaded", "type": "server_error"}})
                 if path == "/v1/batches":
-                    lines = [json.loads(line) for line in server.files[body["input_file_id"]].decode().split("\n") if line.strip()]
-                    batch = server._create("openai", [(ln["custom_id"], ln["body"]) for ln in lines], body.get("metadata") or {})
+                    lines = [
+                        json.loads(line)
+                        for line in server.files[body["input_file_id"]].decode().split("\n")
+                        if line.strip()
+                    ]
+                    batch = server._create(
+                        "openai", [(ln["custom_id"], ln["body"]) for ln in lines], body.get("metadata") or {}
+                    )
                     return self._created(_openai_batch(server, batch, body["input_file_id"]))
                 if path == "/v1/messages/batches":
                     batch = server._create("anthropic", [(r["custom_id"], r["params"]) for r in body["requests"]], {})
@@ -289,8 +343,11 @@ class FakeBatchServer:
                 if match:
                     spec = body["batch"]
                     reqs = spec["inputConfig"]["requests"]["requests"]
-                    batch = server._create("gemini", [(r["metadata"]["key"], r["request"]) for r in reqs],
-                                           {"displayName": spec.get("displayName"), "model": match.group(1)})
+                    batch = server._create(
+                        "gemini",
+                        [(r["metadata"]["key"], r["request"]) for r in reqs],
+                        {"displayName": spec.get("displayName"), "model": match.group(1)},
+                    )
                     return self._created(_gemini_operation(server, batch))
                 self._send(404, {"error": {"message": f"no route {path}"}})
 
@@ -315,17 +372,35 @@ class FakeBatchServer:
                     return
                 if path == "/v1/batches":
                     q = self._query()
-                    page, more = server.listed("openai", q.get("after"), min(int(q.get("limit", 20)), server.page_size or 10**9))
+                    page, more = server.listed(
+                        "openai", q.get("after"), min(int(q.get("limit", 20)), server.page_size or 10**9)
+                    )
                     data = [_openai_batch(server, b, None, peek=True) for b in page]
-                    return self._send(200, {"object": "list", "data": data, "has_more": more,
-                                            "first_id": data[0]["id"] if data else None,
-                                            "last_id": data[-1]["id"] if data else None})
+                    return self._send(
+                        200,
+                        {
+                            "object": "list",
+                            "data": data,
+                            "has_more": more,
+                            "first_id": data[0]["id"] if data else None,
+                            "last_id": data[-1]["id"] if data else None,
+                        },
+                    )
                 if path == "/v1/messages/batches":
                     q = self._query()
-                    page, more = server.listed("anthropic", q.get("after_id"), min(int(q.get("limit", 20)), server.page_size or 10**9))
+                    page, more = server.listed(
+                        "anthropic", q.get("after_id"), min(int(q.get("limit", 20)), server.page_size or 10**9)
+                    )
                     data = [_anthropic_batch(server, b, peek=True) for b in page]
-                    return self._send(200, {"data": data, "has_more": more, "first_id": data[0]["id"] if data else None,
-                                            "last_id": data[-1]["id"] if data else None})
+                    return self._send(
+                        200,
+                        {
+                            "data": data,
+                            "has_more": more,
+                            "first_id": data[0]["id"] if data else None,
+                            "last_id": data[-1]["id"] if data else None,
+                        },
+                    )
                 match = re.fullmatch(r"/download/v1beta/(files/[^/:]+):download", path)
                 if match and match.group(1) in server.files:
                     return self._send(200, server.files[match.group(1)], "application/octet-stream")
@@ -392,41 +467,87 @@ def _iso(seconds: float) -> str:
     return time.strftime("%Y-%m-%dT%H:%M:%S", time.gmtime(seconds)) + f".{int(seconds % 1 * 1e6):06d}Z"
 
 
-def _openai_batch(server: FakeBatchServer, batch: FakeBatch, input_file: str | None, *, peek: bool = False) -> dict[str, Any]:
+def _openai_batch(
+    server: FakeBatchServer, batch: FakeBatch, input_file: str | None, *, peek: bool = False
+) -> dict[str, Any]:
     ended = batch.polls >= server.steps
     final = "cancelled" if batch.canceled else batch.end_state
     status = "validating" if batch.polls == 0 else ("in_progress" if not ended else final)
-    out: dict[str, Any] = {"id": batch.id, "object": "batch", "endpoint": "/v1/chat/completions", "errors": None,
-                           "input_file_id": input_file or "file-x", "completion_window": "24h", "status": status,
-                           "output_file_id": None, "error_file_id": None, "created_at": int(batch.created_at),
-                           "request_counts": {"total": len(batch.requests), "completed": 0, "failed": 0},
-                           "metadata": batch.metadata}
+    out: dict[str, Any] = {
+        "id": batch.id,
+        "object": "batch",
+        "endpoint": "/v1/chat/completions",
+        "errors": None,
+        "input_file_id": input_file or "file-x",
+        "completion_window": "24h",
+        "status": status,
+        "output_file_id": None,
+        "error_file_id": None,
+        "created_at": int(batch.created_at),
+        "request_counts": {"total": len(batch.requests), "completed": 0, "failed": 0},
+        "metadata": batch.metadata,
+    }
     if ended and not peek:
         if batch.end_state == "failed":
-            message = ("Enqueued token limit reached for gpt-4o in organization org-x." if server.fail_code == "token_limit_exceeded"
-                       else "line 1: bad model")
-            out["errors"] = {"object": "list", "data": [{"code": server.fail_code, "message": message, "line": None
-                                                         if server.fail_code == "token_limit_exceeded" else 1}]}
+            message = (
+                "Enqueued token limit reached for gpt-4o in organization org-x."
+                if server.fail_code == "token_limit_exceeded"
+                else "line 1: bad model"
+            )
+            out["errors"] = {
+                "object": "list",
+                "data": [
+                    {
+                        "code": server.fail_code,
+                        "message": message,
+                        "line": None if server.fail_code == "token_limit_exceeded" else 1,
+                    }
+                ],
+            }
             return out
         results = server._results(batch)
         ok, bad = [], []
         for r in results:
             if r["kind"] == "ok":
-                ok.append({"id": f"batch_req_{r['custom_id']}", "custom_id": r["custom_id"],
-                           "response": {"status_code": 200, "request_id": "req", "body": r["body"]}, "error": None})
+                ok.append(
+                    {
+                        "id": f"batch_req_{r['custom_id']}",
+                        "custom_id": r["custom_id"],
+                        "response": {"status_code": 200, "request_id": "req", "body": r["body"]},
+                        "error": None,
+                    }
+                )
             elif r["kind"] == "error":
-                bad.append({"id": f"batch_req_{r['custom_id']}", "custom_id": r["custom_id"],
-                            "response": {"status_code": 400, "request_id": "req",
-                                         "body": {"error": {"message": r["message"], "type": "invalid_request_error"}}},
-                            "error": None})
+                bad.append(
+                    {
+                        "id": f"batch_req_{r['custom_id']}",
+                        "custom_id": r["custom_id"],
+                        "response": {
+                            "status_code": 400,
+                            "request_id": "req",
+                            "body": {"error": {"message": r["message"], "type": "invalid_request_error"}},
+                        },
+                        "error": None,
+                    }
+                )
             else:
                 code = "batch_cancelled" if r["kind"] == "canceled" else "batch_expired"
-                bad.append({"id": f"batch_req_{r['custom_id']}", "custom_id": r["custom_id"], "response": None,
-                            "error": {"code": code, "message": "This request could not be executed before the "
-                                                               "completion window expired."}})
+                bad.append(
+                    {
+                        "id": f"batch_req_{r['custom_id']}",
+                        "custom_id": r["custom_id"],
+                        "response": None,
+                        "error": {
+                            "code": code,
+                            "message": "This request could not be executed before the completion window expired.",
+                        },
+                    }
+                )
         with server.lock:
             if ok and server.results_fault != "no_file":
-                server.files[f"out-{batch.id}"] = "".join(_dumps(server, x) + "\n" for x in _faulty(server, [*ok])).encode()
+                server.files[f"out-{batch.id}"] = "".join(
+                    _dumps(server, x) + "\n" for x in _faulty(server, [*ok])
+                ).encode()
                 out["output_file_id"] = f"out-{batch.id}"
             if bad:
                 server.files[f"err-{batch.id}"] = "".join(json.dumps(x) + "\n" for x in bad).encode()
@@ -440,13 +561,24 @@ def _anthropic_batch(server: FakeBatchServer, batch: FakeBatch, *, peek: bool = 
     counts = {"processing": len(batch.requests), "succeeded": 0, "errored": 0, "canceled": 0, "expired": 0}
     if ended:
         kinds = Counter(r["kind"] for r in server._results(batch))
-        counts = {"processing": 0, "succeeded": kinds["ok"], "errored": kinds["error"], "canceled": kinds["canceled"],
-                  "expired": kinds["expired"]}
-    return {"id": batch.id, "type": "message_batch", "processing_status": "ended" if ended else "in_progress",
-            "request_counts": counts,
-            "results_url": f"{server.root}/v1/messages/batches/{batch.id}/results" if ended else None,
-            "created_at": _iso(batch.created_at), "ended_at": None, "expires_at": "2026-12-02T00:00:00Z",
-            "cancel_initiated_at": _iso(batch.created_at) if batch.canceled and ended else None}
+        counts = {
+            "processing": 0,
+            "succeeded": kinds["ok"],
+            "errored": kinds["error"],
+            "canceled": kinds["canceled"],
+            "expired": kinds["expired"],
+        }
+    return {
+        "id": batch.id,
+        "type": "message_batch",
+        "processing_status": "ended" if ended else "in_progress",
+        "request_counts": counts,
+        "results_url": f"{server.root}/v1/messages/batches/{batch.id}/results" if ended else None,
+        "created_at": _iso(batch.created_at),
+        "ended_at": None,
+        "expires_at": "2026-12-02T00:00:00Z",
+        "cancel_initiated_at": _iso(batch.created_at) if batch.canceled and ended else None,
+    }
 
 
 def _anthropic_results(server: FakeBatchServer, batch: FakeBatch) -> bytes:
@@ -455,8 +587,10 @@ def _anthropic_results(server: FakeBatchServer, batch: FakeBatch) -> bytes:
         if r["kind"] == "ok":
             result = {"type": "succeeded", "message": r["body"]}
         elif r["kind"] == "error":
-            result = {"type": "errored", "error": {"type": "error", "error": {"type": "invalid_request_error",
-                                                                              "message": r["message"]}}}
+            result = {
+                "type": "errored",
+                "error": {"type": "error", "error": {"type": "invalid_request_error", "message": r["message"]}},
+            }
         else:
             result = {"type": r["kind"]}
         lines.append(_dumps(server, {"custom_id": r["custom_id"], "result": result}))
@@ -466,15 +600,23 @@ def _anthropic_results(server: FakeBatchServer, batch: FakeBatch) -> bytes:
 
 def _gemini_operation(server: FakeBatchServer, batch: FakeBatch, *, peek: bool = False) -> dict[str, Any]:
     ended = batch.polls >= server.steps and not peek
-    state = {"completed": "BATCH_STATE_SUCCEEDED", "expired": "BATCH_STATE_EXPIRED", "failed": "BATCH_STATE_FAILED",
-             "cancelled": "BATCH_STATE_CANCELLED"}
+    state = {
+        "completed": "BATCH_STATE_SUCCEEDED",
+        "expired": "BATCH_STATE_EXPIRED",
+        "failed": "BATCH_STATE_FAILED",
+        "cancelled": "BATCH_STATE_CANCELLED",
+    }
     end_state = "cancelled" if batch.canceled else batch.end_state
     if end_state == "completed" and any(server._expired(batch, i) for i in range(len(batch.requests))):
         end_state = "expired"  # Gemini expires a batch as a whole: the requests it did not reach get no response
-    meta = {"@type": "type.googleapis.com/google.ai.generativelanguage.v1main.GenerateContentBatch", "name": batch.id,
-            "displayName": batch.metadata.get("displayName"), "model": f"models/{batch.metadata.get('model')}",
-            "createTime": _iso(batch.created_at),
-            "state": state[end_state] if ended else ("BATCH_STATE_PENDING" if batch.polls == 0 else "BATCH_STATE_RUNNING")}
+    meta = {
+        "@type": "type.googleapis.com/google.ai.generativelanguage.v1main.GenerateContentBatch",
+        "name": batch.id,
+        "displayName": batch.metadata.get("displayName"),
+        "model": f"models/{batch.metadata.get('model')}",
+        "createTime": _iso(batch.created_at),
+        "state": state[end_state] if ended else ("BATCH_STATE_PENDING" if batch.polls == 0 else "BATCH_STATE_RUNNING"),
+    }
     out: dict[str, Any] = {"name": batch.id, "metadata": meta, "done": ended}
     if ended and batch.end_state == "failed":
         out["error"] = {"code": 400, "message": "invalid model"}
@@ -489,16 +631,23 @@ def _gemini_operation(server: FakeBatchServer, batch: FakeBatch, *, peek: bool =
             # expired and canceled requests get no response at all
         # int64 counts are JSON strings in Google's APIs
         ok = sum(1 for r in responses if "response" in r)
-        meta["batchStats"] = {"requestCount": str(len(batch.requests)), "successfulRequestCount": str(ok),
-                              "failedRequestCount": str(len(responses) - ok),
-                              "pendingRequestCount": str(len(batch.requests) - len(responses))}
-        output: dict[str, Any] = {"@type": "type.googleapis.com/google.ai.generativelanguage.v1main.GenerateContentBatchOutput"}
+        meta["batchStats"] = {
+            "requestCount": str(len(batch.requests)),
+            "successfulRequestCount": str(ok),
+            "failedRequestCount": str(len(responses) - ok),
+            "pendingRequestCount": str(len(batch.requests) - len(responses)),
+        }
+        output: dict[str, Any] = {
+            "@type": "type.googleapis.com/google.ai.generativelanguage.v1main.GenerateContentBatchOutput"
+        }
         if server.results_fault == "responses_file":
             name = f"files/batch-{batch.id.split('/')[-1]}"
             with server.lock:
-                server.files[name] = "".join(_dumps(server, {"key": r["metadata"]["key"], **{k: v for k, v in r.items()
-                                                                                               if k != "metadata"}}) + "\n"
-                                             for r in responses).encode()
+                server.files[name] = "".join(
+                    _dumps(server, {"key": r["metadata"]["key"], **{k: v for k, v in r.items() if k != "metadata"}})
+                    + "\n"
+                    for r in responses
+                ).encode()
             output["responsesFile"] = name
         else:
             kept = [json.loads(x) for x in _faulty(server, [json.dumps(r) for r in responses])]

@@ -97,7 +97,9 @@ class Received:
 
     @property
     def has_image(self) -> bool:
-        return any(p.get("type") in ("image_url", "image") or "inline_data" in p or "inlineData" in p for p in self._parts())
+        return any(
+            p.get("type") in ("image_url", "image") or "inline_data" in p or "inlineData" in p for p in self._parts()
+        )
 
     @property
     def stage(self) -> str:
@@ -124,7 +126,12 @@ class Received:
             return out
         system = self.body.get("system")
         if system:
-            out.append(("system", [_part(p) for p in ([{"type": "text", "text": system}] if isinstance(system, str) else system)]))
+            out.append(
+                (
+                    "system",
+                    [_part(p) for p in ([{"type": "text", "text": system}] if isinstance(system, str) else system)],
+                )
+            )
         for turn in self.body.get("messages", []):
             content = turn.get("content", "")
             parts = [{"type": "text", "text": content}] if isinstance(content, str) else content
@@ -184,13 +191,22 @@ class Reply:
     choices: list[str] | None = None  # OpenAI protocol: these answers as the completion's choices (a request with n)
 
     @classmethod
-    def error(cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0) -> Reply:
+    def error(
+        cls, status: int, message: str = "scripted error", *, retry_after: float | None = None, delay: float = 0.0
+    ) -> Reply:
         headers = {"Retry-After": str(retry_after)} if retry_after is not None else {}
         kind = {429: "rate_limit_exceeded", 401: "invalid_api_key"}.get(status, "server_error")
-        return cls(status=status, headers=headers, delay=delay, body={"error": {"message": message, "type": kind, "code": kind}})
+        return cls(
+            status=status,
+            headers=headers,
+            delay=delay,
+            body={"error": {"message": message, "type": kind, "code": kind}},
+        )
 
 
-GOOD_ACTIONS_JSON = json.dumps({"actions": [[5.0, 0.0], [5.2, 0.001], [5.4, 0.002], [5.6, 0.0], [5.8, -0.001], [6.0, 0.0]]})
+GOOD_ACTIONS_JSON = json.dumps(
+    {"actions": [[5.0, 0.0], [5.2, 0.001], [5.4, 0.002], [5.6, 0.0], [5.8, -0.001], [6.0, 0.0]]}
+)
 JSON_TOOL = "json_tool_call"  # the tool litellm forces for Anthropic models without native structured outputs
 
 
@@ -347,7 +363,10 @@ def _blocks(req: Received, counter: TokenCounter) -> list[_Block]:
 Script = Callable[[Received], Reply] | Sequence[Reply]
 
 
-_FINISH = {"anthropic": {"stop": "end_turn", "length": "max_tokens"}, "gemini": {"stop": "STOP", "length": "MAX_TOKENS"}}
+_FINISH = {
+    "anthropic": {"stop": "end_turn", "length": "max_tokens"},
+    "gemini": {"stop": "STOP", "length": "MAX_TOKENS"},
+}
 
 
 def _completion(req: Received, reply: Reply) -> dict[str, Any]:
@@ -357,30 +376,58 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
         content: list[dict[str, Any]] = [{"type": "text", "text": reply.content}]
         if req.forced_tool and reply.content is not None:
             try:
-                content = [{"type": "tool_use", "id": f"toolu_{req.index}", "name": JSON_TOOL, "input": json.loads(reply.content)}]
+                content = [
+                    {
+                        "type": "tool_use",
+                        "id": f"toolu_{req.index}",
+                        "name": JSON_TOOL,
+                        "input": json.loads(reply.content),
+                    }
+                ]
                 finish = "tool_use" if reply.finish_reason == "stop" else finish
             except json.JSONDecodeError:
                 pass  # not JSON: answered as text, as a model ignoring the tool would
         # Anthropic's input_tokens leave out the tokens read from and written to the cache
-        usage = {"input_tokens": reply.prompt_tokens - reply.cached_tokens - reply.cache_write_tokens,
-                 "output_tokens": reply.completion_tokens, "cache_read_input_tokens": reply.cached_tokens,
-                 "cache_creation_input_tokens": reply.cache_write_tokens}
-        out = {"id": f"msg_{req.index}", "type": "message", "role": "assistant", "model": req.body.get("model", "fake"),
-               "content": content, "stop_reason": finish, "stop_sequence": None, "usage": usage}
+        usage = {
+            "input_tokens": reply.prompt_tokens - reply.cached_tokens - reply.cache_write_tokens,
+            "output_tokens": reply.completion_tokens,
+            "cache_read_input_tokens": reply.cached_tokens,
+            "cache_creation_input_tokens": reply.cache_write_tokens,
+        }
+        out = {
+            "id": f"msg_{req.index}",
+            "type": "message",
+            "role": "assistant",
+            "model": req.body.get("model", "fake"),
+            "content": content,
+            "stop_reason": finish,
+            "stop_sequence": None,
+            "usage": usage,
+        }
     elif req.protocol == "gemini":
         # Gemini counts thoughts apart from the answer's (candidates) tokens; the total holds both
         thoughts = reply.reasoning_tokens or 0
-        usage = {"promptTokenCount": reply.prompt_tokens, "candidatesTokenCount": reply.completion_tokens - thoughts,
-                 "totalTokenCount": reply.prompt_tokens + reply.completion_tokens}
+        usage = {
+            "promptTokenCount": reply.prompt_tokens,
+            "candidatesTokenCount": reply.completion_tokens - thoughts,
+            "totalTokenCount": reply.prompt_tokens + reply.completion_tokens,
+        }
         if reply.reasoning_tokens is not None:
             usage["thoughtsTokenCount"] = thoughts
         if reply.cached_tokens:  # Gemini leaves zero counts out
             usage["cachedContentTokenCount"] = reply.cached_tokens
-        out = {"candidates": [{"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": finish, "index": 0}],
-               "usageMetadata": usage}
+        out = {
+            "candidates": [
+                {"content": {"parts": [{"text": reply.content}], "role": "model"}, "finishReason": finish, "index": 0}
+            ],
+            "usageMetadata": usage,
+        }
     else:
-        usage = {"prompt_tokens": reply.prompt_tokens, "completion_tokens": reply.completion_tokens,
-                 "total_tokens": reply.prompt_tokens + reply.completion_tokens}
+        usage = {
+            "prompt_tokens": reply.prompt_tokens,
+            "completion_tokens": reply.completion_tokens,
+            "total_tokens": reply.prompt_tokens + reply.completion_tokens,
+        }
         if reply.reasoning_tokens is not None:
             usage["completion_tokens_details"] = {"reasoning_tokens": reply.reasoning_tokens}
         if reply.cached_tokens or req.counted:
@@ -390,8 +437,10 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
             "object": "chat.completion",
             "created": int(time.time()),
             "model": req.body.get("model", "fake"),
-            "choices": [{"index": i, "message": {"role": "assistant", "content": text}, "finish_reason": finish}
-                        for i, text in enumerate(reply.choices if reply.choices is not None else [reply.content])],
+            "choices": [
+                {"index": i, "message": {"role": "assistant", "content": text}, "finish_reason": finish}
+                for i, text in enumerate(reply.choices if reply.choices is not None else [reply.content])
+            ],
             "usage": usage,
         }
     if not reply.usage:
@@ -403,8 +452,9 @@ def _completion(req: Received, reply: Reply) -> dict[str, Any]:
 def _compressed(chunks: Iterable[bytes], encoding: str) -> bytes:
     """``chunks`` as one body in ``encoding`` (see :attr:`Reply.encoding`); a name the server only declares (br, …)
     leaves the bytes as they are."""
-    wbits = {"gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS, "raw-deflate": -zlib.MAX_WBITS}.get(_wire_name(encoding)
-                                                                                                          if encoding.startswith("gzip") else encoding)
+    wbits = {"gzip": 16 + zlib.MAX_WBITS, "deflate": zlib.MAX_WBITS, "raw-deflate": -zlib.MAX_WBITS}.get(
+        _wire_name(encoding) if encoding.startswith("gzip") else encoding
+    )
     if wbits is None:
         return b"".join(chunks)
 
@@ -414,13 +464,13 @@ def _compressed(chunks: Iterable[bytes], encoding: str) -> bytes:
 
     if encoding == "gzip-members":
         body = b"".join(chunks)
-        return pack([body[: len(body) // 2]]) + pack([body[len(body) // 2:]])
+        return pack([body[: len(body) // 2]]) + pack([body[len(body) // 2 :]])
     data = pack(chunks)
     if encoding == "gzip-cut":
         return data[:-12]
     if encoding == "gzip-corrupt":
         middle = len(data) // 2
-        return data[:middle] + bytes([data[middle] ^ 0xFF]) + data[middle + 1:]
+        return data[:middle] + bytes([data[middle] ^ 0xFF]) + data[middle + 1 :]
     return data
 
 
@@ -432,8 +482,17 @@ def _wire_name(encoding: str) -> str:
 class FakeOpenAIServer:
     """The loopback server; a context manager. ``url`` ends in ``/v1`` (an OpenAI ``api_base``)."""
 
-    def __init__(self, script: Script | None = None, *, latency: float = 0.0, host: str = "127.0.0.1", port: int = 0,
-                 record: bool = True, count_tokens: bool = False, prefix_cache: bool = False) -> None:
+    def __init__(
+        self,
+        script: Script | None = None,
+        *,
+        latency: float = 0.0,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        record: bool = True,
+        count_tokens: bool = False,
+        prefix_cache: bool = False,
+    ) -> None:
         self.latency = latency  # added to every reply's own delay
         self.requests: list[Received] = []
         self.bulk_sent: list[int] = []  # per reply with ``bulk``: body bytes written before the client stopped reading
@@ -487,7 +546,12 @@ class FakeOpenAIServer:
                     body = json.loads(raw or b"{}")
                 except json.JSONDecodeError:
                     body = {}
-                req = Received(path=self.path, headers={k.lower(): v for k, v in self.headers.items()}, body=body, index=next(server._counter))
+                req = Received(
+                    path=self.path,
+                    headers={k.lower(): v for k, v in self.headers.items()},
+                    body=body,
+                    index=next(server._counter),
+                )
                 if server.record:
                     with server._lock:
                         server.requests.append(req)
@@ -534,7 +598,7 @@ class FakeOpenAIServer:
                         self.wfile.flush()
                         for i in range(len(data)):
                             time.sleep(reply.trickle)
-                            self.wfile.write(data[i:i + 1])
+                            self.wfile.write(data[i : i + 1])
                             self.wfile.flush()
                         return
                     self.wfile.write(data)
@@ -546,8 +610,10 @@ class FakeOpenAIServer:
                 reading (compressed whole first when ``reply.encoding``: small on the wire, ``bulk`` bytes decoded);
                 the bytes written are appended to ``server.bulk_sent``."""
                 marker = "@@BULK@@"
-                head, tail = (part.encode() for part in
-                              json.dumps(_completion(req, dataclasses.replace(reply, content=marker))).split(marker))
+                head, tail = (
+                    part.encode()
+                    for part in json.dumps(_completion(req, dataclasses.replace(reply, content=marker))).split(marker)
+                )
                 piece = b"x" * (1 << 16)
                 count, rest = divmod(reply.bulk, len(piece))
 
@@ -590,12 +656,19 @@ class FakeOpenAIServer:
         if self.counter is None or reply.status != 200 or reply.body is not None:
             return reply
         blocks = _blocks(req, self.counter)
-        cached, written = self.cache.lookup(req.protocol, str(req.body.get("model", "")), blocks) if self.cache else (0, 0)
+        cached, written = (
+            self.cache.lookup(req.protocol, str(req.body.get("model", "")), blocks) if self.cache else (0, 0)
+        )
         req.counted, req.prompt_tokens = True, sum(b.tokens for b in blocks)
         req.cached_tokens, req.cache_write_tokens = cached, written
         completion = TokenCounter.text(reply.content or "") + (reply.reasoning_tokens or 0)
-        return dataclasses.replace(reply, prompt_tokens=req.prompt_tokens, completion_tokens=completion,
-                                   cached_tokens=cached, cache_write_tokens=written)
+        return dataclasses.replace(
+            reply,
+            prompt_tokens=req.prompt_tokens,
+            completion_tokens=completion,
+            cached_tokens=cached,
+            cache_write_tokens=written,
+        )
 
     def start(self) -> FakeOpenAIServer:
         self._thread = threading.Thread(target=self._httpd.serve_forever, kwargs={"poll_interval": 0.05}, daemon=True)

@@ -74,7 +74,10 @@ def reference_frames(root: Path, version: str, window: str = "reference") -> dic
     cals = {c["token"]: c for c in read_table(root, version, "calibrated_sensor")}
     cam_sd = {}
     for sd in sds:
-        if sd["is_key_frame"] and sensors[cals[sd["calibrated_sensor_token"]]["sensor_token"]]["channel"] == "CAM_FRONT":
+        if (
+            sd["is_key_frame"]
+            and sensors[cals[sd["calibrated_sensor_token"]]["sensor_token"]]["channel"] == "CAM_FRONT"
+        ):
             cam_sd[sd["sample_token"]] = sd
     out = {}
     for scene in sorted(scenes, key=lambda s: s["name"]):
@@ -95,7 +98,7 @@ def reference_frames(root: Path, version: str, window: str = "reference") -> dic
             cx, cy = pts[c]
             cos, sin = math.cos(yaws[c]), math.sin(yaws[c])
 
-            def ego(p):
+            def ego(p, cx=cx, cy=cy, cos=cos, sin=sin):
                 dx, dy = p[0] - cx, p[1] - cy
                 return (cos * dx + sin * dy, -sin * dx + cos * dy)
 

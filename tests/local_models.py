@@ -30,14 +30,40 @@ _CORPUS = [
     "speed curvature [(5.0, 0.0), (5.1, 0.01), (5.2, -0.02)] m/s 1/m turning left right lane",
 ] * 4
 
-QWEN_SPECIALS = ["<|endoftext|>", "<|im_start|>", "<|im_end|>", "<|vision_start|>", "<|vision_end|>",
-                 "<|image_pad|>", "<|video_pad|>"]
-LLAMA_SPECIALS = ["<|begin_of_text|>", "<|end_of_text|>", "<|start_header_id|>", "<|end_header_id|>", "<|eot_id|>",
-                  "<|finetune_right_pad_id|>", "<|python_tag|>", "<|image|>"]
+QWEN_SPECIALS = [
+    "<|endoftext|>",
+    "<|im_start|>",
+    "<|im_end|>",
+    "<|vision_start|>",
+    "<|vision_end|>",
+    "<|image_pad|>",
+    "<|video_pad|>",
+]
+LLAMA_SPECIALS = [
+    "<|begin_of_text|>",
+    "<|end_of_text|>",
+    "<|start_header_id|>",
+    "<|end_header_id|>",
+    "<|eot_id|>",
+    "<|finetune_right_pad_id|>",
+    "<|python_tag|>",
+    "<|image|>",
+]
 
-LLAMA4_SPECIALS = ["<|begin_of_text|>", "<|end_of_text|>", "<|header_start|>", "<|header_end|>", "<|eot|>",
-                   "<|finetune_right_pad|>", "<|image_start|>", "<|image_end|>", "<|image|>", "<|patch|>",
-                   "<|tile_x_separator|>", "<|tile_y_separator|>"]
+LLAMA4_SPECIALS = [
+    "<|begin_of_text|>",
+    "<|end_of_text|>",
+    "<|header_start|>",
+    "<|header_end|>",
+    "<|eot|>",
+    "<|finetune_right_pad|>",
+    "<|image_start|>",
+    "<|image_end|>",
+    "<|image|>",
+    "<|patch|>",
+    "<|tile_x_separator|>",
+    "<|tile_y_separator|>",
+]
 
 # The families' chat templates, reduced to what a single user turn of [image, text] needs (plus system/assistant turns).
 QWEN_TEMPLATE = (
@@ -58,8 +84,11 @@ LLAMA_TEMPLATE = (
     "{% if add_generation_prompt %}<|start_header_id|>assistant<|end_header_id|>\n\n{% endif %}"
 )
 
-LLAMA4_TEMPLATE = LLAMA_TEMPLATE.replace("<|start_header_id|>", "<|header_start|>").replace(
-    "<|end_header_id|>", "<|header_end|>").replace("<|eot_id|>", "<|eot|>")
+LLAMA4_TEMPLATE = (
+    LLAMA_TEMPLATE.replace("<|start_header_id|>", "<|header_start|>")
+    .replace("<|end_header_id|>", "<|header_end|>")
+    .replace("<|eot_id|>", "<|eot|>")
+)
 
 
 def byte_level_tokenizer(specials: list[str], *, bos: str | None, eos: str, pad: str, vocab_size: int = 384):
@@ -70,11 +99,16 @@ def byte_level_tokenizer(specials: list[str], *, bos: str | None, eos: str, pad:
     tok = Tokenizer(models.BPE())
     tok.pre_tokenizer = pre_tokenizers.ByteLevel(add_prefix_space=False)
     tok.decoder = decoders.ByteLevel()
-    trainer = trainers.BpeTrainer(vocab_size=vocab_size, special_tokens=specials, show_progress=False,
-                                  initial_alphabet=pre_tokenizers.ByteLevel.alphabet())
+    trainer = trainers.BpeTrainer(
+        vocab_size=vocab_size,
+        special_tokens=specials,
+        show_progress=False,
+        initial_alphabet=pre_tokenizers.ByteLevel.alphabet(),
+    )
     tok.train_from_iterator(_CORPUS, trainer=trainer)
-    return PreTrainedTokenizerFast(tokenizer_object=tok, bos_token=bos, eos_token=eos, pad_token=pad, unk_token=None,
-                                   padding_side="left")
+    return PreTrainedTokenizerFast(
+        tokenizer_object=tok, bos_token=bos, eos_token=eos, pad_token=pad, unk_token=None, padding_side="left"
+    )
 
 
 def _qwen_tokenizer():
@@ -88,8 +122,9 @@ def _ids(tokenizer, *tokens: str) -> list[int]:
 def _qwen_image_processor(patch: int, *, max_pixels: int = 64 * 64):
     from transformers import Qwen2VLImageProcessor
 
-    return Qwen2VLImageProcessor(patch_size=patch, temporal_patch_size=2, merge_size=2,
-                                 min_pixels=(2 * patch) ** 2, max_pixels=max_pixels)
+    return Qwen2VLImageProcessor(
+        patch_size=patch, temporal_patch_size=2, merge_size=2, min_pixels=(2 * patch) ** 2, max_pixels=max_pixels
+    )
 
 
 def _qwen_video_processor(family: str, patch: int):
@@ -104,16 +139,30 @@ def _text(tokenizer, dims: dict[str, int], **extra):
     """Tiny decoder dimensions shared by the families (a few hundred thousand parameters)."""
     eos, pad = _ids(tokenizer, tokenizer.eos_token, tokenizer.pad_token)
     hidden, heads = dims["hidden_size"], dims["heads"]
-    return dict(vocab_size=len(tokenizer), hidden_size=hidden, intermediate_size=2 * hidden, num_hidden_layers=2,
-                num_attention_heads=heads, num_key_value_heads=max(1, heads // 2), max_position_embeddings=4096,
-                bos_token_id=tokenizer.bos_token_id, eos_token_id=eos, pad_token_id=pad, **extra)
+    return dict(
+        vocab_size=len(tokenizer),
+        hidden_size=hidden,
+        intermediate_size=2 * hidden,
+        num_hidden_layers=2,
+        num_attention_heads=heads,
+        num_key_value_heads=max(1, heads // 2),
+        max_position_embeddings=4096,
+        bos_token_id=tokenizer.bos_token_id,
+        eos_token_id=eos,
+        pad_token_id=pad,
+        **extra,
+    )
 
 
 def _mrope(dims: dict[str, int], **extra) -> dict[str, object]:
     """Multimodal RoPE over (time, height, width): the sections split half the head dimension."""
     half = dims["hidden_size"] // dims["heads"] // 2
-    return {"rope_type": "default", "rope_theta": 10000.0, "mrope_section": [half // 2, half // 4, half - half // 2 - half // 4],
-            **extra}
+    return {
+        "rope_type": "default",
+        "rope_theta": 10000.0,
+        "mrope_section": [half // 2, half // 4, half - half // 2 - half // 4],
+        **extra,
+    }
 
 
 def _vision_width(dims: dict[str, int]) -> int:
@@ -132,9 +181,18 @@ def _build_qwen2_vl(tokenizer, dims):
     patch = 8
     config = Qwen2VLConfig(
         text_config=_text(tokenizer, dims, rope_parameters=_mrope(dims)),
-        vision_config=dict(depth=1, embed_dim=_vision_width(dims), hidden_size=dims["hidden_size"], num_heads=2, mlp_ratio=2,
-                           patch_size=patch, spatial_merge_size=2, temporal_patch_size=2),
-        **_qwen_special_ids(tokenizer))
+        vision_config=dict(
+            depth=1,
+            embed_dim=_vision_width(dims),
+            hidden_size=dims["hidden_size"],
+            num_heads=2,
+            mlp_ratio=2,
+            patch_size=patch,
+            spatial_merge_size=2,
+            temporal_patch_size=2,
+        ),
+        **_qwen_special_ids(tokenizer),
+    )
     return Qwen2VLForConditionalGeneration(config), patch
 
 
@@ -144,11 +202,20 @@ def _build_qwen2_5_vl(tokenizer, dims):
     patch = 8
     config = Qwen2_5_VLConfig(
         text_config=_text(tokenizer, dims, rope_parameters=_mrope(dims)),
-        vision_config=dict(depth=1, hidden_size=_vision_width(dims), intermediate_size=2 * _vision_width(dims), num_heads=2,
-                           patch_size=patch, spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"],
-                           window_size=32,
-                           fullatt_block_indexes=[0]),
-        **_qwen_special_ids(tokenizer))
+        vision_config=dict(
+            depth=1,
+            hidden_size=_vision_width(dims),
+            intermediate_size=2 * _vision_width(dims),
+            num_heads=2,
+            patch_size=patch,
+            spatial_merge_size=2,
+            temporal_patch_size=2,
+            out_hidden_size=dims["hidden_size"],
+            window_size=32,
+            fullatt_block_indexes=[0],
+        ),
+        **_qwen_special_ids(tokenizer),
+    )
     return Qwen2_5_VLForConditionalGeneration(config), patch
 
 
@@ -157,12 +224,26 @@ def _build_qwen3_vl(tokenizer, dims):
 
     patch = 8
     config = Qwen3VLConfig(
-        text_config=_text(tokenizer, dims, head_dim=dims["hidden_size"] // dims["heads"],
-                          rope_parameters=_mrope(dims, mrope_interleaved=True)),
-        vision_config=dict(depth=1, hidden_size=_vision_width(dims), intermediate_size=2 * _vision_width(dims), num_heads=2,
-                           patch_size=patch, spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=dims["hidden_size"],
-                           num_position_embeddings=64, deepstack_visual_indexes=[0]),
-        **_qwen_special_ids(tokenizer))
+        text_config=_text(
+            tokenizer,
+            dims,
+            head_dim=dims["hidden_size"] // dims["heads"],
+            rope_parameters=_mrope(dims, mrope_interleaved=True),
+        ),
+        vision_config=dict(
+            depth=1,
+            hidden_size=_vision_width(dims),
+            intermediate_size=2 * _vision_width(dims),
+            num_heads=2,
+            patch_size=patch,
+            spatial_merge_size=2,
+            temporal_patch_size=2,
+            out_hidden_size=dims["hidden_size"],
+            num_position_embeddings=64,
+            deepstack_visual_indexes=[0],
+        ),
+        **_qwen_special_ids(tokenizer),
+    )
     return Qwen3VLForConditionalGeneration(config), patch
 
 
@@ -173,8 +254,12 @@ def _qwen_saver(build: Callable, family: str) -> Callable[[Path, dict[str, int]]
         from transformers import Qwen2_5_VLProcessor, Qwen2VLProcessor, Qwen3VLProcessor
 
         cls = {"qwen2_vl": Qwen2VLProcessor, "qwen2_5_vl": Qwen2_5_VLProcessor, "qwen3_vl": Qwen3VLProcessor}[family]
-        processor = cls(image_processor=_qwen_image_processor(patch), tokenizer=tokenizer,
-                        video_processor=_qwen_video_processor(family, patch), chat_template=QWEN_TEMPLATE)
+        processor = cls(
+            image_processor=_qwen_image_processor(patch),
+            tokenizer=tokenizer,
+            video_processor=_qwen_video_processor(family, patch),
+            chat_template=QWEN_TEMPLATE,
+        )
         _save(model, processor, path)
 
     return save
@@ -183,16 +268,30 @@ def _qwen_saver(build: Callable, family: str) -> Callable[[Path, dict[str, int]]
 def _save_mllama(path: Path, dims: dict[str, int]) -> None:
     from transformers import MllamaConfig, MllamaForConditionalGeneration, MllamaImageProcessor, MllamaProcessor
 
-    tokenizer = byte_level_tokenizer(LLAMA_SPECIALS, bos="<|begin_of_text|>", eos="<|eot_id|>",
-                                     pad="<|finetune_right_pad_id|>")
+    tokenizer = byte_level_tokenizer(
+        LLAMA_SPECIALS, bos="<|begin_of_text|>", eos="<|eot_id|>", pad="<|finetune_right_pad_id|>"
+    )
     tile = 32
-    text = _text(tokenizer, dims, cross_attention_layers=[1], rope_parameters={"rope_type": "default", "rope_theta": 10000.0})
+    text = _text(
+        tokenizer, dims, cross_attention_layers=[1], rope_parameters={"rope_type": "default", "rope_theta": 10000.0}
+    )
     config = MllamaConfig(
         text_config=text,
-        vision_config=dict(hidden_size=16, num_hidden_layers=1, num_global_layers=1, attention_heads=2,
-                           intermediate_size=32, vision_output_dim=32, image_size=tile, patch_size=8, max_num_tiles=2,
-                           intermediate_layers_indices=[0], supported_aspect_ratios=[[1, 1], [1, 2], [2, 1]]),
-        image_token_index=tokenizer.convert_tokens_to_ids("<|image|>"))
+        vision_config=dict(
+            hidden_size=16,
+            num_hidden_layers=1,
+            num_global_layers=1,
+            attention_heads=2,
+            intermediate_size=32,
+            vision_output_dim=32,
+            image_size=tile,
+            patch_size=8,
+            max_num_tiles=2,
+            intermediate_layers_indices=[0],
+            supported_aspect_ratios=[[1, 1], [1, 2], [2, 1]],
+        ),
+        image_token_index=tokenizer.convert_tokens_to_ids("<|image|>"),
+    )
     # vision_output_dim = hidden_size * (1 + len(intermediate_layers_indices))
     model = MllamaForConditionalGeneration(config)
     image_processor = MllamaImageProcessor(size={"height": tile, "width": tile}, max_image_tiles=2)
@@ -203,23 +302,51 @@ def _save_mllama(path: Path, dims: dict[str, int]) -> None:
 def _save_llama4(path: Path, dims: dict[str, int]) -> None:
     from transformers import Llama4Config, Llama4ForConditionalGeneration, Llama4ImageProcessor, Llama4Processor
 
-    tokenizer = byte_level_tokenizer(LLAMA4_SPECIALS, bos="<|begin_of_text|>", eos="<|eot|>", pad="<|finetune_right_pad|>")
+    tokenizer = byte_level_tokenizer(
+        LLAMA4_SPECIALS, bos="<|begin_of_text|>", eos="<|eot|>", pad="<|finetune_right_pad|>"
+    )
     tile, patch = 32, 8
     hidden, heads = dims["hidden_size"], dims["heads"]
-    text = _text(tokenizer, dims, head_dim=hidden // heads, intermediate_size_mlp=2 * hidden, num_local_experts=2,
-                 num_experts_per_tok=1, interleave_moe_layer_step=2, rope_parameters={"rope_type": "default", "rope_theta": 10000.0})
+    text = _text(
+        tokenizer,
+        dims,
+        head_dim=hidden // heads,
+        intermediate_size_mlp=2 * hidden,
+        num_local_experts=2,
+        num_experts_per_tok=1,
+        interleave_moe_layer_step=2,
+        rope_parameters={"rope_type": "default", "rope_theta": 10000.0},
+    )
     boi, eoi, image = _ids(tokenizer, "<|image_start|>", "<|image_end|>", "<|patch|>")
     # the vision MLP's width must equal the pixel-shuffled patch width: hidden / ratio² = 16 / 0.25 = 64
     config = Llama4Config(
         text_config=text,
-        vision_config=dict(hidden_size=16, num_hidden_layers=1, num_attention_heads=2, intermediate_size=64, image_size=tile,
-                           patch_size=patch, pixel_shuffle_ratio=0.5, projector_input_dim=32, projector_output_dim=32,
-                           vision_output_dim=32, rope_parameters={"rope_type": "default", "rope_theta": 10000.0}),
-        boi_token_index=boi, eoi_token_index=eoi, image_token_index=image)
+        vision_config=dict(
+            hidden_size=16,
+            num_hidden_layers=1,
+            num_attention_heads=2,
+            intermediate_size=64,
+            image_size=tile,
+            patch_size=patch,
+            pixel_shuffle_ratio=0.5,
+            projector_input_dim=32,
+            projector_output_dim=32,
+            vision_output_dim=32,
+            rope_parameters={"rope_type": "default", "rope_theta": 10000.0},
+        ),
+        boi_token_index=boi,
+        eoi_token_index=eoi,
+        image_token_index=image,
+    )
     model = Llama4ForConditionalGeneration(config)
     image_processor = Llama4ImageProcessor(size={"height": tile, "width": tile}, max_patches=2)
-    processor = Llama4Processor(image_processor=image_processor, tokenizer=tokenizer, patch_size=patch,
-                                pixel_shuffle_ratio=0.5, chat_template=LLAMA4_TEMPLATE)
+    processor = Llama4Processor(
+        image_processor=image_processor,
+        tokenizer=tokenizer,
+        patch_size=patch,
+        pixel_shuffle_ratio=0.5,
+        chat_template=LLAMA4_TEMPLATE,
+    )
     _save(model, processor, path)
 
 
@@ -254,8 +381,16 @@ def build_tiny_model(family: str, path: str | Path, *, seed: int = 0, hidden_siz
     return path
 
 
-def teach_to_answer(path: str | Path, answer: str = "Keep the lane.", *, prompts: list[str], image: str,
-                    steps: int = 50, lr: float = 6e-3, seed: int = 0) -> Path:
+def teach_to_answer(
+    path: str | Path,
+    answer: str = "Keep the lane.",
+    *,
+    prompts: list[str],
+    image: str,
+    steps: int = 50,
+    lr: float = 6e-3,
+    seed: int = 0,
+) -> Path:
     """Train the checkpoint at ``path`` (in place) to answer each of ``prompts`` with ``answer`` and its end token.
 
     Teacher forcing on [image, prompt] user turns through the model's own processor and chat template; the loss

@@ -63,4 +63,3 @@ class FrameIndex:
         parts = (p for m in req.body["messages"] if isinstance(m["content"], list) for p in m["content"])
         url = next(p["image_url"]["url"] for p in parts if p["type"] == "image_url")
         return self._by_url[url]
-

@@ -24,7 +24,7 @@ G = [(-1.0, 0.0), (-1.2, 0.05), (-1.2, 0.05), (-1.0, 0.0), (0.0, 0.0), (0.0, 0.0
 H = [(3.0, 0.0), (3.0, 0.0), (3.0, 0.0), (3.0, 0.0), (3.0, 0.0), (3.0, 0.0)]  # a history to quote
 J = [(5.0, 0.0), (5.2, 0.01), (5.4, 0.01), (5.6, 0.02), (5.8, 0.02), (6.0, 0.03)]  # issue 19's answer
 K = [(4.5, 0.0), (4.6, 0.0), (4.7, 0.0), (4.8, 0.0), (4.9, 0.0), (5.0, 0.0)]  # ... and its history
-I = [(12.52, 0.0014), (12.61, 0.0012), (12.7, 0.0009), (12.74, 0.0007), (12.8, 0.0004), (12.83, 0.0001)]
+I = [(12.52, 0.0014), (12.61, 0.0012), (12.7, 0.0009), (12.74, 0.0007), (12.8, 0.0004), (12.83, 0.0001)]  # noqa: E741 - the corpus's answers are named by letter
 
 
 def bracket(values, inner="()", sep=", ", pair_sep=", "):
@@ -42,9 +42,15 @@ def case(name, answer, status, values=None, failure=""):
 
 
 QUOTED_BEFORE = "Past actions: " + bracket(H) + ". The road is clear, so: " + bracket(A)
-QUOTED_CLAUDE = ("Looking at the history, the ego vehicle held " + bracket(H, inner="[]") + " for the last 3 seconds.\n\nPredicted actions:\n"
-                 + bracket(A))
-QUOTED_UNBRACKETED = "Past: " + ", ".join(f"({v}, {c})" for v, c in H) + ".\nPredicted: " + ", ".join(f"({v}, {c})" for v, c in A)
+QUOTED_CLAUDE = (
+    "Looking at the history, the ego vehicle held "
+    + bracket(H, inner="[]")
+    + " for the last 3 seconds.\n\nPredicted actions:\n"
+    + bracket(A)
+)
+QUOTED_UNBRACKETED = (
+    "Past: " + ", ".join(f"({v}, {c})" for v, c in H) + ".\nPredicted: " + ", ".join(f"({v}, {c})" for v, c in A)
+)
 RECAP_AFTER = bracket(J) + "\nFor comparison, the past actions were " + bracket(K) + "."
 
 EXACT = [
@@ -55,19 +61,43 @@ EXACT = [
     case("exact-braking", bracket(F), "ok", F),
     case("exact-reversing", bracket(G), "ok", G),
     case("exact-four-decimals", bracket(I), "ok", I),
-    case("exact-paper-example", "[(6.0, -0.001), (5.0, -0.001), (4.0, 0.0), (3.5, 0.0), (3.0, 0.0), (3.0, 0.0)]", "ok", D),
+    case(
+        "exact-paper-example", "[(6.0, -0.001), (5.0, -0.001), (4.0, 0.0), (3.5, 0.0), (3.0, 0.0), (3.0, 0.0)]", "ok", D
+    ),
     case("exact-no-spaces", bracket(A, sep=",", pair_sep=","), "ok", A),
     case("exact-square-pairs", bracket(A, inner="[]"), "ok", A),
     case("exact-surrounding-whitespace", "\n\n  " + bracket(A) + "  \n", "ok", A),
-    case("exact-integers", "[(5, 0), (5, 0), (6, 0), (6, 0), (7, 0), (7, 0)]", "ok", [(5, 0), (5, 0), (6, 0), (6, 0), (7, 0), (7, 0)]),
+    case(
+        "exact-integers",
+        "[(5, 0), (5, 0), (6, 0), (6, 0), (7, 0), (7, 0)]",
+        "ok",
+        [(5, 0), (5, 0), (6, 0), (6, 0), (7, 0), (7, 0)],
+    ),
     case("exact-exponents", "[(5e0, 1e-2), (5.5, 0), (6, -2e-2), (6.5, 0), (7, 0), (7.5, 3E-3)]", "ok", A),
-    case("exact-exponents-gpt", "[(12.52, 1.4e-03), (12.61, 1.2e-03), (12.7, 9e-04), (12.74, 7e-04), (12.8, 4e-04), (12.83, 1e-04)]", "ok", I),
-    case("exact-plus-signs", "[(+5.0, +0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]", "ok", A),
+    case(
+        "exact-exponents-gpt",
+        "[(12.52, 1.4e-03), (12.61, 1.2e-03), (12.7, 9e-04), (12.74, 7e-04), (12.8, 4e-04), (12.83, 1e-04)]",
+        "ok",
+        I,
+    ),
+    case(
+        "exact-plus-signs", "[(+5.0, +0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]", "ok", A
+    ),
     case("exact-leading-dot", "[(5.0, .01), (5.5, 0.0), (6.0, -.02), (6.5, 0.0), (7.0, 0.0), (7.5, .003)]", "ok", A),
     case("exact-negative-zero", "[(3.0, -0.0), (3.0, -0.0), (3.0, 0.0), (3.0, 0.0), (3.0, -0.0), (3.0, 0.0)]", "ok", H),
-    case("exact-multiline", "[\n  (5.0, 0.01),\n  (5.5, 0.0),\n  (6.0, -0.02),\n  (6.5, 0.0),\n  (7.0, 0.0),\n  (7.5, 0.003)\n]", "ok", A),
+    case(
+        "exact-multiline",
+        "[\n  (5.0, 0.01),\n  (5.5, 0.0),\n  (6.0, -0.02),\n  (6.5, 0.0),\n  (7.0, 0.0),\n  (7.5, 0.003)\n]",
+        "ok",
+        A,
+    ),
     case("json-nested-arrays", json.dumps([list(p) for p in A]), "ok", A),
-    case("spaces-inside-brackets", "[ ( 5.0 , 0.01 ) , ( 5.5 , 0.0 ) , ( 6.0 , -0.02 ) , ( 6.5 , 0.0 ) , ( 7.0 , 0.0 ) , ( 7.5 , 0.003 ) ]", "ok", A),
+    case(
+        "spaces-inside-brackets",
+        "[ ( 5.0 , 0.01 ) , ( 5.5 , 0.0 ) , ( 6.0 , -0.02 ) , ( 6.5 , 0.0 ) , ( 7.0 , 0.0 ) , ( 7.5 , 0.003 ) ]",
+        "ok",
+        A,
+    ),
     case("tabs-and-crlf", bracket(A).replace(", (", ",\r\n\t("), "ok", A),
 ]
 
@@ -79,8 +109,18 @@ STRUCTURE = [
     case("gemini-assignment-fence", "```python\nactions = " + bracket(E) + "\n```", "corrected", E),
     case("prose-before", "Here are the predicted actions: " + bracket(A), "corrected", A),
     case("prose-after", bracket(A) + "\nThese keep the vehicle in its lane.", "corrected", A),
-    case("prose-both", "Based on the scene, for the next 6 steps:\n" + bracket(A) + "\nThe ego car slows slightly.", "corrected", A),
-    case("trailing-prose-with-numbers", bracket(F) + "\nThe car brakes from 11.2 m/s to 3.0 m/s over 3 seconds, about 2.7 m/s² on average.", "corrected", F),
+    case(
+        "prose-both",
+        "Based on the scene, for the next 6 steps:\n" + bracket(A) + "\nThe ego car slows slightly.",
+        "corrected",
+        A,
+    ),
+    case(
+        "trailing-prose-with-numbers",
+        bracket(F) + "\nThe car brakes from 11.2 m/s to 3.0 m/s over 3 seconds, about 2.7 m/s² on average.",
+        "corrected",
+        F,
+    ),
     case("trailing-prose-pair-mention", bracket(A) + "\nStep 1 (5.0, 0.01) keeps a slight left bias.", "corrected", A),
     case("trailing-period", bracket(A) + ".", "corrected", A),
     case("trailing-comma", bracket(A)[:-1] + ",]", "corrected", A),
@@ -118,41 +158,115 @@ STRUCTURE = [
     case("json-objects", json.dumps([{"speed": v, "curvature": c} for v, c in A]), "corrected", A),
     case("json-object-wrapped", json.dumps({"actions": [{"v": v, "c": c} for v, c in A]}), "corrected", A),
     case("json-keys-swapped", json.dumps([{"curvature": c, "speed": v} for v, c in E]), "corrected", E),
-    case("json-keys-numbered", json.dumps([{f"v{i + 1}": v, f"k{i + 1}": c} for i, (v, c) in enumerate(C)]), "corrected", C),
+    case(
+        "json-keys-numbered",
+        json.dumps([{f"v{i + 1}": v, f"k{i + 1}": c} for i, (v, c) in enumerate(C)]),
+        "corrected",
+        C,
+    ),
     case("json-pretty", json.dumps({"actions": [[v, c] for v, c in A]}, indent=2), "corrected", A),
     case("labelled-pairs", "[" + ", ".join(f"(v={v}, c={c})" for v, c in A) + "]", "corrected", A),
-    case("labelled-pairs-kappa", "\n".join(f"(v{i + 1}: {v} m/s, κ{i + 1}: {c} 1/m)" for i, (v, c) in enumerate(E)), "corrected", E),
-    case("labelled-pairs-time", "[" + ", ".join(f"(t={i / 2 + 0.5}, {v}, {c})" for i, (v, c) in enumerate(A)) + "]", "failed"),
+    case(
+        "labelled-pairs-kappa",
+        "\n".join(f"(v{i + 1}: {v} m/s, κ{i + 1}: {c} 1/m)" for i, (v, c) in enumerate(E)),
+        "corrected",
+        E,
+    ),
+    case(
+        "labelled-pairs-time",
+        "[" + ", ".join(f"(t={i / 2 + 0.5}, {v}, {c})" for i, (v, c) in enumerate(A)) + "]",
+        "failed",
+    ),
     # kind 1: reasoning blocks and quoted history
-    case("think-block", "<think>\nThe history is " + bracket(H) + ", a constant 3 m/s. The light ahead is green, so accelerate.\n</think>\n" + bracket(A), "corrected", A),
-    case("think-block-qwen3", "<think>\nOkay, over the next 3 seconds at 0.5 s intervals I need 6 pairs. Past: " + bracket(H) + ".\n</think>\n\n" + bracket(C), "corrected", C),
-    case("think-close-only", "The vehicle was at 3 m/s " + bracket(H) + "; keep accelerating.\n</think>\n\n" + bracket(A), "corrected", A),
+    case(
+        "think-block",
+        "<think>\nThe history is "
+        + bracket(H)
+        + ", a constant 3 m/s. The light ahead is green, so accelerate.\n</think>\n"
+        + bracket(A),
+        "corrected",
+        A,
+    ),
+    case(
+        "think-block-qwen3",
+        "<think>\nOkay, over the next 3 seconds at 0.5 s intervals I need 6 pairs. Past: "
+        + bracket(H)
+        + ".\n</think>\n\n"
+        + bracket(C),
+        "corrected",
+        C,
+    ),
+    case(
+        "think-close-only",
+        "The vehicle was at 3 m/s " + bracket(H) + "; keep accelerating.\n</think>\n\n" + bracket(A),
+        "corrected",
+        A,
+    ),
     case("thinking-tags", "<thinking>history " + bracket(H) + "</thinking>\n" + bracket(E), "corrected", E),
     case("think-upper-case", "<THINK>" + bracket(H) + "</THINK>" + bracket(F), "corrected", F),
     case("kimi-think-tokens", "\u25c1think\u25b7" + bracket(H) + "\u25c1/think\u25b7" + bracket(A), "corrected", A),
     case("quoted-history-before", QUOTED_BEFORE, "corrected", A),
     case("quoted-history-claude", QUOTED_CLAUDE, "corrected", A),
     case("quoted-history-unbracketed", QUOTED_UNBRACKETED, "corrected", A),
-    case("quoted-history-labelled", f"Past speeds: {[v for v, _ in H]}, past curvatures: {[c for _, c in H]}.\n" + bracket(A), "corrected", A),
+    case(
+        "quoted-history-labelled",
+        f"Past speeds: {[v for v, _ in H]}, past curvatures: {[c for _, c in H]}.\n" + bracket(A),
+        "corrected",
+        A,
+    ),
     case("recap-history-after", RECAP_AFTER, "corrected", J),
-    case("history-only", "The ego vehicle is stopped and stays so: " + bracket(H) + ".", "corrected", H),  # alone, it is the answer
+    case(
+        "history-only", "The ego vehicle is stopped and stays so: " + bracket(H) + ".", "corrected", H
+    ),  # alone, it is the answer
     case("history-echo-after", bracket(A) + "\n(previous: (4.0, 0.0))", "corrected", A),
     # issue 32: keeping one's pace is an answer; a cue wins over the history rule
     case("final-answer-keeps-the-history", "Draft: " + bracket(F) + "\nFinal answer: " + bracket(K), "corrected", K),
-    case("keep-the-pace-then-recap", "Keep the pace: " + bracket(K) + "\nThe previous actions, for reference: " + bracket(K), "corrected", K),
+    case(
+        "keep-the-pace-then-recap",
+        "Keep the pace: " + bracket(K) + "\nThe previous actions, for reference: " + bracket(K),
+        "corrected",
+        K,
+    ),
     # kind 2: self-corrections
-    case("self-correction", bracket(F) + "\nWait, that ignores the red light. Corrected: " + bracket(B), "corrected", B),
-    case("self-correction-reasoning", "First guess: " + bracket(A) + "\nHmm, the car ahead is braking, so let me revise.\nFinal answer: " + bracket(F), "corrected", F),
+    case(
+        "self-correction", bracket(F) + "\nWait, that ignores the red light. Corrected: " + bracket(B), "corrected", B
+    ),
+    case(
+        "self-correction-reasoning",
+        "First guess: "
+        + bracket(A)
+        + "\nHmm, the car ahead is braking, so let me revise.\nFinal answer: "
+        + bracket(F),
+        "corrected",
+        F,
+    ),
     case("self-correction-three", bracket(H) + " no: " + bracket(A) + " actually: " + bracket(C), "corrected", C),
-    case("self-correction-revised", bracket(A) + "\nRevised plan (the pedestrian is crossing): " + bracket(B), "corrected", B),
+    case(
+        "self-correction-revised",
+        bracket(A) + "\nRevised plan (the pedestrian is crossing): " + bracket(B),
+        "corrected",
+        B,
+    ),
     case("repeated-same-list", bracket(A) + "\nSo the actions are " + bracket(A), "corrected", A),
     # kind 4: arithmetic in pairs (a-b is a range or a subtraction: ambiguous, below)
-    case("arithmetic-fraction", "[(5.0, 1/50), (5.0, 1/50), (5.0, 1/100), (5.0, 0), (5.0, 0), (5.0, 0)]", "corrected",
-         [(5.0, 1 / 50), (5.0, 1 / 50), (5.0, 1 / 100), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)]),
-    case("arithmetic-spaced", "[(3.0 + 0.5, 0.0), (3.5 + 0.5, 0.0), (4.0 + 0.5, 0.0), (4.5 + 0.5, 0.0), (5.0 + 0.5, 0.0), (5.5 + 0.5, 0.0)]",
-         "corrected", [(3.5, 0.0), (4.0, 0.0), (4.5, 0.0), (5.0, 0.0), (5.5, 0.0), (6.0, 0.0)]),
-    case("arithmetic-times", "[(5.0, 0.5*0.02), (5.0, 0.01), (5.0, 0.01), (5.0, 0.01), (5.0, 0.01), (5.0, 0.01)]", "corrected",
-         [(5.0, 0.5 * 0.02)] + [(5.0, 0.01)] * 5),
+    case(
+        "arithmetic-fraction",
+        "[(5.0, 1/50), (5.0, 1/50), (5.0, 1/100), (5.0, 0), (5.0, 0), (5.0, 0)]",
+        "corrected",
+        [(5.0, 1 / 50), (5.0, 1 / 50), (5.0, 1 / 100), (5.0, 0.0), (5.0, 0.0), (5.0, 0.0)],
+    ),
+    case(
+        "arithmetic-spaced",
+        "[(3.0 + 0.5, 0.0), (3.5 + 0.5, 0.0), (4.0 + 0.5, 0.0), (4.5 + 0.5, 0.0), (5.0 + 0.5, 0.0), (5.5 + 0.5, 0.0)]",
+        "corrected",
+        [(3.5, 0.0), (4.0, 0.0), (4.5, 0.0), (5.0, 0.0), (5.5, 0.0), (6.0, 0.0)],
+    ),
+    case(
+        "arithmetic-times",
+        "[(5.0, 0.5*0.02), (5.0, 0.01), (5.0, 0.01), (5.0, 0.01), (5.0, 0.01), (5.0, 0.01)]",
+        "corrected",
+        [(5.0, 0.5 * 0.02)] + [(5.0, 0.01)] * 5,
+    ),
 ]
 
 FALLBACK = [
@@ -167,14 +281,38 @@ FALLBACK = [
     case("fence-and-labels", "```\n" + lines(A, "v{i}={v}, c{i}={c}") + "\n```", "corrected", A),
     case("bare-pair-per-line", "\n".join(f"{v} {c}" for v, c in A), "corrected", A),
     case("pairs-in-semicolon-groups", "; ".join(f"{v}, {c}" for v, c in A), "corrected", A),
-    case("speeds-then-curvatures", f"Speeds: {', '.join(str(v) for v, _ in B)}\nCurvatures: {', '.join(str(c) for _, c in B)}", "corrected", B),
-    case("speeds-then-curvatures-slow", "Speeds: 0.8, 0.6, 0.4, 0.2, 0.0, 0.0\nCurvatures: 0.0, 0.0, 0.0, 0.0, 0.0, 0.0", "corrected",
-         [(0.8, 0.0), (0.6, 0.0), (0.4, 0.0), (0.2, 0.0), (0.0, 0.0), (0.0, 0.0)]),
-    case("table-columns", "| Step | Speed (m/s) | Curvature (1/m) |\n|---|---|---|\n" + lines(E, "| t{i} | {v} | {c} |"), "corrected", E),
+    case(
+        "speeds-then-curvatures",
+        f"Speeds: {', '.join(str(v) for v, _ in B)}\nCurvatures: {', '.join(str(c) for _, c in B)}",
+        "corrected",
+        B,
+    ),
+    case(
+        "speeds-then-curvatures-slow",
+        "Speeds: 0.8, 0.6, 0.4, 0.2, 0.0, 0.0\nCurvatures: 0.0, 0.0, 0.0, 0.0, 0.0, 0.0",
+        "corrected",
+        [(0.8, 0.0), (0.6, 0.0), (0.4, 0.0), (0.2, 0.0), (0.0, 0.0), (0.0, 0.0)],
+    ),
+    case(
+        "table-columns",
+        "| Step | Speed (m/s) | Curvature (1/m) |\n|---|---|---|\n" + lines(E, "| t{i} | {v} | {c} |"),
+        "corrected",
+        E,
+    ),
     # kind 3: prose numbers about the horizon are not actions
-    case("prose-horizon-labels", "Over the next 3 seconds at 0.5 s steps:\n" + lines(H, "v{i} = {v}, c{i} = {c}"), "corrected", H),
+    case(
+        "prose-horizon-labels",
+        "Over the next 3 seconds at 0.5 s steps:\n" + lines(H, "v{i} = {v}, c{i} = {c}"),
+        "corrected",
+        H,
+    ),
     case("prose-six-steps", "For the next 6 steps (3 seconds):\n" + lines(E, "v{i} = {v}, c{i} = {c}"), "corrected", E),
-    case("prose-reasoning-then-list", "The light is red, so we decelerate by about 2 m/s per step.\n\nFinal answer: " + bracket(B), "corrected", B),
+    case(
+        "prose-reasoning-then-list",
+        "The light is red, so we decelerate by about 2 m/s per step.\n\nFinal answer: " + bracket(B),
+        "corrected",
+        B,
+    ),
 ]
 
 FAILED = [
@@ -197,7 +335,11 @@ FAILED = [
     # kind 5: fused numbers (a real 72B model, most frames)
     case("fused-72b", "[(3.7640.002)(4.0140.001)(4.2640.001)(4.5140.0)(4.7640.0)(5.0140.0)]", "failed"),
     case("fused-one-pair", bracket(A).replace("(6.0, -0.02)", "(6.0-0.020.0)"), "failed"),
-    case("fused-in-list-of-lists", "[[5.0, 0.01], [5.50.0], [6.0, -0.02], [6.5, 0.0], [7.0, 0.0], [7.5, 0.003]]", "failed"),
+    case(
+        "fused-in-list-of-lists",
+        "[[5.0, 0.01], [5.50.0], [6.0, -0.02], [6.5, 0.0], [7.0, 0.0], [7.5, 0.003]]",
+        "failed",
+    ),
     # kind 6: lost decimal points (leading zeros)
     case("lost-decimal-points", "[(5254,0001),(5559,00005),(5864,0001),(6170,0001),(6475,0001),(6780,0001)]", "failed"),
     case("leading-zero-speed", bracket(A).replace("(5.5,", "(05.5,"), "failed"),
@@ -207,23 +349,44 @@ FAILED = [
     case("stray-text-in-pair", bracket(A).replace("(7.0, 0.0)", "(7.0, about 0)"), "failed"),
     case("quoted-strings-in-pairs", "[" + ", ".join(f'("{v}", "{c}")' for v, c in A) + "]", "failed"),
     case("long-expression", bracket(A).replace("(5.0,", "(5.5-0.25-0.25,"), "failed"),
-    case("stray-number-in-list", "[(5.0, 0.01), (5.5, 0.0), 6.0, (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]", "failed"),
+    case(
+        "stray-number-in-list",
+        "[(5.0, 0.01), (5.5, 0.0), 6.0, (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0.003)]",
+        "failed",
+    ),
     case("json-keys-missing-curvature", json.dumps([{"speed": v} for v, _ in A]), "failed"),
     # a doubled sign: neither sign can be trusted
     case("doubled-minus", bracket(A).replace("-0.02", "--0.02"), "failed"),
     case("plus-minus", bracket(A).replace("0.003", "+-0.003"), "failed"),
-    case("pairs-broken-by-prose", "(5.0, 0.01) to start, and then (5.5, 0.0), after that (6.0, -0.02), (6.5, 0.0), (7.0, 0.0) and (7.5, 0.003)", "failed"),
+    case(
+        "pairs-broken-by-prose",
+        "(5.0, 0.01) to start, and then (5.5, 0.0), after that (6.0, -0.02), (6.5, 0.0), (7.0, 0.0) and (7.5, 0.003)",
+        "failed",
+    ),
 ]
 
 # unambiguous shapes that are not pairs: read
 SHAPES = [
     case("flat-list", "[" + ", ".join(f"{v}, {c}" for v, c in A) + "]", "corrected", A),
-    case("flat-list-gpt-4o", "The actions are: [11.478, 0.0, 11.528, 0.0, 11.578, 0.0, 11.628, 0.0, 11.678, 0.0, 11.728, 0.0]", "corrected",
-         [(11.478, 0.0), (11.528, 0.0), (11.578, 0.0), (11.628, 0.0), (11.678, 0.0), (11.728, 0.0)]),
-    case("space-separated-items-llama", "[11.478 0.0, 11.528 0.0, 11.578 0.0, 11.628 0.0, 11.678 0.0, 11.728 0.0]", "corrected",
-         [(11.478, 0.0), (11.528, 0.0), (11.578, 0.0), (11.628, 0.0), (11.678, 0.0), (11.728, 0.0)]),
+    case(
+        "flat-list-gpt-4o",
+        "The actions are: [11.478, 0.0, 11.528, 0.0, 11.578, 0.0, 11.628, 0.0, 11.678, 0.0, 11.728, 0.0]",
+        "corrected",
+        [(11.478, 0.0), (11.528, 0.0), (11.578, 0.0), (11.628, 0.0), (11.678, 0.0), (11.728, 0.0)],
+    ),
+    case(
+        "space-separated-items-llama",
+        "[11.478 0.0, 11.528 0.0, 11.578 0.0, 11.628 0.0, 11.678 0.0, 11.728 0.0]",
+        "corrected",
+        [(11.478, 0.0), (11.528, 0.0), (11.578, 0.0), (11.628, 0.0), (11.678, 0.0), (11.728, 0.0)],
+    ),
     case("speeds-and-curvatures", f"speeds = {[v for v, _ in A]}\ncurvatures = {[c for _, c in A]}", "corrected", A),
-    case("speeds-and-curvatures-json", json.dumps({"speeds": [v for v, _ in C], "curvatures": [c for _, c in C]}), "corrected", C),
+    case(
+        "speeds-and-curvatures-json",
+        json.dumps({"speeds": [v for v, _ in C], "curvatures": [c for _, c in C]}),
+        "corrected",
+        C,
+    ),
     case("v-and-k-lists", f"v: {[v for v, _ in E]} k: {[c for _, c in E]}", "corrected", E),
 ]
 
@@ -232,47 +395,125 @@ AMBIGUOUS = [
     case("recap-after-answer", RECAP_AFTER, "failed", failure="ambiguous"),
     case("quoted-history-before-no-history", QUOTED_BEFORE, "failed", failure="ambiguous"),
     case("quoted-history-unbracketed-no-history", QUOTED_UNBRACKETED, "failed", failure="ambiguous"),
-    case("waypoints-after-answer", bracket(A) + "\nWaypoints (x, y): " + bracket([(2.5, 0.0), (5.2, 0.01), (8.1, 0.05), (11.3, 0.1), (14.8, 0.2), (18.5, 0.3)]),
-         "failed", failure="ambiguous"),
-    case("alternative-after-answer", bracket(F) + "\nAlternatively, if the light turns green: " + bracket(A), "failed", failure="ambiguous"),
-    case("accelerations-after-answer", bracket(A) + "\nAccelerations: " + bracket([(1.0, 0.0)] * 6), "failed", failure="ambiguous"),
-    case("final-answer-then-recap", "Final answer: " + bracket(A) + "\nFor comparison: " + bracket(C), "failed", failure="ambiguous"),
-    case("range-in-pairs", "[(4.5-5.0, 0.0), (4.7-5.2, 0.0), (4.9-5.4, 0.0), (5.1-5.6, 0.0), (5.3-5.8, 0.0), (5.5-6.0, 0.0)]", "failed",
-         failure="ambiguous"),
+    case(
+        "waypoints-after-answer",
+        bracket(A)
+        + "\nWaypoints (x, y): "
+        + bracket([(2.5, 0.0), (5.2, 0.01), (8.1, 0.05), (11.3, 0.1), (14.8, 0.2), (18.5, 0.3)]),
+        "failed",
+        failure="ambiguous",
+    ),
+    case(
+        "alternative-after-answer",
+        bracket(F) + "\nAlternatively, if the light turns green: " + bracket(A),
+        "failed",
+        failure="ambiguous",
+    ),
+    case(
+        "accelerations-after-answer",
+        bracket(A) + "\nAccelerations: " + bracket([(1.0, 0.0)] * 6),
+        "failed",
+        failure="ambiguous",
+    ),
+    case(
+        "final-answer-then-recap",
+        "Final answer: " + bracket(A) + "\nFor comparison: " + bracket(C),
+        "failed",
+        failure="ambiguous",
+    ),
+    case(
+        "range-in-pairs",
+        "[(4.5-5.0, 0.0), (4.7-5.2, 0.0), (4.9-5.4, 0.0), (5.1-5.6, 0.0), (5.3-5.8, 0.0), (5.5-6.0, 0.0)]",
+        "failed",
+        failure="ambiguous",
+    ),
     case("range-curvature", bracket(A).replace("(5.5, 0.0)", "(5.5, 0.01-0.02)"), "failed", failure="ambiguous"),
-    case("arithmetic-minus", "[" + ", ".join(f"({v + 0.5}-0.5, {c})" for v, c in A) + "]", "failed", failure="ambiguous"),
-    case("arithmetic-llama-11b", "[(7.2-0.5, 0.002), (6.6-0.5, 0.002), (6.0-0.5, 0.002), (5.4-0.5, 0.002), (4.8-0.5, 0.002), (4.2-0.5, 0.002)]",
-         "failed", failure="ambiguous"),
+    case(
+        "arithmetic-minus", "[" + ", ".join(f"({v + 0.5}-0.5, {c})" for v, c in A) + "]", "failed", failure="ambiguous"
+    ),
+    case(
+        "arithmetic-llama-11b",
+        "[(7.2-0.5, 0.002), (6.6-0.5, 0.002), (6.0-0.5, 0.002), (5.4-0.5, 0.002), (4.8-0.5, 0.002), (4.2-0.5, 0.002)]",
+        "failed",
+        failure="ambiguous",
+    ),
     case("bare-numbers", " ".join(f"{v} {c}" for v, c in A), "failed", failure="ambiguous"),
     case("comma-numbers", ", ".join(f"{v}, {c}" for v, c in A), "failed", failure="ambiguous"),
     case("two-unlabelled-lists", f"{[v for v, _ in A]} and {[c for _, c in A]}", "failed", failure="ambiguous"),
     # issue 32: the history, then a degenerate list (a real deepseek-vl2-16b answer), and nothing calls either the past
-    case("history-then-degenerate", bracket(K) + "\n" + bracket([(0.005, 0.005), (0.009, 0.009), (0.014, 0.014), (0.018, 0.018), (0.023, 0.023),
-                                                               (0.027, 0.027)]), "failed", failure="ambiguous"),
-    case("final-answer-and-past-word-on-the-history", bracket(A) + "\nFinal answer: keep the previous actions " + bracket(K), "failed",
-         failure="ambiguous"),
+    case(
+        "history-then-degenerate",
+        bracket(K)
+        + "\n"
+        + bracket([(0.005, 0.005), (0.009, 0.009), (0.014, 0.014), (0.018, 0.018), (0.023, 0.023), (0.027, 0.027)]),
+        "failed",
+        failure="ambiguous",
+    ),
+    case(
+        "final-answer-and-past-word-on-the-history",
+        bracket(A) + "\nFinal answer: keep the previous actions " + bracket(K),
+        "failed",
+        failure="ambiguous",
+    ),
 ]
 
 TRUNCATED = [
     # kind 7: cut off by the token limit
-    case("truncated-mid-pair", "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.5, 0.0), (5.6, -0.0", "failed", failure="truncated"),
+    case(
+        "truncated-mid-pair",
+        "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.5, 0.0), (5.6, -0.0",
+        "failed",
+        failure="truncated",
+    ),
     case("truncated-before-bracket", bracket(A)[:-1], "failed", failure="truncated"),
     case("truncated-after-comma", bracket(A)[:40], "failed", failure="truncated"),
-    case("truncated-think", "<think>\nThe history shows " + bracket(H) + " and the light is", "failed", failure="truncated"),
+    case(
+        "truncated-think",
+        "<think>\nThe history shows " + bracket(H) + " and the light is",
+        "failed",
+        failure="truncated",
+    ),
     case("truncated-json", json.dumps({"actions": [[v, c] for v, c in A]})[:60], "failed", failure="truncated"),
     case("truncated-lines", "\n".join(f"({v}, {c})" for v, c in A)[:-4], "failed", failure="truncated"),
-    case("truncated-correction", bracket(A) + "\nWait, the pedestrian. Corrected: [(4.0, 0.0), (3.0,", "failed", failure="truncated"),
+    case(
+        "truncated-correction",
+        bracket(A) + "\nWait, the pedestrian. Corrected: [(4.0, 0.0), (3.0,",
+        "failed",
+        failure="truncated",
+    ),
 ]
 
 IMPLAUSIBLE = [
-    case("lost-decimal-no-zeros", "[(5254, 0.001), (5559, 0.001), (5864, 0.001), (6170, 0.001), (6475, 0.001), (6780, 0.001)]", "failed", failure="implausible"),
-    case("km-per-hour", "[(72, 0.0), (72, 0.0), (75, 0.0), (78, 0.0), (80, 0.0), (80, 0.0)]", "failed", failure="implausible"),
-    case("degrees-not-curvature", "[(5.0, 15), (5.0, 15), (5.0, 10), (5.0, 5), (5.0, 0), (5.0, 0)]", "failed", failure="implausible"),
+    case(
+        "lost-decimal-no-zeros",
+        "[(5254, 0.001), (5559, 0.001), (5864, 0.001), (6170, 0.001), (6475, 0.001), (6780, 0.001)]",
+        "failed",
+        failure="implausible",
+    ),
+    case(
+        "km-per-hour",
+        "[(72, 0.0), (72, 0.0), (75, 0.0), (78, 0.0), (80, 0.0), (80, 0.0)]",
+        "failed",
+        failure="implausible",
+    ),
+    case(
+        "degrees-not-curvature",
+        "[(5.0, 15), (5.0, 15), (5.0, 10), (5.0, 5), (5.0, 0), (5.0, 0)]",
+        "failed",
+        failure="implausible",
+    ),
     case("fast-reverse", bracket(G).replace("-1.2", "-12.0"), "failed", failure="implausible"),
-    case("fused-reading-curvature", "[(3.764, 2.0), (4.014, 1.0), (4.264, 1.0), (4.514, 0.0), (4.764, 0.0), (5.014, 0.0)]", "failed", failure="implausible"),
+    case(
+        "fused-reading-curvature",
+        "[(3.764, 2.0), (4.014, 1.0), (4.264, 1.0), (4.514, 0.0), (4.764, 0.0), (5.014, 0.0)]",
+        "failed",
+        failure="implausible",
+    ),
 ]
 
-CASES: list[tuple[str, str, str, list | None, str]] = EXACT + STRUCTURE + FALLBACK + FAILED + SHAPES + AMBIGUOUS + TRUNCATED + IMPLAUSIBLE
+CASES: list[tuple[str, str, str, list | None, str]] = (
+    EXACT + STRUCTURE + FALLBACK + FAILED + SHAPES + AMBIGUOUS + TRUNCATED + IMPLAUSIBLE
+)
 
 # the history the prompt printed, for the cases that quote it (parsed with ``history=``)
 HISTORIES: dict[str, list] = {

@@ -110,18 +110,33 @@ def _history(rng: np.random.Generator) -> tuple[list[list[Any]], list[list[float
         curvatures[0] = -0.0  # the reference zeroes a large negative curvature to -0.0
     if rng.random() < 0.2:
         curvatures[1] = 0  # a degenerate triangle: the reference writes an int 0
-    positions = [[-0.5 * v0 * (7 - k), float(rng.normal(0, 0.05))] for k in range(7)] + [[-0.0 if rng.random() < 0.5 else 0.0, 0.0]]
+    positions = [[-0.5 * v0 * (7 - k), float(rng.normal(0, 0.05))] for k in range(7)] + [
+        [-0.0 if rng.random() < 0.5 else 0.0, 0.0]
+    ]
     return [[s, c] for s, c in zip(speeds, curvatures)], positions
 
 
-def make_frame(rng: np.random.Generator, scene_name: str, index: int, *, answer: str | None = None, image_key: str = "image_name",
-               gt_actions: bool = True, predictions: bool = True, tokens: bool = True) -> dict[str, Any]:
+def make_frame(
+    rng: np.random.Generator,
+    scene_name: str,
+    index: int,
+    *,
+    answer: str | None = None,
+    image_key: str = "image_name",
+    gt_actions: bool = True,
+    predictions: bool = True,
+    tokens: bool = True,
+) -> dict[str, Any]:
     """One frame of a scene file. ``answer`` overrides the model's stage-3 answer (default: a strict list near the truth)."""
     history, obs_positions = _history(rng)
     v = history[-1][0]
-    true_actions = [[max(0.0, v + float(rng.normal(0, 0.5)) * (k + 1) / 3), float(rng.normal(0, 0.01))] for k in range(6)]
+    true_actions = [
+        [max(0.0, v + float(rng.normal(0, 0.5)) * (k + 1) / 3), float(rng.normal(0, 0.01))] for k in range(6)
+    ]
     gt_positions = euler(true_actions)
-    predicted = [[round(a + float(rng.normal(0, 0.6)), 2), round(c + float(rng.normal(0, 0.004)), 4)] for a, c in true_actions]
+    predicted = [
+        [round(a + float(rng.normal(0, 0.6)), 2), round(c + float(rng.normal(0, 0.004)), 4)] for a, c in true_actions
+    ]
     answer = strict_answer(predicted) if answer is None else answer
     scene = SCENES[index % len(SCENES)]
     intent = INTENTS[index % len(INTENTS)]
@@ -137,42 +152,68 @@ def make_frame(rng: np.random.Generator, scene_name: str, index: int, *, answer:
         frame["image_name"] = image
     if image_key in ("image_path", "both"):
         frame["image_path"] = f"/data/nuscenes/samples/CAM_FRONT/{image}"
-    frame.update({
-        "timestamp": stamp,
-        "camera_params": {"rotation": [0.4998, -0.5030, 0.4997, -0.4973], "translation": [1.7008, 0.0159, 1.5110],
-                          "camera_intrinsic": [[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]]},
-        "ego_info": {
-            "position": [float(rng.uniform(300, 2000)), float(rng.uniform(300, 2000))],
-            "heading": float(rng.uniform(-math.pi, math.pi)),
-            "obs_positions": obs_positions,
-            "obs_actions": history,
-            "gt_positions": gt_positions,
-        },
-        "inference": {
-            "scene_prompt": format_long_text(SCENE_PROMPT),
-            "scene_description": format_long_text(scene),
-            "intent_prompt": format_long_text(intent_prompt),
-            "driving_intent": format_long_text(intent),
-            "waypoint_prompt": format_long_text(actions_prompt),
-            "pred_actions_str": answer,
-        },
-    })
+    frame.update(
+        {
+            "timestamp": stamp,
+            "camera_params": {
+                "rotation": [0.4998, -0.5030, 0.4997, -0.4973],
+                "translation": [1.7008, 0.0159, 1.5110],
+                "camera_intrinsic": [[1266.4, 0.0, 816.3], [0.0, 1266.4, 491.5], [0.0, 0.0, 1.0]],
+            },
+            "ego_info": {
+                "position": [float(rng.uniform(300, 2000)), float(rng.uniform(300, 2000))],
+                "heading": float(rng.uniform(-math.pi, math.pi)),
+                "obs_positions": obs_positions,
+                "obs_actions": history,
+                "gt_positions": gt_positions,
+            },
+            "inference": {
+                "scene_prompt": format_long_text(SCENE_PROMPT),
+                "scene_description": format_long_text(scene),
+                "intent_prompt": format_long_text(intent_prompt),
+                "driving_intent": format_long_text(intent),
+                "waypoint_prompt": format_long_text(actions_prompt),
+                "pred_actions_str": answer,
+            },
+        }
+    )
     if gt_actions:
         frame["ego_info"]["gt_actions"] = [[round(a, 3), round(c, 3)] for a, c in true_actions]
     if tokens:
-        frame["token_usage"] = {stage: {"input": int(rng.integers(900, 2500)), "output": int(rng.integers(20, 200))}
-                                for stage in ("scene_prompt", "intent_prompt", "waypoint_prompt")}
-        frame["time_usage"] = {stage: round(float(rng.uniform(0.5, 6.0)), 3) for stage in ("scene_prompt", "intent_prompt", "waypoint_prompt")}
+        frame["token_usage"] = {
+            stage: {"input": int(rng.integers(900, 2500)), "output": int(rng.integers(20, 200))}
+            for stage in ("scene_prompt", "intent_prompt", "waypoint_prompt")
+        }
+        frame["time_usage"] = {
+            stage: round(float(rng.uniform(0.5, 6.0)), 3)
+            for stage in ("scene_prompt", "intent_prompt", "waypoint_prompt")
+        }
     if predictions:
-        frame["predictions"] = {"pred_actions": predicted, "trajectory": euler(predicted)} if answer == strict_answer(predicted) else {"pred_actions_str": answer}
+        frame["predictions"] = (
+            {"pred_actions": predicted, "trajectory": euler(predicted)}
+            if answer == strict_answer(predicted)
+            else {"pred_actions_str": answer}
+        )
     return frame
 
 
-def write_scene(folder: Path, scene_name: str, frames: list[dict[str, Any]], *, metadata: dict[str, Any] | None = None,
-                truncate: bool = False) -> Path:
+def write_scene(
+    folder: Path,
+    scene_name: str,
+    frames: list[dict[str, Any]],
+    *,
+    metadata: dict[str, Any] | None = None,
+    truncate: bool = False,
+) -> Path:
     """Write one scene file (indent 4, as the reference's json.dump); ``truncate`` cuts it mid-way (invalid JSON)."""
-    doc: dict[str, Any] = {"scene_info": {"name": scene_name, "description": "invented", "first_sample_token": "a" * 32,
-                                          "last_sample_token": "b" * 32}}
+    doc: dict[str, Any] = {
+        "scene_info": {
+            "name": scene_name,
+            "description": "invented",
+            "first_sample_token": "a" * 32,
+            "last_sample_token": "b" * 32,
+        }
+    }
     if metadata is not None:
         doc["metadata"] = {**metadata, "total_frames": len(frames)}
     doc["frames"] = frames
@@ -201,24 +242,50 @@ def write_results(root: Path, seed: int = 7) -> dict[str, Any]:
     meta = lambda model: {"model": model, "timestamp": "20250101-120000"}  # noqa: E731
 
     gpt = root / "gpt-4o"
-    write_scene(gpt, "scene-0001", [make_frame(rng, "scene-0001", i, answer=PROSE if i == 2 else None) for i in range(8)], metadata=meta("gpt-4o"))
-    write_scene(gpt, "scene-0002", [make_frame(rng, "scene-0002", i, image_key="image_path", gt_actions=False,
-                                               answer=UNPARSEABLE if i == 1 else None) for i in range(5)])  # an older version: no metadata
-    write_scene(gpt, "scene-0003", [make_frame(rng, "scene-0003", i) for i in range(6)], metadata=meta("gpt-4o"), truncate=True)
+    write_scene(
+        gpt,
+        "scene-0001",
+        [make_frame(rng, "scene-0001", i, answer=PROSE if i == 2 else None) for i in range(8)],
+        metadata=meta("gpt-4o"),
+    )
+    write_scene(
+        gpt,
+        "scene-0002",
+        [
+            make_frame(
+                rng, "scene-0002", i, image_key="image_path", gt_actions=False, answer=UNPARSEABLE if i == 1 else None
+            )
+            for i in range(5)
+        ],
+    )  # an older version: no metadata
+    write_scene(
+        gpt, "scene-0003", [make_frame(rng, "scene-0003", i) for i in range(6)], metadata=meta("gpt-4o"), truncate=True
+    )
     (gpt / "analysis").mkdir()
-    (gpt / "analysis" / "evaluation.json").write_text("{\"not\": \"a scene\"}")
+    (gpt / "analysis" / "evaluation.json").write_text('{"not": "a scene"}')
 
     claude = root / "claude-3.7-sonnet_20250101-120000"
-    frames = [make_frame(rng, "scene-0001", i, predictions=False, answer=LIST_OF_LISTS if i == 3 else None) for i in range(8)]
+    frames = [
+        make_frame(rng, "scene-0001", i, predictions=False, answer=LIST_OF_LISTS if i == 3 else None) for i in range(8)
+    ]
     frames[5]["ego_info"]["obs_actions"][2][1] = float("nan")  # a bad frame: not finite
     write_scene(claude, "scene-0001", frames, metadata=meta("claude-3.7"))
-    frames = [make_frame(rng, "scene-0004", i, image_key="both", answer=TRUNCATED if i == 0 else None) for i in range(11)]
-    frames[7]["ego_info"]["gt_positions"] = frames[7]["ego_info"]["gt_positions"][:5]  # a bad frame: 5 ground-truth points
+    frames = [
+        make_frame(rng, "scene-0004", i, image_key="both", answer=TRUNCATED if i == 0 else None) for i in range(11)
+    ]
+    frames[7]["ego_info"]["gt_positions"] = frames[7]["ego_info"]["gt_positions"][
+        :5
+    ]  # a bad frame: 5 ground-truth points
     write_scene(claude, "scene-0004", frames, metadata=meta("claude-3.7"))
 
     qwen = root / "qwen-2.5-7b"
     answers = {0: FIVE_PAIRS, 2: LOST_DECIMALS, 4: LIST_OF_LISTS}
-    write_scene(qwen, "scene-0001", [make_frame(rng, "scene-0001", i, tokens=i != 1, answer=answers.get(i)) for i in range(6)], metadata=meta("qwen2.5-7b"))
+    write_scene(
+        qwen,
+        "scene-0001",
+        [make_frame(rng, "scene-0001", i, tokens=i != 1, answer=answers.get(i)) for i in range(6)],
+        metadata=meta("qwen2.5-7b"),
+    )
     write_scene(qwen, "scene-0002", [make_frame(rng, "scene-0002", i) for i in range(3)], metadata=meta("qwen2.5-7b"))
     write_scene(qwen, "scene-0005", [make_frame(rng, "scene-0005", i) for i in range(12)], metadata=meta("qwen2.5-7b"))
 

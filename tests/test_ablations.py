@@ -8,10 +8,9 @@ from importlib import resources
 
 import numpy as np
 import pytest
-from fake_openai import FakeOpenAIServer
-from memframes import make_frames
 from PIL import Image
 
+from fake_openai import FakeOpenAIServer
 from lightemma.backends.local import load_image
 from lightemma.cache import request_key
 from lightemma.cli import main as cli_main
@@ -20,10 +19,13 @@ from lightemma.inputs import BLANK_RGB, blank_reference, read_image_bytes, reque
 from lightemma.pipeline import resume, run
 from lightemma.prompts import PromptSet, load_prompt_set
 from lightemma.runs.store import FRAMES_FILE, read_run
+from memframes import make_frames
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
-VARIANTS = pytest.mark.parametrize(("chain", "answer_format"), [("independent", "text"), ("conversation", "text"),
-                                                                ("independent", "structured"), ("conversation", "structured")])
+VARIANTS = pytest.mark.parametrize(
+    ("chain", "answer_format"),
+    [("independent", "text"), ("conversation", "text"), ("independent", "structured"), ("conversation", "structured")],
+)
 # history numbers no prompt text holds otherwise
 HISTORY = np.array([[7.31, 0.0137], [7.42, 0.0159], [7.53, 0.0171], [7.64, 0.0183], [7.75, 0.0195], [7.86, 0.0207]])
 NUMBERS = ("7.31", "7.42", "7.53", "7.64", "7.75", "7.86", "0.0137", "0.0159", "0.0171", "0.0183", "0.0195", "0.0207")
@@ -55,8 +57,16 @@ def stages(server):
 def test_no_image_sends_no_image_in_any_stage(tmp_path, chain, answer_format):
     frames = make_frames(tmp_path, 3)
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", inputs="no-image",
-                     chain=chain, answer_format=answer_format, **FAST)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "runs",
+            inputs="no-image",
+            chain=chain,
+            answer_format=answer_format,
+            **FAST,
+        )
     assert stages(server) == {"scene", "intent", "actions"} and len(server.requests) == 9
     assert all(images(r) == [] for r in server.requests)
     assert all(rec["status"] == "ok" for rec in read_run(result.run_dir).records.values())
@@ -69,8 +79,16 @@ def test_no_image_sends_no_image_in_any_stage(tmp_path, chain, answer_format):
 def test_blank_image_sends_a_uniform_grey_image_of_the_frames_size_in_every_stage(tmp_path, chain, answer_format):
     frames = make_frames(tmp_path, 2, image_size=(320, 180))
     with FakeOpenAIServer() as server:
-        run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", inputs="blank-image",
-            chain=chain, answer_format=answer_format, **FAST)
+        run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "runs",
+            inputs="blank-image",
+            chain=chain,
+            answer_format=answer_format,
+            **FAST,
+        )
     assert stages(server) == {"scene", "intent", "actions"}
     photos = {base64.b64encode(open(f.image_path, "rb").read()).decode() for f in frames}
     for req in server.requests:
@@ -84,13 +102,28 @@ def test_blank_image_sends_a_uniform_grey_image_of_the_frames_size_in_every_stag
 @VARIANTS
 def test_no_history_prompts_hold_none_of_the_history_numbers_in_any_stage(tmp_path, chain, answer_format):
     with FakeOpenAIServer() as server:
-        run("openai/gpt-4o", api_base=server.url, frames=distinct_history(make_frames(tmp_path, 2)), output=tmp_path / "full",
-            chain=chain, answer_format=answer_format, **FAST)
+        run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=distinct_history(make_frames(tmp_path, 2)),
+            output=tmp_path / "full",
+            chain=chain,
+            answer_format=answer_format,
+            **FAST,
+        )
     full = list(server.requests)
     assert any(n in texts(r) for r in full for n in NUMBERS)  # the full prompts do carry them: the check can fail
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=distinct_history(make_frames(tmp_path, 2)),
-                     output=tmp_path / "ablated", inputs="no-history", chain=chain, answer_format=answer_format, **FAST)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=distinct_history(make_frames(tmp_path, 2)),
+            output=tmp_path / "ablated",
+            inputs="no-history",
+            chain=chain,
+            answer_format=answer_format,
+            **FAST,
+        )
     assert stages(server) == {"scene", "intent", "actions"} and len(server.requests) == 6
     for req in server.requests:
         text = texts(req)
@@ -106,7 +139,10 @@ def test_each_ablation_has_its_own_cache_key_and_a_full_request_keeps_its_old_on
     params = {"temperature": 0}
     old = request_key("m", None, params, "text", "digest")
     assert request_key("m", None, params, "text", "digest", inputs="full") == old
-    keys = {request_key("m", None, params, "text", "digest", inputs=i) for i in ("full", "no-image", "blank-image", "no-history")}
+    keys = {
+        request_key("m", None, params, "text", "digest", inputs=i)
+        for i in ("full", "no-image", "blank-image", "no-history")
+    }
     assert len(keys) == 4
 
 
@@ -118,8 +154,15 @@ def test_an_ablated_run_never_replays_a_full_runs_cached_answers(tmp_path):
         first = len(server.requests)
         run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "b", cache=str(cache), **FAST)
         assert len(server.requests) == first  # the same full run: every answer from the cache
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "c", cache=str(cache),
-                     inputs="no-image", **FAST)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "c",
+            cache=str(cache),
+            inputs="no-image",
+            **FAST,
+        )
     # the scene prompt is the same text in both: without an image (and the inputs in the key) it reaches the provider
     assert len(server.requests) == 2 * first
     assert not any(rec["cached"] for rec in read_run(result.run_dir).records.values())
@@ -128,7 +171,9 @@ def test_an_ablated_run_never_replays_a_full_runs_cached_answers(tmp_path):
 def test_resume_keeps_the_inputs_and_refuses_a_changed_one(tmp_path, capsys):
     frames = make_frames(tmp_path, 3)
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", inputs="no-image", **FAST)
+        result = run(
+            "openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", inputs="no-image", **FAST
+        )
         path = result.run_dir / FRAMES_FILE
         lines = path.read_text().splitlines()
         path.write_text(lines[0] + "\n")  # two frames lost: a resume runs them again
@@ -160,7 +205,14 @@ def test_a_custom_set_declares_its_own_no_history_variant_and_is_checked():
     data = _custom_set()
     with pytest.raises(UserError, match="no 'no-history' variant, which --inputs no-history needs"):
         PromptSet.from_dict(data).select(inputs="no-history")
-    data = _custom_set(**{"no-history": {"intent": "Scene: {scene}. Intent?", "actions": "Scene {scene}, intent {intent}: [(v1, c1), …]"}})
+    data = _custom_set(
+        **{
+            "no-history": {
+                "intent": "Scene: {scene}. Intent?",
+                "actions": "Scene {scene}, intent {intent}: [(v1, c1), …]",
+            }
+        }
+    )
     ps = PromptSet.from_dict(data).select(inputs="no-history")
     assert ps.variant == "no-history" and "{history}" not in ps.render("actions", scene="s", intent="i")
     with pytest.raises(UserError, match="holds a history placeholder"):
@@ -180,7 +232,9 @@ def test_local_backends_make_the_blank_image_themselves(tmp_path):
     assert request_image(frame, "no-history") == frame.image_path
     decoded = np.asarray(Image.open(io.BytesIO(read_image_bytes("blank-image:64x36"))))
     assert decoded.shape == (36, 64, 3) and (decoded == 128).all()
-    frame.image_path = str(tmp_path / "gone.jpg")  # unreadable: the call fails as a full run's would, never a guessed size
+    frame.image_path = str(
+        tmp_path / "gone.jpg"
+    )  # unreadable: the call fails as a full run's would, never a guessed size
     with pytest.raises(OSError):
         read_image_bytes(request_image(frame, "blank-image"))
 
@@ -202,14 +256,18 @@ def sees_the_road(req):
 def per_frame_ade(run_dir):
     from lightemma import displacement_errors
 
-    return {fid: float(displacement_errors(np.array(r["trajectory"]), np.array(r["gt_positions"])).mean())
-            for fid, r in read_run(run_dir).records.items()}
+    return {
+        fid: float(displacement_errors(np.array(r["trajectory"]), np.array(r["gt_positions"])).mean())
+        for fid, r in read_run(run_dir).records.items()
+    }
 
 
-def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_each_model_meets_the_best_baseline(tmp_path):
+def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_each_model_meets_the_best_baseline(
+    tmp_path,
+):
     from lightemma.evaluation import evaluate_runs
-    from lightemma.report.evaluation_tables import evaluation_tables
     from lightemma.evaluation.stats import Resampling
+    from lightemma.report.evaluation_tables import evaluation_tables
     from lightemma.report.tables import to_markdown
 
     frames = make_frames(tmp_path, 9)
@@ -220,9 +278,16 @@ def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_eac
     out = tmp_path / "runs"
     with FakeOpenAIServer(sees_the_road) as server:
         full = run("openai/gpt-4o", api_base=server.url, frames=frames, output=out, **FAST).run_dir
-        blind = run("openai/gpt-4o", api_base=server.url, frames=frames[:6], output=out, inputs="no-image", **FAST).run_dir
-        blank = run("openai/gpt-4o", api_base=server.url, frames=frames, output=out, inputs="blank-image", **FAST).run_dir
-    bases = {kind: run(f"baseline:{kind}", frames=frames, output=out, progress=False).run_dir for kind in ("constant", "cv", "ego")}
+        blind = run(
+            "openai/gpt-4o", api_base=server.url, frames=frames[:6], output=out, inputs="no-image", **FAST
+        ).run_dir
+        blank = run(
+            "openai/gpt-4o", api_base=server.url, frames=frames, output=out, inputs="blank-image", **FAST
+        ).run_dir
+    bases = {
+        kind: run(f"baseline:{kind}", frames=frames, output=out, progress=False).run_dir
+        for kind in ("constant", "cv", "ego")
+    }
     evaluation = evaluate_runs([out], resampling=Resampling(n_resamples=2000))
     rows = {r["ablation"]: r for r in evaluation.input_ablations}
     assert set(rows) == {"no-image", "blank-image"}
@@ -235,17 +300,27 @@ def test_ablation_and_full_runs_of_one_model_are_paired_on_common_frames_and_eac
     assert r["ade_avg_diff"] < -1 and r["ade_avg_ci95"][1] < 0  # it uses the image
     assert r["ade_avg_p_holm"] >= r["ade_avg_p"] and r["ade_avg_significant"] in (True, False)
     b = rows["blank-image"]
-    assert b["frames"] == 9 and b["ade_avg_diff"] == pytest.approx(np.mean([ade_full[f] - ade_blank[f] for f in ade_full]))
-    assert abs(b["ade_avg_diff"]) < 1e-9 and b["ade_avg_significant"] is False  # a grey image does as well: no image use shown
+    assert b["frames"] == 9 and b["ade_avg_diff"] == pytest.approx(
+        np.mean([ade_full[f] - ade_blank[f] for f in ade_full])
+    )
+    assert (
+        abs(b["ade_avg_diff"]) < 1e-9 and b["ade_avg_significant"] is False
+    )  # a grey image does as well: no image use shown
     # every model run against the best of constant, cv and ego on the frames scored in both
     gains = {g["model"]: g for g in evaluation.baseline_gains}
     assert set(gains) == {"openai/gpt-4o", "openai/gpt-4o [no-image]", "openai/gpt-4o [blank-image]"}
     base_ade = {kind: per_frame_ade(d) for kind, d in bases.items()}
-    for label, ade, ids in (("openai/gpt-4o", ade_full, sorted(ade_full)), ("openai/gpt-4o [no-image]", ade_blind, common)):
+    for label, ade, ids in (
+        ("openai/gpt-4o", ade_full, sorted(ade_full)),
+        ("openai/gpt-4o [no-image]", ade_blind, common),
+    ):
         means = {kind: np.mean([v[f] for f in ids]) for kind, v in base_ade.items()}
         best = min(means, key=means.get)
         g = gains[label]
-        assert g["baseline"] == f"Baseline ({ {'constant': 'constant actions', 'cv': 'constant velocity', 'ego': 'ego status'}[best] })"
+        assert (
+            g["baseline"]
+            == f"Baseline ({ {'constant': 'constant actions', 'cv': 'constant velocity', 'ego': 'ego status'}[best] })"
+        )
         assert g["frames"] == len(ids)
         assert g["ade_avg_gain"] == pytest.approx(means[best] - np.mean([ade[f] for f in ids]))
     names = [t.name for t in evaluation_tables(evaluation)]

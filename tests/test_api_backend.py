@@ -5,9 +5,9 @@ import base64
 import time
 
 import pytest
-from fake_openai import FakeOpenAIServer, Reply
 from PIL import Image
 
+from fake_openai import FakeOpenAIServer, Reply
 from lightemma.backends import ChatRequest, GenerationParams, create_backend
 from lightemma.backends.api import FatalBackendError
 from lightemma.backends.ratelimit import RateLimiter
@@ -28,7 +28,9 @@ def image(tmp_path):
 
 
 def ask(backend, text="describe", image=None, params=GenerationParams()):
-    req = ChatRequest(text=text, stage="scene", frame_id="scene-1/a", image_path=str(image) if image else None, params=params)
+    req = ChatRequest(
+        text=text, stage="scene", frame_id="scene-1/a", image_path=str(image) if image else None, params=params
+    )
     return asyncio.run(backend.generate([req]))[0]
 
 
@@ -57,14 +59,24 @@ def test_models_that_reject_temperature_0_get_none_sent(image):
 
 # The client's timeout is short only where the case is a timeout: elsewhere a loaded machine (litellm's first
 # call sets itself up inside the attempt's deadline) could time an attempt out before it reaches the server.
-@pytest.mark.parametrize(("first", "timeout"), [
-    (Reply.error(429, retry_after=0.3), 30), (Reply.error(500), 30), (Reply.error(503), 30),
-    (Reply(content="x" * 400, truncate=True), 30), (Reply(content="late", delay=6), 2), (Reply(reset=True), 30),
-], ids=["429-retry-after", "500", "503", "truncated-body", "timeout", "connection-reset"])
+@pytest.mark.parametrize(
+    ("first", "timeout"),
+    [
+        (Reply.error(429, retry_after=0.3), 30),
+        (Reply.error(500), 30),
+        (Reply.error(503), 30),
+        (Reply(content="x" * 400, truncate=True), 30),
+        (Reply(content="late", delay=6), 2),
+        (Reply(reset=True), 30),
+    ],
+    ids=["429-retry-after", "500", "503", "truncated-body", "timeout", "connection-reset"],
+)
 @TRANSPORTS
 def test_transient_failures_are_retried_then_succeed(first, timeout, transport):
     with FakeOpenAIServer([first]) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=timeout, transport=transport)
+        backend = create_backend(
+            "openai/test-model", api_base=server.url, retry=FAST, timeout=timeout, transport=transport
+        )
         start = time.perf_counter()
         result = ask(backend)
         elapsed = time.perf_counter() - start
@@ -73,15 +85,23 @@ def test_transient_failures_are_retried_then_succeed(first, timeout, transport):
         assert elapsed >= 0.3  # the server's Retry-After is honoured
 
 
-@pytest.mark.parametrize(("reply", "error", "timeout"), [
-    (Reply.error(500), "InternalServerError", 30), (Reply.error(429), "RateLimitError", 30),
-    (Reply(content="x" * 400, truncate=True), "APIConnectionError", 30), (Reply(content="late", delay=4), "Timeout", 1),
-    (Reply(reset=True), "APIConnectionError", 30),
-], ids=["500", "429", "truncated", "timeout", "reset"])
+@pytest.mark.parametrize(
+    ("reply", "error", "timeout"),
+    [
+        (Reply.error(500), "InternalServerError", 30),
+        (Reply.error(429), "RateLimitError", 30),
+        (Reply(content="x" * 400, truncate=True), "APIConnectionError", 30),
+        (Reply(content="late", delay=4), "Timeout", 1),
+        (Reply(reset=True), "APIConnectionError", 30),
+    ],
+    ids=["500", "429", "truncated", "timeout", "reset"],
+)
 @TRANSPORTS
 def test_persistent_failures_end_as_a_recorded_error_class_never_as_text(reply, error, timeout, transport):
     with FakeOpenAIServer(lambda req: reply) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, timeout=timeout, transport=transport)
+        backend = create_backend(
+            "openai/test-model", api_base=server.url, retry=FAST, timeout=timeout, transport=transport
+        )
         result = ask(backend)
     assert result.text is None and not result.ok
     assert result.error == error and error in RETRYABLE
@@ -99,7 +119,14 @@ def test_non_retryable_request_errors_fail_at_once(transport):
 @TRANSPORTS
 def test_an_empty_answer_is_an_error_not_text(transport):
     with FakeOpenAIServer(lambda req: Reply(content="")) as server:
-        result = ask(create_backend("openai/test-model", api_base=server.url, retry=RetryPolicy(max_retries=1, base=0.01), transport=transport))
+        result = ask(
+            create_backend(
+                "openai/test-model",
+                api_base=server.url,
+                retry=RetryPolicy(max_retries=1, base=0.01),
+                transport=transport,
+            )
+        )
     assert result.error == "EmptyResponse" and result.text is None
     assert len(server.requests) == 1 and result.input_tokens == 1000  # not retried; its usage still counts
 
@@ -109,8 +136,9 @@ def test_a_rejected_key_stops_the_run_and_the_key_is_not_in_the_message(monkeypa
     secret = "sk-test-TOPSECRET-0123456789"
     monkeypatch.setenv("OPENAI_API_KEY", secret)
     with FakeOpenAIServer(lambda req: Reply.error(401, f"Incorrect API key provided: {secret}")) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, retry=FAST, transport=transport,
-                                 api_key_env="OPENAI_API_KEY")
+        backend = create_backend(
+            "openai/test-model", api_base=server.url, retry=FAST, transport=transport, api_key_env="OPENAI_API_KEY"
+        )
         with pytest.raises(FatalBackendError) as info:
             ask(backend)
     assert server.requests[0].headers["authorization"] == f"Bearer {secret}"
@@ -182,7 +210,9 @@ def test_a_call_without_reported_usage_keeps_its_token_reservation():
     """Unknown usage is not zero usage: the estimate stays taken from the TPM bucket."""
     from lightemma.backends.api import ESTIMATED_TOKENS_PER_CALL
 
-    no_usage = {"choices": [{"index": 0, "message": {"role": "assistant", "content": "a street"}, "finish_reason": "stop"}]}
+    no_usage = {
+        "choices": [{"index": 0, "message": {"role": "assistant", "content": "a street"}, "finish_reason": "stop"}]
+    }
     with FakeOpenAIServer([Reply(body=no_usage)]) as server:
         backend = create_backend("openai/m", api_base=server.url, retry=FAST, transport="direct", tpm=60_000)
         result = ask(backend)
@@ -206,8 +236,18 @@ def test_server_pause_holds_every_caller():
 NATIVE = [
     ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", "/v1/messages", (1000 * 3e-6 + 50 * 1.5e-5) * 100),
     ("claude-3.7-sonnet", "ANTHROPIC_API_KEY", "/v1/messages", (1000 * 3e-6 + 50 * 15e-6) * 100),  # registry price
-    ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", "/models/gemini-2.5-flash:generateContent", (1000 * 3e-7 + 50 * 2.5e-6) * 100),
-    ("Gemini-2.0-Flash", "GEMINI_API_KEY", "/models/gemini-2.0-flash:generateContent", (1000 * 0.1e-6 + 50 * 0.4e-6) * 100),
+    (
+        "gemini/gemini-2.5-flash",
+        "GEMINI_API_KEY",
+        "/models/gemini-2.5-flash:generateContent",
+        (1000 * 3e-7 + 50 * 2.5e-6) * 100,
+    ),
+    (
+        "Gemini-2.0-Flash",
+        "GEMINI_API_KEY",
+        "/models/gemini-2.0-flash:generateContent",
+        (1000 * 0.1e-6 + 50 * 0.4e-6) * 100,
+    ),
 ]
 
 
@@ -229,21 +269,39 @@ def test_native_provider_protocols_through_litellm(monkeypatch, image, model, va
         assert req.body["temperature"] == 0 and req.body["max_tokens"] == expected
     else:
         config = req.body["generationConfig"]
-        assert config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == expected, config
+        assert (
+            config["temperature"] == 0 and config.get("maxOutputTokens", config.get("max_output_tokens")) == expected
+        ), config
 
 
-@pytest.mark.parametrize(("model", "variable", "reasoning"), [
-    ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", 300), ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", 0),
-    ("openai/m", None, 300)])
-def test_every_protocol_reports_why_generation_stopped_and_the_reasoning_tokens(monkeypatch, model, variable, reasoning):
+@pytest.mark.parametrize(
+    ("model", "variable", "reasoning"),
+    [
+        ("gemini/gemini-2.5-flash", "GEMINI_API_KEY", 300),
+        ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY", 0),
+        ("openai/m", None, 300),
+    ],
+)
+def test_every_protocol_reports_why_generation_stopped_and_the_reasoning_tokens(
+    monkeypatch, model, variable, reasoning
+):
     if variable:
         monkeypatch.setenv(variable, "native-test-key-0123456789")
-    replies = [Reply("cut off", finish_reason="length", completion_tokens=512, reasoning_tokens=reasoning or None),
-               Reply("whole", finish_reason="stop")]
+    replies = [
+        Reply("cut off", finish_reason="length", completion_tokens=512, reasoning_tokens=reasoning or None),
+        Reply("whole", finish_reason="stop"),
+    ]
     with FakeOpenAIServer(replies) as server:
-        backend = create_backend(model, api_base=server.url if model.startswith("openai/") else server.root_url, retry=FAST)
+        backend = create_backend(
+            model, api_base=server.url if model.startswith("openai/") else server.root_url, retry=FAST
+        )
         cut, whole = ask(backend), ask(backend)
-    assert (cut.text, cut.finish_reason, cut.output_tokens, cut.reasoning_tokens) == ("cut off", "length", 512, reasoning)
+    assert (cut.text, cut.finish_reason, cut.output_tokens, cut.reasoning_tokens) == (
+        "cut off",
+        "length",
+        512,
+        reasoning,
+    )
     assert (whole.text, whole.finish_reason) == ("whole", "stop")
 
 

@@ -69,9 +69,16 @@ def test_every_registered_kind_is_a_concrete_backend_subclass():
 def test_every_backend_class_of_the_package_is_registered():
     """A class that looks like a backend (``generate`` and ``info``) is a Backend subclass in the registry."""
     registered = {backend_class(kind) for kind in KINDS}
-    shaped = {obj for module in _backend_modules() for obj in vars(module).values()
-              if inspect.isclass(obj) and obj.__module__.startswith("lightemma.backends")
-              and hasattr(obj, "generate") and hasattr(obj, "info") and obj is not Backend}
+    shaped = {
+        obj
+        for module in _backend_modules()
+        for obj in vars(module).values()
+        if inspect.isclass(obj)
+        and obj.__module__.startswith("lightemma.backends")
+        and hasattr(obj, "generate")
+        and hasattr(obj, "info")
+        and obj is not Backend
+    }
     assert shaped == registered
 
 
@@ -115,11 +122,26 @@ def test_each_optional_capability_has_its_documented_default():
     assert backend.prepare([], {}) is None and backend.attach("/nowhere", None, budget=None) is None
     for report in ("replica_report", "batch_report", "image_report", "cache_failure", "stats"):
         assert getattr(backend, report) is None, report
-    with pytest.raises(UserError, match=r"^--answer-format structured: the minimal backend cannot constrain answers "
-                                        r"to a JSON schema; use --answer-format text$"):
+    with pytest.raises(
+        UserError,
+        match=r"^--answer-format structured: the minimal backend cannot constrain answers "
+        r"to a JSON schema; use --answer-format text$",
+    ):
         backend.structured_output()
-    for name in ("structured_output", "effective_params", "check_endpoint", "prepare", "attach", "replica_report",
-                 "batch_report", "image_report", "cache_failure", "stats", "notices", "wants_all_frames"):
+    for name in (
+        "structured_output",
+        "effective_params",
+        "check_endpoint",
+        "prepare",
+        "attach",
+        "replica_report",
+        "batch_report",
+        "image_report",
+        "cache_failure",
+        "stats",
+        "notices",
+        "wants_all_frames",
+    ):
         assert inspect.getdoc(getattr(Backend, name)) or name in ("notices", "wants_all_frames"), name
 
 
@@ -159,9 +181,21 @@ def test_the_factory_builds_the_api_kind_and_a_runs_settings_reach_it(tmp_path, 
     assert type(backend) is backend_class("api") and backend.info["kind"] == "api"
     asyncio.run(backend.aclose())
     shown: list[str] = []
-    backend = run_backend("openai/test-model", backend=None, api_base="http://192.0.2.7:8000/v1", output=tmp_path,
-                          timeout=7.0, rpm=60.0, tpm=None, max_retries=2, backoff_base=0.5, backoff_cap=4.0,
-                          api_key_env="MY_KEY_FOR_TESTS", cache="responses.sqlite", log=shown.append)
+    backend = run_backend(
+        "openai/test-model",
+        backend=None,
+        api_base="http://192.0.2.7:8000/v1",
+        output=tmp_path,
+        timeout=7.0,
+        rpm=60.0,
+        tpm=None,
+        max_retries=2,
+        backoff_base=0.5,
+        backoff_cap=4.0,
+        api_key_env="MY_KEY_FOR_TESTS",
+        cache="responses.sqlite",
+        log=shown.append,
+    )
     try:
         info = backend.info
         assert type(backend) is backend_class("api")
@@ -176,21 +210,33 @@ def test_the_factory_builds_the_api_kind_and_a_runs_settings_reach_it(tmp_path, 
 
 
 def test_the_factory_builds_the_batch_kind_and_refuses_what_a_batch_ignores(tmp_path):
-    backend = create_backend("openai/gpt-4o", api_base="http://127.0.0.1:9/v1", batch=True, timeout=3.0,
-                             poll_seconds=5.0)
+    backend = create_backend(
+        "openai/gpt-4o", api_base="http://127.0.0.1:9/v1", batch=True, timeout=3.0, poll_seconds=5.0
+    )
     assert type(backend) is backend_class("batch") and backend.wants_all_frames is True
     assert backend.info["mode"] == "batch" and backend.info["batch"]["poll_s"] == 5.0
     asyncio.run(backend.aclose())
-    settings = dict(backend=None, api_base="http://127.0.0.1:9/v1", output=tmp_path, timeout=3.0, max_retries=1,
-                    backoff_base=1.0, backoff_cap=1.0, batch=True)
+    settings = dict(
+        backend=None,
+        api_base="http://127.0.0.1:9/v1",
+        output=tmp_path,
+        timeout=3.0,
+        max_retries=1,
+        backoff_base=1.0,
+        backoff_cap=1.0,
+        batch=True,
+    )
     backend = run_backend("openai/gpt-4o", rpm=None, tpm=None, batch_poll=2.0, **settings)
     assert type(backend) is backend_class("batch") and backend.poll_seconds == 2.0
     asyncio.run(backend.aclose())
     with pytest.raises(UserError, match=r"^--cache, --rpm do\(es\) not apply to --batch"):
         run_backend("openai/gpt-4o", rpm=10.0, tpm=None, cache="c.sqlite", **settings)
     assert not (tmp_path / "c.sqlite").exists()  # refused before the cache was opened
-    with pytest.raises(UserError, match=r"^--batch is for models behind a provider's API; baseline:cv runs on the "
-                                        r"baseline backend$"):
+    with pytest.raises(
+        UserError,
+        match=r"^--batch is for models behind a provider's API; baseline:cv runs on the "
+        r"baseline backend$",
+    ):
         create_backend("baseline:cv", batch=True)
 
 
@@ -203,8 +249,19 @@ def test_the_factory_builds_each_baseline(kind):
 
 def test_the_factory_refuses_a_price_for_a_backend_that_bills_none(tmp_path):
     with pytest.raises(UserError, match=r"^--price is the price of a provider's tokens; baseline:cv runs on the "):
-        run_backend("baseline:cv", backend=None, api_base=None, output=tmp_path, timeout=1.0, rpm=None, tpm=None,
-                    max_retries=0, backoff_base=1.0, backoff_cap=1.0, price=(1.0, 2.0))
+        run_backend(
+            "baseline:cv",
+            backend=None,
+            api_base=None,
+            output=tmp_path,
+            timeout=1.0,
+            rpm=None,
+            tpm=None,
+            max_retries=0,
+            backoff_base=1.0,
+            backoff_cap=1.0,
+            price=(1.0, 2.0),
+        )
 
 
 @pytest.fixture(scope="module")
@@ -214,9 +271,19 @@ def tiny(tmp_path_factory):
 
 
 def test_the_factory_builds_the_hf_kind_with_the_runs_deadline(tiny, tmp_path):
-    backend = run_backend(str(tiny), backend="hf", api_base=None, output=tmp_path, timeout=9.0, rpm=None, tpm=None,
-                          max_retries=0, backoff_base=1.0, backoff_cap=1.0,
-                          backend_options={"dtype": "float32", "device": "cpu"})
+    backend = run_backend(
+        str(tiny),
+        backend="hf",
+        api_base=None,
+        output=tmp_path,
+        timeout=9.0,
+        rpm=None,
+        tpm=None,
+        max_retries=0,
+        backoff_base=1.0,
+        backoff_cap=1.0,
+        backend_options={"dtype": "float32", "device": "cpu"},
+    )
     try:
         assert type(backend) is backend_class("hf")
         assert backend.info["timeout_s"] == 9.0 and backend.stats is not None

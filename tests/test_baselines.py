@@ -89,7 +89,11 @@ def test_baselines_on_frames_of_a_synthetic_dataset(tmp_path):
     root = write_dataset(tmp_path, scenes=8, keyframes=16, image_size=(160, 90), sweeps=False)
     frames = list(lightemma.load_frames(root, "v1.0-mini", split="all"))
     for kind, field in (("oracle", "gt_actions"), ("constant", "history_actions")):
-        results = asyncio.run(BaselineBackend(kind).generate([ChatRequest(text="", stage="actions", frame_id=f.frame_id, frame=f) for f in frames]))
+        results = asyncio.run(
+            BaselineBackend(kind).generate(
+                [ChatRequest(text="", stage="actions", frame_id=f.frame_id, frame=f) for f in frames]
+            )
+        )
         parsed = lightemma.parse_actions([r.text for r in results], mode="strict")
         assert set(parsed.status) == {"ok"}
         expected = np.stack([getattr(f, field) for f in frames])

@@ -18,7 +18,6 @@ from pathlib import Path
 import pytest
 
 import lightemma
-
 import lightemma.backends.batch as batch_module
 from fake_batch import FakeBatchServer
 from lightemma.backends.batch.journal import BatchJournal
@@ -31,7 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 @pytest.fixture(autouse=True)
 def _fast(monkeypatch):
-    monkeypatch.setattr(batch_module, "IDLE_SECONDS", 0.15)  # a wave closes after this idle time: room for a loaded CI machine
+    monkeypatch.setattr(
+        batch_module, "IDLE_SECONDS", 0.15
+    )  # a wave closes after this idle time: room for a loaded CI machine
     monkeypatch.setenv("OPENAI_API_KEY", "sk-test-openai")
     monkeypatch.setenv("ANTHROPIC_API_KEY", "sk-ant-test")
     monkeypatch.setenv("GEMINI_API_KEY", "gm-test-key")
@@ -39,8 +40,17 @@ def _fast(monkeypatch):
 
 def _run(synth_root, tmp_path, model, **kw):
     kw.setdefault("sample", 4)
-    return run(model, dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path / "runs", batch=True,
-               batch_poll=0.01, progress=False, **kw)
+    return run(
+        model,
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        output=tmp_path / "runs",
+        batch=True,
+        batch_poll=0.01,
+        progress=False,
+        **kw,
+    )
 
 
 def _records(run_dir):
@@ -58,8 +68,11 @@ def _stage_of(server, custom_id):
     for batch in server.batches.values():
         for cid, body in batch.requests:
             if cid == custom_id:
-                path = {"openai": "/v1/chat/completions", "anthropic": "/v1/messages",
-                        "gemini": "/v1beta/models/m:generateContent"}[batch.protocol]
+                path = {
+                    "openai": "/v1/chat/completions",
+                    "anthropic": "/v1/messages",
+                    "gemini": "/v1beta/models/m:generateContent",
+                }[batch.protocol]
                 return Received(path=path, headers={}, body=body, index=0).stage
     raise KeyError(custom_id)
 
@@ -76,7 +89,11 @@ def test_openai_batch_runs_three_waves_at_batch_price_with_shuffled_results(tmp_
     # shuffled results are matched by custom id: each frame got its own stage's text
     for rec in records.values():
         texts = [c["text"] for c in rec["attempts"][0]["calls"]]
-        assert texts[0].startswith("A two-lane") and texts[1].startswith("The ego vehicle") and texts[2].startswith("[(5.0")
+        assert (
+            texts[0].startswith("A two-lane")
+            and texts[1].startswith("The ego vehicle")
+            and texts[2].startswith("[(5.0")
+        )
     # OpenAI's batch price is half its list price: 1000 in, 50 out per call at $1.25 / $5 per M tokens
     call = next(iter(records.values()))["attempts"][0]["calls"][0]
     assert call["cost_cents"] == pytest.approx((1000 * 1.25 + 50 * 5.0) / 1e6 * 100)
@@ -121,8 +138,10 @@ def test_a_batch_rejected_as_a_whole_stops_the_run_with_its_reason(tmp_path, syn
     assert server.created == 1  # not resubmitted wave after wave
 
 
-@pytest.mark.parametrize("model, env", [("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE"),
-                                        ("gemini/gemini-2.5-flash", "GEMINI_API_BASE")])
+@pytest.mark.parametrize(
+    "model, env",
+    [("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE"), ("gemini/gemini-2.5-flash", "GEMINI_API_BASE")],
+)
 def test_anthropic_and_gemini_batches_with_partial_failure_and_expiry(tmp_path, synth_root, monkeypatch, model, env):
     with FakeBatchServer(steps=1) as probe:
         monkeypatch.setenv(env, probe.root)
@@ -200,18 +219,44 @@ def _cli(*args: str) -> list[str]:
 def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, synth_root, monkeypatch, provider):
     """Killed while polling the stage-2 batch: the resume reads stage 1 from the journal's saved results, polls
     the same stage-2 batch again (results shuffled, matched by custom id) and creates only the stage-3 batch."""
-    model = {"openai": "openai/gpt-4o", "anthropic": "anthropic/claude-sonnet-4-6", "gemini": "gemini/gemini-2.5-flash"}[provider]
+    model = {
+        "openai": "openai/gpt-4o",
+        "anthropic": "anthropic/claude-sonnet-4-6",
+        "gemini": "gemini/gemini-2.5-flash",
+    }[provider]
     env = {**os.environ, "PYTHONPATH": str(ROOT / "python"), "LITELLM_LOCAL_MODEL_COST_MAP": "True"}
-    with FakeBatchServer(steps=2, shuffle=True, seed=3, hold_from=2) as server:  # the stage-2 batch never ends while the run lives
+    with FakeBatchServer(
+        steps=2, shuffle=True, seed=3, hold_from=2
+    ) as server:  # the stage-2 batch never ends while the run lives
         where = ["--api-base", server.url] if provider == "openai" else []
         if provider != "openai":
             base = {"anthropic": "ANTHROPIC_API_BASE", "gemini": "GEMINI_API_BASE"}[provider]
             env[base] = server.root
             monkeypatch.setenv(base, server.root)
-        proc = subprocess.Popen(_cli("--model", model, *where, "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                                     "--split", "all", "--sample", "4", "--batch", "--batch-poll", "0.2",
-                                     "--output", str(tmp_path / "runs"), "--no-progress"),
-                                env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+        proc = subprocess.Popen(
+            _cli(
+                "--model",
+                model,
+                *where,
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--sample",
+                "4",
+                "--batch",
+                "--batch-poll",
+                "0.2",
+                "--output",
+                str(tmp_path / "runs"),
+                "--no-progress",
+            ),
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+        )
         deadline = time.monotonic() + 120
         while time.monotonic() < deadline and not (server.created >= 2 and server.polls >= server.steps + 2):
             time.sleep(0.1)
@@ -219,7 +264,13 @@ def test_a_run_killed_mid_poll_resumes_by_polling_the_same_batches(tmp_path, syn
         proc.send_signal(signal.SIGKILL)  # mid-poll of the stage-2 batch
         proc.wait(timeout=10)
         run_dir = next((tmp_path / "runs").glob("*/*"))
-        assert [e["event"] for e in _journal_lines(run_dir)] == ["submitting", "submitted", "completed", "submitting", "submitted"]
+        assert [e["event"] for e in _journal_lines(run_dir)] == [
+            "submitting",
+            "submitted",
+            "completed",
+            "submitting",
+            "submitted",
+        ]
         assert _records(run_dir) == {}
         first, second = list(server.batches.values())
         first_polls = first.polls
@@ -247,11 +298,22 @@ def test_table_one_marks_a_batch_run_and_shows_run_names(tmp_path, synth_root):
     with FakeBatchServer(steps=1) as server:
         batch = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, name="half-price")
     assert "time/frame    n/a (batch mode" in batch.report()
-    normal = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path / "runs",
-                 progress=False, sample=4, name="reference ego")
+    normal = run(
+        "baseline:cv",
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        output=tmp_path / "runs",
+        progress=False,
+        sample=4,
+        name="reference ego",
+    )
     table = to_markdown(efficiency_table(evaluate_runs([batch.run_dir, normal.run_dir])))
-    rows = {line.split("|")[1].strip(): [c.strip() for c in line.split("|")[1:-1]] for line in table.splitlines()
-            if line.startswith("| ") and "Model" not in line}
+    rows = {
+        line.split("|")[1].strip(): [c.strip() for c in line.split("|")[1:-1]]
+        for line in table.splitlines()
+        if line.startswith("| ") and "Model" not in line
+    }
     header = [c.strip() for c in next(line for line in table.splitlines() if "Model" in line).split("|")[1:-1]]
     assert set(rows) == {'openai/gpt-4o "half-price"', 'Baseline (constant velocity) "reference ego"'}
     batch_row = dict(zip(header, rows['openai/gpt-4o "half-price"']))
@@ -268,14 +330,18 @@ def test_max_cost_in_batch_mode_admits_whole_frames_and_a_resume_submits_only_th
     with FakeBatchServer(steps=1) as server:
         probe = _run(synth_root, tmp_path / "probe", "openai/gpt-4o", api_base=server.url)
     frames = lightemma.load_frames(synth_root, "v1.0-mini", split="all").select(read_frame_ids(probe.run_dir))
-    per_frame = estimate_run("openai/gpt-4o", frames=frames).batch_cost_cents / 4  # the estimate's batch cost of one frame
+    per_frame = (
+        estimate_run("openai/gpt-4o", frames=frames).batch_cost_cents / 4
+    )  # the estimate's batch cost of one frame
     with FakeBatchServer(steps=1) as server:
         with pytest.raises(RunStopped) as stopped:
             _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, max_cost_cents=2.5 * per_frame)
         assert stopped.value.cause == "budget"
         run_dir = stopped.value.run_dir
         records = _records(run_dir)
-        assert len(records) == 2 and all(r["status"] == "ok" for r in records.values())  # two whole frames, all 3 stages
+        assert len(records) == 2 and all(
+            r["status"] == "ok" for r in records.values()
+        )  # two whole frames, all 3 stages
         assert [len(b.requests) for b in server.batches.values()] == [2, 2, 2]
         resume(run_dir, progress=False, max_cost_cents=100 * per_frame, api_base=server.url)
     assert len(_records(run_dir)) == 4
@@ -297,10 +363,16 @@ def test_a_wave_is_split_within_the_providers_limits(tmp_path, synth_root, monke
     assert [len(b.requests) for b in server.batches.values()] == [1] * 6
 
 
-@pytest.mark.parametrize("model, env, variable", [("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE", "ANTHROPIC_API_KEY"),
-                                                  ("gemini/gemini-2.5-flash", "GEMINI_API_BASE", "GEMINI_API_KEY")])
-def test_a_rejected_key_stops_the_batch_run_at_once_and_journals_nothing_as_pending(tmp_path, synth_root, monkeypatch,
-                                                                                   model, env, variable):
+@pytest.mark.parametrize(
+    "model, env, variable",
+    [
+        ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE", "ANTHROPIC_API_KEY"),
+        ("gemini/gemini-2.5-flash", "GEMINI_API_BASE", "GEMINI_API_KEY"),
+    ],
+)
+def test_a_rejected_key_stops_the_batch_run_at_once_and_journals_nothing_as_pending(
+    tmp_path, synth_root, monkeypatch, model, env, variable
+):
     with FakeBatchServer(steps=1, require_key="the-right-key") as server:
         monkeypatch.setenv(env, server.root)
         with pytest.raises(RunStopped) as stopped:
@@ -320,7 +392,9 @@ def test_an_expired_openai_batch_has_its_unrun_requests_resubmitted(tmp_path, sy
     with FakeBatchServer(steps=1, batch_state="expired") as server:
         result = _run(synth_root, tmp_path, "openai/gpt-4o", api_base=server.url, sample=2)
     records = _records(result.run_dir)
-    resubmitted = json.loads((result.run_dir / "manifest.json").read_text())["sessions"][-1]["batch"]["requests_resubmitted"]
+    resubmitted = json.loads((result.run_dir / "manifest.json").read_text())["sessions"][-1]["batch"][
+        "requests_resubmitted"
+    ]
     sent = [cid for b in server.batches.values() for cid, _ in b.requests]
     assert resubmitted >= 3 and len(sent) == 6 + resubmitted  # each expired request went out again under a new id
     assert all(cid.rsplit("-r", 1)[-1] in ("1", "2") for cid in sent if "-r" in cid)  # twice at most
@@ -348,7 +422,9 @@ def test_the_providers_own_host_gets_its_key_and_no_other(tmp_path, synth_root, 
     """127.0.0.1 is declared each provider's own host (tests/conftest.py): its --api-base gets that provider's key."""
     provider = model.split("/")[0]
     with FakeBatchServer(steps=1) as server:
-        result = _run(synth_root, tmp_path, model, api_base=server.url if provider == "openai" else server.root, sample=2)
+        result = _run(
+            synth_root, tmp_path, model, api_base=server.url if provider == "openai" else server.root, sample=2
+        )
     assert all(r["status"] == "ok" for r in _records(result.run_dir).values())
     assert {b.protocol for b in server.batches.values()} == {provider}  # the provider's own batch protocol
     assert server.keys and all(os.environ[PROVIDER_KEYS[provider]] in k for k in server.keys)
@@ -356,7 +432,9 @@ def test_the_providers_own_host_gets_its_key_and_no_other(tmp_path, synth_root, 
 
 
 @pytest.mark.parametrize("model", BATCH_MODELS)
-def test_a_batch_run_against_another_api_base_sends_no_provider_key(elsewhere, tmp_path, synth_root, monkeypatch, model):
+def test_a_batch_run_against_another_api_base_sends_no_provider_key(
+    elsewhere, tmp_path, synth_root, monkeypatch, model
+):
     with FakeBatchServer(steps=1) as server:
         result = _run(synth_root, tmp_path / "a", model, api_base=server.url, sample=2)
         records = _records(result.run_dir)
@@ -390,12 +468,19 @@ def test_credentials_in_the_api_base_reach_the_server_but_no_journal_record_or_m
     assert len(abandoned) == 1 and "bad key at" in abandoned[0]["reason"]
     written = b"".join(p.read_bytes() for p in (tmp_path / "runs").rglob("*") if p.is_file())
     assert b"hunter2pw" not in written and "hunter2pw" not in str(stopped.value)
-    assert b"hunter2pw" not in (run_dir / "batches.jsonl").read_bytes() and b"hunter2pw" not in (result.run_dir / "batches.jsonl").read_bytes()
+    assert (
+        b"hunter2pw" not in (run_dir / "batches.jsonl").read_bytes()
+        and b"hunter2pw" not in (result.run_dir / "batches.jsonl").read_bytes()
+    )
 
 
 # -- what a batch API's replies may be (issue 25.9) -----------------------------------------------------------
 
-BATCH_MODEL = {"openai": "openai/gpt-4o", "anthropic": "anthropic/claude-sonnet-4-6", "gemini": "gemini/gemini-2.5-flash"}
+BATCH_MODEL = {
+    "openai": "openai/gpt-4o",
+    "anthropic": "anthropic/claude-sonnet-4-6",
+    "gemini": "gemini/gemini-2.5-flash",
+}
 
 
 def _at(server, provider):
@@ -403,8 +488,9 @@ def _at(server, provider):
 
 
 @pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
-def test_a_batch_reply_past_its_limit_stops_the_run_in_one_line_and_a_resume_reads_the_same_batch(tmp_path, synth_root,
-                                                                                                 monkeypatch, provider):
+def test_a_batch_reply_past_its_limit_stops_the_run_in_one_line_and_a_resume_reads_the_same_batch(
+    tmp_path, synth_root, monkeypatch, provider
+):
     """A results file (a Gemini status poll: the results are inlined in it) past the limit for its batch: the run
     stops naming the limit, nothing was read into a record, and the resume polls the same batch, never resubmits."""
     from lightemma.backends.batch import adapter
@@ -468,7 +554,9 @@ def test_saved_results_that_are_not_a_regular_file_are_polled_again_never_read(t
     answers "not saved", so the batch is polled again (the provider keeps its results)."""
     journal = BatchJournal.open(tmp_path)
     journal.submitted("tok", "batch_1", ["a", "b"])
-    journal.save_results("batch_1", [{"custom_id": "a", "text": "x"}, {"custom_id": "b", "text": "y"}], "completed", 1.0)
+    journal.save_results(
+        "batch_1", [{"custom_id": "a", "text": "x"}, {"custom_id": "b", "text": "y"}], "completed", 1.0
+    )
     saved = tmp_path / journal.batches["batch_1"].results
     assert [i["custom_id"] for i in BatchJournal.open(tmp_path).saved_results("batch_1")] == ["a", "b"]
     saved.unlink()
@@ -524,11 +612,18 @@ def _stranger(line):
     return json.dumps(line)
 
 
-@pytest.mark.parametrize(("change", "said"), [
-    (lambda line: json.dumps(line).replace('"status_code": 200', '"status_code": 1e999'), "status_code inf is no HTTP status"),
-    (_content_list, "message content is a list, not text"),
-    (_stranger, "'no-such-request', which is no request of this batch"),
-], ids=["status-code-inf", "content-list", "foreign-custom-id"])
+@pytest.mark.parametrize(
+    ("change", "said"),
+    [
+        (
+            lambda line: json.dumps(line).replace('"status_code": 200', '"status_code": 1e999'),
+            "status_code inf is no HTTP status",
+        ),
+        (_content_list, "message content is a list, not text"),
+        (_stranger, "'no-such-request', which is no request of this batch"),
+    ],
+    ids=["status-code-inf", "content-list", "foreign-custom-id"],
+)
 def test_openai_results_not_as_documented_stop_the_run_in_one_line(tmp_path, synth_root, monkeypatch, change, said):
     """Found by trial: a status_code of 1e999 ended in an OverflowError traceback; a content list was stored as its
     Python text and re-asked; results for no request of the batch had every request re-asked and billed again."""
@@ -542,11 +637,16 @@ def test_openai_results_not_as_documented_stop_the_run_in_one_line(tmp_path, syn
 
 
 @pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
-def test_a_batch_state_no_provider_documents_stops_the_run_never_polls_forever(tmp_path, synth_root, monkeypatch, provider):
+def test_a_batch_state_no_provider_documents_stops_the_run_never_polls_forever(
+    tmp_path, synth_root, monkeypatch, provider
+):
     import fake_batch
 
-    name, key = {"openai": ("_openai_batch", "status"), "anthropic": ("_anthropic_batch", "processing_status"),
-                 "gemini": ("_gemini_operation", None)}[provider]
+    name, key = {
+        "openai": ("_openai_batch", "status"),
+        "anthropic": ("_anthropic_batch", "processing_status"),
+        "gemini": ("_gemini_operation", None),
+    }[provider]
     real = getattr(fake_batch, name)
 
     def banana(*args, **kw):
@@ -605,13 +705,22 @@ def test_each_batch_call_has_the_whole_timeout_and_a_trickle_is_cut_off(tmp_path
         async def status(self, batch_id):
             await asyncio.sleep(60)
 
-    backend = BatchBackend("openai/gpt-4o", api_base="http://127.0.0.1:9/v1", timeout=0.3, adapter=Trickle(),
-                           retry=RetryPolicy(max_retries=1, base=0.01, cap=0.02))
+    backend = BatchBackend(
+        "openai/gpt-4o",
+        api_base="http://127.0.0.1:9/v1",
+        timeout=0.3,
+        adapter=Trickle(),
+        retry=RetryPolicy(max_retries=1, base=0.01, cap=0.02),
+    )
     start = time.monotonic()
     with pytest.raises(RunFatalError) as fatal:
         asyncio.run(backend._call(lambda: backend.adapter.status("b"), "poll batch b", requests=4))
     assert time.monotonic() - start < 5
-    assert fatal.value.error == "Timeout" and "within --timeout 0.3 s" in str(fatal.value) and "after 1 retries" in str(fatal.value)
+    assert (
+        fatal.value.error == "Timeout"
+        and "within --timeout 0.3 s" in str(fatal.value)
+        and "after 1 retries" in str(fatal.value)
+    )
 
 
 def test_an_answer_over_the_reply_limit_is_that_requests_error_not_a_record(monkeypatch):
@@ -638,14 +747,18 @@ def test_provider_ids_stay_one_piece_of_the_url():
 def test_saved_results_holding_a_request_twice_or_a_link_are_polled_again(tmp_path):
     journal = BatchJournal.open(tmp_path)
     journal.submitted("tok", "batch_1", ["a", "b"])
-    journal.save_results("batch_1", [{"custom_id": "a", "text": "x"}, {"custom_id": "b", "text": "y"}], "completed", 1.0)
+    journal.save_results(
+        "batch_1", [{"custom_id": "a", "text": "x"}, {"custom_id": "b", "text": "y"}], "completed", 1.0
+    )
     saved = tmp_path / journal.batches["batch_1"].results
     with saved.open("a") as fh:
         fh.write(json.dumps({"custom_id": "a", "text": "x", "input_tokens": 999999}) + "\n")
     assert BatchJournal.open(tmp_path).saved_results("batch_1") is None  # was: the last copy, 626 ¢
     saved.unlink()
     saved.symlink_to("/dev/zero")
-    assert BatchJournal.open(tmp_path).saved_results("batch_1") is None  # was: "names results outside the run directory"
+    assert (
+        BatchJournal.open(tmp_path).saved_results("batch_1") is None
+    )  # was: "names results outside the run directory"
 
 
 def test_the_basic_auth_value_a_server_echoes_is_kept_out_of_messages_and_files(tmp_path, synth_root):

@@ -11,8 +11,9 @@ import os
 import threading
 from pathlib import Path
 
-import lightemma.backends.batch as batch_module
 import pytest
+
+import lightemma.backends.batch as batch_module
 from fake_batch import FakeBatchServer
 from lightemma.backends.batch import journal as journal_module
 from lightemma.backends.batch.journal import BatchJournal
@@ -42,8 +43,18 @@ def _where(server, provider, monkeypatch):
 
 def _run(synth_root, tmp_path, provider, server, monkeypatch, **kw):
     kw.setdefault("sample", 4)
-    return run(MODELS[provider], dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path / "runs",
-               batch=True, batch_poll=0.01, progress=False, **_where(server, provider, monkeypatch), **kw)
+    return run(
+        MODELS[provider],
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        output=tmp_path / "runs",
+        batch=True,
+        batch_poll=0.01,
+        progress=False,
+        **_where(server, provider, monkeypatch),
+        **kw,
+    )
 
 
 def _resume(run_dir, server, provider, **kw):
@@ -70,6 +81,7 @@ def _events(run_dir):
 
 # -- 1. a lost answer to "create batch" ---------------------------------------------------------------------------
 
+
 @pytest.mark.parametrize("provider", ["openai", "gemini"])
 def test_a_create_whose_answer_is_lost_is_looked_up_not_created_again(tmp_path, synth_root, monkeypatch, provider):
     with FakeBatchServer(steps=1, lose_create=1) as server:  # the provider creates the batch, then answers 500
@@ -87,8 +99,9 @@ def test_a_create_cut_off_by_the_timeout_is_looked_up_not_created_again(tmp_path
 
 
 @pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
-def test_a_create_refused_with_a_server_error_is_created_once_it_is_known_not_to_exist(tmp_path, synth_root,
-                                                                                        monkeypatch, provider):
+def test_a_create_refused_with_a_server_error_is_created_once_it_is_known_not_to_exist(
+    tmp_path, synth_root, monkeypatch, provider
+):
     with FakeBatchServer(steps=1, fail_create=1) as server:  # 503, nothing created: the look-up finds none
         result = _run(synth_root, tmp_path, provider, server, monkeypatch)
     _all_ok(result.run_dir)
@@ -104,6 +117,7 @@ def test_an_anthropic_create_whose_answer_is_lost_stops_rather_than_create_it_ag
 
 
 # -- 2. the look-up reads every page, down to the submission --------------------------------------------------------
+
 
 class Killed(BaseException):
     """The process dying at that point (a BaseException: nothing in lightemma catches it, as with SIGKILL)."""
@@ -136,8 +150,9 @@ def test_an_interrupted_submission_is_found_behind_150_newer_batches(tmp_path, s
     assert server.list_calls >= 2  # more than the first page was read
 
 
-def test_an_anthropic_submission_cut_off_before_the_create_is_made_once_all_pages_show_none(tmp_path, synth_root,
-                                                                                           monkeypatch):
+def test_an_anthropic_submission_cut_off_before_the_create_is_made_once_all_pages_show_none(
+    tmp_path, synth_root, monkeypatch
+):
     calls = {"n": 0}
     from lightemma.backends.batch.anthropic import AnthropicBatches
 
@@ -162,6 +177,7 @@ def test_an_anthropic_submission_cut_off_before_the_create_is_made_once_all_page
 
 
 # -- 3. a journal write that does not reach the disk ---------------------------------------------------------------
+
 
 def _disk_full_on(monkeypatch, event, times=1):
     """os.write of the batch journal writes half the line (then nothing) for the next ``times`` ``event`` lines."""
@@ -225,6 +241,7 @@ def test_a_resume_repairs_a_torn_last_line_instead_of_refusing_the_journal(tmp_p
 
 # -- 6. a batch failed as a whole; a results line holding U+2028 -------------------------------------------------
 
+
 def test_a_batch_failed_at_the_enqueued_token_limit_is_resubmitted(tmp_path, synth_root, monkeypatch):
     with FakeBatchServer(steps=1, fail_batches={1}, fail_code="token_limit_exceeded") as server:
         result = _run(synth_root, tmp_path, "openai", server, monkeypatch)
@@ -233,8 +250,9 @@ def test_a_batch_failed_at_the_enqueued_token_limit_is_resubmitted(tmp_path, syn
     assert [e["event"] for e in _events(result.run_dir)][:4] == ["submitting", "submitted", "failed", "submitting"]
 
 
-def test_a_batch_rejected_as_a_whole_is_submitted_again_by_the_resume_not_polled_forever(tmp_path, synth_root,
-                                                                                        monkeypatch):
+def test_a_batch_rejected_as_a_whole_is_submitted_again_by_the_resume_not_polled_forever(
+    tmp_path, synth_root, monkeypatch
+):
     with FakeBatchServer(steps=1, batch_state="failed") as server:
         stop = _stopped_run(synth_root, tmp_path, "openai", server, monkeypatch, "batch-failed")
         assert "line 1: bad model" in str(stop) and server.created == 1
@@ -257,12 +275,15 @@ def test_a_results_line_holding_u2028_or_u0085_is_one_line_of_json(tmp_path, syn
     with FakeBatchServer(script, steps=1, raw_text=True) as server:
         result = _run(synth_root, tmp_path, provider, server, monkeypatch, sample=2)
     records = _all_ok(result.run_dir, 2)
-    assert all(r["attempts"][0]["calls"][0]["text"] == "A two-lane road\u2028with a cyclist\u0085ahead."
-               for r in records.values())
+    assert all(
+        r["attempts"][0]["calls"][0]["text"] == "A two-lane road\u2028with a cyclist\u0085ahead."
+        for r in records.values()
+    )
     assert server.paid_twice() == [] and isinstance(Reply, type)
 
 
 # -- 7. batches.jsonl read like every run file ------------------------------------------------------------------------
+
 
 def test_a_fifo_journal_is_refused_at_once_not_waited_on(tmp_path):
     os.mkfifo(tmp_path / "batches.jsonl")
@@ -292,18 +313,23 @@ def test_a_journal_linked_to_dev_zero_or_too_large_is_refused_in_one_line(tmp_pa
         BatchJournal.open(tmp_path)
 
 
-@pytest.mark.parametrize("line, said", [
-    ('{"event":"submitted","token":"t","custom_ids":["a"]}', "batch_id is NoneType"),
-    ('{"event":"submitted","token":"t","batch_id":"b","custom_ids":5}', "custom_ids is not a list"),
-    ('{"event":"submitting","token":["t"],"custom_ids":[]}', "token is list"),
-    ('{"event":"completed","batch_id":"nope","state":"completed","results":"x"}', "never submitted"),
-    ('{"event":"submitting","token":"t","custom_ids":[],"at":"yesterday"}', "not a time"),
-    ("[" * 3000 + "]" * 3000, "not a JSON line"),
-    ('{"event":"submitting","token":"t","custom_ids":[],"at":1' + "0" * 5000 + "}", "not a JSON line"),
-    ("7", "not a batch journal event"),
-])
+@pytest.mark.parametrize(
+    "line, said",
+    [
+        ('{"event":"submitted","token":"t","custom_ids":["a"]}', "batch_id is NoneType"),
+        ('{"event":"submitted","token":"t","batch_id":"b","custom_ids":5}', "custom_ids is not a list"),
+        ('{"event":"submitting","token":["t"],"custom_ids":[]}', "token is list"),
+        ('{"event":"completed","batch_id":"nope","state":"completed","results":"x"}', "never submitted"),
+        ('{"event":"submitting","token":"t","custom_ids":[],"at":"yesterday"}', "not a time"),
+        ("[" * 3000 + "]" * 3000, "not a JSON line"),
+        ('{"event":"submitting","token":"t","custom_ids":[],"at":1' + "0" * 5000 + "}", "not a JSON line"),
+        ("7", "not a batch journal event"),
+    ],
+)
 def test_a_hand_edited_journal_line_is_one_line_naming_it(tmp_path, line, said):
-    (tmp_path / "batches.jsonl").write_text('{"event":"submitting","token":"t0","custom_ids":["z"],"at":1}\n' + line + "\n")
+    (tmp_path / "batches.jsonl").write_text(
+        '{"event":"submitting","token":"t0","custom_ids":["z"],"at":1}\n' + line + "\n"
+    )
     with pytest.raises(RunStoreError) as error:
         BatchJournal.open(tmp_path)
     message = str(error.value)
@@ -311,6 +337,7 @@ def test_a_hand_edited_journal_line_is_one_line_naming_it(tmp_path, line, said):
 
 
 # -- 5. a cancel in the provider's console; the resubmission limit across attempts ------------------------------------
+
 
 @pytest.mark.parametrize("provider", ["openai", "anthropic", "gemini"])
 def test_a_canceled_batch_stops_the_run_and_the_resume_submits_it_again(tmp_path, synth_root, monkeypatch, provider):
@@ -347,11 +374,22 @@ def test_the_resubmission_limit_holds_across_attempts(tmp_path, synth_root, monk
 
 # -- 4. empty or partial results ----------------------------------------------------------------------------------------
 
-@pytest.mark.parametrize("provider, fault", [("openai", "empty"), ("openai", "no_file"), ("openai", "half"),
-                                             ("anthropic", "empty"), ("anthropic", "half"),
-                                             ("gemini", "no_file"), ("gemini", "half")])
+
+@pytest.mark.parametrize(
+    "provider, fault",
+    [
+        ("openai", "empty"),
+        ("openai", "no_file"),
+        ("openai", "half"),
+        ("anthropic", "empty"),
+        ("anthropic", "half"),
+        ("gemini", "no_file"),
+        ("gemini", "half"),
+    ],
+)
 def test_results_short_of_the_providers_counts_stop_the_run_and_are_read_again_never_reasked(
-        tmp_path, synth_root, monkeypatch, provider, fault):
+    tmp_path, synth_root, monkeypatch, provider, fault
+):
     with FakeBatchServer(steps=1, results_fault=fault) as server:
         stop = _stopped_run(synth_root, tmp_path, provider, server, monkeypatch, "batch-results")
         assert "incomplete" in str(stop) and server.created == 1  # nothing asked again
@@ -378,6 +416,7 @@ def test_gemini_results_in_a_responses_file_are_read(tmp_path, synth_root, monke
 
 
 # -- 9. --max-cost in batch mode ---------------------------------------------------------------------------------------
+
 
 def test_max_cost_checks_each_finished_waves_reported_cost_before_sending_the_next(tmp_path, synth_root, monkeypatch):
     """The provider bills 20,000 input tokens per call where the estimate said about a thousand: the first wave is

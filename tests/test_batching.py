@@ -11,7 +11,9 @@ from lightemma.backends.batching import MicroBatcher
 
 
 def req(i, stage="scene", max_tokens=512):
-    return ChatRequest(text=f"prompt {i}", stage=stage, frame_id=f"f{i}", params=GenerationParams(max_tokens=max_tokens))
+    return ChatRequest(
+        text=f"prompt {i}", stage=stage, frame_id=f"f{i}", params=GenerationParams(max_tokens=max_tokens)
+    )
 
 
 class Recorder:
@@ -36,7 +38,10 @@ class Recorder:
         self.gate.wait(5)
         if self.fail_when and self.fail_when(requests):
             raise MemoryError("CUDA out of memory. Tried to allocate 2.00 GiB")
-        return [ChatResult(text=f"echo {r.text}", input_tokens=len(r.text), output_tokens=len(requests), seconds=0.0) for r in requests]
+        return [
+            ChatResult(text=f"echo {r.text}", input_tokens=len(r.text), output_tokens=len(requests), seconds=0.0)
+            for r in requests
+        ]
 
 
 async def fill_while_blocked(batcher, recorder, first, rest):
@@ -59,15 +64,29 @@ def test_concurrent_requests_are_answered_in_batches_of_batch_size_each_with_its
     assert [r[0].text for r in out[:1]] + [r[0].text for r in out[1:]] == [f"echo prompt {i}" for i in range(10)]
     # arrival order is kept inside and across batches
     assert [t for b in rec.batches for _, t in b] == [f"prompt {i}" for i in range(10)]
-    assert batcher.stats.to_dict() == {"batches": 4, "requests": 10, "seconds": pytest.approx(batcher.stats.seconds, abs=1e-3),
-                                       "mean_batch_size": 2.5, "max_batch_size": 4}
+    assert batcher.stats.to_dict() == {
+        "batches": 4,
+        "requests": 10,
+        "seconds": pytest.approx(batcher.stats.seconds, abs=1e-3),
+        "mean_batch_size": 2.5,
+        "max_batch_size": 4,
+    }
 
 
 def test_a_batch_never_mixes_stages_and_starts_from_the_oldest_pending_stage():
     rec = Recorder(block_first=True)
     batcher = MicroBatcher(rec, batch_size=4, batch_window=0.5)
-    rest = [req(1, "intent"), req(2, "intent"), req(3, "scene"), req(4, "scene"), req(5, "scene"), req(6, "intent"),
-            req(7, "actions"), req(8, "intent"), req(9, "intent")]
+    rest = [
+        req(1, "intent"),
+        req(2, "intent"),
+        req(3, "scene"),
+        req(4, "scene"),
+        req(5, "scene"),
+        req(6, "intent"),
+        req(7, "actions"),
+        req(8, "intent"),
+        req(9, "intent"),
+    ]
     asyncio.run(fill_while_blocked(batcher, rec, [req(0, "scene")], rest))
     stages = [[s for s, _ in b] for b in rec.batches]
     assert stages == [["scene"], ["intent"] * 4, ["scene"] * 3, ["actions"], ["intent"]]
@@ -250,12 +269,16 @@ def test_requests_failed_after_their_caller_was_cancelled_leave_no_unretrieved_e
     from lightemma.errors import RunFatalError
 
     recorder = Recorder(block_first=True)
-    batcher = MicroBatcher(recorder, batch_size=1, batch_window=0, deadline=30)  # a deadline: the watchdog's asyncio.wait
+    batcher = MicroBatcher(
+        recorder, batch_size=1, batch_window=0, deadline=30
+    )  # a deadline: the watchdog's asyncio.wait
     logged = []
 
     async def main():
         asyncio.get_running_loop().set_exception_handler(lambda loop, context: logged.append(context.get("message")))
-        running = asyncio.ensure_future(batcher.submit([req(0)]))  # its batch blocks: the next requests wait in the queue
+        running = asyncio.ensure_future(
+            batcher.submit([req(0)])
+        )  # its batch blocks: the next requests wait in the queue
         queued = asyncio.ensure_future(batcher.submit([req(1), req(2)]))
         await asyncio.sleep(0.2)
         queued.cancel()

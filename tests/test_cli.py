@@ -44,8 +44,23 @@ def baseline_run(synth_root, tmp_path_factory):
 
 
 def test_run_on_v1_0_mini_takes_every_scene_and_says_so(synth_root, tmp_path, capsys):
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                 "--output", str(tmp_path), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--output",
+                str(tmp_path),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     err = capsys.readouterr().err
     assert "lightemma run: frames: v1.0-mini, split all: 2 scenes, 12 frames, reference window\n" in err
     (manifest,) = tmp_path.rglob("manifest.json")
@@ -54,13 +69,34 @@ def test_run_on_v1_0_mini_takes_every_scene_and_says_so(synth_root, tmp_path, ca
 
 
 def test_run_with_a_limit_says_how_many_frames_it_took(synth_root, tmp_path, capsys):
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                 "--limit", "5", "--output", str(tmp_path), "--no-progress"]) == 0
-    assert "frames: v1.0-mini, split all: 1 scene, 5 frames, reference window (first 5 frames)" in capsys.readouterr().err
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--limit",
+                "5",
+                "--output",
+                str(tmp_path),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
+    assert (
+        "frames: v1.0-mini, split all: 1 scene, 5 frames, reference window (first 5 frames)" in capsys.readouterr().err
+    )
 
 
 def test_resume_loads_the_split_the_run_started_with_not_todays_default(synth_root, tmp_path, monkeypatch, capsys):
-    result = lightemma.run("baseline:constant", dataroot=synth_root, version="v1.0-mini", output=tmp_path, progress=False)
+    result = lightemma.run(
+        "baseline:constant", dataroot=synth_root, version="v1.0-mini", output=tmp_path, progress=False
+    )
     assert result.manifest["config"]["dataset"]["split"] is None  # the request named no split
     # were the default for v1.0-mini to change (it was mini_val), the run still resumes its own frames
     monkeypatch.setitem(lightemma.nuscenes.frames.DEFAULT_SPLITS, "v1.0-mini", "mini_val")
@@ -91,26 +127,77 @@ def test_resume_loads_the_split_the_run_started_with_not_todays_default(synth_ro
     ],
 )
 def test_run_refuses_an_option_out_of_range_by_its_flag(synth_root, tmp_path, capsys, flag, value, message):
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                 "--output", str(tmp_path / "out"), flag, value]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--output",
+                str(tmp_path / "out"),
+                flag,
+                value,
+            ]
+        )
+        == 2
+    )
     assert one_error_line(capsys, "run").endswith(message)
     assert not (tmp_path / "out").exists()
 
 
-@pytest.mark.parametrize("model, backend", [("baseline:cv", None), ("Qwen/Qwen2.5-VL-7B-Instruct", "hf"),
-                                            ("qwen-2.5-vl-7b", "vllm")])
+@pytest.mark.parametrize(
+    "model, backend", [("baseline:cv", None), ("Qwen/Qwen2.5-VL-7B-Instruct", "hf"), ("qwen-2.5-vl-7b", "vllm")]
+)
 def test_an_api_base_that_the_backend_would_ignore_is_refused(synth_root, tmp_path, capsys, model, backend):
     extra = ["--backend", backend] if backend else []
-    assert main(["run", "--model", model, *extra, "--api-base", "http://127.0.0.1:9/v1", "--dataroot", str(synth_root),
-                 "--version", "v1.0-mini", "--output", str(tmp_path / "out"), "--no-progress"]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                model,
+                *extra,
+                "--api-base",
+                "http://127.0.0.1:9/v1",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--output",
+                str(tmp_path / "out"),
+                "--no-progress",
+            ]
+        )
+        == 2
+    )
     err = capsys.readouterr().err
     assert "--api-base is for models behind an API" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
 
 
 def test_a_named_split_missing_from_synthetic_data_points_to_split_all(synth_root, tmp_path, capsys):
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                 "--split", "mini_val", "--output", str(tmp_path)]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "mini_val",
+                "--output",
+                str(tmp_path),
+            ]
+        )
+        == 2
+    )
     line = one_error_line(capsys, "run")
     assert "2 of the 2 scenes of split 'mini_val' are not in version v1.0-mini" in line
     assert line.endswith("a synthetic dataset is loaded with --split all or --scenes NAME ...")
@@ -120,8 +207,22 @@ def test_a_version_without_a_default_split_points_to_split_all(tmp_path, capsys)
     from lightemma.synth import write_dataset
 
     root = write_dataset(tmp_path / "d", scenes=1, keyframes=15, version="v9-custom", images=False, sweeps=False)
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(root), "--version", "v9-custom",
-                 "--output", str(tmp_path / "out")]) == 2
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(root),
+                "--version",
+                "v9-custom",
+                "--output",
+                str(tmp_path / "out"),
+            ]
+        )
+        == 2
+    )
     assert "add --split all to use every scene of it, or --scenes NAME ..." in one_error_line(capsys, "run")
 
 
@@ -168,8 +269,12 @@ def test_os_errors_are_one_line_too(tmp_path, capsys):
     # evaluate -o into a path under a file: an OSError from open(), not a traceback
     blocker = tmp_path / "file"
     blocker.write_text("")
-    run_dir = lightemma.run("baseline:oracle", frames=lightemma.load_frames(_synth(tmp_path), "v1.0-mini"),
-                            output=tmp_path / "runs", progress=False).run_dir
+    run_dir = lightemma.run(
+        "baseline:oracle",
+        frames=lightemma.load_frames(_synth(tmp_path), "v1.0-mini"),
+        output=tmp_path / "runs",
+        progress=False,
+    ).run_dir
     assert main(["evaluate", str(run_dir), "-o", str(blocker / "x.md")]) == 2
     one_error_line(capsys, "evaluate")
 
@@ -185,20 +290,35 @@ def test_resume_of_a_run_from_frames_in_memory_says_it_needs_python(synth_root, 
     run_dir = lightemma.run("baseline:cv", frames=frames, output=tmp_path, progress=False).run_dir
     assert main(["run", "--resume", str(run_dir)]) == 2
     assert one_error_line(capsys, "run").endswith(
-        "made from frames passed in memory, not from a dataset; resume it from Python: lightemma.resume(RUN_DIR, frames=FRAMES)")
+        "made from frames passed in memory, not from a dataset; resume it from Python: lightemma.resume(RUN_DIR, frames=FRAMES)"
+    )
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["run", "--concurrency", "x"], "lightemma run: error: argument --concurrency: invalid int value: 'x' (see lightemma run --help)"),
-    (["evaluate", "runs", "--format", "yaml"], "lightemma evaluate: error: argument --format: invalid choice: 'yaml'"),
-    (["frobnicate"], "lightemma: error: argument COMMAND: invalid choice: 'frobnicate'"),
-    # an unknown flag is named by the subcommand that got it, with that subcommand's help
-    (["run", "--bogus"], "lightemma run: error: unrecognized arguments: --bogus (see lightemma run --help)"),
-    (["models", "--bogus", "x"], "lightemma models: error: unrecognized arguments: --bogus x (see lightemma models --help)"),
-    (["prompts", "check", "set", "run", "extra"],
-     "lightemma prompts check: error: unrecognized arguments: extra (see lightemma prompts check --help)"),
-    (["--bogus"], "lightemma: error: unrecognized arguments: --bogus (see lightemma --help)"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (
+            ["run", "--concurrency", "x"],
+            "lightemma run: error: argument --concurrency: invalid int value: 'x' (see lightemma run --help)",
+        ),
+        (
+            ["evaluate", "runs", "--format", "yaml"],
+            "lightemma evaluate: error: argument --format: invalid choice: 'yaml'",
+        ),
+        (["frobnicate"], "lightemma: error: argument COMMAND: invalid choice: 'frobnicate'"),
+        # an unknown flag is named by the subcommand that got it, with that subcommand's help
+        (["run", "--bogus"], "lightemma run: error: unrecognized arguments: --bogus (see lightemma run --help)"),
+        (
+            ["models", "--bogus", "x"],
+            "lightemma models: error: unrecognized arguments: --bogus x (see lightemma models --help)",
+        ),
+        (
+            ["prompts", "check", "set", "run", "extra"],
+            "lightemma prompts check: error: unrecognized arguments: extra (see lightemma prompts check --help)",
+        ),
+        (["--bogus"], "lightemma: error: unrecognized arguments: --bogus (see lightemma --help)"),
+    ],
+)
 def test_a_usage_error_is_one_line_naming_the_flag(argv, message, capsys):
     with pytest.raises(SystemExit) as exit_:
         main(argv)

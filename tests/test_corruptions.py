@@ -13,21 +13,27 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from fake_openai import FakeOpenAIServer
-from memframes import make_frames
 from PIL import Image
 
+from fake_openai import FakeOpenAIServer
 from lightemma.backends.base import ChatResult
 from lightemma.backends.local import load_image
 from lightemma.cli import main as cli_main
-from lightemma.corruptions import (CORRUPTIONS, NAMES, SEVERITIES, corruption_reference, corruption_seed,
-                                   parse_corruption)
+from lightemma.corruptions import (
+    CORRUPTIONS,
+    NAMES,
+    SEVERITIES,
+    corruption_reference,
+    corruption_seed,
+    parse_corruption,
+)
 from lightemma.errors import UserError
 from lightemma.inputs import read_image_bytes, request_image, shown_history
 from lightemma.pipeline import run
 from lightemma.pipeline.chain import ChainPolicy, run_frame
 from lightemma.prompts import load_prompt_set
 from lightemma.runs.store import read_run
+from memframes import make_frames
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
 W, H = 160, 90
@@ -101,7 +107,8 @@ def run_corrupted(tmp_path, frames, inputs, out):
 
 @pytest.mark.parametrize("name", NAMES)
 def test_each_corruption_at_each_severity_changes_the_sent_image_as_defined_and_the_same_frame_gives_the_same_bytes(
-        tmp_path, name):
+    tmp_path, name
+):
     frames = make_frames(tmp_path, 1)
     clean = textured(frames[0].image_path)
     measured = []
@@ -146,8 +153,10 @@ def test_local_backends_and_ray_replicas_read_the_bytes_the_api_sends(tmp_path):
     assert (np.asarray(load_image(ref)) == decode(data)).all()
     assert load_image(ref, max_pixels=W * H // 4).size == (W // 2, H // 2)  # the local backends' cap still applies
     # a fresh interpreter (as a replica is) makes the same bytes
-    code = ("import hashlib, sys; from lightemma.inputs import read_image_bytes; "
-            "print(hashlib.sha256(read_image_bytes(sys.argv[1])).hexdigest())")
+    code = (
+        "import hashlib, sys; from lightemma.inputs import read_image_bytes; "
+        "print(hashlib.sha256(read_image_bytes(sys.argv[1])).hexdigest())"
+    )
     out = subprocess.run([sys.executable, "-c", code, ref], capture_output=True, text=True, check=True, timeout=120)
     assert out.stdout.strip() == hashlib.sha256(data).hexdigest()
     # the requests the chain hands to any backend (the Ray router included) carry the reference, not pixels
@@ -175,9 +184,24 @@ def test_a_corrupted_image_of_an_unreadable_file_fails_the_call_never_sends_the_
         read_image_bytes("corrupt:fog@9:1:" + str(tmp_path / "cam0.jpg"))
 
 
-BAD = ["corrupt:haze@3", "corrupt:fog@0", "corrupt:fog@6", "corrupt:fog@2.5", "corrupt:fog", "corrupt:Fog@2",
-       "history-noise@-1", "history-noise@abc", "history-noise@0", "history-noise@0,0", "history-noise@nan",
-       "history-noise@99", "history-stale@0", "history-stale@6", "history-stale@1.5", "history-stale@"]
+BAD = [
+    "corrupt:haze@3",
+    "corrupt:fog@0",
+    "corrupt:fog@6",
+    "corrupt:fog@2.5",
+    "corrupt:fog",
+    "corrupt:Fog@2",
+    "history-noise@-1",
+    "history-noise@abc",
+    "history-noise@0",
+    "history-noise@0,0",
+    "history-noise@nan",
+    "history-noise@99",
+    "history-stale@0",
+    "history-stale@6",
+    "history-stale@1.5",
+    "history-stale@",
+]
 
 
 @pytest.mark.parametrize("inputs", BAD)
@@ -187,8 +211,21 @@ def test_a_bad_spec_is_one_line_before_any_call(tmp_path, capsys, inputs):
         with pytest.raises(UserError) as info:
             run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", inputs=inputs, **FAST)
         with pytest.raises(SystemExit) as exited:  # argparse refuses it
-            cli_main(["run", "--model", "openai/gpt-4o", "--api-base", server.url, "--dataroot", str(tmp_path),
-                      "--inputs", inputs, "--output", str(tmp_path / "cli")])
+            cli_main(
+                [
+                    "run",
+                    "--model",
+                    "openai/gpt-4o",
+                    "--api-base",
+                    server.url,
+                    "--dataroot",
+                    str(tmp_path),
+                    "--inputs",
+                    inputs,
+                    "--output",
+                    str(tmp_path / "cli"),
+                ]
+            )
     assert server.requests == [] and not (tmp_path / "runs").exists() and not (tmp_path / "cli").exists()
     message = str(info.value)
     assert "\n" not in message and inputs in message
@@ -259,20 +296,34 @@ def test_history_noise_has_the_documented_sigma_per_frame_seeds_and_is_the_same_
 
 
 def test_a_batch_run_sends_the_bytes_the_direct_api_run_sends(tmp_path, monkeypatch):
-    from fake_batch import FakeBatchServer
-
     import lightemma.backends.batch as batch_module
+    from fake_batch import FakeBatchServer
 
     monkeypatch.setattr(batch_module, "IDLE_SECONDS", 0.15)
     monkeypatch.setenv("OPENAI_API_KEY", "sk-test-openai")
     frames = make_frames(tmp_path, 2, image_size=(W, H))
     direct = run_corrupted(tmp_path, frames, "corrupt:rain@4", "direct")[1]
     with FakeBatchServer(steps=1) as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "batch", batch=True,
-                     batch_poll=0.01, inputs="corrupt:rain@4", progress=False)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "batch",
+            batch=True,
+            batch_poll=0.01,
+            inputs="corrupt:rain@4",
+            progress=False,
+        )
     assert all(rec["status"] == "ok" for rec in read_run(result.run_dir).records.values())
-    urls = [p["image_url"]["url"] for b in server.batches.values() for _, body in b.requests for m in body["messages"]
-            if isinstance(m["content"], list) for p in m["content"] if p.get("type") == "image_url"]
+    urls = [
+        p["image_url"]["url"]
+        for b in server.batches.values()
+        for _, body in b.requests
+        for m in body["messages"]
+        if isinstance(m["content"], list)
+        for p in m["content"]
+        if p.get("type") == "image_url"
+    ]
     assert len(urls) == 6 and {u.split(",", 1)[1] for u in urls} == set(direct)
 
 
@@ -297,10 +348,22 @@ def test_a_corrupted_png_is_sent_as_the_jpeg_it_is(tmp_path):
     Image.fromarray(textured(frames[0].image_path)).save(png)
     frames[0].image_path = str(png)
     with FakeOpenAIServer() as server:
-        run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "runs", inputs="corrupt:pixelate@2",
-            **FAST)
-    urls = [p["image_url"]["url"] for r in server.requests for m in r.body["messages"] if isinstance(m["content"], list)
-            for p in m["content"] if p.get("type") == "image_url"]
+        run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "runs",
+            inputs="corrupt:pixelate@2",
+            **FAST,
+        )
+    urls = [
+        p["image_url"]["url"]
+        for r in server.requests
+        for m in r.body["messages"]
+        if isinstance(m["content"], list)
+        for p in m["content"]
+        if p.get("type") == "image_url"
+    ]
     assert len(urls) == 3 and all(u.startswith("data:image/jpeg;base64,") for u in urls)
     assert Image.open(io.BytesIO(base64.b64decode(urls[0].split(",", 1)[1]))).format == "JPEG"
 
@@ -308,11 +371,10 @@ def test_a_corrupted_png_is_sent_as_the_jpeg_it_is(tmp_path):
 @pytest.mark.slow
 def test_the_hf_backend_hands_the_model_the_pixels_of_the_bytes_the_api_sends(tmp_path, monkeypatch):
     """A tiny Qwen2-VL through the real hf backend: the image its processor gets is the one corrupted JPEG decoded."""
-    from local_models import build_tiny_model
-
     import lightemma.backends.hf as hf_module
     from lightemma.backends.base import ChatRequest, GenerationParams
     from lightemma.backends.hf import HFBackend
+    from local_models import build_tiny_model
 
     frame = make_frames(tmp_path, 1)[0]
     textured(frame.image_path)
@@ -329,8 +391,17 @@ def test_the_hf_backend_hands_the_model_the_pixels_of_the_bytes_the_api_sends(tm
 
     async def ask():
         try:
-            return await backend.generate([ChatRequest(text="Describe.", stage="scene", frame_id=frame.frame_id,
-                                                       image_path=ref, params=GenerationParams(max_tokens=2))])
+            return await backend.generate(
+                [
+                    ChatRequest(
+                        text="Describe.",
+                        stage="scene",
+                        frame_id=frame.frame_id,
+                        image_path=ref,
+                        params=GenerationParams(max_tokens=2),
+                    )
+                ]
+            )
         finally:
             await backend.aclose()
 
@@ -340,10 +411,9 @@ def test_the_hf_backend_hands_the_model_the_pixels_of_the_bytes_the_api_sends(tm
 
 def test_the_vllm_backend_hands_the_engine_the_pixels_of_the_bytes_the_api_sends(tmp_path, monkeypatch):
     """vLLM's chat call (a stand-in ``vllm.LLM`` recording what it gets) receives the one corrupted JPEG decoded."""
-    from test_local_backends import FakeLLM, FakeSamplingParams, FakeStructuredOutputsParams
-
     from lightemma.backends.base import ChatRequest, GenerationParams
     from lightemma.backends.vllm import VLLMBackend
+    from test_local_backends import FakeLLM, FakeSamplingParams, FakeStructuredOutputsParams
 
     module = type(sys)("vllm")
     module.LLM, module.SamplingParams, module.__version__ = FakeLLM, FakeSamplingParams, "0.32.0-fake"
@@ -358,8 +428,17 @@ def test_the_vllm_backend_hands_the_engine_the_pixels_of_the_bytes_the_api_sends
 
     async def ask():
         try:
-            return await backend.generate([ChatRequest(text="Describe.", stage="scene", frame_id=frame.frame_id,
-                                                       image_path=ref, params=GenerationParams(max_tokens=4))])
+            return await backend.generate(
+                [
+                    ChatRequest(
+                        text="Describe.",
+                        stage="scene",
+                        frame_id=frame.frame_id,
+                        image_path=ref,
+                        params=GenerationParams(max_tokens=4),
+                    )
+                ]
+            )
         finally:
             await backend.aclose()
 

@@ -111,10 +111,32 @@ def test_every_other_kernel_default_is_the_definition():
 
 
 #: names a module may not define for itself (they live in lightemma.definitions)
-_OWN_NAMES = {"DT", "KEYFRAME_DT", "STATUSES", "KNOWN_STATUSES", "STATUS_CODES", "STAGES", "FAILURES", "FAILURE_CODES",
-              "OUTCOMES", "OUTCOME_CODES", "UNREADABLE", "CONVENTIONS", "CONVENTION_NAMES", "METHODS",
-              "INTEGRATION_METHODS", "COLLISION_CONVENTIONS", "COLLISION_FOR_ADE", "EGO_LENGTH", "EGO_WIDTH",
-              "EGO_OFFSET", "MIN_STEP", "PARSE_FAILURES", "PARSE_MODES", "MODES"}
+_OWN_NAMES = {
+    "DT",
+    "KEYFRAME_DT",
+    "STATUSES",
+    "KNOWN_STATUSES",
+    "STATUS_CODES",
+    "STAGES",
+    "FAILURES",
+    "FAILURE_CODES",
+    "OUTCOMES",
+    "OUTCOME_CODES",
+    "UNREADABLE",
+    "CONVENTIONS",
+    "CONVENTION_NAMES",
+    "METHODS",
+    "INTEGRATION_METHODS",
+    "COLLISION_CONVENTIONS",
+    "COLLISION_FOR_ADE",
+    "EGO_LENGTH",
+    "EGO_WIDTH",
+    "EGO_OFFSET",
+    "MIN_STEP",
+    "PARSE_FAILURES",
+    "PARSE_MODES",
+    "MODES",
+}
 #: numbers that are the ego box (the docs may say them; the code takes them from lightemma.definitions)
 _OWN_NUMBERS = {4.084, 0.943713, 1.444, 1.443713}
 

@@ -11,8 +11,8 @@ import json
 import pytest
 
 from lightemma.cli import main
-from lightemma.offline_demo import MARKER, api_models, run_demo, skipped_api_models, skipped_line
 from lightemma.errors import UserError
+from lightemma.offline_demo import MARKER, api_models, run_demo, skipped_api_models, skipped_line
 
 
 @pytest.mark.slow
@@ -26,8 +26,10 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     captured = capsys.readouterr()
     assert f"demo report: {index}" in captured.out
     # no key set: one line says which paper models were skipped and how to run them
-    assert ("skipped paper models: gpt-4o (no key: set OPENAI_API_KEY), claude-3.7-sonnet (no key: set "
-            "ANTHROPIC_API_KEY), gemini-2.0-flash (no key: set GEMINI_API_KEY)\n") in captured.err
+    assert (
+        "skipped paper models: gpt-4o (no key: set OPENAI_API_KEY), claude-3.7-sonnet (no key: set "
+        "ANTHROPIC_API_KEY), gemini-2.0-flash (no key: set GEMINI_API_KEY)\n"
+    ) in captured.err
     assert "frames: v1.0-mini, split all: 8 scenes, 8 frames, reference window" in captured.err
     # the ego baseline's fit on these few scenes is named as such, in one line of the demo's own (no Python warning)
     assert "\n    warning: baseline:ego is fitted on few frames: each fold's fit sees as few as " in captured.err
@@ -37,14 +39,24 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     # five baseline runs (the ego baseline cross-fitted over the 8 scenes), every frame scored, the oracle's floor visible
     evaluation = json.loads((out / "report" / "tables" / "evaluation.json").read_text())
     rows = {r["model"]: r for r in evaluation["accuracy"]["lightemma"]}
-    assert len(rows) == 5 and "Baseline (ego status)" in rows and all(r["frames"] > 0 and r["frames"] == r["frames_in_run"] for r in rows.values())
+    assert (
+        len(rows) == 5
+        and "Baseline (ego status)" in rows
+        and all(r["frames"] > 0 and r["frames"] == r["frames_in_run"] for r in rows.values())
+    )
     oracle = [r for name, r in rows.items() if "oracle" in name]
     others = [r for name, r in rows.items() if "oracle" not in name]
     assert len(oracle) == 2 and max(r["ade_avg"] for r in oracle) < min(r["ade_avg"] for r in others)
     assert {r["fe_pct"] for r in rows.values()} == {0.0}  # baselines answer in the strict format
     # the safety columns: off-road on the synthetic map, collisions with its agents, the ground-truth floor at 0
-    assert all(r["offroad"] is not None and r["collision"] is not None and r["area_source"] == "expansion" for r in rows.values())
-    assert evaluation["safety"]["floor"]["lightemma"]["offroad"] == 0.0 and evaluation["safety"]["floor"]["lightemma"]["collision"] == 0.0
+    assert all(
+        r["offroad"] is not None and r["collision"] is not None and r["area_source"] == "expansion"
+        for r in rows.values()
+    )
+    assert (
+        evaluation["safety"]["floor"]["lightemma"]["offroad"] == 0.0
+        and evaluation["safety"]["floor"]["lightemma"]["collision"] == 0.0
+    )
     assert "Off-road (%) [95% CI]" in text and "Collision (%) [95% CI]" in text and "| Ground truth (floor) |" in text
     # pictures drawn with the synthetic camera images (no "no camera view" note)
     assert "pictures have no camera view" not in text
@@ -70,14 +82,20 @@ def test_demo_end_to_end_in_the_current_directory(tmp_path, monkeypatch, capsys)
     # (before: the baselines on their 4, GPT-4o on its 2, in one table); the demo and the report say so
     assert result.common and evaluation["common"] and evaluation["n_common"] == 2
     assert {r["frames"] for r in rows.values()} == {2} and {r["frames_accounted"] for r in rows.values()} == {2}
-    assert any("every model is scored on the frames scored in every run (the API models ran on the first 2 frames"
-               in line for line in said)
+    assert any(
+        "every model is scored on the frames scored in every run (the API models ran on the first 2 frames" in line
+        for line in said
+    )
     assert "2 frames scored in every run" in (out / "report" / "index.md").read_text()
     (ablation,) = evaluation["input_ablations"]
     assert (ablation["model"], ablation["ablation"], ablation["frames"]) == ("GPT-4o", "no-image", 2)
     assert {g["model"] for g in evaluation["baseline_gains"]} == {"GPT-4o", "GPT-4o [no-image]"}
     text = (out / "report" / "index.md").read_text()
-    assert "## Does the model look at the road?" in text and "Does the image matter?" in text and "Gain over the best baseline" in text
+    assert (
+        "## Does the model look at the road?" in text
+        and "Does the image matter?" in text
+        and "Gain over the best baseline" in text
+    )
     assert (out / "report" / "figures" / "input_ablations.png").stat().st_size > 1000
 
 
@@ -90,12 +108,18 @@ def test_demo_refuses_a_folder_it_did_not_make(tmp_path):
 
 def test_api_models_follow_the_keys_that_are_set():
     assert api_models({}) == []
-    assert api_models({"ANTHROPIC_API_KEY": "x", "GEMINI_API_KEY": "", "OPENAI_API_KEY": "y"}) == ["gpt-4o", "claude-3.7-sonnet"]
+    assert api_models({"ANTHROPIC_API_KEY": "x", "GEMINI_API_KEY": "", "OPENAI_API_KEY": "y"}) == [
+        "gpt-4o",
+        "claude-3.7-sonnet",
+    ]
 
 
 def test_skipped_models_name_the_missing_key_or_no_api():
     env = {"ANTHROPIC_API_KEY": "x", "GEMINI_API_KEY": ""}
-    assert skipped_api_models(env) == {"gpt-4o": "no key: set OPENAI_API_KEY", "gemini-2.0-flash": "no key: set GEMINI_API_KEY"}
+    assert skipped_api_models(env) == {
+        "gpt-4o": "no key: set OPENAI_API_KEY",
+        "gemini-2.0-flash": "no key: set GEMINI_API_KEY",
+    }
     assert skipped_line(skipped_api_models(env)) == (
         "skipped paper models: gpt-4o (no key: set OPENAI_API_KEY), gemini-2.0-flash (no key: set GEMINI_API_KEY)"
     )
@@ -109,7 +133,9 @@ def test_demo_rejects_too_few_keyframes(tmp_path, capsys):
     assert "at least 15" in capsys.readouterr().err
 
 
-@pytest.mark.parametrize(("flag", "value"), [("--scenes", "0"), ("--scenes", "-2"), ("--api-limit", "0"), ("--api-limit", "-1")])
+@pytest.mark.parametrize(
+    ("flag", "value"), [("--scenes", "0"), ("--scenes", "-2"), ("--api-limit", "0"), ("--api-limit", "-1")]
+)
 def test_demo_refuses_a_count_below_one_before_any_work(tmp_path, capsys, flag, value):
     """Before: --scenes 0 ran the default 8 scenes, and --api-limit 0 ran a keyed API model on every frame."""
     out = tmp_path / "demo"

@@ -51,16 +51,19 @@ def test_the_hand_labelled_corpus_is_read_as_labelled():
     assert {"affirmed", "negated", "hedged", "not_mentioned"} <= set(got.mentions.ravel().tolist())
 
 
-@pytest.mark.parametrize(("text", "why"), [
-    ("", "empty text"),
-    (None, "no stage-1 text"),
-    ("a " * 40_000, "too long"),
-    ("Ein Fußgänger überquert die Straße vor dem Auto und ein Radfahrer wartet", "not English"),
-    ("You are an expert labeller of autonomous-driving data. A car.", "echoes the prompt"),
-    ("A car \x00\x01 ahead", "control characters"),
-    ("A pedestrian \ud800 ahead", "not valid UTF-8"),
-    ("<think>a pedestrian is there", "reasoning block"),
-])
+@pytest.mark.parametrize(
+    ("text", "why"),
+    [
+        ("", "empty text"),
+        (None, "no stage-1 text"),
+        ("a " * 40_000, "too long"),
+        ("Ein Fußgänger überquert die Straße vor dem Auto und ein Radfahrer wartet", "not English"),
+        ("You are an expert labeller of autonomous-driving data. A car.", "echoes the prompt"),
+        ("A car \x00\x01 ahead", "control characters"),
+        ("A pedestrian \ud800 ahead", "not valid UTF-8"),
+        ("<think>a pedestrian is there", "reasoning block"),
+    ],
+)
 def test_bad_input_is_unknown_on_every_class_with_the_reason(text, why):
     got = read_objects([text])
     assert set(got.mentions[0].tolist()) == {"unknown"}
@@ -84,9 +87,10 @@ def dataset(tmp_path_factory):
 
 
 def _tables(root):
-    return {name: json.loads((root / VERSION / f"{name}.json").read_text(encoding="utf-8"))
-            for name in ("sample", "sample_data", "ego_pose", "sample_annotation", "instance", "category",
-                         "visibility")}
+    return {
+        name: json.loads((root / VERSION / f"{name}.json").read_text(encoding="utf-8"))
+        for name in ("sample", "sample_data", "ego_pose", "sample_annotation", "instance", "category", "visibility")
+    }
 
 
 def _hand_states(root) -> dict[str, np.ndarray]:
@@ -125,8 +129,13 @@ def _hand_states(root) -> dict[str, np.ndarray]:
                 gx = bx + math.cos(byaw) * sx * length / 2 - math.sin(byaw) * sy * w / 2
                 gy = by + math.sin(byaw) * sx * length / 2 + math.cos(byaw) * sy * w / 2
                 dx, dy = gx - ex, gy - ey
-                pts.append([math.cos(eyaw) * dx + math.sin(eyaw) * dy, -math.sin(eyaw) * dx + math.cos(eyaw) * dy,
-                            bz + sz * h / 2])
+                pts.append(
+                    [
+                        math.cos(eyaw) * dx + math.sin(eyaw) * dy,
+                        -math.sin(eyaw) * dx + math.cos(eyaw) * dy,
+                        bz + sz * h / 2,
+                    ]
+                )
             c = cam.ego_to_cam(np.array(pts))
             uv = cam.project(np.where(c[:, 2:3] > 0, c, 1.0))
             seen = ((c[:, 2] > 1.0) & (uv[:, 0] > 0) & (uv[:, 0] < 64) & (uv[:, 1] > 0) & (uv[:, 1] < 36)).any()
@@ -150,7 +159,8 @@ def test_states_match_a_hand_projection(dataset):
     cols = [CHECKED.index("pedestrian"), CHECKED.index("car")]
     mine = {st: front.states[st][cols] for st in samples}
     assert all(np.array_equal(mine[st], hand[st]) for st in samples), [
-        (st, mine[st], hand[st]) for st in samples if not np.array_equal(mine[st], hand[st])][:5]
+        (st, mine[st], hand[st]) for st in samples if not np.array_equal(mine[st], hand[st])
+    ][:5]
     # not vacuous: pedestrians and cars are both in view somewhere and absent elsewhere
     stacked = np.stack([hand[st] for st in samples])
     for k in range(2):
@@ -198,14 +208,16 @@ def _mentions(rows: list[dict[str, str]]) -> np.ndarray:
 def test_checks_and_tags_by_hand():
     P, A, X = PRESENT, ABSENT, AMBIGUOUS
     ped, car = CHECKED.index("pedestrian"), CHECKED.index("car")
-    mentions = _mentions([
-        {"pedestrian": "affirmed"},              # 0: pedestrian absent -> hallucinated
-        {"pedestrian": "affirmed"},              # 1: present -> correct
-        {},                                      # 2: present, not mentioned -> missed
-        {"pedestrian": "negated"},               # 3: present, negated -> missed
-        {"pedestrian": "hedged"},                # 4: present, hedged -> neither (no answer)
-        {"pedestrian": "affirmed", "car": "affirmed"},  # 5: ambiguous -> neither
-    ])
+    mentions = _mentions(
+        [
+            {"pedestrian": "affirmed"},  # 0: pedestrian absent -> hallucinated
+            {"pedestrian": "affirmed"},  # 1: present -> correct
+            {},  # 2: present, not mentioned -> missed
+            {"pedestrian": "negated"},  # 3: present, negated -> missed
+            {"pedestrian": "hedged"},  # 4: present, hedged -> neither (no answer)
+            {"pedestrian": "affirmed", "car": "affirmed"},  # 5: ambiguous -> neither
+        ]
+    )
     states = np.full((6, len(CHECKED)), A, dtype=np.int8)
     states[[1, 2, 3, 4], ped] = P
     states[5, ped] = X
@@ -279,10 +291,35 @@ def runs(tmp_path_factory, dataset):
 
     out = tmp_path_factory.mktemp("objects-runs") / "runs"
     with FakeOpenAIServer(model) as server:
-        full = run("openai/gpt-4o", api_base=server.url, dataroot=dataset, version=VERSION, output=out,
-                   backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False).run_dir
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(dataset), "--version", VERSION,
-                 "--split", "all", "--out", str(out)]) == 0
+        full = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            dataroot=dataset,
+            version=VERSION,
+            output=out,
+            backoff_base=0.01,
+            backoff_cap=0.05,
+            timeout=10.0,
+            progress=False,
+        ).run_dir
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(dataset),
+                "--version",
+                VERSION,
+                "--split",
+                "all",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     (baseline,) = (out / "baseline-cv").iterdir()
     return full, baseline, out
 
@@ -302,9 +339,17 @@ def test_two_evaluations_merge_with_their_described_objects(runs, tmp_path, caps
         return Reply("[" + ", ".join("(5.000, 0.0)" for _ in range(6)) + "]")
 
     with FakeOpenAIServer(model) as server:
-        other = run("openai/gpt-4o-mini", api_base=server.url, dataroot=_dataroot(full), version=VERSION,
-                    output=tmp_path / "other", backoff_base=0.01, backoff_cap=0.05, timeout=10.0,
-                    progress=False).run_dir
+        other = run(
+            "openai/gpt-4o-mini",
+            api_base=server.url,
+            dataroot=_dataroot(full),
+            version=VERSION,
+            output=tmp_path / "other",
+            backoff_base=0.01,
+            backoff_cap=0.05,
+            timeout=10.0,
+            progress=False,
+        ).run_dir
     files = []
     for k, d in enumerate((full, other)):
         capsys.readouterr()
@@ -381,9 +426,41 @@ def test_the_scenario_tags(runs, dataset):
 
 # -- fuzzing -----------------------------------------------------------------------------------------------------------
 
-_WORDS = ["a", "two", "no", "not", "pedestrian", "pedestrians", "car", "cars", "bus", "stop", "lane", "bike", "may",
-          "watch", "for", "any", "but", "and", "the", "ego", ",", ".", ":", "none", "clear", "of", "traffic", "light",
-          "cones", "Straße", "<think>", "</think>", "\n"]
+_WORDS = [
+    "a",
+    "two",
+    "no",
+    "not",
+    "pedestrian",
+    "pedestrians",
+    "car",
+    "cars",
+    "bus",
+    "stop",
+    "lane",
+    "bike",
+    "may",
+    "watch",
+    "for",
+    "any",
+    "but",
+    "and",
+    "the",
+    "ego",
+    ",",
+    ".",
+    ":",
+    "none",
+    "clear",
+    "of",
+    "traffic",
+    "light",
+    "cones",
+    "Straße",
+    "<think>",
+    "</think>",
+    "\n",
+]
 
 
 @settings(max_examples=300, deadline=None)
@@ -402,8 +479,10 @@ def test_fuzz_never_crashes_and_unknown_always_has_a_reason(parts):
 
 
 @settings(max_examples=100, deadline=None)
-@given(st.sampled_from(["pedestrians", "cyclists", "cars", "trucks", "buses", "traffic cones", "barriers"]),
-       st.sampled_from(["There are no", "No", "I see no", "The road is clear of", "There are not any"]))
+@given(
+    st.sampled_from(["pedestrians", "cyclists", "cars", "trucks", "buses", "traffic cones", "barriers"]),
+    st.sampled_from(["There are no", "No", "I see no", "The road is clear of", "There are not any"]),
+)
 def test_a_negated_class_is_never_affirmed(noun, negation):
     got = read_objects([f"{negation} {noun} in the scene."])
     assert "affirmed" not in got.mentions[0].tolist() and "negated" in got.mentions[0].tolist()

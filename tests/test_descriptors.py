@@ -6,6 +6,7 @@ import re
 from pathlib import Path
 
 import pytest
+
 from lightemma.errors import UserError
 from lightemma.evaluation.descriptors import (
     ADE_BY_CONVENTION,

@@ -36,8 +36,11 @@ def make_frames(n_scenes: int = 6, per_scene: int = 5, seed: int = 0, odd: str |
             future = np.column_stack([v_fut, np.full(6, kappa * 0.9)])
             if scene == odd:
                 future = np.column_stack([np.full(6, 40.0) - v_fut, np.full(6, -0.3)])  # nothing else drives like this
-            frames.append(SimpleNamespace(frame_id=f"{scene}/t{i:03d}", scene_name=scene, history_actions=history,
-                                          gt_actions=future))
+            frames.append(
+                SimpleNamespace(
+                    frame_id=f"{scene}/t{i:03d}", scene_name=scene, history_actions=history, gt_actions=future
+                )
+            )
     return frames
 
 
@@ -141,10 +144,14 @@ def test_the_cross_fit_needs_three_scenes_and_a_split_fit_refuses_shared_scenes(
 def test_the_backend_answers_from_its_fit_and_only_for_fitted_frames():
     frames = make_frames(4, 3)
     backend = BaselineBackend("ego")
-    unfitted = asyncio.run(backend.generate([ChatRequest(text="", stage="actions", frame_id=frames[0].frame_id, frame=frames[0])]))
+    unfitted = asyncio.run(
+        backend.generate([ChatRequest(text="", stage="actions", frame_id=frames[0].frame_id, frame=frames[0])])
+    )
     assert unfitted[0].error == "ValueError" and "not fitted" in unfitted[0].error_message
     backend.prepare(frames)
-    results = asyncio.run(backend.generate([ChatRequest(text="", stage="actions", frame_id=f.frame_id, frame=f) for f in frames]))
+    results = asyncio.run(
+        backend.generate([ChatRequest(text="", stage="actions", frame_id=f.frame_id, frame=f) for f in frames])
+    )
     parsed = lightemma.parse_actions([r.text for r in results], mode="strict")
     assert set(parsed.status) == {"ok"}
     reference = EgoFit.cross_fit(frames).predictions
@@ -152,7 +159,9 @@ def test_the_backend_answers_from_its_fit_and_only_for_fitted_frames():
     np.testing.assert_allclose(parsed.actions, expected, atol=1e-6)
     assert backend.info["fit"]["method"].startswith("cross-fit by scene")
     stranger = SimpleNamespace(**{**vars(frames[0]), "frame_id": "other/t0"})
-    (missing,) = asyncio.run(backend.generate([ChatRequest(text="", stage="actions", frame_id="other/t0", frame=stranger)]))
+    (missing,) = asyncio.run(
+        backend.generate([ChatRequest(text="", stage="actions", frame_id="other/t0", frame=stranger)])
+    )
     assert missing.error == "ValueError" and "no prediction" in missing.error_message
     with pytest.raises(UserError, match="--fit-split is for baseline:ego"):
         BaselineBackend("cv", fit_split="train")
@@ -166,8 +175,22 @@ def four_scenes(tmp_path_factory):
 
 
 def test_lightemma_run_baseline_ego_records_the_fit_and_resumes_under_it(four_scenes, tmp_path, capsys):
-    code = cli_main(["run", "--model", "baseline:ego", "--dataroot", str(four_scenes), "--version", "v1.0-mini",
-                     "--split", "all", "--output", str(tmp_path), "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--model",
+            "baseline:ego",
+            "--dataroot",
+            str(four_scenes),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--output",
+            str(tmp_path),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
@@ -201,8 +224,23 @@ def test_lightemma_run_baseline_ego_records_the_fit_and_resumes_under_it(four_sc
 
 @pytest.mark.parametrize("flag", [["--sample", "6"], ["--limit", "6"]])
 def test_a_cross_fit_on_a_sample_or_limit_warns_in_one_line_and_is_recorded(four_scenes, tmp_path, capsys, flag):
-    code = cli_main(["run", "--model", "baseline:ego", "--dataroot", str(four_scenes), "--version", "v1.0-mini",
-                     "--split", "all", "--output", str(tmp_path), "--no-progress", *flag])
+    code = cli_main(
+        [
+            "run",
+            "--model",
+            "baseline:ego",
+            "--dataroot",
+            str(four_scenes),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--output",
+            str(tmp_path),
+            "--no-progress",
+            *flag,
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 0, err
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
@@ -210,20 +248,48 @@ def test_a_cross_fit_on_a_sample_or_limit_warns_in_one_line_and_is_recorded(four
     subset = fit["subset"]
     scenes = len({s for f in fit["folds"] for s in f["predicted_scenes"]})
     assert subset["taken_by"] == " ".join(flag) and subset["frames"] == 6 and subset["scenes"] == scenes >= 3
-    assert subset["fit_frames_per_fold"] == [f["fit_frames"] for f in fit["folds"]] and max(subset["fit_frames_per_fold"]) < 6
-    warned = [line for line in err.splitlines() if "baseline:ego is cross-fitted on the 6 frame(s) of " + " ".join(flag) in line]
+    assert (
+        subset["fit_frames_per_fold"] == [f["fit_frames"] for f in fit["folds"]]
+        and max(subset["fit_frames_per_fold"]) < 6
+    )
+    warned = [
+        line
+        for line in err.splitlines()
+        if "baseline:ego is cross-fitted on the 6 frame(s) of " + " ".join(flag) in line
+    ]
     assert len(warned) == 1 and f"({scenes} scenes;" in warned[0] and "--fit-split train" in warned[0]
     assert warned[0] == "lightemma run: " + subset["warning"]
 
 
 def test_fit_split_is_for_baseline_ego_only_and_checks_its_split(four_scenes, tmp_path, capsys):
-    code = cli_main(["run", "--model", "baseline:cv", "--dataroot", str(four_scenes), "--version", "v1.0-mini",
-                     "--fit-split", "train", "--output", str(tmp_path), "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--model",
+            "baseline:cv",
+            "--dataroot",
+            str(four_scenes),
+            "--version",
+            "v1.0-mini",
+            "--fit-split",
+            "train",
+            "--output",
+            str(tmp_path),
+            "--no-progress",
+        ]
+    )
     assert code == 2 and "--fit-split is for baseline:ego" in capsys.readouterr().err
     # the evaluated scenes are the training split's own: refused, not a leaked fit
     with pytest.raises(UserError, match="in the training split too"):
-        run("baseline:ego", dataroot=four_scenes, version="v1.0-mini", split="all", output=tmp_path, progress=False,
-            backend_options={"fit_split": "all"})
+        run(
+            "baseline:ego",
+            dataroot=four_scenes,
+            version="v1.0-mini",
+            split="all",
+            output=tmp_path,
+            progress=False,
+            backend_options={"fit_split": "all"},
+        )
 
 
 def test_a_fit_on_few_scenes_or_frames_carries_a_warning_and_a_large_one_none():
@@ -233,7 +299,8 @@ def test_a_fit_on_few_scenes_or_frames_carries_a_warning_and_a_large_one_none():
     per_fold = [(f["fit_scenes"], f["fit_frames"]) for f in small.record["folds"]]
     assert small.record["warning"].startswith(
         "warning: baseline:ego is fitted on few frames: each fold's fit sees as few as "
-        f"{min(s for s, _ in per_fold)} scene(s) and {min(n for _, n in per_fold)} frame(s)")
+        f"{min(s for s, _ in per_fold)} scene(s) and {min(n for _, n in per_fold)} frame(s)"
+    )
     assert "\n" not in small.record["warning"] and "--fit-split train" in small.record["warning"]
     # 30 scenes of 10 frames: each of the 5 folds fits on 24 scenes and 240 frames, above both limits
     large = EgoFit.cross_fit(make_frames(n_scenes=30, per_scene=10))

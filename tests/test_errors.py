@@ -52,8 +52,17 @@ def test_the_public_api_raises_the_same_classes():
 
 
 def test_the_classes_are_exported_from_lightemma():
-    for name in ("UserError", "InputError", "ShapeError", "NonFiniteError", "UnknownNameError", "DatasetError",
-                 "RunStoreError", "RunFatalError", "RunStopped"):
+    for name in (
+        "UserError",
+        "InputError",
+        "ShapeError",
+        "NonFiniteError",
+        "UnknownNameError",
+        "DatasetError",
+        "RunStoreError",
+        "RunFatalError",
+        "RunStopped",
+    ):
         assert name in lightemma.__all__
         assert getattr(lightemma, name) is getattr(errors, name)
     for cls in (InputError, ShapeError, NonFiniteError, UnknownNameError, errors.DatasetError, errors.RunStoreError):
@@ -63,12 +72,17 @@ def test_the_classes_are_exported_from_lightemma():
 def test_no_binding_raises_a_python_class_of_its_own():
     """One mapping (rust/python/errors.rs): no binding file builds a Python exception but through it."""
     sources = [ROOT / "rust" / "python.rs", *sorted((ROOT / "rust" / "python").glob("*.rs"))]
-    offenders = [f"{p.name}:{i}" for p in sources for i, line in enumerate(p.read_text().splitlines(), 1)
-                 if re.search(r"\bPy[A-Z]\w*(Error|Exception)\b", line) and p.name != "errors.rs"]
+    offenders = [
+        f"{p.name}:{i}"
+        for p in sources
+        for i, line in enumerate(p.read_text().splitlines(), 1)
+        if re.search(r"\bPy[A-Z]\w*(Error|Exception)\b", line) and p.name != "errors.rs"
+    ]
     assert offenders == []
 
 
 # ---- the CLI ----------------------------------------------------------------------------------------------------
+
 
 def _cli_with(monkeypatch, func):
     """lightemma's main() with one subcommand, ``boom``, that runs ``func``."""

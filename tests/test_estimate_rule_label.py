@@ -12,8 +12,15 @@ from lightemma.nuscenes import load_frames
 from lightemma.pipeline.runner import estimate_run
 
 
-@pytest.mark.parametrize(("model", "rule"), [("claude-4.6-sonnet", "anthropic"), ("gemini-2.0-flash", "gemini"),
-                                             ("gemini-3.0-flash", "gemini"), ("gpt-4o", "openai")])
+@pytest.mark.parametrize(
+    ("model", "rule"),
+    [
+        ("claude-4.6-sonnet", "anthropic"),
+        ("gemini-2.0-flash", "gemini"),
+        ("gemini-3.0-flash", "gemini"),
+        ("gpt-4o", "openai"),
+    ],
+)
 def test_the_label_is_the_rule_counted(synth_root, elsewhere, model, rule) -> None:
     # elsewhere: 127.0.0.1 is not the provider's host here, so the route is the OpenAI-compatible one
     frames = load_frames(synth_root, "v1.0-mini", split="all")

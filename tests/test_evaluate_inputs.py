@@ -9,6 +9,7 @@ import os
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import pytest
+
 from lightemma.cli import main
 from lightemma.evaluation import evaluate_runs
 from lightemma.evaluation.synthetic import write_synthetic_run
@@ -27,7 +28,9 @@ def test_a_corrupt_manifest_is_left_out_with_a_warning(runs, tmp_path, capsys):
     (broken / "manifest.json").write_text('{"format": "lightemma-run/1", "model": ')  # cut off mid-write
     evaluation = evaluate_runs([runs])
     assert sorted(m.label for m in evaluation.models) == ["GPT-4o", "baseline:cv"]
-    assert any(w.startswith(f"left out {broken}: ") and "is unreadable" in w for w in evaluation.warnings), evaluation.warnings
+    assert any(w.startswith(f"left out {broken}: ") and "is unreadable" in w for w in evaluation.warnings), (
+        evaluation.warnings
+    )
     assert main(["evaluate", str(runs)]) == 0
     captured = capsys.readouterr()
     assert f"lightemma evaluate: warning: left out {broken}: " in captured.err and "| GPT-4o |" in captured.out
@@ -54,8 +57,10 @@ def test_a_linked_run_is_named_not_silently_left_out(runs, tmp_path, capsys):
     evaluation = evaluate_runs([runs])
     assert len(evaluation.models) == 2
     (warning,) = [w for w in evaluation.warnings if w.startswith("left out")]
-    assert warning == (f"left out {runs / 'shared'}: a symbolic link to {elsewhere} holding 1 run(s), not followed; "
-                       "give it by its own path to include it")
+    assert warning == (
+        f"left out {runs / 'shared'}: a symbolic link to {elsewhere} holding 1 run(s), not followed; "
+        "give it by its own path to include it"
+    )
     assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--no-pictures", "--top", "0", "--no-paper"]) == 0
     assert f"left out {runs / 'shared'}: a symbolic link" in (tmp_path / "rep" / "index.md").read_text()
     # given by its own path it is read

@@ -8,6 +8,7 @@ import json
 
 import jsonschema
 import pytest
+
 from lightemma.cli import main
 from lightemma.errors import UserError
 from lightemma.evaluation.descriptors import EVALUATE_FORMAT, check_evaluation_json, read_evaluation_json, schema

@@ -15,10 +15,10 @@ import pytest
 from lightemma.cli import main
 from lightemma.errors import RunStoreError, UserError
 from lightemma.evaluation import columns, evaluate_runs, load_run
-from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation.synthetic import make_record, write_synthetic_run
-from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir, update_manifest
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.report.tables import render
+from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir, update_manifest
 
 SLICES = {
     "lightemma": ([0, 1], [2, 3], [4, 5]),
@@ -117,7 +117,13 @@ def test_efficiency_accounting(two_runs):
 
 
 def test_models_ordered_by_family_and_labelled(tmp_path):
-    for model in ("meta-llama/Llama-3.2-11B-Vision-Instruct", "baseline:constant", "gemini/gemini-2.0-flash", "openai/gpt-5.2", "openai/gpt-4o"):
+    for model in (
+        "meta-llama/Llama-3.2-11B-Vision-Instruct",
+        "baseline:constant",
+        "gemini/gemini-2.0-flash",
+        "openai/gpt-5.2",
+        "openai/gpt-4o",
+    ):
         write_synthetic_run(tmp_path, model, 5)
     rows = evaluate_runs([tmp_path]).accuracy_rows()
     assert [r["model"] for r in rows] == ["GPT-4o", "GPT-5.2", "Gemini-2.0-Flash", "LLaMA-3.2-11B", "baseline:constant"]
@@ -125,8 +131,8 @@ def test_models_ordered_by_family_and_labelled(tmp_path):
 
 
 def test_every_registry_id_of_a_paper_model_is_recognised():
-    from lightemma.models.names import known_model
     from lightemma.models.catalog import PAPER_MODELS
+    from lightemma.models.names import known_model
 
     for info in PAPER_MODELS:
         for name in (info.key, info.display_name, info.model_id):
@@ -226,8 +232,14 @@ def test_cli_markdown_layout_with_paper(two_runs, capsys):
     body = lines[header + 2 : header + 2 + 18]
     # the run, then the paper's row of its model, then the difference; then the baseline; then the other paper rows
     assert body[0].startswith("| GPT-4o (synthetic data) | ") and body[0].endswith("| lenient |")  # synthetic records
-    assert re.search(r"\| GPT-4o \(synthetic data\) \| \d+ \| \d+ \| \d+ \| 0 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \[[\d.]+, [\d.]+\] \| [\d.]+ \[[\d.]+, [\d.]+\] \|", body[0])
-    assert body[1] == "| GPT-4o (paper) | 3908 | - | - | - | - | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
+    assert re.search(
+        r"\| GPT-4o \(synthetic data\) \| \d+ \| \d+ \| \d+ \| 0 \| 0 \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \| [\d.]+ \[[\d.]+, [\d.]+\] \| [\d.]+ \[[\d.]+, [\d.]+\] \|",
+        body[0],
+    )
+    assert (
+        body[1]
+        == "| GPT-4o (paper) | 3908 | - | - | - | - | 7.78 | 0.08 | 0.28 | 0.92 | 2.01 | 1.07 | 2.34 | - | paper |"
+    )
     assert body[2].startswith("| Δ vs paper | - | ") and body[3].startswith("| baseline:cv (synthetic data) | ")
     assert body[4].startswith("| GPT-5.0 (paper) | ") and len([b for b in body if "(paper)" in b]) == 15
     assert "| Gemini-2.5-Flash (paper) | 28.5 | 1.35† | 1968† | - | 402 | - | - | - | 3908 |" in text
@@ -253,8 +265,14 @@ def test_csv_latex_json_formats(two_runs, capsys):
     latex = render(tables, "latex")
     assert latex.count(r"\begin{tabular}") == 6 and r"FE (\%)" in latex and r"\textcent{}" in latex
     doc = json.loads(render(tables, "json", extra={"common": False}))
-    assert [t["name"] for t in doc["tables"]] == ["efficiency", "accuracy_lightemma", "accuracy_stp3", "accuracy_uniad", "explanations",
-                                                  "baseline_gains"]
+    assert [t["name"] for t in doc["tables"]] == [
+        "efficiency",
+        "accuracy_lightemma",
+        "accuracy_stp3",
+        "accuracy_uniad",
+        "explanations",
+        "baseline_gains",
+    ]
     assert doc["tables"][1]["rows"][0]["ade_avg"] == ev.accuracy_rows("lightemma")[0]["ade_avg"]
     low, high = doc["tables"][1]["rows"][0]["ade_avg_ci95"]
     assert low < doc["tables"][1]["rows"][0]["ade_avg"] < high and len(doc["tables"][1]["rows"][0]["fde_ci95"]) == 2
@@ -295,7 +313,11 @@ def test_manifest_in_the_run_pipelines_shape(tmp_path):
             w.append(make_record(f"f{i}", np.zeros((6, 2)), np.zeros((6, 2))))
     ev = evaluate_runs([run_dir])
     model = ev.models[0]
-    assert (model.label, model.family, model.integrator) == ("Baseline (oracle actions) [midpoint]", "Baseline", "midpoint")  # not the paper's euler
+    assert (model.label, model.family, model.integrator) == (
+        "Baseline (oracle actions) [midpoint]",
+        "Baseline",
+        "midpoint",
+    )  # not the paper's euler
     row = ev.efficiency_rows()[0]
     assert row["run_wall_seconds"] == 15.0 and row["frames_per_second"] == pytest.approx(0.2)
     assert row["gpus"] is None and row["concurrency"] == 4
@@ -309,8 +331,10 @@ def test_interrupted_session_makes_the_run_wall_time_unknown(tmp_path):
     """
     manifest = {
         "model": "baseline:cv",
-        "sessions": [{"kind": "run", "started_at": "2026-01-01T00:00:00+00:00"},  # SIGKILLed: no wall time
-                     {"kind": "resume", "wall_seconds": 5.0, "frames_run": 2}],
+        "sessions": [
+            {"kind": "run", "started_at": "2026-01-01T00:00:00+00:00"},  # SIGKILLed: no wall time
+            {"kind": "resume", "wall_seconds": 5.0, "frames_run": 2},
+        ],
         "summary": {"wall_seconds": 5.0, "frames_run": 2},  # the last session's
         "finished_at": "2026-01-01T00:01:00+00:00",
     }
@@ -376,8 +400,10 @@ def test_frames_with_only_api_errors_are_counted_apart_from_format_errors(tmp_pa
     legacy = make_record("f4", gt, None, status="failed")  # written before `failure` existed: first_status "failed"
     legacy["attempts"] = [{"answer": None, "status": "failed", "reason": "API error: X"}]
     late = make_record("f5", gt, np.ones((6, 2)), status="ok", first_status="failed")
-    late["attempts"] = [{"answer": None, "status": "failed", "failure": "api_error"},
-                        {"answer": "[(…)]", "status": "corrected", "failure": ""}]
+    late["attempts"] = [
+        {"answer": None, "status": "failed", "failure": "api_error"},
+        {"answer": "[(…)]", "status": "corrected", "failure": ""},
+    ]
     with RunWriter(run_dir) as w:
         w.append(make_record("f1", gt, np.ones((6, 2)), status="ok"))
         w.append(make_record("f2", gt, None, status="failed"))
@@ -400,7 +426,9 @@ def test_a_file_given_as_a_run_directory_is_named_as_a_file(two_runs, capsys):
     for path in (a / FRAMES_FILE, a / "manifest.json"):
         assert main(["evaluate", str(path)]) == 2
         err = capsys.readouterr().err.strip()
-        assert err == (f"lightemma evaluate: error: {path} is a file, not a run directory; give the folder that holds "
-                       f"manifest.json ({a})"), err
+        assert err == (
+            f"lightemma evaluate: error: {path} is a file, not a run directory; give the folder that holds "
+            f"manifest.json ({a})"
+        ), err
     assert main(["evaluate", str(out / "missing")]) == 2
     assert capsys.readouterr().err.strip() == f"lightemma evaluate: error: {out / 'missing'} does not exist"

@@ -53,11 +53,36 @@ def runs(tmp_path_factory, synth_root):
     dirs = {}
     for inputs, lie_every in (("full", 3), ("no-image", None)):
         with FakeOpenAIServer(_model(lie_every)) as server:
-            dirs[inputs] = run("openai/gpt-4o", api_base=server.url, dataroot=synth_root, version="v1.0-mini",
-                               output=out,
-                               backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False, inputs=inputs).run_dir
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                 "--split", "all", "--out", str(out)]) == 0
+            dirs[inputs] = run(
+                "openai/gpt-4o",
+                api_base=server.url,
+                dataroot=synth_root,
+                version="v1.0-mini",
+                output=out,
+                backoff_base=0.01,
+                backoff_cap=0.05,
+                timeout=10.0,
+                progress=False,
+                inputs=inputs,
+            ).run_dir
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     (dirs["baseline"],) = (out / "baseline-cv").iterdir()
     return out, dirs
 
@@ -98,8 +123,12 @@ def test_json_rates_intervals_and_na_for_the_baseline(runs, capsys, synth_root):
     index = {fid: i for i, fid in enumerate(fs.frame_ids)}
     ids = list(records)
     rows_gt = np.array([index[f] for f in ids])
-    truth = intent_consistency(read_intents([records[f]["intent_text"] for f in ids]), fs.gt_actions[rows_gt],
-                               fs.history_actions[rows_gt], fs.gt_positions[rows_gt])
+    truth = intent_consistency(
+        read_intents([records[f]["intent_text"] for f in ids]),
+        fs.gt_actions[rows_gt],
+        fs.history_actions[rows_gt],
+        fs.gt_positions[rows_gt],
+    )
     assert full["intent_accuracy"] == pytest.approx(float(np.mean(truth.verdict == "consistent")))
 
     # every column has its descriptor; the audit's own JSON section
@@ -171,8 +200,9 @@ def test_says_stop_drives_on_tags_the_lies(runs):
     from lightemma.evaluation.stats import Resampling
 
     _, dirs = runs
-    evaluation = evaluate_runs([dirs["full"], dirs["baseline"]], resampling=Resampling(n_resamples=0), safety=False,
-                               planning=False)
+    evaluation = evaluate_runs(
+        [dirs["full"], dirs["baseline"]], resampling=Resampling(n_resamples=0), safety=False, planning=False
+    )
     audit = evaluation.explanations.runs["openai/gpt-4o"]
     lied = sorted(fid for fid, r in _records(dirs["full"]).items() if r["intent_text"] == LIE)
     assert sorted(np.asarray(audit.frame_ids)[says_stop_drives_on(audit)].tolist()) == lied

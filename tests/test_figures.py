@@ -12,7 +12,16 @@ from PIL import Image
 
 from lightemma.evaluation import evaluate_runs, load_run
 from lightemma.evaluation.synthetic import write_synthetic_run
-from lightemma.report.figures import Camera, bubble_chart, bubble_points, frame_figure, history_bias_figure, model_grid, project, save_figure
+from lightemma.report.figures import (
+    Camera,
+    bubble_chart,
+    bubble_points,
+    frame_figure,
+    history_bias_figure,
+    model_grid,
+    project,
+    save_figure,
+)
 from lightemma.report.figures._mpl import GT_COLOR, family_color, pred_color
 
 # a nuScenes-like CAM_FRONT: 1600×900, f = 1266 px, 1.70 m ahead of the rear axle, 1.51 m up
@@ -59,7 +68,9 @@ def _frame_png(tmp_path, *, texts=None):
 
 
 def test_frame_picture_draws_trajectories_where_they_project(tmp_path):
-    paths, gt_px, pred_px, height = _frame_png(tmp_path, texts={"scene": "cars ahead", "intent": "keep lane", "answer": "[(8.0, 0.0)]"})
+    paths, gt_px, pred_px, height = _frame_png(
+        tmp_path, texts={"scene": "cars ahead", "intent": "keep lane", "answer": "[(8.0, 0.0)]"}
+    )
     assert [p.suffix for p in paths] == [".png", ".svg"] and all(p.stat().st_size > 1000 for p in paths)
     img = pixels(paths[0])
     assert len(np.unique(img.reshape(-1, 3), axis=0)) > 50  # not a blank canvas
@@ -179,9 +190,31 @@ def test_history_bias_figure_draws_ablated_runs_beside_the_full_ones(tmp_path):
 def test_ablation_figure_draws_each_comparison_with_its_interval_filled_when_significant(tmp_path):
     from lightemma.report.figures import ablation_figure
 
-    ablations = [{"model": "m", "ablation": "no-image", "ade_avg_diff": -0.4, "ade_avg_ci95": [-0.6, -0.2], "ade_avg_significant": True},
-                 {"model": "m", "ablation": "blank-image", "ade_avg_diff": 0.01, "ade_avg_ci95": [-0.1, 0.12], "ade_avg_significant": False}]
-    gains = [{"model": "m", "baseline": "Baseline (ego status)", "ade_avg_gain": 0.3, "ade_avg_ci95": None, "ade_avg_significant": False}]
+    ablations = [
+        {
+            "model": "m",
+            "ablation": "no-image",
+            "ade_avg_diff": -0.4,
+            "ade_avg_ci95": [-0.6, -0.2],
+            "ade_avg_significant": True,
+        },
+        {
+            "model": "m",
+            "ablation": "blank-image",
+            "ade_avg_diff": 0.01,
+            "ade_avg_ci95": [-0.1, 0.12],
+            "ade_avg_significant": False,
+        },
+    ]
+    gains = [
+        {
+            "model": "m",
+            "baseline": "Baseline (ego status)",
+            "ade_avg_gain": 0.3,
+            "ade_avg_ci95": None,
+            "ade_avg_significant": False,
+        }
+    ]
     fig = ablation_figure(ablations, gains)
     left, right = fig.axes
     assert [t.get_text() for t in left.get_yticklabels()] == ["m − no-image", "m − blank-image"]
@@ -255,12 +288,30 @@ def test_model_grid_uses_the_given_colours_and_has_a_legend(tmp_path):
 
 def test_bubble_axis_and_intervals_come_from_the_points_shown(tmp_path):
     points = [
-        {"model": "a", "family": "GPT", "generation": 1, "ade_avg": 1.1, "ade_avg_ci95": [1.0, 1.2], "seconds_per_frame": 3.0},
-        {"model": "b", "family": "GPT", "generation": 2, "ade_avg": 1.4, "ade_avg_ci95": [1.3, 1.6], "seconds_per_frame": 5.0, "note": " (only 40 % scored)"},
+        {
+            "model": "a",
+            "family": "GPT",
+            "generation": 1,
+            "ade_avg": 1.1,
+            "ade_avg_ci95": [1.0, 1.2],
+            "seconds_per_frame": 3.0,
+        },
+        {
+            "model": "b",
+            "family": "GPT",
+            "generation": 2,
+            "ade_avg": 1.4,
+            "ade_avg_ci95": [1.3, 1.6],
+            "seconds_per_frame": 5.0,
+            "note": " (only 40 % scored)",
+        },
         {"model": "a", "family": "GPT", "generation": 1, "ade_avg": 1.07, "seconds_per_frame": 12.0, "source": "paper"},
     ]
     fig = bubble_chart(points)
     ax = fig.axes[0]
     low, high = ax.get_ylim()
     assert 0.5 < low < 1.0 and 1.6 < high < 2.2
-    assert [t.get_text() for t in ax.get_xticklabels()] == ["a", "b (only 40 % scored)"]  # the paper's row shares a's slot
+    assert [t.get_text() for t in ax.get_xticklabels()] == [
+        "a",
+        "b (only 40 % scored)",
+    ]  # the paper's row shares a's slot

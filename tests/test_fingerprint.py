@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 
 import pytest
+
 from lightemma.cli import main
 from lightemma.errors import RunStoreError
 from lightemma.frames.fingerprint import (

@@ -13,9 +13,10 @@ import os
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import numpy as np
+
 from lightemma.evaluation import evaluate_runs
-from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation.synthetic import make_record, write_synthetic_run
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.report.tables import to_markdown
 
 
@@ -38,13 +39,26 @@ def test_table_one_and_two_count_the_same_frames_and_the_outcomes_add_up(tmp_pat
     gpt, cv = accuracy["GPT-4o"], accuracy["baseline:cv"]
     assert int(gpt["Failed"]) > 0  # the case of the issue: some frames failed
     assert gpt["Frames"] == efficiency["GPT-4o"]["Frames"] == "208"
-    assert int(gpt["Scored"]) + int(gpt["Failed"]) + int(gpt["Implausible"]) + int(gpt["API errors"]) + int(gpt["Other unscored"]) == 208
+    assert (
+        int(gpt["Scored"])
+        + int(gpt["Failed"])
+        + int(gpt["Implausible"])
+        + int(gpt["API errors"])
+        + int(gpt["Other unscored"])
+        == 208
+    )
     assert gpt["Other unscored"] == "0"
-    assert cv["Frames"] == efficiency["baseline:cv"]["Frames"] == "209" and cv["Other unscored"] == "1" and cv["Scored"] == "208"
+    assert (
+        cv["Frames"] == efficiency["baseline:cv"]["Frames"] == "209"
+        and cv["Other unscored"] == "1"
+        and cv["Scored"] == "208"
+    )
     assert any(n.startswith("Other unscored:") for n in tables["accuracy_lightemma"].notes)
     # runs whose outcomes add up without it: no such column
     clean = evaluate_runs([next(runs.glob("openai*"))])
-    assert "Other unscored" not in to_markdown(next(t for t in evaluation_tables(clean) if t.name == "accuracy_lightemma"))
+    assert "Other unscored" not in to_markdown(
+        next(t for t in evaluation_tables(clean) if t.name == "accuracy_lightemma")
+    )
 
 
 def test_the_scenario_table_never_shows_one_models_count_beside_anothers_values():

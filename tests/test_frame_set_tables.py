@@ -9,6 +9,7 @@ import io
 import json
 
 import pytest
+
 from lightemma.cli import main
 
 
@@ -25,8 +26,25 @@ def runs(synth_root, tmp_path_factory):
             ("first", "cv", ["--scenes", names[0]]),
             ("second", "constant", ["--scenes", names[1]]),
         ):
-            assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                         "--split", "all", "--out", str(base / folder), *extra]) == 0
+            assert (
+                main(
+                    [
+                        "run",
+                        "--model",
+                        f"baseline:{kind}",
+                        "--dataroot",
+                        str(synth_root),
+                        "--version",
+                        "v1.0-mini",
+                        "--split",
+                        "all",
+                        "--out",
+                        str(base / folder),
+                        *extra,
+                    ]
+                )
+                == 0
+            )
     return base
 
 
@@ -116,8 +134,26 @@ def test_runs_on_other_prompt_sets_are_marked(runs, synth_root, capsys, tmp_path
     prompts["name"] = "lab-v2"
     (tmp_path / "p.json").write_text(json.dumps(prompts), encoding="utf-8")
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        assert main(["run", "--model", "baseline:constant", "--dataroot", str(synth_root), "--version", "v1.0-mini",
-                     "--split", "all", "--out", str(tmp_path / "runs"), "--prompt-set", str(tmp_path / "p.json")]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--model",
+                    "baseline:constant",
+                    "--dataroot",
+                    str(synth_root),
+                    "--version",
+                    "v1.0-mini",
+                    "--split",
+                    "all",
+                    "--out",
+                    str(tmp_path / "runs"),
+                    "--prompt-set",
+                    str(tmp_path / "p.json"),
+                ]
+            )
+            == 0
+        )
     rc, out, err = _evaluate(capsys, runs / "all", tmp_path / "runs")
     assert rc == 0, err
     notes = [line for line in out.splitlines() if line.startswith("Runs differ in prompt sets:")]

@@ -14,15 +14,13 @@ from hypothesis import example, given, settings
 from hypothesis import strategies as st
 
 import lightemma
-from frames_fixtures import make_small_dataset, read_table, reference_frames, small_copy, small_root  # noqa: F401
+from frames_fixtures import SMALL, make_small_dataset, read_table, reference_frames, small_copy, small_root  # noqa: F401
 from lightemma.errors import DatasetError
 from lightemma.frames import Frame, FrameSet, format_history, format_number
-from lightemma.nuscenes import geometry, load_frames, window_range
-from lightemma.nuscenes.frames import QUATERNION_TOLERANCE, Tables, extract_frames, load_tables, predefined_splits
 from lightemma.frames.model import summary_line
+from lightemma.nuscenes import geometry, load_frames, window_range
+from lightemma.nuscenes.frames import Tables, extract_frames, load_tables, predefined_splits
 from lightemma.synth import build_scenarios
-
-from frames_fixtures import SMALL
 
 VERSION = "v1.0-mini"
 
@@ -214,8 +212,11 @@ def test_full_window_matches_the_independent_reading_too(small_root):
 
 
 def _devkit():
-    return pytest.importorskip("nuscenes.nuscenes", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed; "
-                               "CI installs it (the README's main install includes the nuscenes extra)")
+    return pytest.importorskip(
+        "nuscenes.nuscenes",
+        reason="nuscenes-devkit (lightemma[nuscenes]) is not installed; "
+        "CI installs it (the README's main install includes the nuscenes extra)",
+    )
 
 
 @pytest.mark.parametrize("window", ["reference", "full"])
@@ -248,23 +249,37 @@ def test_the_frame_reader_agrees_with_the_devkits_reading_of_the_same_dataroot(s
         np.testing.assert_allclose(frame.ego_pose[:2], pose["translation"][:2], rtol=0, atol=1e-9)
         assert frame.ego_pose[2] == pytest.approx(Quaternion(pose["rotation"]).yaw_pitch_roll[0], abs=1e-12)
         np.testing.assert_array_equal(frame.camera_intrinsic, cs["camera_intrinsic"])
-        np.testing.assert_allclose(frame.camera_extrinsic[:3, :3], Quaternion(cs["rotation"]).rotation_matrix, atol=1e-12)
+        np.testing.assert_allclose(
+            frame.camera_extrinsic[:3, :3], Quaternion(cs["rotation"]).rotation_matrix, atol=1e-12
+        )
         np.testing.assert_allclose(frame.camera_extrinsic[:3, 3], cs["translation"], atol=1e-12)
         # the future positions from the devkit's poses of keyframes c+1 … c+6, in the ego frame
-        future = [nusc.get("ego_pose", nusc.get("sample_data", nusc.get("sample", t)["data"]["CAM_FRONT"])["ego_pose_token"])
-                  for t in chain[frame.keyframe_index + 1: frame.keyframe_index + 7]]
+        future = [
+            nusc.get("ego_pose", nusc.get("sample_data", nusc.get("sample", t)["data"]["CAM_FRONT"])["ego_pose_token"])
+            for t in chain[frame.keyframe_index + 1 : frame.keyframe_index + 7]
+        ]
         x, y, yaw = frame.ego_pose
         d = np.array([p["translation"][:2] for p in future]) - [x, y]
         c, s = math.cos(yaw), math.sin(yaw)
-        np.testing.assert_allclose(frames.gt_positions[i], np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], -1),
-                                   atol=1e-9)
+        np.testing.assert_allclose(
+            frames.gt_positions[i], np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1]], -1), atol=1e-9
+        )
 
 
 def test_the_split_lists_are_the_devkits():
-    splits = pytest.importorskip("nuscenes.utils.splits", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed")
+    splits = pytest.importorskip(
+        "nuscenes.utils.splits", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed"
+    )
     assert predefined_splits() == splits.create_splits_scenes()
     assert {k: len(v) for k, v in predefined_splits().items()} == {
-        "train": 700, "val": 150, "test": 150, "mini_train": 8, "mini_val": 2, "train_detect": 350, "train_track": 350}
+        "train": 700,
+        "val": 150,
+        "test": 150,
+        "mini_train": 8,
+        "mini_val": 2,
+        "train_detect": 350,
+        "train_track": 350,
+    }
 
 
 def test_frames_and_splits_load_without_the_devkit_or_its_dependencies(renamed_mini, tmp_path):
@@ -410,8 +425,13 @@ def test_frame_fields_types_and_calibration(small_root, fs):
     np.testing.assert_allclose(f.camera_extrinsic[3], [0, 0, 0, 1])
     # the camera looks forward: its optical axis (z) is the ego's +x
     np.testing.assert_allclose(r[:, 2], [1, 0, 0], atol=0.01)
-    for name, shape in [("history_positions", (8, 2)), ("history_actions", (6, 2)),
-                        ("gt_positions", (6, 2)), ("gt_actions", (6, 2)), ("ego_pose", (3,))]:
+    for name, shape in [
+        ("history_positions", (8, 2)),
+        ("history_actions", (6, 2)),
+        ("gt_positions", (6, 2)),
+        ("gt_actions", (6, 2)),
+        ("ego_pose", (3,)),
+    ]:
         assert getattr(f, name).shape == shape
     np.testing.assert_allclose(f.history_positions[-1], [0.0, 0.0], atol=1e-12)
     d = f.to_dict()
@@ -498,7 +518,10 @@ def test_v1_0_mini_without_a_split_takes_all_of_its_scenes(small_root, fs, caplo
     assert f"loaded {default.summary_line()}" in caplog.messages
     assert default.split == "all" and default.frame_ids == fs.frame_ids
     assert len(default.scenes) == SMALL["scenes"] == 8
-    assert default.summary_line() == f"v1.0-mini, split all: 8 scenes, {8 * (SMALL['keyframes'] - 14)} frames, reference window"
+    assert (
+        default.summary_line()
+        == f"v1.0-mini, split all: 8 scenes, {8 * (SMALL['keyframes'] - 14)} frames, reference window"
+    )
 
 
 def test_summary_line_names_subsets_limits_and_what_was_left_out(small_root, fs):
@@ -588,7 +611,7 @@ def test_missing_table_is_named(small_copy):
 
 
 def test_corrupt_table_is_named(small_copy):
-    (small_copy / VERSION / "sample.json").write_text("[{\"token\": ")
+    (small_copy / VERSION / "sample.json").write_text('[{"token": ')
     with pytest.raises(DatasetError, match=r"sample\.json"):
         load_frames(small_copy, VERSION, split="all")
 

@@ -26,8 +26,9 @@ MARK = "@@MARK@@"
 @pytest.fixture(scope="module")
 def hostile_root(tmp_path_factory) -> Path:
     """3 scenes x 20 keyframes, small images, no sweeps (a scene skipped still leaves frames)."""
-    return write_dataset(tmp_path_factory.mktemp("synth-hostile"), scenes=3, seed=5, keyframes=20, image_size=(64, 36),
-                         sweeps=False)
+    return write_dataset(
+        tmp_path_factory.mktemp("synth-hostile"), scenes=3, seed=5, keyframes=20, image_size=(64, 36), sweeps=False
+    )
 
 
 @pytest.fixture(scope="module")
@@ -48,8 +49,11 @@ def _keyframe(root: Path, scene_index: int = 1, keyframe: int = 9) -> tuple[str,
     samples = {s["token"]: s for s in read_table(root, VERSION, "sample")}
     sensors = {s["token"]: s["channel"] for s in read_table(root, VERSION, "sensor")}
     channel = {c["token"]: sensors[c["sensor_token"]] for c in read_table(root, VERSION, "calibrated_sensor")}
-    sds = {sd["sample_token"]: sd for sd in read_table(root, VERSION, "sample_data")
-           if sd["is_key_frame"] and channel[sd["calibrated_sensor_token"]] == "CAM_FRONT"}
+    sds = {
+        sd["sample_token"]: sd
+        for sd in read_table(root, VERSION, "sample_data")
+        if sd["is_key_frame"] and channel[sd["calibrated_sensor_token"]] == "CAM_FRONT"
+    }
     token = scenes[scene_index]["first_sample_token"]
     for _ in range(keyframe):
         token = samples[token]["next"]
@@ -91,7 +95,7 @@ EGO_POSE_VALUES = {
     "400-digit rotation": ("rotation", f"[{HUGE}, 0, 0, 0]", "is not finite"),
     "400-digit timestamp": ("timestamp", HUGE, "is not a finite, whole, non-negative number of microseconds"),
     "1.5e300 timestamp": ("timestamp", "1.5e300", "is not a finite, whole, non-negative number of microseconds"),
-    "2**63 timestamp": ("timestamp", str(2 ** 63), "is not a finite, whole, non-negative number of microseconds"),
+    "2**63 timestamp": ("timestamp", str(2**63), "is not a finite, whole, non-negative number of microseconds"),
     "9.3e18 float timestamp": ("timestamp", "9.3e18", "is not a finite, whole, non-negative number of microseconds"),
 }
 
@@ -105,8 +109,16 @@ def test_an_ego_pose_number_beyond_float_or_int64_is_a_bad_record(root, clean, k
 
 
 CAMERA_VALUES = {
-    "400-digit intrinsic": ("camera_intrinsic", f"[[{HUGE}, 0, 0], [0, 1, 0], [0, 0, 1]]", "is not a finite 3x3 matrix"),
-    "infinite intrinsic": ("camera_intrinsic", "[[1, 0, 0], [0, Infinity, 0], [0, 0, 1]]", "is not a finite 3x3 matrix"),
+    "400-digit intrinsic": (
+        "camera_intrinsic",
+        f"[[{HUGE}, 0, 0], [0, 1, 0], [0, 0, 1]]",
+        "is not a finite 3x3 matrix",
+    ),
+    "infinite intrinsic": (
+        "camera_intrinsic",
+        "[[1, 0, 0], [0, Infinity, 0], [0, 0, 1]]",
+        "is not a finite 3x3 matrix",
+    ),
     "400-digit camera translation": ("translation", f"[{HUGE}, 0, 0]", "is not finite"),
     "400-digit camera rotation": ("rotation", f"[0, 0, 0, {HUGE}]", "is not finite"),
 }
@@ -141,11 +153,27 @@ def test_intrinsics_given_as_integers_are_read_as_floats(root, clean):
     assert loaded.camera_intrinsics[0].tolist() == [[float(v) for v in row] for row in front["camera_intrinsic"]]
 
 
-@pytest.mark.parametrize("value, ok", [
-    (0, True), (1532402927647951, True), (1532402927647951.0, True), (TIMESTAMP_MAX, True),
-    (TIMESTAMP_MAX + 1, False), (10 ** 400, False), (1.5e300, False), (float(2 ** 63), False),
-    (-1, False), (0.5, False), (float("nan"), False), (float("inf"), False), (True, False), ("1", False), (None, False),
-], ids=lambda v: repr(v)[:24] if not isinstance(v, bool) else str(v))
+@pytest.mark.parametrize(
+    "value, ok",
+    [
+        (0, True),
+        (1532402927647951, True),
+        (1532402927647951.0, True),
+        (TIMESTAMP_MAX, True),
+        (TIMESTAMP_MAX + 1, False),
+        (10**400, False),
+        (1.5e300, False),
+        (float(2**63), False),
+        (-1, False),
+        (0.5, False),
+        (float("nan"), False),
+        (float("inf"), False),
+        (True, False),
+        ("1", False),
+        (None, False),
+    ],
+    ids=lambda v: repr(v)[:24] if not isinstance(v, bool) else str(v),
+)
 def test_timestamps_are_whole_microseconds_within_int64(value, ok):
     record = {"token": "tok", "timestamp": value}
     if ok:
@@ -211,11 +239,24 @@ def test_symlinks_inside_the_dataroot_are_followed(root, clean, tmp_path):
     assert all(p.startswith(str(root) + os.sep) and os.path.isfile(p) for p in loaded.image_paths)
 
 
-@pytest.mark.parametrize("name, ok", [
-    ("samples/CAM_FRONT/a.jpg", True), ("maps/53992ee3023e5494b90c316c183be829.png", True), ("./maps/m.png", True),
-    ("maps/../maps/m.png", True), ("a..b/c", True), ("..a/b", True),
-    ("/etc/passwd", False), ("../x", False), ("maps/../../x", False), ("", False), (None, False), (3, False), (".", False),
-])
+@pytest.mark.parametrize(
+    "name, ok",
+    [
+        ("samples/CAM_FRONT/a.jpg", True),
+        ("maps/53992ee3023e5494b90c316c183be829.png", True),
+        ("./maps/m.png", True),
+        ("maps/../maps/m.png", True),
+        ("a..b/c", True),
+        ("..a/b", True),
+        ("/etc/passwd", False),
+        ("../x", False),
+        ("maps/../../x", False),
+        ("", False),
+        (None, False),
+        (3, False),
+        (".", False),
+    ],
+)
 def test_dataset_path_is_the_one_check_for_any_table_filename(tmp_path, name, ok):
     record = {"token": "m1", "filename": name}
     if ok:

@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+
 from lightemma.evaluation.descriptors import ADE_BY_CONVENTION, COLLISION_BY_CONVENTION, METRICS, miss_descriptor
 
 # --- the fixed input: two frames whose errors e_k (k = 1 … 6) are k m and 0.1·k m, along a slanted direction
@@ -129,8 +130,8 @@ def test_ade_conventions_from_the_evaluation_pipeline():
 
 
 def test_format_error_rates_paper_rule():
-    from lightemma.evaluation.accounting import format_errors
     from lightemma.definitions import STATUS_CODES
+    from lightemma.evaluation.accounting import format_errors
     from lightemma.runs.columns import API_ERROR_STATUS, UNKNOWN_STATUS
 
     first = np.array(

@@ -57,6 +57,16 @@ def test_the_tokenizer_decodes_every_id_and_the_processor_sees_a_1600x900_frame_
 
 def test_agreement_counts_frames_and_stage_calls_over_the_frames_both_ran():
     single = {"dtype": "float32", "batch_size": 1, "texts": {"a": ["x", "y", "z"], "b": ["x", "y", "z"]}}
-    batched = {"dtype": "float32", "batch_size": 8, "texts": {"a": ["x", "y", "z"], "b": ["x", "q", "z"], "c": ["?"] * 3}}
+    batched = {
+        "dtype": "float32",
+        "batch_size": 8,
+        "texts": {"a": ["x", "y", "z"], "b": ["x", "q", "z"], "c": ["?"] * 3},
+    }
     got = bench_gpu.agreement(single, batched)
-    assert (got["frames"], got["frames_identical"], got["calls_identical"], got["calls"], got["rate"]) == (2, 1, 5, 6, 0.5)
+    assert (got["frames"], got["frames_identical"], got["calls_identical"], got["calls"], got["rate"]) == (
+        2,
+        1,
+        5,
+        6,
+        0.5,
+    )

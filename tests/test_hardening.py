@@ -16,12 +16,12 @@ import time
 from pathlib import Path
 
 import pytest
-from fake_openai import INTENT_TEXT, FakeOpenAIServer, Reply, default_reply
-from memframes import make_frames
 
+from fake_openai import INTENT_TEXT, FakeOpenAIServer, Reply, default_reply
 from lightemma.pipeline import run
 from lightemma.prompts import load_prompt_set
 from lightemma.runs.store import read_run
+from memframes import make_frames
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
 ROOT = Path(__file__).resolve().parent.parent
@@ -35,8 +35,13 @@ def frames(tmp_path):
 def env(**extra: str) -> dict[str, str]:
     """The environment of a lightemma subprocess: this checkout's code, no network for HF or litellm."""
     out = {k: v for k, v in os.environ.items() if not k.endswith("_API_KEY")}
-    out.update(PYTHONPATH=str(ROOT / "python") + os.pathsep + str(ROOT / "tests"), HF_HUB_OFFLINE="1",
-               LITELLM_LOCAL_MODEL_COST_MAP="True", PYTHONUNBUFFERED="1", **extra)
+    out.update(
+        PYTHONPATH=str(ROOT / "python") + os.pathsep + str(ROOT / "tests"),
+        HF_HUB_OFFLINE="1",
+        LITELLM_LOCAL_MODEL_COST_MAP="True",
+        PYTHONUNBUFFERED="1",
+        **extra,
+    )
     return out
 
 
@@ -48,7 +53,9 @@ def test_placeholders_in_a_models_answer_are_not_expanded_in_the_next_prompt():
     scene = "a sign reads {intent} and {history} and {speeds}"
     intent = ps.render("intent", scene=scene, history="HIST", speeds="S", curvatures="C")
     assert scene in intent and "HIST" in intent  # the template's own {history} is filled, the scene's is not
-    actions = ps.render("actions", scene=scene, intent="go {scene} {curvatures}", history="HIST", speeds="S", curvatures="C")
+    actions = ps.render(
+        "actions", scene=scene, intent="go {scene} {curvatures}", history="HIST", speeds="S", curvatures="C"
+    )
     assert scene in actions and "go {scene} {curvatures}" in actions
 
 
@@ -74,12 +81,25 @@ def test_a_chain_passes_a_scene_text_holding_placeholders_on_verbatim(tmp_path, 
 def test_a_retry_after_beyond_the_maximum_wait_stops_the_run_at_once_resumable(tmp_path, frames, after, transport):
     from lightemma.errors import RunStopped
 
-    replies = [Reply(status=429, headers={"Retry-After": after}, body={"error": {"message": "quota", "type": "rate_limit_exceeded"}})]
+    replies = [
+        Reply(
+            status=429,
+            headers={"Retry-After": after},
+            body={"error": {"message": "quota", "type": "rate_limit_exceeded"}},
+        )
+    ]
     with FakeOpenAIServer(replies) as server:
         start = time.monotonic()
         with pytest.raises(RunStopped) as info:
-            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
-                transport=transport, **FAST)
+            run(
+                "openai/test-model",
+                frames=frames,
+                api_base=server.url,
+                output=tmp_path / "out",
+                concurrency=1,
+                transport=transport,
+                **FAST,
+            )
         elapsed = time.monotonic() - start
     assert elapsed < 15, elapsed  # not an hour, not forever
     assert info.value.cause == "quota-exhausted" and "Retry-After" in str(info.value) and "--resume" in str(info.value)
@@ -100,8 +120,11 @@ def test_a_short_retry_after_is_waited_and_no_pause_exceeds_the_cap():
 # -- 25.5: a provider's key goes only to its own host, or where the user names a key variable --------------
 
 
-KEYS = {"OPENAI_API_KEY": "sk-proj-OPENAI-SECRET-0123456789", "ANTHROPIC_API_KEY": "sk-ant-ANTHROPIC-SECRET-0123456789",
-        "GEMINI_API_KEY": "AIzaGEMINI-SECRET-0123456789"}
+KEYS = {
+    "OPENAI_API_KEY": "sk-proj-OPENAI-SECRET-0123456789",
+    "ANTHROPIC_API_KEY": "sk-ant-ANTHROPIC-SECRET-0123456789",
+    "GEMINI_API_KEY": "AIzaGEMINI-SECRET-0123456789",
+}
 
 
 def sent_secrets(server) -> set[str]:
@@ -113,21 +136,37 @@ def sent_secrets(server) -> set[str]:
 
 
 # the direct transport speaks only the OpenAI protocol: the native Anthropic / Gemini paths go through litellm
-@pytest.mark.parametrize(("model", "openai_path", "transport"),
-                         [(m, True, t) for m in ("gpt-4o", "openai/test-model") for t in ("litellm", "direct")]
-                         + [("anthropic/claude-sonnet-4-6", False, "litellm"), ("gemini/gemini-2.5-flash", False, "litellm")])
-def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(elsewhere, monkeypatch, tmp_path, frames, model,
-                                                                             openai_path, transport):
+@pytest.mark.parametrize(
+    ("model", "openai_path", "transport"),
+    [(m, True, t) for m in ("gpt-4o", "openai/test-model") for t in ("litellm", "direct")]
+    + [("anthropic/claude-sonnet-4-6", False, "litellm"), ("gemini/gemini-2.5-flash", False, "litellm")],
+)
+def test_no_provider_key_goes_to_an_api_base_without_an_explicit_key_variable(
+    elsewhere, monkeypatch, tmp_path, frames, model, openai_path, transport
+):
     for name, value in KEYS.items():
         monkeypatch.setenv(name, value)
     with FakeOpenAIServer() as server:
-        run(model, frames=frames[:1], api_base=server.url if openai_path else server.root_url, output=tmp_path / "a",
-            transport=transport, **FAST)
+        run(
+            model,
+            frames=frames[:1],
+            api_base=server.url if openai_path else server.root_url,
+            output=tmp_path / "a",
+            transport=transport,
+            **FAST,
+        )
         assert server.requests and sent_secrets(server) == set()
         # named explicitly, that key (and only that one) goes there
         monkeypatch.setenv("MY_SERVER_KEY", "sk-my-own-server-key-0123456789")
-        run(model, frames=frames[:1], api_base=server.url if openai_path else server.root_url, output=tmp_path / "b",
-            transport=transport, api_key_env="MY_SERVER_KEY", **FAST)
+        run(
+            model,
+            frames=frames[:1],
+            api_base=server.url if openai_path else server.root_url,
+            output=tmp_path / "b",
+            transport=transport,
+            api_key_env="MY_SERVER_KEY",
+            **FAST,
+        )
         later = server.requests[-1]
         assert "sk-my-own-server-key-0123456789" in json.dumps([later.path, later.headers])
         assert sent_secrets(server) == set()
@@ -143,16 +182,19 @@ def test_demo_with_an_api_base_sends_none_of_the_three_keys(elsewhere, monkeypat
         assert server.requests and sent_secrets(server) == set()
 
 
-BASE_VARIABLE_CASES = [("gpt-4o", "OPENAI_BASE_URL", "OPENAI_API_KEY"), ("gpt-4o", "OPENAI_API_BASE", "OPENAI_API_KEY"),
-                       ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE", "ANTHROPIC_API_KEY"),
-                       ("anthropic/claude-sonnet-4-6", "ANTHROPIC_BASE_URL", "ANTHROPIC_API_KEY"),
-                       ("gemini/gemini-2.5-flash", "GEMINI_API_BASE", "GEMINI_API_KEY")]
+BASE_VARIABLE_CASES = [
+    ("gpt-4o", "OPENAI_BASE_URL", "OPENAI_API_KEY"),
+    ("gpt-4o", "OPENAI_API_BASE", "OPENAI_API_KEY"),
+    ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_BASE", "ANTHROPIC_API_KEY"),
+    ("anthropic/claude-sonnet-4-6", "ANTHROPIC_BASE_URL", "ANTHROPIC_API_KEY"),
+    ("gemini/gemini-2.5-flash", "GEMINI_API_BASE", "GEMINI_API_KEY"),
+]
 
 
 @pytest.mark.parametrize(("model", "variable", "key"), BASE_VARIABLE_CASES, ids=[v for _, v, _ in BASE_VARIABLE_CASES])
-def test_a_base_url_variable_of_the_environment_gets_the_key_only_when_declared_the_providers(elsewhere, monkeypatch,
-                                                                                            tmp_path, frames, model,
-                                                                                            variable, key):
+def test_a_base_url_variable_of_the_environment_gets_the_key_only_when_declared_the_providers(
+    elsewhere, monkeypatch, tmp_path, frames, model, variable, key
+):
     """litellm, the OpenAI SDK and the batch adapters send a provider's calls and key to OPENAI_BASE_URL & co. when
     no --api-base is given: such a variable is refused unless it names a host declared the provider's own."""
     from lightemma.errors import UserError
@@ -168,7 +210,9 @@ def test_a_base_url_variable_of_the_environment_gets_the_key_only_when_declared_
         if variable == "OPENAI_API_BASE":
             return  # read by litellm's files and batch calls, not by its chat calls: refused, and a declared one unused
         provider = model.split("/")[0] if "/" in model else "openai"
-        monkeypatch.setenv("LIGHTEMMA_PROVIDER_HOSTS", f"{provider}=127.0.0.1")  # declared: that gateway is the provider
+        monkeypatch.setenv(
+            "LIGHTEMMA_PROVIDER_HOSTS", f"{provider}=127.0.0.1"
+        )  # declared: that gateway is the provider
         result = run(model, frames=frames[:1], output=tmp_path / "b", **FAST)
         assert server.requests and sent_secrets(server) == {key}
     backend = json.loads((result.run_dir / "manifest.json").read_text())["backend"]
@@ -186,15 +230,24 @@ def test_an_unset_key_variable_is_refused_in_one_line_and_plain_http_elsewhere_i
     far = create_backend("openai/m", api_base="http://192.0.2.7:8000/v1", api_key_env="MY_KEY")
     (notice,) = far.notices
     assert "plain http" in notice and "MY_KEY" in notice and "sk-abc" not in notice
-    for quiet in ("http://127.0.0.1:8000/v1", "http://localhost:8000/v1", "http://[::1]:8000/v1", "https://192.0.2.7/v1",
-                  "http://127.1:8000/v1", "http://[::ffff:127.0.0.1]:8000/v1", "http://LOCALHOST.:8000/v1"):  # this machine too
+    for quiet in (
+        "http://127.0.0.1:8000/v1",
+        "http://localhost:8000/v1",
+        "http://[::1]:8000/v1",
+        "https://192.0.2.7/v1",
+        "http://127.1:8000/v1",
+        "http://[::ffff:127.0.0.1]:8000/v1",
+        "http://LOCALHOST.:8000/v1",
+    ):  # this machine too
         assert create_backend("openai/m", api_base=quiet).notices == []
     for short in ("http://127.1:8000/v1", "http://2130706433:8000/v1", "http://127.000.000.001:8000/v1"):
         with pytest.raises(UserError, match="as 127.0.0.1 for --transport direct"):  # aiohttp refuses it at every call
             create_backend("openai/m", api_base=short, transport="direct")
 
 
-@pytest.mark.parametrize("price", [(float("inf"), 1.0), (1e400, 1.0), (2.0, float("nan")), (-1.0, 2.0), (2e6, 1.0), (True, 1.0)])
+@pytest.mark.parametrize(
+    "price", [(float("inf"), 1.0), (1e400, 1.0), (2.0, float("nan")), (-1.0, 2.0), (2e6, 1.0), (True, 1.0)]
+)
 def test_a_price_that_is_no_price_is_refused_before_any_call(price):
     """--price 1e400 1 was taken: every frame's cost computed as inf, then dropped to unknown after the run."""
     from lightemma.backends import create_backend
@@ -215,13 +268,33 @@ def test_a_password_in_the_api_base_is_in_no_record_and_no_message(tmp_path, fra
     with FakeOpenAIServer(lambda req: Reply.error(400, "bad request at http://alice:hunter2pw@host")) as server:
         base = server.url.replace("http://", "http://alice:hunter2pw@")
         out = tmp_path / "out"
-        code = main(["run", "--model", "openai/test-model", "--api-base", base, "--dataroot", str(tmp_path / "none"),
-                     "--output", str(out), "--no-progress"])
+        code = main(
+            [
+                "run",
+                "--model",
+                "openai/test-model",
+                "--api-base",
+                base,
+                "--dataroot",
+                str(tmp_path / "none"),
+                "--output",
+                str(out),
+                "--no-progress",
+            ]
+        )
         assert code == 2  # no dataset: refused, but the message must not show the password either
         from lightemma.errors import RunStopped
 
         with pytest.raises(RunStopped) as info:
-            run("openai/test-model", frames=frames, api_base=base, output=out, max_attempts=1, transport=transport, **FAST)
+            run(
+                "openai/test-model",
+                frames=frames,
+                api_base=base,
+                output=out,
+                max_attempts=1,
+                transport=transport,
+                **FAST,
+            )
     messages = capsys.readouterr().err + str(info.value)
     assert server.requests[0].headers["authorization"].startswith("Basic ")  # used to reach the server, not shown
     written = b"".join(p.read_bytes() for p in out.rglob("*") if p.is_file())
@@ -296,7 +369,11 @@ def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, fr
             assert main(["run", "--resume", str(run_dir), "--api-base", server.url, *extra, "--no-progress"]) == 2
             err = capsys.readouterr().err
             assert len(err.strip().splitlines()) == 1 and "--cache" in err, err
-        assert not target.exists() and not (tmp_path / "escape.sqlite").exists() and not list(tmp_path.parent.glob("escape*"))
+        assert (
+            not target.exists()
+            and not (tmp_path / "escape.sqlite").exists()
+            and not list(tmp_path.parent.glob("escape*"))
+        )
         assert len(read_run(run_dir).records) == 1
         # given on the command line, the path is the user's choice
         wanted = target if cache == "ABS" else (run_dir.parent.parent / cache).resolve()
@@ -306,15 +383,26 @@ def test_resume_refuses_a_manifest_cache_path_the_user_did_not_give(tmp_path, fr
         assert wanted.exists() and len(read_run(run_dir).records) == 3
 
 
-@pytest.mark.parametrize(("changes", "words"), [
-    ({"ray_address": "10.0.0.1:6379"}, "--ray-address"),
-    ({"backend_options": {"trust_remote_code": True}}, "--trust-remote-code"),
-    ({"backend_options": {"runtime_env": {"pip": ["evil-package"]}}}, "'runtime_env': the run's {'pip': ['evil-package']}"),
-    ({"backend_options": {"attn_implementation": "someone/kernels"}}, "'attn_implementation': the run's 'someone/kernels'"),
-])
-def test_resume_refuses_a_manifest_that_chooses_where_the_model_runs_or_what_code_runs(tmp_path, frames, capsys, changes, words):
-    from lightemma.pipeline import resume
+@pytest.mark.parametrize(
+    ("changes", "words"),
+    [
+        ({"ray_address": "10.0.0.1:6379"}, "--ray-address"),
+        ({"backend_options": {"trust_remote_code": True}}, "--trust-remote-code"),
+        (
+            {"backend_options": {"runtime_env": {"pip": ["evil-package"]}}},
+            "'runtime_env': the run's {'pip': ['evil-package']}",
+        ),
+        (
+            {"backend_options": {"attn_implementation": "someone/kernels"}},
+            "'attn_implementation': the run's 'someone/kernels'",
+        ),
+    ],
+)
+def test_resume_refuses_a_manifest_that_chooses_where_the_model_runs_or_what_code_runs(
+    tmp_path, frames, capsys, changes, words
+):
     from lightemma.errors import UserError
+    from lightemma.pipeline import resume
 
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server, **changes)
@@ -333,43 +421,62 @@ def test_resume_refuses_options_it_takes_from_the_manifest_and_code_options_the_
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server)
         with pytest.raises(UserError, match="did not load the model with trust_remote_code"):
-            resume(run_dir, frames=frames, api_base=server.url, cache=True, backend_options={"trust_remote_code": True},
-                   progress=False)
+            resume(
+                run_dir,
+                frames=frames,
+                api_base=server.url,
+                cache=True,
+                backend_options={"trust_remote_code": True},
+                progress=False,
+            )
         with pytest.raises(UserError, match="takes batch_size from the run's manifest"):
-            resume(run_dir, frames=frames, api_base=server.url, cache=True, backend_options={"batch_size": 4}, progress=False)
+            resume(
+                run_dir,
+                frames=frames,
+                api_base=server.url,
+                cache=True,
+                backend_options={"batch_size": 4},
+                progress=False,
+            )
         assert len(read_run(run_dir).records) == 1
 
 
-@pytest.mark.parametrize(("changes", "words"), [
-    ({"concurrency": "x"}, "config.concurrency is 'x', not a whole number"),
-    ({"timeout": None}, "config.timeout is None"),
-    ({"timeout": "soon"}, "config.timeout is 'soon'"),
-    ({"dataset": [1]}, "config.dataset is [1], not an object"),
-    ({"backend_options": ["x"]}, "config.backend_options is ['x'], not an object"),
-    ({"prompt_set": ["x"]}, "config.prompt_set"),
-    ({"backend_options": {"trust_remote_code": "yes"}}, "trust_remote_code is 'yes', not true or false"),
-    ({"ray_address": 0}, "ray_address is 0, not an address"),
-    ({"backend_options": {"batch_size": "8"}}, "cannot build the run's backend (TypeError"),
-    ({"model": ["gpt-4o"]}, "config.model is ['gpt-4o'], not text"),
-    ({"timeout": -1}, "config.timeout is -1, not a number greater than 0"),
-    ({"temperature": -1}, "config.temperature is -1, not a number of at least 0"),
-    ({"cache": True}, "config.cache is True, not text"),
-    ({"speed_range": [5, 1]}, "config.speed_range is [5, 1], not [low, high]"),
-    ({"dataset": {"scenes": [1]}}, "config.dataset.scenes is [1], not a list of scene names"),
-    ({"dataset": {"sample": {"seed": 0}}}, "config.dataset.sample"),
-    ({"batch": -2.5}, "config.batch is -2.5, not true or false"),
-    # the trial's: left-out settings, numbers beyond a float, and values that would wait or retry without end
-    *[({name: LEFT_OUT}, f"config has no {name}") for name in ("timeout", "max_retries", "backoff_base", "rpm", "tpm")],
-    ({"timeout": 10**400}, "config.timeout is a whole number of 401 digits, not a finite number"),
-    ({"speed_range": [-10**400, 10**400]}, "config.speed_range is [-1000"),
-    ({"rpm": 1e-300}, "config.rpm is 1e-300, not between 1 and 1e+09"),
-    ({"tpm": 1e-300}, "config.tpm is 1e-300, not between 10 and 1e+12"),
-    ({"timeout": 1e-300}, "config.timeout is 1e-300, not between 0.001 and 86400"),
-    ({"timeout": 1e308}, "config.timeout is 1e+308, not between"),
-    ({"max_attempts": 10**9}, "config.max_attempts is 1000000000, not between 1 and 100"),
-    ({"max_retries": 10**400}, "config.max_retries is a whole number of 401 digits, not between 0 and 100"),
-    ({"cache": "runs/x\x00y"}, "not text without NUL characters"),
-])
+@pytest.mark.parametrize(
+    ("changes", "words"),
+    [
+        ({"concurrency": "x"}, "config.concurrency is 'x', not a whole number"),
+        ({"timeout": None}, "config.timeout is None"),
+        ({"timeout": "soon"}, "config.timeout is 'soon'"),
+        ({"dataset": [1]}, "config.dataset is [1], not an object"),
+        ({"backend_options": ["x"]}, "config.backend_options is ['x'], not an object"),
+        ({"prompt_set": ["x"]}, "config.prompt_set"),
+        ({"backend_options": {"trust_remote_code": "yes"}}, "trust_remote_code is 'yes', not true or false"),
+        ({"ray_address": 0}, "ray_address is 0, not an address"),
+        ({"backend_options": {"batch_size": "8"}}, "cannot build the run's backend (TypeError"),
+        ({"model": ["gpt-4o"]}, "config.model is ['gpt-4o'], not text"),
+        ({"timeout": -1}, "config.timeout is -1, not a number greater than 0"),
+        ({"temperature": -1}, "config.temperature is -1, not a number of at least 0"),
+        ({"cache": True}, "config.cache is True, not text"),
+        ({"speed_range": [5, 1]}, "config.speed_range is [5, 1], not [low, high]"),
+        ({"dataset": {"scenes": [1]}}, "config.dataset.scenes is [1], not a list of scene names"),
+        ({"dataset": {"sample": {"seed": 0}}}, "config.dataset.sample"),
+        ({"batch": -2.5}, "config.batch is -2.5, not true or false"),
+        # the trial's: left-out settings, numbers beyond a float, and values that would wait or retry without end
+        *[
+            ({name: LEFT_OUT}, f"config has no {name}")
+            for name in ("timeout", "max_retries", "backoff_base", "rpm", "tpm")
+        ],
+        ({"timeout": 10**400}, "config.timeout is a whole number of 401 digits, not a finite number"),
+        ({"speed_range": [-(10**400), 10**400]}, "config.speed_range is [-1000"),
+        ({"rpm": 1e-300}, "config.rpm is 1e-300, not between 1 and 1e+09"),
+        ({"tpm": 1e-300}, "config.tpm is 1e-300, not between 10 and 1e+12"),
+        ({"timeout": 1e-300}, "config.timeout is 1e-300, not between 0.001 and 86400"),
+        ({"timeout": 1e308}, "config.timeout is 1e+308, not between"),
+        ({"max_attempts": 10**9}, "config.max_attempts is 1000000000, not between 1 and 100"),
+        ({"max_retries": 10**400}, "config.max_retries is a whole number of 401 digits, not between 0 and 100"),
+        ({"cache": "runs/x\x00y"}, "not text without NUL characters"),
+    ],
+)
 def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_path, frames, capsys, changes, words):
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server, **changes)
@@ -379,9 +486,8 @@ def test_a_hand_edited_manifest_is_refused_in_one_line_never_a_traceback(tmp_pat
 @pytest.mark.parametrize("how", ["deep manifest", "frame_ids to /dev/zero", "frame_ids a FIFO"])
 def test_a_run_directory_file_that_is_deep_endless_or_a_pipe_is_refused_in_one_line(tmp_path, frames, capsys, how):
     from lightemma.cli import main
-    from lightemma.runs.store import FRAME_IDS_FILE, MANIFEST_FILE
-
     from lightemma.pipeline import resume
+    from lightemma.runs.store import FRAME_IDS_FILE, MANIFEST_FILE
 
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server)
@@ -395,8 +501,24 @@ def test_a_run_directory_file_that_is_deep_endless_or_a_pipe_is_refused_in_one_l
             (run_dir / FRAME_IDS_FILE).unlink()
             (run_dir / FRAME_IDS_FILE).symlink_to("/dev/zero")  # a read would fill the memory
         if how == "deep manifest":
-            done = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base",
-                                   server.url, "--cache", "--no-progress"], capture_output=True, text=True, env=env(), timeout=120)
+            done = subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "lightemma",
+                    "run",
+                    "--resume",
+                    str(run_dir),
+                    "--api-base",
+                    server.url,
+                    "--cache",
+                    "--no-progress",
+                ],
+                capture_output=True,
+                text=True,
+                env=env(),
+                timeout=120,
+            )
             assert done.returncode == 2 and "Traceback" not in done.stderr, done.stderr
             assert len(done.stderr.strip().splitlines()) == 1 and "nested too deeply" in done.stderr, done.stderr
         else:  # a run of frames passed in memory: resumed from Python
@@ -417,11 +539,39 @@ def test_a_resume_takes_how_long_and_how_fast_to_ask_and_records_it(tmp_path, fr
 
     with FakeOpenAIServer() as server:
         run_dir = crafted_run(tmp_path, frames, server)
-        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--timeout", "inf",
-                     "--no-progress"]) == 2
+        assert (
+            main(
+                [
+                    "run",
+                    "--resume",
+                    str(run_dir),
+                    "--api-base",
+                    server.url,
+                    "--cache",
+                    "--timeout",
+                    "inf",
+                    "--no-progress",
+                ]
+            )
+            == 2
+        )
         assert "--timeout must be a finite number, got inf" in capsys.readouterr().err
-        assert main(["run", "--resume", str(run_dir), "--api-base", server.url, "--cache", "--rpm", "1e-300",
-                     "--no-progress"]) == 2
+        assert (
+            main(
+                [
+                    "run",
+                    "--resume",
+                    str(run_dir),
+                    "--api-base",
+                    server.url,
+                    "--cache",
+                    "--rpm",
+                    "1e-300",
+                    "--no-progress",
+                ]
+            )
+            == 2
+        )
         assert "--rpm must be between 1 and 1e+09, got 1e-300" in capsys.readouterr().err
         from lightemma.pipeline import resume
 
@@ -437,7 +587,9 @@ def test_replies_too_large_on_frame_after_frame_stop_the_run_naming_the_limit(tm
 
     with FakeOpenAIServer(lambda req: Reply(bulk=MAX_BODY_BYTES + 1)) as server:
         with pytest.raises(RunStopped) as stopped:
-            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", max_attempts=1, **FAST)
+            run(
+                "openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", max_attempts=1, **FAST
+            )
     assert "larger than the 8 MiB lightemma reads" in str(stopped.value) and stopped.value.cause == "invalid-response"
 
 
@@ -446,9 +598,27 @@ def test_a_local_run_with_trust_remote_code_resumes_only_with_it_again(tmp_path,
     from lightemma.runs.store import FRAMES_FILE, read_manifest
 
     out = tmp_path / "out"
-    args = ["--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "2", "--max-tokens", "4",
-            "--max-attempts", "1", "--output", str(out), "--no-progress"]
-    assert main(["run", "--model", str(tiny_qwen), "--backend", "hf", "--device", "cpu", "--trust-remote-code", *args]) == 1
+    args = [
+        "--dataroot",
+        str(synth_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--limit",
+        "2",
+        "--max-tokens",
+        "4",
+        "--max-attempts",
+        "1",
+        "--output",
+        str(out),
+        "--no-progress",
+    ]
+    assert (
+        main(["run", "--model", str(tiny_qwen), "--backend", "hf", "--device", "cpu", "--trust-remote-code", *args])
+        == 1
+    )
     (run_dir,) = run_dirs(out)
     assert read_manifest(run_dir)["config"]["backend_options"]["trust_remote_code"] is True
     path = run_dir / FRAMES_FILE
@@ -457,7 +627,9 @@ def test_a_local_run_with_trust_remote_code_resumes_only_with_it_again(tmp_path,
     assert main(["run", "--resume", str(run_dir), "--no-progress"]) == 2
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "--trust-remote-code" in err, err
-    assert main(["run", "--resume", str(run_dir), "--trust-remote-code", "--no-progress"]) == 1  # random weights: no valid frame
+    assert (
+        main(["run", "--resume", str(run_dir), "--trust-remote-code", "--no-progress"]) == 1
+    )  # random weights: no valid frame
     assert len(read_run(run_dir).records) == 2
 
 
@@ -491,13 +663,41 @@ def test_sigterm_and_sighup_stop_a_run_like_ctrl_c(tmp_path, synth_root, signum)
 
     out = tmp_path / "out"
     with FakeOpenAIServer(latency=0.2) as server:
-        proc = subprocess.Popen([sys.executable, "-m", "lightemma", "run", "--model", "openai/test-model", "--api-base",
-                                 server.url, "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-                                 "--concurrency", "2", "--output", str(out), "--no-progress"],
-                                stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
+        proc = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "lightemma",
+                "run",
+                "--model",
+                "openai/test-model",
+                "--api-base",
+                server.url,
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--concurrency",
+                "2",
+                "--output",
+                str(out),
+                "--no-progress",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            env=env(),
+            text=True,
+        )
         try:
-            wait_for(lambda: any((d / "frames.jsonl").exists() and (d / "frames.jsonl").stat().st_size for d in run_dirs(out)),
-                     60, "a first frame")
+            wait_for(
+                lambda: any(
+                    (d / "frames.jsonl").exists() and (d / "frames.jsonl").stat().st_size for d in run_dirs(out)
+                ),
+                60,
+                "a first frame",
+            )
             proc.send_signal(signum)
             _, err = proc.communicate(timeout=20)
         finally:
@@ -532,10 +732,36 @@ def tiny_qwen(tmp_path_factory):
 
 
 def hf_run(tiny_qwen, synth_root, out, *extra):
-    return subprocess.Popen([sys.executable, "-c", HANG, "run", "--model", str(tiny_qwen), "--backend", "hf", "--device", "cpu",
-                             "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "2",
-                             "--output", str(out), "--no-progress", *extra],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env(), text=True)
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            HANG,
+            "run",
+            "--model",
+            str(tiny_qwen),
+            "--backend",
+            "hf",
+            "--device",
+            "cpu",
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            "2",
+            "--output",
+            str(out),
+            "--no-progress",
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=env(),
+        text=True,
+    )
 
 
 def test_a_hung_local_generate_stops_the_run_at_the_timeout_resumable(tmp_path, synth_root, tiny_qwen):
@@ -582,21 +808,62 @@ def test_ctrl_c_stops_a_hung_local_generate_and_a_second_one_exits_at_once(tmp_p
     assert not (run_dir / LOCK_PID_FILE).exists()
 
 
-def test_every_local_batch_past_the_timeout_stops_in_one_line_naming_the_resume_with_a_longer_wait(tmp_path, synth_root,
-                                                                                                   tiny_qwen):
+def test_every_local_batch_past_the_timeout_stops_in_one_line_naming_the_resume_with_a_longer_wait(
+    tmp_path, synth_root, tiny_qwen
+):
     """One line (no stray tracebacks after it: tests/test_batching.py), and the fix it names works on a resume."""
     out = tmp_path / "out"
-    done = subprocess.run([sys.executable, "-m", "lightemma", "run", "--model", str(tiny_qwen), "--backend", "hf", "--device",
-                           "cpu", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--limit", "6",
-                           "--timeout", "0.001", "--max-tokens", "8", "--output", str(out), "--no-progress"],
-                          capture_output=True, text=True, env=env(), timeout=300)
-    lines = [line for line in done.stderr.splitlines() if line.strip() and not line.startswith("Loading weights")]  # transformers'
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "lightemma",
+            "run",
+            "--model",
+            str(tiny_qwen),
+            "--backend",
+            "hf",
+            "--device",
+            "cpu",
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            "6",
+            "--timeout",
+            "0.001",
+            "--max-tokens",
+            "8",
+            "--output",
+            str(out),
+            "--no-progress",
+        ],
+        capture_output=True,
+        text=True,
+        env=env(),
+        timeout=300,
+    )
+    lines = [
+        line for line in done.stderr.splitlines() if line.strip() and not line.startswith("Loading weights")
+    ]  # transformers'
     assert done.returncode == 2 and "Traceback" not in done.stderr and "never retrieved" not in done.stderr, done.stderr
-    assert "every batch runs past --timeout 0.001 s" in lines[-1] and "--resume" in lines[-1] and "--timeout SECONDS" in lines[-1]
+    assert (
+        "every batch runs past --timeout 0.001 s" in lines[-1]
+        and "--resume" in lines[-1]
+        and "--timeout SECONDS" in lines[-1]
+    )
     assert len(lines) == 3, lines  # the frames, the run directory, the stop
     (run_dir,) = run_dirs(out)
-    again = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--timeout", "600",
-                            "--no-progress"], capture_output=True, text=True, env=env(), timeout=300)
+    again = subprocess.run(
+        [sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--timeout", "600", "--no-progress"],
+        capture_output=True,
+        text=True,
+        env=env(),
+        timeout=300,
+    )
     assert again.returncode == 1, again.stderr  # finished (random weights: no valid frame), with the longer wait
     assert len(read_run(run_dir).records) == 6
 
@@ -610,8 +877,13 @@ def test_a_local_generate_past_the_timeout_fails_its_batch_as_timeout(tiny_qwen,
     image = tmp_path / "cam.jpg"
     Image.new("RGB", (32, 32), (10, 20, 30)).save(image)
     backend = HFBackend(str(tiny_qwen), device="cpu", timeout=0.5)
-    request = ChatRequest(text="describe", stage="scene", frame_id="s/0", image_path=str(image),
-                          params=GenerationParams(max_tokens=1_000_000))  # babble: it would never end
+    request = ChatRequest(
+        text="describe",
+        stage="scene",
+        frame_id="s/0",
+        image_path=str(image),
+        params=GenerationParams(max_tokens=1_000_000),
+    )  # babble: it would never end
     start = time.monotonic()
     (result,) = asyncio.run(backend.generate([request]))
     assert time.monotonic() - start < 10
@@ -646,8 +918,15 @@ def test_a_provider_rejecting_one_scenes_images_does_not_stop_the_run(tmp_path):
         return default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
-                     max_attempts=2, **FAST)
+        result = run(
+            "openai/test-model",
+            frames=frames,
+            api_base=server.url,
+            output=tmp_path / "out",
+            concurrency=1,
+            max_attempts=2,
+            **FAST,
+        )
     records = read_run(result.run_dir).records
     assert [records[f.frame_id]["status"] for f in frames] == ["failed"] * 5 + ["ok"] * 3
     assert all(records[f.frame_id]["error"] == "BadRequestError" for f in frames[:5])
@@ -659,8 +938,15 @@ def test_the_same_rejection_across_scenes_still_stops_the_run(tmp_path):
     frames = scenes_in_order(tmp_path, 4, 3)
     with FakeOpenAIServer(lambda req: Reply.error(400, "max_tokens is too large")) as server:
         with pytest.raises(RunStopped, match="every request is rejected the same way"):
-            run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", concurrency=1,
-                max_attempts=2, **FAST)
+            run(
+                "openai/test-model",
+                frames=frames,
+                api_base=server.url,
+                output=tmp_path / "out",
+                concurrency=1,
+                max_attempts=2,
+                **FAST,
+            )
         assert len(server.requests) <= 2 * 5  # stopped at the first frame of the second scene
 
 
@@ -686,8 +972,15 @@ def test_a_locked_response_cache_is_reported_in_one_line_and_the_run_goes_on_unc
         return default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", cache=True,
-                     log=lines.append, **FAST)
+        result = run(
+            "openai/test-model",
+            frames=frames,
+            api_base=server.url,
+            output=tmp_path / "out",
+            cache=True,
+            log=lines.append,
+            **FAST,
+        )
     holder[0].close()
     warnings = [line for line in lines if "response cache" in line]
     assert len(warnings) == 1 and "database is locked" in warnings[0] and "without caching" in warnings[0], lines
@@ -699,16 +992,19 @@ def test_a_locked_response_cache_is_reported_in_one_line_and_the_run_goes_on_unc
 
 
 BODY_LIMIT_CASES = [  # (model, transport, key variable): every client a reply can reach lightemma through
-    ("openai/test-model", "litellm", None), ("openai/test-model", "direct", None),
-    ("anthropic/claude-sonnet-4-6", "litellm", "ANTHROPIC_API_KEY"), ("gemini/gemini-2.5-flash", "litellm", "GEMINI_API_KEY"),
+    ("openai/test-model", "litellm", None),
+    ("openai/test-model", "direct", None),
+    ("anthropic/claude-sonnet-4-6", "litellm", "ANTHROPIC_API_KEY"),
+    ("gemini/gemini-2.5-flash", "litellm", "GEMINI_API_KEY"),
 ]
 
 
-@pytest.mark.parametrize(("model", "transport", "variable"), BODY_LIMIT_CASES, ids=[f"{m.split('/')[0]}-{t}" for m, t, _ in BODY_LIMIT_CASES])
+@pytest.mark.parametrize(
+    ("model", "transport", "variable"), BODY_LIMIT_CASES, ids=[f"{m.split('/')[0]}-{t}" for m, t, _ in BODY_LIMIT_CASES]
+)
 @pytest.mark.parametrize("length", ["declared", "chunked"])
 def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(monkeypatch, model, transport, variable, length):
     from fake_openai import SCENE_TEXT
-
     from lightemma.backends import ChatRequest, create_backend
     from lightemma.backends.openai_http import MAX_BODY_BYTES
     from lightemma.backends.retry import RetryPolicy
@@ -718,8 +1014,9 @@ def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(monkeypatch
     huge = Reply(bulk=8 * MAX_BODY_BYTES, chunked=length == "chunked")  # 64 MiB, declared or not
     with FakeOpenAIServer([huge, Reply(SCENE_TEXT)]) as server:
         base = server.url if model.startswith("openai/") else server.root_url
-        backend = create_backend(model, api_base=base, transport=transport,
-                                 retry=RetryPolicy(max_retries=2, base=0.01, cap=0.05))
+        backend = create_backend(
+            model, api_base=base, transport=transport, retry=RetryPolicy(max_retries=2, base=0.01, cap=0.05)
+        )
 
         async def two():
             req = ChatRequest(text="describe", stage="scene", frame_id="s/a")
@@ -733,13 +1030,15 @@ def test_a_huge_response_body_fails_the_call_and_is_never_read_whole(monkeypatch
     assert len(server.bulk_sent) == 1 and server.bulk_sent[0] < 4 * MAX_BODY_BYTES, server.bulk_sent
 
 
-@pytest.mark.parametrize(("model", "transport", "variable"), BODY_LIMIT_CASES, ids=[f"{m.split('/')[0]}-{t}" for m, t, _ in BODY_LIMIT_CASES])
-def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_compressed_replies_read(monkeypatch, model,
-                                                                                                      transport, variable):
+@pytest.mark.parametrize(
+    ("model", "transport", "variable"), BODY_LIMIT_CASES, ids=[f"{m.split('/')[0]}-{t}" for m, t, _ in BODY_LIMIT_CASES]
+)
+def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_compressed_replies_read(
+    monkeypatch, model, transport, variable
+):
     """A 64 MiB body gzipped to ~64 KB fails at the limit (httpx inflated it whole before); gzip, deflate and raw deflate
     replies of normal size read as before; an encoding lightemma did not ask for fails unread."""
     from fake_openai import SCENE_TEXT
-
     from lightemma.backends import ChatRequest, create_backend
     from lightemma.backends.openai_http import MAX_BODY_BYTES
     from lightemma.backends.retry import RetryPolicy
@@ -747,14 +1046,23 @@ def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_com
     if variable:
         monkeypatch.setenv(variable, "native-test-key-0123456789")
     bomb = Reply(bulk=8 * MAX_BODY_BYTES, encoding="gzip")
-    replies = [bomb, Reply(SCENE_TEXT, encoding="gzip"), Reply(SCENE_TEXT, encoding="deflate"),
-               Reply(SCENE_TEXT, encoding="raw-deflate"), Reply(SCENE_TEXT, encoding="br"),
-               Reply(SCENE_TEXT, encoding="gzip-members"), Reply(SCENE_TEXT, encoding="gzip", trailing=16),
-               Reply(SCENE_TEXT, encoding="gzip", trailing=MAX_BODY_BYTES + 1), Reply(SCENE_TEXT, encoding="gzip-cut"),
-               Reply(SCENE_TEXT, encoding="gzip-corrupt")]
+    replies = [
+        bomb,
+        Reply(SCENE_TEXT, encoding="gzip"),
+        Reply(SCENE_TEXT, encoding="deflate"),
+        Reply(SCENE_TEXT, encoding="raw-deflate"),
+        Reply(SCENE_TEXT, encoding="br"),
+        Reply(SCENE_TEXT, encoding="gzip-members"),
+        Reply(SCENE_TEXT, encoding="gzip", trailing=16),
+        Reply(SCENE_TEXT, encoding="gzip", trailing=MAX_BODY_BYTES + 1),
+        Reply(SCENE_TEXT, encoding="gzip-cut"),
+        Reply(SCENE_TEXT, encoding="gzip-corrupt"),
+    ]
     with FakeOpenAIServer(replies) as server:
         base = server.url if model.startswith("openai/") else server.root_url
-        backend = create_backend(model, api_base=base, transport=transport, retry=RetryPolicy(max_retries=0, base=0.01, cap=0.05))
+        backend = create_backend(
+            model, api_base=base, transport=transport, retry=RetryPolicy(max_retries=0, base=0.01, cap=0.05)
+        )
 
         async def ask_all():
             req = ChatRequest(text="describe", stage="scene", frame_id="s/a")
@@ -775,7 +1083,9 @@ def test_the_limit_is_on_the_decoded_body_a_compressed_bomb_fails_and_normal_com
         assert got[9].error == "ResponseEncodingError" and "not valid gzip" in got[9].error_message, got[9]
         return
     assert got[6].text == SCENE_TEXT  # a few bytes after the end: dropped
-    assert [(r.error, "not valid gzip" in (r.error_message or "")) for r in got[8:]] == [("ResponseEncodingError", True)] * 2
+    assert [(r.error, "not valid gzip" in (r.error_message or "")) for r in got[8:]] == [
+        ("ResponseEncodingError", True)
+    ] * 2
 
 
 @pytest.mark.parametrize("transport", ["litellm", "direct"])
@@ -788,8 +1098,14 @@ def test_half_an_emoji_in_an_answer_becomes_a_replacement_character_and_the_chai
         return Reply(scene) if req.stage == "scene" else default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", frames=frames[:1], api_base=server.url, output=tmp_path / "out", transport=transport,
-                     **FAST)
+        result = run(
+            "openai/test-model",
+            frames=frames[:1],
+            api_base=server.url,
+            output=tmp_path / "out",
+            transport=transport,
+            **FAST,
+        )
     (record,) = read_run(result.run_dir).records.values()
     assert record["status"] == "ok" and record["scene_text"] == scene.replace("\ud83d", "\ufffd")
     assert [r.stage for r in server.requests] == ["scene", "intent", "actions"]
@@ -807,17 +1123,41 @@ def closed_port() -> int:
         return sock.getsockname()[1]  # closed again: nothing listens there
 
 
-@pytest.mark.parametrize(("base", "words"), [("localhost:8000/v1", "needs a scheme"), ("http://127.0.0.1:99999/v1", "usable URL"),
-                                             ("http://127.0.0.1:PORT/v1", "cannot connect"),
-                                             ("alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
-                                             ("http:/alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
-                                             ("http//alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme")])
+@pytest.mark.parametrize(
+    ("base", "words"),
+    [
+        ("localhost:8000/v1", "needs a scheme"),
+        ("http://127.0.0.1:99999/v1", "usable URL"),
+        ("http://127.0.0.1:PORT/v1", "cannot connect"),
+        ("alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
+        ("http:/alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
+        ("http//alice:hunter2pw@127.0.0.1:1/v1", "needs a scheme"),
+    ],
+)
 def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path, synth_root, capsys, base, words):
     from lightemma.cli import main
 
     base = base.replace("PORT", str(closed_port()))
-    code = main(["run", "--model", "openai/test-model", "--api-base", base, "--dataroot", str(synth_root), "--version",
-                 "v1.0-mini", "--split", "all", "--limit", "2", "--output", str(tmp_path / "out"), "--no-progress"])
+    code = main(
+        [
+            "run",
+            "--model",
+            "openai/test-model",
+            "--api-base",
+            base,
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            "2",
+            "--output",
+            str(tmp_path / "out"),
+            "--no-progress",
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and len(err.strip().splitlines()) == 1 and words in err, err
     assert "hunter2pw" not in err  # a password in a URL without a scheme is still a password
@@ -827,8 +1167,9 @@ def test_a_bad_or_dead_api_base_is_refused_in_one_line_before_any_work(tmp_path,
 # -- 22.5: a model served from --api-base is that server's: its protocol, no list price, no registry GPUs -------
 
 
-def test_a_registry_model_of_another_provider_at_an_api_base_speaks_openai_and_has_no_list_price(elsewhere, monkeypatch,
-                                                                                                 tmp_path, frames):
+def test_a_registry_model_of_another_provider_at_an_api_base_speaks_openai_and_has_no_list_price(
+    elsewhere, monkeypatch, tmp_path, frames
+):
     monkeypatch.setenv("ANTHROPIC_API_KEY", KEYS["ANTHROPIC_API_KEY"])
     with FakeOpenAIServer() as server:
         plain = run("claude-4.6-sonnet", frames=frames[:2], api_base=server.url, output=tmp_path / "a", **FAST)
@@ -874,9 +1215,28 @@ def test_a_signal_before_the_first_frame_is_one_line_naming_the_resume_and_leave
     from lightemma.runs.store import LOCK_PID_FILE
 
     out = tmp_path / "out"
-    proc = subprocess.Popen([sys.executable, "-c", STARTUP_WINDOW, "run", "--model", "baseline:cv", "--dataroot",
-                             str(synth_root), "--version", "v1.0-mini", "--split", "all", "--output", str(out),
-                             "--no-progress"], stderr=subprocess.PIPE, text=True, env=env())
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            STARTUP_WINDOW,
+            "run",
+            "--model",
+            "baseline:cv",
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--output",
+            str(out),
+            "--no-progress",
+        ],
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env(),
+    )
     before = []
     for line in proc.stderr:  # the frames and run directory lines, then the window
         if line.strip() == "window":

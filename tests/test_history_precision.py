@@ -34,7 +34,8 @@ def test_a_narrow_float_history_prints_the_shortest_decimal_of_its_own_precision
 def test_a_float64_history_is_written_as_before():
     history = np.asarray(HISTORY)
     assert history_placeholders(history)["history"] == (
-        "[(4.512, 0.012), (4.6, 0.0), (5.0, 0.00001), (5.25, -0.0031), (6.1, 0.0), (7.3, 0.2)]")
+        "[(4.512, 0.012), (4.6, 0.0), (5.0, 0.00001), (5.25, -0.0031), (6.1, 0.0), (7.3, 0.2)]"
+    )
     assert history_placeholders(history)["speeds"] == "[4.512, 4.6, 5.0, 5.25, 6.1, 7.3]"
     assert history_placeholders([[1.0, 0], [2.0, 0]])["curvatures"] == "[0, 0]"  # an int stays an int (the reference's)
     wide = np.float32(4.512).astype(np.float64)  # a float64 that came from float32 is a float64: written in full

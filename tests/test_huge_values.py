@@ -25,8 +25,14 @@ def write_run(root, model, speeds):
         for i, v in enumerate(speeds):
             actions = np.array([[v, 0.0]] * 6)
             answer = "[" + ", ".join([f"({v!r}, 0.0)"] * 6) + "]"
-            rec = make_record(f"scene-{i % 4}/{i}", GT, lightemma.integrate(actions), actions=actions, scene_name=f"scene-{i % 4}",
-                              texts={"answer": answer})
+            rec = make_record(
+                f"scene-{i % 4}/{i}",
+                GT,
+                lightemma.integrate(actions),
+                actions=actions,
+                scene_name=f"scene-{i % 4}",
+                texts={"answer": answer},
+            )
             rec["attempts"][0].update(status="ok", reason="", failure="")
             writer.append(rec)
     update_manifest(run_dir, finished_at="t")

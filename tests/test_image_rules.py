@@ -11,9 +11,9 @@ import pytest
 
 from fake_openai import FakeOpenAIServer, Reply, default_reply
 from lightemma.errors import RunStopped, UserError
-from lightemma.pipeline.runner import estimate_run, run
 from lightemma.models.catalog import PAPER_MODELS, resolve
 from lightemma.models.prices import reasoning_budget
+from lightemma.pipeline.runner import estimate_run, run
 from lightemma.runs.store import read_run
 
 # the names this change adds are imported inside the tests, so that each test fails on its own without the change
@@ -100,8 +100,15 @@ def test_every_registry_api_model_has_a_cited_rule_or_none_by_a_stated_reason():
             assert f"read {IMAGE_RULES_READ}" in rule.source, info.key
     # gpt-5 and gpt-5.2: no base/tile figures in any copy of OpenAI's page that could be read (registry.IMAGE_RULES)
     assert without == {"gpt-5.0", "gpt-5.2"}
-    assert set(with_rule) == {"gpt-4o", "claude-3.7-sonnet", "claude-4.0-sonnet", "claude-4.6-sonnet",
-                              "gemini-2.0-flash", "gemini-2.5-flash", "gemini-3.0-flash"}
+    assert set(with_rule) == {
+        "gpt-4o",
+        "claude-3.7-sonnet",
+        "claude-4.0-sonnet",
+        "claude-4.6-sonnet",
+        "gemini-2.0-flash",
+        "gemini-2.5-flash",
+        "gemini-3.0-flash",
+    }
     # another provider's route or a model no rule names: unknown, not OpenAI's rule by default
     for name in ("openrouter/openai/gpt-4o", "openai/my-finetune", "gpt-4.1", "gpt-5-mini", "openai/Qwen/Qwen2-VL"):
         assert image_rule(name) is None, name
@@ -155,8 +162,23 @@ def test_cli_estimate_prints_unknown_for_the_image_part(synth_root, capsys, monk
     from lightemma.cli import main
 
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)
-    assert main(["run", "--model", "gpt-5.2", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-                 "--estimate"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "gpt-5.2",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--estimate",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "unknown image tokens" in out and "image tokens: unknown: no published image rule for gpt-5.2" in out
     assert "--max-cost: each call admitted at its upper bound" in out
@@ -181,8 +203,17 @@ def test_max_cost_holds_when_a_model_bills_images_at_its_own_rule(synth_root, tm
     limit = 2.5 * frame_cents
     with FakeOpenAIServer(billed) as server:
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-4o-mini", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path, progress=False, concurrency=12, max_cost_cents=limit)
+            run(
+                "openai/gpt-4o-mini",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path,
+                progress=False,
+                concurrency=12,
+                max_cost_cents=limit,
+            )
     records = read_run(stopped.value.run_dir).records
     spent = sum(r["cost_cents"] for r in records.values())
     assert stopped.value.cause == "budget" and len(records) == 2
@@ -192,10 +223,21 @@ def test_max_cost_holds_when_a_model_bills_images_at_its_own_rule(synth_root, tm
 def test_max_cost_without_an_image_rule_or_a_context_window_is_refused(synth_root, tmp_path, elsewhere):
     with FakeOpenAIServer() as server:
         # served from another --api-base: no context window is known, so nothing bounds a call
-        with pytest.raises(UserError, match="image tokens of openai/gpt-5.2 are unknown .* context window is "
-                                            "unknown .* drop --max-cost"):
-            run("openai/gpt-5.2", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path / "b", progress=False, max_cost_cents=1000.0, price=(1.75, 14.0))
+        with pytest.raises(
+            UserError,
+            match="image tokens of openai/gpt-5.2 are unknown .* context window is unknown .* drop --max-cost",
+        ):
+            run(
+                "openai/gpt-5.2",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path / "b",
+                progress=False,
+                max_cost_cents=1000.0,
+                price=(1.75, 14.0),
+            )
         assert not server.requests and not (tmp_path / "b").exists()
 
 
@@ -203,19 +245,48 @@ def test_max_cost_admits_a_model_without_an_image_rule_at_its_upper_bound(synth_
     frame_bound = frame_cost_upper_bound(resolve("gpt-5.2"), max_tokens=512).cents_per_frame
     with FakeOpenAIServer() as server:  # the loopback server plays OpenAI's own host: list price, known context window
         # below one frame's bound: refused before anything is called or written
-        with pytest.raises(UserError, match=r"--max-cost 100: not one frame fits within it \(a frame is admitted at "
-                                            f"{frame_bound:.3f} ¢"):
-            run("openai/gpt-5.2", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path / "a", progress=False, max_cost_cents=100.0)
+        with pytest.raises(
+            UserError,
+            match=r"--max-cost 100: not one frame fits within it \(a frame is admitted at "
+            f"{frame_bound:.3f} ¢",
+        ):
+            run(
+                "openai/gpt-5.2",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path / "a",
+                progress=False,
+                max_cost_cents=100.0,
+            )
         assert not server.requests and not (tmp_path / "a").exists()
         # two frames' bounds fit: two frames in flight, all 12 done, each call's real cost settled as it ends
-        result = run("openai/gpt-5.2", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                     output=tmp_path / "b", progress=False, concurrency=2, max_cost_cents=2.5 * frame_bound)
+        result = run(
+            "openai/gpt-5.2",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            api_base=server.url,
+            output=tmp_path / "b",
+            progress=False,
+            concurrency=2,
+            max_cost_cents=2.5 * frame_bound,
+        )
         assert result.summary["frames"] == 12 and len(server.requests) == 36
         # a third frame in flight would not fit: the run stops there (resumable), as for any frame that does not fit
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-5.2", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path / "c", progress=False, concurrency=12, max_cost_cents=2.5 * frame_bound)
+            run(
+                "openai/gpt-5.2",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path / "c",
+                progress=False,
+                concurrency=12,
+                max_cost_cents=2.5 * frame_bound,
+            )
     assert stopped.value.cause == "budget" and f"the next frame (about {frame_bound:.3f} ¢)" in str(stopped.value)
     assert 2 <= len(read_run(stopped.value.run_dir).records) < 12  # two at once (more only if one ended first)
 
@@ -226,12 +297,27 @@ def test_max_cost_admits_a_model_without_an_image_rule_at_its_upper_bound(synth_
 def test_a_refused_max_cost_leaves_no_run_directory(synth_root, tmp_path, elsewhere):
     with FakeOpenAIServer() as server:
         with pytest.raises(UserError, match="--max-cost: the price of openai/gpt-4o is unknown"):
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path / "served", progress=False, max_cost_cents=5.0)
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path / "served",
+                progress=False,
+                max_cost_cents=5.0,
+            )
         assert not server.requests
     with pytest.raises(UserError, match="--max-cost: the price of baseline:cv is unknown"):
-        run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path / "baseline",
-            progress=False, max_cost_cents=5.0)
+        run(
+            "baseline:cv",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            output=tmp_path / "baseline",
+            progress=False,
+            max_cost_cents=5.0,
+        )
     assert not (tmp_path / "served").exists() and not (tmp_path / "baseline").exists()
 
 
@@ -242,15 +328,26 @@ def test_a_stopped_run_prints_the_resume_command_that_works(synth_root, tmp_path
     state = {"fail": True}
     with FakeOpenAIServer(lambda req: Reply.error(401) if state["fail"] else default_reply(req)) as server:
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                api_key_env="MY_GATEWAY_KEY", output=tmp_path, progress=False, limit=2, cache=True)
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                api_key_env="MY_GATEWAY_KEY",
+                output=tmp_path,
+                progress=False,
+                limit=2,
+                cache=True,
+            )
         run_dir = stopped.value.run_dir
         command = re.search(r"continue with: (.*)$", str(stopped.value)).group(1)
         assert f"--resume {run_dir} --api-base {server.url} --api-key-env MY_GATEWAY_KEY --cache " in command
         from lightemma.pipeline.runner import resume_command
 
-        assert command == resume_command(run_dir, {"api_base": server.url, "api_key_env": "MY_GATEWAY_KEY",
-                                                   "cache": "cache.sqlite"})
+        assert command == resume_command(
+            run_dir, {"api_base": server.url, "api_key_env": "MY_GATEWAY_KEY", "cache": "cache.sqlite"}
+        )
         state["fail"] = False
         argv = shlex.split(command)
         assert argv[:2] == ["lightemma", "run"]

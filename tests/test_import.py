@@ -9,7 +9,6 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from reference_fixtures import CALL_FAILED, PROMPT_SET, format_long_text, make_frame, write_results, write_scene
 
 from lightemma.cli import main
 from lightemma.errors import UserError
@@ -21,6 +20,7 @@ from lightemma.runs.importer import import_reference
 from lightemma.runs.reference import as_stored, join_lines, split_lines
 from lightemma.runs.store import find_run_dirs, read_manifest, read_run
 from lightemma.runs.stored_prompts import call_prompt, frame_texts
+from reference_fixtures import CALL_FAILED, PROMPT_SET, format_long_text, make_frame, write_results, write_scene
 
 
 @pytest.fixture
@@ -36,7 +36,12 @@ def imported(tmp_path, results, **kw):
 
 def test_one_run_per_model_named_by_the_registry_in_the_run_format(tmp_path, results):
     runs, _ = imported(tmp_path, results)
-    assert set(runs) == {"gpt-4o", "claude-3.7-sonnet", "qwen-2.5-vl-7b", "my-finetune"}  # unknown names stay as they are
+    assert set(runs) == {
+        "gpt-4o",
+        "claude-3.7-sonnet",
+        "qwen-2.5-vl-7b",
+        "my-finetune",
+    }  # unknown names stay as they are
     for model, result in runs.items():
         assert result.outcome == "imported" and result.run_dir.parent == tmp_path / "runs" / model
         contents = read_run(result.run_dir)  # the store reads it as any run
@@ -53,12 +58,19 @@ def test_one_run_per_model_named_by_the_registry_in_the_run_format(tmp_path, res
     assert read_manifest(runs["my-finetune"].run_dir)["display_name"] == "my-finetune"
     # evaluate reads every imported run unchanged
     ev = evaluate_runs([tmp_path / "runs"])
-    assert {row["model"] for row in ev.accuracy_rows()} == {"GPT-4o", "Claude-3.7-Sonnet", "Qwen-2.5-VL-7B", "my-finetune"}
+    assert {row["model"] for row in ev.accuracy_rows()} == {
+        "GPT-4o",
+        "Claude-3.7-Sonnet",
+        "Qwen-2.5-VL-7B",
+        "my-finetune",
+    }
 
 
 def test_every_frame_field_comes_across(tmp_path, results):
     runs, _ = imported(tmp_path, results)
-    source = json.loads((results["models"]["gpt-4o"] / "output" / "scene-0002.json").read_text())  # image_path only, no gt_actions
+    source = json.loads(
+        (results["models"]["gpt-4o"] / "output" / "scene-0002.json").read_text()
+    )  # image_path only, no gt_actions
     contents = read_run(runs["gpt-4o"].run_dir)
     records, templates = contents.records, contents.manifest["prompt_set"]["templates"]
     assert set(templates) == {"scene", "intent", "actions"}  # each stage's shared text is stored once, in the manifest
@@ -81,9 +93,14 @@ def test_every_frame_field_comes_across(tmp_path, results):
         for stage, key in (("scene", "scene_prompt"), ("intent", "intent_prompt"), ("actions", "waypoint_prompt")):
             call = calls[stage]
             assert call_prompt(call, frame_texts(attempt["calls"]), templates) == " ".join(inf[key])
-            assert (call["input_tokens"], call["output_tokens"]) == (frame["token_usage"][key]["input"], frame["token_usage"][key]["output"])
+            assert (call["input_tokens"], call["output_tokens"]) == (
+                frame["token_usage"][key]["input"],
+                frame["token_usage"][key]["output"],
+            )
             assert call["seconds"] == frame["time_usage"][key]
-            assert call["cost_cents"] == pytest.approx((call["input_tokens"] * prices[0] + call["output_tokens"] * prices[1]) * 100)
+            assert call["cost_cents"] == pytest.approx(
+                (call["input_tokens"] * prices[0] + call["output_tokens"] * prices[1]) * 100
+            )
         assert rec["seconds"] == pytest.approx(sum(frame["time_usage"].values()))
         assert rec["input_tokens"] == sum(u["input"] for u in frame["token_usage"].values())
         assert rec["output_tokens"] == sum(u["output"] for u in frame["token_usage"].values())
@@ -91,8 +108,15 @@ def test_every_frame_field_comes_across(tmp_path, results):
         assert attempt["status"] == rec["status"] == rec["first_status"] and "failure" in attempt
     # image_name is kept as the file has it; local models have no price
     claude = read_run(runs["claude-3.7-sonnet"].run_dir).records
-    assert all(r["image_name"].endswith(".jpg") and r["image_path"] is None for r in claude.values() if r["frame_id"].startswith("scene-0001"))
-    assert all(r["cost_cents"] is None and r["input_tokens"] is not None for r in read_run(runs["my-finetune"].run_dir).records.values())
+    assert all(
+        r["image_name"].endswith(".jpg") and r["image_path"] is None
+        for r in claude.values()
+        if r["frame_id"].startswith("scene-0001")
+    )
+    assert all(
+        r["cost_cents"] is None and r["input_tokens"] is not None
+        for r in read_run(runs["my-finetune"].run_dir).records.values()
+    )
     qwen = read_run(runs["qwen-2.5-vl-7b"].run_dir).records
     assert all(r["cost_cents"] is None for r in qwen.values())
     no_usage = [r for r in qwen.values() if r["source"] == {"file": "scene-0001.json", "frame_index": 1}]
@@ -109,7 +133,12 @@ def test_the_reference_names_map_to_the_papers_rows():
 
 def test_a_folder_name_the_registry_does_not_know_falls_back_to_the_files_metadata(tmp_path):
     rng = np.random.default_rng(1)
-    write_scene(tmp_path / "res" / "run-a", "scene-0001", [make_frame(rng, "scene-0001", i) for i in range(3)], metadata={"model": "claude-3.7"})
+    write_scene(
+        tmp_path / "res" / "run-a",
+        "scene-0001",
+        [make_frame(rng, "scene-0001", i) for i in range(3)],
+        metadata={"model": "claude-3.7"},
+    )
     (result,) = import_reference([tmp_path / "res" / "run-a"], tmp_path / "runs")
     assert result.model == "claude-3.7-sonnet"
     assert read_manifest(result.run_dir)["imported"]["metadata_model"] == "claude-3.7"
@@ -127,10 +156,24 @@ def test_stage_texts_round_trip_through_the_references_lines(text):
 
 
 def test_importing_the_same_folder_again_writes_nothing(tmp_path, results, capsys):
-    assert main(["import", str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--quiet", "--jobs", "2"]) == 0
+    assert (
+        main(["import", str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--quiet", "--jobs", "2"]) == 0
+    )
     before = {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").rglob("*")}
     capsys.readouterr()
-    assert main(["import", str(tmp_path / "results" / "gpt-4o"), str(tmp_path / "results"), "--output", str(tmp_path / "runs"), "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "import",
+                str(tmp_path / "results" / "gpt-4o"),
+                str(tmp_path / "results"),
+                "--output",
+                str(tmp_path / "runs"),
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert out.count("already imported") == 5 and "nothing written" in out
     assert {p: p.stat().st_mtime_ns for p in (tmp_path / "runs").rglob("*")} == before
@@ -158,7 +201,9 @@ def test_a_failure_mid_import_leaves_no_run(tmp_path, results, monkeypatch, erro
         import_reference([results["models"]["qwen-2.5-vl-7b"]], tmp_path / "runs")
     assert not (tmp_path / "runs").exists()  # no run, no partial folder, not even the folders made for it
     monkeypatch.setattr(importer, "_scene_records", original)
-    (result,) = import_reference([results["models"]["qwen-2.5-vl-7b"]], tmp_path / "runs")  # and a retry imports it whole
+    (result,) = import_reference(
+        [results["models"]["qwen-2.5-vl-7b"]], tmp_path / "runs"
+    )  # and a retry imports it whole
     assert result.outcome == "imported" and result.frames == 21
 
 
@@ -168,7 +213,9 @@ def test_bad_files_and_frames_are_named_in_one_line_each_and_never_scored(tmp_pa
     warnings = [line for line in captured.err.splitlines() if line]
     assert all(line.startswith("lightemma import: warning: ") for line in warnings)
     (bad_file,) = [w for w in warnings if "scene-0003.json" in w]
-    assert str(results["bad_files"][0]) in bad_file and "not valid JSON" in bad_file and bad_file.endswith("file skipped")
+    assert (
+        str(results["bad_files"][0]) in bad_file and "not valid JSON" in bad_file and bad_file.endswith("file skipped")
+    )
     for where in results["bad_frames"]["claude-3.7-sonnet"]:
         (line,) = [w for w in warnings if where in w]
         assert line.endswith("frame skipped")
@@ -176,7 +223,10 @@ def test_bad_files_and_frames_are_named_in_one_line_each_and_never_scored(tmp_pa
     assert any("gt_positions has 5 entries, expected 6" in w for w in warnings)
     claude = next(iter((tmp_path / "runs" / "claude-3.7-sonnet").iterdir()))
     sources = [r["source"] for r in read_run(claude).records.values()]
-    assert {"file": "scene-0001.json", "frame_index": 5} not in sources and {"file": "scene-0004.json", "frame_index": 7} not in sources
+    assert {"file": "scene-0001.json", "frame_index": 5} not in sources and {
+        "file": "scene-0004.json",
+        "frame_index": 7,
+    } not in sources
     imported_info = read_manifest(claude)["imported"]
     assert imported_info["frames_skipped"] == 2 and imported_info["files_skipped"] == []
     gpt = next(iter((tmp_path / "runs" / "gpt-4o").iterdir()))
@@ -190,7 +240,10 @@ def test_a_folder_without_a_usable_frame_writes_no_run_and_fails(tmp_path, capsy
     (folder / "scene-0001.json").write_text('{"frames": [{"sample_token": "x"}]}')
     assert main(["import", str(tmp_path / "res"), "--output", str(tmp_path / "runs"), "--quiet"]) == 1
     captured = capsys.readouterr()
-    assert "no usable frame" in captured.out and "scene-0001.json frame #0: no ego_info object; frame skipped" in captured.err
+    assert (
+        "no usable frame" in captured.out
+        and "scene-0001.json frame #0: no ego_info object; frame skipped" in captured.err
+    )
     assert not (tmp_path / "runs").exists()
 
 
@@ -204,7 +257,11 @@ def test_a_failed_call_stored_as_text_is_an_api_error_not_a_format_error(tmp_pat
     call = rec["attempts"][0]["calls"][2]
     assert rec["status"] == "failed" and rec["answer"] is None and rec["failure"] == "api_error"
     assert call["text"] is None and call["error"] == "ReferenceCallError" and call["error_message"] == CALL_FAILED
-    assert result.summary["api_errors"] == 1 and result.summary["answers_received"] == 3 and result.summary["fe_percent"] == 0.0
+    assert (
+        result.summary["api_errors"] == 1
+        and result.summary["answers_received"] == 3
+        and result.summary["fe_percent"] == 0.0
+    )
 
 
 def test_source_errors_are_one_line(tmp_path, capsys):
@@ -243,7 +300,11 @@ def test_parallel_import_writes_the_same_runs_and_warnings(tmp_path, results):
 def test_actions_too_large_to_integrate_are_named_and_never_scored(tmp_path):
     huge = "[" + ", ".join([f"({'9' * 308}, 0)"] * 6) + "]"  # a Python literal: the paper's rules read it as ok
     rng = np.random.default_rng(2)
-    write_scene(tmp_path / "res" / "gpt-4o", "scene-0001", [make_frame(rng, "scene-0001", i, answer=huge if i == 0 else None) for i in range(3)])
+    write_scene(
+        tmp_path / "res" / "gpt-4o",
+        "scene-0001",
+        [make_frame(rng, "scene-0001", i, answer=huge if i == 0 else None) for i in range(3)],
+    )
     warnings = []
     (result,) = import_reference([tmp_path / "res"], tmp_path / "runs", warn=warnings.append)
     assert any("non-finite positions" in w and "frame 0" in w for w in warnings)

@@ -7,20 +7,20 @@ import re
 
 import numpy as np
 import pytest
-from reference_fixtures import euler, write_results
 
 import lightemma
 from lightemma.cli import main
 from lightemma.errors import UserError
 from lightemma.evaluation import evaluate_runs
-from lightemma.report.evaluation_tables import evaluation_tables
-from lightemma.models.paper import paper_accuracy_rows, paper_efficiency_rows
 from lightemma.evaluation.rescore import ParseDefinition
 from lightemma.evaluation.synthetic import make_record
 from lightemma.models.catalog import lookup
+from lightemma.models.paper import paper_accuracy_rows, paper_efficiency_rows
 from lightemma.models.prices import price_per_token
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.runs.importer import import_reference
 from lightemma.runs.store import RunWriter, create_run_dir, read_run, update_manifest
+from reference_fixtures import euler, write_results
 
 # ---------------------------------------------------------------- the paper's rules, restated in plain Python
 
@@ -32,8 +32,10 @@ def paper_read(text):
         value = ast.literal_eval(text)
     except (ValueError, SyntaxError, TypeError, MemoryError, RecursionError):
         value = None
-    if isinstance(value, list) and len(value) == 6 and all(
-        isinstance(p, tuple) and len(p) == 2 and all(type(x) in (int, float) for x in p) for p in value
+    if (
+        isinstance(value, list)
+        and len(value) == 6
+        and all(isinstance(p, tuple) and len(p) == 2 and all(type(x) in (int, float) for x in p) for p in value)
     ):
         return False, False, [[float(v), float(c)] for v, c in value]
     numbers = [float(run) for run in re.findall(r"[0-9.\-]+", text) if re.fullmatch(r"-?\d+(\.\d+)?", run)]
@@ -45,8 +47,11 @@ def paper_read(text):
 def usable(frame):
     """The frames a correct import keeps: 6 ground-truth points, 6 history pairs, all finite."""
     ego = frame.get("ego_info", {})
-    pairs = lambda value, n: isinstance(value, list) and len(value) == n and all(  # noqa: E731
-        len(p) == 2 and all(isinstance(x, (int, float)) and math.isfinite(x) for x in p) for p in value)
+    pairs = lambda value, n: (  # noqa: E731
+        isinstance(value, list)
+        and len(value) == n
+        and all(len(p) == 2 and all(isinstance(x, (int, float)) and math.isfinite(x) for x in p) for p in value)
+    )
     return pairs(ego.get("gt_positions"), 6) and pairs(ego.get("obs_actions"), 6)
 
 
@@ -82,7 +87,10 @@ def paper_tables(folder, prices=None, *, gate=False):
                 inputs.append(sum(u["input"] for u in frame["token_usage"].values()))
                 outputs.append(sum(u["output"] for u in frame["token_usage"].values()))
                 if prices:
-                    costs.append(100 * sum(u["input"] * prices[0] + u["output"] * prices[1] for u in frame["token_usage"].values()))
+                    costs.append(
+                        100
+                        * sum(u["input"] * prices[0] + u["output"] * prices[1] for u in frame["token_usage"].values())
+                    )
             if gate and implausible(actions):
                 n_implausible += 1
                 continue
@@ -101,8 +109,13 @@ def paper_tables(folder, prices=None, *, gate=False):
         "ade_avg": e.mean(),
         "fde": e[:, 5].mean(),
         "miss_rate": (e.max(axis=1) > 2.0).mean(),
-    }, {"seconds_per_frame": mean(seconds), "input_tokens": mean(inputs), "output_tokens": mean(outputs),
-        "cost_cents_per_frame": mean(costs), "frames": n_read}  # means over readable frames whose counts are known
+    }, {
+        "seconds_per_frame": mean(seconds),
+        "input_tokens": mean(inputs),
+        "output_tokens": mean(outputs),
+        "cost_cents_per_frame": mean(costs),
+        "frames": n_read,
+    }  # means over readable frames whose counts are known
 
 
 @pytest.fixture(scope="module")
@@ -147,9 +160,13 @@ def test_the_fixtures_exercise_every_rule(imported):
         for rec in read_run(run_dir).records.values():
             statuses.setdefault(rec["status"], []).append(rec["answer"])
     assert {"ok", "corrected", "failed"} == set(statuses)
-    assert any(a.startswith("[[") for a in statuses["corrected"]) and any(a.startswith("Sure") for a in statuses["corrected"])
+    assert any(a.startswith("[[") for a in statuses["corrected"]) and any(
+        a.startswith("Sure") for a in statuses["corrected"]
+    )
     assert any("5254" in a for a in statuses["corrected"])  # the paper's rule reads lost decimals as 5254 m/s
-    assert any(a.startswith("I am unable") for a in statuses["failed"]) and any(a.count("(") == 5 for a in statuses["failed"])
+    assert any(a.startswith("I am unable") for a in statuses["failed"]) and any(
+        a.count("(") == 5 for a in statuses["failed"]
+    )
 
 
 def test_parse_rescores_stored_answers_and_says_so(imported, capsys):
@@ -188,17 +205,24 @@ def test_rescoring_takes_the_first_attempt_that_passes_and_integrates_with_the_r
     good = "[(4.0, 0.01), (4.2, 0.01), (4.4, 0.0), (4.6, 0.0), (4.8, 0.0), (5.0, 0.0)]"
     prose = "Answer: [(9.0, 0.1), (9.0, 0.1), (9.0, 0.1), (9.0, 0.1), (9.0, 0.1), (9.0, 0.1)]"
     gt = lightemma.integrate(np.array([[4.0, 0.0]] * 6))
-    run_dir = create_run_dir(tmp_path, "openai/test", {"model": "openai/test", "params": {"integrate_method": "midpoint"}})
+    run_dir = create_run_dir(
+        tmp_path, "openai/test", {"model": "openai/test", "params": {"integrate_method": "midpoint"}}
+    )
     with RunWriter(run_dir) as writer:
         rec = make_record("s/1", gt, None, status="corrected", first_status="corrected")
-        rec["attempts"] = [{"answer": prose, "status": "corrected", "reason": ""}, {"answer": None, "status": "failed", "error": "Timeout"},
-                           {"answer": good, "status": "ok", "reason": ""}]
+        rec["attempts"] = [
+            {"answer": prose, "status": "corrected", "reason": ""},
+            {"answer": None, "status": "failed", "error": "Timeout"},
+            {"answer": good, "status": "ok", "reason": ""},
+        ]
         writer.append(rec)
     update_manifest(run_dir, finished_at="t")
     lenient = evaluate_runs([run_dir], parse=ParseDefinition("lenient"))
     strict = evaluate_runs([run_dir], parse=ParseDefinition("strict"))
     (row_l,), (row_s,) = lenient.accuracy_rows(), strict.accuracy_rows()
-    assert row_l["fe_pct"] == 100.0 and row_s["fe_pct"] == 100.0 and row_s["fe_corr_pct"] == 100.0  # first received answer
+    assert (
+        row_l["fe_pct"] == 100.0 and row_s["fe_pct"] == 100.0 and row_s["fe_corr_pct"] == 100.0
+    )  # first received answer
     assert row_s["frames"] == row_l["frames"] == 1
     from lightemma.evaluation import load_run
 
@@ -229,11 +253,15 @@ def test_with_paper_puts_each_run_beside_its_papers_row(imported):
     reference = next(r for r in paper_accuracy_rows() if r["model"] == "GPT-4o")
     for key in ("fe_pct", "fe_corr_pct", "ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde"):
         assert diff[key] == pytest.approx(mine[key] - reference[key])
-    assert accuracy[3]["model"] == "my-finetune" and accuracy[4]["source"] == "paper" and accuracy[4]["model"] != "GPT-4o"
+    assert (
+        accuracy[3]["model"] == "my-finetune" and accuracy[4]["source"] == "paper" and accuracy[4]["model"] != "GPT-4o"
+    )
     assert len(accuracy) == 3 + 1 + 14 and "note" not in mine
     efficiency = evaluation_tables(ev, with_paper=True)[0].rows
     ref = next(r for r in paper_efficiency_rows() if r["model"] == "GPT-4o")
-    assert efficiency[2]["seconds_per_frame"] == pytest.approx(efficiency[0]["seconds_per_frame"] - ref["seconds_per_frame"])
+    assert efficiency[2]["seconds_per_frame"] == pytest.approx(
+        efficiency[0]["seconds_per_frame"] - ref["seconds_per_frame"]
+    )
 
 
 def test_with_paper_labels_runs_on_synthetic_data(tmp_path, capsys):
@@ -249,8 +277,8 @@ def test_reports_and_pictures_work_on_imported_runs(imported, tmp_path):
     from PIL import Image
 
     from lightemma.evaluation import load_run
-    from lightemma.report.pictures import CameraSource
     from lightemma.report import write_report
+    from lightemma.report.pictures import CameraSource
 
     results, runs = imported
     run = load_run(runs["gpt-4o"])
@@ -264,8 +292,13 @@ def test_reports_and_pictures_work_on_imported_runs(imported, tmp_path):
     assert camera.image is not None and camera.image.shape == (36, 64, 3)
     assert np.allclose(camera.intrinsic, record["camera_params"]["camera_intrinsic"])
     assert np.allclose(camera.extrinsic[:3, 3], record["camera_params"]["translation"])
-    index = write_report([runs["gpt-4o"], runs["claude-3.7-sonnet"]], tmp_path / "report", frames=[fid], top=1,
-                         dataroot=str(tmp_path / "nuscenes"))
+    index = write_report(
+        [runs["gpt-4o"], runs["claude-3.7-sonnet"]],
+        tmp_path / "report",
+        frames=[fid],
+        top=1,
+        dataroot=str(tmp_path / "nuscenes"),
+    )
     text = index.read_text()
     assert "GPT-4o (paper)" in text and "| Δ vs paper |" in text
     assert list((tmp_path / "report" / "figures" / "frames").glob("frame_*_grid.png"))

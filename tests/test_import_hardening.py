@@ -11,14 +11,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import still_running
-from reference_fixtures import make_frame, write_scene
 
 from lightemma.evaluation import evaluate_runs
 from lightemma.evaluation.loading import load_run
 from lightemma.runs import importer, reference
 from lightemma.runs.importer import import_reference
 from lightemma.runs.store import read_manifest, read_run
+from processes import still_running
+from reference_fixtures import make_frame, write_scene
 
 PYTHON_ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
 
@@ -30,8 +30,13 @@ def _scene(folder: Path, name: str, seed: int, frames: int = 3) -> Path:
 
 def _import_in_subprocess(src: Path, out: Path, timeout: float = 120) -> subprocess.CompletedProcess:
     """The real command, in its own process, with a deadline: a hang fails the test instead of stalling it."""
-    return subprocess.run([sys.executable, "-m", "lightemma", "import", str(src), "--output", str(out), "--quiet"],
-                          capture_output=True, text=True, timeout=timeout, env=PYTHON_ENV)
+    return subprocess.run(
+        [sys.executable, "-m", "lightemma", "import", str(src), "--output", str(out), "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        env=PYTHON_ENV,
+    )
 
 
 def test_special_files_and_symlinks_leaving_the_folder_are_skipped_and_named_never_read(tmp_path):
@@ -47,8 +52,11 @@ def test_special_files_and_symlinks_leaving_the_folder_are_skipped_and_named_nev
     done = _import_in_subprocess(tmp_path / "res", tmp_path / "runs")
     assert done.returncode == 0, done.stderr
     warnings = [line for line in done.stderr.splitlines() if "warning" in line]
-    for name, why in (("scene-0003.json", "a symlink leading outside"), ("scene-0004.json", "not a regular file (a FIFO)"),
-                      ("scene-0005.json", "a symlink leading outside")):
+    for name, why in (
+        ("scene-0003.json", "a symlink leading outside"),
+        ("scene-0004.json", "not a regular file (a FIFO)"),
+        ("scene-0005.json", "a symlink leading outside"),
+    ):
         (line,) = [w for w in warnings if name in w]
         assert why in line and line.endswith("file skipped")
     run_dir = next((tmp_path / "runs" / "gpt-4o").iterdir())
@@ -125,7 +133,8 @@ def test_deep_or_huge_lines_of_frames_jsonl_are_named_and_skipped_the_rest_evalu
 def test_import_workers_die_with_their_parent(tmp_path, sig):
     """The pool import_reference builds (spawned workers, _die_with_parent) with workers busy when the parent is killed."""
     script = tmp_path / "parent.py"
-    script.write_text(textwrap.dedent("""
+    script.write_text(
+        textwrap.dedent("""
         import multiprocessing, os, sys, time
         from concurrent.futures import ProcessPoolExecutor
         from lightemma.runs.importer import _die_with_parent
@@ -140,7 +149,8 @@ def test_import_workers_die_with_their_parent(tmp_path, sig):
                 busy = [pool.submit(time.sleep, 120) for _ in range(2)]
                 print(" ".join(map(str, sorted(pids))), flush=True)
                 time.sleep(120)
-    """))
+    """)
+    )
     parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True, env=PYTHON_ENV)
     try:
         workers = [int(p) for p in parent.stdout.readline().split()]
@@ -195,9 +205,23 @@ def test_a_killed_import_really_leaves_only_what_the_next_one_removes(tmp_path):
     model = tmp_path / "res" / "gpt-4o"
     for k in range(40):
         _scene(model, f"scene-{k:04d}", k, frames=40)
-    proc = subprocess.Popen([sys.executable, "-m", "lightemma", "import", str(tmp_path / "res"), "--output",
-                             str(tmp_path / "runs"), "--quiet", "--jobs", "1"], env=PYTHON_ENV,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "lightemma",
+            "import",
+            str(tmp_path / "res"),
+            "--output",
+            str(tmp_path / "runs"),
+            "--quiet",
+            "--jobs",
+            "1",
+        ],
+        env=PYTHON_ENV,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     runs = tmp_path / "runs" / "gpt-4o"
     deadline = time.monotonic() + 60
     while not (runs.is_dir() and any(p.name.endswith(".partial") for p in runs.iterdir())):
@@ -262,7 +286,9 @@ def test_lone_surrogates_in_a_reference_file_become_replacement_characters_and_e
             inference[key] = ["Half an emoji \ud83d here."] + inference[key]
     out = tmp_path / "res" / "gpt-4o" / "output"
     out.mkdir(parents=True)
-    (out / "scene-0001.json").write_text(json.dumps({"scene_info": {"name": "scene-0001 \ud83d"}, "frames": frames}, indent=4))
+    (out / "scene-0001.json").write_text(
+        json.dumps({"scene_info": {"name": "scene-0001 \ud83d"}, "frames": frames}, indent=4)
+    )
     (result,) = import_reference([tmp_path / "res"], tmp_path / "runs")
     contents = read_run(result.run_dir)
     templates = contents.manifest["prompt_set"]["templates"]
@@ -277,13 +303,21 @@ def test_lone_surrogates_in_a_reference_file_become_replacement_characters_and_e
             assert call_prompt(call, frame_texts(calls), templates) == clean(" ".join(frame["inference"][key]))
     assert (result.run_dir / "frames.jsonl").read_bytes().decode("utf-8")  # valid UTF-8 throughout
     prompts = tmp_path / "p.json"
-    prompts.write_text(json.dumps({"name": "p", "stages": {"scene": "x {0}", "intent": "{scene} {history}",
-                                                          "actions": "{scene} {intent} {history}"}}))
+    prompts.write_text(
+        json.dumps(
+            {
+                "name": "p",
+                "stages": {"scene": "x {0}", "intent": "{scene} {history}", "actions": "{scene} {intent} {history}"},
+            }
+        )
+    )
     capsys.readouterr()
     assert main(["prompts", "check", str(prompts), str(result.run_dir)]) == 1  # differences, printed without a crash
     assert "first difference" in capsys.readouterr().out
     assert main(["evaluate", str(tmp_path / "runs")]) == 0
-    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "report"), "--top", "2"]) == 0, capsys.readouterr().err
+    assert main(["report", str(tmp_path / "runs"), "--out", str(tmp_path / "report"), "--top", "2"]) == 0, (
+        capsys.readouterr().err
+    )
 
 
 def test_folder_and_file_names_that_are_not_utf8_are_imported_with_replacement_characters(tmp_path, capsys):
@@ -299,7 +333,9 @@ def test_folder_and_file_names_that_are_not_utf8_are_imported_with_replacement_c
     (result,) = import_reference([root], tmp_path / "runs")
     assert result.model == "my-model-\ufffd" and result.frames == 2
     records = read_run(result.run_dir).records.values()
-    assert {r["source"]["file"] for r in records} == {"scene-\ufffd01.json"} and {r["scene_name"] for r in records} == {"scene-\ufffd01"}
+    assert {r["source"]["file"] for r in records} == {"scene-\ufffd01.json"} and {r["scene_name"] for r in records} == {
+        "scene-\ufffd01"
+    }
     assert read_manifest(result.run_dir)["imported"]["source_model"] == "my-model-\ufffd"
     capsys.readouterr()
     assert main(["evaluate", str(tmp_path / "runs")]) == 0 and "my-model-\ufffd" in capsys.readouterr().out

@@ -59,8 +59,10 @@ def test_every_class_comes_with_its_sentence_and_every_unknown_with_a_reason():
     got = ex.read_intents([t for t, _, _ in CORPUS])
     for i, (text, _, _) in enumerate(CORPUS):
         flat = text.replace("\u2019", "'")
-        for axis, cls, sentence in (("longitudinal", got.longitudinal[i], got.longitudinal_sentence[i]),
-                                    ("lateral", got.lateral[i], got.lateral_sentence[i])):
+        for axis, cls, sentence in (
+            ("longitudinal", got.longitudinal[i], got.longitudinal_sentence[i]),
+            ("lateral", got.lateral[i], got.lateral_sentence[i]),
+        ):
             if cls == U:
                 assert sentence == ""
                 assert got.reason[i], text
@@ -70,8 +72,10 @@ def test_every_class_comes_with_its_sentence_and_every_unknown_with_a_reason():
 
 
 def test_the_planned_part_not_the_recap():
-    text = ("The ego vehicle has been accelerating strongly and turning left over the past 3 seconds. "
-            "Given the red light, it should now decelerate and keep its lane.")
+    text = (
+        "The ego vehicle has been accelerating strongly and turning left over the past 3 seconds. "
+        "Given the red light, it should now decelerate and keep its lane."
+    )
     got = ex.read_intents(text)
     assert (got.longitudinal[0], got.lateral[0]) == ("decelerate", "follow_lane")
     assert got.longitudinal_sentence[0] == "Given the red light, it should now decelerate and keep its lane"
@@ -80,22 +84,27 @@ def test_the_planned_part_not_the_recap():
     assert "recap" in recap_only.reason[0]
 
 
-@pytest.mark.parametrize(("text", "words"), [
-    ("The ego vehicle should not accelerate.", ["longitudinal", "negated 'not accelerate'"]),
-    ("If the light turns green, proceed straight.", ["lateral", "conditional"]),
-    ("Be prepared to stop.", ["longitudinal", "conditional or hedged 'stop'"]),
-    ("The ego vehicle should accelerate. The ego vehicle should decelerate.",
-     ["contradictory statements 'accelerate' (accelerate) and 'decelerate' (decelerate)"]),
-    ("The car ahead will turn right.", ["about another road user 'turn right'"]),
-    ("", ["empty text"]),
-    ("x" * 70_000, ["text too long: 70000 bytes (limit 65536)"]),
-    ("The ego vehicle should stop\ufffd.", ["not valid UTF-8"]),
-    ("The ego vehicle should stop\ud800.", ["not valid UTF-8 (lone surrogates)"]),
-    ("\x00\x01binary\x02 stop", ["control characters"]),
-    ("Answer in one paragraph of plain text. The ego vehicle should stop.", ["echoes the stage-2 prompt"]),
-    ("Le véhicule doit ralentir et rester dans sa voie à l'approche du carrefour.", ["not English"]),
-    ("<think>I should stop", ["reasoning block"]),
-])
+@pytest.mark.parametrize(
+    ("text", "words"),
+    [
+        ("The ego vehicle should not accelerate.", ["longitudinal", "negated 'not accelerate'"]),
+        ("If the light turns green, proceed straight.", ["lateral", "conditional"]),
+        ("Be prepared to stop.", ["longitudinal", "conditional or hedged 'stop'"]),
+        (
+            "The ego vehicle should accelerate. The ego vehicle should decelerate.",
+            ["contradictory statements 'accelerate' (accelerate) and 'decelerate' (decelerate)"],
+        ),
+        ("The car ahead will turn right.", ["about another road user 'turn right'"]),
+        ("", ["empty text"]),
+        ("x" * 70_000, ["text too long: 70000 bytes (limit 65536)"]),
+        ("The ego vehicle should stop\ufffd.", ["not valid UTF-8"]),
+        ("The ego vehicle should stop\ud800.", ["not valid UTF-8 (lone surrogates)"]),
+        ("\x00\x01binary\x02 stop", ["control characters"]),
+        ("Answer in one paragraph of plain text. The ego vehicle should stop.", ["echoes the stage-2 prompt"]),
+        ("Le véhicule doit ralentir et rester dans sa voie à l'approche du carrefour.", ["not English"]),
+        ("<think>I should stop", ["reasoning block"]),
+    ],
+)
 def test_unknown_with_its_reason(text, words):
     got = ex.read_intents([text])
     assert (got.longitudinal[0], got.lateral[0]) == (U, U) or "ignored" not in got.reason[0]
@@ -106,7 +115,10 @@ def test_unknown_with_its_reason(text, words):
 def test_ignored_statements_are_named_beside_the_firm_one():
     got = ex.read_intents("Decelerate, and stop if the pedestrian steps onto the road.")
     assert got.longitudinal[0] == "decelerate"
-    assert got.reason[0] == "longitudinal: ignored conditional or hedged 'stop'; lateral: no lateral intent stated in the planned part"
+    assert (
+        got.reason[0]
+        == "longitudinal: ignored conditional or hedged 'stop'; lateral: no lateral intent stated in the planned part"
+    )
 
 
 def test_inputs():
@@ -132,12 +144,79 @@ def test_large_batches_read_as_small_ones():
 
 # ---------------------------------------------------------------- reading: fuzzed
 
-_WORDS = ["the", "ego", "vehicle", "should", "will", "not", "if", "has", "been", "was", "accelerate", "decelerate",
-          "slow", "down", "stop", "remain", "stopped", "start", "moving", "maintain", "speed", "keep", "lane", "turn",
-          "left", "right", "change", "lanes", "to", "merge", "into", "straight", "or", "and", "then", "may", "car",
-          "ahead", "while", "past", "next", "plan", "recent", "brake", "cruise", "halt", "é", "停", "3.5", "m/s"]
-_PUNCT = [" ", " ", " ", ". ", ", ", "; ", ": ", "\n", "!", "?", " - ", "<think>", "</think>", "<think>", "</think>", "’",
-          "\u2014", "\ud800", "\x00"]
+_WORDS = [
+    "the",
+    "ego",
+    "vehicle",
+    "should",
+    "will",
+    "not",
+    "if",
+    "has",
+    "been",
+    "was",
+    "accelerate",
+    "decelerate",
+    "slow",
+    "down",
+    "stop",
+    "remain",
+    "stopped",
+    "start",
+    "moving",
+    "maintain",
+    "speed",
+    "keep",
+    "lane",
+    "turn",
+    "left",
+    "right",
+    "change",
+    "lanes",
+    "to",
+    "merge",
+    "into",
+    "straight",
+    "or",
+    "and",
+    "then",
+    "may",
+    "car",
+    "ahead",
+    "while",
+    "past",
+    "next",
+    "plan",
+    "recent",
+    "brake",
+    "cruise",
+    "halt",
+    "é",
+    "停",
+    "3.5",
+    "m/s",
+]
+_PUNCT = [
+    " ",
+    " ",
+    " ",
+    ". ",
+    ", ",
+    "; ",
+    ": ",
+    "\n",
+    "!",
+    "?",
+    " - ",
+    "<think>",
+    "</think>",
+    "<think>",
+    "</think>",
+    "’",
+    "\u2014",
+    "\ud800",
+    "\x00",
+]
 _fragments = st.lists(st.one_of(st.sampled_from(_WORDS), st.sampled_from(_PUNCT), st.text(max_size=3)), max_size=60)
 
 
@@ -148,7 +227,10 @@ def test_fuzz_never_crashes_and_never_reads_without_a_source(parts):
     got = ex.read_intents([text])
     assert got.longitudinal[0] in (*ex.LONGITUDINAL, U)
     assert got.lateral[0] in (*ex.LATERAL, U)
-    for cls, sentence in ((got.longitudinal[0], got.longitudinal_sentence[0]), (got.lateral[0], got.lateral_sentence[0])):
+    for cls, sentence in (
+        (got.longitudinal[0], got.longitudinal_sentence[0]),
+        (got.lateral[0], got.lateral_sentence[0]),
+    ):
         if cls == U:
             assert got.reason[0]
         else:
@@ -156,13 +238,21 @@ def test_fuzz_never_crashes_and_never_reads_without_a_source(parts):
 
 
 _PLAIN = [(t, lon, lat) for t, lon, lat in CORPUS if (lon != U or lat != U)]
-_SINGLE = [(t, lon, lat) for t, lon, lat in _PLAIN
-           if t.count(".") == 1 and t.endswith(".") and not any(c in t for c in ":\n<;") and "ignored" not in ex.read_intents(t).reason[0]]
+_SINGLE = [
+    (t, lon, lat)
+    for t, lon, lat in _PLAIN
+    if t.count(".") == 1
+    and t.endswith(".")
+    and not any(c in t for c in ":\n<;")
+    and "ignored" not in ex.read_intents(t).reason[0]
+]
 
 
 @pytest.mark.parametrize(("text", "lon", "lat"), _PLAIN)
 def test_a_recap_put_first_changes_nothing(text, lon, lat):
-    got = ex.read_intents("The ego vehicle has been accelerating hard and turning right for the last 3 seconds. " + text)
+    got = ex.read_intents(
+        "The ego vehicle has been accelerating hard and turning right for the last 3 seconds. " + text
+    )
     assert (got.longitudinal[0], got.lateral[0]) == (lon, lat)
 
 
@@ -172,7 +262,9 @@ def test_a_condition_put_first_makes_both_unknown(text, lon, lat):
     assert (got.longitudinal[0], got.lateral[0]) == (U, U), got.reason[0]
 
 
-@pytest.mark.parametrize("verb", ["accelerate", "slow down", "stop", "turn left", "change lanes to the right", "speed up", "brake"])
+@pytest.mark.parametrize(
+    "verb", ["accelerate", "slow down", "stop", "turn left", "change lanes to the right", "speed up", "brake"]
+)
 @pytest.mark.parametrize("negation", ["Do not", "Don’t", "Never", "The ego vehicle should not", "Avoid the need to"])
 def test_negated_cues_are_never_read(verb, negation):
     got = ex.read_intents(f"{negation} {verb}.")
@@ -185,7 +277,9 @@ def test_corpus_has_at_least_100_texts_in_each_style_family():
     assert sum(len(t) < 60 for t in texts) >= 20  # terse
     assert sum(len(t) > 150 for t in texts) >= 10  # verbose
     assert sum("has been" in t or "was " in t for t in texts) >= 10  # with recaps
-    assert sum(t.lower().startswith(("if ", "once ", "when ", "should ", "in case")) or " if " in t for t in texts) >= 8  # conditionals
+    assert (
+        sum(t.lower().startswith(("if ", "once ", "when ", "should ", "in case")) or " if " in t for t in texts) >= 8
+    )  # conditionals
 
 
 # ---------------------------------------------------------------- the planned intent
@@ -220,7 +314,11 @@ _PLANNED = [
 def test_planned_classes(row, lon, lat):
     actions, history = _plans([row])
     got = ex.planned_intents(actions, history)
-    assert (got.longitudinal[0], got.lateral[0]) == (lon, lat), (got.reason[0], got.heading_change[0], got.arc_excess[0])
+    assert (got.longitudinal[0], got.lateral[0]) == (lon, lat), (
+        got.reason[0],
+        got.heading_change[0],
+        got.arc_excess[0],
+    )
     if U in (lon, lat):
         assert "borderline" in got.reason[0] or "path of" in got.reason[0]
 
@@ -257,9 +355,24 @@ def test_planned_unknown_without_numbers_and_shape_errors():
 
 _CHECKS = [
     ("The ego vehicle should come to a stop.", (8, [8] * 6, _STRAIGHT), "contradicts", "says stop, plans keep_speed"),
-    ("Turn left at the intersection.", (8, [8] * 6, [-0.05] * 6), "contradicts", "says turn_left, plans turn_right to the right"),
-    ("Change lanes to the left.", (8, [8] * 6, [-0.03, -0.03, 0, 0.03, 0.03, 0]), "contradicts", "says change_lane_left"),
-    ("Keep your lane and maintain speed.", (8, [8] * 6, [0.03, 0.03, 0, -0.03, -0.03, 0]), "contradicts", "says follow_lane, plans change_lane_left"),
+    (
+        "Turn left at the intersection.",
+        (8, [8] * 6, [-0.05] * 6),
+        "contradicts",
+        "says turn_left, plans turn_right to the right",
+    ),
+    (
+        "Change lanes to the left.",
+        (8, [8] * 6, [-0.03, -0.03, 0, 0.03, 0.03, 0]),
+        "contradicts",
+        "says change_lane_left",
+    ),
+    (
+        "Keep your lane and maintain speed.",
+        (8, [8] * 6, [0.03, 0.03, 0, -0.03, -0.03, 0]),
+        "contradicts",
+        "says follow_lane, plans change_lane_left",
+    ),
     ("Accelerate.", (8, [7, 6, 5, 4, 3, 2], _STRAIGHT), "contradicts", "says accelerate, plans decelerate"),
     ("Slow down and stay in lane.", (8, [7.5, 7, 6.5, 6, 5.5, 5], _STRAIGHT), "consistent", ""),
     ("Slow down.", (8, [6, 4, 2, 1, 0.2, 0], _STRAIGHT), "consistent", "lateral: no stated lateral intent"),
@@ -319,15 +432,25 @@ _LIES = {
 
 
 def _write_run(root, model, lies, scenes=4, per_scene=6):
-    run_dir = create_run_dir(root, model, {"model": model, "started_at": "2026-01-01T00:00:00+00:00", "integrator": "euler"})
+    run_dir = create_run_dir(
+        root, model, {"model": model, "started_at": "2026-01-01T00:00:00+00:00", "integrator": "euler"}
+    )
     records = []
     for k in range(scenes * per_scene):
         text, row = lies.get(k, _HONEST[k % len(_HONEST)])
         actions, history = _plans([row])
         traj = lightemma.integrate(actions)[0]
-        records.append(make_record(f"scene-{k // per_scene:04d}/{k % per_scene}", traj, traj, actions=actions[0],
-                                   history_actions=history[0], scene_name=f"scene-{k // per_scene:04d}",
-                                   texts={"intent": text, "answer": "[]"}))
+        records.append(
+            make_record(
+                f"scene-{k // per_scene:04d}/{k % per_scene}",
+                traj,
+                traj,
+                actions=actions[0],
+                history_actions=history[0],
+                scene_name=f"scene-{k // per_scene:04d}",
+                texts={"intent": text, "answer": "[]"},
+            )
+        )
     (run_dir / FRAMES_FILE).write_text("".join(json.dumps(r) + "\n" for r in records), encoding="utf-8")
     return run_dir
 
@@ -409,10 +532,21 @@ def test_a_run_through_the_pipeline_whose_model_lies_at_known_frames(tmp_path, s
         return Reply("[" + ", ".join(f"({v:.3f}, 0.0)" for _ in range(6)) + "]")
 
     with FakeOpenAIServer(model) as server:
-        result = run("openai/gpt-4o", api_base=server.url, dataroot=synth_root, version="v1.0-mini",
-                     output=tmp_path / "runs", backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            dataroot=synth_root,
+            version="v1.0-mini",
+            output=tmp_path / "runs",
+            backoff_base=0.01,
+            backoff_cap=0.05,
+            timeout=10.0,
+            progress=False,
+        )
     got = ex.run_consistency(result.run_dir)
-    records = {r["frame_id"]: r for r in (json.loads(line) for line in (result.run_dir / FRAMES_FILE).read_text().splitlines())}
+    records = {
+        r["frame_id"]: r for r in (json.loads(line) for line in (result.run_dir / FRAMES_FILE).read_text().splitlines())
+    }
     lied = sorted(fid for fid, r in records.items() if r["intent_text"] == LIE)
     assert 0 < len(lied) < len(records) == len(got.frame_ids) == 12
     verdict = dict(zip(got.frame_ids, got.consistency.verdict.tolist(), strict=True))

@@ -5,6 +5,7 @@ in the folder, and neither do its bootstrap intervals (keyed by the label)."""
 from __future__ import annotations
 
 import pytest
+
 from lightemma.evaluation import evaluate_runs
 from lightemma.evaluation.loading import load_run
 from lightemma.evaluation.synthetic import write_synthetic_run
@@ -29,9 +30,13 @@ def test_every_setting_and_the_name_are_in_the_label_in_one_order(tmp_path):
     cases = {
         _run(runs): "GPT-4o",
         _run(runs, dataset={"window": "full"}): "GPT-4o [full window]",
-        _run(runs, config={"dataset": {"window": "full"}, "inputs": "blank-image"}): "GPT-4o [full window, blank-image]",
+        _run(
+            runs, config={"dataset": {"window": "full"}, "inputs": "blank-image"}
+        ): "GPT-4o [full window, blank-image]",
         _run(runs, integrator="midpoint"): "GPT-4o [midpoint]",
-        _run(runs, config={"chain": "conversation", "answer_format": "structured"}, name="b"): 'GPT-4o [conversation, structured] "b"',
+        _run(
+            runs, config={"chain": "conversation", "answer_format": "structured"}, name="b"
+        ): 'GPT-4o [conversation, structured] "b"',
         _run(runs, name="no-image"): 'GPT-4o "no-image"',  # a name never reads as a setting
         _run(runs, config={"inputs": "no-image"}): "GPT-4o [no-image]",
         _run(runs, "baseline:oracle", integrator="euler"): "baseline:oracle",
@@ -63,7 +68,10 @@ def test_only_runs_alike_in_everything_get_their_run_id(tmp_path):
     c = _run(tmp_path / "runs", seed=3, config={"inputs": "no-image"})
     labels = unique_labels([load_run(a), load_run(b), load_run(c)])
     assert labels == [f"GPT-4o [run {a.name}]", f"GPT-4o [run {b.name}]", "GPT-4o [no-image]"]
-    named = [_run(tmp_path / "n", seed=1, name="x", config={"inputs": "no-image"}), _run(tmp_path / "n", seed=2, name="x", config={"inputs": "no-image"})]
+    named = [
+        _run(tmp_path / "n", seed=1, name="x", config={"inputs": "no-image"}),
+        _run(tmp_path / "n", seed=2, name="x", config={"inputs": "no-image"}),
+    ]
     assert unique_labels([load_run(d) for d in named]) == [f'GPT-4o [no-image, run {d.name}] "x"' for d in named]
 
 
@@ -72,4 +80,7 @@ def test_a_label_is_one_printable_line(tmp_path, name):
     from lightemma.evaluation.core import run_label
 
     run_dir = _run(tmp_path / "runs", name=name, display_name="GPT\n4o")
-    assert run_label(load_run(run_dir).info) == 'GPT\\n4o "' + name.replace("\x1b", "\\x1b").replace("\u202e", "\\u202e") + '"'
+    assert (
+        run_label(load_run(run_dir).info)
+        == 'GPT\\n4o "' + name.replace("\x1b", "\\x1b").replace("\u202e", "\\u202e") + '"'
+    )

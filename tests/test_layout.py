@@ -58,7 +58,8 @@ EXPORTS = _exports()
 
 def _is_type_checking(test: ast.expr) -> bool:
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or (
-        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+        isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING"
+    )
 
 
 def _import_nodes(tree: ast.AST) -> list[tuple[ast.Import | ast.ImportFrom, str]]:
@@ -199,9 +200,11 @@ def test_every_module_has_a_layer_and_the_map_names_only_modules():
 
 
 def test_no_module_imports_a_layer_above_its_own():
-    upward = [f"{a}:{line} ({where}) imports {b} (layer {_layer(a)} → {_layer(b)})"
-              for a, b, where, line in import_edges()
-              if _layer(a) is not None and _layer(b) is not None and _layer(b) > _layer(a)]
+    upward = [
+        f"{a}:{line} ({where}) imports {b} (layer {_layer(a)} → {_layer(b)})"
+        for a, b, where, line in import_edges()
+        if _layer(a) is not None and _layer(b) is not None and _layer(b) > _layer(a)
+    ]
     assert upward == []
 
 
@@ -243,13 +246,16 @@ def test_the_cycle_check_finds_a_cycle_through_a_package_init():
     assert _cycles([("x", "y"), ("y", "z")]) == []
 
 
-@pytest.mark.parametrize(("source", "where"), [
-    ("from lightemma.report import tables\n", "module"),
-    ("def f():\n    from lightemma.report import tables\n", "deferred"),
-    ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from lightemma.report import tables\n", "typing"),
-])
+@pytest.mark.parametrize(
+    ("source", "where"),
+    [
+        ("from lightemma.report import tables\n", "module"),
+        ("def f():\n    from lightemma.report import tables\n", "deferred"),
+        ("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from lightemma.report import tables\n", "typing"),
+    ],
+)
 def test_the_walker_sees_module_level_deferred_and_typing_imports(source, where):
-    (node, found), = [(n, w) for n, w in _import_nodes(ast.parse(source)) if getattr(n, "module", "") != "typing"]
+    ((node, found),) = [(n, w) for n, w in _import_nodes(ast.parse(source)) if getattr(n, "module", "") != "typing"]
     assert found == where
     assert _targets("lightemma.frames.model", node) == ["lightemma.report.tables"]
     assert _layer("lightemma.frames.model") < _layer("lightemma.report.tables")  # an upward import, were it real

@@ -16,7 +16,6 @@ import sys
 
 import numpy as np
 import pytest
-from local_models import FAMILIES, build_tiny_model, teach_to_answer
 from PIL import Image
 
 import lightemma.frames
@@ -25,6 +24,7 @@ from lightemma.backends.base import ChatRequest, GenerationParams
 from lightemma.cli import main as cli_main
 from lightemma.errors import UserError
 from lightemma.runs.store import read_run
+from local_models import FAMILIES, build_tiny_model, teach_to_answer
 
 os.environ["HF_HUB_OFFLINE"] = "1"
 
@@ -72,8 +72,11 @@ def taught(tmp_path_factory, dataroot):
     prompts = load_prompt_set()
     frames = lightemma.load_frames(dataroot, "v1.0-mini", split="all")
     history = lightemma.frames.format_history(frames[0].history_actions)
-    texts = [prompts.render("scene"), prompts.render("intent", scene=TAUGHT, history=history),
-             prompts.render("actions", scene=TAUGHT, history=history, intent=TAUGHT)]
+    texts = [
+        prompts.render("scene"),
+        prompts.render("intent", scene=TAUGHT, history=history),
+        prompts.render("actions", scene=TAUGHT, history=history, intent=TAUGHT),
+    ]
     path = build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_taught"))
     return teach_to_answer(path, TAUGHT, prompts=texts, image=frames[0].image_path)
 
@@ -92,10 +95,18 @@ def images(tmp_path_factory):
 
 
 def requests_for(images, stage="scene", max_tokens=MAX_TOKENS):
-    texts = ["Describe the scene.", "What is ahead?", "Describe the vehicles, pedestrians and lane markings in detail.",
-             "Lights?", "Predict speed and curvature for the next 6 steps.", "One paragraph of plain text, please."]
-    return [ChatRequest(text=t, stage=stage, frame_id=f"f{i}", image_path=p, params=GenerationParams(max_tokens=max_tokens))
-            for i, (t, p) in enumerate(zip(texts, images))]
+    texts = [
+        "Describe the scene.",
+        "What is ahead?",
+        "Describe the vehicles, pedestrians and lane markings in detail.",
+        "Lights?",
+        "Predict speed and curvature for the next 6 steps.",
+        "One paragraph of plain text, please.",
+    ]
+    return [
+        ChatRequest(text=t, stage=stage, frame_id=f"f{i}", image_path=p, params=GenerationParams(max_tokens=max_tokens))
+        for i, (t, p) in enumerate(zip(texts, images))
+    ]
 
 
 def answer(backend, requests, *, together=False):
@@ -125,9 +136,32 @@ def hf(path, **options):
 def test_lightemma_run_with_the_hf_backend_records_truncated_babble_truthfully(tiny, dataroot, tmp_path, capsys):
     """Random weights babble to the output limit: each scene text is cut off, recorded, and never passed on."""
     family, path = tiny
-    code = cli_main(["run", "--backend", "hf", "--model", str(path), "--dataroot", str(dataroot), "--version", "v1.0-mini",
-                     "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
-                     "--max-tokens", str(MAX_TOKENS), "--max-attempts", str(MAX_ATTEMPTS), "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(path),
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            str(N_FRAMES),
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "4",
+            "--max-tokens",
+            str(MAX_TOKENS),
+            "--max-attempts",
+            str(MAX_ATTEMPTS),
+            "--no-progress",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 1 and "no valid frame" in err, err  # a run without one valid frame exits non-zero
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
@@ -135,8 +169,14 @@ def test_lightemma_run_with_the_hf_backend_records_truncated_babble_truthfully(t
     manifest = contents.manifest
     assert contents.complete and len(contents.records) == N_FRAMES
     info = manifest["backend"]
-    assert (info["backend"], info["model"], info["model_type"], info["gpus"], info["device"], info["dtype"]) == \
-        ("hf", str(path), family, 0, "cpu", "float32")
+    assert (info["backend"], info["model"], info["model_type"], info["gpus"], info["device"], info["dtype"]) == (
+        "hf",
+        str(path),
+        family,
+        0,
+        "cpu",
+        "float32",
+    )
     assert info["batch_size"] == 4 and "image" in info["token_counting"]
     assert manifest["config"]["backend_options"] == {"batch_size": 4}
     for record in contents.records.values():
@@ -160,9 +200,32 @@ def test_lightemma_run_with_the_hf_backend_records_truncated_babble_truthfully(t
 
 def test_the_hf_chain_passes_each_finished_text_on_and_fills_in_accounting(taught, dataroot, tmp_path, capsys):
     """A tiny model taught to end its answers goes through all three stages, then re-asks stage 3."""
-    code = cli_main(["run", "--backend", "hf", "--model", str(taught), "--dataroot", str(dataroot), "--version", "v1.0-mini",
-                     "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
-                     "--max-tokens", str(MAX_TOKENS), "--max-attempts", str(MAX_ATTEMPTS), "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(taught),
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            str(N_FRAMES),
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "4",
+            "--max-tokens",
+            str(MAX_TOKENS),
+            "--max-attempts",
+            str(MAX_ATTEMPTS),
+            "--no-progress",
+        ]
+    )
     out, err = capsys.readouterr()
     assert code == 1 and "no valid frame" in err, err  # "Keep the lane." is no list of actions
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
@@ -185,9 +248,20 @@ def test_the_hf_chain_passes_each_finished_text_on_and_fills_in_accounting(taugh
 def test_a_run_batches_each_stage_across_the_frames_in_flight(taught, dataroot, tmp_path):
     from lightemma.pipeline import run
 
-    result = run(str(taught), backend="hf", dataroot=dataroot, version="v1.0-mini", split="all", limit=N_FRAMES,
-                 output=tmp_path, concurrency=N_FRAMES, max_tokens=MAX_TOKENS, max_attempts=2, progress=False,
-                 backend_options={"batch_size": N_FRAMES, "batch_window": 2.0, "dtype": "float32"})
+    result = run(
+        str(taught),
+        backend="hf",
+        dataroot=dataroot,
+        version="v1.0-mini",
+        split="all",
+        limit=N_FRAMES,
+        output=tmp_path,
+        concurrency=N_FRAMES,
+        max_tokens=MAX_TOKENS,
+        max_attempts=2,
+        progress=False,
+        backend_options={"batch_size": N_FRAMES, "batch_window": 2.0, "dtype": "float32"},
+    )
     records = list(read_run(result.run_dir).records.values())
     assert len(records) == N_FRAMES
     # each request's seconds is its batch's wall time: one batch per stage (and per re-ask) means one value
@@ -237,13 +311,22 @@ def test_input_tokens_count_the_image_tokens_each_model_has(tiny, images):
         elif family == "llama4":
             # <|image_start|>, <|patch|> per (pixel-shuffled) patch of each tile and the global view, separators,
             # <|image|>, <|image_end|>: count them in what the processor makes of a bare image
-            specials = {processor.tokenizer.convert_tokens_to_ids(t) for t in
-                        ("<|image_start|>", "<|image_end|>", "<|image|>", "<|patch|>", "<|tile_x_separator|>", "<|tile_y_separator|>")}
+            specials = {
+                processor.tokenizer.convert_tokens_to_ids(t)
+                for t in (
+                    "<|image_start|>",
+                    "<|image_end|>",
+                    "<|image|>",
+                    "<|patch|>",
+                    "<|tile_x_separator|>",
+                    "<|tile_y_separator|>",
+                )
+            }
             ids = processor(text=["<|image|>"], images=[[image]], return_tensors="pt")["input_ids"][0].tolist()
             assert extra == sum(t in specials for t in ids) > 4
         else:
             pixels = processor.image_processor(images=[image], return_tensors="pt")
-            merged = int(pixels["image_grid_thw"][0].prod()) // processor.image_processor.merge_size ** 2
+            merged = int(pixels["image_grid_thw"][0].prod()) // processor.image_processor.merge_size**2
             assert extra == merged + 2  # <|vision_start|> + one <|image_pad|> per merged patch + <|vision_end|>
 
 
@@ -255,14 +338,23 @@ def test_output_tokens_stop_at_and_include_the_end_of_turn_token(qwen2_vl):
     finished = backend._result([*words, eos, pad, pad], 10, 0.5)
     unfinished = backend._result(words, 10, 0.5)
     asyncio.run(backend.aclose())
-    assert (finished.text, finished.output_tokens, finished.input_tokens, finished.cost_cents) == ("left lane", len(words) + 1, 10, None)
+    assert (finished.text, finished.output_tokens, finished.input_tokens, finished.cost_cents) == (
+        "left lane",
+        len(words) + 1,
+        10,
+        None,
+    )
     assert (unfinished.text, unfinished.output_tokens) == ("left lane", len(words))
 
 
 def test_max_pixels_caps_the_image_tokens_through_the_qwen_pixel_budget(qwen2_vl, tmp_path):
     big = tmp_path / "big.jpg"
     Image.fromarray(np.full((96, 128, 3), 120, dtype=np.uint8)).save(big)
-    request = [ChatRequest(text="Describe.", stage="scene", frame_id="f", image_path=str(big), params=GenerationParams(max_tokens=2))]
+    request = [
+        ChatRequest(
+            text="Describe.", stage="scene", frame_id="f", image_path=str(big), params=GenerationParams(max_tokens=2)
+        )
+    ]
     full_backend = hf(qwen2_vl)
     capped_backend = hf(qwen2_vl, max_pixels=32 * 32)
     full, capped = answer(full_backend, request)[0], answer(capped_backend, request)[0]
@@ -272,7 +364,7 @@ def test_max_pixels_caps_the_image_tokens_through_the_qwen_pixel_budget(qwen2_vl
     def image_tokens(backend):
         processor = backend._processor.image_processor
         grid = processor(images=[Image.open(big).convert("RGB")], return_tensors="pt")["image_grid_thw"][0]
-        return int(grid.prod()) // processor.merge_size ** 2
+        return int(grid.prod()) // processor.merge_size**2
 
     # 16×16 px per merged token (8 px patches, 2×2 merge): at most 1024 / 256 = 4 tokens once capped
     assert image_tokens(capped_backend) <= 4 < image_tokens(full_backend)
@@ -295,14 +387,19 @@ def test_cap_pixels_keeps_the_aspect_and_never_upscales():
 
 def test_a_failed_batch_answers_each_request_with_an_error_not_text(qwen2_vl, images, tmp_path):
     missing = str(tmp_path / "missing.jpg")
-    requests = [ChatRequest(text="Describe.", stage="scene", frame_id="f", image_path=missing, params=GenerationParams(max_tokens=2))]
+    requests = [
+        ChatRequest(
+            text="Describe.", stage="scene", frame_id="f", image_path=missing, params=GenerationParams(max_tokens=2)
+        )
+    ]
     result = answer(hf(qwen2_vl), requests)[0]
     assert (result.ok, result.text, result.error) == (False, None, "UserError")
     assert "missing.jpg" in result.error_message
 
 
 def test_a_model_family_the_installed_transformers_cannot_generate_with_stops_the_run_in_one_line(
-        qwen2_vl, dataroot, tmp_path, capsys, monkeypatch):
+    qwen2_vl, dataroot, tmp_path, capsys, monkeypatch
+):
     """A library regression (every forward raises the same error) is one run-fatal line, not a failure per frame."""
     import transformers
     from transformers import Qwen2VLForConditionalGeneration
@@ -317,14 +414,33 @@ def test_a_model_family_the_installed_transformers_cannot_generate_with_stops_th
 
     monkeypatch.setattr(Qwen2VLForConditionalGeneration, "forward", broken)
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
-    args = ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES),
-            "--output", str(tmp_path), "--max-tokens", "4", "--max-attempts", "2", "--no-progress"]
-    code = cli_main(["run", "--backend", "hf", "--model", str(qwen2_vl), "--batch-size", "2", "--dtype", "float32", *args])
+    args = [
+        "--dataroot",
+        str(dataroot),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--limit",
+        str(N_FRAMES),
+        "--output",
+        str(tmp_path),
+        "--max-tokens",
+        "4",
+        "--max-attempts",
+        "2",
+        "--no-progress",
+    ]
+    code = cli_main(
+        ["run", "--backend", "hf", "--model", str(qwen2_vl), "--batch-size", "2", "--dtype", "float32", *args]
+    )
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if "error:" in line]
     assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
-    assert (f"transformers {transformers.__version__} cannot generate with qwen2_vl: AttributeError: "
-            "'MoeCausalLMOutputWithPast' object has no attribute 'image_outputs'") in lines[0]
+    assert (
+        f"transformers {transformers.__version__} cannot generate with qwen2_vl: AttributeError: "
+        "'MoeCausalLMOutputWithPast' object has no attribute 'image_outputs'"
+    ) in lines[0]
     assert "--resume" in lines[0]
     assert len(forwards) == 2  # two batches of two frames each, then nothing more
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
@@ -360,17 +476,32 @@ def test_without_torch_the_hf_backend_says_which_extra_to_install(monkeypatch):
 
 
 def test_importing_lightemma_and_the_local_backends_does_not_import_torch():
-    code = ("import sys, lightemma, lightemma.backends, lightemma.backends.hf, lightemma.backends.vllm, "
-            "lightemma.backends.batching, lightemma.backends.ray, lightemma.cli.run, lightemma.pipeline.runner\n"
-            "heavy = sorted(m for m in ('torch', 'transformers', 'vllm', 'ray') if m in sys.modules)\n"
-            "print(heavy)")
+    code = (
+        "import sys, lightemma, lightemma.backends, lightemma.backends.hf, lightemma.backends.vllm, "
+        "lightemma.backends.batching, lightemma.backends.ray, lightemma.cli.run, lightemma.pipeline.runner\n"
+        "heavy = sorted(m for m in ('torch', 'transformers', 'vllm', 'ray') if m in sys.modules)\n"
+        "print(heavy)"
+    )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == "[]"
 
 
 def test_local_options_are_refused_for_an_api_model(dataroot, tmp_path, capsys):
-    code = cli_main(["run", "--model", "openai/gpt-4o", "--api-base", "http://127.0.0.1:9/v1", "--dataroot", str(dataroot),
-                     "--batch-size", "8", "--output", str(tmp_path)])
+    code = cli_main(
+        [
+            "run",
+            "--model",
+            "openai/gpt-4o",
+            "--api-base",
+            "http://127.0.0.1:9/v1",
+            "--dataroot",
+            str(dataroot),
+            "--batch-size",
+            "8",
+            "--output",
+            str(tmp_path),
+        ]
+    )
     assert code == 2
     assert "--batch-size" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
@@ -404,7 +535,9 @@ class FakeLLM:
     def __init__(self, model, **kwargs):
         self.model, self.kwargs, self.calls, self.seen, self.action_calls = model, kwargs, [], set(), 0
         model_type = "qwen2_5_vl" if "mllama" not in str(model) else "mllama"
-        self.llm_engine = type("E", (), {"model_config": type("C", (), {"hf_config": type("H", (), {"model_type": model_type})})})
+        self.llm_engine = type(
+            "E", (), {"model_config": type("C", (), {"hf_config": type("H", (), {"model_type": model_type})})}
+        )
         FakeLLM.instances.append(self)
 
     def chat(self, conversations, sampling_params=None, use_tqdm=True):
@@ -430,7 +563,9 @@ class FakeLLM:
         completion = type("Completion", (), {"text": " ".join(words), "token_ids": list(range(len(words) + 1))})
         n_words = sum(len(p["text"].split()) for turn in conversation for p in turn["content"] if p["type"] == "text")
         prompt = list(range(n_words + (100 if image is not None else 0)))
-        return type("RequestOutput", (), {"prompt_token_ids": prompt, "outputs": [completion], "num_cached_tokens": cached})
+        return type(
+            "RequestOutput", (), {"prompt_token_ids": prompt, "outputs": [completion], "num_cached_tokens": cached}
+        )
 
 
 @pytest.fixture
@@ -471,18 +606,50 @@ def test_vllm_sends_one_chat_per_stage_batch_with_the_image_first_and_greedy_sam
     assert [c[0]["content"][1]["text"] for c in sent] == [r.text for r in requests]
     for result, conversation in zip(results, sent):
         words = len(conversation[0]["content"][1]["text"].split())
-        assert (result.input_tokens, result.output_tokens, result.cost_cents) == (words + 100, len(result.text.split()) + 1, None)
+        assert (result.input_tokens, result.output_tokens, result.cost_cents) == (
+            words + 100,
+            len(result.text.split()) + 1,
+            None,
+        )
         assert result.text.startswith("A road seen in") and result.seconds > 0
     info = backend.info
-    assert (info["backend"], info["gpus"], info["tensor_parallel_size"], info["model_type"], info["vllm"]) == \
-        ("vllm", 2, 2, "qwen2_5_vl", "0.32.0-fake")
+    assert (info["backend"], info["gpus"], info["tensor_parallel_size"], info["model_type"], info["vllm"]) == (
+        "vllm",
+        2,
+        2,
+        "qwen2_5_vl",
+        "0.32.0-fake",
+    )
     assert info["engine"]["limit_mm_per_prompt"] == {"image": 1} and json.dumps(info)
 
 
-def test_lightemma_run_with_the_vllm_backend_reasks_and_accounts_like_any_backend(fake_vllm, dataroot, tmp_path, capsys):
-    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
-                     "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
-                     "--tensor-parallel-size", "1", "--no-progress"])
+def test_lightemma_run_with_the_vllm_backend_reasks_and_accounts_like_any_backend(
+    fake_vllm, dataroot, tmp_path, capsys
+):
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "vllm",
+            "--model",
+            "Qwen-2.5-VL-7B",
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            str(N_FRAMES),
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "4",
+            "--tensor-parallel-size",
+            "1",
+            "--no-progress",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     contents = read_run(run_dir)
@@ -557,9 +724,32 @@ def test_vllm_end_to_end_on_a_gpu(dataroot, tmp_path):
     """Only where vLLM is installed (its own environment, with a GPU): a tiny Qwen2-VL through `lightemma run`."""
     pytest.importorskip("vllm")
     path = build_tiny_model("qwen2_vl", tmp_path / "tiny", hidden_size=128, heads=2)
-    code = cli_main(["run", "--backend", "vllm", "--model", str(path), "--dataroot", str(dataroot), "--version", "v1.0-mini",
-                     "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path / "out"), "--max-tokens", "8",
-                     "--max-attempts", "2", "--gpu-memory-utilization", "0.3", "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "vllm",
+            "--model",
+            str(path),
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            str(N_FRAMES),
+            "--output",
+            str(tmp_path / "out"),
+            "--max-tokens",
+            "8",
+            "--max-attempts",
+            "2",
+            "--gpu-memory-utilization",
+            "0.3",
+            "--no-progress",
+        ]
+    )
     assert code == 0
     (run_dir,) = [p.parent for p in (tmp_path / "out").glob("*/*/manifest.json")]
     records = list(read_run(run_dir).records.values())
@@ -586,21 +776,45 @@ def test_a_batch_that_runs_out_of_gpu_memory_is_halved_until_it_fits(qwen2_vl, i
     got = answer(backend, requests, together=True)
     assert sizes == [5, 2, 3, 1, 2]  # 5 -> 2 + 3 -> 2 + (1 + 2)
     assert backend.stats["oom_splits"] == 2 and backend.stats["batches"] == 1
-    assert [(r.text, r.input_tokens, r.output_tokens) for r in got] == [(r.text, r.input_tokens, r.output_tokens) for r in alone]
+    assert [(r.text, r.input_tokens, r.output_tokens) for r in got] == [
+        (r.text, r.input_tokens, r.output_tokens) for r in alone
+    ]
 
 
-def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_identically(taught, dataroot, tmp_path, capsys):
+def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_identically(
+    taught, dataroot, tmp_path, capsys
+):
     from lightemma.runs.store import FRAMES_FILE
 
-    args = ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES),
-            "--output", str(tmp_path), "--max-tokens", str(MAX_TOKENS), "--max-attempts", "1", "--no-progress"]
+    args = [
+        "--dataroot",
+        str(dataroot),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--limit",
+        str(N_FRAMES),
+        "--output",
+        str(tmp_path),
+        "--max-tokens",
+        str(MAX_TOKENS),
+        "--max-attempts",
+        "1",
+        "--no-progress",
+    ]
     # exit 1: "Keep the lane." is a format error, so no frame is valid; the chain runs all three stages
-    assert cli_main(["run", "--backend", "hf", "--model", str(taught), "--batch-size", "2", "--dtype", "float32", *args]) == 1
+    assert (
+        cli_main(["run", "--backend", "hf", "--model", str(taught), "--batch-size", "2", "--dtype", "float32", *args])
+        == 1
+    )
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     lines = (run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
     dropped = {json.loads(line)["frame_id"]: json.loads(line) for line in lines[2:]}
     (run_dir / FRAMES_FILE).write_text("".join(lines[:2]))
-    assert cli_main(["run", "--resume", str(run_dir), "--batch-size", "4", "--no-progress"]) == 2  # from the manifest only
+    assert (
+        cli_main(["run", "--resume", str(run_dir), "--batch-size", "4", "--no-progress"]) == 2
+    )  # from the manifest only
     assert "drop --batch-size" in capsys.readouterr().err
     assert cli_main(["run", "--resume", str(run_dir), "--no-progress"]) == 1, capsys.readouterr().err
     contents = read_run(run_dir)
@@ -609,8 +823,12 @@ def test_resume_rebuilds_the_hf_backend_from_the_manifest_and_redoes_frames_iden
     for frame_id, before in dropped.items():
         again = contents.records[frame_id]
         assert before["scene_text"] == before["intent_text"] == before["answer"] == TAUGHT
-        assert (again["scene_text"], again["intent_text"], again["answer"], again["input_tokens"]) == \
-            (before["scene_text"], before["intent_text"], before["answer"], before["input_tokens"])
+        assert (again["scene_text"], again["intent_text"], again["answer"], again["input_tokens"]) == (
+            before["scene_text"],
+            before["intent_text"],
+            before["answer"],
+            before["input_tokens"],
+        )
 
 
 def test_the_checkpoints_own_sampling_settings_do_not_change_greedy_answers(qwen2_vl, images, tmp_path):
@@ -636,9 +854,17 @@ def test_the_checkpoints_own_sampling_settings_do_not_change_greedy_answers(qwen
 def structured_requests(images, max_tokens=200):
     from lightemma.backends.structured import ACTIONS_SCHEMA
 
-    return [ChatRequest(text=f"Predict the next 6 actions as JSON, v1, c1 … ({i})", stage="actions", frame_id=f"f{i}",
-                        image_path=p, params=GenerationParams(max_tokens=max_tokens), response_schema=ACTIONS_SCHEMA)
-            for i, p in enumerate(images[:3])]
+    return [
+        ChatRequest(
+            text=f"Predict the next 6 actions as JSON, v1, c1 … ({i})",
+            stage="actions",
+            frame_id=f"f{i}",
+            image_path=p,
+            params=GenerationParams(max_tokens=max_tokens),
+            response_schema=ACTIONS_SCHEMA,
+        )
+        for i, p in enumerate(images[:3])
+    ]
 
 
 def test_hf_answers_under_xgrammar_are_always_schema_valid_even_from_random_weights(tiny, images):
@@ -653,12 +879,19 @@ def test_hf_answers_under_xgrammar_are_always_schema_valid_even_from_random_weig
     requests = structured_requests(images)
     backend = hf(path, batch_size=3)
     constrained = answer(backend, requests)
-    free = answer(hf(path, batch_size=3), [replace(r, response_schema=None, params=GenerationParams(max_tokens=60)) for r in requests])
+    free = answer(
+        hf(path, batch_size=3),
+        [replace(r, response_schema=None, params=GenerationParams(max_tokens=60)) for r in requests],
+    )
     assert backend.structured_output()["mechanism"].startswith("xgrammar ")
     for result in constrained:
         assert result.ok and result.finish_reason == "stop", (family, result.text)
         value = json.loads(result.text)
-        assert list(value) == ["actions"] and len(value["actions"]) == 6 and all(len(pair) == 2 for pair in value["actions"])
+        assert (
+            list(value) == ["actions"]
+            and len(value["actions"]) == 6
+            and all(len(pair) == 2 for pair in value["actions"])
+        )
         numbers = np.array(value["actions"], dtype=np.float64)
         assert np.isfinite(numbers).all() and (np.abs(numbers) <= MAGNITUDE).all()
         assert result.cached_input_tokens == 0  # transformers keeps no prefix cache
@@ -675,17 +908,34 @@ def test_hf_answers_under_xgrammar_are_always_schema_valid_even_from_random_weig
 
 def test_hf_takes_conversations_through_the_chat_template(qwen2_vl, images):
     """The conversation chain's requests: earlier turns as user/assistant messages, the image in the first only."""
-    first = ChatRequest(text="Describe the scene.", stage="scene", frame_id="f0", image_path=images[0],
-                        params=GenerationParams(max_tokens=4))
-    later = ChatRequest(text="What should the car do?", stage="intent", frame_id="f0", image_path=images[0],
-                        params=GenerationParams(max_tokens=4), turns=(("Describe the scene.", "A quiet road."),))
+    first = ChatRequest(
+        text="Describe the scene.",
+        stage="scene",
+        frame_id="f0",
+        image_path=images[0],
+        params=GenerationParams(max_tokens=4),
+    )
+    later = ChatRequest(
+        text="What should the car do?",
+        stage="intent",
+        frame_id="f0",
+        image_path=images[0],
+        params=GenerationParams(max_tokens=4),
+        turns=(("Describe the scene.", "A quiet road."),),
+    )
     from lightemma.backends.local import conversation
 
     backend = hf(qwen2_vl)
-    chats = [backend._processor.apply_chat_template(conversation(r, {"type": "image"}), add_generation_prompt=True, tokenize=False)
-             for r in (first, later)]
+    chats = [
+        backend._processor.apply_chat_template(
+            conversation(r, {"type": "image"}), add_generation_prompt=True, tokenize=False
+        )
+        for r in (first, later)
+    ]
     one, two = answer(backend, [first, later])
-    assert chats[1].startswith(chats[0].removesuffix("<|im_start|>assistant\n"))  # the first request is the later's prefix
+    assert chats[1].startswith(
+        chats[0].removesuffix("<|im_start|>assistant\n")
+    )  # the first request is the later's prefix
     assert chats[1].count("<|image_pad|>") == 1 and "<|im_start|>assistant\nA quiet road.<|im_end|>" in chats[1]
     assert two.input_tokens > one.input_tokens + 5
 
@@ -693,16 +943,45 @@ def test_hf_takes_conversations_through_the_chat_template(qwen2_vl, images):
 def test_lightemma_run_with_hf_and_structured_answers_records_schema_valid_answers(taught, dataroot, tmp_path, capsys):
     from lightemma.backends.structured import MAGNITUDE
 
-    code = cli_main(["run", "--backend", "hf", "--model", str(taught), "--dataroot", str(dataroot), "--version", "v1.0-mini",
-                     "--split", "all", "--limit", "2", "--output", str(tmp_path), "--batch-size", "2",
-                     "--max-tokens", "160", "--max-attempts", "2", "--answer-format", "structured", "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(taught),
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            "2",
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "2",
+            "--max-tokens",
+            "160",
+            "--max-attempts",
+            "2",
+            "--answer-format",
+            "structured",
+            "--no-progress",
+        ]
+    )
     capsys.readouterr()
     assert code in (0, 1)
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     contents = read_run(run_dir)
     assert contents.manifest["structured_output"]["mechanism"].startswith("xgrammar")
-    answers = [a for r in contents.records.values() for a in r["attempts"] if a["answer"] is not None and
-               a["calls"][-1]["stage"] == "actions"]
+    answers = [
+        a
+        for r in contents.records.values()
+        for a in r["attempts"]
+        if a["answer"] is not None and a["calls"][-1]["stage"] == "actions"
+    ]
     assert answers
     for attempt in answers:
         value = json.loads(attempt["answer"])["actions"]
@@ -713,16 +992,40 @@ def test_lightemma_run_with_hf_and_structured_answers_records_schema_valid_answe
 def test_vllm_passes_the_actions_schema_as_structured_outputs_on_stage_3_only(fake_vllm, dataroot, tmp_path, capsys):
     from lightemma.backends.structured import ACTIONS_SCHEMA
 
-    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
-                     "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
-                     "--answer-format", "structured", "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "vllm",
+            "--model",
+            "Qwen-2.5-VL-7B",
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            str(N_FRAMES),
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "4",
+            "--answer-format",
+            "structured",
+            "--no-progress",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     (llm,) = FakeLLM.instances
     for conversations, sampling, _ in llm.calls:
         is_actions = "v1, c1" in conversations[0][-1]["content"][-1]["text"]
         if is_actions:
             assert isinstance(sampling.structured_outputs, FakeStructuredOutputsParams)
-            assert sampling.structured_outputs.json == ACTIONS_SCHEMA.as_dict() and sampling.structured_outputs.disable_any_whitespace
+            assert (
+                sampling.structured_outputs.json == ACTIONS_SCHEMA.as_dict()
+                and sampling.structured_outputs.disable_any_whitespace
+            )
         else:
             assert sampling.structured_outputs is None
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
@@ -733,9 +1036,30 @@ def test_vllm_passes_the_actions_schema_as_structured_outputs_on_stage_3_only(fa
 
 
 def test_vllm_conversation_chain_and_cached_tokens_per_call(fake_vllm, dataroot, tmp_path, capsys):
-    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
-                     "v1.0-mini", "--split", "all", "--limit", str(N_FRAMES), "--output", str(tmp_path), "--batch-size", "4",
-                     "--chain", "conversation", "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "vllm",
+            "--model",
+            "Qwen-2.5-VL-7B",
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            str(N_FRAMES),
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "4",
+            "--chain",
+            "conversation",
+            "--no-progress",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     (llm,) = FakeLLM.instances
     shapes = [[len(c) for c in conversations] for conversations, _, _ in llm.calls]
@@ -750,8 +1074,13 @@ def test_vllm_conversation_chain_and_cached_tokens_per_call(fake_vllm, dataroot,
     for record in read_run(run_dir).records.values():
         calls = [c for a in record["attempts"] for c in a["calls"]]
         # vLLM's num_cached_tokens per request: the image prefix once the frame's first request has been through
-        assert [c["cached_input_tokens"] for c in calls[1:]] == [100, 100, 100] and calls[0]["cached_input_tokens"] in (0, 100)
-        assert record["cached_input_tokens"] == sum(c["cached_input_tokens"] for c in calls) and record["status"] == "ok"
+        assert [c["cached_input_tokens"] for c in calls[1:]] == [100, 100, 100] and calls[0]["cached_input_tokens"] in (
+            0,
+            100,
+        )
+        assert (
+            record["cached_input_tokens"] == sum(c["cached_input_tokens"] for c in calls) and record["status"] == "ok"
+        )
         first_calls.append(calls[0]["cached_input_tokens"])
     assert 0 in first_calls  # (frames whose image repeats an earlier frame's hit the cache from their first request)
 
@@ -768,9 +1097,32 @@ def test_vllm_without_structured_outputs_is_refused_for_structured_answers(fake_
 
 @pytest.mark.parametrize("inputs", ["no-image", "blank-image", "no-history"])
 def test_vllm_is_shown_what_each_input_ablation_leaves(fake_vllm, dataroot, tmp_path, capsys, inputs):
-    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen-2.5-VL-7B", "--dataroot", str(dataroot), "--version",
-                     "v1.0-mini", "--split", "all", "--limit", "2", "--output", str(tmp_path), "--batch-size", "2",
-                     "--answer-format", "structured", "--inputs", inputs, "--no-progress"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "vllm",
+            "--model",
+            "Qwen-2.5-VL-7B",
+            "--dataroot",
+            str(dataroot),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            "2",
+            "--output",
+            str(tmp_path),
+            "--batch-size",
+            "2",
+            "--answer-format",
+            "structured",
+            "--inputs",
+            inputs,
+            "--no-progress",
+        ]
+    )
     assert code == 0, capsys.readouterr().err
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     contents = read_run(run_dir)
@@ -788,7 +1140,9 @@ def test_vllm_is_shown_what_each_input_ablation_leaves(fake_vllm, dataroot, tmp_
         else:
             (image,) = sent
             if inputs == "blank-image":
-                assert image.size == (64, 48) and np.unique(np.asarray(image).reshape(-1, 3), axis=0).tolist() == [[128, 128, 128]]
+                assert image.size == (64, 48) and np.unique(np.asarray(image).reshape(-1, 3), axis=0).tolist() == [
+                    [128, 128, 128]
+                ]
             else:
                 assert np.asarray(image).std() > 0  # the camera image itself
         if inputs == "no-history":
@@ -799,9 +1153,20 @@ def test_hf_runs_each_image_ablation_end_to_end(qwen2_vl, dataroot, tmp_path):
     from lightemma.pipeline import run
 
     for inputs in ("no-image", "blank-image"):
-        result = run(str(qwen2_vl), backend="hf", dataroot=dataroot, version="v1.0-mini", split="all", limit=1,
-                     output=tmp_path / inputs, max_tokens=4, max_attempts=1, inputs=inputs, progress=False,
-                     backend_options={"dtype": "float32", "device": "cpu"})
+        result = run(
+            str(qwen2_vl),
+            backend="hf",
+            dataroot=dataroot,
+            version="v1.0-mini",
+            split="all",
+            limit=1,
+            output=tmp_path / inputs,
+            max_tokens=4,
+            max_attempts=1,
+            inputs=inputs,
+            progress=False,
+            backend_options={"dtype": "float32", "device": "cpu"},
+        )
         (record,) = read_run(result.run_dir).records.values()
         calls = [c for a in record["attempts"] for c in a["calls"]]
         assert calls and all(c["error"] is None and c["input_tokens"] > 0 for c in calls)

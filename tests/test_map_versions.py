@@ -45,10 +45,29 @@ def runs(roots, tmp_path_factory):
     base = tmp_path_factory.mktemp("map_version_runs")
     out = {}
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        for name, kind, root in (("cv", "cv", roots[0]), ("constant", "constant", roots[0]),
-                                 ("old", "constant", roots[1])):
-            assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(root), "--version", "v1.0-mini",
-                         "--split", "all", "--out", str(base / name)]) == 0
+        for name, kind, root in (
+            ("cv", "cv", roots[0]),
+            ("constant", "constant", roots[0]),
+            ("old", "constant", roots[1]),
+        ):
+            assert (
+                main(
+                    [
+                        "run",
+                        "--model",
+                        f"baseline:{kind}",
+                        "--dataroot",
+                        str(root),
+                        "--version",
+                        "v1.0-mini",
+                        "--split",
+                        "all",
+                        "--out",
+                        str(base / name),
+                    ]
+                )
+                == 0
+            )
             out[name] = base / name
     return out
 

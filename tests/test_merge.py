@@ -8,13 +8,31 @@ import json
 
 import jsonschema
 import pytest
+
 from lightemma.cli import main
 from lightemma.evaluation.descriptors import check_evaluation_json, schema
 
 
 def _run(out, kind, *extra):
-    assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(out["root"]), "--version", "v1.0-mini",
-                 "--split", "all", "--out", str(out["dir"]), *extra]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                f"baseline:{kind}",
+                "--dataroot",
+                str(out["root"]),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--out",
+                str(out["dir"]),
+                *extra,
+            ]
+        )
+        == 0
+    )
 
 
 @pytest.fixture(scope="module")
@@ -32,12 +50,43 @@ def files(synth_root, tmp_path_factory):
             assert main(["evaluate", str(base / name), "--resamples", "20", "--format", "json", "-o", str(path)]) == 0
             out[name] = path
         path = base / "cv_pairwise.json"
-        assert main(["evaluate", str(base / "cv"), str(base / "six"), "--common", "--pairwise", "--resamples", "20",
-                     "--format", "json", "-o", str(path)]) == 0
+        assert (
+            main(
+                [
+                    "evaluate",
+                    str(base / "cv"),
+                    str(base / "six"),
+                    "--common",
+                    "--pairwise",
+                    "--resamples",
+                    "20",
+                    "--format",
+                    "json",
+                    "-o",
+                    str(path),
+                ]
+            )
+            == 0
+        )
         out["pairwise"] = path
         path = base / "cv_miss3.json"
-        assert main(["evaluate", str(base / "cv"), "--resamples", "20", "--miss-threshold", "3", "--format", "json",
-                     "-o", str(path)]) == 0
+        assert (
+            main(
+                [
+                    "evaluate",
+                    str(base / "cv"),
+                    "--resamples",
+                    "20",
+                    "--miss-threshold",
+                    "3",
+                    "--format",
+                    "json",
+                    "-o",
+                    str(path),
+                ]
+            )
+            == 0
+        )
         out["miss3"] = path
     return out
 
@@ -117,8 +166,10 @@ def test_paired_comparisons_and_common_frames_are_refused(files, capsys, tmp_pat
     ("edit", "field"),
     [
         (lambda d: d.__setitem__("format", "lightemma-evaluate/2"), "format"),
-        (lambda d: d["columns"]["accuracy_lightemma"]["ade_avg"].__setitem__("id", "ade@lightemma/2"),
-         "columns.accuracy_lightemma.ade_avg.id"),
+        (
+            lambda d: d["columns"]["accuracy_lightemma"]["ade_avg"].__setitem__("id", "ade@lightemma/2"),
+            "columns.accuracy_lightemma.ade_avg.id",
+        ),
         (lambda d: d["tables"][1]["rows"][0].__setitem__("miss_rate", 1.5), "tables[1].rows[0].miss_rate"),
         (
             lambda d: next(iter(d["provenance"]["frame_sets"].values())).__setitem__("n_frames", 5),

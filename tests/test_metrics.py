@@ -63,7 +63,15 @@ def test_known_values():
     pred = gt.copy()
     pred[0, :, 1] = [1, 2, 3, 4, 5, 6]
     m = lightemma.evaluate(pred, gt)
-    assert (m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde, m.miss_rate, m.n_frames) == (1.5, 3.5, 5.5, 3.5, 6.0, 1.0, 1)
+    assert (m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde, m.miss_rate, m.n_frames) == (
+        1.5,
+        3.5,
+        5.5,
+        3.5,
+        6.0,
+        1.0,
+        1,
+    )
     assert lightemma.evaluate(pred, gt, convention="stp3").ade_2s == 2.5
     assert lightemma.evaluate(pred, gt, convention="uniad").ade_3s == 6.0
     # "ADE avg" as each convention's papers print it: stp3 (1.5 + 2.5 + 3.5) / 3, uniad (2 + 4 + 6) / 3
@@ -82,7 +90,9 @@ def test_ade_avg_is_the_mean_of_the_columns_and_frame_metrics_agree(arrays, conv
     assert m.ade_avg == pytest.approx((m.ade_1s + m.ade_2s + m.ade_3s) / 3, rel=1e-12, abs=1e-12)
     per_frame = frame_metrics(pred, gt, convention=convention)
     assert per_frame.shape == (len(pred), 5)
-    np.testing.assert_allclose(per_frame.mean(0), [m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde], rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(
+        per_frame.mean(0), [m.ade_1s, m.ade_2s, m.ade_3s, m.ade_avg, m.fde], rtol=1e-12, atol=1e-12
+    )
 
 
 def test_single_frame_errors():

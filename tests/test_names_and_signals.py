@@ -11,13 +11,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from processes import children, still_running
-from reference_fixtures import make_frame, write_scene
 
 from lightemma._text import printable
 from lightemma.report.html import table_html
 from lightemma.report.tables import Column, Table, to_latex, to_markdown
 from lightemma.report.writer import _slug
+from processes import children, still_running
+from reference_fixtures import make_frame, write_scene
 
 PYTHON_ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
 LIGHTEMMA = [sys.executable, "-m", "lightemma"]
@@ -71,7 +71,9 @@ def test_import_warnings_and_summary_are_one_line_per_name(tmp_path):
     assert not any(line.startswith("lightemma import:") for line in lines)
     rows = [line for line in lines if line.startswith("| model-")]
     assert rows and all("\\n" in row for row in rows)
-    for block in table.stdout.decode("utf-8").split("\n\n"):  # each Markdown table: every row as many cells as its header
+    for block in table.stdout.decode("utf-8").split(
+        "\n\n"
+    ):  # each Markdown table: every row as many cells as its header
         body = [line for line in block.splitlines() if line.startswith("|")]
         if body:
             assert len({len(re.split(r"(?<!\\)\|", line)) for line in body}) == 1, body
@@ -79,25 +81,46 @@ def test_import_warnings_and_summary_are_one_line_per_name(tmp_path):
 
 def test_markdown_html_and_latex_rows_stay_one_row_whatever_the_model_is_called():
     name = "a|b\nFAKE | row\x1b[2J<script>"
-    table = Table("Accuracy of " + name, [Column("model", "Model"), Column("frames", "Frames")],
-                  [{"model": name, "frames": 3}, {"model": "GPT-4o", "frames": 4}], notes=[f"{name}: a note"])
+    table = Table(
+        "Accuracy of " + name,
+        [Column("model", "Model"), Column("frames", "Frames")],
+        [{"model": name, "frames": 3}, {"model": "GPT-4o", "frames": 4}],
+        notes=[f"{name}: a note"],
+    )
     md = to_markdown(table)
     rows = [line for line in md.splitlines() if line.startswith("|")]
     assert len(rows) == 4  # header, rule, two rows
     assert {len(re.split(r"(?<!\\)\|", row)) for row in rows} == {4}
     assert "a\\|b\\nFAKE \\| row\\x1b[2J" in rows[2] and "\x1b" not in md
-    assert md.splitlines()[0] == "### Accuracy of a|b\\nFAKE | row\\x1b[2J&lt;script&gt;"  # no raw HTML in Markdown either
+    assert (
+        md.splitlines()[0] == "### Accuracy of a|b\\nFAKE | row\\x1b[2J&lt;script&gt;"
+    )  # no raw HTML in Markdown either
     html = table_html(table, {})
     assert "\x1b" not in html and "\n" not in html and "<script>" not in html
     assert "a|b\\nFAKE | row\\x1b[2J&lt;script&gt;" in html
-    assert "\x1b" not in to_latex(table) and len(to_latex(table).splitlines()) == len(to_latex(Table("t", table.columns, table.rows, notes=["n"])).splitlines())
+    assert "\x1b" not in to_latex(table) and len(to_latex(table).splitlines()) == len(
+        to_latex(Table("t", table.columns, table.rows, notes=["n"])).splitlines()
+    )
 
 
 # --- 2. file names made from frame ids and model labels ------------------------------------------------------------
 
 
-@pytest.mark.parametrize("name", ["../../../../evil", "..", ".", "", "/etc/passwd", "a\x00b", "x" * 5000, ".hidden",
-                                  "scene-0001/" + "f" * 32, os.fsdecode(b"\xff\xfe")])
+@pytest.mark.parametrize(
+    "name",
+    [
+        "../../../../evil",
+        "..",
+        ".",
+        "",
+        "/etc/passwd",
+        "a\x00b",
+        "x" * 5000,
+        ".hidden",
+        "scene-0001/" + "f" * 32,
+        os.fsdecode(b"\xff\xfe"),
+    ],
+)
 def test_a_file_name_part_from_an_outside_name_stays_in_its_folder(tmp_path, name):
     slug = _slug(name)
     assert slug and re.fullmatch(r"[A-Za-z0-9._-]+", slug) and not slug.startswith(".")
@@ -158,14 +181,20 @@ def _partials(out: Path) -> list[Path]:
 
 
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc")
-@pytest.mark.parametrize(("sig", "jobs"), [(signal.SIGINT, 3), (signal.SIGTERM, 3), (signal.SIGHUP, 3), (signal.SIGTERM, 1)])
+@pytest.mark.parametrize(
+    ("sig", "jobs"), [(signal.SIGINT, 3), (signal.SIGTERM, 3), (signal.SIGHUP, 3), (signal.SIGTERM, 1)]
+)
 def test_a_stop_signal_to_the_import_stops_its_workers_and_leaves_no_partial_folder(tmp_path, sig, jobs):
     res = _big_results(tmp_path / "res")
     out = tmp_path / "runs"
     slow = tmp_path / "slow_lightemma.py"
     slow.write_text(SLOW_LIGHTEMMA)
-    proc = subprocess.Popen([sys.executable, str(slow), "import", str(res), "--output", str(out), "--quiet", "--jobs", str(jobs)],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=PYTHON_ENV)
+    proc = subprocess.Popen(
+        [sys.executable, str(slow), "import", str(res), "--output", str(out), "--quiet", "--jobs", str(jobs)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        env=PYTHON_ENV,
+    )
     try:
         deadline = time.monotonic() + 60
         while not _partials(out) and proc.poll() is None and time.monotonic() < deadline:
@@ -181,8 +210,11 @@ def test_a_stop_signal_to_the_import_stops_its_workers_and_leaves_no_partial_fol
     assert proc.returncode == 128 + sig, err
     lines = err.splitlines()
     assert len(lines) == 1, err  # no traceback, no resource_tracker warning
-    assert re.fullmatch(rf"lightemma import: interrupted by {signal.Signals(sig).name}; \d of 3 model folder\(s\) imported, "
-                        r"run the same command again to import the rest", lines[0]), lines[0]
+    assert re.fullmatch(
+        rf"lightemma import: interrupted by {signal.Signals(sig).name}; \d of 3 model folder\(s\) imported, "
+        r"run the same command again to import the rest",
+        lines[0],
+    ), lines[0]
     assert _partials(out) == []
     written = list(out.glob("*/ref-*/manifest.json"))
     assert len(written) < 3  # stopped before every run was renamed into place

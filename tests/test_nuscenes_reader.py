@@ -87,8 +87,24 @@ def world(tmp_path_factory):
 
     base = tmp_path_factory.mktemp("nuscenes_reader")
     root = write_dataset(base / "data", scenes=8, keyframes=22, image_size=(64, 36), sweeps=False)
-    assert main(["run", "--model", "baseline:cv", "--dataroot", str(root), "--version", VERSION, "--split", "all",
-                 "--out", str(base / "runs")]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:cv",
+                "--dataroot",
+                str(root),
+                "--version",
+                VERSION,
+                "--split",
+                "all",
+                "--out",
+                str(base / "runs"),
+            ]
+        )
+        == 0
+    )
     return base, Path(root), find_run_dirs(base / "runs")[0]
 
 
@@ -96,8 +112,14 @@ def _evaluate(run_dir: Path, root: Path):
     from lightemma.evaluation import evaluate_loaded, load_run
     from lightemma.evaluation.stats import Resampling
 
-    return evaluate_loaded([load_run(run_dir)], resampling=Resampling(n_resamples=0), dataroot=root, version=VERSION,
-                           safety=True, planning=True)
+    return evaluate_loaded(
+        [load_run(run_dir)],
+        resampling=Resampling(n_resamples=0),
+        dataroot=root,
+        version=VERSION,
+        safety=True,
+        planning=True,
+    )
 
 
 def test_only_lightemma_nuscenes_opens_files_under_the_dataroot(world, tmp_path):
@@ -124,9 +146,13 @@ def test_only_lightemma_nuscenes_opens_files_under_the_dataroot(world, tmp_path)
         assert any(p.endswith(f"{os.sep}can_bus{os.sep}" + Path(p).name) for p in paths)
         assert any(p.endswith(".png") for p in paths) == (where == masks_only)
         assert opens.outside() == [], opens.outside()
-        assert modules <= {"lightemma.nuscenes.json_tables", "lightemma.nuscenes.frames",
-                           "lightemma.nuscenes.map_files", "lightemma.nuscenes.can_bus",
-                           "lightemma.nuscenes.annotations"}, modules
+        assert modules <= {
+            "lightemma.nuscenes.json_tables",
+            "lightemma.nuscenes.frames",
+            "lightemma.nuscenes.map_files",
+            "lightemma.nuscenes.can_bus",
+            "lightemma.nuscenes.annotations",
+        }, modules
 
 
 # -- static: evaluation/ and planning/ never read a dataroot's files themselves ----------------------------------------
@@ -170,10 +196,14 @@ def test_the_static_scan_sees_the_readers_safety_held(tmp_path):
     lightemma.nuscenes (a table opened with ``open``, a map expansion with ``json.load``): a test of the test."""
     (tmp_path / "evaluation").mkdir()
     sample = tmp_path / "evaluation" / "safety.py"
-    sample.write_text("import json\n\ndef _table(root, name):\n"
-                      "    with open(root / f'{name}.json', encoding='utf-8') as f:\n        return json.load(f)\n")
-    assert {call for _, call in _file_reads(sample, tmp_path)} == {"open(root / f'{name}.json', encoding='utf-8')",
-                                                                   "json.load(f)"}
+    sample.write_text(
+        "import json\n\ndef _table(root, name):\n"
+        "    with open(root / f'{name}.json', encoding='utf-8') as f:\n        return json.load(f)\n"
+    )
+    assert {call for _, call in _file_reads(sample, tmp_path)} == {
+        "open(root / f'{name}.json', encoding='utf-8')",
+        "json.load(f)",
+    }
 
 
 # -- the one table reader: every reader refuses alike ------------------------------------------------------------------
@@ -237,18 +267,25 @@ def test_a_two_number_ego_pose_translation_is_refused_by_the_safety_reader_too(w
     token = frames.sample_tokens[0]
     sds = json.loads((data / VERSION / "sample_data.json").read_text())
     sensors = {s["token"]: s["channel"] for s in json.loads((data / VERSION / "sensor.json").read_text())}
-    channel = {c["token"]: sensors[c["sensor_token"]]
-               for c in json.loads((data / VERSION / "calibrated_sensor.json").read_text())}
-    sd = next(r for r in sds if r["sample_token"] == token and r["is_key_frame"]
-              and channel[r["calibrated_sensor_token"]] == "CAM_FRONT")
+    channel = {
+        c["token"]: sensors[c["sensor_token"]]
+        for c in json.loads((data / VERSION / "calibrated_sensor.json").read_text())
+    }
+    sd = next(
+        r
+        for r in sds
+        if r["sample_token"] == token and r["is_key_frame"] and channel[r["calibrated_sensor_token"]] == "CAM_FRONT"
+    )
     poses = json.loads((data / VERSION / "ego_pose.json").read_text())
     pose = next(p for p in poses if p["token"] == sd["ego_pose_token"])
     pose["translation"] = pose["translation"][:2]
     (data / VERSION / "ego_pose.json").write_text(json.dumps(poses))
     got = load_safety_data(data, VERSION)
     assert token not in got.poses
-    assert "has 2 value(s), needs 3 (x, y, z in metres)" in got.pose_reasons[token] and pose["token"] in \
-        got.pose_reasons[token]
+    assert (
+        "has 2 value(s), needs 3 (x, y, z in metres)" in got.pose_reasons[token]
+        and pose["token"] in got.pose_reasons[token]
+    )
     # the frame reader's bound on x, y: beyond ±1e6 m is a bad record
     pose["translation"] = [2e6, 0.0, 0.0]
     (data / VERSION / "ego_pose.json").write_text(json.dumps(poses))
@@ -265,10 +302,18 @@ def test_lane_nodes_are_checked_as_drivable_area_nodes(world, tmp_path):
     base, root, _ = world
     (path,) = sorted((root / "maps" / "expansion").glob("boston*.json"))
     doc = json.loads(path.read_text())
-    lane_nodes = {t for lane in doc["lane"] for t in
-                  next(p for p in doc["polygon"] if p["token"] == lane["polygon_token"])["exterior_node_tokens"]}
-    drivable_nodes = {t for rec in doc["drivable_area"] for p in doc["polygon"] if p["token"] in rec["polygon_tokens"]
-                      for t in p["exterior_node_tokens"]}
+    lane_nodes = {
+        t
+        for lane in doc["lane"]
+        for t in next(p for p in doc["polygon"] if p["token"] == lane["polygon_token"])["exterior_node_tokens"]
+    }
+    drivable_nodes = {
+        t
+        for rec in doc["drivable_area"]
+        for p in doc["polygon"]
+        if p["token"] in rec["polygon_tokens"]
+        for t in p["exterior_node_tokens"]
+    }
     target = sorted(lane_nodes - drivable_nodes)[0]
     node = next(n for n in doc["node"] if n["token"] == target)
     node["x"] = str(node["x"])

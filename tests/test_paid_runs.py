@@ -6,13 +6,14 @@ import json
 
 import pytest
 
-from fake_openai import FakeOpenAIServer, TokenCounter, image_tokens as oracle_image_tokens
+from fake_openai import FakeOpenAIServer, TokenCounter
+from fake_openai import image_tokens as oracle_image_tokens
 from lightemma.errors import RunStopped, UserError
 from lightemma.frames.sample import sample_indices
-from lightemma.pipeline.runner import estimate_run, resume, run
 from lightemma.models.catalog import PAPER_MODELS, lookup
 from lightemma.models.prices import batch_price, price
 from lightemma.models.tokens import image_tokens
+from lightemma.pipeline.runner import estimate_run, resume, run
 from lightemma.runs.store import read_run
 
 
@@ -63,7 +64,9 @@ def test_the_estimate_counts_images_text_and_output_and_prices_both_modes(synth_
     assert est.batch_cost_cents == pytest.approx(est.cost_cents / 2)
     claude = estimate_run("claude-3.7-sonnet", frames=frames)
     assert claude.provider == "anthropic" and claude.image_tokens == 3 * n * image_tokens(64, 36, "anthropic")
-    with pytest.raises(UserError, match="0 calls to a provider, no cost: qwen-2.5-vl-7b runs on this machine through the hf backend"):
+    with pytest.raises(
+        UserError, match="0 calls to a provider, no cost: qwen-2.5-vl-7b runs on this machine through the hf backend"
+    ):
         estimate_run("qwen-2.5-vl-7b", frames=frames)  # a local model: no bill, no image tokens by anyone's rule
     assert "~$" in est.line() and "with --batch" in est.line()
 
@@ -71,8 +74,16 @@ def test_the_estimate_counts_images_text_and_output_and_prices_both_modes(synth_
 def test_the_estimate_is_close_to_what_an_emulated_provider_counts(synth_root, tmp_path):
     """The text rule against the loopback server's own token counter (4 bytes per token, the same image rule)."""
     with FakeOpenAIServer(count_tokens=True) as server:
-        result = run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                     output=tmp_path, progress=False, sample=3)
+        result = run(
+            "openai/gpt-4o",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            api_base=server.url,
+            output=tmp_path,
+            progress=False,
+            sample=3,
+        )
     est = estimate_run("openai/gpt-4o", frames=_frames(synth_root).select(list(read_run(result.run_dir).records)))
     counted = sum(r["input_tokens"] for r in read_run(result.run_dir).records.values())
     # the estimate pastes typical answers (45 % / 35 % of the frame's output: the default 400 for a model the paper
@@ -91,8 +102,22 @@ def test_cli_estimate_prints_the_bill_and_calls_nothing(synth_root, capsys, monk
     from lightemma.cli import main
 
     monkeypatch.delenv("OPENAI_API_KEY", raising=False)  # no key needed: nothing is called
-    code = main(["run", "--model", "gpt-4o", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-                 "--sample", "5", "--estimate"])
+    code = main(
+        [
+            "run",
+            "--model",
+            "gpt-4o",
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--sample",
+            "5",
+            "--estimate",
+        ]
+    )
     out = capsys.readouterr().out
     assert code == 0 and out.startswith("estimate: 5 frames, 15 calls") and "with --batch" in out
     assert "platform.openai.com/docs/guides/images-vision" in out and "the paper's Table I" in out
@@ -105,7 +130,10 @@ def test_the_estimate_uses_the_prompts_and_images_of_the_chosen_inputs(synth_roo
     frames = _frames(synth_root)
     n = len(frames)
     full = estimate_run("gpt-4o", frames=frames)
-    no_image, blank = estimate_run("gpt-4o", frames=frames, inputs="no-image"), estimate_run("gpt-4o", frames=frames, inputs="blank-image")
+    no_image, blank = (
+        estimate_run("gpt-4o", frames=frames, inputs="no-image"),
+        estimate_run("gpt-4o", frames=frames, inputs="blank-image"),
+    )
     no_history = estimate_run("gpt-4o", frames=frames, inputs="no-history")
     assert full.image_tokens == 3 * n * image_tokens(64, 36, "openai") > 0
     assert no_image.image_tokens == 0 and no_image.image_sizes == {} and no_image.missing_images == 0
@@ -117,13 +145,27 @@ def test_the_estimate_uses_the_prompts_and_images_of_the_chosen_inputs(synth_roo
     assert no_history.image_tokens == full.image_tokens
     assert no_history.input_tokens - no_history.image_tokens < full.input_tokens - full.image_tokens
     assert no_history.input_tokens - no_history.image_tokens >= n * 3 * MESSAGE_TOKENS + n * sum(
-        text_tokens(variant.stages[stage].replace("{scene}", "").replace("{intent}", "")) - 2 for stage in ("scene", "intent", "actions"))
+        text_tokens(variant.stages[stage].replace("{scene}", "").replace("{intent}", "")) - 2
+        for stage in ("scene", "intent", "actions")
+    )
     # the line a paid run prints first follows --inputs too
     lines = []
     with FakeOpenAIServer() as server:
-        run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url, output=tmp_path,
-            progress=False, sample=2, inputs="no-image", log=lines.append)
-    assert any(line.startswith("estimate: 2 frames, 6 calls") and "(0 image: --inputs no-image)" in line for line in lines)
+        run(
+            "openai/gpt-4o",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            api_base=server.url,
+            output=tmp_path,
+            progress=False,
+            sample=2,
+            inputs="no-image",
+            log=lines.append,
+        )
+    assert any(
+        line.startswith("estimate: 2 frames, 6 calls") and "(0 image: --inputs no-image)" in line for line in lines
+    )
 
 
 def test_cli_estimate_follows_inputs_and_has_no_bill_where_nothing_is_paid(synth_root, capsys, monkeypatch):
@@ -138,8 +180,10 @@ def test_cli_estimate_follows_inputs_and_has_no_bill_where_nothing_is_paid(synth
     assert "(0 image: --inputs no-image)" in no_image and "(0 image" not in full and no_image != full
     assert main([*base, "--model", "gpt-4o", "--inputs", "no-history"]) == 0
     assert capsys.readouterr().out.splitlines()[0] != full
-    for model, extra, where in (("baseline:cv", [], "runs here as a baseline"),
-                                ("qwen-2.5-vl-7b", ["--backend", "hf"], "runs on this machine through the hf backend (local compute)")):
+    for model, extra, where in (
+        ("baseline:cv", [], "runs here as a baseline"),
+        ("qwen-2.5-vl-7b", ["--backend", "hf"], "runs on this machine through the hf backend (local compute)"),
+    ):
         assert main([*base, "--model", model, *extra]) == 0
         out = capsys.readouterr().out
         assert out.count("\n") == 1 and "0 calls to a provider, no cost" in out and where in out, out
@@ -156,25 +200,48 @@ def test_a_sample_larger_than_the_set_is_refused(synth_root, tmp_path, capsys):
     from lightemma.cli import main
 
     n = len(_frames(synth_root))
-    with pytest.raises(UserError, match=f"--sample 1000 is more than the {n} frames of the set; drop --sample to take them all"):
-        run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, sample=1000)
+    with pytest.raises(
+        UserError, match=f"--sample 1000 is more than the {n} frames of the set; drop --sample to take them all"
+    ):
+        run(
+            "baseline:cv",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            output=tmp_path,
+            progress=False,
+            sample=1000,
+        )
     assert not list(tmp_path.glob("*/*/manifest.json"))  # nothing written
     base = ["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all"]
     assert main([*base, "--sample", "1000", "--output", str(tmp_path)]) == 2
     assert f"--sample 1000 is more than the {n} frames" in capsys.readouterr().err
     assert main(["run", "--model", "gpt-4o", *base[3:], "--sample", "1000", "--estimate"]) == 2
     assert f"--sample 1000 is more than the {n} frames" in capsys.readouterr().err
-    result = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, sample=n)
+    result = run(
+        "baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, sample=n
+    )
     assert result.manifest["dataset"]["sample"]["n"] == n == result.manifest["dataset"]["sample"]["frames"]
 
 
 def test_every_paid_run_prints_its_estimate_first_and_records_it(synth_root, tmp_path):
     lines = []
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                     output=tmp_path, progress=False, sample=2, log=lines.append)
+        result = run(
+            "openai/gpt-4o",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            api_base=server.url,
+            output=tmp_path,
+            progress=False,
+            sample=2,
+            log=lines.append,
+        )
     assert any(line.startswith("estimate: 2 frames, 6 calls") for line in lines)
-    assert lines.index(next(l for l in lines if l.startswith("estimate:"))) < lines.index(next(l for l in lines if l.startswith("run directory")))
+    assert lines.index(next(line for line in lines if line.startswith("estimate:"))) < lines.index(
+        next(line for line in lines if line.startswith("run directory"))
+    )
     manifest = json.loads((result.run_dir / "manifest.json").read_text())
     assert manifest["estimate"]["calls"] == 6
 
@@ -183,8 +250,17 @@ def test_max_cost_stops_cleanly_before_spending_more_and_a_resume_finishes(synth
     # each call costs (1000 × 2.5 + 50 × 10) / 1e6 $ = 0.3 ¢; a frame 0.9 ¢; the estimate errs high per call
     with FakeOpenAIServer() as server:
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path, progress=False, concurrency=1, max_cost_cents=2.0)
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path,
+                progress=False,
+                concurrency=1,
+                max_cost_cents=2.0,
+            )
         assert stopped.value.cause == "budget" and "--max-cost 2" in str(stopped.value)
         run_dir = stopped.value.run_dir
         records = read_run(run_dir).records
@@ -198,11 +274,27 @@ def test_max_cost_stops_cleanly_before_spending_more_and_a_resume_finishes(synth
 def test_max_cost_needs_a_known_price(synth_root, tmp_path):
     with FakeOpenAIServer() as server:
         with pytest.raises(UserError, match="--max-cost: the price of openai/no-such-price-model is unknown"):
-            run("openai/no-such-price-model", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path, progress=False, max_cost_cents=5.0)
+            run(
+                "openai/no-such-price-model",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path,
+                progress=False,
+                max_cost_cents=5.0,
+            )
         with pytest.raises(UserError, match="greater than 0"):
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path, progress=False, max_cost_cents=0.0)
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path,
+                progress=False,
+                max_cost_cents=0.0,
+            )
 
 
 def test_the_estimate_and_max_cost_price_calls_as_the_run_bills_them(synth_root, tmp_path, elsewhere):
@@ -221,13 +313,31 @@ def test_the_estimate_and_max_cost_price_calls_as_the_run_bills_them(synth_root,
         estimate_run("gpt-4o", frames=frames, price=(1.0, float("inf")))
     with FakeOpenAIServer() as server:
         with pytest.raises(UserError, match="none: served from .* give it with --price IN OUT"):
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path / "a", progress=False, max_cost_cents=1.0)
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path / "a",
+                progress=False,
+                max_cost_cents=1.0,
+            )
         assert not server.requests
         # each call: (1000 × 10 + 50 × 20) / 1e6 $ = 1.1 ¢, a frame 3.3 ¢: 5 ¢ admits one frame, not two
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path / "b", progress=False, concurrency=1, max_cost_cents=5.0, price=(10.0, 20.0))
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path / "b",
+                progress=False,
+                concurrency=1,
+                max_cost_cents=5.0,
+                price=(10.0, 20.0),
+            )
     records = read_run(stopped.value.run_dir).records
     assert stopped.value.cause == "budget" and len(records) == 1
     assert sum(r["cost_cents"] for r in records.values()) == pytest.approx(3 * 1.1)
@@ -240,17 +350,32 @@ def test_a_sample_spreads_over_scenes_is_reproducible_and_is_recorded(synth_root
     assert len(set(first.scene_names)) == 1  # what --limit does on this set: one scene
     picked = sample_indices(frames.scene_names, 4, seed=1)
     assert len({frames.scene_names[i] for i in picked}) == 2 and picked == sample_indices(frames.scene_names, 4, seed=1)
-    assert picked != sample_indices(frames.scene_names, 4, seed=2) or picked != sample_indices(frames.scene_names, 4, seed=3)
+    assert picked != sample_indices(frames.scene_names, 4, seed=2) or picked != sample_indices(
+        frames.scene_names, 4, seed=3
+    )
     assert sample_indices(frames.scene_names, 100) == list(range(len(frames)))
     names = [f"s{i % 7}" for i in range(70)]
     assert len({names[i] for i in sample_indices(names, 5, seed=0)}) == 5  # N < scenes: N distinct scenes
     counts = [sum(1 for i in sample_indices(names, 21, seed=4) if names[i] == s) for s in sorted(set(names))]
     assert counts == [3] * 7  # N = 3 × scenes: three from each
-    result = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False,
-                 sample=4, sample_seed=1)
+    result = run(
+        "baseline:cv",
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        output=tmp_path,
+        progress=False,
+        sample=4,
+        sample_seed=1,
+    )
     manifest = json.loads((result.run_dir / "manifest.json").read_text())
-    assert manifest["dataset"]["sample"] == {"n": 4, "seed": 1, "frames": 4, "scenes": 2,
-                                             "rule": manifest["dataset"]["sample"]["rule"]}
+    assert manifest["dataset"]["sample"] == {
+        "n": 4,
+        "seed": 1,
+        "frames": 4,
+        "scenes": 2,
+        "rule": manifest["dataset"]["sample"]["rule"],
+    }
     assert sorted(read_run(result.run_dir).records) == sorted(frames.frame_ids[i] for i in picked)
     again = resume(result.run_dir, progress=False)  # the resume loads the same sample
     assert again.frames_run == 0
@@ -269,12 +394,28 @@ def test_cli_sample_options_are_checked(synth_root, capsys):
 
 
 def test_a_run_name_is_recorded_and_checked(synth_root, tmp_path):
-    result = run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False,
-                 sample=2, name="  ego baseline ")
+    result = run(
+        "baseline:cv",
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        output=tmp_path,
+        progress=False,
+        sample=2,
+        name="  ego baseline ",
+    )
     assert json.loads((result.run_dir / "manifest.json").read_text())["name"] == "ego baseline"
     for bad in ("a\nb", "caf\udce9"):  # a line break; a byte that is not UTF-8 (a Latin-1 terminal's argv)
         with pytest.raises(UserError, match="^name must be 1 to 80 printable characters"):
-            run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False, name=bad)
+            run(
+                "baseline:cv",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                output=tmp_path,
+                progress=False,
+                name=bad,
+            )
     assert lookup("gpt-4o") is not None
 
 
@@ -301,8 +442,17 @@ def test_price_covers_cached_tokens_and_a_call_of_unknown_cost_is_never_free_to_
 
     cached = lambda req: dataclasses.replace(default_reply(req), cached_tokens=500)  # noqa: E731
     with FakeOpenAIServer(cached) as server:
-        result = run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                     output=tmp_path / "a", progress=False, sample=2, price=(10.0, 20.0))
+        result = run(
+            "openai/gpt-4o",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            api_base=server.url,
+            output=tmp_path / "a",
+            progress=False,
+            sample=2,
+            price=(10.0, 20.0),
+        )
         calls = [c for r in read_run(result.run_dir).records.values() for a in r["attempts"] for c in a["calls"]]
         assert calls and all(c["cached_input_tokens"] == 500 for c in calls)
         assert all(c["cost_cents"] == pytest.approx((1000 * 10 + 50 * 20) / 1e6 * 100) for c in calls)
@@ -325,22 +475,51 @@ def test_unknown_costs_count_at_the_estimate_under_max_cost(synth_root, tmp_path
     unreported = lambda req: dataclasses.replace(default_reply(req), usage=False)  # noqa: E731
     with FakeOpenAIServer(unreported) as server:
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path, progress=False, concurrency=1, max_cost_cents=5.0, price=(10.0, 20.0))
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path,
+                progress=False,
+                concurrency=1,
+                max_cost_cents=5.0,
+                price=(10.0, 20.0),
+            )
     records = read_run(stopped.value.run_dir).records
     assert stopped.value.cause == "budget" and 0 < len(records) < 12
     assert all(r["cost_cents"] is None for r in records.values())
 
 
 def test_price_for_a_model_no_provider_bills_is_refused_and_a_resume_names_the_way_on(synth_root, tmp_path, elsewhere):
-    with pytest.raises(UserError, match="--price is the price of a provider's tokens; baseline:cv runs on the baseline backend"):
-        run("baseline:cv", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False,
-            price=(1.0, 2.0))
+    with pytest.raises(
+        UserError, match="--price is the price of a provider's tokens; baseline:cv runs on the baseline backend"
+    ):
+        run(
+            "baseline:cv",
+            dataroot=synth_root,
+            version="v1.0-mini",
+            split="all",
+            output=tmp_path,
+            progress=False,
+            price=(1.0, 2.0),
+        )
     from fake_openai import Reply
 
     with FakeOpenAIServer(lambda req: Reply.error(401)) as server:  # stops at its first call: a run to resume
         with pytest.raises(RunStopped) as stopped:
-            run("openai/gpt-4o", dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url,
-                output=tmp_path, progress=False, limit=2)
-        with pytest.raises(UserError, match="a resume keeps the run's price \\(it has none\\): drop --max-cost, or start a new run"):
+            run(
+                "openai/gpt-4o",
+                dataroot=synth_root,
+                version="v1.0-mini",
+                split="all",
+                api_base=server.url,
+                output=tmp_path,
+                progress=False,
+                limit=2,
+            )
+        with pytest.raises(
+            UserError, match="a resume keeps the run's price \\(it has none\\): drop --max-cost, or start a new run"
+        ):
             resume(stopped.value.run_dir, progress=False, max_cost_cents=5.0, api_base=server.url)

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import re
 
 import numpy as np
@@ -46,13 +45,17 @@ def test_corpus_reasons_say_what_happened():
     def reason(name):
         return lightemma.parse_actions(by_name[name][1], history=_history(name)).reason[0]
 
-    assert "skipped 1 list(s) repeating the history given in the prompt (at position 14)" in reason("quoted-history-before")
+    assert "skipped 1 list(s) repeating the history given in the prompt (at position 14)" in reason(
+        "quoted-history-before"
+    )
     assert "skipped 1 list(s) repeating the history" in reason("recap-history-after")
     assert "the list equals the history given in the prompt (no other list)" in reason("history-only")
     assert 'took the list after the cue "actually" at position' in reason("self-correction-three")
     assert "the same list given 2 times" in reason("repeated-same-list")
-    assert reason("recap-after-answer") == ("ambiguous: 2 different lists of 6 actions (at positions 0 and 116), and no correction or "
-                                            "final-answer cue says which is the answer")
+    assert reason("recap-after-answer") == (
+        "ambiguous: 2 different lists of 6 actions (at positions 0 and 116), and no correction or "
+        "final-answer cue says which is the answer"
+    )
     assert "ambiguous: 2 different lists" in reason("waypoints-after-answer")
     assert reason("range-in-pairs") == "pair 1 (4.5-5.0, 0.0) is ambiguous: 4.5-5.0 is a range or a subtraction"
     assert "pair 2 (5.5, 0.01-0.02) is ambiguous: 0.01-0.02" in reason("range-curvature")
@@ -84,7 +87,7 @@ def test_batch_of_the_whole_corpus_matches_one_by_one():
     batch = lightemma.parse_actions(answers, history=histories)
     assert batch.actions.shape == (len(answers), 6, 2)
     for i, answer in enumerate(answers):
-        one = lightemma.parse_actions(answer, history=histories[i:i + 1])
+        one = lightemma.parse_actions(answer, history=histories[i : i + 1])
         assert one.status[0] == batch.status[i]
         assert one.reason[0] == batch.reason[i]
         np.testing.assert_array_equal(one.actions[0], batch.actions[i])
@@ -125,7 +128,7 @@ def test_ok_mask_and_len():
         ({"texts": np.array(["a", 3], dtype=object)}, "item 1 is int"),
         ({"texts": "x", "n": 0}, "n must be a positive integer"),
         ({"texts": "x", "n": True}, "n must be a positive integer"),
-        ({"texts": "x", "mode": "fuzzy"}, "unknown parse mode \"fuzzy\"; expected one of: strict, lenient, paper, json"),
+        ({"texts": "x", "mode": "fuzzy"}, 'unknown parse mode "fuzzy"; expected one of: strict, lenient, paper, json'),
         ({"texts": "x", "mode": None}, "mode must be one of"),
         ({"texts": "x", "speed_range": (50, -10)}, "lo < hi"),
         ({"texts": "x", "speed_range": (0, float("nan"))}, "lo < hi"),
@@ -148,8 +151,14 @@ EXACT = "[(5.0, 0.01), (5.5, 0.0), (6.0, -0.02), (6.5, 0.0), (7.0, 0.0), (7.5, 0
 
 def test_texts_may_be_any_iterable_or_a_numpy_array_of_str():
     want = lightemma.parse_actions([EXACT, "nope"])
-    for texts in ((EXACT, "nope"), iter([EXACT, "nope"]), np.array([EXACT, "nope"]), np.array([EXACT, "nope"], dtype=object),
-                  {EXACT: 1, "nope": 2}.keys(), [np.str_(EXACT), "nope"]):
+    for texts in (
+        (EXACT, "nope"),
+        iter([EXACT, "nope"]),
+        np.array([EXACT, "nope"]),
+        np.array([EXACT, "nope"], dtype=object),
+        {EXACT: 1, "nope": 2}.keys(),
+        [np.str_(EXACT), "nope"],
+    ):
         got = lightemma.parse_actions(texts)
         assert got.status.tolist() == want.status.tolist() == ["ok", "failed"]
         np.testing.assert_array_equal(got.actions, want.actions)
@@ -161,7 +170,9 @@ def test_lone_surrogates_do_not_raise():
 
 
 def test_failure_kinds():
-    parsed = lightemma.parse_actions([EXACT, "", "no actions here", EXACT.replace("7.5", "75.0"), EXACT.replace("nan", "x").replace("0.003", "nan")])
+    parsed = lightemma.parse_actions(
+        [EXACT, "", "no actions here", EXACT.replace("7.5", "75.0"), EXACT.replace("nan", "x").replace("0.003", "nan")]
+    )
     assert parsed.failure.tolist() == ["", "format", "format", "implausible", "format"]
     assert parsed.reason[3] == "speed 75 at step 6 outside [-10, 50] m/s"
     assert parsed.failure.dtype.kind == "U" and parsed.status.dtype.kind == "U"
@@ -196,7 +207,9 @@ def test_plausibility_record():
 
 def test_json_mode():
     obj = '{"actions": [[5.0, 0.01], [5.5, 0.0], [6.0, -0.02], [6.5, 0.0], [7.0, 0.0], [7.5, 0.003]]}'
-    parsed = lightemma.parse_actions([obj, "```json\n" + obj + "\n```", obj[:-10], EXACT, obj.replace("5.5", "+5.5")], mode="json")
+    parsed = lightemma.parse_actions(
+        [obj, "```json\n" + obj + "\n```", obj[:-10], EXACT, obj.replace("5.5", "+5.5")], mode="json"
+    )
     assert parsed.status.tolist() == ["ok", "ok", "failed", "failed", "failed"]
     assert parsed.failure.tolist() == ["", "", "truncated", "format", "format"]
     np.testing.assert_array_equal(parsed.actions[0], lightemma.parse_actions(EXACT).actions[0])
@@ -272,8 +285,36 @@ def a_list(draw, pairs=plausible_pairs):
     return outer[0] + body + outer[1], values
 
 
-WORDS = st.sampled_from(["the", "car", "Past actions:", "So:", "Wait,", "history", "speed", "is", "3 seconds", "0.5 s", "v1 =",
-                         "6 steps", "at", "about", "m/s", "-", "—", ".", ",", ":", "**", "```", "\n", "\n\n", "I think", "e.g."])
+WORDS = st.sampled_from(
+    [
+        "the",
+        "car",
+        "Past actions:",
+        "So:",
+        "Wait,",
+        "history",
+        "speed",
+        "is",
+        "3 seconds",
+        "0.5 s",
+        "v1 =",
+        "6 steps",
+        "at",
+        "about",
+        "m/s",
+        "-",
+        "—",
+        ".",
+        ",",
+        ":",
+        "**",
+        "```",
+        "\n",
+        "\n\n",
+        "I think",
+        "e.g.",
+    ]
+)
 any_number = st.floats(min_value=-1e4, max_value=1e4, allow_nan=False).map(lambda x: repr(round(x, 3)))
 
 
@@ -292,7 +333,11 @@ def prose_with_pairs(draw, full_lists=False):
             k = draw(st.sampled_from([1, 2, 3, 4, 5, 7, 8]))
             parts.append("[" + ", ".join(f"({draw(any_number)}, {draw(any_number)})" for _ in range(k)) + "]")
         elif kind == 3 and full_lists:
-            parts.append(draw(a_list(st.lists(st.tuples(any_number.map(float), any_number.map(float)), min_size=6, max_size=6)))[0])
+            parts.append(
+                draw(a_list(st.lists(st.tuples(any_number.map(float), any_number.map(float)), min_size=6, max_size=6)))[
+                    0
+                ]
+            )
         elif kind == 4:
             parts.append("<think>" + draw(a_list())[0] + " (5, [1, 2" + "</think>")  # anything goes inside
         else:
@@ -309,16 +354,61 @@ def test_the_one_list_among_prose_with_other_pairs_is_returned(before, answer, a
     np.testing.assert_array_equal(parsed.actions[0], np.array(values))
 
 
-NO_CUE_WORDS = st.sampled_from(["the", "car", "Past actions:", "So:", "history", "For comparison,", "Alternatively,", "speed", "is",
-                                "3 seconds", "at", "about", "\n", "\n\n", "I think", "e.g.", "**", "Also", "then", "final speed",
-                                "the correct", "waypoints:", "m/s", ".", "we could wait for", "if it is actually red", "the updated plan"])
-CUES = st.sampled_from(["Wait,", "Correction:", "Final answer:", "**Final Answer:**", "Actually,", "Revised:", "Corrected:", "wait,",
-                        "the final answer is"])
+NO_CUE_WORDS = st.sampled_from(
+    [
+        "the",
+        "car",
+        "Past actions:",
+        "So:",
+        "history",
+        "For comparison,",
+        "Alternatively,",
+        "speed",
+        "is",
+        "3 seconds",
+        "at",
+        "about",
+        "\n",
+        "\n\n",
+        "I think",
+        "e.g.",
+        "**",
+        "Also",
+        "then",
+        "final speed",
+        "the correct",
+        "waypoints:",
+        "m/s",
+        ".",
+        "we could wait for",
+        "if it is actually red",
+        "the updated plan",
+    ]
+)
+CUES = st.sampled_from(
+    [
+        "Wait,",
+        "Correction:",
+        "Final answer:",
+        "**Final Answer:**",
+        "Actually,",
+        "Revised:",
+        "Corrected:",
+        "wait,",
+        "the final answer is",
+    ]
+)
 
 
 @settings(max_examples=600, deadline=None)
-@given(a_list(), a_list(), st.lists(NO_CUE_WORDS, max_size=5).map(" ".join), st.none() | CUES,
-       st.sampled_from(["none", "b", "other"]), prose_with_pairs(full_lists=True))
+@given(
+    a_list(),
+    a_list(),
+    st.lists(NO_CUE_WORDS, max_size=5).map(" ".join),
+    st.none() | CUES,
+    st.sampled_from(["none", "b", "other"]),
+    prose_with_pairs(full_lists=True),
+)
 def test_a_later_different_list_never_wins_without_a_cue(first, second, between, cue, history_is, after):
     """Issue 19: for a valid answer A followed by a different list B, lenient never returns B unless a cue
     introduces B. Issue 32: a B equal to the given history is skipped only where its sentence calls it the past
@@ -340,7 +430,10 @@ def test_a_later_different_list_never_wins_without_a_cue(first, second, between,
         else:
             assert parsed.failure[0] == "ambiguous", (text, parsed.reason[0])
     elif called_past:  # the cue and the past word disagree about B
-        assert parsed.failure[0] == "ambiguous" and "introduced both as the past" in parsed.reason[0], (text, parsed.reason[0])
+        assert parsed.failure[0] == "ambiguous" and "introduced both as the past" in parsed.reason[0], (
+            text,
+            parsed.reason[0],
+        )
     else:  # the cue introduces B, even when B equals the history
         np.testing.assert_array_equal(got, b)
     # whatever follows, a text with A and B never gives B without a cue
@@ -359,14 +452,54 @@ def test_a_cut_off_list_never_gives_actions(before, answer, data):
     assert np.isnan(parsed.actions[0]).all()
 
 
-FRAGMENTS = st.sampled_from(["(", ")", "[", "]", "{", "}", ",", ";", " ", "\n", "-", "+", "*", "/", ".", "\u2212", "e", "0", "1",
-                             "5.0", "0.01", "0001", "3.7640.002", "nan", "<think>", "</think>", "v1 =", "m/s", "1/m", '"v": ',
-                             '"c": ', "3 seconds", "1. ", "1) ", "\x00", "κ"])
+FRAGMENTS = st.sampled_from(
+    [
+        "(",
+        ")",
+        "[",
+        "]",
+        "{",
+        "}",
+        ",",
+        ";",
+        " ",
+        "\n",
+        "-",
+        "+",
+        "*",
+        "/",
+        ".",
+        "\u2212",
+        "e",
+        "0",
+        "1",
+        "5.0",
+        "0.01",
+        "0001",
+        "3.7640.002",
+        "nan",
+        "<think>",
+        "</think>",
+        "v1 =",
+        "m/s",
+        "1/m",
+        '"v": ',
+        '"c": ',
+        "3 seconds",
+        "1. ",
+        "1) ",
+        "\x00",
+        "κ",
+    ]
+)
 
 
 @settings(max_examples=1500, deadline=None)
-@given(st.text(max_size=400) | st.binary(max_size=400).map(lambda b: b.decode("utf-8", "replace"))
-       | st.lists(FRAGMENTS, max_size=80).map("".join))
+@given(
+    st.text(max_size=400)
+    | st.binary(max_size=400).map(lambda b: b.decode("utf-8", "replace"))
+    | st.lists(FRAGMENTS, max_size=80).map("".join)
+)
 def test_fuzz_arbitrary_text_never_raises(text):
     for mode in ("lenient", "strict", "json", "paper"):
         parsed = lightemma.parse_actions([text, text], mode=mode)

@@ -13,16 +13,16 @@ import json
 
 import numpy as np
 import pytest
-from fake_openai import FakeOpenAIServer, Reply, default_reply
-from memframes import FrameIndex, make_frames
 
 import lightemma
+from fake_openai import FakeOpenAIServer, Reply, default_reply
 from lightemma.cli import main as cli_main
 from lightemma.evaluation import evaluate_runs
 from lightemma.evaluation.rescore import ParseDefinition, rescored
 from lightemma.frames.render import format_history
 from lightemma.pipeline import resume, run
 from lightemma.runs.store import read_run
+from memframes import FrameIndex, make_frames
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=5.0, progress=False)
 N = 6
@@ -83,19 +83,25 @@ def ade(actions, frames):
 def test_a_recap_of_the_history_after_the_answer_never_becomes_the_prediction(tmp_path, frames, capsys):
     script, prompts = recap_script(frames, history_recap(frames))
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "runs", cache=True, **FAST)
+        result = run(
+            "openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "runs", cache=True, **FAST
+        )
         records = read_run(result.run_dir).records
         assert len(prompts) == N
         for i, f in enumerate(frames):
             rec = records[f.frame_id]
-            assert (rec["status"], rec["failure"], rec["n_attempts"]) == ("corrected", "", 1), rec["attempts"][0]["reason"]
+            assert (rec["status"], rec["failure"], rec["n_attempts"]) == ("corrected", "", 1), rec["attempts"][0][
+                "reason"
+            ]
             np.testing.assert_array_equal(rec["actions"], answer_of(i))
             assert "skipped 1 list(s) repeating the history given in the prompt" in rec["attempts"][0]["reason"]
         want = ade([answer_of(i) for i in range(N)], frames)
         history_ade = ade([f.history_actions for f in frames], frames)
         assert result.summary["ade_avg"] == pytest.approx(want) and abs(want - history_ade) > 0.5
         # the response cache replays the same answers: parsed with the same histories
-        replay = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "runs", cache=True, **FAST)
+        replay = run(
+            "openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "runs", cache=True, **FAST
+        )
         assert len(server.requests) == 3 * N  # the second run was served from the cache
     again = read_run(replay.run_dir).records
     assert all(r["cached"] and r["status"] == "corrected" for r in again.values())
@@ -115,10 +121,14 @@ def test_a_recap_of_the_history_after_the_answer_never_becomes_the_prediction(tm
 def test_a_recap_that_is_not_the_history_is_ambiguous_and_resume_keeps_it_so(tmp_path, frames, capsys):
     script, _ = recap_script(frames, waypoint_recap)
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "runs", max_attempts=2, **FAST)
+        result = run(
+            "openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "runs", max_attempts=2, **FAST
+        )
         for rec in read_run(result.run_dir).records.values():
             assert (rec["status"], rec["failure"], rec["n_attempts"]) == ("failed", "ambiguous", 2)
-            assert rec["attempts"][0]["reason"].startswith("ambiguous: 2 different lists of 6 actions (at positions 0 and ")
+            assert rec["attempts"][0]["reason"].startswith(
+                "ambiguous: 2 different lists of 6 actions (at positions 0 and "
+            )
         assert (result.summary["failed"], result.summary["ade_frames"]) == (N, 0)
         retried = resume(result.run_dir, retry_failed=True, frames=frames, progress=False, api_base=server.url)
     assert all(r["failure"] == "ambiguous" for r in read_run(retried.run_dir).records.values())
@@ -132,8 +142,16 @@ def test_rescoring_passes_each_records_own_history(frames):
     records = []
     for i, f in enumerate(frames):
         answer = text_of(answer_of(i)) + "\nPast: " + format_history(f.history_actions)
-        records.append({"frame_id": f.frame_id, "status": "failed", "failure": "format", "history_actions": f.history_actions.tolist(),
-                        "attempts": [{"answer": answer, "status": "failed", "reason": ""}], "answer": answer})
+        records.append(
+            {
+                "frame_id": f.frame_id,
+                "status": "failed",
+                "failure": "format",
+                "history_actions": f.history_actions.tolist(),
+                "attempts": [{"answer": answer, "status": "failed", "reason": ""}],
+                "answer": answer,
+            }
+        )
     records[-1] = {k: v for k, v in records[-1].items() if k != "history_actions"}
     out = list(rescored(records, ParseDefinition("lenient"), block=4))  # blocks split the batch: rows stay aligned
     for i, rec in enumerate(out[:-1]):
@@ -150,17 +168,30 @@ def test_an_answer_equal_to_the_history_is_scored_as_given(frames):
     records = []
     for i, f in enumerate(frames):
         quoted = format_history(f.history_actions)
-        answer = {0: f"Draft: {text_of(answer_of(i))}\nFinal answer: {quoted}", 1: f"{quoted}\n{text_of(degenerate)}",
-                  2: f"The previous actions were {quoted}. Now: {text_of(degenerate)}"}[i % 3]
-        records.append({"frame_id": f.frame_id, "status": "failed", "failure": "format", "history_actions": f.history_actions.tolist(),
-                        "attempts": [{"answer": answer, "status": "failed", "reason": ""}], "answer": answer})
+        answer = {
+            0: f"Draft: {text_of(answer_of(i))}\nFinal answer: {quoted}",
+            1: f"{quoted}\n{text_of(degenerate)}",
+            2: f"The previous actions were {quoted}. Now: {text_of(degenerate)}",
+        }[i % 3]
+        records.append(
+            {
+                "frame_id": f.frame_id,
+                "status": "failed",
+                "failure": "format",
+                "history_actions": f.history_actions.tolist(),
+                "attempts": [{"answer": answer, "status": "failed", "reason": ""}],
+                "answer": answer,
+            }
+        )
     out = list(rescored(records, ParseDefinition("lenient"), block=4))
     for i, (f, rec) in enumerate(zip(frames, out)):
         reason = rec["attempts"][0]["reason"]
         if i % 3 == 0:
             assert rec["status"] == "corrected", reason
             np.testing.assert_allclose(rec["actions"], f.history_actions, rtol=0, atol=1e-12)
-            assert "the list equals the history given in the prompt" in reason and "took the list after the cue" in reason
+            assert (
+                "the list equals the history given in the prompt" in reason and "took the list after the cue" in reason
+            )
         elif i % 3 == 1:
             assert (rec["status"], rec["failure"]) == ("failed", "ambiguous"), reason
         else:
@@ -177,7 +208,12 @@ def test_history_rows_and_the_shape_check():
     text = "Past: " + text_of(np.zeros((6, 2)))
     assert lightemma.parse_actions(text, history=np.full((1, 6, 2), np.nan)).status[0] == "corrected"
     assert "the list equals the history" in lightemma.parse_actions(text, history=np.zeros((1, 6, 2))).reason[0]
-    assert lightemma.parse_actions(text + " then " + text.replace("0.0)", "0.5)", 1), history=np.zeros((1, 6, 2))).status[0] == "corrected"
+    assert (
+        lightemma.parse_actions(text + " then " + text.replace("0.0)", "0.5)", 1), history=np.zeros((1, 6, 2))).status[
+            0
+        ]
+        == "corrected"
+    )
     assert lightemma.parse_actions(text, mode="paper", history=np.zeros((1, 6, 2))).status[0] == "corrected"
 
 
@@ -188,7 +224,10 @@ def test_every_parse_failure_kind_is_known_to_evaluation():
     from lightemma.runs.columns import failure_code
 
     assert set(PARSE_FAILURES) <= set(OUTCOME_CODES)
-    assert "ambiguous" in UNREADABLE and failure_code("ambiguous") not in (failure_code("format"), failure_code("implausible"))
+    assert "ambiguous" in UNREADABLE and failure_code("ambiguous") not in (
+        failure_code("format"),
+        failure_code("implausible"),
+    )
     codes = np.array([failure_code(k) for k in ("", "ambiguous", "format", "truncated", "implausible", "api_error")])
     counts = outcome_counts(codes, codes == 0)
     assert counts == {"scored": 1, "failed": 3, "implausible": 1, "api_errors": 1}

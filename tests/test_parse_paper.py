@@ -16,6 +16,7 @@ from hypothesis import strategies as st
 import lightemma
 from paper_reference import paper_reference
 
+
 def check_agrees(texts: list[str], n: int = 6) -> None:
     parsed = lightemma.parse_actions(texts, n=n, mode="paper")
     for i, text in enumerate(texts):
@@ -46,11 +47,23 @@ EXACT = "[" + ", ".join(f"({v}, {c})" for v, c in SIX) + "]"
         ("prose-around", "Sure! " + EXACT + " Drive safely.", "corrected"),
         ("think-block", "<think>history [(3.0, 0.0)]</think>\n" + EXACT, "corrected"),  # 2 + 12 runs: first 12
         ("self-correction", EXACT + " Wait, corrected: " + EXACT, "corrected"),
-        ("prose-numbers", "Over the next 3 seconds at 0.5 s steps: v1 = 3.0, c1 = 0.0, v2 = 3.1, c2 = 0.0, v3 = 3.2", "corrected"),
+        (
+            "prose-numbers",
+            "Over the next 3 seconds at 0.5 s steps: v1 = 3.0, c1 = 0.0, v2 = 3.1, c2 = 0.0, v3 = 3.2",
+            "corrected",
+        ),
         ("arithmetic", "[" + ", ".join(["(7.2-0.5, 0.002)"] * 6) + "]", "failed"),  # `7.2-0.5` is no run of the form
         ("fused", "[" + "".join(["(3.7640.002)"] * 6) + "]", "failed"),
-        ("lost-decimal-points", "[(5254,0001),(5559,00005),(5864,0001),(6170,0001),(6475,0001),(6780,0001)]", "corrected"),
-        ("truncated", "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.5, 0.0), (5.6, -0.0", "corrected"),  # c6 = -0.0
+        (
+            "lost-decimal-points",
+            "[(5254,0001),(5559,00005),(5864,0001),(6170,0001),(6475,0001),(6780,0001)]",
+            "corrected",
+        ),
+        (
+            "truncated",
+            "[(5.0, 0.0), (5.1, 0.0), (5.2, 0.0), (5.3, 0.0), (5.5, 0.0), (5.6, -0.0",
+            "corrected",
+        ),  # c6 = -0.0
         ("empty", "", "failed"),
     ],
 )
@@ -62,13 +75,17 @@ def test_paper_mode_on_the_issue_kinds(name, text, status):
 
 def test_paper_mode_reads_what_the_paper_read():
     # the paper's corrections: `0001` is a Python syntax error (FE) but gives 1.0 as a digit run
-    lost = lightemma.parse_actions("[(5254,0001),(5559,00005),(5864,0001),(6170,0001),(6475,0001),(6780,0001)]", mode="paper")
+    lost = lightemma.parse_actions(
+        "[(5254,0001),(5559,00005),(5864,0001),(6170,0001),(6475,0001),(6780,0001)]", mode="paper"
+    )
     assert lost.actions[0, 0].tolist() == [5254.0, 1.0]
     assert "leading zeros" in lost.reason[0]
     # no plausibility gate in paper mode, even with the limits given
     assert lightemma.parse_actions(EXACT.replace("5.0", "5254"), mode="paper", speed_range=(-10, 50)).status[0] == "ok"
     # prose numbers are read as the paper read them: `3` seconds, `0.5` s, `1` of v1 …
-    prose = lightemma.parse_actions("Over the next 3 seconds at 0.5 s steps: v1 = 3.0, c1 = 0.0, v2 = 3.1, c2 = 0.0, v3 = 3.2", mode="paper")
+    prose = lightemma.parse_actions(
+        "Over the next 3 seconds at 0.5 s steps: v1 = 3.0, c1 = 0.0, v2 = 3.1, c2 = 0.0, v3 = 3.2", mode="paper"
+    )
     assert prose.actions[0, :2].tolist() == [[3.0, 0.5], [1.0, 3.0]]
 
 
@@ -89,13 +106,48 @@ def test_paper_mode_n_other_than_six():
 # ---------------------------------------------------------------- the property
 def _number_texts() -> st.SearchStrategy[str]:
     finite = st.floats(min_value=-1e6, max_value=1e6, allow_nan=False, allow_infinity=False)
-    fixed = st.sampled_from([
-        "5.", ".5", "1e3", "1E-3", "2.5e+2", "0001", "00", "0.0", "-0", "-0.0", "1_000", "1__0", "0x1f", "0b101",
-        "0o17", "\u22125", "5a", "1.5.5", "inf", "nan", "1e999", "True", "1j", "--5", "-(5)", "(5)", "((5))", "+ 5",
-        "7.2-0.5", "1/50", "3.7640.002", "0_0", "09.5", "1e", "- (0)", "12345678901234567890123",
-    ])
+    fixed = st.sampled_from(
+        [
+            "5.",
+            ".5",
+            "1e3",
+            "1E-3",
+            "2.5e+2",
+            "0001",
+            "00",
+            "0.0",
+            "-0",
+            "-0.0",
+            "1_000",
+            "1__0",
+            "0x1f",
+            "0b101",
+            "0o17",
+            "\u22125",
+            "5a",
+            "1.5.5",
+            "inf",
+            "nan",
+            "1e999",
+            "True",
+            "1j",
+            "--5",
+            "-(5)",
+            "(5)",
+            "((5))",
+            "+ 5",
+            "7.2-0.5",
+            "1/50",
+            "3.7640.002",
+            "0_0",
+            "09.5",
+            "1e",
+            "- (0)",
+            "12345678901234567890123",
+        ]
+    )
     valid = st.one_of(
-        st.integers(-10**6, 10**6).map(str),
+        st.integers(-(10**6), 10**6).map(str),
         finite.map(repr),
         finite.map(lambda x: f"{x:.3f}"),
         finite.map(lambda x: f"{x:e}"),
@@ -148,7 +200,10 @@ def _list_texts() -> st.SearchStrategy[str]:
 
 
 PROSE = st.lists(
-    st.sampled_from(list("abcdefv κ:=,.;-()[]#\n\t 0123456789−'\"<>/*") + ["<think>", "</think>", "```", "3 seconds", "0.5 s", "v1 = "]),
+    st.sampled_from(
+        list("abcdefv κ:=,.;-()[]#\n\t 0123456789−'\"<>/*")
+        + ["<think>", "</think>", "```", "3 seconds", "0.5 s", "v1 = "]
+    ),
     max_size=20,
 ).map("".join)
 WHITE = st.sampled_from(["\n", "  ", "\t", "\n\n", " # done", "# note\n", "\n  ", "\n\x0c", "\r\n", "\n \n"])

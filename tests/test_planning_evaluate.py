@@ -25,8 +25,24 @@ def world(tmp_path_factory):
     # 8 scenes: the turning ones give the map its intersections
     root = write_dataset(base / "data", scenes=8, keyframes=22, image_size=(64, 36), sweeps=False)
     for kind in ("cv", "oracle"):
-        assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(root), "--version", VERSION,
-                     "--split", "all", "--out", str(base / "runs" / kind)]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--model",
+                    f"baseline:{kind}",
+                    "--dataroot",
+                    str(root),
+                    "--version",
+                    VERSION,
+                    "--split",
+                    "all",
+                    "--out",
+                    str(base / "runs" / kind),
+                ]
+            )
+            == 0
+        )
     dirs = {kind: find_run_dirs(base / "runs" / kind)[0] for kind in ("cv", "oracle")}
     return base, root, dirs
 
@@ -90,8 +106,10 @@ def test_pairwise_covers_the_headline_aggregate(world, capsys):
     assert set(rows) >= {pair["model_a"], pair["model_b"]}
     # the mean paired difference on the frames where both have a value, from the per-frame values
     ev = evaluate_loaded([load_run(d, details=True) for d in dirs.values()], resampling=Resampling(n_resamples=0))
-    va, vb = (dict(zip(ev.planning.runs[m].frame_ids, ev.planning.runs[m].values["epdms"]))
-              for m in (pair["model_a"], pair["model_b"]))
+    va, vb = (
+        dict(zip(ev.planning.runs[m].frame_ids, ev.planning.runs[m].values["epdms"]))
+        for m in (pair["model_a"], pair["model_b"])
+    )
     both = [f for f in va if f in vb and np.isfinite(va[f]) and np.isfinite(vb[f])]
     assert pair["frames"] == len(both)
     assert pair["diff"] == pytest.approx(float(np.mean([va[f] - vb[f] for f in both])))
@@ -132,8 +150,23 @@ def test_missing_layers_are_na_with_the_reason(world, tmp_path, capsys):
         for layer in ("lane", "lane_connector", "road_segment"):
             doc[layer] = []
         path.write_text(json.dumps(doc))
-    assert main(["evaluate", str(dirs["oracle"]), "--dataroot", str(data), "--version", VERSION, "--format", "json",
-                 "--resamples", "0"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(dirs["oracle"]),
+                "--dataroot",
+                str(data),
+                "--version",
+                VERSION,
+                "--format",
+                "json",
+                "--resamples",
+                "0",
+            ]
+        )
+        == 0
+    )
     doc = json.loads(capsys.readouterr().out)
     row = _planning_table(doc)["rows"][0]
     assert row["ddc"] is None and "no lane polygons" in row["ddc_na"]
@@ -143,8 +176,23 @@ def test_missing_layers_are_na_with_the_reason(world, tmp_path, capsys):
     assert any("planning score" in w and "no lane polygons" in w for w in doc["warnings"])
     # no expansion at all: the drivable area is the base map mask, still scored
     shutil.rmtree(data / "maps" / "expansion")
-    assert main(["evaluate", str(dirs["oracle"]), "--dataroot", str(data), "--version", VERSION, "--format", "json",
-                 "--resamples", "0"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(dirs["oracle"]),
+                "--dataroot",
+                str(data),
+                "--version",
+                VERSION,
+                "--format",
+                "json",
+                "--resamples",
+                "0",
+            ]
+        )
+        == 0
+    )
     row = _planning_table(json.loads(capsys.readouterr().out))["rows"][0]
     assert row["planning_map"] == "mask" and row["dac"] is not None and row["ddc"] is None
 
@@ -182,12 +230,18 @@ def test_a_frame_without_a_pose_and_a_degenerate_box_are_na(world, tmp_path):
     rows = np.flatnonzero(run.valid)
     no_pose = run.frame_ids[rows[5]].rsplit("/", 1)[-1]
     boxed = run.frame_ids[rows[12]].rsplit("/", 1)[-1]
-    front = {c["token"] for c in json.loads((data / VERSION / "calibrated_sensor.json").read_text())
-             if c["sensor_token"] in {s["token"] for s in json.loads((data / VERSION / "sensor.json").read_text())
-                                      if s["channel"] == "CAM_FRONT"}}
+    front = {
+        c["token"]
+        for c in json.loads((data / VERSION / "calibrated_sensor.json").read_text())
+        if c["sensor_token"]
+        in {s["token"] for s in json.loads((data / VERSION / "sensor.json").read_text()) if s["channel"] == "CAM_FRONT"}
+    }
     sd = json.loads((data / VERSION / "sample_data.json").read_text())
-    pose_token = next(r["ego_pose_token"] for r in sd if r["sample_token"] == no_pose and r["is_key_frame"]
-                      and r["calibrated_sensor_token"] in front)
+    pose_token = next(
+        r["ego_pose_token"]
+        for r in sd
+        if r["sample_token"] == no_pose and r["is_key_frame"] and r["calibrated_sensor_token"] in front
+    )
     _edit_table(data, "ego_pose", lambda rs: rs.remove(next(r for r in rs if r["token"] == pose_token)))
 
     def shrink(rs):
@@ -220,8 +274,10 @@ def test_pairwise_on_the_headline_aggregate_by_hand():
     ids = [f"s{i // 3}/t{i}" for i in range(9)]
     a = np.array([1.0, 0.5, 0.8, 0.9, 0.7, np.nan, 1.0, 0.2, 0.6])
     b = np.array([0.5, 0.5, 0.9, 0.4, 0.7, 0.3, 0.8, np.nan, 0.1])
-    runs = {label: P.RunPlanning(ids, np.arange(9), {"epdms": v}, {"epdms": [None] * 9})
-            for label, v in (("A", a), ("B", b))}
+    runs = {
+        label: P.RunPlanning(ids, np.arange(9), {"epdms": v}, {"epdms": [None] * 9})
+        for label, v in (("A", a), ("B", b))
+    }
     result = P.PlanningResult(rows={}, ground_truth=None, runs=runs, headline="epdms")
     (row,) = P.pairwise_planning(result, ["A", "B"], FAST)
     both = np.isfinite(a) & np.isfinite(b)
@@ -232,8 +288,11 @@ def test_pairwise_on_the_headline_aggregate_by_hand():
 
 def test_scenario_tags_from_the_sub_scores():
     ids = ["s/a", "s/b", "s/c", "s/d"]
-    values = {"ddc": np.array([1.0, 0.5, np.nan, 0.0]), "c": np.array([1.0, 0.0, np.nan, 1.0]),
-              "ep": np.array([0.0, 0.4, np.nan, 1.0])}
+    values = {
+        "ddc": np.array([1.0, 0.5, np.nan, 0.0]),
+        "c": np.array([1.0, 0.0, np.nan, 1.0]),
+        "ep": np.array([0.0, 0.4, np.nan, 1.0]),
+    }
     tags = P.frame_tags(P.RunPlanning(ids, np.arange(4), values, {}))
     assert tags["wrong-way"].tolist() == [False, True, False, True]
     assert tags["uncomfortable"].tolist() == [False, True, False, False]
@@ -243,8 +302,22 @@ def test_scenario_tags_from_the_sub_scores():
 def test_report_has_the_table_the_figure_and_the_tags(world, tmp_path):
     base, root, dirs = world
     out = tmp_path / "report"
-    assert main(["report", str(base / "runs"), "--out", str(out), "--no-pictures", "--resamples", "50",
-                 "--convention", "lightemma"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                str(base / "runs"),
+                "--out",
+                str(out),
+                "--no-pictures",
+                "--resamples",
+                "50",
+                "--convention",
+                "lightemma",
+            ]
+        )
+        == 0
+    )
     index = (out / "index.md").read_text()
     assert "### Planning score (NAVSIM)" in index and P.GT_LABEL in index
     assert (out / "figures" / "planning.png").is_file()
@@ -282,8 +355,23 @@ def test_imported_runs_get_the_score_with_a_dataroot(world, tmp_path, capsys):
     assert main(["evaluate", str(run.run_dir), "--resamples", "0", "--format", "json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert "planning" not in [t["name"] for t in doc["tables"]]  # no dataroot: no numbers to show
-    assert main(["evaluate", str(run.run_dir), "--resamples", "0", "--format", "json", "--dataroot", str(root),
-                 "--version", VERSION]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(run.run_dir),
+                "--resamples",
+                "0",
+                "--format",
+                "json",
+                "--dataroot",
+                str(root),
+                "--version",
+                VERSION,
+            ]
+        )
+        == 0
+    )
     doc = json.loads(capsys.readouterr().out)
     row = _planning_table(doc)["rows"][0]
     assert row["nc"] == 1.0 and 0.8 < row["dac"] <= 1.0 and row["c"] is not None and row["epdms"] is not None
@@ -294,8 +382,22 @@ def test_imported_runs_get_the_score_with_a_dataroot(world, tmp_path, capsys):
 def test_the_frame_browser_carries_the_simulated_path(world, tmp_path):
     base, root, dirs = world
     out = tmp_path / "report"
-    assert main(["report", str(dirs["oracle"]), "--out", str(out), "--no-pictures", "--resamples", "0",
-                 "--convention", "lightemma"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                str(dirs["oracle"]),
+                "--out",
+                str(out),
+                "--no-pictures",
+                "--resamples",
+                "0",
+                "--convention",
+                "lightemma",
+            ]
+        )
+        == 0
+    )
     text = (out / "html" / "data.js").read_text()
     data = json.loads(text[text.index("(") + 1 : text.rindex(")")])
     sim = np.array([np.nan if v is None else v for v in data["sim"][0]]).reshape(len(data["ids"]), 11, 2)
@@ -394,11 +496,22 @@ def test_a_cone_in_the_path_is_a_static_object_at_fault_half(world, tmp_path):
 
     def add_annotations(rs):
         for i, s in enumerate(scene + [lone]):
-            rs.append({"token": f"cone-{i}", "sample_token": s, "instance_token": "cone" if i < len(scene) else
-                       "lone-cone", "visibility_token": "4", "attribute_tokens": [],
-                       "translation": [at[0] if i < len(scene) else at[0] + 500.0, at[1], 0.4],
-                       "size": [0.4, 0.4, 0.8], "rotation": quaternion_from_yaw(0.0), "prev": "", "next": "",
-                       "num_lidar_pts": 5, "num_radar_pts": 0})
+            rs.append(
+                {
+                    "token": f"cone-{i}",
+                    "sample_token": s,
+                    "instance_token": "cone" if i < len(scene) else "lone-cone",
+                    "visibility_token": "4",
+                    "attribute_tokens": [],
+                    "translation": [at[0] if i < len(scene) else at[0] + 500.0, at[1], 0.4],
+                    "size": [0.4, 0.4, 0.8],
+                    "rotation": quaternion_from_yaw(0.0),
+                    "prev": "",
+                    "next": "",
+                    "num_lidar_pts": 5,
+                    "num_radar_pts": 0,
+                }
+            )
 
     _edit_table(data, "category", add_category)
     _edit_table(data, "instance", add_instances)

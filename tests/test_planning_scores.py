@@ -362,7 +362,14 @@ def test_kernel_agrees_with_a_shapely_oracle_of_navsims_definitions(seed):
     seen = {k: set() for k in ("nc", "dac", "ddc", "ttc", "lk")}
     for st, agents, road, lanes, on_route, crossing, route in scenes:
         want = oracle(
-            st, agents, Polygon(road[0]), [Polygon(r) for r in lanes], on_route, Polygon(crossing), route, route,
+            st,
+            agents,
+            Polygon(road[0]),
+            [Polygon(r) for r in lanes],
+            on_route,
+            Polygon(crossing),
+            route,
+            route,
             EGO,
         )
         m = PlanningMap(
@@ -406,13 +413,21 @@ def test_batches_share_frames_and_equal_one_by_one_calls():
     for i in range(6):
         f = frame[i]
         one_fl = FrameLanes(np.array([0, 2]), fl.ids[2 * f : 2 * f + 2], fl.on_route[2 * f : 2 * f + 2])
-        one, _ = subscores(plans[i : i + 1], agents=agents[f : f + 1], route=routes[f : f + 1],
-                           centreline=routes[f : f + 1], map=m, frame_lanes=one_fl, ego=EGO)
+        one, _ = subscores(
+            plans[i : i + 1],
+            agents=agents[f : f + 1],
+            route=routes[f : f + 1],
+            centreline=routes[f : f + 1],
+            map=m,
+            frame_lanes=one_fl,
+            ego=EGO,
+        )
         for k in got:
             np.testing.assert_equal(got[k][i], one[k][0])
         # and the same as the union of the tiles tested by a one-polygon map
-        whole, _ = subscores(plans[i : i + 1], map=PlanningMap(PolygonSet.from_rings([[rect(-50, -12, 150, 12)]])),
-                             ego=EGO)
+        whole, _ = subscores(
+            plans[i : i + 1], map=PlanningMap(PolygonSet.from_rings([[rect(-50, -12, 150, 12)]])), ego=EGO
+        )
         assert whole["dac"][0] == one["dac"][0]
 
 
@@ -474,9 +489,20 @@ def test_bad_input_is_na_with_a_reason():
     plans = np.stack([run(0, -1.75, 10), run(0, -1.75, 10)])
     plans[1, 12, 0] = np.nan
     gt = run(0, -1.75, 10)[None]
-    r = drive_scores(plans, gt, frame=[0, 0], agents=agents_of(track(100, 30, 0)), map=FULL_MAP,
-                     frame_lanes=ONE_FRAME_LANES, route=ROUTE, centreline=ROUTE, ego=EGO,
-                     c=[1, 1], hc=[1, 1], ec=[1, 1])
+    r = drive_scores(
+        plans,
+        gt,
+        frame=[0, 0],
+        agents=agents_of(track(100, 30, 0)),
+        map=FULL_MAP,
+        frame_lanes=ONE_FRAME_LANES,
+        route=ROUTE,
+        centreline=ROUTE,
+        ego=EGO,
+        c=[1, 1],
+        hc=[1, 1],
+        ec=[1, 1],
+    )
     assert np.isfinite(r["epdms"][0])
     for k in ("nc", "dac", "ddc", "ttc", "lk", "ep", "pdms", "epdms"):
         assert math.isnan(r[k][1]), k
@@ -501,8 +527,16 @@ def test_bad_input_is_na_with_a_reason():
     v, why = subscores(run(0, 0, 10)[None], route=bad_route, ego=EGO)
     assert math.isnan(v["ep_raw"][0]) and "route" in why["ep_raw"][0]
     # comfort not given
-    r = drive_scores(run(0, -1.75, 5)[None], gt, agents=agents_of(track(100, 30, 0)), map=FULL_MAP,
-                     frame_lanes=ONE_FRAME_LANES, route=ROUTE, centreline=ROUTE, ego=EGO)
+    r = drive_scores(
+        run(0, -1.75, 5)[None],
+        gt,
+        agents=agents_of(track(100, 30, 0)),
+        map=FULL_MAP,
+        frame_lanes=ONE_FRAME_LANES,
+        route=ROUTE,
+        centreline=ROUTE,
+        ego=EGO,
+    )
     assert math.isnan(r["epdms"][0]) and "hc (hc not given)" in r.reasons["epdms"][0]
 
 
@@ -568,7 +602,9 @@ def _expansion(tmp_path, lanes=True, crossing=True):
         "road_segment": [
             {"token": "rs0", "polygon_token": poly("seg0", rect(100, -6, 120, 6)), "is_intersection": True},
             {"token": "rs1", "polygon_token": poly("seg1", rect(-200, -6, 100, 6)), "is_intersection": False},
-        ] if crossing else [],
+        ]
+        if crossing
+        else [],
     }
     path = tmp_path / "boston-seaport.json"
     import json
@@ -585,8 +621,9 @@ def test_read_planning_map_and_route_lanes(tmp_path):
     np.testing.assert_array_equal(fl.offsets, [0, 2])
     np.testing.assert_array_equal(fl.ids, [0, 1])
     np.testing.assert_array_equal(fl.on_route, [1, 0])  # the ground truth drives in lane 0 only
-    r = drive_scores(run(0, 1.75, 7.0)[None], gt, map=m, frame_lanes=fl, route=ROUTE, centreline=ROUTE, ego=EGO,
-                     hc=[1.0], ec=[1.0])
+    r = drive_scores(
+        run(0, 1.75, 7.0)[None], gt, map=m, frame_lanes=fl, route=ROUTE, centreline=ROUTE, ego=EGO, hc=[1.0], ec=[1.0]
+    )
     assert r["ddc"][0] == 0.0 and r["dac"][0] == 1.0
     assert np.isfinite(r["epdms_map"][0])
     # an expansion without lanes or intersections (before v1.3, or synthetic): those sub-scores are n/a, not scored

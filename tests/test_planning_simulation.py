@@ -390,13 +390,21 @@ def uneven(tmp_path_factory):
     from lightemma.synth import build_scenarios, write_dataset
 
     scenes, keyframes = 3, 20  # cruise, accelerate, brake at a red light
-    root = write_dataset(tmp_path_factory.mktemp("uneven"), scenes=scenes, keyframes=keyframes, images=False,
-                         sweeps=False)
+    root = write_dataset(
+        tmp_path_factory.mktemp("uneven"), scenes=scenes, keyframes=keyframes, images=False, sweeps=False
+    )
     by_name = {s.name: s for s in build_scenarios(scenes, keyframes=keyframes)}
     frames = load_frames(root, "v1.0-mini", on_missing_image="keep")
     # the history keyframes' timestamps (s), oldest first, as the frames' history_positions
-    times = np.array([np.asarray(by_name[n].keyframe_times_us)[k - 7 : k + 1]
-                      for n, k in zip(frames.scene_names, frames.keyframe_indices)]) / 1e6
+    times = (
+        np.array(
+            [
+                np.asarray(by_name[n].keyframe_times_us)[k - 7 : k + 1]
+                for n, k in zip(frames.scene_names, frames.keyframe_indices)
+            ]
+        )
+        / 1e6
+    )
     return root, by_name, frames, times
 
 
@@ -435,10 +443,15 @@ def test_initial_state_uses_the_real_keyframe_spacing(uneven):
     assert np.abs(assumed[:, AX] - can.values[rows, 1]).max() > 0.5
     # even spacing given as times is the default
     even = np.tile(np.arange(-7, 1) * sim.STEP_SECONDS + 3.0, (len(rows), 1))
-    np.testing.assert_allclose(sim.initial_state(frames.history_positions[rows], times=even).states, assumed,
-                               rtol=0, atol=1e-9)
-    np.testing.assert_allclose(sim.history_states(frames.history_positions[rows], times=even).states,
-                               sim.history_states(frames.history_positions[rows]).states, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        sim.initial_state(frames.history_positions[rows], times=even).states, assumed, rtol=0, atol=1e-9
+    )
+    np.testing.assert_allclose(
+        sim.history_states(frames.history_positions[rows], times=even).states,
+        sim.history_states(frames.history_positions[rows]).states,
+        rtol=0,
+        atol=1e-9,
+    )
 
 
 def test_history_states_use_the_real_keyframe_spacing(uneven):
@@ -479,8 +492,9 @@ def test_the_planning_score_takes_the_keyframe_timestamps(uneven, tmp_path):
     got = P._frames(data, tokens, [frames.scene_names[i] for i in rows])
     ok = np.array([r is None for r in got.reason])
     assert ok.sum() >= 4
-    truth = np.array([synth_can.kinematics(by_name[frames.scene_names[i]], [int(frames.timestamps[i])])[0]
-                      for i in rows])
+    truth = np.array(
+        [synth_can.kinematics(by_name[frames.scene_names[i]], [int(frames.timestamps[i])])[0] for i in rows]
+    )
     # exact up to the timestamps' whole microseconds (1e-4)
     np.testing.assert_allclose(got.init[ok, VX], truth[ok, 0], rtol=0, atol=1e-4)
     np.testing.assert_allclose(got.init[ok, AX], truth[ok, 1], rtol=0, atol=1e-4)

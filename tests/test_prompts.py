@@ -21,12 +21,15 @@ def test_default_set_is_shipped_as_package_data_and_hashed_over_its_content():
     canonical = json.dumps(data, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
     assert ps.hash == "sha256:" + hashlib.sha256(canonical.encode()).hexdigest()
     assert set(ps.stages) == {"scene", "intent", "actions"}
-    settings = {"structured": ("independent", "structured"), "conversation": ("conversation", "text"),
-                "conversation+structured": ("conversation", "structured"),
-                "no-history": ("independent", "text", "no-history"),
-                "no-history+structured": ("independent", "structured", "no-history"),
-                "conversation+no-history": ("conversation", "text", "no-history"),
-                "conversation+no-history+structured": ("conversation", "structured", "no-history")}
+    settings = {
+        "structured": ("independent", "structured"),
+        "conversation": ("conversation", "text"),
+        "conversation+structured": ("conversation", "structured"),
+        "no-history": ("independent", "text", "no-history"),
+        "no-history+structured": ("independent", "structured", "no-history"),
+        "conversation+no-history": ("conversation", "text", "no-history"),
+        "conversation+no-history+structured": ("conversation", "structured", "no-history"),
+    }
     assert set(variants) == set(settings)
     for name, templates in variants.items():
         canonical = json.dumps(templates, sort_keys=True, separators=(",", ":"), ensure_ascii=False)
@@ -72,7 +75,10 @@ def test_a_prompt_file_missing_a_placeholder_is_rejected(tmp_path):
 
 
 def test_a_custom_prompt_file_loads_and_unknown_names_list_the_known_ones(tmp_path):
-    good = {"name": "mine", "stages": {"scene": "s", "intent": "{scene} {history}", "actions": "{scene} {history} {intent}"}}
+    good = {
+        "name": "mine",
+        "stages": {"scene": "s", "intent": "{scene} {history}", "actions": "{scene} {history} {intent}"},
+    }
     path = tmp_path / "mine.json"
     path.write_text(json.dumps(good))
     ps = load_prompt_set(str(path))
@@ -84,7 +90,10 @@ def test_a_custom_prompt_file_loads_and_unknown_names_list_the_known_ones(tmp_pa
 def test_a_prompt_file_is_read_afresh_on_each_load(tmp_path):
     """An edited file is what the next run gets (and what a resume's hash guard compares), even in the same process."""
     path = tmp_path / "mine.json"
-    first = {"name": "mine", "stages": {"scene": "s", "intent": "{scene} {history}", "actions": "{scene} {history} {intent}"}}
+    first = {
+        "name": "mine",
+        "stages": {"scene": "s", "intent": "{scene} {history}", "actions": "{scene} {history} {intent}"},
+    }
     path.write_text(json.dumps(first))
     assert load_prompt_set(str(path)).hash == content_hash(first)
     edited = {**first, "stages": {**first["stages"], "scene": "describe the scene"}}
@@ -100,7 +109,17 @@ def test_a_prompt_set_file_holding_half_an_emoji_is_refused_in_one_line(tmp_path
     from lightemma.prompts import load_prompt_set
 
     path = tmp_path / "p.json"
-    path.write_text(json.dumps({"name": "p", "stages": {"scene": "Look \ud83d.", "intent": "{scene} {history}",
-                                                       "actions": "{scene} {intent} {history}"}}))
+    path.write_text(
+        json.dumps(
+            {
+                "name": "p",
+                "stages": {
+                    "scene": "Look \ud83d.",
+                    "intent": "{scene} {history}",
+                    "actions": "{scene} {intent} {history}",
+                },
+            }
+        )
+    )
     with pytest.raises(UserError, match="lone surrogate"):
         load_prompt_set(str(path))

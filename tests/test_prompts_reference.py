@@ -5,7 +5,6 @@ import json
 
 import numpy as np
 import pytest
-from reference_fixtures import PROMPT_SET, write_results
 
 from lightemma.backends.base import ChatResult
 from lightemma.cli import main
@@ -16,6 +15,7 @@ from lightemma.prompts import PromptSet, load_prompt_set
 from lightemma.prompts.check import check_prompts, first_difference
 from lightemma.runs.importer import import_reference
 from memframes import make_frames
+from reference_fixtures import PROMPT_SET, write_results
 
 
 def test_speeds_and_curvatures_print_as_python_printed_the_lists():
@@ -30,12 +30,17 @@ def test_speeds_and_curvatures_print_as_python_printed_the_lists():
 
 
 def test_a_template_may_give_the_history_as_two_lists_but_not_as_one():
-    base = {"name": "t", "stages": {"scene": "s", "intent": "{scene} v{speeds} c{curvatures}", "actions": "{scene} {history} {intent}"}}
+    base = {
+        "name": "t",
+        "stages": {"scene": "s", "intent": "{scene} v{speeds} c{curvatures}", "actions": "{scene} {history} {intent}"},
+    }
     ps = PromptSet.from_dict(base)
     text = ps.render("intent", scene="S", **history_placeholders(np.array([[1.5, -0.0]] * 6)))
     assert text == "S v[1.5, 1.5, 1.5, 1.5, 1.5, 1.5] c[-0.0, -0.0, -0.0, -0.0, -0.0, -0.0]"
     half = {**base, "stages": {**base["stages"], "intent": "{scene} v{speeds}"}}
-    with pytest.raises(UserError, match=r"'intent' template lacks placeholder\(s\) \{history\} \(or \{speeds\} and \{curvatures\}\)"):
+    with pytest.raises(
+        UserError, match=r"'intent' template lacks placeholder\(s\) \{history\} \(or \{speeds\} and \{curvatures\}\)"
+    ):
         PromptSet.from_dict(half)
 
 
@@ -51,7 +56,11 @@ class Recorder:
         out = []
         for req in requests:
             self.texts.append((req.stage, req.text))
-            answer = {"scene": "A quiet street.", "intent": "Keep going.", "actions": "[" + ", ".join(["(5.0, 0.0)"] * 6) + "]"}[req.stage]
+            answer = {
+                "scene": "A quiet street.",
+                "intent": "Keep going.",
+                "actions": "[" + ", ".join(["(5.0, 0.0)"] * 6) + "]",
+            }[req.stage]
             out.append(ChatResult(text=answer, input_tokens=10, output_tokens=5, seconds=0.0))
         return out
 
@@ -82,7 +91,11 @@ def imported_run(tmp_path_factory):
 def test_a_prompt_set_with_the_references_wording_matches_every_stored_prompt(imported_run, capsys):
     run_dir, path = imported_run
     checks = check_prompts(load_prompt_set(str(path)), run_dir)
-    assert [(c.stage, c.compared, c.identical) for c in checks] == [("scene", 21, 21), ("intent", 21, 21), ("actions", 21, 21)]
+    assert [(c.stage, c.compared, c.identical) for c in checks] == [
+        ("scene", 21, 21),
+        ("intent", 21, 21),
+        ("actions", 21, 21),
+    ]
     assert main(["prompts", "check", str(path), str(run_dir)]) == 0
     assert "21/21 frame(s) identical" in capsys.readouterr().out
 

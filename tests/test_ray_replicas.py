@@ -20,7 +20,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from local_models import build_tiny_model, teach_to_answer
 from PIL import Image
 
 import lightemma.prompts
@@ -29,6 +28,7 @@ from lightemma.backends.base import ChatRequest, ChatResult, GenerationParams
 from lightemma.cli import main as cli_main
 from lightemma.errors import RunFatalError
 from lightemma.runs.store import FRAMES_FILE, read_run
+from local_models import build_tiny_model, teach_to_answer
 
 os.environ["HF_HUB_OFFLINE"] = "1"
 TESTS = Path(__file__).resolve().parent
@@ -43,8 +43,14 @@ def ray_address():
     before = os.environ.get("PYTHONPATH")
     # the replicas' processes import fake_vllm from here (they inherit this environment)
     os.environ["PYTHONPATH"] = os.pathsep.join([str(TESTS), *([before] if before else [])])
-    context = ray.init(num_cpus=2, num_gpus=2, include_dashboard=False, object_store_memory=80 * 1024**2,
-                       log_to_driver=False, logging_level=logging.WARNING)
+    context = ray.init(
+        num_cpus=2,
+        num_gpus=2,
+        include_dashboard=False,
+        object_store_memory=80 * 1024**2,
+        log_to_driver=False,
+        logging_level=logging.WARNING,
+    )
     yield context.address_info["gcs_address"]
     ray.shutdown()
     if before is None:
@@ -69,7 +75,9 @@ def dataroot(tmp_path_factory):
     for i, frame in enumerate(lightemma.load_frames(root, "v1.0-mini", split="all")):
         w, h = sizes[i % len(sizes)]
         Image.fromarray(rng.integers(0, 256, (h, w, 3), dtype=np.uint8)).save(frame.image_path, quality=90)
-    data = json.loads((Path(lightemma.prompts.__file__).parent / f"{lightemma.prompts.DEFAULT_PROMPT_SET}.json").read_text())
+    data = json.loads(
+        (Path(lightemma.prompts.__file__).parent / f"{lightemma.prompts.DEFAULT_PROMPT_SET}.json").read_text()
+    )
     data["name"], data["stages"]["scene"] = "short-scene", "Describe the scene."
     prompts_of(root).write_text(json.dumps(data))
     return root
@@ -94,23 +102,47 @@ def taught(tmp_path_factory, dataroot):
     frame = lightemma.load_frames(dataroot, "v1.0-mini", split="all")[0]
     history = lightemma.frames.format_history(frame.history_actions)
     said = "Keep the lane."
-    texts = [prompts.render("scene"), prompts.render("intent", scene=said, history=history),
-             prompts.render("actions", scene=said, history=history, intent=said)]
+    texts = [
+        prompts.render("scene"),
+        prompts.render("intent", scene=said, history=history),
+        prompts.render("actions", scene=said, history=history, intent=said),
+    ]
     path = build_tiny_model("qwen2_vl", tmp_path_factory.mktemp("qwen2_vl_taught"))
     return teach_to_answer(path, said, prompts=texts, image=frame.image_path)
 
 
 def frames_args(dataroot, output, limit, attempts=2):
-    return ["--dataroot", str(dataroot), "--version", "v1.0-mini", "--split", "all", "--limit", str(limit), "--output",
-            str(output), "--max-tokens", str(MAX_TOKENS), "--max-attempts", str(attempts),
-            "--prompt-set", str(prompts_of(dataroot)), "--no-progress"]
+    return [
+        "--dataroot",
+        str(dataroot),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--limit",
+        str(limit),
+        "--output",
+        str(output),
+        "--max-tokens",
+        str(MAX_TOKENS),
+        "--max-attempts",
+        str(attempts),
+        "--prompt-set",
+        str(prompts_of(dataroot)),
+        "--no-progress",
+    ]
 
 
 def answers(run_dir):
     """frame id -> every call's (stage, text, input tokens, output tokens, finish reason), in order."""
-    return {fid: [(c["stage"], c["text"], c["input_tokens"], c["output_tokens"], c["finish_reason"])
-                  for a in r["attempts"] for c in a["calls"]]
-            for fid, r in read_run(run_dir).records.items()}
+    return {
+        fid: [
+            (c["stage"], c["text"], c["input_tokens"], c["output_tokens"], c["finish_reason"])
+            for a in r["attempts"]
+            for c in a["calls"]
+        ]
+        for fid, r in read_run(run_dir).records.items()
+    }
 
 
 def only_run(output):
@@ -122,8 +154,23 @@ def only_run(output):
 def reference(tiny, dataroot, tmp_path_factory):
     """The same 16 frames through one in-process replica (no Ray): the answers every replica count must give."""
     output = tmp_path_factory.mktemp("reference")
-    assert cli_main(["run", "--backend", "hf", "--model", str(tiny), "--batch-size", "4", "--dtype", "float32",
-                     *frames_args(dataroot, output, 16)]) == 1  # random weights: every text is cut off
+    assert (
+        cli_main(
+            [
+                "run",
+                "--backend",
+                "hf",
+                "--model",
+                str(tiny),
+                "--batch-size",
+                "4",
+                "--dtype",
+                "float32",
+                *frames_args(dataroot, output, 16),
+            ]
+        )
+        == 1
+    )  # random weights: every text is cut off
     run_dir = only_run(output)
     manifest = read_run(run_dir).manifest
     assert "replicas" not in manifest["backend"] and manifest["sessions"][-1].get("replicas") is None
@@ -135,10 +182,27 @@ def reference(tiny, dataroot, tmp_path_factory):
 # -- two replicas answer as one does --------------------------------------------------------------
 
 
-def test_two_replicas_give_the_same_answers_as_one_under_greedy_decoding(ray_address, tiny, dataroot, reference, tmp_path,
-                                                                         capsys):
-    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--batch-size", "4", "--dtype", "float32",
-                     "--replicas", "2", "--gpus-per-replica", "0", *frames_args(dataroot, tmp_path, 16)])
+def test_two_replicas_give_the_same_answers_as_one_under_greedy_decoding(
+    ray_address, tiny, dataroot, reference, tmp_path, capsys
+):
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(tiny),
+            "--batch-size",
+            "4",
+            "--dtype",
+            "float32",
+            "--replicas",
+            "2",
+            "--gpus-per-replica",
+            "0",
+            *frames_args(dataroot, tmp_path, 16),
+        ]
+    )
     assert code == 1, capsys.readouterr().err
     run_dir = only_run(tmp_path)
     contents = read_run(run_dir)
@@ -146,10 +210,18 @@ def test_two_replicas_give_the_same_answers_as_one_under_greedy_decoding(ray_add
     assert contents.complete and contents.duplicates == 0
     assert len((run_dir / FRAMES_FILE).read_text().splitlines()) == 16
     info = contents.manifest["backend"]
-    assert (info["backend"], info["replicas"], info["gpus_per_replica"], info["gpus"], info["device"]) == ("hf", 2, 0, 0, "cpu")
+    assert (info["backend"], info["replicas"], info["gpus_per_replica"], info["gpus"], info["device"]) == (
+        "hf",
+        2,
+        0,
+        0,
+        "cpu",
+    )
     assert info["devices_per_replica"] == {"GPU": 0, "CPU": 1}
     assert info["ray"]["version"] == __import__("ray").__version__ and len(info["ray"]["nodes"]) == 2
-    assert len({n["pid"] for n in info["ray"]["nodes"]}) == 2 and os.getpid() not in {n["pid"] for n in info["ray"]["nodes"]}
+    assert len({n["pid"] for n in info["ray"]["nodes"]}) == 2 and os.getpid() not in {
+        n["pid"] for n in info["ray"]["nodes"]
+    }
     config = contents.manifest["config"]
     assert (config["replicas"], config["ray_address"], config["concurrency"]) == (2, None, 32)  # 16 frames per replica
     report = contents.manifest["sessions"][-1]["replicas"]
@@ -182,8 +254,9 @@ def test_a_frames_stages_stay_on_one_replica_and_new_frames_go_to_the_least_busy
 # -- faults ---------------------------------------------------------------------------------------
 
 
-def test_a_replica_killed_mid_run_loses_no_frame_and_duplicates_none(ray_address, tiny, dataroot, reference, tmp_path,
-                                                                     monkeypatch):
+def test_a_replica_killed_mid_run_loses_no_frame_and_duplicates_none(
+    ray_address, tiny, dataroot, reference, tmp_path, monkeypatch
+):
     """Replica 0 dies while it holds requests; they are re-dispatched, Ray restarts it, every frame is written once."""
     from lightemma.backends import ray as ray_backend
     from lightemma.pipeline import run
@@ -209,10 +282,22 @@ def test_a_replica_killed_mid_run_loses_no_frame_and_duplicates_none(ray_address
 
     monkeypatch.setattr(ray_backend.Router, "_pick", pick_and_kill)
     monkeypatch.setattr(ray_backend.RayBackend, "aclose", close_once_restarted)
-    result = run(str(tiny), backend="hf", dataroot=dataroot, version="v1.0-mini", split="all", limit=16, output=tmp_path,
-                 concurrency=8, max_tokens=MAX_TOKENS, max_attempts=2, prompt_set=str(prompts_of(dataroot)), progress=False,
-                 replicas=2,
-                 backend_options={"batch_size": 4, "batch_window": 0.5, "dtype": "float32"})
+    result = run(
+        str(tiny),
+        backend="hf",
+        dataroot=dataroot,
+        version="v1.0-mini",
+        split="all",
+        limit=16,
+        output=tmp_path,
+        concurrency=8,
+        max_tokens=MAX_TOKENS,
+        max_attempts=2,
+        prompt_set=str(prompts_of(dataroot)),
+        progress=False,
+        replicas=2,
+        backend_options={"batch_size": 4, "batch_window": 0.5, "dtype": "float32"},
+    )
     assert killed, "replica 0 was never killed"
     contents = read_run(result.run_dir)
     assert contents.complete and contents.duplicates == 0 and result.frames_run == 16
@@ -225,16 +310,39 @@ def test_a_replica_killed_mid_run_loses_no_frame_and_duplicates_none(ray_address
     assert [e["event"] for e in report["events"]] == ["died", "restarted"]
     calls = [c for r in contents.records.values() for a in r["attempts"] for c in a["calls"]]
     assert sum(c["retries"] for c in calls) == report["redispatched"]  # each re-dispatch is on its call's record
-    assert contents.manifest["backend"]["ray"]["nodes"][0]["gpu_ids"] != contents.manifest["backend"]["ray"]["nodes"][1]["gpu_ids"]
+    assert (
+        contents.manifest["backend"]["ray"]["nodes"][0]["gpu_ids"]
+        != contents.manifest["backend"]["ray"]["nodes"][1]["gpu_ids"]
+    )
 
 
 def test_resume_after_the_driver_is_killed_finishes_the_run_as_before(ray_address, tiny, dataroot, reference, tmp_path):
     """A driver (2 replicas on a running cluster) is SIGKILLed mid-run; --resume finishes it, each frame written once."""
-    args = ["--backend", "hf", "--model", str(tiny), "--batch-size", "4", "--dtype", "float32", "--replicas", "2",
-            "--ray-address", ray_address, "--concurrency", "1", *frames_args(dataroot, tmp_path, 16)]
+    args = [
+        "--backend",
+        "hf",
+        "--model",
+        str(tiny),
+        "--batch-size",
+        "4",
+        "--dtype",
+        "float32",
+        "--replicas",
+        "2",
+        "--ray-address",
+        ray_address,
+        "--concurrency",
+        "1",
+        *frames_args(dataroot, tmp_path, 16),
+    ]
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in (str(TESTS), os.environ.get("PYTHONPATH")) if p)}
-    driver = subprocess.Popen([sys.executable, "-m", "lightemma", "run", *args], env=env, stdout=subprocess.DEVNULL,
-                              stderr=subprocess.PIPE, start_new_session=True)
+    driver = subprocess.Popen(
+        [sys.executable, "-m", "lightemma", "run", *args],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
     try:
         deadline = time.monotonic() + 300
         frames_file = None
@@ -256,7 +364,10 @@ def test_resume_after_the_driver_is_killed_finishes_the_run_as_before(ray_addres
     assert cli_main(["run", "--resume", str(run_dir), "--replicas", "1", "--no-progress"]) == 2
     assert read_run(run_dir).records == before.records
     # the same cluster, named; with one replica this time (where the model runs may change on a resume)
-    assert cli_main(["run", "--resume", str(run_dir), "--replicas", "1", "--ray-address", ray_address, "--no-progress"]) == 1
+    assert (
+        cli_main(["run", "--resume", str(run_dir), "--replicas", "1", "--ray-address", ray_address, "--no-progress"])
+        == 1
+    )
     after = read_run(run_dir)
     assert after.complete and after.duplicates == 0 and len(after.records) == 16
     assert answers(run_dir) == reference
@@ -265,18 +376,35 @@ def test_resume_after_the_driver_is_killed_finishes_the_run_as_before(ray_addres
     sessions = after.manifest["sessions"]
     assert [s["kind"] for s in sessions] == ["run", "resume"] and sessions[-1]["frames_run"] == 16 - len(before.records)
     assert after.manifest["backend"]["ray"]["cluster"] == "joined" and after.manifest["config"]["replicas"] == 2
-    assert sessions[-1]["replicas"]["replicas"] == 1 and sum(sessions[-1]["replicas"]["frames"]) == 16 - len(before.records)
+    assert sessions[-1]["replicas"]["replicas"] == 1 and sum(sessions[-1]["replicas"]["frames"]) == 16 - len(
+        before.records
+    )
 
 
-def test_a_replica_whose_model_fails_every_batch_identically_stops_the_run_in_one_line(ray_address, tiny, dataroot, tmp_path,
-                                                                                       capsys):
+def test_a_replica_whose_model_fails_every_batch_identically_stops_the_run_in_one_line(
+    ray_address, tiny, dataroot, tmp_path, capsys
+):
     """A broken checkpoint (no chat template) fails each batch the same way: the replica's run-fatal rule stops the run."""
     import shutil
 
     broken = shutil.copytree(tiny, tmp_path / "broken")
     (broken / "chat_template.jinja").unlink()
-    code = cli_main(["run", "--backend", "hf", "--model", str(broken), "--batch-size", "1", "--dtype", "float32",
-                     "--ray-address", ray_address, *frames_args(dataroot, tmp_path / "out", 4)])  # one replica, on Ray
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(broken),
+            "--batch-size",
+            "1",
+            "--dtype",
+            "float32",
+            "--ray-address",
+            ray_address,
+            *frames_args(dataroot, tmp_path / "out", 4),
+        ]
+    )  # one replica, on Ray
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if "error:" in line]
     assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
@@ -286,15 +414,36 @@ def test_a_replica_whose_model_fails_every_batch_identically_stops_the_run_in_on
     assert stopped.records == {} and stopped.manifest["sessions"][-1]["stopped"]["cause"] == "local-model"
 
 
-def test_timeout_reaches_every_replica_and_a_model_past_it_stops_the_run_in_one_line(ray_address, tiny, dataroot, tmp_path,
-                                                                                   capsys):
+def test_timeout_reaches_every_replica_and_a_model_past_it_stops_the_run_in_one_line(
+    ray_address, tiny, dataroot, tmp_path, capsys
+):
     """--timeout is each replica's deadline per batch: a random-weight model asked for 10^6 tokens never ends its answer,
     so every batch of every replica stops at the deadline (``Timeout``) and the replicas' run-fatal rule stops the run."""
     args = frames_args(dataroot, tmp_path / "out", 4)
     args[args.index("--max-tokens") + 1] = "1000000"
     start = time.monotonic()
-    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--batch-size", "1", "--dtype", "float32",
-                     "--replicas", "2", "--gpus-per-replica", "0", "--ray-address", ray_address, "--timeout", "1", *args])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(tiny),
+            "--batch-size",
+            "1",
+            "--dtype",
+            "float32",
+            "--replicas",
+            "2",
+            "--gpus-per-replica",
+            "0",
+            "--ray-address",
+            ray_address,
+            "--timeout",
+            "1",
+            *args,
+        ]
+    )
     err = capsys.readouterr().err
     lines = [line for line in err.splitlines() if "error:" in line]
     assert code == 2 and len(lines) == 1 and "Traceback" not in err, err
@@ -306,9 +455,21 @@ def test_timeout_reaches_every_replica_and_a_model_past_it_stops_the_run_in_one_
     assert all(c["error"] == "Timeout" for c in calls)
 
 
-def test_replicas_that_cannot_build_the_model_are_one_line_before_any_run_directory(ray_address, dataroot, tmp_path, capsys):
-    code = cli_main(["run", "--backend", "vllm", "--model", "Qwen/Qwen2.5-VL-7B-Instruct", "--replicas", "2",
-                     *frames_args(dataroot, tmp_path / "out", 4)])
+def test_replicas_that_cannot_build_the_model_are_one_line_before_any_run_directory(
+    ray_address, dataroot, tmp_path, capsys
+):
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "vllm",
+            "--model",
+            "Qwen/Qwen2.5-VL-7B-Instruct",
+            "--replicas",
+            "2",
+            *frames_args(dataroot, tmp_path / "out", 4),
+        ]
+    )
     err = capsys.readouterr().err  # vLLM is not installed here: the replicas say so, in one line
     assert code == 2 and "pip install 'lightemma[vllm]'" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
@@ -367,9 +528,13 @@ def test_a_replicas_run_fatal_finding_is_raised_on_the_driver():
 
 def test_more_replicas_than_the_cluster_can_place_are_refused_at_once(ray_address, tiny, dataroot, tmp_path, capsys):
     """The module's cluster has 2 CPUs and 2 GPUs: 3 one-GPU replicas, or 3 one-CPU ones, can never be placed."""
-    for extra, what in ((["--replicas", "3"], "needs 3 GPUs; the Ray cluster"),
-                        (["--replicas", "3", "--gpus-per-replica", "0"], "needs 3 CPUs; the Ray cluster")):
-        code = cli_main(["run", "--backend", "hf", "--model", str(tiny), *extra, *frames_args(dataroot, tmp_path / "out", 4)])
+    for extra, what in (
+        (["--replicas", "3"], "needs 3 GPUs; the Ray cluster"),
+        (["--replicas", "3", "--gpus-per-replica", "0"], "needs 3 CPUs; the Ray cluster"),
+    ):
+        code = cli_main(
+            ["run", "--backend", "hf", "--model", str(tiny), *extra, *frames_args(dataroot, tmp_path / "out", 4)]
+        )
         err = capsys.readouterr().err
         assert code == 2 and what in err and f"{ray_address}) has 2" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists()
@@ -377,33 +542,74 @@ def test_more_replicas_than_the_cluster_can_place_are_refused_at_once(ray_addres
 
 def test_structured_answers_run_through_replicas(ray_address, taught, dataroot, tmp_path, capsys):
     """Each replica constrains stage 3 with its own xgrammar processor; the manifest says how, and the answers obey."""
-    code = cli_main(["run", "--backend", "hf", "--model", str(taught), "--batch-size", "4", "--dtype", "float32",
-                     "--replicas", "2", "--gpus-per-replica", "0", "--answer-format", "structured",
-                     *frames_args(dataroot, tmp_path, 4, attempts=1), "--max-tokens", "160"])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(taught),
+            "--batch-size",
+            "4",
+            "--dtype",
+            "float32",
+            "--replicas",
+            "2",
+            "--gpus-per-replica",
+            "0",
+            "--answer-format",
+            "structured",
+            *frames_args(dataroot, tmp_path, 4, attempts=1),
+            "--max-tokens",
+            "160",
+        ]
+    )
     err = capsys.readouterr().err
     assert code in (0, 1), err
     (run_dir,) = [p.parent for p in tmp_path.glob("*/*/manifest.json")]
     contents = read_run(run_dir)
     how = contents.manifest["structured_output"]
-    assert how["mechanism"].startswith("xgrammar") and how["replicas"] == "each of the 2 replicas constrains its own answers"
+    assert (
+        how["mechanism"].startswith("xgrammar")
+        and how["replicas"] == "each of the 2 replicas constrains its own answers"
+    )
     assert len(contents.records) == 4
-    stage3 = [a["answer"] for r in contents.records.values() for a in r["attempts"]
-              if a["answer"] is not None and a["calls"][-1]["stage"] == "actions"]
+    stage3 = [
+        a["answer"]
+        for r in contents.records.values()
+        for a in r["attempts"]
+        if a["answer"] is not None and a["calls"][-1]["stage"] == "actions"
+    ]
     assert stage3
     for answer in stage3:
         assert len(json.loads(answer)["actions"]) == 6, answer
 
 
-def test_structured_answers_are_refused_before_any_run_when_a_replica_cannot_constrain(ray_address, tiny, dataroot, tmp_path,
-                                                                                       capsys, monkeypatch):
+def test_structured_answers_are_refused_before_any_run_when_a_replica_cannot_constrain(
+    ray_address, tiny, dataroot, tmp_path, capsys, monkeypatch
+):
     from lightemma.backends import ray as ray_backend
 
     async def refuse(self):
         return {"ok": False, "message": "--answer-format structured: xgrammar is not installed on this node"}
 
     monkeypatch.setattr(ray_backend.ReplicaServer, "structured_output", refuse)
-    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--replicas", "2", "--gpus-per-replica", "0",
-                     "--answer-format", "structured", *frames_args(dataroot, tmp_path / "out", 4)])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(tiny),
+            "--replicas",
+            "2",
+            "--gpus-per-replica",
+            "0",
+            "--answer-format",
+            "structured",
+            *frames_args(dataroot, tmp_path / "out", 4),
+        ]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "xgrammar is not installed on this node" in err and len(err.strip().splitlines()) == 1, err
     assert not (tmp_path / "out").exists() or not list((tmp_path / "out").glob("*/*/records.jsonl"))
@@ -415,9 +621,18 @@ def test_structured_answers_are_refused_before_any_run_when_a_replica_cannot_con
 def test_a_tensor_parallel_vllm_replica_gets_a_placement_group_and_vllms_ray_executor(ray_address, dataroot, tmp_path):
     from lightemma.pipeline import run
 
-    result = run("Qwen/Qwen2.5-VL-7B-Instruct", backend="vllm", dataroot=dataroot, version="v1.0-mini", split="all", limit=4,
-                 output=tmp_path / "out", progress=False, ray_address=ray_address,
-                 backend_options={"vllm": "fake_vllm", "tensor_parallel_size": 2, "batch_size": 4})  # a stand-in engine
+    result = run(
+        "Qwen/Qwen2.5-VL-7B-Instruct",
+        backend="vllm",
+        dataroot=dataroot,
+        version="v1.0-mini",
+        split="all",
+        limit=4,
+        output=tmp_path / "out",
+        progress=False,
+        ray_address=ray_address,
+        backend_options={"vllm": "fake_vllm", "tensor_parallel_size": 2, "batch_size": 4},
+    )  # a stand-in engine
     contents = read_run(result.run_dir)
     assert contents.complete and all(r["status"] == "ok" for r in contents.records.values())
     info = contents.manifest["backend"]
@@ -425,8 +640,13 @@ def test_a_tensor_parallel_vllm_replica_gets_a_placement_group_and_vllms_ray_exe
     assert info["engine"]["distributed_executor_backend"] == "ray" and info["engine"]["tensor_parallel_size"] == 2
     assert info["devices_per_replica"] == {"GPU": 2, "CPU": 2}
     (node,) = info["ray"]["nodes"]
-    assert node["placement_group"] and node["gpu_ids"] == []  # the replica sits in its group; vLLM's workers take the GPUs
-    assert "placement group" in info["ray"]["placement"] and info["ray"]["cluster"] == "the Ray already initialised in this process"
+    assert (
+        node["placement_group"] and node["gpu_ids"] == []
+    )  # the replica sits in its group; vLLM's workers take the GPUs
+    assert (
+        "placement group" in info["ray"]["placement"]
+        and info["ray"]["cluster"] == "the Ray already initialised in this process"
+    )
 
 
 # -- the command line -----------------------------------------------------------------------------
@@ -443,22 +663,62 @@ def test_replicas_are_refused_for_api_models_and_baselines_in_one_line(model, da
 
 def test_one_replica_without_an_address_runs_in_process_and_needs_no_ray(tiny, dataroot, tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "ray", None)  # as if the ray extra were not installed
-    assert cli_main(["run", "--backend", "hf", "--model", str(tiny), "--replicas", "1", "--dtype", "float32",
-                     *frames_args(dataroot, tmp_path / "one", 4, attempts=1)]) == 1
+    assert (
+        cli_main(
+            [
+                "run",
+                "--backend",
+                "hf",
+                "--model",
+                str(tiny),
+                "--replicas",
+                "1",
+                "--dtype",
+                "float32",
+                *frames_args(dataroot, tmp_path / "one", 4, attempts=1),
+            ]
+        )
+        == 1
+    )
     assert "replicas" not in read_run(only_run(tmp_path / "one")).manifest["backend"]
     capsys.readouterr()
-    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--replicas", "2", *frames_args(dataroot, tmp_path / "two", 4)])
+    code = cli_main(
+        ["run", "--backend", "hf", "--model", str(tiny), "--replicas", "2", *frames_args(dataroot, tmp_path / "two", 4)]
+    )
     err = capsys.readouterr().err
     assert code == 2 and "pip install 'lightemma[ray]'" in err and len(err.strip().splitlines()) == 1, err
 
 
 def test_replica_flags_are_checked_and_resume_takes_them(dataroot, tmp_path, capsys):
-    assert cli_main(["run", "--backend", "hf", "--model", "m", "--replicas", "0", *frames_args(dataroot, tmp_path, 4)]) == 2
+    assert (
+        cli_main(["run", "--backend", "hf", "--model", "m", "--replicas", "0", *frames_args(dataroot, tmp_path, 4)])
+        == 2
+    )
     assert "--replicas must be at least 1" in capsys.readouterr().err
-    assert cli_main(["run", "--backend", "vllm", "--model", "m", "--replicas", "2", "--gpus-per-replica", "1",
-                     *frames_args(dataroot, tmp_path, 4)]) == 2
+    assert (
+        cli_main(
+            [
+                "run",
+                "--backend",
+                "vllm",
+                "--model",
+                "m",
+                "--replicas",
+                "2",
+                "--gpus-per-replica",
+                "1",
+                *frames_args(dataroot, tmp_path, 4),
+            ]
+        )
+        == 2
+    )
     assert "--gpus-per-replica is for --backend hf" in capsys.readouterr().err
-    assert cli_main(["run", "--backend", "hf", "--model", "m", "--gpus-per-replica", "1", *frames_args(dataroot, tmp_path, 4)]) == 2
+    assert (
+        cli_main(
+            ["run", "--backend", "hf", "--model", "m", "--gpus-per-replica", "1", *frames_args(dataroot, tmp_path, 4)]
+        )
+        == 2
+    )
     assert "goes with --replicas" in capsys.readouterr().err
     # --resume refuses run settings, but takes where the model runs
     assert cli_main(["run", "--resume", str(tmp_path / "nope"), "--replicas", "2", "--max-tokens", "5"]) == 2
@@ -532,20 +792,56 @@ async def _answer_and_stop(router, req):
 def test_vllm_pipeline_parallelism_passes_through_and_counts_its_gpus(dataroot, tmp_path, capsys):
     from lightemma.backends.vllm import VLLMBackend
 
-    backend = VLLMBackend("Qwen/Qwen2.5-VL-7B-Instruct", vllm="fake_vllm", tensor_parallel_size=2, pipeline_parallel_size=2)
-    assert backend._llm.engine_kwargs["pipeline_parallel_size"] == 2 and backend._llm.engine_kwargs["tensor_parallel_size"] == 2
+    backend = VLLMBackend(
+        "Qwen/Qwen2.5-VL-7B-Instruct", vllm="fake_vllm", tensor_parallel_size=2, pipeline_parallel_size=2
+    )
+    assert (
+        backend._llm.engine_kwargs["pipeline_parallel_size"] == 2
+        and backend._llm.engine_kwargs["tensor_parallel_size"] == 2
+    )
     assert (backend.info["gpus"], backend.info["pipeline_parallel_size"]) == (4, 2)
     asyncio.run(backend.aclose())
-    assert cli_main(["run", "--backend", "hf", "--model", "m", "--pipeline-parallel-size", "2",
-                     *frames_args(dataroot, tmp_path, 4)]) == 2
+    assert (
+        cli_main(
+            [
+                "run",
+                "--backend",
+                "hf",
+                "--model",
+                "m",
+                "--pipeline-parallel-size",
+                "2",
+                *frames_args(dataroot, tmp_path, 4),
+            ]
+        )
+        == 2
+    )
     assert "--pipeline-parallel-size do(es) not apply to the hf backend" in capsys.readouterr().err
 
 
 def test_replicas_make_each_frames_blank_image_themselves(ray_address, tiny, dataroot, reference, tmp_path, capsys):
     """--inputs blank-image through replicas: each replica draws the grey image from the frame's size (no file sent), so
     a frame's image costs the tokens its photo does, while what the model sees (and says) changes."""
-    code = cli_main(["run", "--backend", "hf", "--model", str(tiny), "--batch-size", "4", "--dtype", "float32",
-                     "--replicas", "2", "--gpus-per-replica", "0", "--inputs", "blank-image", *frames_args(dataroot, tmp_path, 4, attempts=1)])
+    code = cli_main(
+        [
+            "run",
+            "--backend",
+            "hf",
+            "--model",
+            str(tiny),
+            "--batch-size",
+            "4",
+            "--dtype",
+            "float32",
+            "--replicas",
+            "2",
+            "--gpus-per-replica",
+            "0",
+            "--inputs",
+            "blank-image",
+            *frames_args(dataroot, tmp_path, 4, attempts=1),
+        ]
+    )
     assert code == 1, capsys.readouterr().err  # random weights: every text is cut off
     run_dir = only_run(tmp_path)
     assert read_run(run_dir).manifest["config"]["inputs"] == "blank-image"

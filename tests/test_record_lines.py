@@ -20,11 +20,23 @@ def reference(record):
     return json.dumps(_sanitize(bounded_values(record), []), default=_to_jsonable, allow_nan=False, ensure_ascii=False)
 
 
-scalars = (st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(2**70), 2**70) | st.booleans() | st.none()
-           | st.text(max_size=20) | st.floats(width=32).map(np.float32) | st.integers(-5, 5).map(np.int64)
-           | st.just(Path("/tmp/x.jpg")))
-values = st.recursive(scalars, lambda inner: st.lists(inner, max_size=4) | st.tuples(inner, inner)
-                      | st.dictionaries(st.text(max_size=8), inner, max_size=4), max_leaves=25)
+scalars = (
+    st.floats(allow_nan=True, allow_infinity=True)
+    | st.integers(-(2**70), 2**70)
+    | st.booleans()
+    | st.none()
+    | st.text(max_size=20)
+    | st.floats(width=32).map(np.float32)
+    | st.integers(-5, 5).map(np.int64)
+    | st.just(Path("/tmp/x.jpg"))
+)
+values = st.recursive(
+    scalars,
+    lambda inner: (
+        st.lists(inner, max_size=4) | st.tuples(inner, inner) | st.dictionaries(st.text(max_size=8), inner, max_size=4)
+    ),
+    max_leaves=25,
+)
 
 
 @settings(max_examples=400, deadline=None)
@@ -37,14 +49,31 @@ def test_a_line_decodes_to_what_the_standard_encoding_decodes_to(record):
 
 
 def test_non_finite_numbers_become_null_and_numpy_values_plain_ones():
-    record = {"a": [math.nan, math.inf, -math.inf, 1.5], "b": np.array([[0.1, np.nan]], dtype=np.float32),
-              "c": np.float32(0.1), "d": np.int64(7), "e": (1, 2), "f": Path("x/y")}
-    assert json.loads(encode_line(record)) == {"a": [None, None, None, 1.5], "b": [[float(np.float32(0.1)), None]],
-                                               "c": float(np.float32(0.1)), "d": 7, "e": [1, 2], "f": "x/y"}
+    record = {
+        "a": [math.nan, math.inf, -math.inf, 1.5],
+        "b": np.array([[0.1, np.nan]], dtype=np.float32),
+        "c": np.float32(0.1),
+        "d": np.int64(7),
+        "e": (1, 2),
+        "f": Path("x/y"),
+    }
+    assert json.loads(encode_line(record)) == {
+        "a": [None, None, None, 1.5],
+        "b": [[float(np.float32(0.1)), None]],
+        "c": float(np.float32(0.1)),
+        "d": 7,
+        "e": [1, 2],
+        "f": "x/y",
+    }
 
 
 def test_what_orjson_refuses_is_written_by_json_with_the_same_meaning():
     big = {"tokens": 10**30, "n": math.nan, 3: "int key", "half an emoji": "a\ud83db"}
     line = encode_line(big)
     # an integer the readers refuse (more than 18 digits) is written as unknown
-    assert line.isascii() and json.loads(line) == {"tokens": None, "n": None, "3": "int key", "half an emoji": "a\ud83db"}
+    assert line.isascii() and json.loads(line) == {
+        "tokens": None,
+        "n": None,
+        "3": "int key",
+        "half an emoji": "a\ud83db",
+    }

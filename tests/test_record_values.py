@@ -13,10 +13,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fake_openai import FakeOpenAIServer
-from memframes import make_frames
-from reference_fixtures import make_frame, write_scene
 
+from fake_openai import FakeOpenAIServer
 from lightemma.cache import ResponseCache
 from lightemma.evaluation.loading import load_run
 from lightemma.pipeline import run
@@ -24,6 +22,8 @@ from lightemma.runs import records
 from lightemma.runs.columns import SIDECAR_FILE
 from lightemma.runs.importer import import_reference
 from lightemma.runs.store import FRAMES_FILE, RunWriter, encode_line, read_run
+from memframes import make_frames
+from reference_fixtures import make_frame, write_scene
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False)
 
@@ -35,8 +35,11 @@ def _import_huge_tokens(tmp_path: Path) -> tuple[Path, list[str]]:
     rng = np.random.default_rng(0)
     frames = [make_frame(rng, "scene-0001", i) for i in range(3)]
     frames[1]["token_usage"]["waypoint_prompt"]["input"] = 1e308
-    frames[2]["token_usage"] = {"scene_prompt": {"input": -5, "output": "x"}, "intent_prompt": [],
-                                "waypoint_prompt": {"input": 1e308, "output": float("inf")}}
+    frames[2]["token_usage"] = {
+        "scene_prompt": {"input": -5, "output": "x"},
+        "intent_prompt": [],
+        "waypoint_prompt": {"input": 1e308, "output": float("inf")},
+    }
     frames[0]["time_usage"]["waypoint_prompt"] = 1e300  # no call takes 10^300 s
     write_scene(tmp_path / "res" / "gpt-4o", "scene-0001", frames)
     warnings: list[str] = []
@@ -71,9 +74,23 @@ def test_import_records_a_token_count_of_1e308_as_unknown_with_one_warning_and_e
 
 def test_the_store_never_writes_an_integer_the_reader_refuses(tmp_path):
     big = 9223372036854775807 * 3  # three int64-max counts summed: 20 digits
-    record = {"frame_id": "s/a", "status": "ok", "input_tokens": big, "output_tokens": -4, "seconds": float("1e300"),
-              "cost_cents": 1.5, "timestamp": 10**30, "attempts": [{"status": "ok", "answer": "x", "input_tokens": big,
-                                                                     "calls": [{"output_tokens": 2**63 - 1, "seconds": 2.0}]}]}
+    record = {
+        "frame_id": "s/a",
+        "status": "ok",
+        "input_tokens": big,
+        "output_tokens": -4,
+        "seconds": float("1e300"),
+        "cost_cents": 1.5,
+        "timestamp": 10**30,
+        "attempts": [
+            {
+                "status": "ok",
+                "answer": "x",
+                "input_tokens": big,
+                "calls": [{"output_tokens": 2**63 - 1, "seconds": 2.0}],
+            }
+        ],
+    }
     problems: list[str] = []
     line = encode_line(record, problems)
     back = records.loads_bounded(line)
@@ -98,8 +115,17 @@ def read_run_records(run_dir: Path) -> list[dict]:
 
 
 def test_an_ordinary_record_is_written_unchanged():
-    record = {"frame_id": "s/a", "status": "ok", "input_tokens": 1200, "seconds": 3.25, "cost_cents": 0.4, "timestamp": 1533151603547590,
-              "attempts": [{"status": "ok", "answer": "x", "calls": [{"input_tokens": 400, "seconds": 1.0, "cost_cents": None}]}]}
+    record = {
+        "frame_id": "s/a",
+        "status": "ok",
+        "input_tokens": 1200,
+        "seconds": 3.25,
+        "cost_cents": 0.4,
+        "timestamp": 1533151603547590,
+        "attempts": [
+            {"status": "ok", "answer": "x", "calls": [{"input_tokens": 400, "seconds": 1.0, "cost_cents": None}]}
+        ],
+    }
     assert records.bounded_values(record) is record
     assert json.loads(encode_line(record)) == record
 
@@ -107,29 +133,43 @@ def test_an_ordinary_record_is_written_unchanged():
 # -- B: a response-cache row of the wrong kind or out of range is a miss --------------------------------
 
 
-@pytest.mark.parametrize("update", [
-    "text = X'FFFE00'",  # a BLOB: AttributeError: 'bytes' object has no attribute 'encode' before
-    "text = CAST(X'FFFE00' AS TEXT)",  # TEXT that is not UTF-8
-    "input_tokens = 9223372036854775807, output_tokens = 9223372036854775807",  # records the run could not read back
-    "output_tokens = -7",  # replayed as it was before
-    "input_tokens = 'many'",
-    "cost_cents = -1.0",
-])
+@pytest.mark.parametrize(
+    "update",
+    [
+        "text = X'FFFE00'",  # a BLOB: AttributeError: 'bytes' object has no attribute 'encode' before
+        "text = CAST(X'FFFE00' AS TEXT)",  # TEXT that is not UTF-8
+        "input_tokens = 9223372036854775807, output_tokens = 9223372036854775807",  # records the run could not read back
+        "output_tokens = -7",  # replayed as it was before
+        "input_tokens = 'many'",
+        "cost_cents = -1.0",
+    ],
+)
 def test_a_bad_cache_row_is_a_miss_said_once_and_replaced(tmp_path, update):
     frames = make_frames(tmp_path, 2)
     path = tmp_path / "cache.sqlite"
     lines: list[str] = []
     with FakeOpenAIServer() as server:  # one server: its address is part of the cache key
-        seeded = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "seed", cache=str(path), **FAST)
+        seeded = run(
+            "openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "seed", cache=str(path), **FAST
+        )
         assert seeded.summary["ok"] == 2 and len(server.requests) == 6
         db = sqlite3.connect(path)
         db.execute(f"UPDATE responses SET {update}")
         db.commit()
         db.close()
-        result = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "out", cache=str(path),
-                     log=lines.append, **FAST)
+        result = run(
+            "openai/test-model",
+            frames=frames,
+            api_base=server.url,
+            output=tmp_path / "out",
+            cache=str(path),
+            log=lines.append,
+            **FAST,
+        )
         asked = len(server.requests) - 6
-        again = run("openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "again", cache=str(path), **FAST)
+        again = run(
+            "openai/test-model", frames=frames, api_base=server.url, output=tmp_path / "again", cache=str(path), **FAST
+        )
         assert len(server.requests) - 6 == asked  # the rows were replaced: the third run is served from the cache
     assert asked == 6  # every call made again (2 frames × 3 stages)
     warned = [line for line in lines if "response cache" in line]
@@ -175,15 +215,18 @@ def _rewrite_second(run_dir: Path, **fields) -> None:
     (run_dir / SIDECAR_FILE).unlink(missing_ok=True)
 
 
-@pytest.mark.parametrize("fields, named", [
-    ({"status": ["ok"]}, "status"),  # TypeError: unhashable type: 'list' before
-    ({"first_status": {"a": 1}}, "first_status"),
-    ({"seconds": -1e308}, "seconds"),  # report: math domain error before
-    ({"seconds": "fast"}, "seconds"),
-    ({"input_tokens": 1e300}, "input_tokens"),
-    ({"cost_cents": -2}, "cost_cents"),
-    ({"failure": [1]}, "failure"),
-])
+@pytest.mark.parametrize(
+    "fields, named",
+    [
+        ({"status": ["ok"]}, "status"),  # TypeError: unhashable type: 'list' before
+        ({"first_status": {"a": 1}}, "first_status"),
+        ({"seconds": -1e308}, "seconds"),  # report: math domain error before
+        ({"seconds": "fast"}, "seconds"),
+        ({"input_tokens": 1e300}, "input_tokens"),
+        ({"cost_cents": -2}, "cost_cents"),
+        ({"failure": [1]}, "failure"),
+    ],
+)
 def test_a_record_of_the_wrong_kinds_is_named_and_skipped(imported_run, fields, named):
     _rewrite_second(imported_run, **fields)
     for sidecar in (True, False, True):  # written from frames.jsonl, then read back from the sidecar: the same
@@ -195,7 +238,9 @@ def test_a_record_of_the_wrong_kinds_is_named_and_skipped(imported_run, fields, 
     assert len(contents.records) == 2 and any("line 2" in w and named in w for w in contents.warnings())
 
 
-def test_evaluate_and_report_of_a_bad_status_and_a_huge_negative_time_say_so_without_a_traceback(imported_run, tmp_path, capsys):
+def test_evaluate_and_report_of_a_bad_status_and_a_huge_negative_time_say_so_without_a_traceback(
+    imported_run, tmp_path, capsys
+):
     from lightemma.cli import main
 
     _rewrite_second(imported_run, status=["ok"], seconds=-1e308)

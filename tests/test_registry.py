@@ -3,9 +3,9 @@
 import sys
 import types
 
+import litellm
 import pytest
 
-import litellm
 from lightemma.backends import backend_kind, create_backend
 from lightemma.backends.api import litellm_model, require_api_key
 from lightemma.errors import UserError
@@ -14,11 +14,30 @@ from lightemma.models.prices import price_per_token
 
 # Display names exactly as in the paper's Tables I and II, in table order.
 PAPER_NAMES = [
-    "GPT-4o", "GPT-5.0", "GPT-5.2", "Claude-3.7-Sonnet", "Claude-4.0-Sonnet", "Claude-4.6-Sonnet",
-    "Gemini-2.0-Flash", "Gemini-2.5-Flash", "Gemini-3.0-Flash", "Qwen-2.0-VL-7B", "Qwen-2.5-VL-7B", "Qwen-3.0-VL-8B",
-    "LLaMA-3.2-11B", "LLaMA-3.2-90B", "LLaMA-4.0-17B-Scout",
+    "GPT-4o",
+    "GPT-5.0",
+    "GPT-5.2",
+    "Claude-3.7-Sonnet",
+    "Claude-4.0-Sonnet",
+    "Claude-4.6-Sonnet",
+    "Gemini-2.0-Flash",
+    "Gemini-2.5-Flash",
+    "Gemini-3.0-Flash",
+    "Qwen-2.0-VL-7B",
+    "Qwen-2.5-VL-7B",
+    "Qwen-3.0-VL-8B",
+    "LLaMA-3.2-11B",
+    "LLaMA-3.2-90B",
+    "LLaMA-4.0-17B-Scout",
 ]
-PAPER_GPUS = {"Qwen-2.0-VL-7B": 1, "Qwen-2.5-VL-7B": 1, "Qwen-3.0-VL-8B": 1, "LLaMA-3.2-11B": 1, "LLaMA-3.2-90B": 3, "LLaMA-4.0-17B-Scout": 3}
+PAPER_GPUS = {
+    "Qwen-2.0-VL-7B": 1,
+    "Qwen-2.5-VL-7B": 1,
+    "Qwen-3.0-VL-8B": 1,
+    "LLaMA-3.2-11B": 1,
+    "LLaMA-3.2-90B": 3,
+    "LLaMA-4.0-17B-Scout": 3,
+}
 
 
 def test_the_fifteen_paper_models_in_table_order_with_generations():
@@ -51,7 +70,12 @@ def test_lookup_by_key_display_name_or_provider_id_and_ad_hoc_strings():
     assert resolve("gpt-4o") is resolve("GPT-4o") is resolve("gpt-4o ")
     assert resolve("anthropic/claude-3-7-sonnet-20250219").display_name == "Claude-3.7-Sonnet"
     other = resolve("openai/my-finetune")
-    assert (other.backend, other.family, other.model_id, other.in_paper) == ("api", "other", "openai/my-finetune", False)
+    assert (other.backend, other.family, other.model_id, other.in_paper) == (
+        "api",
+        "other",
+        "openai/my-finetune",
+        False,
+    )
     with pytest.raises(UserError, match="baseline:constant"):
         resolve("baseline:nope")
 
@@ -103,9 +127,14 @@ def test_a_missing_optional_backend_is_a_clear_error(monkeypatch):
         create_backend("qwen-2.5-vl-7b", backend="vllm")
 
 
-@pytest.mark.parametrize(("model", "variable"), [
-    ("gpt-4o", "OPENAI_API_KEY"), ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY"), ("gemini/gemini-2.5-flash", "GEMINI_API_KEY"),
-])
+@pytest.mark.parametrize(
+    ("model", "variable"),
+    [
+        ("gpt-4o", "OPENAI_API_KEY"),
+        ("anthropic/claude-sonnet-4-6", "ANTHROPIC_API_KEY"),
+        ("gemini/gemini-2.5-flash", "GEMINI_API_KEY"),
+    ],
+)
 def test_missing_api_key_names_the_variable(monkeypatch, model, variable):
     for name in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY"):
         monkeypatch.delenv(name, raising=False)
@@ -164,7 +193,9 @@ def test_lightemma_models_lists_the_registry_with_prices_their_sources_and_reaso
     rows = json.loads(capsys.readouterr().out)
     by_key = {r["key"]: r for r in rows}
     assert list(by_key) == [m.key for m in (*PAPER_MODELS, *BASELINES)]
-    assert by_key["gpt-4o"]["price_source"].startswith("litellm ") and by_key["gpt-4o"]["input_usd_per_mtok"] == pytest.approx(2.5)
+    assert by_key["gpt-4o"]["price_source"].startswith("litellm ") and by_key["gpt-4o"][
+        "input_usd_per_mtok"
+    ] == pytest.approx(2.5)
     assert by_key["claude-3.7-sonnet"]["price_source"].endswith("read 2026-11-22")
     assert by_key["gpt-5.0"]["reasoning"] and not by_key["gpt-4o"]["reasoning"]
     assert by_key["qwen-2.5-vl-7b"]["backend"] == "hf" and by_key["qwen-2.5-vl-7b"]["input_usd_per_mtok"] is None

@@ -27,7 +27,14 @@ def report(tmp_path_factory):
     runs = tmp_path_factory.mktemp("runs")
     write_synthetic_run(runs, "openai/gpt-4o", 60, seed=1, noise=0.3)
     write_synthetic_run(runs, "gemini/gemini-2.0-flash", 60, seed=2, noise=0.8)
-    write_synthetic_run(runs, "baseline:cv", 60, seed=3, noise=1.5, manifest={"dataset": {"dataroot": str(runs / "nowhere"), "version": "v1.0-mini", "split": "all"}})
+    write_synthetic_run(
+        runs,
+        "baseline:cv",
+        60,
+        seed=3,
+        noise=1.5,
+        manifest={"dataset": {"dataroot": str(runs / "nowhere"), "version": "v1.0-mini", "split": "all"}},
+    )
     out = tmp_path_factory.mktemp("report")
     index = write_report([runs], out, top=1, common=True, svg=True)
     return out, index, index.read_text()
@@ -60,7 +67,11 @@ def test_index_has_tables_scenarios_and_pictures(report):
 
 def test_report_figures_are_not_blank(report):
     out, index, text = report
-    for png in [out / "figures" / "bubble.png", out / "figures" / "history_bias.png", *sorted((out / "figures" / "frames").glob("*.png"))[:3]]:
+    for png in [
+        out / "figures" / "bubble.png",
+        out / "figures" / "history_bias.png",
+        *sorted((out / "figures" / "frames").glob("*.png"))[:3],
+    ]:
         img = np.asarray(Image.open(png).convert("RGB"))
         assert img.shape[0] > 200 and img.shape[1] > 300
         assert n_colours(img) > 20, png
@@ -93,11 +104,23 @@ def test_pictures_use_the_camera_of_the_runs_dataset(tmp_path):
     frames = lightemma.load_frames(root, "v1.0-mini", split="all")
     run_dirs = []
     for kind in ("constant", "cv"):
-        run_dir = create_run_dir(tmp_path / "runs", f"baseline:{kind}", {"model": f"baseline:{kind}", "dataset": frames.describe(), "finished_at": "t"})
+        run_dir = create_run_dir(
+            tmp_path / "runs",
+            f"baseline:{kind}",
+            {"model": f"baseline:{kind}", "dataset": frames.describe(), "finished_at": "t"},
+        )
         with RunWriter(run_dir) as w:
             for frame in frames:
                 actions = baseline_actions(kind, frame)
-                w.append(make_record(frame.frame_id, frame.gt_positions, lightemma.integrate(actions), actions=actions, history_actions=frame.history_actions))
+                w.append(
+                    make_record(
+                        frame.frame_id,
+                        frame.gt_positions,
+                        lightemma.integrate(actions),
+                        actions=actions,
+                        history_actions=frame.history_actions,
+                    )
+                )
         run_dirs.append(run_dir)
     runs = [load_run(d, details=True) for d in run_dirs]
     cameras = CameraSource().cameras(runs, frames.frame_ids[:3])
@@ -130,10 +153,28 @@ def test_requested_frames_are_drawn_and_unknown_ones_refused(tmp_path, capsys):
     runs = tmp_path / "runs"
     write_synthetic_run(runs, "openai/gpt-4o", 12)
     write_synthetic_run(runs, "baseline:cv", 12, noise=1.0)
-    assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--frame", "scene-0000/9", "--top", "0", "--convention", "lightemma"]) == 0
+    assert (
+        main(
+            [
+                "report",
+                str(runs),
+                "--out",
+                str(tmp_path / "rep"),
+                "--frame",
+                "scene-0000/9",
+                "--top",
+                "0",
+                "--convention",
+                "lightemma",
+            ]
+        )
+        == 0
+    )
     text = (tmp_path / "rep" / "index.md").read_text()
     assert re.search(r"\*\*requested frame[^*]*\*\* — frame `scene-0000/9`", text)
-    (grid,) = (tmp_path / "rep" / "figures" / "frames").glob("frame_scene-0000_9_*grid.png")  # readable, then a hash of the id
+    (grid,) = (tmp_path / "rep" / "figures" / "frames").glob(
+        "frame_scene-0000_9_*grid.png"
+    )  # readable, then a hash of the id
     assert re.fullmatch(r"frame_scene-0000_9_[0-9a-f]{10}_grid\.png", grid.name)
     capsys.readouterr()
     assert main(["report", str(runs), "--out", str(tmp_path / "rep2"), "--frame", "nope/1"]) == 2

@@ -15,6 +15,7 @@ from html.parser import HTMLParser
 os.environ.setdefault("MPLBACKEND", "Agg")
 
 import pytest
+
 from lightemma.evaluation.synthetic import write_synthetic_run
 from lightemma.report import write_report
 from lightemma.runs.store import update_manifest
@@ -77,7 +78,27 @@ def test_no_name_becomes_html_or_a_link_in_any_markdown_file(hostile_report):
         source = path.read_text(encoding="utf-8")
         rendered = _render(source)
         # h4: the "#### Provenance" footer of every table file (lightemma.report.evaluation_tables.provenance_footer)
-        allowed = {"h1", "h2", "h3", "h4", "p", "table", "thead", "tbody", "tr", "th", "td", "em", "strong", "ul", "li", "code", "blockquote", "img", "a"}
+        allowed = {
+            "h1",
+            "h2",
+            "h3",
+            "h4",
+            "p",
+            "table",
+            "thead",
+            "tbody",
+            "tr",
+            "th",
+            "td",
+            "em",
+            "strong",
+            "ul",
+            "li",
+            "code",
+            "blockquote",
+            "img",
+            "a",
+        }
         assert {tag for tag, _ in rendered.tags} <= allowed, (path.name, rendered.tags)
         for tag, attrs in rendered.tags:
             assert not any(name.startswith("on") for name in attrs), (path.name, tag, attrs)
@@ -106,7 +127,7 @@ def test_every_svg_figure_parses(hostile_report):
 
 def test_the_frame_browser_shows_control_and_bidi_characters_as_escapes(hostile_report):
     data = (hostile_report / "html" / "data.js").read_text(encoding="utf-8")
-    payload = json.loads(data[len("LE.data("):-len(");\n")])
+    payload = json.loads(data[len("LE.data(") : -len(");\n")])
     scene = SCENE.replace("\u202e", "\\u202e")
     assert scene + "/7\\x1b[31m" in payload["ids"] and scene in payload["scene"]
     assert any(m["label"].startswith(f"GPT {PAYLOAD}\\x1b[31m") for m in payload["models"])

@@ -39,7 +39,10 @@ def _boxes_overlap(a, b) -> bool:
 
 @pytest.mark.parametrize("labels", [["GPT-4o", "Gemini-2.0-Flash"], ["GPT-4o", "Claude-3.7-Sonnet", "Qwen-2.5-VL-7B"]])
 def test_pairwise_title_and_colourbar_label_stay_inside_and_apart(labels):
-    rows = [{"model_a": a, "model_b": b, "ade_avg_diff": 0.1 * (i + 1), "significant": i % 2 == 0} for i, (a, b) in enumerate((a, b) for k, a in enumerate(labels) for b in labels[k + 1:])]
+    rows = [
+        {"model_a": a, "model_b": b, "ade_avg_diff": 0.1 * (i + 1), "significant": i % 2 == 0}
+        for i, (a, b) in enumerate((a, b) for k, a in enumerate(labels) for b in labels[k + 1 :])
+    ]
     fig = pairwise_figure(rows, labels)
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
@@ -47,7 +50,9 @@ def test_pairwise_title_and_colourbar_label_stay_inside_and_apart(labels):
     title = fig._suptitle.get_window_extent(renderer)
     bar_label = fig.axes[-1].yaxis.label.get_window_extent(renderer)
     for box in (title, bar_label):
-        assert figure_box.x0 <= box.x0 and box.x1 <= figure_box.x1 and figure_box.y0 <= box.y0 and box.y1 <= figure_box.y1
+        assert (
+            figure_box.x0 <= box.x0 and box.x1 <= figure_box.x1 and figure_box.y0 <= box.y0 and box.y1 <= figure_box.y1
+        )
     assert not _boxes_overlap(title, bar_label)
 
 
@@ -70,11 +75,23 @@ def test_baselines_are_cyan_and_two_runs_of_one_model_differ():
     for label in ("baseline:constant", "baseline:cv", "baseline:ca", "baseline:last", "my-vlm", "your-vlm"):
         r, g, b = (int(colors[label][i : i + 2], 16) / 255 for i in (1, 3, 5))
         saturated = colorsys.rgb_to_hls(r, g, b)[2] > 0.25
-        assert not saturated or all(_hue_gap(_hue(colors[label]), _hue(f)) > 20 for f in families), label  # no family's hue
+        assert not saturated or all(_hue_gap(_hue(colors[label]), _hue(f)) > 20 for f in families), (
+            label
+        )  # no family's hue
     # the bubble chart's legend shows the baselines' cyan
     from lightemma.report.figures import bubble_chart
 
-    points = [{"model": m["label"], "family": m["family"], "generation": m.get("generation"), "ade_avg": 1.0 + i / 10, "seconds_per_frame": 1.0, "source": "lightemma"} for i, m in enumerate(models)]
+    points = [
+        {
+            "model": m["label"],
+            "family": m["family"],
+            "generation": m.get("generation"),
+            "ade_avg": 1.0 + i / 10,
+            "seconds_per_frame": 1.0,
+            "source": "lightemma",
+        }
+        for i, m in enumerate(models)
+    ]
     fig = bubble_chart(points)
     legend = fig.axes[0].get_legend()
     swatch = next(h for h, t in zip(legend.legend_handles, legend.get_texts()) if t.get_text() == "Baseline")
@@ -97,7 +114,10 @@ def test_a_prediction_on_the_ground_truth_stays_visible(tmp_path):
     gt = np.stack([7.0 * STEPS, 0.4 * STEPS**2], axis=1)
     color = "#7048c8"
     counts = []
-    for name, truth in (("alone", gt + [0.0, 60.0]), ("on_truth", gt)):  # ground truth far off-image, then exactly under the prediction
+    for name, truth in (
+        ("alone", gt + [0.0, 60.0]),
+        ("on_truth", gt),
+    ):  # ground truth far off-image, then exactly under the prediction
         fig = frame_figure(truth, {"m": gt}, camera=Camera(image, K, EXTRINSIC), colors={"m": color})
         (png,) = save_figure(fig, tmp_path / name, formats=("png",))
         counts.append(_count(np.asarray(Image.open(png).convert("RGB")), color))
@@ -175,7 +195,9 @@ def disagreement_report(tmp_path_factory):
     write_synthetic_run(runs, "baseline:cv", 104, seed=3, noise=6.0)  # far off everywhere: never counted in the spread
     from lightemma.runs.store import create_run_dir
 
-    create_run_dir(runs, "anthropic/claude-3-7-sonnet-20250219", {"model": "anthropic/claude-3-7-sonnet-20250219"})  # an aborted, empty run
+    create_run_dir(
+        runs, "anthropic/claude-3-7-sonnet-20250219", {"model": "anthropic/claude-3-7-sonnet-20250219"}
+    )  # an aborted, empty run
     return runs
 
 
@@ -190,7 +212,9 @@ def test_disagreement_pictures_show_the_models_their_number_was_measured_on(disa
         return real(gt, predictions, **kwargs)
 
     monkeypatch.setattr(figures, "model_grid", spy)
-    text = write_report([disagreement_report], tmp_path / "rep", top=3, case_tags=(), with_paper=False, pictures=True).read_text()
+    text = write_report(
+        [disagreement_report], tmp_path / "rep", top=3, case_tags=(), with_paper=False, pictures=True
+    ).read_text()
     captions = re.findall(r"the (\d+) models shown disagree by ([\d.]+) m at 3 s", text)
     assert len(captions) == 3
     scenes = set()
@@ -219,4 +243,6 @@ def test_an_empty_run_is_left_out_with_a_warning_not_every_picture(disagreement_
     assert main(["report", str(disagreement_report), "--out", str(tmp_path / "rep2"), "--top", "2", "--no-paper"]) == 0
     err = capsys.readouterr().err
     assert not re.search(r"(?<!lightemma )report:", err) and "frame pictures" not in err and "\r" not in err  # no bar
-    assert re.search(r"lightemma report: warning: left out .*claude-3-7-sonnet.*: no scored frame", err)  # the warning, on stderr too
+    assert re.search(
+        r"lightemma report: warning: left out .*claude-3-7-sonnet.*: no scored frame", err
+    )  # the warning, on stderr too

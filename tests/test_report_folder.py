@@ -54,8 +54,12 @@ def test_a_killed_report_leaves_the_old_one_whole_and_its_leftovers_go_next_time
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--no-paper", "--top", "0"]) == 0
     before = _snapshot(out)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join(sys.path)}
-    proc = subprocess.Popen([sys.executable, "-m", "lightemma", "report", str(runs), "--out", str(out), "--top", "3"], env=env,
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "lightemma", "report", str(runs), "--out", str(out), "--top", "3"],
+        env=env,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     try:
         deadline = time.monotonic() + 120
         partial = []
@@ -86,8 +90,10 @@ def test_a_folder_that_is_not_a_report_is_refused_even_with_force(runs, tmp_path
     for force in ([], ["--force"]):
         assert main(["report", str(runs), "--out", str(mine), "--no-pictures", *force]) == 2
         err = capsys.readouterr().err.strip()
-        assert err == (f"lightemma report: error: --out {mine} is not empty and holds no lightemma report: refusing to write over it; "
-                       "choose a new or empty folder")
+        assert err == (
+            f"lightemma report: error: --out {mine} is not empty and holds no lightemma report: refusing to write over it; "
+            "choose a new or empty folder"
+        )
         assert _snapshot(mine) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["notes", "runs"]  # no hidden folder left
     # an empty folder, or a report lightemma wrote, is fine without --force
@@ -101,11 +107,14 @@ def test_a_folder_that_is_not_a_report_is_refused_even_with_force(runs, tmp_path
 
 def _png_header_only(path, width, height):
     """A PNG that claims ``width`` × ``height`` pixels (a decompression bomb's header) with almost no data."""
+
     def chunk(kind, data):
         return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
 
     ihdr = struct.pack(">IIBBBBB", width, height, 8, 2, 0, 0, 0)
-    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 64)) + chunk(b"IEND", b""))
+    path.write_bytes(
+        b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", ihdr) + chunk(b"IDAT", zlib.compress(b"\x00" * 64)) + chunk(b"IEND", b"")
+    )
 
 
 @pytest.mark.parametrize("size", [(60000, 60000), (8000, 6000)])  # over PIL's own bomb limit; over lightemma's cap only
@@ -127,29 +136,56 @@ def test_a_decompression_bomb_image_is_skipped_not_fatal(tmp_path, size):
     for frame in frames:  # every camera image of the dataset is a bomb now
         bomb_bytes = bomb.read_bytes()
         open(frame.image_path, "wb").write(bomb_bytes)
-    run_dir = create_run_dir(tmp_path / "runs", "baseline:cv", {"model": "baseline:cv", "dataset": frames.describe(), "finished_at": "t"})
+    run_dir = create_run_dir(
+        tmp_path / "runs", "baseline:cv", {"model": "baseline:cv", "dataset": frames.describe(), "finished_at": "t"}
+    )
     with RunWriter(run_dir) as w:
         for frame in frames:
             actions = baseline_actions("cv", frame)
-            w.append(make_record(frame.frame_id, frame.gt_positions, lightemma.integrate(actions), actions=actions, history_actions=frame.history_actions))
+            w.append(
+                make_record(
+                    frame.frame_id,
+                    frame.gt_positions,
+                    lightemma.integrate(actions),
+                    actions=actions,
+                    history_actions=frame.history_actions,
+                )
+            )
     index = write_report([run_dir], tmp_path / "rep", top=1, convention="lightemma", case_tags=(), with_paper=False)
     assert index.is_file() and (tmp_path / "rep" / "index.html").is_file()
-    assert not (tmp_path / "rep" / "html" / "images").exists() or not list((tmp_path / "rep" / "html" / "images").iterdir())
+    assert not (tmp_path / "rep" / "html" / "images").exists() or not list(
+        (tmp_path / "rep" / "html" / "images").iterdir()
+    )
     assert np.isfinite(np.asarray(frames[0].gt_positions)).all()
 
 
 @pytest.mark.parametrize("shape", ["run", "model_folder", "runs", "parent", "inside_run", "inside_runs"])
-def test_an_out_that_is_holds_or_lies_in_an_input_is_refused_even_with_force(runs, tmp_path, monkeypatch, capsys, shape):
+def test_an_out_that_is_holds_or_lies_in_an_input_is_refused_even_with_force(
+    runs, tmp_path, monkeypatch, capsys, shape
+):
     from lightemma.runs.store import find_run_dirs
 
     run = find_run_dirs(runs)[0]  # runs/<model>/<run id>
-    out = {"run": run, "model_folder": run.parent, "runs": runs, "parent": tmp_path, "inside_run": run / "rep", "inside_runs": runs / "rep"}[shape]
+    out = {
+        "run": run,
+        "model_folder": run.parent,
+        "runs": runs,
+        "parent": tmp_path,
+        "inside_run": run / "rep",
+        "inside_runs": runs / "rep",
+    }[shape]
     before = _snapshot(tmp_path)
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--force"]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and f"--out {out} " in err and "--force does not override this" in err
-    relation = {"run": "is the input run directory", "model_folder": "contains the input run directory", "runs": "is the runs folder", "parent": "contains the",
-                "inside_run": "lies inside the input run directory", "inside_runs": "lies inside the runs folder"}[shape]
+    relation = {
+        "run": "is the input run directory",
+        "model_folder": "contains the input run directory",
+        "runs": "is the runs folder",
+        "parent": "contains the",
+        "inside_run": "lies inside the input run directory",
+        "inside_runs": "lies inside the runs folder",
+    }[shape]
     assert relation in err
     assert _snapshot(tmp_path) == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["runs"]  # no hidden folder, the runs whole
@@ -172,8 +208,25 @@ def test_an_out_that_is_or_holds_the_dataroot_is_refused(runs, tmp_path, capsys)
         assert main(["report", str(runs), "--out", str(out), "--dataroot", str(data), "--no-pictures", "--force"]) == 2
         assert "the dataroot" in capsys.readouterr().err
     assert (data / "v1.0-mini" / "scene.json").read_text() == "[]" and not (data / "rep").exists()
-    assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--dataroot", str(data), "--version", "v9", "--no-pictures"]) == 2
-    assert capsys.readouterr().err.strip() == f"lightemma report: error: --version v9: --dataroot {data} has no folder v9"
+    assert (
+        main(
+            [
+                "report",
+                str(runs),
+                "--out",
+                str(tmp_path / "rep"),
+                "--dataroot",
+                str(data),
+                "--version",
+                "v9",
+                "--no-pictures",
+            ]
+        )
+        == 2
+    )
+    assert (
+        capsys.readouterr().err.strip() == f"lightemma report: error: --version v9: --dataroot {data} has no folder v9"
+    )
 
 
 def test_files_added_to_a_report_are_not_replaced_without_force(runs, tmp_path, capsys):
@@ -182,17 +235,25 @@ def test_files_added_to_a_report_are_not_replaced_without_force(runs, tmp_path, 
     out = tmp_path / "rep2"
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--no-paper", "--top", "0"]) == 0
     marker = json.loads((out / ".lightemma-report").read_text())
-    assert "index.md" in marker["files"] and "index.html" in marker["files"] and ".lightemma-report" not in marker["files"]
-    assert sorted(marker["files"]) == sorted(p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() and p.name != ".lightemma-report")
-    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 0  # its own files only: replaced
+    assert (
+        "index.md" in marker["files"] and "index.html" in marker["files"] and ".lightemma-report" not in marker["files"]
+    )
+    assert sorted(marker["files"]) == sorted(
+        p.relative_to(out).as_posix() for p in out.rglob("*") if p.is_file() and p.name != ".lightemma-report"
+    )
+    assert (
+        main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 0
+    )  # its own files only: replaced
     (out / "notes.txt").write_text("mine")
     (out / "figures" / "myfig.png").write_bytes(b"png")
     before = _snapshot(out)
     capsys.readouterr()
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err == (f"lightemma report: error: --out {out} holds 2 file(s) its report did not write (figures/myfig.png, notes.txt): "
-                   "refusing to replace it (--force replaces only the report's own files and keeps these)")
+    assert err == (
+        f"lightemma report: error: --out {out} holds 2 file(s) its report did not write (figures/myfig.png, notes.txt): "
+        "refusing to replace it (--force replaces only the report's own files and keeps these)"
+    )
     assert _snapshot(out) == before
     # --force replaces the report's own files and keeps the others, byte for byte; they stay not the report's
     (out / "index.md").write_text("stale")
@@ -205,11 +266,16 @@ def test_files_added_to_a_report_are_not_replaced_without_force(runs, tmp_path, 
     assert "holds 2 file(s) its report did not write" in capsys.readouterr().err
     # a file of the user's that the new report would write over is not replaced, --force or not
     (out / "tables" / "history_bias.md").unlink()
-    (out / ".lightemma-report").write_text(json.dumps({"files": [f for f in marker["files"] if f != "tables/history_bias.md"]}))
+    (out / ".lightemma-report").write_text(
+        json.dumps({"files": [f for f in marker["files"] if f != "tables/history_bias.md"]})
+    )
     (out / "tables" / "history_bias.md").write_text("my own table")
     mine = _snapshot(out)
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 2
-    assert "--force cannot keep tables/history_bias.md: the new report writes a file of that name" in capsys.readouterr().err
+    assert (
+        "--force cannot keep tables/history_bias.md: the new report writes a file of that name"
+        in capsys.readouterr().err
+    )
     assert _snapshot(out) == mine and sorted(p.name for p in tmp_path.iterdir()) == ["rep2", "runs"]
     # a report whose marker has no file list (an older lightemma's) cannot be told apart from added files: refused, --force too
     (out / "notes.txt").unlink()
@@ -218,7 +284,11 @@ def test_files_added_to_a_report_are_not_replaced_without_force(runs, tmp_path, 
     for force in ([], ["--force"]):
         assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", *force]) == 2
         err = capsys.readouterr().err
-        assert "without the list of its files" in err and "delete it yourself or choose another folder" in err and "--force" not in err
+        assert (
+            "without the list of its files" in err
+            and "delete it yourself or choose another folder" in err
+            and "--force" not in err
+        )
     assert (out / "tables" / "history_bias.md").read_text() == "my own table"
 
 
@@ -230,13 +300,21 @@ def test_the_dataroot_a_run_records_is_never_replaced_even_with_force(tmp_path, 
     (data / "samples").mkdir()
     (data / "samples" / "a.jpg").write_bytes(b"jpg")
     runs = tmp_path / "runs"
-    write_synthetic_run(runs, "baseline:cv", 20, seed=2, manifest={"dataset": {"dataroot": str(data), "version": "v1.0-mini"}})
+    write_synthetic_run(
+        runs, "baseline:cv", 20, seed=2, manifest={"dataset": {"dataroot": str(data), "version": "v1.0-mini"}}
+    )
     # recorded only in the run's request (config.dataset), as a resume reads it
-    write_synthetic_run(runs, "baseline:constant", 20, seed=3, manifest={"config": {"dataset": {"dataroot": str(tmp_path / "other")}}})
+    write_synthetic_run(
+        runs, "baseline:constant", 20, seed=3, manifest={"config": {"dataset": {"dataroot": str(tmp_path / "other")}}}
+    )
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "keep.json").write_text("{}")
     before = _snapshot(tmp_path)
-    for out, relation in ((data, "is the dataroot"), (tmp_path / "ds", "contains the dataroot"), (tmp_path / "other", "is the dataroot")):
+    for out, relation in (
+        (data, "is the dataroot"),
+        (tmp_path / "ds", "contains the dataroot"),
+        (tmp_path / "other", "is the dataroot"),
+    ):
         assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--force"]) == 2
         err = capsys.readouterr().err.strip()
         assert len(err.splitlines()) == 1 and f"--out {out} {relation} " in err and "recorded by the run" in err, err
@@ -245,7 +323,9 @@ def test_the_dataroot_a_run_records_is_never_replaced_even_with_force(tmp_path, 
     # a report beside the dataset, or inside it, replaces nothing of it and is written
     assert main(["report", str(runs), "--out", str(tmp_path / "rep"), "--no-pictures", "--top", "0"]) == 0
     assert main(["report", str(runs), "--out", str(data / "rep"), "--no-pictures", "--top", "0"]) == 0
-    assert (data / "v1.0-mini" / "scene.json").read_text() == "[]" and (data / "samples" / "a.jpg").read_bytes() == b"jpg"
+    assert (data / "v1.0-mini" / "scene.json").read_text() == "[]" and (
+        data / "samples" / "a.jpg"
+    ).read_bytes() == b"jpg"
 
 
 def test_a_folder_holding_a_run_is_never_replaced(runs, tmp_path, capsys):
@@ -255,7 +335,10 @@ def test_a_folder_holding_a_run_is_never_replaced(runs, tmp_path, capsys):
     before = _snapshot(out)
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0", "--force"]) == 2
     err = capsys.readouterr().err.strip()
-    assert err.startswith(f"lightemma report: error: --out {out} holds the lightemma run {out / 'parked'}") and "--force replaces" not in err
+    assert (
+        err.startswith(f"lightemma report: error: --out {out} holds the lightemma run {out / 'parked'}")
+        and "--force replaces" not in err
+    )
     assert _snapshot(out) == before
 
 
@@ -264,7 +347,11 @@ def test_a_report_killed_between_its_renames_is_put_back(runs, tmp_path):
     assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 0
     (out / "notes.txt").write_text("mine")
     before = _snapshot(out)
-    dead = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"], check=True, capture_output=True, text=True).stdout.strip()
+    dead = subprocess.run(
+        [sys.executable, "-c", "import os; print(os.getpid())"], check=True, capture_output=True, text=True
+    ).stdout.strip()
     os.rename(out, tmp_path / f".rep.old-{dead}")  # what a report killed after moving the old one aside leaves
-    assert main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2  # the old one is back, with notes.txt
+    assert (
+        main(["report", str(runs), "--out", str(out), "--no-pictures", "--top", "0"]) == 2
+    )  # the old one is back, with notes.txt
     assert _snapshot(out) == before and not list(tmp_path.glob(".rep.*"))

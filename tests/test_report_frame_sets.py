@@ -29,14 +29,25 @@ def report(tmp_path_factory):
     from lightemma.frames.fingerprint import run_fingerprint
 
     base = tmp_path_factory.mktemp("report_frame_sets")
-    dirs = [write_synthetic_run(base / "runs", "openai/gpt-4o", 40, seed=1, noise=0.3),
-            write_synthetic_run(base / "runs", "gemini/gemini-2.0-flash", 20, seed=2, noise=0.9)]
+    dirs = [
+        write_synthetic_run(base / "runs", "openai/gpt-4o", 40, seed=1, noise=0.3),
+        write_synthetic_run(base / "runs", "gemini/gemini-2.0-flash", 20, seed=2, noise=0.9),
+    ]
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        write_report([base / "runs"], base / "rep", top=0, pictures=False, case_tags=(), pairwise=False,
-                     resampling=Resampling(n_resamples=20))
+        write_report(
+            [base / "runs"],
+            base / "rep",
+            top=0,
+            pictures=False,
+            case_tags=(),
+            pairwise=False,
+            resampling=Resampling(n_resamples=20),
+        )
     runs = [load_run(d) for d in dirs]
-    fps = {label: run_fingerprint(run.info.run_dir, run.info.manifest or {}, run.frame_ids)
-           for label, run in zip(unique_labels(runs), runs, strict=True)}
+    fps = {
+        label: run_fingerprint(run.info.run_dir, run.info.manifest or {}, run.frame_ids)
+        for label, run in zip(unique_labels(runs), runs, strict=True)
+    }
     return base / "rep", fps
 
 
@@ -81,8 +92,10 @@ def test_the_html_page_shows_two_separated_labelled_groups(report, browser):  # 
         assert len(group.find_elements(By.CSS_SELECTOR, "tbody tr.diff")) == 1
     (one, first_fp), (other, second_fp) = fps.items()
     first, second = runs[first_fp["id"]], runs[second_fp["id"]]
-    assert first.rect["y"] + first.rect["height"] <= second.rect["y"] or \
-        second.rect["y"] + second.rect["height"] <= first.rect["y"]  # separated, not overlapping
+    assert (
+        first.rect["y"] + first.rect["height"] <= second.rect["y"]
+        or second.rect["y"] + second.rect["height"] <= first.rect["y"]
+    )  # separated, not overlapping
     header = first.find_element(By.CSS_SELECTOR, "thead th:nth-child(2)")
     header.click()  # sorting one group leaves the other as it was
     after = [td.text for td in second.find_elements(By.CSS_SELECTOR, RUN_CELLS)]
@@ -99,8 +112,15 @@ def test_one_frame_set_keeps_one_table(tmp_path):
     write_synthetic_run(tmp_path / "runs", "openai/gpt-4o", 20, seed=1)
     write_synthetic_run(tmp_path / "runs", "gemini/gemini-2.0-flash", 20, seed=2)
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        write_report([tmp_path / "runs"], tmp_path / "rep", top=0, pictures=False, case_tags=(), pairwise=False,
-                     resampling=Resampling(n_resamples=0))
+        write_report(
+            [tmp_path / "runs"],
+            tmp_path / "rep",
+            top=0,
+            pictures=False,
+            case_tags=(),
+            pairwise=False,
+            resampling=Resampling(n_resamples=0),
+        )
     assert (tmp_path / "rep" / "tables" / "accuracy_lightemma.md").is_file()
     assert not list((tmp_path / "rep" / "tables").glob("*_frames-*"))
     assert '<div class="frame-set-groups"' not in (tmp_path / "rep" / "index.html").read_text(encoding="utf-8")
@@ -115,8 +135,15 @@ def test_disjoint_frame_sets_split_the_scenario_and_history_bias_tables(tmp_path
     frames = other / "frames.jsonl"  # the synthetic ids in scenes of their own: no frame in common
     frames.write_text(frames.read_text(encoding="utf-8").replace('"scene-', '"other-'), encoding="utf-8")
     with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.StringIO()):
-        write_report([tmp_path / "runs"], tmp_path / "rep", top=0, pictures=False, case_tags=(), pairwise=False,
-                     resampling=Resampling(n_resamples=0))
+        write_report(
+            [tmp_path / "runs"],
+            tmp_path / "rep",
+            top=0,
+            pictures=False,
+            case_tags=(),
+            pairwise=False,
+            resampling=Resampling(n_resamples=0),
+        )
     tables = tmp_path / "rep" / "tables"
     assert not (tables / "scenarios.md").exists() and not (tables / "history_bias.md").exists()
     parts = sorted(tables.glob("scenarios_frames-*.md"))

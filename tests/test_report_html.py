@@ -29,14 +29,23 @@ def _chromium() -> str | None:
 @pytest.fixture(scope="module")
 def browser():
     if not (os.path.exists(CHROMEDRIVER) and _chromium()):
-        pytest.fail("chromium and chromium-driver are needed (apt-get install -y chromium chromium-driver; .ci/run installs them)")
+        pytest.fail(
+            "chromium and chromium-driver are needed (apt-get install -y chromium chromium-driver; .ci/run installs them)"
+        )
     os.environ["SE_AVOID_STATS"] = "true"  # Selenium Manager would phone home otherwise
     from selenium import webdriver
     from selenium.webdriver.chrome.service import Service
 
     options = webdriver.ChromeOptions()
     options.binary_location = _chromium()
-    for arg in ("--headless=new", "--no-sandbox", "--disable-gpu", "--disable-dev-shm-usage", "--window-size=1400,1000", "--allow-file-access-from-files"):
+    for arg in (
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--disable-dev-shm-usage",
+        "--window-size=1400,1000",
+        "--allow-file-access-from-files",
+    ):
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver = webdriver.Chrome(service=Service(CHROMEDRIVER), options=options)
@@ -71,7 +80,9 @@ def _wait(driver, predicate, timeout=15):
     from selenium.common.exceptions import StaleElementReferenceException
     from selenium.webdriver.support.ui import WebDriverWait
 
-    return WebDriverWait(driver, timeout, ignored_exceptions=(StaleElementReferenceException,)).until(lambda d: predicate(d))
+    return WebDriverWait(driver, timeout, ignored_exceptions=(StaleElementReferenceException,)).until(
+        lambda d: predicate(d)
+    )
 
 
 def _errors(driver):
@@ -85,7 +96,7 @@ def test_html_report_is_self_contained(html_report):
     assert (html_report / "index.md").read_text().count("(index.html)") == 1
     data = (html_report / "html" / "data.js").read_text()
     assert data.startswith("LE.data(") and data.rstrip().endswith(");")
-    payload = json.loads(data[len("LE.data("):data.rindex(")")])
+    payload = json.loads(data[len("LE.data(") : data.rindex(")")])
     assert sorted(m["label"] for m in payload["models"]) == ["GPT-4o", "Gemini-2.0-Flash", "baseline:cv"]
     assert len(payload["ids"]) == 90 and len(payload["gt"]) == 90 * 12 and len(payload["pred"]) == 3
     assert all(len(a) == 90 for a in payload["ade"])
@@ -124,11 +135,18 @@ def test_html_report_in_a_browser(browser, html_report, tmp_path):
     cards = d.find_elements(By.CSS_SELECTOR, "#grid .card")
     assert len(cards) >= 10
     ades = [float(c.text.split("ADE ")[1].split(" m")[0]) for c in cards if "ADE " in c.text]
-    assert ades == sorted(ades, reverse=True) and model_label.startswith(Select(d.find_element(By.ID, "f-model")).first_selected_option.text)
+    assert ades == sorted(ades, reverse=True) and model_label.startswith(
+        Select(d.find_element(By.ID, "f-model")).first_selected_option.text
+    )
 
     # filter: a scenario tag and an error band; every card shown matches, the count says how many
     d.get((html_report / "index.html").as_uri() + "#frames")
-    _wait(d, lambda d: d.find_element(By.ID, "frames-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#grid .card"))
+    _wait(
+        d,
+        lambda d: (
+            d.find_element(By.ID, "frames-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#grid .card")
+        ),
+    )
     total = len(d.find_elements(By.CSS_SELECTOR, "#grid .card"))
     Select(d.find_element(By.ID, "f-tag")).select_by_value("braking")
     _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "tag=braking")
@@ -143,17 +161,32 @@ def test_html_report_in_a_browser(browser, html_report, tmp_path):
     assert set(narrowed) <= set(braking)
     assert len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) == min(len(narrowed), 60) <= total
     # an error band of one model, and a failure kind: the lists are exactly the frames data.js says
-    payload = json.loads((html_report / "html" / "data.js").read_text()[len("LE.data("):-3])
+    payload = json.loads((html_report / "html" / "data.js").read_text()[len("LE.data(") : -3])
     d.get((html_report / "index.html").as_uri() + "#frames?model=0&band=0")
-    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'model=0&band=0'"))
+    _wait(
+        d,
+        lambda d: d.execute_script(
+            "return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'model=0&band=0'"
+        ),
+    )
     banded = d.execute_script("return LE.lastList.list")
     assert banded == [j for j, a in enumerate(payload["ade"][0]) if a is not None and a < 1.0] and banded
     failed = [j for j in range(90) if any(f[j] == payload["failures"].index("format") for f in payload["fail"])]
     d.get((html_report / "index.html").as_uri() + "#frames?fail=format")
-    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'fail=format'"))
+    _wait(
+        d,
+        lambda d: d.execute_script(
+            "return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'fail=format'"
+        ),
+    )
     assert d.execute_script("return LE.lastList.list") == failed
     d.get((html_report / "index.html").as_uri() + "#frames?tag=braking&dis=1")
-    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'tag=braking&dis=1'"))
+    _wait(
+        d,
+        lambda d: d.execute_script(
+            "return window.LE && LE.ready && LE.lastList && LE.lastList.query === 'tag=braking&dis=1'"
+        ),
+    )
     # thumbnails are drawn as they scroll into view: the first ones hold a bird's-eye plot
     _wait(d, lambda d: d.find_elements(By.CSS_SELECTOR, "#grid .card .thumb svg polyline.gt"))
 
@@ -186,22 +219,35 @@ def test_html_report_in_a_browser(browser, html_report, tmp_path):
 
 def test_html_frame_view_draws_the_camera_image_with_projected_paths(browser, tmp_path):
     """Runs on a synthetic nuScenes dataset: thumbnails are camera images, the frame view projects every path."""
+    from selenium.webdriver.common.by import By
+
     import lightemma
     from lightemma.backends.baseline import baseline_actions
     from lightemma.evaluation.synthetic import make_record
     from lightemma.runs.store import RunWriter, create_run_dir
     from lightemma.synth import write_dataset
-    from selenium.webdriver.common.by import By
 
     root = write_dataset(tmp_path / "data", scenes=3, keyframes=15, image_size=(320, 180), sweeps=False)
     frames = lightemma.load_frames(root, "v1.0-mini", split="all")
     run_dirs = []
     for kind in ("constant", "cv"):
-        run_dir = create_run_dir(tmp_path / "runs", f"baseline:{kind}", {"model": f"baseline:{kind}", "dataset": frames.describe(), "finished_at": "t"})
+        run_dir = create_run_dir(
+            tmp_path / "runs",
+            f"baseline:{kind}",
+            {"model": f"baseline:{kind}", "dataset": frames.describe(), "finished_at": "t"},
+        )
         with RunWriter(run_dir) as w:
             for frame in frames:
                 actions = baseline_actions(kind, frame)
-                w.append(make_record(frame.frame_id, frame.gt_positions, lightemma.integrate(actions), actions=actions, history_actions=frame.history_actions))
+                w.append(
+                    make_record(
+                        frame.frame_id,
+                        frame.gt_positions,
+                        lightemma.integrate(actions),
+                        actions=actions,
+                        history_actions=frame.history_actions,
+                    )
+                )
         run_dirs.append(run_dir)
     out = tmp_path / "report"
     write_report(run_dirs, out, top=1, convention="lightemma", case_tags=())
@@ -226,8 +272,12 @@ def test_a_new_column_needs_no_html_change():
     from lightemma.report.html import table_html
     from lightemma.report.tables import Column, Table, fixed
 
-    table = Table("Safety", [Column("model", "Model"), Column("collision_pct", "Collision (%)", fixed(2))],
-                  [{"model": "GPT-4o", "collision_pct": 0.512}, {"model": "CV", "collision_pct": None}], name="safety")
+    table = Table(
+        "Safety",
+        [Column("model", "Model"), Column("collision_pct", "Collision (%)", fixed(2))],
+        [{"model": "GPT-4o", "collision_pct": 0.512}, {"model": "CV", "collision_pct": None}],
+        name="safety",
+    )
     page = table_html(table, {"model:GPT-4o": "#frames?model=0&sort=worst"})
     assert '<section class="table" id="table-safety">' in page and ">Collision (%)</th>" in page
     assert '<td data-sort="0.512" class="num">0.51</td>' in page and '<td class="num">-</td>' in page
@@ -256,7 +306,13 @@ def test_the_frame_browser_shows_hostile_names_as_visible_text(browser, tmp_path
     d = browser
     d.get((out / "index.html").as_uri() + "#frame/0")
     _wait(d, lambda d: d.execute_script("return window.LE && window.LE.ready === true"))
-    _wait(d, lambda d: d.find_element(By.ID, "frame-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#texts .model-texts"))
+    _wait(
+        d,
+        lambda d: (
+            d.find_element(By.ID, "frame-view").is_displayed()
+            and d.find_elements(By.CSS_SELECTOR, "#texts .model-texts")
+        ),
+    )
     title = d.find_element(By.ID, "frame-title").text
     assert title.startswith("sc\\u202eene-<b>0000/") and "\u202e" not in title
     page = d.find_element(By.ID, "frame-view").text
@@ -280,8 +336,24 @@ def safety_report(tmp_path_factory):
     base = tmp_path_factory.mktemp("safety_html")
     root = write_dataset(base / "data", scenes=2, keyframes=20, image_size=(64, 36), sweeps=False)
     for kind in ("oracle", "cv"):
-        assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(root), "--version", "v1.0-mini", "--split", "all",
-                     "--out", str(base / "runs" / kind)]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--model",
+                    f"baseline:{kind}",
+                    "--dataroot",
+                    str(root),
+                    "--version",
+                    "v1.0-mini",
+                    "--split",
+                    "all",
+                    "--out",
+                    str(base / "runs" / kind),
+                ]
+            )
+            == 0
+        )
     run_dir = find_run_dirs(base / "runs" / "oracle")[0]
     data = S.load_safety_data(root, "v1.0-mini")
     records = [json.loads(line) for line in (run_dir / "frames.jsonl").read_text().splitlines()]
@@ -303,7 +375,9 @@ def safety_report(tmp_path_factory):
     (run_dir / "frames.jsonl").write_text("".join(json.dumps(r) + "\n" for r in records))
     (run_dir / SIDECAR_FILE).unlink(missing_ok=True)
     out = base / "rep"
-    write_report([base / "runs"], out, top=0, case_tags=(), dataroot=str(root), version="v1.0-mini", convention="lightemma")
+    write_report(
+        [base / "runs"], out, top=0, case_tags=(), dataroot=str(root), version="v1.0-mini", convention="lightemma"
+    )
     return out, hit, off
 
 
@@ -324,19 +398,33 @@ def test_safety_filter_and_per_model_flags_in_the_frame_browser(browser, safety_
     assert d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))") == [hit]
     Select(d.find_element(By.ID, "f-safe")).select_by_value("off_road")
     _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "safe=off_road")
-    assert sorted(d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")) == sorted([hit, off])  # the swerve leaves the lane too
+    assert sorted(d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")) == sorted(
+        [hit, off]
+    )  # the swerve leaves the lane too
     Select(d.find_element(By.ID, "f-safe")).select_by_value("unsafe")
     _wait(d, lambda d: d.execute_script("return LE.lastList.query") == "safe=unsafe")
     assert sorted(d.execute_script("return LE.lastList.list.map((j) => LE.frameId(j))")) == sorted([hit, off])
     assert len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) == 2
     # the other model has neither: filtered on it, nothing is left
     d.get((out / "index.html").as_uri() + f"#frames?model={1 - oracle}&safe=unsafe")
-    _wait(d, lambda d: d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query") == f"model={1 - oracle}&safe=unsafe")
+    _wait(
+        d,
+        lambda d: (
+            d.execute_script("return window.LE && LE.ready && LE.lastList && LE.lastList.query")
+            == f"model={1 - oracle}&safe=unsafe"
+        ),
+    )
     assert d.execute_script("return LE.lastList.list") == []
     # the frame view: each model's row says yes / no
     j = d.execute_script(f"return [...Array(1000).keys()].find((k) => LE.frameId(k) === {json.dumps(hit)})")
     d.get((out / "index.html").as_uri() + f"#frame/{j}")
-    _wait(d, lambda d: d.find_element(By.ID, "frame-view").is_displayed() and d.find_elements(By.CSS_SELECTOR, "#frame-metrics tbody tr"))
+    _wait(
+        d,
+        lambda d: (
+            d.find_element(By.ID, "frame-view").is_displayed()
+            and d.find_elements(By.CSS_SELECTOR, "#frame-metrics tbody tr")
+        ),
+    )
     heads = [th.text for th in d.find_elements(By.CSS_SELECTOR, "#frame-metrics thead th")]
     c, o = heads.index("Collides"), heads.index("Off-road")
 
@@ -375,7 +463,9 @@ def test_the_model_column_stays_in_view_when_a_wide_table_scrolls(browser, safet
         d.get((out / "index.html").as_uri())
         _wait(d, lambda d: d.execute_script("return window.LE && LE.ready === true"))
         box = d.find_element(By.CSS_SELECTOR, "#table-accuracy_lightemma .scroll")
-        assert d.execute_script("return arguments[0].scrollWidth > arguments[0].clientWidth + 300", box)  # wide: it scrolls
+        assert d.execute_script(
+            "return arguments[0].scrollWidth > arguments[0].clientWidth + 300", box
+        )  # wide: it scrolls
         d.execute_script("arguments[0].scrollIntoView({block: 'center'})", box)
         first = box.find_element(By.CSS_SELECTOR, "tbody tr td:first-child")
         second = box.find_element(By.CSS_SELECTOR, "tbody tr td:nth-child(2)")
@@ -385,8 +475,11 @@ def test_the_model_column_stays_in_view_when_a_wide_table_scrolls(browser, safet
         _wait(d, lambda d: left(second) < second_before - 250)
         assert abs(left(first) - before) < 1.0
         # and it is on top: the point at its middle is the model cell, not a scrolled cell under it
-        hit = d.execute_script("const r = arguments[0].getBoundingClientRect(); const e = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);"
-                               " return arguments[0].contains(e)", first)
+        hit = d.execute_script(
+            "const r = arguments[0].getBoundingClientRect(); const e = document.elementFromPoint(r.left + r.width / 2, r.top + r.height / 2);"
+            " return arguments[0].contains(e)",
+            first,
+        )
         assert hit
     finally:
         d.set_window_size(1400, 1000)

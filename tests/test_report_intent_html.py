@@ -24,8 +24,17 @@ def intent_report(tmp_path_factory, synth_root):
 
     out = tmp_path_factory.mktemp("intent-html") / "runs"
     with FakeOpenAIServer(_model(3)) as server:
-        run_dir = run("openai/gpt-4o", api_base=server.url, dataroot=synth_root, version="v1.0-mini", output=out,
-                      backoff_base=0.01, backoff_cap=0.05, timeout=10.0, progress=False).run_dir
+        run_dir = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            dataroot=synth_root,
+            version="v1.0-mini",
+            output=out,
+            backoff_base=0.01,
+            backoff_cap=0.05,
+            timeout=10.0,
+            progress=False,
+        ).run_dir
     report = tmp_path_factory.mktemp("intent-html-report") / "rep"
     write_report([run_dir], report, top=1, case_tags=())
     records = _records(run_dir)
@@ -37,7 +46,7 @@ def intent_report(tmp_path_factory, synth_root):
 def test_the_data_carries_the_contradictions(intent_report):
     report, lied, frames = intent_report
     data = (report / "html" / "data.js").read_text(encoding="utf-8")
-    payload = json.loads(data[data.index("(") + 1: data.rindex(")")])
+    payload = json.loads(data[data.index("(") + 1 : data.rindex(")")])
     flagged = sorted(fid for fid, v in zip(payload["ids"], payload["contra"][0], strict=True) if v == 1)
     assert flagged == lied
     assert all(v in (0, 1) for v in payload["contra"][0])
@@ -54,8 +63,10 @@ def test_the_frame_browser_filters_flags_and_highlights(browser, intent_report, 
     _wait(d, lambda d: len(d.find_elements(By.CSS_SELECTOR, "#grid .card")) > 0)
     # every frame, the lied ones flagged
     cards = d.find_elements(By.CSS_SELECTOR, "#grid .card")
-    shown = {c.find_element(By.CSS_SELECTOR, ".id").text: bool(c.find_elements(By.CSS_SELECTOR, ".intent-flag"))
-             for c in cards}
+    shown = {
+        c.find_element(By.CSS_SELECTOR, ".id").text: bool(c.find_elements(By.CSS_SELECTOR, ".intent-flag"))
+        for c in cards
+    }
     assert sorted(shown) == frames
     assert sorted(fid for fid, flag in shown.items() if flag) == lied
     # the filter: only the contradicting frames

@@ -17,8 +17,13 @@ from lightemma.report.writer import WARNINGS_FILE, summarise_warnings
 
 def test_repeated_warnings_are_counted_with_their_first_examples():
     tokens = [f"{k:032x}" for k in range(40)]
-    warnings = [f"GPT-4o: 1 frame(s) have no off-road value (n/a): no pose for sample {t} (e.g. scene-0001/{t})" for t in tokens]
-    warnings += [f"Claude: 1 frame(s) have no off-road value (n/a): no pose for sample {t} (e.g. scene-0002/{t})" for t in tokens[:2]]
+    warnings = [
+        f"GPT-4o: 1 frame(s) have no off-road value (n/a): no pose for sample {t} (e.g. scene-0001/{t})" for t in tokens
+    ]
+    warnings += [
+        f"Claude: 1 frame(s) have no off-road value (n/a): no pose for sample {t} (e.g. scene-0002/{t})"
+        for t in tokens[:2]
+    ]
     warnings += ["left out /runs/a: no scored frame", "left out /runs/a: no scored frame"]  # the same text twice: once
     summary = summarise_warnings(warnings, names=["GPT-4o", "Claude"])
     assert summary[0] == (f"42 warnings like: {warnings[0]}", warnings[1:3])
@@ -32,7 +37,17 @@ def test_a_wrong_dataroot_gives_a_few_lines_on_stderr_and_every_warning_in_a_fil
     write_synthetic_run(runs, "openai/gpt-4o", 30, seed=1, noise=0.3)
     write_synthetic_run(runs, "baseline:cv", 30, seed=2, noise=1.0)
     out = tmp_path / "rep"
-    write_report([runs], out, top=0, case_tags=(), pictures=False, with_paper=False, pairwise=False, dataroot=str(synth_root), version="v1.0-mini")
+    write_report(
+        [runs],
+        out,
+        top=0,
+        case_tags=(),
+        pictures=False,
+        with_paper=False,
+        pairwise=False,
+        dataroot=str(synth_root),
+        version="v1.0-mini",
+    )
     err = capsys.readouterr().err
     every = (out / WARNINGS_FILE).read_text().splitlines()
     assert len(every) >= 100  # per frame and model: the frames are not in that dataset
@@ -55,7 +70,9 @@ def test_the_reports_warnings_reach_stderr(tmp_path, capsys):
     (empty / "frames.jsonl").write_text("")
     for side in empty.glob("frames.columns*"):
         side.unlink()
-    write_report([runs], tmp_path / "rep", top=0, case_tags=(), pictures=False, with_paper=False, pairwise=False, safety=False)
+    write_report(
+        [runs], tmp_path / "rep", top=0, case_tags=(), pictures=False, with_paper=False, pairwise=False, safety=False
+    )
     err = capsys.readouterr().err
     assert f"lightemma report: warning: left out {empty}" in err
 
@@ -72,7 +89,10 @@ def test_an_na_reason_is_said_once_per_table():
     rows[1]["why"] = "no annotations"
     md = to_markdown(Table("Safety", cols, rows))
     assert md.count("n/a [1] |") == 11 and md.count("n/a [2] |") == 11
-    assert f"Every n/a [1] in this table: n/a ({reason})." in md and "Every n/a [2] in this table: n/a (no annotations)." in md
+    assert (
+        f"Every n/a [1] in this table: n/a ({reason})." in md
+        and "Every n/a [2] in this table: n/a (no annotations)." in md
+    )
 
 
 def test_each_table_names_its_holm_family(tmp_path):

@@ -8,12 +8,12 @@ import time
 from collections import Counter
 
 import pytest
-from fake_openai import FakeOpenAIServer, Reply, default_reply
-from memframes import FrameIndex, make_frames
 
+from fake_openai import FakeOpenAIServer, Reply, default_reply
 from lightemma.errors import UserError
 from lightemma.pipeline import resume, run
 from lightemma.runs.store import FRAMES_FILE, read_manifest, read_run, update_manifest
+from memframes import FrameIndex, make_frames
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, progress=False)
 
@@ -45,9 +45,27 @@ def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path, 
     n = len(frame_ids)
     out = tmp_path / "out"
     with FakeOpenAIServer(latency=0.05) as server:
-        command = [sys.executable, "-m", "lightemma", "run", "--model", "openai/test-model", "--api-base", server.url,
-                   "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all", "--concurrency", "2",
-                   "--output", str(out), "--no-progress"]
+        command = [
+            sys.executable,
+            "-m",
+            "lightemma",
+            "run",
+            "--model",
+            "openai/test-model",
+            "--api-base",
+            server.url,
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--concurrency",
+            "2",
+            "--output",
+            str(out),
+            "--no-progress",
+        ]
         proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
         try:
             deadline = time.monotonic() + 60
@@ -69,9 +87,22 @@ def test_sigkill_mid_run_then_resume_records_every_frame_exactly_once(tmp_path, 
             fh.write(b'{"frame_id": "synth-0000-cruise/tok')
         assert read_run(run_dir).truncated_tail
         before = len(server.requests)
-        resumed = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base", server.url,
-                                  "--no-progress"],
-                                 capture_output=True, text=True, timeout=120)
+        resumed = subprocess.run(
+            [
+                sys.executable,
+                "-m",
+                "lightemma",
+                "run",
+                "--resume",
+                str(run_dir),
+                "--api-base",
+                server.url,
+                "--no-progress",
+            ],
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
         assert resumed.returncode == 0, resumed.stderr
     assert f"{len(killed.records)} frame(s) recorded, {n - len(killed.records)} to run" in resumed.stderr
     assert len(server.requests) - before == 3 * (n - len(killed.records))
@@ -137,7 +168,9 @@ def test_retry_failed_reruns_only_failed_frames_and_the_last_record_wins(tmp_pat
         new = contents.records[old["frame_id"]]
         assert (new["first_status"], new["n_attempts"]) == ("failed", 3)
         assert [a["attempt"] for a in new["attempts"]] == [1, 2, 3]
-        assert [a["status"] for a in new["attempts"]] == ["failed", "failed", "ok"] and new["attempts"][:2] == old["attempts"]
+        assert [a["status"] for a in new["attempts"]] == ["failed", "failed", "ok"] and new["attempts"][:2] == old[
+            "attempts"
+        ]
         assert new["input_tokens"] > old["input_tokens"] and new["seconds"] >= old["seconds"]
     assert again.summary["fe_corr_percent"] == pytest.approx(100 * 2 / 6)
 
@@ -154,18 +187,32 @@ def test_with_the_response_cache_a_reask_and_a_retry_reach_the_provider_not_the_
         return default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "a", max_attempts=2, cache=True,
-                    **FAST)
+        first = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "a",
+            max_attempts=2,
+            cache=True,
+            **FAST,
+        )
         asked = [r.stage for r in server.requests]
         assert asked == ["scene", "intent", "actions", "actions"], asked  # the re-ask went to the server
         assert first.summary["failed"] == 1 and first.summary["cached_calls"] == 0
         fixed["now"] = True
         again = resume(first.run_dir, api_base=server.url, cache=True, retry_failed=True, frames=frames, progress=False)
-        assert [r.stage for r in server.requests[len(asked):]] == ["scene", "intent", "actions"]
+        assert [r.stage for r in server.requests[len(asked) :]] == ["scene", "intent", "actions"]
         sent = len(server.requests)
         # the same run again, sharing the cache: both attempts are replayed, nothing is sent
-        replay = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path / "a", max_attempts=2,
-                     cache=tmp_path / "a" / "cache.sqlite", **FAST)
+        replay = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "a",
+            max_attempts=2,
+            cache=tmp_path / "a" / "cache.sqlite",
+            **FAST,
+        )
         assert len(server.requests) == sent and replay.summary["failed"] == 1 and replay.summary["cached_calls"] == 4
     (record,) = read_run(first.run_dir).records.values()
     assert record["status"] == "ok" and [a["attempt"] for a in record["attempts"]] == [1, 2, 3]
@@ -191,7 +238,9 @@ def test_resume_of_a_run_with_a_prompt_set_file(tmp_path, monkeypatch):
     frames = make_frames(tmp_path, 3)
     monkeypatch.chdir(tmp_path)
     with FakeOpenAIServer() as server:
-        first = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, prompt_set="mine.json", **FAST)
+        first = run(
+            "openai/test-model", api_base=server.url, frames=frames, output=tmp_path, prompt_set="mine.json", **FAST
+        )
         path = first.run_dir / FRAMES_FILE
         path.write_bytes(b"".join(path.read_bytes().splitlines(keepends=True)[:2]))  # lost the last frame
         monkeypatch.chdir(first.run_dir)  # resumed from elsewhere: the file is found all the same

@@ -11,8 +11,9 @@ from lightemma.cli import main
 
 
 def test_resume_with_batch_poll_says_the_manifest_decides(synth_root, tmp_path, capsys) -> None:
-    run_dir = lightemma.run("baseline:cv", dataroot=synth_root, version="v1.0-mini", output=tmp_path, limit=2,
-                            progress=False).run_dir
+    run_dir = lightemma.run(
+        "baseline:cv", dataroot=synth_root, version="v1.0-mini", output=tmp_path, limit=2, progress=False
+    ).run_dir
     capsys.readouterr()
     assert main(["run", "--resume", str(run_dir), "--batch-poll", "1"]) == 2
     err = capsys.readouterr().err.strip()

@@ -4,20 +4,37 @@ import os
 
 import numpy as np
 import pytest
-from fake_openai import GOOD_ACTIONS, INTENT_TEXT, SCENE_TEXT, FakeOpenAIServer, Reply, default_reply
-from memframes import FrameIndex, make_frames
 
 import lightemma
+from fake_openai import GOOD_ACTIONS, INTENT_TEXT, SCENE_TEXT, FakeOpenAIServer, Reply, default_reply
 from lightemma.backends.api import FatalBackendError
 from lightemma.errors import UserError
 from lightemma.pipeline import run
 from lightemma.prompts import load_prompt_set
 from lightemma.runs.store import FRAMES_FILE, read_run
+from memframes import FrameIndex, make_frames
 
 FAST = dict(backoff_base=0.01, backoff_cap=0.05, timeout=5.0, progress=False)
-RECORD_FIELDS = {"frame_id", "scene_name", "sample_token", "status", "first_status", "attempts", "actions", "trajectory",
-               "gt_positions", "history_actions", "seconds", "input_tokens", "output_tokens", "cost_cents",
-               "scene_text", "intent_text", "answer", "cached"}
+RECORD_FIELDS = {
+    "frame_id",
+    "scene_name",
+    "sample_token",
+    "status",
+    "first_status",
+    "attempts",
+    "actions",
+    "trajectory",
+    "gt_positions",
+    "history_actions",
+    "seconds",
+    "input_tokens",
+    "output_tokens",
+    "cost_cents",
+    "scene_text",
+    "intent_text",
+    "answer",
+    "cached",
+}
 CORRECTED = "Sure! For the next 6 steps:\nv1 = 5.0, c1 = 0.0\nv2 = 5.0 c2 = 0.0\n5.0 0.0\n5.0 0.0\n5.0 0.0\n5.0 0.0"
 GARBAGE = "I cannot predict the future."
 
@@ -49,7 +66,15 @@ def records_of(result, frames=None):
 @pytest.mark.parametrize("transport", ["litellm", "direct"])
 def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames, transport):
     with FakeOpenAIServer() as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", concurrency=4, transport=transport, **FAST)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "out",
+            concurrency=4,
+            transport=transport,
+            **FAST,
+        )
     records = records_of(result)
     assert sorted(records) == sorted(f.frame_id for f in frames)
     assert server.stages().count("scene") == server.stages().count("intent") == server.stages().count("actions") == 8
@@ -58,7 +83,9 @@ def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames, transport):
         assert (rec["status"], rec["first_status"], rec["n_attempts"]) == ("ok", "ok", 1)
         assert (rec["scene_text"], rec["intent_text"], rec["answer"]) == (SCENE_TEXT, INTENT_TEXT, GOOD_ACTIONS)
         assert np.allclose(rec["trajectory"], lightemma.integrate(np.array(rec["actions"]), method="euler"))
-        assert np.allclose(rec["history_actions"], frame.history_actions) and np.allclose(rec["gt_positions"], frame.gt_positions)
+        assert np.allclose(rec["history_actions"], frame.history_actions) and np.allclose(
+            rec["gt_positions"], frame.gt_positions
+        )
         assert (rec["input_tokens"], rec["output_tokens"]) == (3000, 150)
         assert rec["cost_cents"] == pytest.approx(3 * (1000 * 2.5e-6 + 50 * 1e-5) * 100)
         assert [c["stage"] for c in rec["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
@@ -70,8 +97,14 @@ def test_a_clean_run_records_every_frame_per_spec(tmp_path, frames, transport):
     assert {"lightemma_version", "git_revision", "started_at", "backend", "dataset"} <= set(manifest)
     summary = result.summary
     assert (summary["frames"], summary["ok"], summary["fe_percent"], summary["fe_corr_percent"]) == (8, 8, 0.0, 0.0)
-    assert summary["ade_avg"] == pytest.approx(float(lightemma.evaluate(
-        np.array([r["trajectory"] for r in records.values()]), np.array([r["gt_positions"] for r in records.values()])).ade_avg))
+    assert summary["ade_avg"] == pytest.approx(
+        float(
+            lightemma.evaluate(
+                np.array([r["trajectory"] for r in records.values()]),
+                np.array([r["gt_positions"] for r in records.values()]),
+            ).ade_avg
+        )
+    )
     assert "FE" in result.report() and "frames/s" in result.report()
 
 
@@ -110,10 +143,19 @@ def test_malformed_answers_are_reasked_and_counted_as_format_errors(tmp_path, fr
     assert (recs[0]["first_status"], recs[0]["status"], recs[0]["n_attempts"]) == ("failed", "ok", 2)
     assert [c["stage"] for c in recs[0]["attempts"][1]["calls"]] == ["actions"]  # stage 3 alone re-asked
     assert recs[0]["attempts"][0]["answer"] == GARBAGE and "standalone number" in recs[0]["attempts"][0]["reason"]
-    assert (recs[0]["attempts"][0]["failure"], recs[0]["attempts"][1]["failure"], recs[0]["failure"]) == ("format", "", "")
+    assert (recs[0]["attempts"][0]["failure"], recs[0]["attempts"][1]["failure"], recs[0]["failure"]) == (
+        "format",
+        "",
+        "",
+    )
     assert (recs[1]["first_status"], recs[1]["status"], recs[1]["n_attempts"]) == ("corrected", "corrected", 1)
     assert recs[1]["attempts"][0]["reason"]
-    assert (recs[2]["status"], recs[2]["n_attempts"], recs[2]["actions"], recs[2]["trajectory"]) == ("failed", 3, None, None)
+    assert (recs[2]["status"], recs[2]["n_attempts"], recs[2]["actions"], recs[2]["trajectory"]) == (
+        "failed",
+        3,
+        None,
+        None,
+    )
     assert recs[2]["input_tokens"] == 5 * 1000  # scene + intent + 3 answers all count
     s = result.summary
     assert (s["ok"], s["corrected"], s["failed"]) == (6, 1, 1)
@@ -127,7 +169,9 @@ def test_reask_chain_reruns_all_three_stages(tmp_path, frames):
         return Reply(GARBAGE) if (i == 0 and stage == "actions" and n == 1) else None
 
     with FakeOpenAIServer(scripted(frames[:1], per_frame)) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames[:1], output=tmp_path, reask="chain", **FAST)
+        result = run(
+            "openai/test-model", api_base=server.url, frames=frames[:1], output=tmp_path, reask="chain", **FAST
+        )
     rec = next(iter(records_of(result).values()))
     assert server.stages() == ["scene", "intent", "actions"] * 2
     assert [c["stage"] for c in rec["attempts"][1]["calls"]] == ["scene", "intent", "actions"]
@@ -145,11 +189,24 @@ def test_api_errors_fail_the_frame_never_the_run_and_never_leak_into_prompts(tmp
         return None
 
     with FakeOpenAIServer(scripted(frames, per_frame)) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_retries=2, max_attempts=2, **FAST)
+        result = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path,
+            max_retries=2,
+            max_attempts=2,
+            **FAST,
+        )
     recs = records_of(result)
     bad, flaky = recs[frames[3].frame_id], recs[frames[4].frame_id]
     # no answer was ever received: not a format error, counted apart
-    assert (bad["status"], bad["first_status"], bad["error"], bad["n_attempts"]) == ("failed", None, "InternalServerError", 2)
+    assert (bad["status"], bad["first_status"], bad["error"], bad["n_attempts"]) == (
+        "failed",
+        None,
+        "InternalServerError",
+        2,
+    )
     assert bad["failure"] == "api_error" and [a["failure"] for a in bad["attempts"]] == ["api_error", "api_error"]
     assert bad["attempts"][0]["calls"][-1]["text"] is None and bad["attempts"][0]["answer"] is None
     assert bad["attempts"][0]["calls"][-1]["retries"] == 2
@@ -160,7 +217,12 @@ def test_api_errors_fail_the_frame_never_the_run_and_never_leak_into_prompts(tmp
     assert all(marker not in req.text and "Error" not in req.text for req in server.requests)
     assert result.summary["failed"] == 1 and result.summary["api_errors"] == 3
     s = result.summary
-    assert (s["api_error_frames"], s["answered_frames"], s["fe_percent"], s["fe_corr_percent"]) == (1, len(frames) - 1, 0.0, 0.0)
+    assert (s["api_error_frames"], s["answered_frames"], s["fe_percent"], s["fe_corr_percent"]) == (
+        1,
+        len(frames) - 1,
+        0.0,
+        0.0,
+    )
     assert "API errors only: 1" in result.report()
 
 
@@ -179,8 +241,15 @@ def test_api_keys_never_appear_in_any_file_the_run_writes(tmp_path, frames, monk
         return Reply.error(400, f"invalid request for key {secret}") if i == 0 else None
 
     with FakeOpenAIServer(scripted(frames, per_frame)) as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path / "out", cache=True,
-                     api_key_env="OPENAI_API_KEY", **FAST)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path / "out",
+            cache=True,
+            api_key_env="OPENAI_API_KEY",
+            **FAST,
+        )
     assert server.requests[0].headers["authorization"] == f"Bearer {secret}"
     assert records_of(result)[frames[0].frame_id]["status"] == "failed"
     written = [p for p in (tmp_path / "out").rglob("*") if p.is_file()]
@@ -194,8 +263,14 @@ def test_a_key_in_backend_options_is_refused_since_the_manifest_records_them(tmp
     secret = "sk-proj-NEVERWRITE-abcdef0123456789"
     with FakeOpenAIServer() as server:
         with pytest.raises(UserError, match="api_key"):
-            run("openai/gpt-4o", api_base=server.url, frames=frames[:1], output=tmp_path / "out",
-                backend_options={"api_key": secret}, **FAST)
+            run(
+                "openai/gpt-4o",
+                api_base=server.url,
+                frames=frames[:1],
+                output=tmp_path / "out",
+                backend_options={"api_key": secret},
+                **FAST,
+            )
     assert not (tmp_path / "out").exists() and not server.requests
 
 
@@ -239,7 +314,13 @@ def test_many_frames_are_in_flight_at_once(tmp_path):
 def test_invalid_settings_are_refused_before_any_work(tmp_path, frames):
     for bad in (dict(reask="sometimes"), dict(max_attempts=0), dict(integrate_method="rk4"), dict(concurrency=0)):
         with pytest.raises((UserError, ValueError)):
-            run("openai/test-model", api_base="http://127.0.0.1:9/v1", frames=frames, output=tmp_path / "x", **{**FAST, **bad})
+            run(
+                "openai/test-model",
+                api_base="http://127.0.0.1:9/v1",
+                frames=frames,
+                output=tmp_path / "x",
+                **{**FAST, **bad},
+            )
     assert not (tmp_path / "x").exists()
 
 
@@ -249,14 +330,37 @@ def cli(*args, env=None):
     import sys
 
     merged = {**os.environ, **(env or {})}
-    return subprocess.run([sys.executable, "-m", "lightemma", *map(str, args)], capture_output=True, text=True, timeout=120,
-                          env={k: v for k, v in merged.items() if v is not None})
+    return subprocess.run(
+        [sys.executable, "-m", "lightemma", *map(str, args)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        env={k: v for k, v in merged.items() if v is not None},
+    )
 
 
 def test_cli_run_over_a_synthetic_dataset(tmp_path, synth_root):
     with FakeOpenAIServer() as server:
-        done = cli("run", "--model", "openai/gpt-4o", "--api-base", server.url, "--dataroot", synth_root, "--version", "v1.0-mini",
-                   "--split", "all", "--limit", 10, "--concurrency", 4, "--output", tmp_path, "--no-progress")
+        done = cli(
+            "run",
+            "--model",
+            "openai/gpt-4o",
+            "--api-base",
+            server.url,
+            "--dataroot",
+            synth_root,
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            10,
+            "--concurrency",
+            4,
+            "--output",
+            tmp_path,
+            "--no-progress",
+        )
     assert done.returncode == 0, done.stderr
     assert "FE" in done.stdout and "ADE avg" in done.stdout and "run directory:" in done.stderr
     (run_dir,) = [p.parent for p in tmp_path.rglob("manifest.json")]
@@ -271,12 +375,25 @@ def test_cli_run_over_a_synthetic_dataset(tmp_path, synth_root):
     rec = contents.records[frames.frame_ids[0]]
     assert np.allclose(rec["gt_positions"], frames[0].gt_positions)
     assert lightemma.frames.format_history(frames[0].history_actions) in server.requests[1].text or any(
-        lightemma.frames.format_history(frames[0].history_actions) in r.text for r in server.requests)
+        lightemma.frames.format_history(frames[0].history_actions) in r.text for r in server.requests
+    )
 
 
 def test_cli_reports_a_missing_key_and_bad_usage_in_one_line(tmp_path, synth_root, capsys, monkeypatch):
-    done = cli("run", "--model", "gpt-4o", "--dataroot", synth_root, "--version", "v1.0-mini", "--split", "all",
-               "--output", tmp_path, env={"OPENAI_API_KEY": None})
+    done = cli(
+        "run",
+        "--model",
+        "gpt-4o",
+        "--dataroot",
+        synth_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--output",
+        tmp_path,
+        env={"OPENAI_API_KEY": None},
+    )
     assert done.returncode == 2 and "OPENAI_API_KEY" in done.stderr and "Traceback" not in done.stderr
     assert not list(tmp_path.iterdir())
     from lightemma.cli import main
@@ -336,11 +453,15 @@ def test_an_empty_answer_fails_the_attempt_and_is_reasked(tmp_path, frames):
 def test_baselines_run_through_the_same_chain_without_any_key(tmp_path, synth_root, monkeypatch):
     for name in ("OPENAI_API_KEY", "ANTHROPIC_API_KEY", "GEMINI_API_KEY", "GOOGLE_API_KEY"):
         monkeypatch.delenv(name, raising=False)
-    result = run("baseline:oracle", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False)
+    result = run(
+        "baseline:oracle", dataroot=synth_root, version="v1.0-mini", split="all", output=tmp_path, progress=False
+    )
     records = records_of(result)
     assert len(records) == result.manifest["dataset"]["n_frames"] == 12
-    assert all(r["status"] == "ok" and [c["stage"] for c in r["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
-               for r in records.values())
+    assert all(
+        r["status"] == "ok" and [c["stage"] for c in r["attempts"][0]["calls"]] == ["scene", "intent", "actions"]
+        for r in records.values()
+    )
     assert result.manifest["backend"]["kind"] == "oracle" and result.manifest["model_info"]["family"] == "baseline"
     assert result.summary["ade_avg"] < 0.5  # the oracle's own future actions, integrated
 
@@ -361,8 +482,16 @@ def test_plausibility_limits_are_run_settings_recorded_and_kept_by_resume(tmp_pa
         return None
 
     with FakeOpenAIServer(scripted(frames[:2], per_frame)) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames[:2], output=tmp_path, max_attempts=2,
-                     speed_range=(0, 40), max_abs_curvature=0.5, **FAST)
+        result = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames[:2],
+            output=tmp_path,
+            max_attempts=2,
+            speed_range=(0, 40),
+            max_abs_curvature=0.5,
+            **FAST,
+        )
         first, fast = records_of(result, frames[:2])
         assert (first["first_status"], first["status"]) == ("failed", "ok")
         assert first["attempts"][0]["failure"] == "implausible"
@@ -385,8 +514,11 @@ def test_runs_recorded_before_the_limits_resume_without_them():
     from lightemma.pipeline.runner import _policy
 
     # a manifest's config written before the limits existed: without speed_range and max_abs_curvature
-    config = {k: v for k, v in RunConfig.of("baseline:cv").to_manifest().items()
-              if k not in ("speed_range", "max_abs_curvature")}
+    config = {
+        k: v
+        for k, v in RunConfig.of("baseline:cv").to_manifest().items()
+        if k not in ("speed_range", "max_abs_curvature")
+    }
     policy = _policy(RunConfig.from_manifest(config))
     assert (policy.speed_range, policy.max_abs_curvature) == (None, None)
     assert policy.parse_record() == {"mode": "lenient", "speed_range": None, "max_abs_curvature": None}
@@ -399,14 +531,35 @@ def test_cli_plausibility_flags(tmp_path, synth_root, capsys, monkeypatch):
     from lightemma.runs.store import find_run_dirs, read_manifest
 
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
-    base = ["run", "--model", "baseline:oracle", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-            "--limit", "2", "--no-progress", "--output", str(tmp_path)]
+    base = [
+        "run",
+        "--model",
+        "baseline:oracle",
+        "--dataroot",
+        str(synth_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--limit",
+        "2",
+        "--no-progress",
+        "--output",
+        str(tmp_path),
+    ]
     assert main([*base, "--speed-range", "50", "-10"]) == 2
-    assert "lightemma run: error: --speed-range LO HI needs two finite numbers with LO < HI, got 50 -10" in capsys.readouterr().err
+    assert (
+        "lightemma run: error: --speed-range LO HI needs two finite numbers with LO < HI, got 50 -10"
+        in capsys.readouterr().err
+    )
     assert main([*base, "--max-curvature", "0"]) == 2
     assert "--max-curvature must be a finite number > 0" in capsys.readouterr().err
     assert main([*base, "--speed-range", "-5", "30", "--max-curvature", "0.25"]) == 0
     (run_dir,) = find_run_dirs(tmp_path)
-    assert read_manifest(run_dir)["params"]["parse"] == {"mode": "lenient", "speed_range": [-5.0, 30.0], "max_abs_curvature": 0.25}
+    assert read_manifest(run_dir)["params"]["parse"] == {
+        "mode": "lenient",
+        "speed_range": [-5.0, 30.0],
+        "max_abs_curvature": 0.25,
+    }
     assert main(["run", "--resume", str(run_dir), "--max-curvature", "0.3"]) == 2
     assert "drop --max-curvature" in capsys.readouterr().err

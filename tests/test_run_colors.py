@@ -13,7 +13,15 @@ import pytest
 
 from lightemma.evaluation.synthetic import write_synthetic_run
 from lightemma.report import write_report
-from lightemma.report.figures._mpl import COLLISION_RED, GT_COLOR, MIN_DELTA_E, RUN_PALETTE, delta_e, run_colors, srgb_to_lab
+from lightemma.report.figures._mpl import (
+    COLLISION_RED,
+    GT_COLOR,
+    MIN_DELTA_E,
+    RUN_PALETTE,
+    delta_e,
+    run_colors,
+    srgb_to_lab,
+)
 
 
 def test_cielab_matches_published_values():
@@ -45,7 +53,7 @@ def test_a_report_separates_runs_of_one_family(tmp_path):
     out = tmp_path / "rep"
     write_report([runs], out, top=0, case_tags=(), pictures=False, with_paper=False, pairwise=False)
     data = (out / "html" / "data.js").read_text()
-    models = json.loads(data[len("LE.data("):data.rindex(")")])["models"]
+    models = json.loads(data[len("LE.data(") : data.rindex(")")])["models"]
     assert len(models) == 4
     for a, b in itertools.combinations(models, 2):
         assert delta_e(a["color"], b["color"]) >= MIN_DELTA_E, (a, b)

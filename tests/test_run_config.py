@@ -28,25 +28,35 @@ def test_every_recorded_config_block_round_trips_through_run_config_key_for_key_
         assert json.dumps(again) == json.dumps(block), name  # same keys, same order, same values (1000 stays an int)
 
 
-@pytest.mark.parametrize(("group", "keywords", "message"), [
-    ("run", {"concurrency": 0}, "concurrency must be at least 1, got 0"),
-    ("run", {"timeout": float("inf")}, "timeout must be a finite number, got inf"),
-    ("run", {"max_cost_cents": 0.0}, "max_cost_cents must be greater than 0, got 0"),
-    ("run", {"name": "a\nb"}, "name must be 1 to 80 printable characters of UTF-8 text, got 'a\\nb'"),
-    ("dataset", {"limit": 0}, "limit must be at least 1, got 0"),
-    ("dataset", {"scenes": [1]}, "scenes must be a list of scene names, got [1]"),
-    ("dataset", {"sample": 0}, "sample must be at least 1, got 0"),
-    ("prompting", {"max_tokens": 2_000_000}, "max_tokens must be between 1 and 1e+06, got 2e+06"),
-    ("prompting", {"temperature": -1}, "temperature must be at least 0, got -1"),
-    ("prompting", {"speed_range": (5, 1)},
-     "speed_range must be two finite numbers (low, high) with low < high, got [5.0, 1.0]"),
-    ("api", {"rpm": 1e-300}, "rpm must be between 1 and 1e+09, got 1e-300"),
-    ("api", {"max_retries": "6"}, "max_retries must be a whole number, got '6'"),
-    ("api", {"price": (1.0, -2.0)}, "price must be two numbers (input, output USD per million tokens), each 0..1e+06"),
-    ("local", {"replicas": 0}, "replicas must be at least 1, got 0"),
-    ("local", {"backend_options": {"batch_size": 0}}, "batch_size must be at least 1, got 0"),
-    ("batch", {"batch": True, "batch_poll": 0}, "batch_poll must be greater than 0, got 0"),
-])
+@pytest.mark.parametrize(
+    ("group", "keywords", "message"),
+    [
+        ("run", {"concurrency": 0}, "concurrency must be at least 1, got 0"),
+        ("run", {"timeout": float("inf")}, "timeout must be a finite number, got inf"),
+        ("run", {"max_cost_cents": 0.0}, "max_cost_cents must be greater than 0, got 0"),
+        ("run", {"name": "a\nb"}, "name must be 1 to 80 printable characters of UTF-8 text, got 'a\\nb'"),
+        ("dataset", {"limit": 0}, "limit must be at least 1, got 0"),
+        ("dataset", {"scenes": [1]}, "scenes must be a list of scene names, got [1]"),
+        ("dataset", {"sample": 0}, "sample must be at least 1, got 0"),
+        ("prompting", {"max_tokens": 2_000_000}, "max_tokens must be between 1 and 1e+06, got 2e+06"),
+        ("prompting", {"temperature": -1}, "temperature must be at least 0, got -1"),
+        (
+            "prompting",
+            {"speed_range": (5, 1)},
+            "speed_range must be two finite numbers (low, high) with low < high, got [5.0, 1.0]",
+        ),
+        ("api", {"rpm": 1e-300}, "rpm must be between 1 and 1e+09, got 1e-300"),
+        ("api", {"max_retries": "6"}, "max_retries must be a whole number, got '6'"),
+        (
+            "api",
+            {"price": (1.0, -2.0)},
+            "price must be two numbers (input, output USD per million tokens), each 0..1e+06",
+        ),
+        ("local", {"replicas": 0}, "replicas must be at least 1, got 0"),
+        ("local", {"backend_options": {"batch_size": 0}}, "batch_size must be at least 1, got 0"),
+        ("batch", {"batch": True, "batch_poll": 0}, "batch_poll must be greater than 0, got 0"),
+    ],
+)
 def test_a_setting_out_of_its_kind_or_range_is_refused_naming_the_parameter_not_a_flag(group, keywords, message):
     with pytest.raises(InvalidSetting) as refused:
         RunConfig.of("baseline:cv", **keywords)
@@ -70,14 +80,28 @@ def test_the_command_line_names_the_flag_for_the_same_refusal(tmp_path, synth_ro
     from lightemma.cli import main
 
     monkeypatch.delenv("LIGHTEMMA_DEBUG", raising=False)
-    base = ["run", "--model", "baseline:cv", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-            "--output", str(tmp_path), "--no-progress"]
-    for flags, message in ((["--concurrency", "0"], "--concurrency must be at least 1, got 0"),
-                           (["--backoff", "601"], "--backoff must be between 0 and 600, got 601"),
-                           (["--max-cost", "0"], "--max-cost must be greater than 0, got 0"),
-                           (["--batch-size", "0"], "--batch-size must be at least 1, got 0"),
-                           # checked by the library (RunConfig), translated by the CLI
-                           (["--name", "a\nb"], "--name must be 1 to 80 printable characters of UTF-8 text")):
+    base = [
+        "run",
+        "--model",
+        "baseline:cv",
+        "--dataroot",
+        str(synth_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--output",
+        str(tmp_path),
+        "--no-progress",
+    ]
+    for flags, message in (
+        (["--concurrency", "0"], "--concurrency must be at least 1, got 0"),
+        (["--backoff", "601"], "--backoff must be between 0 and 600, got 601"),
+        (["--max-cost", "0"], "--max-cost must be greater than 0, got 0"),
+        (["--batch-size", "0"], "--batch-size must be at least 1, got 0"),
+        # checked by the library (RunConfig), translated by the CLI
+        (["--name", "a\nb"], "--name must be 1 to 80 printable characters of UTF-8 text"),
+    ):
         assert main([*base, *flags]) == 2
         err = capsys.readouterr().err
         assert f"lightemma run: error: {message}" in err and len(err.strip().splitlines()) == 1, err
@@ -123,16 +147,21 @@ def test_run_config_is_frozen_and_a_replaced_copy_is_validated_again():
 
 def test_a_manifest_config_is_refused_naming_the_manifest_setting():
     block = RunConfig.of("baseline:cv").to_manifest()
-    for changes, words in (({"concurrency": 0}, "run: the manifest's config.concurrency is 0, not a whole number"),
-                           ({"rpm": -1.0}, "config.rpm is -1.0, not a number greater than 0"),
-                           ({"backend_options": {"batch_size": 0}},
-                            "config.backend_options.batch_size is 0, not at least 1"),
-                           ({"chain": 3}, "config.chain is 3, not text")):
+    for changes, words in (
+        ({"concurrency": 0}, "run: the manifest's config.concurrency is 0, not a whole number"),
+        ({"rpm": -1.0}, "config.rpm is -1.0, not a number greater than 0"),
+        ({"backend_options": {"batch_size": 0}}, "config.backend_options.batch_size is 0, not at least 1"),
+        ({"chain": 3}, "config.chain is 3, not text"),
+    ):
         with pytest.raises(UserError) as refused:
             RunConfig.from_manifest({**block, **changes}, "run")
         text = str(refused.value)
         assert words in text and text.endswith("; start a new run"), text
     legacy = {k: v for k, v in block.items() if k not in ("chain", "answer_format", "inputs", "batch", "transport")}
     old = RunConfig.from_manifest(legacy, "run")  # written before those settings existed: what they meant then
-    assert (old.prompting.chain, old.prompting.inputs, old.batch.enabled, old.api.transport) == \
-        ("independent", "full", False, "litellm")
+    assert (old.prompting.chain, old.prompting.inputs, old.batch.enabled, old.api.transport) == (
+        "independent",
+        "full",
+        False,
+        "litellm",
+    )

@@ -21,11 +21,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from fake_openai import GOOD_ACTIONS, SCENE_TEXT, FakeOpenAIServer, Reply, default_reply
-from memframes import FrameIndex, make_frames
 
 import lightemma
 import lightemma.synth
+from fake_openai import GOOD_ACTIONS, SCENE_TEXT, FakeOpenAIServer, Reply, default_reply
 from lightemma.backends import ChatRequest, GenerationParams, create_backend
 from lightemma.backends.batching import MicroBatcher
 from lightemma.backends.retry import FailureStreak, RetryPolicy, failure_signature
@@ -34,6 +33,7 @@ from lightemma.errors import RunFatalError, RunStopped, RunStoreError
 from lightemma.pipeline import resume, run
 from lightemma.runs import store
 from lightemma.runs.store import FRAMES_FILE, RunLock, read_manifest, read_run
+from memframes import FrameIndex, make_frames
 
 CONCURRENCY = 4
 N_FRAMES = 12  # the synthetic dataset of conftest: 2 scenes × 20 keyframes
@@ -70,9 +70,33 @@ def run_cli(capsys, *args):
 
 
 def start(capsys, server, synth_root, out, *extra, transport="litellm"):
-    return run_cli(capsys, "--model", "openai/test-model", "--api-base", server.url, "--dataroot", synth_root,
-                   "--version", "v1.0-mini", "--split", "all", "--concurrency", CONCURRENCY, "--output", out,
-                   "--backoff", 0.01, "--max-retries", 1, "--timeout", 5, "--transport", transport, "--no-progress", *extra)
+    return run_cli(
+        capsys,
+        "--model",
+        "openai/test-model",
+        "--api-base",
+        server.url,
+        "--dataroot",
+        synth_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--concurrency",
+        CONCURRENCY,
+        "--output",
+        out,
+        "--backoff",
+        0.01,
+        "--max-retries",
+        1,
+        "--timeout",
+        5,
+        "--transport",
+        transport,
+        "--no-progress",
+        *extra,
+    )
 
 
 def only_run_dir(out):
@@ -92,11 +116,15 @@ def assert_resumes_to_the_end(capsys, run_dir, switch):
     # frames that ended failed with the error that stopped the run are redone: one fresh record each (the last wins)
     redone = Counter(fid for fid, r in before.records.items() if r["status"] == "failed")
     assert after.complete and len(after.records) == N_FRAMES and after.duplicates == sum(redone.values())
-    assert Counter(json.loads(line)["frame_id"] for line in (run_dir / FRAMES_FILE).read_text().splitlines()) == \
-        Counter(set(after.records)) + redone
+    assert (
+        Counter(json.loads(line)["frame_id"] for line in (run_dir / FRAMES_FILE).read_text().splitlines())
+        == Counter(set(after.records)) + redone
+    )
     assert all(r["status"] == "ok" for r in after.records.values())
     sessions = read_manifest(run_dir)["sessions"]
-    assert [s["kind"] for s in sessions] == ["run", "resume"] and "stopped" in sessions[0] and "stopped" not in sessions[1]
+    assert (
+        [s["kind"] for s in sessions] == ["run", "resume"] and "stopped" in sessions[0] and "stopped" not in sessions[1]
+    )
     return sessions[0]["stopped"]
 
 
@@ -112,13 +140,16 @@ WORDINGS = {
 @pytest.mark.parametrize("transport", ["litellm", "direct"])
 @pytest.mark.parametrize("wording", list(WORDINGS))
 def test_a_rejected_key_in_either_wording_stops_the_run_at_once_and_resume_finishes_it(
-        tmp_path, synth_root, capsys, wording, transport):
+    tmp_path, synth_root, capsys, wording, transport
+):
     body = {"error": {"message": WORDINGS[wording], "type": "invalid_request_error", "code": None}}
     switch = Switch(Reply(status=401, body=body))
     with FakeOpenAIServer(switch) as server:
         code, _, errors = start(capsys, server, synth_root, tmp_path, transport=transport)
         assert code == 2 and len(errors) == 1, errors
-        assert "AuthenticationError" in errors[0] and "API key was rejected" in errors[0] and "OPENAI_API_KEY" in errors[0]
+        assert (
+            "AuthenticationError" in errors[0] and "API key was rejected" in errors[0] and "OPENAI_API_KEY" in errors[0]
+        )
         assert "sk-wrong" not in errors[0] and "lightemma run --resume" in errors[0]
         assert len(server.requests) <= CONCURRENCY  # the first 401 stops everything: only the first wave was sent
         stopped = assert_resumes_to_the_end(capsys, only_run_dir(tmp_path), switch)
@@ -151,8 +182,16 @@ def test_one_frame_whose_request_is_always_rejected_fails_alone(tmp_path):
         return Reply.error(400, "Invalid image content") if mine else default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, concurrency=1,
-                     max_attempts=3, backoff_base=0.01, progress=False)
+        result = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path,
+            concurrency=1,
+            max_attempts=3,
+            backoff_base=0.01,
+            progress=False,
+        )
     records = read_run(result.run_dir).records
     assert records[frames[3].frame_id]["status"] == "failed" and records[frames[3].frame_id]["n_attempts"] == 3
     assert sum(r["status"] == "ok" for r in records.values()) == 7
@@ -173,19 +212,51 @@ def test_a_dead_api_base_stops_the_run(tmp_path, synth_root, capsys):
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
         port = sock.getsockname()[1]  # closed again: nothing listens there
-    code, _, errors = run_cli(capsys, "--model", "openai/test-model", "--api-base", f"http://127.0.0.1:{port}/v1",
-                              "--dataroot", synth_root, "--version", "v1.0-mini", "--split", "all", "--concurrency",
-                              CONCURRENCY, "--output", tmp_path, "--backoff", 0.01, "--max-retries", 0, "--no-progress")
+    code, _, errors = run_cli(
+        capsys,
+        "--model",
+        "openai/test-model",
+        "--api-base",
+        f"http://127.0.0.1:{port}/v1",
+        "--dataroot",
+        synth_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--concurrency",
+        CONCURRENCY,
+        "--output",
+        tmp_path,
+        "--backoff",
+        0.01,
+        "--max-retries",
+        0,
+        "--no-progress",
+    )
     assert code == 2 and len(errors) == 1 and "cannot connect" in errors[0] and "--api-base" in errors[0], errors
     assert not list(Path(tmp_path).iterdir())  # refused before any work: no run directory
 
 
 def test_a_typo_in_the_model_name_is_one_line_before_any_work(tmp_path, synth_root, capsys, monkeypatch):
     monkeypatch.setenv("OPENAI_API_KEY", "sk-test-0123456789")
-    code, _, errors = run_cli(capsys, "--model", "gtp-4o", "--dataroot", synth_root, "--version", "v1.0-mini",
-                              "--split", "all", "--output", tmp_path / "out")
+    code, _, errors = run_cli(
+        capsys,
+        "--model",
+        "gtp-4o",
+        "--dataroot",
+        synth_root,
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--output",
+        tmp_path / "out",
+    )
     assert code == 2 and len(errors) == 1, errors
-    assert "unknown model 'gtp-4o'" in errors[0] and "did you mean gpt-4o" in errors[0] and "lightemma models" in errors[0]
+    assert (
+        "unknown model 'gtp-4o'" in errors[0] and "did you mean gpt-4o" in errors[0] and "lightemma models" in errors[0]
+    )
     assert not (tmp_path / "out").exists()
 
 
@@ -196,8 +267,13 @@ def test_a_typo_in_the_model_name_is_one_line_before_any_work(tmp_path, synth_ro
 def test_a_trickling_server_is_cut_off_at_the_deadline(transport):
     """One byte every 0.25 s never trips a read timeout; lightemma's deadline bounds the whole call."""
     with FakeOpenAIServer(lambda req: Reply(SCENE_TEXT, trickle=0.25)) as server:
-        backend = create_backend("openai/test-model", api_base=server.url, timeout=1.0, transport=transport,
-                                 retry=RetryPolicy(max_retries=1, base=0.01, cap=0.02))
+        backend = create_backend(
+            "openai/test-model",
+            api_base=server.url,
+            timeout=1.0,
+            transport=transport,
+            retry=RetryPolicy(max_retries=1, base=0.01, cap=0.02),
+        )
         request = ChatRequest(text="describe", stage="scene", frame_id="f")
         began = time.perf_counter()
         result = asyncio.run(backend.generate([request]))[0]
@@ -211,11 +287,32 @@ def test_a_server_that_trickles_every_answer_stops_the_run_within_its_deadlines(
     switch = Switch(lambda req: Reply(SCENE_TEXT, trickle=0.2))
     with FakeOpenAIServer(switch) as server:
         began = time.perf_counter()
-        code, _, errors = run_cli(capsys, "--model", "openai/test-model", "--api-base", server.url, "--dataroot", synth_root,
-                                  "--version", "v1.0-mini", "--split", "all", "--concurrency", CONCURRENCY, "--output",
-                                  tmp_path, "--max-retries", 0, "--timeout", 0.6, "--no-progress")
+        code, _, errors = run_cli(
+            capsys,
+            "--model",
+            "openai/test-model",
+            "--api-base",
+            server.url,
+            "--dataroot",
+            synth_root,
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--concurrency",
+            CONCURRENCY,
+            "--output",
+            tmp_path,
+            "--max-retries",
+            0,
+            "--timeout",
+            0.6,
+            "--no-progress",
+        )
         elapsed = time.perf_counter() - began
-        assert code == 2 and len(errors) == 1 and "Timeout" in errors[0] and "raise --timeout (now 0.6 s)" in errors[0], errors
+        assert (
+            code == 2 and len(errors) == 1 and "Timeout" in errors[0] and "raise --timeout (now 0.6 s)" in errors[0]
+        ), errors
         assert len(server.requests) <= 2 * CONCURRENCY and elapsed < 20
         run_dir = only_run_dir(tmp_path)
         assert read_run(run_dir).records == {}
@@ -228,12 +325,21 @@ def test_a_server_that_trickles_every_answer_stops_the_run_within_its_deadlines(
 def test_a_reply_without_usage_is_unknown_tokens_and_cost_never_zero(tmp_path, transport):
     frames = make_frames(tmp_path, 4)
     with FakeOpenAIServer(lambda req: Reply(default_reply(req).content, usage=False)) as server:
-        result = run("openai/gpt-4o", api_base=server.url, frames=frames, output=tmp_path, transport=transport,
-                     backoff_base=0.01, progress=False)
+        result = run(
+            "openai/gpt-4o",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path,
+            transport=transport,
+            backoff_base=0.01,
+            progress=False,
+        )
     for record in read_run(result.run_dir).records.values():
         assert record["status"] == "ok"
         assert (record["input_tokens"], record["output_tokens"], record["cost_cents"]) == (None, None, None)
-        assert all(c["input_tokens"] is None and c["cost_cents"] is None for a in record["attempts"] for c in a["calls"])
+        assert all(
+            c["input_tokens"] is None and c["cost_cents"] is None for a in record["attempts"] for c in a["calls"]
+        )
     summary = result.summary
     assert summary["frames_tokens_unknown"] == 4 and summary["mean_input_tokens"] is None
     assert summary["total_cost_cents"] is None and summary["frames_cost_unknown"] == 4
@@ -247,7 +353,9 @@ def test_the_litellm_transport_keeps_the_tpm_reservation_of_a_call_without_usage
         backend = create_backend("openai/m", api_base=server.url, tpm=60_000, retry=RetryPolicy(max_retries=0))
         result = asyncio.run(backend.generate([ChatRequest(text="describe", stage="scene", frame_id="f")]))[0]
     assert result.ok and (result.input_tokens, result.output_tokens, result.cost_cents) == (None, None, None)
-    assert backend.limiter.tokens.level <= 60_000 - ESTIMATED_TOKENS_PER_CALL + 1000  # refills 1000/s; the call is quick
+    assert (
+        backend.limiter.tokens.level <= 60_000 - ESTIMATED_TOKENS_PER_CALL + 1000
+    )  # refills 1000/s; the call is quick
 
 
 def test_truncated_texts_are_recorded_asked_again_and_never_passed_on(tmp_path):
@@ -264,18 +372,33 @@ def test_truncated_texts_are_recorded_asked_again_and_never_passed_on(tmp_path):
         return default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, concurrency=1,
-                     backoff_base=0.01, progress=False)
+        result = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path,
+            concurrency=1,
+            backoff_base=0.01,
+            progress=False,
+        )
     assert all(cut_scene not in r.text for r in server.requests if r.stage != "scene")
     first = read_run(result.run_dir).records[frames[0].frame_id]
     attempts = first["attempts"]
-    assert [[c["stage"] for c in a["calls"]] for a in attempts] == [["scene"], ["scene", "intent", "actions"], ["actions"]]
+    assert [[c["stage"] for c in a["calls"]] for a in attempts] == [
+        ["scene"],
+        ["scene", "intent", "actions"],
+        ["actions"],
+    ]
     assert attempts[0]["calls"][0]["text"] == cut_scene and attempts[0]["calls"][0]["finish_reason"] == "length"
     assert (attempts[0]["status"], attempts[0]["failure"], attempts[0]["error"]) == ("failed", "truncated", None)
     assert attempts[0]["reason"].startswith("truncated: the scene text")
     # the cut-off answer holds six valid pairs, and is still not parsed: it is not the whole answer
-    assert (attempts[1]["status"], attempts[1]["reason"], attempts[1]["failure"], attempts[1]["answer"]) == \
-        ("failed", "truncated", "truncated", cut_answer)
+    assert (attempts[1]["status"], attempts[1]["reason"], attempts[1]["failure"], attempts[1]["answer"]) == (
+        "failed",
+        "truncated",
+        "truncated",
+        cut_answer,
+    )
     assert attempts[2]["status"] == "ok" and attempts[2]["failure"] == ""
     assert [c["finish_reason"] for a in attempts for c in a["calls"]] == ["length", "stop", "stop", "length", "stop"]
     assert (first["status"], first["first_status"], first["scene_text"]) == ("ok", "failed", SCENE_TEXT)
@@ -297,8 +420,16 @@ def test_frames_cut_off_before_stage_3_are_not_reported_as_api_errors(tmp_path):
         return default_reply(req)
 
     with FakeOpenAIServer(script) as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, max_attempts=2, max_retries=0,
-                     backoff_base=0.01, progress=False)
+        result = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path,
+            max_attempts=2,
+            max_retries=0,
+            backoff_base=0.01,
+            progress=False,
+        )
     s = result.summary
     assert (s["answered_frames"], s["api_error_frames"], s["cut_off_frames"], s["api_errors"]) == (1, 1, 1, 2)
     assert "(over 1 answered frame(s); API errors only: 1; cut off before stage 3: 1)" in result.report()
@@ -309,9 +440,17 @@ def test_frames_cut_off_before_stage_3_are_not_reported_as_api_errors(tmp_path):
 def test_reasoning_models_get_room_for_the_answer_and_their_reasoning_tokens_are_recorded(tmp_path):
     from lightemma.models.catalog import DEFAULT_REASONING_BUDGET
 
-    with FakeOpenAIServer(lambda req: Reply(default_reply(req).content, completion_tokens=900, reasoning_tokens=700)) as server:
-        result = run("gpt-5", api_base=server.url, frames=make_frames(tmp_path, 1), output=tmp_path, backoff_base=0.01,
-                     progress=False)
+    with FakeOpenAIServer(
+        lambda req: Reply(default_reply(req).content, completion_tokens=900, reasoning_tokens=700)
+    ) as server:
+        result = run(
+            "gpt-5",
+            api_base=server.url,
+            frames=make_frames(tmp_path, 1),
+            output=tmp_path,
+            backoff_base=0.01,
+            progress=False,
+        )
     body = server.requests[0].body
     sent = body.get("max_completion_tokens", body.get("max_tokens"))
     assert sent == 512 + DEFAULT_REASONING_BUDGET
@@ -340,8 +479,14 @@ def test_images_over_the_providers_limit_are_re_encoded_to_fit_and_the_manifest_
     limit = 24_000
     assert all(os.path.getsize(f.image_path) * 4 / 3 > limit for f in frames)
     with FakeOpenAIServer() as server:
-        result = run("openai/test-model", api_base=server.url, frames=frames, output=tmp_path, progress=False,
-                     backend_options={"max_image_bytes": limit})
+        result = run(
+            "openai/test-model",
+            api_base=server.url,
+            frames=frames,
+            output=tmp_path,
+            progress=False,
+            backend_options={"max_image_bytes": limit},
+        )
     for req in server.requests:
         url = next(p["image_url"]["url"] for p in req.body["messages"][-1]["content"] if p["type"] == "image_url")
         assert url.startswith("data:image/jpeg;base64,") and len(url.split(",", 1)[1]) <= limit
@@ -358,20 +503,46 @@ def test_images_over_the_providers_limit_are_re_encoded_to_fit_and_the_manifest_
 
 def test_a_second_writer_is_refused_naming_the_holders_pid(tmp_path, capsys):
     with FakeOpenAIServer() as server:
-        result = run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 2), output=tmp_path, progress=False)
+        result = run(
+            "openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 2), output=tmp_path, progress=False
+        )
         with RunLock(result.run_dir):
             with pytest.raises(RunStoreError, match=f"another lightemma process \\(PID {os.getpid()}\\)"):
                 resume(result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False)
-        resume(result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False)  # released: fine again
+        resume(
+            result.run_dir, api_base=server.url, frames=make_frames(tmp_path, 2), progress=False
+        )  # released: fine again
 
 
 def test_a_second_process_on_a_run_being_written_is_refused_and_the_first_finishes_alone(tmp_path, synth_root):
     out = tmp_path / "out"
     with FakeOpenAIServer(latency=0.4) as server:
-        first = subprocess.Popen([sys.executable, "-m", "lightemma", "run", "--model", "openai/test-model", "--api-base",
-                                  server.url, "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-                                  "--concurrency", "2", "--output", str(out), "--no-progress"],
-                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        first = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "lightemma",
+                "run",
+                "--model",
+                "openai/test-model",
+                "--api-base",
+                server.url,
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--concurrency",
+                "2",
+                "--output",
+                str(out),
+                "--no-progress",
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
         try:
             deadline = time.monotonic() + 60
             while not (out.exists() and store.find_run_dirs(out)) and time.monotonic() < deadline:
@@ -380,9 +551,22 @@ def test_a_second_process_on_a_run_being_written_is_refused_and_the_first_finish
             while not read_run(run_dir).records and time.monotonic() < deadline:
                 time.sleep(0.05)  # writing for sure
             calls_before = len(server.requests)
-            second = subprocess.run([sys.executable, "-m", "lightemma", "run", "--resume", str(run_dir), "--api-base",
-                                     server.url, "--no-progress"],
-                                    capture_output=True, text=True, timeout=120)
+            second = subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "lightemma",
+                    "run",
+                    "--resume",
+                    str(run_dir),
+                    "--api-base",
+                    server.url,
+                    "--no-progress",
+                ],
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
             stdout, stderr = first.communicate(timeout=120)
         finally:
             if first.poll() is None:
@@ -412,7 +596,9 @@ def test_a_full_disk_at_the_start_leaves_no_run_directory(tmp_path, synth_root, 
     assert [p.name for p in (tmp_path / "out").rglob("*")] == ["openai--test-model"]  # nothing half-made
 
 
-def test_a_full_disk_mid_run_stops_with_what_was_written_intact_and_resumable(tmp_path, synth_root, capsys, monkeypatch):
+def test_a_full_disk_mid_run_stops_with_what_was_written_intact_and_resumable(
+    tmp_path, synth_root, capsys, monkeypatch
+):
     written = []
     real_append = store.RunWriter.append
 
@@ -440,7 +626,9 @@ def test_an_output_path_that_is_a_file_is_one_line(tmp_path, synth_root, capsys)
     (tmp_path / "runs").write_text("not a directory")
     with FakeOpenAIServer() as server:
         code, _, errors = start(capsys, server, synth_root, tmp_path / "runs")
-    assert code == 2 and len(errors) == 1 and "is a file, not a directory" in errors[0] and "--output" in errors[0], errors
+    assert code == 2 and len(errors) == 1 and "is a file, not a directory" in errors[0] and "--output" in errors[0], (
+        errors
+    )
 
 
 def test_a_frame_set_with_no_frames_is_an_error_not_an_empty_run(tmp_path, synth_root, capsys):
@@ -450,8 +638,21 @@ def test_a_frame_set_with_no_frames_is_an_error_not_an_empty_run(tmp_path, synth
     # every scene shorter than a window: nothing to run
     short = lightemma.synth.write_dataset(tmp_path / "short", scenes=2, keyframes=10, image_size=(32, 18), sweeps=False)
     with FakeOpenAIServer() as server:
-        code, _, errors = run_cli(capsys, "--model", "openai/test-model", "--api-base", server.url, "--dataroot", short,
-                                  "--version", "v1.0-mini", "--split", "all", "--output", tmp_path / "out")
+        code, _, errors = run_cli(
+            capsys,
+            "--model",
+            "openai/test-model",
+            "--api-base",
+            server.url,
+            "--dataroot",
+            short,
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--output",
+            tmp_path / "out",
+        )
     assert code == 2 and len(errors) == 1 and "no frames to run: every scene was skipped" in errors[0], errors
     assert not (tmp_path / "out").exists()
 
@@ -459,8 +660,17 @@ def test_a_frame_set_with_no_frames_is_an_error_not_an_empty_run(tmp_path, synth
 def test_a_frame_set_whose_images_are_all_missing_says_so(tmp_path, capsys):
     """Not "choose other scenes or --window full": the frames exist, their CAM_FRONT images do not."""
     tables_only = lightemma.synth.write_dataset(tmp_path / "tables", scenes=1, keyframes=15, images=False, sweeps=False)
-    code, _, errors = run_cli(capsys, "--model", "baseline:cv", "--dataroot", tables_only, "--version", "v1.0-mini",
-                              "--output", tmp_path / "out")
+    code, _, errors = run_cli(
+        capsys,
+        "--model",
+        "baseline:cv",
+        "--dataroot",
+        tables_only,
+        "--version",
+        "v1.0-mini",
+        "--output",
+        tmp_path / "out",
+    )
     assert code == 2 and len(errors) == 1, errors
     assert "no frames to run: the CAM_FRONT image of every frame (1) is missing" in errors[0], errors
     assert "--window full" not in errors[0] and "samples/CAM_FRONT" in errors[0], errors
@@ -474,16 +684,22 @@ def test_evaluate_drops_records_of_frames_outside_the_runs_frame_set(tmp_path, c
     from lightemma.evaluation import evaluate_runs
 
     with FakeOpenAIServer() as server:
-        result = run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 4), output=tmp_path, progress=False)
-    assert (result.run_dir / store.FRAME_IDS_FILE).read_text().splitlines() == [f.frame_id for f in make_frames(tmp_path, 4)]
+        result = run(
+            "openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 4), output=tmp_path, progress=False
+        )
+    assert (result.run_dir / store.FRAME_IDS_FILE).read_text().splitlines() == [
+        f.frame_id for f in make_frames(tmp_path, 4)
+    ]
     record = next(iter(read_run(result.run_dir).records.values()))
     with open(result.run_dir / FRAMES_FILE, "a") as fh:
         fh.write(json.dumps({**record, "frame_id": "scene-9999/not-a-frame-of-this-run"}) + "\n")
     evaluation = evaluate_runs([result.run_dir])
     (model,) = evaluation.models
     assert model.frames_in_run == 4
-    assert any("dropped 1 record(s) whose frame id is not in the run's frame set" in w and "not-a-frame" in w
-               for w in evaluation.warnings)
+    assert any(
+        "dropped 1 record(s) whose frame id is not in the run's frame set" in w and "not-a-frame" in w
+        for w in evaluation.warnings
+    )
     assert cli_main(["evaluate", str(result.run_dir)]) == 0
     assert "dropped 1 record(s)" in capsys.readouterr().err
 
@@ -493,13 +709,18 @@ def test_evaluate_warns_when_a_finished_run_lost_records(tmp_path, capsys):
     from lightemma.evaluation import evaluate_runs
 
     with FakeOpenAIServer() as server:
-        result = run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 4), output=tmp_path, progress=False)
+        result = run(
+            "openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 4), output=tmp_path, progress=False
+        )
     assert not any("no record" in w for w in evaluate_runs([result.run_dir]).warnings)
     lines = (result.run_dir / FRAMES_FILE).read_text().splitlines(keepends=True)
     (result.run_dir / FRAMES_FILE).write_text("".join(lines[:3]))
     evaluation = evaluate_runs([result.run_dir])
-    assert [w for w in evaluation.warnings if "1 of its 4 frame(s) have no record in frames.jsonl" in w
-            and f"lightemma run --resume {result.run_dir}" in w], evaluation.warnings
+    assert [
+        w
+        for w in evaluation.warnings
+        if "1 of its 4 frame(s) have no record in frames.jsonl" in w and f"lightemma run --resume {result.run_dir}" in w
+    ], evaluation.warnings
     assert cli_main(["evaluate", str(result.run_dir)]) == 0
     assert "1 of its 4 frame(s) have no record" in capsys.readouterr().err
 
@@ -560,8 +781,14 @@ def test_the_micro_batcher_turns_fatal_only_on_an_identical_exception_in_consecu
     results = asyncio.run(go(MicroBatcher(varied, batch_size=1, batch_window=0), ["a"], ["b"], ["c"]))
     assert all(isinstance(r, list) for r in results)
     # the identical exception on two consecutive batches of different frames: fatal, and stays fatal
-    results = asyncio.run(go(MicroBatcher(broken, batch_size=2, batch_window=0, describe_fatal=lambda e: f"cannot: {e}"),
-                             ["a", "b"], ["c", "d"], ["e", "f"]))
+    results = asyncio.run(
+        go(
+            MicroBatcher(broken, batch_size=2, batch_window=0, describe_fatal=lambda e: f"cannot: {e}"),
+            ["a", "b"],
+            ["c", "d"],
+            ["e", "f"],
+        )
+    )
     assert isinstance(results[0], list) and results[0][0].error == "AttributeError"
     assert isinstance(results[1], RunFatalError) and str(results[1]) == "cannot: no attribute 'image_outputs'"
     assert results[2] is results[1] and results[1].cause == "local-model"
@@ -571,19 +798,32 @@ def test_the_micro_batcher_turns_fatal_only_on_an_identical_exception_in_consecu
 def test_a_stopped_run_raises_run_stopped_from_python_too(tmp_path):
     with FakeOpenAIServer(lambda req: Reply.error(401, "bad key")) as server:
         with pytest.raises(RunStopped) as info:
-            run("openai/test-model", api_base=server.url, frames=make_frames(tmp_path, 6), output=tmp_path, progress=False)
+            run(
+                "openai/test-model",
+                api_base=server.url,
+                frames=make_frames(tmp_path, 6),
+                output=tmp_path,
+                progress=False,
+            )
     assert info.value.cause == "authentication" and info.value.frames_run == 0
     assert read_run(info.value.run_dir).records == {} and np.isscalar(info.value.frames_run)
 
 
-def test_permission_denied_creating_the_run_directory_is_one_line_and_leaves_nothing(tmp_path, synth_root, capsys, monkeypatch):
+def test_permission_denied_creating_the_run_directory_is_one_line_and_leaves_nothing(
+    tmp_path, synth_root, capsys, monkeypatch
+):
     def denied(*args, **kwargs):
         raise PermissionError(errno.EACCES, "Permission denied", str(tmp_path / "out"))
 
     monkeypatch.setattr(store.tempfile, "mkdtemp", denied)
     with FakeOpenAIServer() as server:
         code, _, errors = start(capsys, server, synth_root, tmp_path / "out")
-    assert code == 2 and len(errors) == 1 and "cannot create the run directory" in errors[0] and "permission denied" in errors[0]
+    assert (
+        code == 2
+        and len(errors) == 1
+        and "cannot create the run directory" in errors[0]
+        and "permission denied" in errors[0]
+    )
     assert store.find_run_dirs(tmp_path / "out") == []
 
 
@@ -597,17 +837,36 @@ def test_a_malformed_pose_is_named_in_one_line_or_its_scene_left_out_of_the_run(
     frames = lightemma.load_frames(synth_root, "v1.0-mini", split="all")
     first_scene = frames.scenes[0]
     sample = frames[0].sample_token
-    (sd,) = [s for s in json.loads((root / "v1.0-mini" / "sample_data.json").read_text())
-             if s["sample_token"] == sample and s["is_key_frame"] and "CAM_FRONT" in s["filename"]]
+    (sd,) = [
+        s
+        for s in json.loads((root / "v1.0-mini" / "sample_data.json").read_text())
+        if s["sample_token"] == sample and s["is_key_frame"] and "CAM_FRONT" in s["filename"]
+    ]
     (pose,) = [p for p in poses if p["token"] == sd["ego_pose_token"]]
     pose["rotation"] = [0, 0, 0, 0]
     path.write_text(json.dumps(poses))
     with FakeOpenAIServer() as server:
-        args = ["--model", "openai/test-model", "--api-base", server.url, "--dataroot", root, "--version", "v1.0-mini",
-                "--split", "all", "--output", tmp_path / "out", "--no-progress"]
+        args = [
+            "--model",
+            "openai/test-model",
+            "--api-base",
+            server.url,
+            "--dataroot",
+            root,
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--output",
+            tmp_path / "out",
+            "--no-progress",
+        ]
         code, _, errors = run_cli(capsys, *args, "--on-bad-record", "error")
         assert code == 2 and len(errors) == 1 and not (tmp_path / "out").exists() and not server.requests, errors
-        assert f"scene {first_scene}: ego_pose {pose['token']}: field rotation = [0, 0, 0, 0] is not a unit quaternion (norm 0;" in errors[0]
+        assert (
+            f"scene {first_scene}: ego_pose {pose['token']}: field rotation = [0, 0, 0, 0] is not a unit quaternion (norm 0;"
+            in errors[0]
+        )
         code, _, errors = run_cli(capsys, *args)  # the default: that scene is left out, with a warning
         assert code == 0 and not errors
     contents = read_run(only_run_dir(tmp_path / "out"))

@@ -23,7 +23,9 @@ def _rect(cx, cy, yaw, length, width):
     from shapely import affinity
     from shapely.geometry import box
 
-    return affinity.rotate(box(cx - length / 2, cy - width / 2, cx + length / 2, cy + width / 2), yaw, origin=(cx, cy), use_radians=True)
+    return affinity.rotate(
+        box(cx - length / 2, cy - width / 2, cx + length / 2, cy + width / 2), yaw, origin=(cx, cy), use_radians=True
+    )
 
 
 # -- geometry ------------------------------------------------------------------------------------
@@ -35,8 +37,14 @@ def test_rotated_rectangle_overlap_matches_shapely_on_random_pairs():
     ego = np.column_stack([rng.uniform(-3, 3, n), rng.uniform(-3, 3, n)])  # one step from the origin pose
     poses = np.column_stack([rng.uniform(-50, 50, (n, 2)), rng.uniform(-np.pi, np.pi, n)])
     traj = ego[:, None, :]
-    agents = np.column_stack([poses[:, :2] + rng.uniform(-6, 6, (n, 2)),
-                              rng.uniform(-np.pi, np.pi, n), rng.uniform(0.3, 6, n), rng.uniform(0.3, 3, n)])
+    agents = np.column_stack(
+        [
+            poses[:, :2] + rng.uniform(-6, 6, (n, 2)),
+            rng.uniform(-np.pi, np.pi, n),
+            rng.uniform(0.3, 6, n),
+            rng.uniform(0.3, 3, n),
+        ]
+    )
     hits = S.box_collisions(traj, poses, agents[:, None, None, :])[:, 0, 0]
     gp = S.ego_poses(traj, poses)[:, 0]
     want = []
@@ -55,7 +63,9 @@ def test_footprint_by_hand():
     np.testing.assert_allclose(gp, [10.0, 23.0, math.pi / 2], atol=1e-12)
     c = S.footprints(traj, poses)[0, 0]
     front, rear = 23.0 + OFF + L / 2, 23.0 + OFF - L / 2  # along +y
-    np.testing.assert_allclose(c, [[10 - W / 2, front], [10 + W / 2, front], [10 + W / 2, rear], [10 - W / 2, rear]], atol=1e-12)
+    np.testing.assert_allclose(
+        c, [[10 - W / 2, front], [10 + W / 2, front], [10 + W / 2, rear], [10 - W / 2, rear]], atol=1e-12
+    )
 
 
 def test_short_steps_keep_the_heading():
@@ -96,14 +106,20 @@ def _fs(collide, gt_collide=None):
     n = len(collide)
     col = np.zeros((n, 6, 2), dtype=bool)
     col[:, :, 0] = np.asarray(collide, dtype=bool)
-    fs = S.FrameSafety(np.ones((n, 6, 5), np.uint8), np.ones(n, bool), [""] * n, ["mask"] * n, col, np.ones(n, bool), [""] * n)
+    fs = S.FrameSafety(
+        np.ones((n, 6, 5), np.uint8), np.ones(n, bool), [""] * n, ["mask"] * n, col, np.ones(n, bool), [""] * n
+    )
     return fs
 
 
 def test_collision_conventions_by_hand():
-    model = _fs([[0, 1, 0, 0, 0, 0],   # collides at 1.0 s only
-                 [0, 0, 0, 0, 0, 1],   # at 3.0 s only
-                 [0, 0, 0, 1, 0, 0]])  # at 2.0 s, where the ground truth collides too
+    model = _fs(
+        [
+            [0, 1, 0, 0, 0, 0],  # collides at 1.0 s only
+            [0, 0, 0, 0, 0, 1],  # at 3.0 s only
+            [0, 0, 0, 1, 0, 0],
+        ]
+    )  # at 2.0 s, where the ground truth collides too
     gt = _fs([[0, 0, 0, 0, 0, 0], [0, 0, 0, 0, 0, 0], [0, 0, 0, 1, 0, 0]])
     uniad = S.rates(S.safety_values(model, "uniad", gt=gt))
     # at the instants 1/2/3 s (steps 2, 4, 6); frame 3's step 4 masked by the ground truth
@@ -114,15 +130,17 @@ def test_collision_conventions_by_hand():
     assert (stp3["collision_1s"], stp3["collision_2s"], stp3["collision_3s"]) == pytest.approx((1 / 6, 1 / 12, 1 / 9))
     anyc = S.rates(S.safety_values(model, "any", gt=gt))
     # any collision up to t, not masked: 1 s frame 1; 2 s frames 1, 3; 3 s all three
-    assert (anyc["collision_1s"], anyc["collision_2s"], anyc["collision_3s"], anyc["collision"]) == pytest.approx((1 / 3, 2 / 3, 1.0, 1.0))
+    assert (anyc["collision_1s"], anyc["collision_2s"], anyc["collision_3s"], anyc["collision"]) == pytest.approx(
+        (1 / 3, 2 / 3, 1.0, 1.0)
+    )
     assert anyc["collision_vehicle"] == 1.0 and anyc["collision_vru"] == 0.0
 
 
 def test_offroad_values_and_na():
     fs = _fs([[0] * 6] * 3)
-    fs.area[0, 3, 2] = S.OFF      # frame 0: rear-right corner at step 4 (2.0 s)
-    fs.area[1, 5, 4] = S.OFF      # frame 1: the reference point at step 6 (corners on)
-    fs.area_ok[2] = False         # frame 2: no map
+    fs.area[0, 3, 2] = S.OFF  # frame 0: rear-right corner at step 4 (2.0 s)
+    fs.area[1, 5, 4] = S.OFF  # frame 1: the reference point at step 6 (corners on)
+    fs.area_ok[2] = False  # frame 2: no map
     fs.area_reason[2] = "no drivable area: map mask x.png is missing"
     v = S.rates(S.safety_values(fs, "any"))
     assert v["offroad"] == 0.5 and v["offroad_2s"] == 0.5 and v["offroad_3s"] == 0.0 and v["offroad_centre"] == 0.5
@@ -226,7 +244,7 @@ def test_na_reasons(safety_root, tmp_path, frames):
     root = tmp_path / "copy"
     shutil.copytree(safety_root, root)
     (root / "v1.0-mini" / "sample_annotation.json").write_text("[]")  # like v1.0-test
-    shutil.rmtree(root / "maps" / "expansion")                       # base masks only
+    shutil.rmtree(root / "maps" / "expansion")  # base masks only
     first_mask = json.loads((root / "v1.0-mini" / "map.json").read_text())[0]
     (root / first_mask["filename"]).unlink()
     data = S.load_safety_data(root, "v1.0-mini")

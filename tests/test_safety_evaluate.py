@@ -10,11 +10,11 @@ import pytest
 
 from lightemma.cli import main
 from lightemma.evaluation import evaluate_loaded, load_run
-from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.evaluation import safety as S
-from lightemma.runs.store import find_run_dirs
 from lightemma.evaluation.stats import Resampling
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.report.tables import ACCURACY_COLUMNS, render
+from lightemma.runs.store import find_run_dirs
 
 FAST = Resampling(n_resamples=200, seed=0)
 
@@ -26,8 +26,24 @@ def world(tmp_path_factory):
     base = tmp_path_factory.mktemp("safety_eval")
     root = write_dataset(base / "data", scenes=8, keyframes=24, image_size=(64, 36), sweeps=False)
     for kind in ("cv", "oracle"):
-        assert main(["run", "--model", f"baseline:{kind}", "--dataroot", str(root), "--version", "v1.0-mini", "--split", "all",
-                     "--out", str(base / "runs" / kind)]) == 0
+        assert (
+            main(
+                [
+                    "run",
+                    "--model",
+                    f"baseline:{kind}",
+                    "--dataroot",
+                    str(root),
+                    "--version",
+                    "v1.0-mini",
+                    "--split",
+                    "all",
+                    "--out",
+                    str(base / "runs" / kind),
+                ]
+            )
+            == 0
+        )
     dirs = {kind: find_run_dirs(base / "runs" / kind)[0] for kind in ("cv", "oracle")}
     return base, root, dirs
 
@@ -62,8 +78,14 @@ def test_hand_counted_rates_in_every_table(world):
     rows = {c: ev.accuracy_rows(c)[0] for c in ("lightemma", "stp3", "uniad")}
     # off-road: only the swerving frame (its corners leave the lane from step 1, its reference point never does)
     for r in rows.values():
-        assert r["offroad"] == pytest.approx(1 / n) and r["offroad_1s"] == pytest.approx(1 / n) and r["offroad_centre"] == 0.0
-        assert r["safety_frames"] == r["offroad_frames"] == r["collision_frames"] == n and r["area_source"] == "expansion"
+        assert (
+            r["offroad"] == pytest.approx(1 / n)
+            and r["offroad_1s"] == pytest.approx(1 / n)
+            and r["offroad_centre"] == 0.0
+        )
+        assert (
+            r["safety_frames"] == r["offroad_frames"] == r["collision_frames"] == n and r["area_source"] == "expansion"
+        )
         assert r["collision_vru"] == 0.0
     c = np.array(steps, dtype=float)
     any_t = [c[: 2 * s].max() / n for s in (1, 2, 3)]
@@ -113,22 +135,31 @@ def test_na_without_dataroot_and_without_annotations(world, tmp_path):
 def test_a_given_dataroot_that_is_not_there_is_an_error_and_a_gone_recorded_one_is_named(world, tmp_path, capsys):
     base, root, dirs = world
     (tmp_path / "afile").write_text("x")
-    for dataroot, version, message in ((tmp_path / "nonexistent", "v1.0-mini", f"--dataroot {tmp_path / 'nonexistent'} does not exist"),
-                                       (tmp_path / "afile", "v1.0-mini", f"--dataroot {tmp_path / 'afile'} is not a folder"),
-                                       (root, "v9", f"--version v9: --dataroot {root} has no folder v9")):
-        assert main(["evaluate", str(dirs["cv"]), "--dataroot", str(dataroot), "--version", version, "--resamples", "0"]) == 2
+    for dataroot, version, message in (
+        (tmp_path / "nonexistent", "v1.0-mini", f"--dataroot {tmp_path / 'nonexistent'} does not exist"),
+        (tmp_path / "afile", "v1.0-mini", f"--dataroot {tmp_path / 'afile'} is not a folder"),
+        (root, "v9", f"--version v9: --dataroot {root} has no folder v9"),
+    ):
+        assert (
+            main(["evaluate", str(dirs["cv"]), "--dataroot", str(dataroot), "--version", version, "--resamples", "0"])
+            == 2
+        )
         captured = capsys.readouterr()
         assert captured.err == f"lightemma evaluate: error: {message}\n" and captured.out == ""
     # the run's recorded dataroot (or its version folder) is gone: the n/a says so, not "no dataroot"
     run = load_run(dirs["cv"])
     gone = tmp_path / "moved-away"
-    for dataset, named in (({"dataroot": str(gone), "version": "v1.0-mini"}, str(gone)),
-                           ({"dataroot": str(root), "version": "v9"}, str(root / "v9"))):
+    for dataset, named in (
+        ({"dataroot": str(gone), "version": "v1.0-mini"}, str(gone)),
+        ({"dataroot": str(root), "version": "v9"}, str(root / "v9")),
+    ):
         run.info = dataclasses.replace(run.info, dataset=dataset)
         ev = evaluate_loaded([run], resampling=FAST)
         row = ev.accuracy_rows("lightemma")[0]
         reason = f"recorded dataroot {named} is gone; pass --dataroot"
-        assert row["offroad"] is None and row["collision"] is None and row["offroad_na"] == row["collision_na"] == reason
+        assert (
+            row["offroad"] is None and row["collision"] is None and row["offroad_na"] == row["collision_na"] == reason
+        )
         assert f"n/a ({reason})" in render(evaluation_tables(ev), "md")
 
 
@@ -136,7 +167,10 @@ def test_cli_dataroot_with_paper_and_pairwise(world, capsys):
     base, root, dirs = world
     assert main(["evaluate", str(dirs["cv"]), "--dataroot", str(root)]) == 2
     assert "--dataroot needs --version" in capsys.readouterr().err
-    assert main(["evaluate", str(base / "runs"), "--with-paper", "--resamples", "100", "--pairwise", "--format", "json"]) == 0
+    assert (
+        main(["evaluate", str(base / "runs"), "--with-paper", "--resamples", "100", "--pairwise", "--format", "json"])
+        == 0
+    )
     doc = json.loads(capsys.readouterr().out)
     names = [t["name"] for t in doc["tables"]]
     assert "safety_lightemma" in names and "pairwise_safety" in names
@@ -189,7 +223,23 @@ def test_imported_runs_get_safety_numbers_with_a_dataroot(world, tmp_path, capsy
     assert main(["evaluate", str(run.run_dir), "--resamples", "0", "--format", "json"]) == 0
     row = json.loads(capsys.readouterr().out)["tables"][1]["rows"][0]
     assert row["offroad"] is None and row["offroad_na"].startswith("no dataroot")
-    assert main(["evaluate", str(run.run_dir), "--resamples", "0", "--format", "json", "--dataroot", str(root), "--version", "v1.0-mini"]) == 0
+    assert (
+        main(
+            [
+                "evaluate",
+                str(run.run_dir),
+                "--resamples",
+                "0",
+                "--format",
+                "json",
+                "--dataroot",
+                str(root),
+                "--version",
+                "v1.0-mini",
+            ]
+        )
+        == 0
+    )
     doc = json.loads(capsys.readouterr().out)
     row = doc["tables"][1]["rows"][0]
     # one frame's recorded position was moved 50 m: it is not placed, and a warning says why
@@ -199,7 +249,11 @@ def test_imported_runs_get_safety_numbers_with_a_dataroot(world, tmp_path, capsy
     keep[[i for i in range(len(fs)) if fs.sample_tokens[i] == first["sample_token"]]] = False
     # the imported trajectories placed with the dataroot's poses
     tokens = [t for t, k in zip(fs.sample_tokens, keep) if k]
-    want = S.rates(S.safety_values(S.frame_safety(np.array(trajectories)[keep], tokens, S.load_safety_data(root, "v1.0-mini")), "any"))
+    want = S.rates(
+        S.safety_values(
+            S.frame_safety(np.array(trajectories)[keep], tokens, S.load_safety_data(root, "v1.0-mini")), "any"
+        )
+    )
     assert row["offroad"] == pytest.approx(want["offroad"]) and row["collision"] == pytest.approx(want["collision"])
     assert 0.0 < row["offroad"] < 0.5
 
@@ -223,11 +277,18 @@ def test_bird_eye_view_marks_the_colliding_steps(world):
 
 
 def test_report_has_safety_tags_and_views(world, tmp_path):
-    from lightemma.report import write_report
     from lightemma.evaluation.scenarios import per_tag_metrics
+    from lightemma.report import write_report
 
     base, root, dirs = world
-    index = write_report([base / "runs"], tmp_path / "rep", convention="lightemma", top=0, case_tags=(), resampling=Resampling(n_resamples=0))
+    index = write_report(
+        [base / "runs"],
+        tmp_path / "rep",
+        convention="lightemma",
+        top=0,
+        case_tags=(),
+        resampling=Resampling(n_resamples=0),
+    )
     text = index.read_text()
     assert "## Safety — bird's-eye views" in text and list((tmp_path / "rep" / "figures").glob("bev_*.png"))
     runs = [load_run(d, details=True) for d in dirs.values()]
@@ -258,7 +319,9 @@ def test_a_map_mask_named_outside_the_dataroot_is_never_read(tmp_path):
     shutil.copy(inside, tmp_path / "outside.png")  # a real, readable mask outside the dataroot
     from lightemma.evaluation.safety import DrivableArea
 
-    assert all(isinstance(a, DrivableArea) for a in load_safety_data(root, "v1.0-mini").areas.values())  # the mask, read
+    assert all(
+        isinstance(a, DrivableArea) for a in load_safety_data(root, "v1.0-mini").areas.values()
+    )  # the mask, read
     for name in ("../outside.png", str(tmp_path / "outside.png")):
         maps[0]["filename"] = name
         table.write_text(json.dumps(maps))

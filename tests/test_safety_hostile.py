@@ -18,11 +18,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from lightemma.errors import DatasetError
 from lightemma.evaluation import safety as S
 from lightemma.nuscenes import annotations as A
-from lightemma.nuscenes import map_files as M
 from lightemma.nuscenes import geometry, load_frames
+from lightemma.nuscenes import map_files as M
 
 VERSION = "v1.0-mini"
 

@@ -49,9 +49,20 @@ def sampled_model(req) -> Reply:
 
 
 def _run(synth_root, tmp_path, server, **kw):
-    settings = dict(dataroot=synth_root, version="v1.0-mini", split="all", api_base=server.url, api_key_env=KEY,
-                    output=tmp_path / "runs", limit=2, progress=False, samples=K, temperature=0.7, concurrency=1,
-                    cache=str(tmp_path / "cache.sqlite"))
+    settings = dict(
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        api_base=server.url,
+        api_key_env=KEY,
+        output=tmp_path / "runs",
+        limit=2,
+        progress=False,
+        samples=K,
+        temperature=0.7,
+        concurrency=1,
+        cache=str(tmp_path / "cache.sqlite"),
+    )
     settings.update(kw)
     return run("openai/gpt-4o", **settings)
 
@@ -106,7 +117,7 @@ def test_min_ade_and_min_fde_are_the_best_of_the_recorded_samples(synth_root, tm
     from lightemma.report.evaluation_tables import accuracy_table
 
     headers = [c.header for c in accuracy_table(evaluation, "lightemma").columns]
-    assert headers[headers.index("FDE (m) [95% CI]") + 1:][:3] == ["K", "minADE@K (m)", "minFDE@K (m)"]
+    assert headers[headers.index("FDE (m) [95% CI]") + 1 :][:3] == ["K", "minADE@K (m)", "minFDE@K (m)"]
 
 
 def test_evaluate_json_carries_minade_with_its_descriptor_and_passes_the_schema(synth_root, tmp_path, capsys):
@@ -216,8 +227,9 @@ def test_a_resume_after_a_stop_continues_the_missing_samples_from_the_cache(synt
         assert len(read_run(run_dir).records) == 0  # the frame was cut off mid-chain: not written
         answered["fail"] = False
         before = len(server.requests)
-        done = resume(run_dir, progress=False, api_base=server.url, api_key_env=KEY,
-                      cache=str(tmp_path / "cache.sqlite"))
+        done = resume(
+            run_dir, progress=False, api_base=server.url, api_key_env=KEY, cache=str(tmp_path / "cache.sqlite")
+        )
         again = server.requests[before:]
     # stages 1 and 2 of every sample and one sample's stage 3 come from the cache: only the two missing answers go out
     assert [r.stage for r in again] == ["actions", "actions"]
@@ -255,10 +267,15 @@ def test_max_cost_admits_a_frame_at_its_k_chains_and_stops_before_the_next(synth
     assert len(read_run(run_dir).records) == 1 and len(server.requests) == 1 + 2 * K
 
 
-@pytest.mark.parametrize(("value", "message"), [(0, "samples must be at least 1, got 0"),
-                                                 (2.5, "samples must be a whole number, got 2.5"),
-                                                 (True, "samples must be a whole number"),
-                                                 (65, "samples must be between 1 and 64, got 65")])
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        (0, "samples must be at least 1, got 0"),
+        (2.5, "samples must be a whole number, got 2.5"),
+        (True, "samples must be a whole number"),
+        (65, "samples must be between 1 and 64, got 65"),
+    ],
+)
 def test_bad_sample_counts_are_refused_naming_the_setting(value, message):
     with pytest.raises(InvalidSetting, match=re.escape(message)):
         RunConfig.of("openai/gpt-4o", samples=value)
@@ -275,8 +292,18 @@ def test_one_sample_keeps_the_manifest_blocks_as_they_were():
 def test_the_cli_refuses_bad_samples_and_a_baseline_that_cannot_sample(synth_root, tmp_path, capsys):
     from lightemma.cli import main
 
-    common = ["run", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-              "--output", str(tmp_path), "--no-progress"]
+    common = [
+        "run",
+        "--dataroot",
+        str(synth_root),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--output",
+        str(tmp_path),
+        "--no-progress",
+    ]
     assert main([*common, "--model", "openai/gpt-4o", "--samples", "0"]) != 0
     assert "--samples must be at least 1, got 0" in capsys.readouterr().err
     assert main([*common, "--model", "baseline:cv", "--samples", "2", "--temperature", "0.5"]) != 0
@@ -299,9 +326,20 @@ def test_the_hf_backend_draws_k_samples_with_k_sampled_generate_requests(synth_r
     from local_models import build_tiny_model
 
     path = build_tiny_model("qwen2_vl", tmp_path / "tiny")
-    result = run(str(path), backend="hf", dataroot=synth_root, version="v1.0-mini", split="all",
-                 output=tmp_path / "runs", limit=1, progress=False, samples=2, temperature=1.0, max_tokens=6,
-                 max_attempts=1)
+    result = run(
+        str(path),
+        backend="hf",
+        dataroot=synth_root,
+        version="v1.0-mini",
+        split="all",
+        output=tmp_path / "runs",
+        limit=1,
+        progress=False,
+        samples=2,
+        temperature=1.0,
+        max_tokens=6,
+        max_attempts=1,
+    )
     (record,) = read_run(result.run_dir).records.values()
     assert result.manifest["params"]["samples"] == 2 and [s["sample"] for s in record["samples"]] == [1]
     calls = [record["attempts"][0]["calls"][0], record["samples"][0]["attempts"][0]["calls"][0]]

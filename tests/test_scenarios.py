@@ -7,9 +7,17 @@ import pytest
 
 import lightemma
 from lightemma.evaluation import load_run
+from lightemma.evaluation.scenarios import (
+    TAGS,
+    disagreements,
+    history_bias,
+    mean_curvature,
+    per_tag_metrics,
+    tag_frames,
+    worst_frame_per_tag,
+)
 from lightemma.evaluation.synthetic import make_record
 from lightemma.runs.store import RunWriter, create_run_dir
-from lightemma.evaluation.scenarios import TAGS, disagreements, history_bias, mean_curvature, per_tag_metrics, tag_frames, worst_frame_per_tag
 
 
 def drive(speeds, curvature=0.0):

@@ -5,7 +5,6 @@ import os
 
 import numpy as np
 import pytest
-from reference_fixtures import write_results
 
 from lightemma.cli import main
 from lightemma.evaluation import evaluate_runs
@@ -15,11 +14,34 @@ from lightemma.evaluation.synthetic import write_synthetic_run
 from lightemma.runs import columns
 from lightemma.runs.columns import SIDECAR_FILE
 from lightemma.runs.importer import import_reference
+from reference_fixtures import write_results
 
-FIELDS = ("frame_ids", "trajectory", "gt_positions", "status", "first_status", "seconds", "input_tokens", "output_tokens",
-          "cost_cents", "cached_input_tokens", "history_actions", "actions", "failure", "scene_index", "scene_names",
-          "caught_implausible", "corrupt_lines", "truncated_tail", "duplicates", "bad_records", "foreign_records",
-          "foreign_example", "frame_set_size", "warnings")
+FIELDS = (
+    "frame_ids",
+    "trajectory",
+    "gt_positions",
+    "status",
+    "first_status",
+    "seconds",
+    "input_tokens",
+    "output_tokens",
+    "cost_cents",
+    "cached_input_tokens",
+    "history_actions",
+    "actions",
+    "failure",
+    "scene_index",
+    "scene_names",
+    "caught_implausible",
+    "corrupt_lines",
+    "truncated_tail",
+    "duplicates",
+    "bad_records",
+    "foreign_records",
+    "foreign_example",
+    "frame_set_size",
+    "warnings",
+)
 
 
 def assert_same(a, b):
@@ -40,14 +62,16 @@ def _messy_run(tmp_path):
     lines = (run_dir / "frames.jsonl").read_text().splitlines()
     recs = [json.loads(line) for line in lines]
     extra = []
-    for i, change in enumerate([
-        {"status": "ok", "failure": None},  # a later record of frame 3 (last wins)
-        {"gt_positions": recs[10]["gt_positions"][:5]},  # no usable ground truth
-        {"frame_id": "scene-0999/7", "scene_name": "scene-0999"},  # not in the frame set
-        {"gt_positions": [[0, "x"]] * 6},
-        {"trajectory": None},  # integrated from its actions
-        {"actions": [[99, 0]] * 6, "trajectory": None},  # implausible
-    ]):
+    for i, change in enumerate(
+        [
+            {"status": "ok", "failure": None},  # a later record of frame 3 (last wins)
+            {"gt_positions": recs[10]["gt_positions"][:5]},  # no usable ground truth
+            {"frame_id": "scene-0999/7", "scene_name": "scene-0999"},  # not in the frame set
+            {"gt_positions": [[0, "x"]] * 6},
+            {"trajectory": None},  # integrated from its actions
+            {"actions": [[99, 0]] * 6, "trajectory": None},  # implausible
+        ]
+    ):
         extra.append(json.dumps({**recs[3 + 3 * i], **change}))
     nameless = dict(recs[30])
     del nameless["scene_name"]
@@ -138,8 +162,25 @@ def test_an_imported_run_comes_with_its_sidecar_and_evaluates_the_same(tmp_path)
 
 
 def test_a_session_of_lightemma_run_ends_by_writing_the_sidecar(tmp_path, synth_root):
-    assert main(["run", "--model", "baseline:constant", "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-                 "--output", str(tmp_path / "runs"), "--no-progress"]) == 0
+    assert (
+        main(
+            [
+                "run",
+                "--model",
+                "baseline:constant",
+                "--dataroot",
+                str(synth_root),
+                "--version",
+                "v1.0-mini",
+                "--split",
+                "all",
+                "--output",
+                str(tmp_path / "runs"),
+                "--no-progress",
+            ]
+        )
+        == 0
+    )
     (run_dir,) = [p.parent for p in (tmp_path / "runs").rglob("frames.jsonl")]
     assert (run_dir / SIDECAR_FILE).is_file()
     assert columns.read_sidecar(run_dir, columns.source_key(run_dir)) is not None  # current

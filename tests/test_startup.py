@@ -6,6 +6,7 @@ import subprocess
 import sys
 
 import pytest
+
 from fake_openai import FakeOpenAIServer
 
 ENV = {**os.environ, "PYTHONPATH": os.pathsep.join(p for p in sys.path if p)}
@@ -31,7 +32,9 @@ def test_import_lightemma_cli_imports_neither_litellm_nor_the_devkit():
 
 
 def test_help_imports_nothing_heavy():
-    got = imported_after("from lightemma.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit as e:\n    rc = e.code")
+    got = imported_after(
+        "from lightemma.cli import main\ntry:\n    main(['--help'])\nexcept SystemExit as e:\n    rc = e.code"
+    )
     assert got["rc"] == 0 and got["modules"] == []
 
 
@@ -46,13 +49,29 @@ def test_evaluate_imports_nothing_heavy(tmp_path):
 @pytest.mark.parametrize("model", ["openai/test-model", "baseline:constant"])
 def test_a_run_with_the_direct_transport_or_a_baseline_never_imports_litellm(tmp_path, synth_root, model):
     with FakeOpenAIServer() as server:
-        argv = ["run", "--model", model, "--dataroot", str(synth_root), "--version", "v1.0-mini", "--split", "all",
-                "--limit", "3", "--output", str(tmp_path / "runs"), "--no-progress"]
+        argv = [
+            "run",
+            "--model",
+            model,
+            "--dataroot",
+            str(synth_root),
+            "--version",
+            "v1.0-mini",
+            "--split",
+            "all",
+            "--limit",
+            "3",
+            "--output",
+            str(tmp_path / "runs"),
+            "--no-progress",
+        ]
         if model.startswith("openai/"):
             argv += ["--api-base", server.url, "--transport", "direct"]
         got = imported_after("from lightemma.cli import main\nrc = main(json.loads(sys.argv[1]))", json.dumps(argv))
         assert got["rc"] == 0 and "litellm" not in got["modules"]
         if model.startswith("openai/"):
             assert len(server.requests) == 9  # three frames, three stages: the run really called the server
-    records = [json.loads(line) for p in (tmp_path / "runs").rglob("frames.jsonl") for line in p.read_text().splitlines()]
+    records = [
+        json.loads(line) for p in (tmp_path / "runs").rglob("frames.jsonl") for line in p.read_text().splitlines()
+    ]
     assert len(records) == 3 and all(r["status"] == "ok" for r in records)

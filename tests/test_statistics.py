@@ -13,12 +13,12 @@ import pytest
 
 from lightemma.cli import main
 from lightemma.evaluation import evaluate_runs, load_run
-from lightemma.report.evaluation_tables import evaluation_tables
+from lightemma.evaluation.stats import Resampling, bootstrap_ci, cluster_sums, holm, sign_flip_p
 from lightemma.evaluation.study import StudyModel, study_scenes, write_study
 from lightemma.evaluation.synthetic import make_record
-from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir
-from lightemma.evaluation.stats import Resampling, bootstrap_ci, cluster_sums, holm, sign_flip_p
+from lightemma.report.evaluation_tables import evaluation_tables
 from lightemma.report.tables import render
+from lightemma.runs.store import FRAMES_FILE, RunWriter, create_run_dir
 
 GARBAGE = "meta-llama/Llama-3.2-11B-Vision-Instruct"
 MODELS = [
@@ -58,7 +58,11 @@ def numpy_scored(run_dir, convention="lightemma"):
         if r["status"] == "failed" or r.get("failure") or r["trajectory"] is None or r["answer"] == "garbage":
             continue
         e = np.linalg.norm(np.array(r["trajectory"]) - np.array(r["gt_positions"]), axis=1)
-        cols = {"lightemma": [e[0:2], e[2:4], e[4:6]], "stp3": [e[0:2], e[0:4], e[0:6]], "uniad": [e[1:2], e[3:4], e[5:6]]}[convention]
+        cols = {
+            "lightemma": [e[0:2], e[2:4], e[4:6]],
+            "stp3": [e[0:2], e[0:4], e[0:6]],
+            "uniad": [e[1:2], e[3:4], e[5:6]],
+        }[convention]
         avg = e.mean() if convention == "lightemma" else np.mean([c.mean() for c in cols])
         out[r["frame_id"]] = (avg, e[5], r["scene_name"])
     return out
@@ -72,7 +76,7 @@ def test_the_fixture_is_as_messy_as_real_runs(study, scenes):
     err = np.linalg.norm(np.array(garbage[0]["actions"])[:, 0]) if garbage[0]["actions"] else 0
     assert err > 1e11  # ADE ≈ 1e12 m
     # near-stationary frames: ground-truth curvature of tens to hundreds of 1/m
-    from lightemma.evaluation.scenarios import menger_curvature, path_length, _with_origin
+    from lightemma.evaluation.scenarios import _with_origin, menger_curvature, path_length
 
     still = path_length(scenes.gt_positions) < 0.3
     assert still.sum() > 20
@@ -113,7 +117,13 @@ def test_the_low_coverage_flag_is_in_every_table(study):
     out, dirs = study
     ev = evaluate_runs([out], resampling=FAST, pairwise=True)
     tables = evaluation_tables(ev)
-    assert [t.name for t in tables] == ["efficiency", "accuracy_lightemma", "pairwise_ade", "generations", "explanations"]
+    assert [t.name for t in tables] == [
+        "efficiency",
+        "accuracy_lightemma",
+        "pairwise_ade",
+        "generations",
+        "explanations",
+    ]
     text = render(tables, "md")
     for block in text.split("### ")[1:]:
         if "LLaMA" in block:
@@ -122,9 +132,9 @@ def test_the_low_coverage_flag_is_in_every_table(study):
 
 
 def test_figures_and_frame_picker_use_scored_frames_only(study, tmp_path):
-    from lightemma.report.figures import bubble_points
-    from lightemma.report import write_report
     from lightemma.evaluation.scenarios import disagreements, per_tag_metrics, worst_frame_per_tag
+    from lightemma.report import write_report
+    from lightemma.report.figures import bubble_points
 
     out, dirs = study
     runs = [load_run(d, details=True) for d in dirs.values()]
@@ -140,7 +150,9 @@ def test_figures_and_frame_picker_use_scored_frames_only(study, tmp_path):
     assert max(p["ade_avg"] for p in points) < 5
     if out.name.startswith("marked"):
         return  # the report (slow: matplotlib) once, on the runs that do not mark their garbage
-    index = write_report([out], tmp_path / "rep", top=2, case_tags=("braking",), resampling=Resampling(n_resamples=200), with_paper=False)
+    index = write_report(
+        [out], tmp_path / "rep", top=2, case_tags=("braking",), resampling=Resampling(n_resamples=200), with_paper=False
+    )
     text = index.read_text()
     drawn = set(re.findall(r"— frame `([^`]+)`", text))
     assert drawn and not drawn & bad
@@ -175,7 +187,9 @@ def test_plausibility_limits_come_from_the_runs_parse_definition(tmp_path):
     run_dir = create_run_dir(tmp_path, "m", {"model": "m", "finished_at": "t", "params": {"parse": parse}})
     gt = np.zeros((6, 2))
     with RunWriter(run_dir) as w:
-        w.append(make_record("a/1", gt, gt, actions=[[80.0, 0.0]] * 6))  # too fast for the default 50 m/s, not for this run
+        w.append(
+            make_record("a/1", gt, gt, actions=[[80.0, 0.0]] * 6)
+        )  # too fast for the default 50 m/s, not for this run
     assert evaluate_runs([run_dir], resampling=FAST).accuracy_rows()[0]["scored"] == 1
 
 
@@ -204,7 +218,9 @@ def test_history_bias_ignores_near_stop_frames_and_reports_sign_agreement(tmp_pa
             gt = lightemma.integrate(np.array([[6.0, k]] * 6), method="midpoint")
             w.append(make_record(f"s/{i}", gt, gt, history_actions=[[6.0, k]] * 6))
             xs.append(k), ys.append(k)
-        for i, k in enumerate(rng.uniform(0.02, 0.1, 12)):  # halting: 1 cm of jitter gives a curvature of ±90 against the turn
+        for i, k in enumerate(
+            rng.uniform(0.02, 0.1, 12)
+        ):  # halting: 1 cm of jitter gives a curvature of ±90 against the turn
             gt = np.array([[0.3, 0.0], [0.45, 0.0], [0.5, 0.0], [0.5, -0.01], [0.51, -0.01], [0.5, -0.02]])
             w.append(make_record(f"h/{i}", gt, gt, history_actions=[[1.5, k]] * 6))
             xs.append(k), ys.append(-90.0)
@@ -268,7 +284,9 @@ def test_bootstrap_agrees_with_a_numpy_restatement_and_is_deterministic():
     ours = bootstrap_ci([(values, labels)], ["m"], Resampling(n_resamples=20_000, seed=1))[0, 0]
     ref = numpy_cluster_bootstrap(values, labels, 20_000, np.random.default_rng(1))
     assert ours == pytest.approx(ref, abs=0.02 * (ref[1] - ref[0]) + 0.005)
-    again = bootstrap_ci([(values, labels), simulate(rng)], ["m", "other"], Resampling(n_resamples=20_000, seed=1))[0, 0]
+    again = bootstrap_ci([(values, labels), simulate(rng)], ["m", "other"], Resampling(n_resamples=20_000, seed=1))[
+        0, 0
+    ]
     np.testing.assert_array_equal(ours, again)  # a row's interval does not depend on the other rows
     other_seed = bootstrap_ci([(values, labels)], ["m"], Resampling(n_resamples=20_000, seed=2))[0, 0]
     assert not np.array_equal(ours, other_seed)
@@ -310,7 +328,9 @@ def test_generation_verdicts(study):
     assert (gpt["model"], gpt["predecessor"]) == ("GPT-5.0", "GPT-4o")
     row = next(r for r in ev.pairwise if (r["model_a"], r["model_b"]) == ("GPT-4o", "GPT-5.0"))
     assert gpt["change"] == pytest.approx(-row["ade_avg_diff"])
-    assert gpt["verdict"] == ("not distinguishable" if not row["significant"] else ("better" if gpt["change"] < 0 else "worse"))
+    assert gpt["verdict"] == (
+        "not distinguishable" if not row["significant"] else ("better" if gpt["change"] < 0 else "worse")
+    )
 
 
 def test_holm_step_down():
@@ -324,7 +344,9 @@ def test_sign_flip_p_values_detect_a_shift_and_not_noise():
     rng = np.random.default_rng(3)
     values, labels = simulate(rng, scenes=40, mu=0.0)
     shifted = values + 1.0
-    p_null, p_shift = sign_flip_p([(values, labels), (shifted, labels)], ["null", "shift"], Resampling(n_resamples=5000))
+    p_null, p_shift = sign_flip_p(
+        [(values, labels), (shifted, labels)], ["null", "shift"], Resampling(n_resamples=5000)
+    )
     assert p_shift < 0.001 and p_null > 0.01
 
 
@@ -332,7 +354,11 @@ def test_cli_pairwise_json_and_bad_resamples(study, capsys):
     out, dirs = study
     assert main(["evaluate", str(out), "--pairwise", "--format", "json", "--resamples", "500", "--seed", "9"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert doc["resampling"]["n_resamples"] == 500 and doc["resampling"]["seed"] == 9 and doc["resampling"]["unit"] == "scene"
+    assert (
+        doc["resampling"]["n_resamples"] == 500
+        and doc["resampling"]["seed"] == 9
+        and doc["resampling"]["unit"] == "scene"
+    )
     table = next(t for t in doc["tables"] if t["name"] == "pairwise_ade")
     assert set(table["rows"][0]) >= {"model_a", "model_b", "ade_avg_diff", "ci95", "p_value", "p_holm", "significant"}
     accuracy = next(t for t in doc["tables"] if t["name"] == "accuracy_lightemma")

@@ -75,8 +75,16 @@ def test_scenarios_cycle_through_the_kinds_and_say_what_happens():
     assert [s.kind for s in scns] == list(KINDS) + list(KINDS[:2])
     assert scns[5].name == "synth-0005-left-turn"
     assert all(s.name.startswith(f"synth-{i:04d}-") for i, s in enumerate(scns))
-    assert {"cruise", "accelerate", "brake-red-light", "wait-then-go-green", "stopped-behind-lead-green",
-            "left-turn", "right-turn", "straight-after-turn"} == set(KINDS)
+    assert {
+        "cruise",
+        "accelerate",
+        "brake-red-light",
+        "wait-then-go-green",
+        "stopped-behind-lead-green",
+        "left-turn",
+        "right-turn",
+        "straight-after-turn",
+    } == set(KINDS)
 
 
 @pytest.mark.parametrize("seed", [0, 1, 7])
@@ -123,7 +131,9 @@ def test_scenario_semantics(seed):
 
 def test_unmodified_devkit_loads_all_tables(small_root):
     # the devkit is the nuscenes extra, which the README's main install and CI include
-    NuScenes = pytest.importorskip("nuscenes.nuscenes", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed").NuScenes
+    NuScenes = pytest.importorskip(
+        "nuscenes.nuscenes", reason="nuscenes-devkit (lightemma[nuscenes]) is not installed"
+    ).NuScenes
 
     nusc = NuScenes(version=VERSION, dataroot=str(small_root), verbose=False)
     for t in TABLES:
@@ -237,13 +247,18 @@ def test_another_dataset_never_overwrites_the_shared_files_of_a_root(tmp_path, c
         (real / "maps" / "expansion" / f"{loc}.json").write_text('{"version": "1.3"}')
     with pytest.raises(UserError, match=r"expansion/.*\.json already exists with other contents"):
         write_dataset(real, scenes=3, keyframes=15, images=False, version="v1.0-new")
-    assert sorted(p.name for p in real.rglob("*")) == ["boston-seaport.json", "expansion", "maps",
-                                                       "singapore-onenorth.json"]
+    assert sorted(p.name for p in real.rglob("*")) == [
+        "boston-seaport.json",
+        "expansion",
+        "maps",
+        "singapore-onenorth.json",
+    ]
     # the same dataset under another version keeps identical shared files and adds its own folder
     write_dataset(d3, scenes=3, seed=0, keyframes=15, sweeps=False, image_size=(160, 90), version="v1.0-same")
     assert _shared_digest(d3) == shared_before and (d3 / "v1.0-same" / "scene.json").is_file()
     assert {k: v for k, v in _digest(d3).items() if k.startswith(VERSION + "/")} == {
-        k: v for k, v in before.items() if k.startswith(VERSION + "/")}
+        k: v for k, v in before.items() if k.startswith(VERSION + "/")
+    }
 
 
 def test_tables_only_mode_writes_no_images(tmp_path):
@@ -307,8 +322,21 @@ def test_written_jpeg_shows_the_red_light(small_root):
 
 def test_cli_synth_writes_a_loadable_dataset(tmp_path, capsys):
     out = tmp_path / "cli"
-    rc = main(["synth", str(out), "--scenes", "2", "--seed", "4", "--keyframes", "16", "--image-size", "160x90",
-               "--no-sweeps"])
+    rc = main(
+        [
+            "synth",
+            str(out),
+            "--scenes",
+            "2",
+            "--seed",
+            "4",
+            "--keyframes",
+            "16",
+            "--image-size",
+            "160x90",
+            "--no-sweeps",
+        ]
+    )
     assert rc == 0
     out_text = capsys.readouterr().out
     assert f"lightemma run --model baseline:cv --dataroot {out} --version {VERSION}\n" in out_text
@@ -321,13 +349,27 @@ def test_cli_synth_writes_a_loadable_dataset(tmp_path, capsys):
     rc = main(["synth", str(out), "--scenes", "2"])
     assert rc == 2 and "already exists" in capsys.readouterr().err
     # a second version of the same dataset (same seed, scenes, keyframes) shares the files outside its folder
-    rc = main(["synth", str(out), "--scenes", "2", "--seed", "4", "--keyframes", "16", "--version", "v1.0-test",
-               "--no-images"])
+    rc = main(
+        [
+            "synth",
+            str(out),
+            "--scenes",
+            "2",
+            "--seed",
+            "4",
+            "--keyframes",
+            "16",
+            "--version",
+            "v1.0-test",
+            "--no-images",
+        ]
+    )
     assert rc == 0 and len(read_table(out, "v1.0-test", "scene")) == 2
     # another dataset (other seed and keyframes) would rewrite them: refused, nothing written, --force or not
     for force in ([], ["--force"]):
-        rc = main(["synth", str(out), "--scenes", "1", "--keyframes", "15", "--version", "v1.0-other", "--no-images",
-                   *force])
+        rc = main(
+            ["synth", str(out), "--scenes", "1", "--keyframes", "15", "--version", "v1.0-other", "--no-images", *force]
+        )
         err = capsys.readouterr().err
         assert rc == 2 and "already exists with other contents" in err and "another dataset" in err
         assert not (out / "v1.0-other").exists()
@@ -343,11 +385,28 @@ def test_cli_rejects_bad_arguments(tmp_path, capsys):
 
 def test_cli_synth_says_when_its_dataset_cannot_be_run(tmp_path, capsys):
     """Too few keyframes for a window, or no images: no hint to run a baseline that would find no frame."""
-    assert main(["synth", str(tmp_path / "short"), "--scenes", "1", "--keyframes", "14", "--no-sweeps",
-                 "--image-size", "32x18"]) == 0
+    assert (
+        main(
+            [
+                "synth",
+                str(tmp_path / "short"),
+                "--scenes",
+                "1",
+                "--keyframes",
+                "14",
+                "--no-sweeps",
+                "--image-size",
+                "32x18",
+            ]
+        )
+        == 0
+    )
     out, err = capsys.readouterr()
     assert "0 frames in the reference window" in out
-    assert err.startswith("lightemma synth: warning: a scene needs at least 15 keyframes") and "only --window full has frames (1)" in err
+    assert (
+        err.startswith("lightemma synth: warning: a scene needs at least 15 keyframes")
+        and "only --window full has frames (1)" in err
+    )
     assert main(["synth", str(tmp_path / "shorter"), "--scenes", "1", "--keyframes", "5", "--no-images"]) == 0
     out, err = capsys.readouterr()
     assert "there is no frame to run" in err

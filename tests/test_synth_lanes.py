@@ -22,9 +22,8 @@ from lightemma.synth import build_scenarios, write_dataset
 from lightemma.synth import can_pose as synth_can
 from lightemma.synth import maps as synth_maps
 from lightemma.synth import planning_cases as pc
-from lightemma.synth.situations import LANE_WIDTH, build_scenario
 from lightemma.synth.dataset import token
-
+from lightemma.synth.situations import LANE_WIDTH, build_scenario
 
 
 def _devkit():
@@ -33,14 +32,16 @@ def _devkit():
     arcline = pytest.importorskip("nuscenes.map_expansion.arcline_path_utils")
     return map_api, arcline, pytest.importorskip("shapely.geometry"), pytest.importorskip("shapely.ops").unary_union
 
+
 SCENES, KEYFRAMES = 8, 20
 
 
 @pytest.fixture(scope="module")
 def root(tmp_path_factory):
     """Every scenario kind once, tables and maps only."""
-    return write_dataset(tmp_path_factory.mktemp("lanes"), scenes=SCENES, keyframes=KEYFRAMES, images=False,
-                         sweeps=False)
+    return write_dataset(
+        tmp_path_factory.mktemp("lanes"), scenes=SCENES, keyframes=KEYFRAMES, images=False, sweeps=False
+    )
 
 
 @pytest.fixture(scope="module")
@@ -109,8 +110,9 @@ def test_lanes_road_segments_and_car_parks_lie_in_the_unchanged_drivable_area(ro
             assert [r["is_intersection"] for r in segments] == [p.curved for p in pieces]
             turns = scn.kind in ("left-turn", "right-turn", "straight-after-turn")
             assert any(r["is_intersection"] for r in segments) == turns
-            carpark = next(r for r in doc["carpark_area"] if r["token"] == token(0, "carpark_area", location,
-                                                                                   scn.index))
+            carpark = next(
+                r for r in doc["carpark_area"] if r["token"] == token(0, "carpark_area", location, scn.index)
+            )
             shapes = [_polygon(doc, r["polygon_token"]) for r in segments] + [_polygon(doc, carpark["polygon_token"])]
             for i in range(len(pieces)):
                 for d in ("ego", "oncoming"):
@@ -254,13 +256,30 @@ def _score(scn, case, tmp_path):
     if case.agents is not None:  # the case's own agent, from the keyframe's ego frame
         a = case.agents
         c, s = math.cos(p0[2]), math.sin(p0[2])
-        boxes[0, :, 0] = np.column_stack([p0[0] + c * a[:, 0] - s * a[:, 1], p0[1] + s * a[:, 0] + c * a[:, 1],
-                                          a[:, 2] + p0[2], a[:, 3], a[:, 4], c * a[:, 5] - s * a[:, 6],
-                                          s * a[:, 5] + c * a[:, 6], a[:, 7]])
+        boxes[0, :, 0] = np.column_stack(
+            [
+                p0[0] + c * a[:, 0] - s * a[:, 1],
+                p0[1] + s * a[:, 0] + c * a[:, 1],
+                a[:, 2] + p0[2],
+                a[:, 3],
+                a[:, 4],
+                c * a[:, 5] - s * a[:, 6],
+                s * a[:, 5] + c * a[:, 6],
+                a[:, 7],
+            ]
+        )
     elif scn.lead is not None:
         lp, lv = scn.lead_pose(times), scn.lead_speed(times)
-        boxes[0, :, 0] = np.column_stack([lp, np.full(31, scn.lead.length), np.full(31, scn.lead.width),
-                                          lv * np.cos(lp[:, 2]), lv * np.sin(lp[:, 2]), np.zeros(31)])
+        boxes[0, :, 0] = np.column_stack(
+            [
+                lp,
+                np.full(31, scn.lead.length),
+                np.full(31, scn.lead.width),
+                lv * np.cos(lp[:, 2]),
+                lv * np.sin(lp[:, 2]),
+                np.zeros(31),
+            ]
+        )
     kw = dict(map=m, frame_lanes=route_lanes(m.lanes, gt_g), route=line, centreline=line, agents=boxes)
     values, reasons = subscores(np.concatenate([plan_g, gt_g]), [0, 0], n_frames=1, **kw)
     out = {k: v[0] for k, v in values.items()}
@@ -284,8 +303,11 @@ def test_each_plan_case_breaks_its_subscore_in_the_simulated_states(name, tmp_pa
     scn, keyframe = _case_scene(name)
     assert scn.kind == kind
     case = fn(scn, keyframe)
-    assert case.poses.shape == (6, 3) and 0 < case.break_step <= 30 or (name == "follow-too-close"
-                                                                         and case.break_step == 0)
+    assert (
+        case.poses.shape == (6, 3)
+        and 0 < case.break_step <= 30
+        or (name == "follow-too-close" and case.break_step == 0)
+    )
     got, truth, states = _score(scn, case, tmp_path)
     # the ground truth passes everything this case breaks (but the case's own slow lead is in its way), and nothing
     # leaves the road or collides
@@ -303,7 +325,7 @@ def test_each_plan_case_breaks_its_subscore_in_the_simulated_states(name, tmp_pa
     if name == "wrong-way":
         out = np.abs(centre[:, 1]) > LANE_WIDTH / 2
         travel = np.where(out[1:], np.hypot(*np.diff(centre, axis=0).T), 0.0)
-        window = np.array([travel[max(0, t - 10): t].sum() for t in range(1, 31)])
+        window = np.array([travel[max(0, t - 10) : t].sum() for t in range(1, 31)])
         assert np.argmax(window >= 6.0) + 1 >= case.break_step
     elif name == "swerve":
         far = np.abs(centre[:, 1]) > 0.5
@@ -387,5 +409,6 @@ def test_follow_too_close_breaks_ttc_and_a_safe_follow_does_not():
     hand_gap = near[:, 0] - near[:, 3] / 2 - (states[1, :, 0] + pc.CENTRE_OFFSET + pc.HALF_LENGTH)
     assert hand_gap.min() < 0 and v2["nc"][0] == 0.0 and v2["ttc"][0] == 0.0
     with pytest.raises(ValueError, match="needs ≥ 7 m/s"):
-        pc.follow_too_close(next(s for s in build_scenarios(SCENES, keyframes=KEYFRAMES)
-                                 if s.kind == "stopped-behind-lead-green"), 0)
+        pc.follow_too_close(
+            next(s for s in build_scenarios(SCENES, keyframes=KEYFRAMES) if s.kind == "stopped-behind-lead-green"), 0
+        )

@@ -29,7 +29,11 @@ def test_a_path_on_the_left_is_left_in_both_views_and_its_ticks_read_plus_y(synt
     xs = np.asarray(line.get_xdata())[1:]
     assert (xs < 0).all()
     fig.canvas.draw()
-    ticks = {round(float(t.get_position()[0]), 6): t.get_text().replace("\u2212", "-") for t in bev_ax.get_xticklabels() if t.get_text()}
+    ticks = {
+        round(float(t.get_position()[0]), 6): t.get_text().replace("\u2212", "-")
+        for t in bev_ax.get_xticklabels()
+        if t.get_text()
+    }
     under = min((v for v in ticks if v < 0), key=lambda v: abs(v - xs[-1]))
     assert float(ticks[under]) == -under > 0
     assert "left" in bev_ax.get_xlabel() and "y" in bev_ax.get_xlabel()
@@ -60,7 +64,13 @@ def test_the_safety_view_is_drawn_in_the_ego_frame_as_the_camera_sees_it(synth_r
     ax = fig.axes[0]
     fig.canvas.draw()
     to_view = ax.transData.inverted()
-    agents = [p for p in ax.patches if not p.get_fill() and p.get_edgecolor()[0] == p.get_edgecolor()[1] == p.get_edgecolor()[2] and p.get_edgecolor()[0] < 0.7]
+    agents = [
+        p
+        for p in ax.patches
+        if not p.get_fill()
+        and p.get_edgecolor()[0] == p.get_edgecolor()[1] == p.get_edgecolor()[2]
+        and p.get_edgecolor()[0] < 0.7
+    ]
     centres = np.array([to_view.transform(p.get_verts()).mean(axis=0) for p in agents])
     in_view = (np.abs(centres[:, 0]) < 20) & (centres[:, 1] > 0) & (centres[:, 1] < 50)
     assert in_view.any() and (centres[in_view, 0] > 0).all()  # right of the ego, as in the camera image

@@ -22,16 +22,18 @@ import pytest
 from PIL import Image
 
 vllm = pytest.importorskip(
-    "vllm", reason="vllm is not installed: it needs numpy 2 and its own environment "
-                   "(pip install -e '.[vllm,test]'; then python -m pytest tests/test_vllm_api.py)")
+    "vllm",
+    reason="vllm is not installed: it needs numpy 2 and its own environment "
+    "(pip install -e '.[vllm,test]'; then python -m pytest tests/test_vllm_api.py)",
+)
 
 from vllm.outputs import CompletionOutput, RequestOutput  # noqa: E402
 
 REAL_LLM = vllm.LLM  # before the fixture replaces it
 
 from lightemma.backends.base import ChatRequest, GenerationParams  # noqa: E402
-from lightemma.backends.vllm import VLLMBackend  # noqa: E402
 from lightemma.backends.structured import ACTIONS_SCHEMA  # noqa: E402
+from lightemma.backends.vllm import VLLMBackend  # noqa: E402
 
 
 class CheckedLLM:
@@ -48,8 +50,11 @@ class CheckedLLM:
         unknown = set(rest) - engine_fields
         assert not unknown, f"not vllm.LLM parameters nor EngineArgs fields: {sorted(unknown)}"
         self.bound, self.calls = bound, []
-        self.llm_engine = type("Engine", (), {"model_config": type("Config", (), {
-            "hf_config": type("HF", (), {"model_type": "qwen2_5_vl"})})})()
+        self.llm_engine = type(
+            "Engine",
+            (),
+            {"model_config": type("Config", (), {"hf_config": type("HF", (), {"model_type": "qwen2_5_vl"})})},
+        )()
         CheckedLLM.instances.append(self)
 
     def chat(self, messages, **kwargs):
@@ -67,11 +72,25 @@ class CheckedLLM:
                     kind, content = parse(part)  # vLLM's own parser of a content part
                     assert kind == part["type"] and content is not None
             text = "A road."
-            completion = CompletionOutput(index=0, text=text, token_ids=[11, 12, 13], cumulative_logprob=None,
-                                          logprobs=None, finish_reason="length")
-            outputs.append(RequestOutput(request_id=str(i), prompt=None, prompt_token_ids=list(range(40 + i)),
-                                         prompt_logprobs=None, outputs=[completion], finished=True,
-                                         num_cached_tokens=7))
+            completion = CompletionOutput(
+                index=0,
+                text=text,
+                token_ids=[11, 12, 13],
+                cumulative_logprob=None,
+                logprobs=None,
+                finish_reason="length",
+            )
+            outputs.append(
+                RequestOutput(
+                    request_id=str(i),
+                    prompt=None,
+                    prompt_token_ids=list(range(40 + i)),
+                    prompt_logprobs=None,
+                    outputs=[completion],
+                    finished=True,
+                    num_cached_tokens=7,
+                )
+            )
         return outputs
 
 
@@ -99,9 +118,16 @@ def run(backend, requests):
 
 
 def test_engine_options_bind_to_the_real_llm_and_engine_args(checked):
-    VLLMBackend("Qwen/Qwen2.5-VL-7B-Instruct", tensor_parallel_size=2, pipeline_parallel_size=2,
-                gpu_memory_utilization=0.5, max_model_len=8192, dtype="bfloat16", seed=3,
-                engine_options={"enforce_eager": True})
+    VLLMBackend(
+        "Qwen/Qwen2.5-VL-7B-Instruct",
+        tensor_parallel_size=2,
+        pipeline_parallel_size=2,
+        gpu_memory_utilization=0.5,
+        max_model_len=8192,
+        dtype="bfloat16",
+        seed=3,
+        engine_options={"enforce_eager": True},
+    )
     (llm,) = CheckedLLM.instances
     args = llm.bound.arguments
     assert args["tensor_parallel_size"] == 2 and args["gpu_memory_utilization"] == 0.5 and args["seed"] == 3
@@ -116,8 +142,10 @@ def test_an_argument_vllm_does_not_know_is_caught(checked):
 def test_a_batch_is_one_real_chat_call_with_real_sampling_params_and_outputs(checked, image):
     backend = VLLMBackend("Qwen/Qwen2.5-VL-7B-Instruct", batch_size=4, batch_window=0.5)
     params = GenerationParams(max_tokens=9)
-    requests = [ChatRequest(text=f"Describe {i}.", stage="scene", frame_id=f"f{i}", image_path=image, params=params)
-                for i in range(3)]
+    requests = [
+        ChatRequest(text=f"Describe {i}.", stage="scene", frame_id=f"f{i}", image_path=image, params=params)
+        for i in range(3)
+    ]
     results = run(backend, requests)
     (llm,) = CheckedLLM.instances
     ((messages, sampling),) = llm.calls
@@ -125,15 +153,23 @@ def test_a_batch_is_one_real_chat_call_with_real_sampling_params_and_outputs(che
     assert sampling.structured_outputs is None
     assert [p["type"] for p in messages[0][0]["content"]] == ["image_pil", "text"]
     assert [(r.text, r.input_tokens, r.output_tokens, r.finish_reason, r.cached_input_tokens) for r in results] == [
-        ("A road.", 40 + i, 3, "length", 7) for i in range(3)]
+        ("A road.", 40 + i, 3, "length", 7) for i in range(3)
+    ]
 
 
 def test_structured_stage_3_uses_the_real_structured_outputs_params(checked, image):
     backend = VLLMBackend("Qwen/Qwen2.5-VL-7B-Instruct", batch_size=1)
     assert "StructuredOutputsParams" in backend.structured_output()["mechanism"]
     schema = ACTIONS_SCHEMA
-    request = ChatRequest(text="Actions?", stage="actions", frame_id="f0", image_path=image,
-                          params=GenerationParams(max_tokens=5), response_schema=schema, turns=(("Q1", "A1"),))
+    request = ChatRequest(
+        text="Actions?",
+        stage="actions",
+        frame_id="f0",
+        image_path=image,
+        params=GenerationParams(max_tokens=5),
+        response_schema=schema,
+        turns=(("Q1", "A1"),),
+    )
     run(backend, [request])
     ((messages, sampling),) = CheckedLLM.instances[0].calls
     structured = sampling.structured_outputs

@@ -52,25 +52,71 @@ TINY_DIMS = {"hidden_size": 64, "heads": 4, "kv_heads": 2, "layers": 2, "vocab_s
 ARCHITECTURES: dict[str, dict[str, Any]] = {
     "Qwen2.5-VL-7B": {
         "family": "qwen2_5_vl",
-        "text": dict(vocab_size=152064, hidden_size=3584, intermediate_size=18944, num_hidden_layers=28,
-                     num_attention_heads=28, num_key_value_heads=4, max_position_embeddings=128000, rms_norm_eps=1e-6,
-                     hidden_act="silu", tie_word_embeddings=False,
-                     rope_parameters={"rope_type": "default", "rope_theta": 1000000.0, "mrope_section": [16, 24, 24]}),
-        "vision": dict(depth=32, hidden_size=1280, intermediate_size=3420, num_heads=16, in_channels=3, patch_size=14,
-                       spatial_merge_size=2, temporal_patch_size=2, window_size=112, fullatt_block_indexes=[7, 15, 23, 31],
-                       out_hidden_size=3584, hidden_act="silu", tokens_per_second=2),
+        "text": dict(
+            vocab_size=152064,
+            hidden_size=3584,
+            intermediate_size=18944,
+            num_hidden_layers=28,
+            num_attention_heads=28,
+            num_key_value_heads=4,
+            max_position_embeddings=128000,
+            rms_norm_eps=1e-6,
+            hidden_act="silu",
+            tie_word_embeddings=False,
+            rope_parameters={"rope_type": "default", "rope_theta": 1000000.0, "mrope_section": [16, 24, 24]},
+        ),
+        "vision": dict(
+            depth=32,
+            hidden_size=1280,
+            intermediate_size=3420,
+            num_heads=16,
+            in_channels=3,
+            patch_size=14,
+            spatial_merge_size=2,
+            temporal_patch_size=2,
+            window_size=112,
+            fullatt_block_indexes=[7, 15, 23, 31],
+            out_hidden_size=3584,
+            hidden_act="silu",
+            tokens_per_second=2,
+        ),
         "image": dict(patch_size=14, merge_size=2, temporal_patch_size=2, min_pixels=3136, max_pixels=12845056),
     },
     "Qwen3-VL-8B": {
         "family": "qwen3_vl",
-        "text": dict(vocab_size=151936, hidden_size=4096, intermediate_size=12288, num_hidden_layers=36,
-                     num_attention_heads=32, num_key_value_heads=8, head_dim=128, max_position_embeddings=262144,
-                     rms_norm_eps=1e-6, hidden_act="silu", tie_word_embeddings=False,
-                     rope_parameters={"rope_type": "default", "rope_theta": 5000000.0, "mrope_section": [24, 20, 20],
-                                      "mrope_interleaved": True}),
-        "vision": dict(depth=27, hidden_size=1152, intermediate_size=4304, num_heads=16, in_channels=3, patch_size=16,
-                       spatial_merge_size=2, temporal_patch_size=2, out_hidden_size=4096, num_position_embeddings=2304,
-                       deepstack_visual_indexes=[8, 16, 24], hidden_act="gelu_pytorch_tanh"),
+        "text": dict(
+            vocab_size=151936,
+            hidden_size=4096,
+            intermediate_size=12288,
+            num_hidden_layers=36,
+            num_attention_heads=32,
+            num_key_value_heads=8,
+            head_dim=128,
+            max_position_embeddings=262144,
+            rms_norm_eps=1e-6,
+            hidden_act="silu",
+            tie_word_embeddings=False,
+            rope_parameters={
+                "rope_type": "default",
+                "rope_theta": 5000000.0,
+                "mrope_section": [24, 20, 20],
+                "mrope_interleaved": True,
+            },
+        ),
+        "vision": dict(
+            depth=27,
+            hidden_size=1152,
+            intermediate_size=4304,
+            num_heads=16,
+            in_channels=3,
+            patch_size=16,
+            spatial_merge_size=2,
+            temporal_patch_size=2,
+            out_hidden_size=4096,
+            num_position_embeddings=2304,
+            deepstack_visual_indexes=[8, 16, 24],
+            hidden_act="gelu_pytorch_tanh",
+        ),
         "image": dict(patch_size=16, merge_size=2, temporal_patch_size=2, min_pixels=65536, max_pixels=16777216),
     },
 }
@@ -87,9 +133,15 @@ def tiny_architecture(name: str) -> dict[str, Any]:
     d = TINY_DIMS
     half = d["hidden_size"] // d["heads"] // 2
     section = [half // 2, half // 4, half - half // 2 - half // 4]
-    arch["text"].update(vocab_size=d["vocab_size"], hidden_size=d["hidden_size"], intermediate_size=2 * d["hidden_size"],
-                        num_hidden_layers=d["layers"], num_attention_heads=d["heads"], num_key_value_heads=d["kv_heads"],
-                        max_position_embeddings=8192)
+    arch["text"].update(
+        vocab_size=d["vocab_size"],
+        hidden_size=d["hidden_size"],
+        intermediate_size=2 * d["hidden_size"],
+        num_hidden_layers=d["layers"],
+        num_attention_heads=d["heads"],
+        num_key_value_heads=d["kv_heads"],
+        max_position_embeddings=8192,
+    )
     arch["text"]["rope_parameters"]["mrope_section"] = section
     if "head_dim" in arch["text"]:
         arch["text"]["head_dim"] = d["hidden_size"] // d["heads"]
@@ -112,8 +164,11 @@ def _corpus() -> list[str]:
     prompts = load_prompt_set()
     history = "[(4.512, 0.0), (4.6, -0.012), (4.7, 0.0), (5.0, 0.003), (5.1, 0.0), (5.25, 0.1)]"
     scene = "A straight road with two lanes; a white car ahead brakes at a red traffic light; pedestrians wait."
-    return [prompts.render("scene"), prompts.render("intent", scene=scene, history=history),
-            prompts.render("actions", scene=scene, history=history, intent="Slow down and stop at the light.")] * 8
+    return [
+        prompts.render("scene"),
+        prompts.render("intent", scene=scene, history=history),
+        prompts.render("actions", scene=scene, history=history, intent="Slow down and stop at the light."),
+    ] * 8
 
 
 def build_tokenizer(vocab_size: int) -> Any:
@@ -128,8 +183,12 @@ def build_tokenizer(vocab_size: int) -> Any:
     tok = Tokenizer(models.BPE())
     tok.pre_tokenizer = pre_tokenizers.ByteLevel(add_prefix_space=False)
     tok.decoder = decoders.ByteLevel()
-    trainer = trainers.BpeTrainer(vocab_size=min(4000, vocab_size), special_tokens=QWEN_SPECIALS, show_progress=False,
-                                  initial_alphabet=pre_tokenizers.ByteLevel.alphabet())
+    trainer = trainers.BpeTrainer(
+        vocab_size=min(4000, vocab_size),
+        special_tokens=QWEN_SPECIALS,
+        show_progress=False,
+        initial_alphabet=pre_tokenizers.ByteLevel.alphabet(),
+    )
     tok.train_from_iterator(_corpus(), trainer=trainer)
     data = json.loads(tok.to_str())
     vocab = data["model"]["vocab"]
@@ -146,8 +205,14 @@ def build_tokenizer(vocab_size: int) -> Any:
             vocab["Ġ" + word] = next_id
             next_id += 1
     tok = Tokenizer.from_str(json.dumps(data))
-    return PreTrainedTokenizerFast(tokenizer_object=tok, bos_token=None, eos_token="<|im_end|>", pad_token="<|endoftext|>",
-                                   unk_token=None, padding_side="left")
+    return PreTrainedTokenizerFast(
+        tokenizer_object=tok,
+        bos_token=None,
+        eos_token="<|im_end|>",
+        pad_token="<|endoftext|>",
+        unk_token=None,
+        padding_side="left",
+    )
 
 
 def write_checkpoint(arch: dict[str, Any], path: Path) -> Path:
@@ -155,9 +220,15 @@ def write_checkpoint(arch: dict[str, Any], path: Path) -> Path:
     import transformers as tf
 
     tokenizer = build_tokenizer(arch["text"]["vocab_size"])
-    ids = {name: tokenizer.convert_tokens_to_ids(tok) for name, tok in (
-        ("image_token_id", "<|image_pad|>"), ("video_token_id", "<|video_pad|>"),
-        ("vision_start_token_id", "<|vision_start|>"), ("vision_end_token_id", "<|vision_end|>"))}
+    ids = {
+        name: tokenizer.convert_tokens_to_ids(tok)
+        for name, tok in (
+            ("image_token_id", "<|image_pad|>"),
+            ("video_token_id", "<|video_pad|>"),
+            ("vision_start_token_id", "<|vision_start|>"),
+            ("vision_end_token_id", "<|vision_end|>"),
+        )
+    }
     eos, pad = tokenizer.convert_tokens_to_ids("<|im_end|>"), tokenizer.convert_tokens_to_ids("<|endoftext|>")
     text = {**arch["text"], "eos_token_id": eos, "pad_token_id": pad, "bos_token_id": None}
     if arch["family"] == "qwen2_5_vl":
@@ -170,10 +241,12 @@ def write_checkpoint(arch: dict[str, Any], path: Path) -> Path:
     tf.GenerationConfig(eos_token_id=eos, pad_token_id=pad).save_pretrained(path)
     image = arch["image"]
     image_processor = tf.Qwen2VLImageProcessor(**image)
-    video = video_cls(patch_size=image["patch_size"], temporal_patch_size=image["temporal_patch_size"],
-                      merge_size=image["merge_size"])
-    processor_cls(image_processor=image_processor, tokenizer=tokenizer, video_processor=video,
-                  chat_template=QWEN_TEMPLATE).save_pretrained(path)
+    video = video_cls(
+        patch_size=image["patch_size"], temporal_patch_size=image["temporal_patch_size"], merge_size=image["merge_size"]
+    )
+    processor_cls(
+        image_processor=image_processor, tokenizer=tokenizer, video_processor=video, chat_template=QWEN_TEMPLATE
+    ).save_pretrained(path)
     return path
 
 
@@ -249,8 +322,17 @@ def _force_full_length(model: Any) -> None:
 # -- one measured run ----------------------------------------------------------------------------------------
 
 
-def lightemma_run(hook: RandomWeights, folder: Path, dataroot: Path, out: Path, *, batch: int, frames: int, dtype: str,
-                  max_new_tokens: int) -> dict[str, Any]:
+def lightemma_run(
+    hook: RandomWeights,
+    folder: Path,
+    dataroot: Path,
+    out: Path,
+    *,
+    batch: int,
+    frames: int,
+    dtype: str,
+    max_new_tokens: int,
+) -> dict[str, Any]:
     """``lightemma run --backend hf`` over the first ``frames`` frames; throughput and texts from its records."""
     import torch
 
@@ -262,24 +344,59 @@ def lightemma_run(hook: RandomWeights, folder: Path, dataroot: Path, out: Path, 
         torch.cuda.synchronize()
         torch.cuda.reset_peak_memory_stats()
     hook.ready = 0.0
-    argv = ["run", "--backend", "hf", "--model", str(folder), "--dataroot", str(dataroot), "--version", "v1.0-mini",
-            "--split", "all", "--limit", str(frames), "--batch-size", str(batch), "--concurrency", str(batch),
-            "--max-tokens", str(max_new_tokens), "--max-attempts", "1", "--temperature", "0", "--dtype", dtype,
-            "--device", hook.device, "--output", str(out), "--no-progress"]
+    argv = [
+        "run",
+        "--backend",
+        "hf",
+        "--model",
+        str(folder),
+        "--dataroot",
+        str(dataroot),
+        "--version",
+        "v1.0-mini",
+        "--split",
+        "all",
+        "--limit",
+        str(frames),
+        "--batch-size",
+        str(batch),
+        "--concurrency",
+        str(batch),
+        "--max-tokens",
+        str(max_new_tokens),
+        "--max-attempts",
+        "1",
+        "--temperature",
+        "0",
+        "--dtype",
+        dtype,
+        "--device",
+        hook.device,
+        "--output",
+        str(out),
+        "--no-progress",
+    ]
     code = cli_main(argv)
     end = time.perf_counter()
     (run_dir,) = find_run_dirs(out)
     records = list(read_run(run_dir).records.values())
     calls = [c for r in records for a in r["attempts"] for c in a["calls"]]
     if len(records) != frames or len(calls) != 3 * frames or any(c.get("error") for c in calls):
-        raise RuntimeError(f"lightemma run (exit {code}) recorded {len(records)} frame(s) and {len(calls)} call(s) "
-                           f"for {frames} frames × 3 stages; first error: "
-                           f"{next((c.get('error_message') for c in calls if c.get('error')), None)}")
+        raise RuntimeError(
+            f"lightemma run (exit {code}) recorded {len(records)} frame(s) and {len(calls)} call(s) "
+            f"for {frames} frames × 3 stages; first error: "
+            f"{next((c.get('error_message') for c in calls if c.get('error')), None)}"
+        )
     wall = end - hook.ready
     out_tokens = sum(int(c["output_tokens"]) for c in calls)
     return {
-        "dtype": dtype, "batch_size": batch, "frames": frames, "calls": len(calls), "wall_s": round(wall, 3),
-        "frames_per_s": round(frames / wall, 4), "generated_tokens": out_tokens,
+        "dtype": dtype,
+        "batch_size": batch,
+        "frames": frames,
+        "calls": len(calls),
+        "wall_s": round(wall, 3),
+        "frames_per_s": round(frames / wall, 4),
+        "generated_tokens": out_tokens,
         "generated_tokens_per_s": round(out_tokens / wall, 2),
         "input_tokens_per_call": round(sum(int(c["input_tokens"]) for c in calls) / len(calls), 1),
         "peak_gpu_gib": round(torch.cuda.max_memory_allocated() / 2**30, 2) if on_gpu else None,
@@ -292,9 +409,16 @@ def agreement(single: dict[str, Any], batched: dict[str, Any]) -> dict[str, Any]
     common = [f for f in single["texts"] if f in batched["texts"]]
     same_calls = sum(a == b for f in common for a, b in zip(single["texts"][f], batched["texts"][f]))
     same_frames = sum(single["texts"][f] == batched["texts"][f] for f in common)
-    return {"dtype": single["dtype"], "single": single["batch_size"], "batched": batched["batch_size"],
-            "frames": len(common), "frames_identical": same_frames, "calls_identical": same_calls,
-            "calls": 3 * len(common), "rate": round(same_frames / len(common), 4) if common else None}
+    return {
+        "dtype": single["dtype"],
+        "single": single["batch_size"],
+        "batched": batched["batch_size"],
+        "frames": len(common),
+        "frames_identical": same_frames,
+        "calls_identical": same_calls,
+        "calls": 3 * len(common),
+        "rate": round(same_frames / len(common), 4) if common else None,
+    }
 
 
 # -- the whole bench -----------------------------------------------------------------------------------------
@@ -322,28 +446,43 @@ def environment(device: str) -> dict[str, Any]:
     import transformers
 
     gpu = torch.cuda.get_device_name(0) if device.startswith("cuda") else None
-    return {"date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d %H:%M UTC"),
-            "device": gpu or f"CPU ({platform.machine()}, {os.cpu_count()} cores)",
-            "python": platform.python_version(), "torch": torch.__version__, "transformers": transformers.__version__}
+    return {
+        "date": datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"),
+        "device": gpu or f"CPU ({platform.machine()}, {os.cpu_count()} cores)",
+        "python": platform.python_version(),
+        "torch": torch.__version__,
+        "transformers": transformers.__version__,
+    }
 
 
 def markdown(result: dict[str, Any]) -> str:
     env = result["environment"]
-    lines = [f"GPU bench ({'tiny configs, CPU' if result['tiny'] else 'random weights, real architectures'}): "
-             f"{env['device']}, {env['date']}; torch {env['torch']}, transformers {env['transformers']}; "
-             f"{result['image_size'][0]}×{result['image_size'][1]} synthetic frames, {result['max_new_tokens']} new tokens "
-             "per call, 3 calls per frame", "",
-             "| architecture | dtype | batch | frames | frames/s | generated tokens/s | input tokens/call | peak GPU GiB |",
-             "|---|---|---|---|---|---|---|---|"]
+    lines = [
+        f"GPU bench ({'tiny configs, CPU' if result['tiny'] else 'random weights, real architectures'}): "
+        f"{env['device']}, {env['date']}; torch {env['torch']}, transformers {env['transformers']}; "
+        f"{result['image_size'][0]}×{result['image_size'][1]} synthetic frames, {result['max_new_tokens']} new tokens "
+        "per call, 3 calls per frame",
+        "",
+        "| architecture | dtype | batch | frames | frames/s | generated tokens/s | input tokens/call | peak GPU GiB |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
     for name, arch in result["architectures"].items():
         for r in arch["runs"]:
-            lines.append(f"| {name} | {r['dtype']} | {r['batch_size']} | {r['frames']} | {r['frames_per_s']:.3f} | "
-                         f"{r['generated_tokens_per_s']:.1f} | {r['input_tokens_per_call']:.0f} | {r['peak_gpu_gib'] if r['peak_gpu_gib'] is not None else '—'} |")
-    lines += ["", "| architecture | dtype | batch 1 vs | frames | frames identical | stage calls identical |", "|---|---|---|---|---|---|"]
+            lines.append(
+                f"| {name} | {r['dtype']} | {r['batch_size']} | {r['frames']} | {r['frames_per_s']:.3f} | "
+                f"{r['generated_tokens_per_s']:.1f} | {r['input_tokens_per_call']:.0f} | {r['peak_gpu_gib'] if r['peak_gpu_gib'] is not None else '—'} |"
+            )
+    lines += [
+        "",
+        "| architecture | dtype | batch 1 vs | frames | frames identical | stage calls identical |",
+        "|---|---|---|---|---|---|",
+    ]
     for name, arch in result["architectures"].items():
         for a in arch["agreement"]:
-            lines.append(f"| {name} | {a['dtype']} | {a['batched']} | {a['frames']} | {a['frames_identical']} | "
-                         f"{a['calls_identical']}/{a['calls']} |")
+            lines.append(
+                f"| {name} | {a['dtype']} | {a['batched']} | {a['frames']} | {a['frames_identical']} | "
+                f"{a['calls_identical']}/{a['calls']} |"
+            )
     if result["skipped"]:
         lines += ["", "Not measured (time): " + "; ".join(result["skipped"])]
     return "\n".join(lines) + "\n"
@@ -375,12 +514,22 @@ def main(argv: list[str] | None = None) -> int:
     frames_for = {b: max(2, b) if args.tiny else max(4, 2 * b) for b in sizes}
     agree_frames = 2 if args.tiny else 4  # fp32 agreement: batch 1 and the second batch size over the same frames
     args.out.mkdir(parents=True, exist_ok=True)
-    result: dict[str, Any] = {"tiny": args.tiny, "environment": environment(device), "max_new_tokens": max_new,
-                              "image_size": list(image_size), "architectures": {}, "skipped": [], "errors": []}
+    result: dict[str, Any] = {
+        "tiny": args.tiny,
+        "environment": environment(device),
+        "max_new_tokens": max_new,
+        "image_size": list(image_size),
+        "architectures": {},
+        "skipped": [],
+        "errors": [],
+    }
 
     def save() -> None:
         result["elapsed_s"] = round(time.perf_counter() - deadline.start, 1)
-        for path, text in ((args.out / "gpu.json", json.dumps(result, indent=1) + "\n"), (args.out / "gpu.md", markdown(result))):
+        for path, text in (
+            (args.out / "gpu.json", json.dumps(result, indent=1) + "\n"),
+            (args.out / "gpu.md", markdown(result)),
+        ):
             tmp = path.with_suffix(path.suffix + ".tmp")
             tmp.write_text(text, encoding="utf-8")
             os.replace(tmp, path)
@@ -398,8 +547,9 @@ def _bench(args, result, save, deadline, work, device, max_new, image_size, size
 
     start = time.perf_counter()
     n_frames = max(frames_for.values())
-    dataroot = lightemma.synth.write_dataset(work / "data", scenes=math.ceil(n_frames / 16), keyframes=30,
-                                             image_size=image_size, sweeps=False)
+    dataroot = lightemma.synth.write_dataset(
+        work / "data", scenes=math.ceil(n_frames / 16), keyframes=30, image_size=image_size, sweeps=False
+    )
     result["synth_s"] = round(time.perf_counter() - start, 1)
     hook = RandomWeights(device)
     step_seconds: list[float] = []
@@ -423,20 +573,43 @@ def _bench(args, result, save, deadline, work, device, max_new, image_size, size
         arch = tiny_architecture(name) if args.tiny else ARCHITECTURES[name]
         folder = write_checkpoint(arch, work / name)
         hook.folders.add(os.path.abspath(folder))
-        entry: dict[str, Any] = {"config": {"text": arch["text"], "vision": arch["vision"], "image": arch["image"]},
-                                 "runs": [], "agreement": []}
+        entry: dict[str, Any] = {
+            "config": {"text": arch["text"], "vision": arch["vision"], "image": arch["image"]},
+            "runs": [],
+            "agreement": [],
+        }
         result["architectures"][name] = entry
         for dtype, batch_sizes, frames in (("bfloat16", sizes, frames_for), ("float32", sizes[:2], None)):
             by_size: dict[int, dict[str, Any]] = {}
             if frames:  # warm-up (kernels, allocator, processor): one frame, not measured
-                step(f"{name} {dtype} warm-up", lambda: lightemma_run(
-                    hook, folder, dataroot, work / f"runs-{name}-{dtype}-warmup", batch=1, frames=1, dtype=dtype,
-                    max_new_tokens=max_new))
+                step(
+                    f"{name} {dtype} warm-up",
+                    lambda: lightemma_run(
+                        hook,
+                        folder,
+                        dataroot,
+                        work / f"runs-{name}-{dtype}-warmup",
+                        batch=1,
+                        frames=1,
+                        dtype=dtype,
+                        max_new_tokens=max_new,
+                    ),
+                )
             for b in batch_sizes:
                 n = frames[b] if frames else agree_frames * (1 if b == sizes[0] else 2)
-                run = step(f"{name} {dtype} batch {b}", lambda b=b, n=n: lightemma_run(
-                    hook, folder, dataroot, work / f"runs-{name}-{dtype}-{b}", batch=b, frames=n, dtype=dtype,
-                    max_new_tokens=max_new))
+                run = step(
+                    f"{name} {dtype} batch {b}",
+                    lambda b=b, n=n: lightemma_run(
+                        hook,
+                        folder,
+                        dataroot,
+                        work / f"runs-{name}-{dtype}-{b}",
+                        batch=b,
+                        frames=n,
+                        dtype=dtype,
+                        max_new_tokens=max_new,
+                    ),
+                )
                 if run is None:
                     continue
                 if not entry.get("parameters"):
@@ -447,7 +620,9 @@ def _bench(args, result, save, deadline, work, device, max_new, image_size, size
                     entry["runs"].append({k: v for k, v in run.items() if k != "texts"})
                 if b != sizes[0] and sizes[0] in by_size:
                     entry["agreement"].append(agreement(by_size[sizes[0]], run))
-            entry["init_s"] = {d: round(s, 1) for (f, d), s in hook.init_seconds.items() if f == os.path.abspath(folder)}
+            entry["init_s"] = {
+                d: round(s, 1) for (f, d), s in hook.init_seconds.items() if f == os.path.abspath(folder)
+            }
             hook.free()
             save()
     save()

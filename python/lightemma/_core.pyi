@@ -26,15 +26,54 @@ _ParseStatus: TypeAlias = Literal["ok", "corrected", "failed"]
 """Parse statuses by code 0..2."""
 
 __all__ = [
-    "parse_actions", "integrate", "displacement_errors", "evaluate", "evaluate_all", "frame_metrics",
-    "cluster_bootstrap", "sign_flip_test", "ego_poses", "footprint_corners", "box_collisions", "mask_area",
-    "polygon_area", "mask_lookup", "read_intents", "INTENT_RULES", "INTENT_LONGITUDINAL", "INTENT_LATERAL",
-    "INTENT_UNKNOWN", "INTENT_MAX_BYTES", "read_objects", "OBJECT_RULES", "OBJECT_CLASSES", "OBJECT_MENTIONS",
-    "OBJECT_UNKNOWN", "simulate", "comfort", "extended_comfort", "COMFORT_BOUNDS",
-    "COMFORT_LIMITS", "EXTENDED_COMFORT_FEATURES", "EXTENDED_COMFORT_LIMITS", "planning_subscores",
-    "planning_first_bad_box", "PLANNING_SCORE_NAMES", "PLANNING_REASONS", "METHODS", "CONVENTIONS", "PARSE_MODES",
-    "PARSE_FAILURES", "PARSE_STATUSES", "STEP_SECONDS", "EGO_LENGTH", "EGO_WIDTH", "EGO_OFFSET", "MIN_STEP",
-    "ZOE_REAR_AXLE_TO_CENTER", "__version__",
+    "parse_actions",
+    "integrate",
+    "displacement_errors",
+    "evaluate",
+    "evaluate_all",
+    "frame_metrics",
+    "cluster_bootstrap",
+    "sign_flip_test",
+    "ego_poses",
+    "footprint_corners",
+    "box_collisions",
+    "mask_area",
+    "polygon_area",
+    "mask_lookup",
+    "read_intents",
+    "INTENT_RULES",
+    "INTENT_LONGITUDINAL",
+    "INTENT_LATERAL",
+    "INTENT_UNKNOWN",
+    "INTENT_MAX_BYTES",
+    "read_objects",
+    "OBJECT_RULES",
+    "OBJECT_CLASSES",
+    "OBJECT_MENTIONS",
+    "OBJECT_UNKNOWN",
+    "simulate",
+    "comfort",
+    "extended_comfort",
+    "COMFORT_BOUNDS",
+    "COMFORT_LIMITS",
+    "EXTENDED_COMFORT_FEATURES",
+    "EXTENDED_COMFORT_LIMITS",
+    "planning_subscores",
+    "planning_first_bad_box",
+    "PLANNING_SCORE_NAMES",
+    "PLANNING_REASONS",
+    "METHODS",
+    "CONVENTIONS",
+    "PARSE_MODES",
+    "PARSE_FAILURES",
+    "PARSE_STATUSES",
+    "STEP_SECONDS",
+    "EGO_LENGTH",
+    "EGO_WIDTH",
+    "EGO_OFFSET",
+    "MIN_STEP",
+    "ZOE_REAR_AXLE_TO_CENTER",
+    "__version__",
 ]
 
 __version__: str
@@ -130,37 +169,62 @@ def sign_flip_test(
 # heading 0), kept from the step before when that segment is shorter than `min_step` m.
 
 def ego_poses(
-    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64],
-    length: float = 4.084, width: float = 1.85, offset: float = 1.443713, min_step: float = 1.0,
+    traj: npt.NDArray[np.float64],
+    poses: npt.NDArray[np.float64],
+    length: float = 4.084,
+    width: float = 1.85,
+    offset: float = 1.443713,
+    min_step: float = 1.0,
 ) -> npt.NDArray[np.float64]:
     """Global (x, y, heading) of every step's reference point: (N, T, 3)."""
 
 def footprint_corners(
-    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64],
-    length: float = 4.084, width: float = 1.85, offset: float = 1.443713, min_step: float = 1.0,
+    traj: npt.NDArray[np.float64],
+    poses: npt.NDArray[np.float64],
+    length: float = 4.084,
+    width: float = 1.85,
+    offset: float = 1.443713,
+    min_step: float = 1.0,
 ) -> npt.NDArray[np.float64]:
     """Global footprint corners (N, T, 4, 2): front-left, front-right, rear-right, rear-left."""
 
 def box_collisions(
-    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64], agents: npt.NDArray[np.float64],
-    length: float = 4.084, width: float = 1.85, offset: float = 1.443713, min_step: float = 1.0,
+    traj: npt.NDArray[np.float64],
+    poses: npt.NDArray[np.float64],
+    agents: npt.NDArray[np.float64],
+    length: float = 4.084,
+    width: float = 1.85,
+    offset: float = 1.443713,
+    min_step: float = 1.0,
 ) -> npt.NDArray[np.bool_]:
     """(N, T, A) overlap of the footprint with agents (N, T, A, 5) = global centre x, y, yaw, length, width
     (exact separating-axis test; touching is no overlap). A slot with NaN centre x is empty; other non-finite
     values or sizes ≤ 0 raise ValueError naming frame, step and slot."""
 
 def mask_area(
-    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64], mask: npt.NDArray[np.uint8],
-    resolution: float = 0.1, foreground: int = 255,
-    length: float = 4.084, width: float = 1.85, offset: float = 1.443713, min_step: float = 1.0,
+    traj: npt.NDArray[np.float64],
+    poses: npt.NDArray[np.float64],
+    mask: npt.NDArray[np.uint8],
+    resolution: float = 0.1,
+    foreground: int = 255,
+    length: float = 4.084,
+    width: float = 1.85,
+    offset: float = 1.443713,
+    min_step: float = 1.0,
 ) -> npt.NDArray[np.uint8]:
     """(N, T, 5) lookups of the 4 corners then the reference point in a devkit MapMask raster (H, W):
     0 off, 1 on (pixel == foreground), 2 outside the image. Pixel = (round(x/r), round(-y/r + H)), half to even."""
 
 def polygon_area(
-    traj: npt.NDArray[np.float64], poses: npt.NDArray[np.float64], xy: npt.NDArray[np.float64],
-    rings: npt.NDArray[np.int64], polygons: npt.NDArray[np.int64],
-    length: float = 4.084, width: float = 1.85, offset: float = 1.443713, min_step: float = 1.0,
+    traj: npt.NDArray[np.float64],
+    poses: npt.NDArray[np.float64],
+    xy: npt.NDArray[np.float64],
+    rings: npt.NDArray[np.int64],
+    polygons: npt.NDArray[np.int64],
+    length: float = 4.084,
+    width: float = 1.85,
+    offset: float = 1.443713,
+    min_step: float = 1.0,
 ) -> npt.NDArray[np.uint8]:
     """(N, T, 5) point-in-polygon tests (0 off, 1 on) of the 4 corners then the reference point against the
     union of polygons: vertices xy (V, 2), ring offsets (R+1,) into vertices, polygon offsets (P+1,) into rings

@@ -31,8 +31,13 @@ class FileRefused(Exception):
 def file_kind(mode: int) -> str:
     """What a file that is not a regular file is, from its ``st_mode``: ``a FIFO``, ``a character device``, ``a block
     device``, ``a socket``, ``a folder``, else ``not a plain file``."""
-    for test, name in ((stat.S_ISFIFO, "a FIFO"), (stat.S_ISCHR, "a character device"),
-                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"), (stat.S_ISDIR, "a folder")):
+    for test, name in (
+        (stat.S_ISFIFO, "a FIFO"),
+        (stat.S_ISCHR, "a character device"),
+        (stat.S_ISBLK, "a block device"),
+        (stat.S_ISSOCK, "a socket"),
+        (stat.S_ISDIR, "a folder"),
+    ):
         if test(mode):
             return name
     return "not a plain file"

@@ -50,9 +50,17 @@ CREATE TABLE IF NOT EXISTS responses (
 """
 
 
-def request_key(model: str, api_base: str | None, params: dict[str, Any], text: str, image_digest: str | None,
-                turns: tuple[tuple[str, str], ...] = (), attempt: int = 1, inputs: str = "full",
-                sample: int = 0) -> str:
+def request_key(
+    model: str,
+    api_base: str | None,
+    params: dict[str, Any],
+    text: str,
+    image_digest: str | None,
+    turns: tuple[tuple[str, str], ...] = (),
+    attempt: int = 1,
+    inputs: str = "full",
+    sample: int = 0,
+) -> str:
     """The cache key of one request: ``text`` after the earlier ``turns`` (a single-turn request keeps its old key).
 
     ``attempt`` > 1 (a re-ask) is part of the key: a re-ask must reach the provider, not replay the cached
@@ -150,8 +158,10 @@ class ResponseCache:
             self.bad_rows += 1
             if self.bad_rows > 1:
                 return
-        self._say(f"warning: the response cache {self.path} holds rows that are no answer ({problem}); such a request "
-                  "is sent again and its row replaced (later rows like it are not named)")
+        self._say(
+            f"warning: the response cache {self.path} holds rows that are no answer ({problem}); such a request "
+            "is sent again and its row replaced (later rows like it are not named)"
+        )
 
     def _say(self, line: str) -> None:
         if self.log is not None:
@@ -161,7 +171,15 @@ class ResponseCache:
 
             print(f"lightemma: {line}", file=sys.stderr, flush=True)
 
-    def put(self, key: str, model: str, text: str, input_tokens: int | None, output_tokens: int | None, cost_cents: float | None) -> None:
+    def put(
+        self,
+        key: str,
+        model: str,
+        text: str,
+        input_tokens: int | None,
+        output_tokens: int | None,
+        cost_cents: float | None,
+    ) -> None:
         """Store one successful answer (an error is never cached)."""
         if self.failure is not None:
             return
@@ -179,8 +197,10 @@ class ResponseCache:
         if self.failure is not None:
             return
         self.failure = f"{type(exc).__name__}: {exc}"
-        self._say(f"warning: the response cache {self.path} failed ({exc}); the run goes on without caching "
-                  "(answers from here on are neither looked up nor stored)")
+        self._say(
+            f"warning: the response cache {self.path} failed ({exc}); the run goes on without caching "
+            "(answers from here on are neither looked up nor stored)"
+        )
 
     def __len__(self) -> int:
         with self._lock:

@@ -38,41 +38,83 @@ _REFERENCE = re.compile(r"corrupt:([a-z0-9-]+)@([1-5]):(\d{1,10}):(.+)", re.DOTA
 # name → (albumentations transform, its keyword arguments at severities 1 … 5), pinned: docs/definitions.md
 _NEAREST, _AREA = 0, 3  # cv2.INTER_NEAREST, cv2.INTER_AREA
 CORRUPTIONS: dict[str, tuple[str, tuple[dict[str, Any], ...]]] = {
-    "brightness": ("RandomBrightnessContrast", tuple(
-        {"brightness_limit": (b, b), "contrast_limit": (0.0, 0.0)} for b in (0.1, 0.2, 0.3, 0.4, 0.5))),
+    "brightness": (
+        "RandomBrightnessContrast",
+        tuple({"brightness_limit": (b, b), "contrast_limit": (0.0, 0.0)} for b in (0.1, 0.2, 0.3, 0.4, 0.5)),
+    ),
     "dark": ("RandomGamma", tuple({"gamma_limit": (g, g)} for g in (150, 200, 250, 300, 350))),
     # x·c + 255·(1 − c)/2: contrast scaled by ImageNet-C's factors c around mid-grey
-    "contrast": ("RandomBrightnessContrast", tuple(
-        {"brightness_limit": (round((1 - c) / 2, 4),) * 2, "contrast_limit": (round(c - 1, 4),) * 2}
-        for c in (0.4, 0.3, 0.2, 0.1, 0.05))),
+    "contrast": (
+        "RandomBrightnessContrast",
+        tuple(
+            {"brightness_limit": (round((1 - c) / 2, 4),) * 2, "contrast_limit": (round(c - 1, 4),) * 2}
+            for c in (0.4, 0.3, 0.2, 0.1, 0.05)
+        ),
+    ),
     # homogeneous fog (atmospheric scattering): x·t + A·(1 − t), transmission t, airlight A = 0.9 × 255;
     # albumentations' RandomFog takes 2-5 s a 1600×900 frame (a full-image copy per fog particle)
-    "fog": ("RandomBrightnessContrast", tuple(
-        {"brightness_limit": (round(0.9 * (1 - t), 4),) * 2, "contrast_limit": (round(t - 1, 4),) * 2}
-        for t in (0.8, 0.65, 0.5, 0.35, 0.2))),
-    "rain": ("RandomRain", tuple(
-        {"rain_type": t, "brightness_coefficient": b, "slant_range": (-10.0, 10.0), "blur_value": 3}
-        for t, b in (("drizzle", 0.9), ("default", 0.8), ("heavy", 0.75), ("torrential", 0.7), ("torrential", 0.6)))),
-    "snow": ("RandomSnow", tuple(
-        {"snow_point_range": (s, s), "brightness_coeff": 2.5, "method": "bleach"} for s in (0.1, 0.2, 0.3, 0.4, 0.5))),
-    "motion-blur": ("MotionBlur", tuple(
-        {"blur_limit": (k, k), "angle_range": (0.0, 360.0), "direction_range": (-1.0, 1.0), "allow_shifted": False}
-        for k in (7, 11, 15, 21, 31))),
-    "defocus-blur": ("Defocus", tuple(
-        {"radius": (r, r), "alias_blur": (a, a)} for r, a in ((3, 0.1), (4, 0.5), (6, 0.5), (8, 0.5), (10, 0.5)))),
-    "zoom-blur": ("ZoomBlur", tuple(
-        {"max_factor": (m, m), "step_factor": (s, s)}
-        for m, s in ((1.11, 0.01), (1.16, 0.01), (1.21, 0.02), (1.26, 0.02), (1.31, 0.03)))),
-    "gaussian-noise": ("GaussNoise", tuple(
-        {"std_range": (s, s), "mean_range": (0.0, 0.0), "per_channel": True} for s in (0.08, 0.12, 0.18, 0.26, 0.38))),
-    "jpeg": ("ImageCompression", tuple(
-        {"compression_type": "jpeg", "quality_range": (q, q)} for q in (25, 18, 15, 10, 7))),
-    "pixelate": ("Downscale", tuple(
-        {"scale_range": (s, s), "interpolation_pair": {"downscale": _AREA, "upscale": _NEAREST}}
-        for s in (0.6, 0.5, 0.4, 0.3, 0.25))),
-    "occlusion": ("CoarseDropout", tuple(
-        {"num_holes_range": (1, 1), "hole_height_range": (f, f), "hole_width_range": (f, f), "fill": 0}
-        for f in (0.2, 0.3, 0.4, 0.5, 0.6))),
+    "fog": (
+        "RandomBrightnessContrast",
+        tuple(
+            {"brightness_limit": (round(0.9 * (1 - t), 4),) * 2, "contrast_limit": (round(t - 1, 4),) * 2}
+            for t in (0.8, 0.65, 0.5, 0.35, 0.2)
+        ),
+    ),
+    "rain": (
+        "RandomRain",
+        tuple(
+            {"rain_type": t, "brightness_coefficient": b, "slant_range": (-10.0, 10.0), "blur_value": 3}
+            for t, b in (("drizzle", 0.9), ("default", 0.8), ("heavy", 0.75), ("torrential", 0.7), ("torrential", 0.6))
+        ),
+    ),
+    "snow": (
+        "RandomSnow",
+        tuple(
+            {"snow_point_range": (s, s), "brightness_coeff": 2.5, "method": "bleach"} for s in (0.1, 0.2, 0.3, 0.4, 0.5)
+        ),
+    ),
+    "motion-blur": (
+        "MotionBlur",
+        tuple(
+            {"blur_limit": (k, k), "angle_range": (0.0, 360.0), "direction_range": (-1.0, 1.0), "allow_shifted": False}
+            for k in (7, 11, 15, 21, 31)
+        ),
+    ),
+    "defocus-blur": (
+        "Defocus",
+        tuple({"radius": (r, r), "alias_blur": (a, a)} for r, a in ((3, 0.1), (4, 0.5), (6, 0.5), (8, 0.5), (10, 0.5))),
+    ),
+    "zoom-blur": (
+        "ZoomBlur",
+        tuple(
+            {"max_factor": (m, m), "step_factor": (s, s)}
+            for m, s in ((1.11, 0.01), (1.16, 0.01), (1.21, 0.02), (1.26, 0.02), (1.31, 0.03))
+        ),
+    ),
+    "gaussian-noise": (
+        "GaussNoise",
+        tuple(
+            {"std_range": (s, s), "mean_range": (0.0, 0.0), "per_channel": True} for s in (0.08, 0.12, 0.18, 0.26, 0.38)
+        ),
+    ),
+    "jpeg": (
+        "ImageCompression",
+        tuple({"compression_type": "jpeg", "quality_range": (q, q)} for q in (25, 18, 15, 10, 7)),
+    ),
+    "pixelate": (
+        "Downscale",
+        tuple(
+            {"scale_range": (s, s), "interpolation_pair": {"downscale": _AREA, "upscale": _NEAREST}}
+            for s in (0.6, 0.5, 0.4, 0.3, 0.25)
+        ),
+    ),
+    "occlusion": (
+        "CoarseDropout",
+        tuple(
+            {"num_holes_range": (1, 1), "hole_height_range": (f, f), "hole_width_range": (f, f), "fill": 0}
+            for f in (0.2, 0.3, 0.4, 0.5, 0.6)
+        ),
+    ),
 }
 NAMES: tuple[str, ...] = tuple(CORRUPTIONS)
 
@@ -87,8 +129,9 @@ def parse_corruption(inputs: str) -> tuple[str, int] | None:
         return None
     match = _SPEC.fullmatch(inputs)
     if match is None:
-        raise InputError(f"--inputs {inputs}: a corruption is corrupt:NAME@SEVERITY (severity 1-5), "
-                         f"NAME one of {', '.join(NAMES)}")
+        raise InputError(
+            f"--inputs {inputs}: a corruption is corrupt:NAME@SEVERITY (severity 1-5), NAME one of {', '.join(NAMES)}"
+        )
     name, severity = match[1], match[2]
     if name not in CORRUPTIONS:
         raise InputError(f"--inputs {inputs}: unknown corruption {name!r}; one of {', '.join(NAMES)}")
@@ -182,7 +225,12 @@ def describe(name: str, severity: int) -> dict[str, Any]:
     seed rule and encoding."""
     cls, table = CORRUPTIONS[name]
     params = {k: list(v) if isinstance(v, tuple) else v for k, v in table[severity - 1].items()}
-    return {"name": name, "severity": severity, "transform": f"albumentations.{cls}", "params": params,
-            "library": f"albumentations {_albumentations().__version__}",
-            "seed": "sha256('lightemma-corrupt|NAME@SEVERITY|SAMPLE_TOKEN')[:4], big-endian",
-            "encoding": f"JPEG quality {JPEG_QUALITY} (PIL)"}
+    return {
+        "name": name,
+        "severity": severity,
+        "transform": f"albumentations.{cls}",
+        "params": params,
+        "library": f"albumentations {_albumentations().__version__}",
+        "seed": "sha256('lightemma-corrupt|NAME@SEVERITY|SAMPLE_TOKEN')[:4], big-endian",
+        "encoding": f"JPEG quality {JPEG_QUALITY} (PIL)",
+    }

@@ -207,7 +207,11 @@ def planned_intents(
         y = traj[:, -1, 1] if traj.shape[1] else np.full(n, np.nan)
         arc = finite.copy()
         arc[..., 1] = np.where(path > 0, dpsi / np.where(path > 0, path, 1.0), 0.0)[:, None]
-        arc_y = integrate(np.where(np.isfinite(arc), arc, np.nan), dt=t.dt, method=method)[:, -1, 1] if a.size else np.full(n, np.nan)
+        arc_y = (
+            integrate(np.where(np.isfinite(arc), arc, np.nan), dt=t.dt, method=method)[:, -1, 1]
+            if a.size
+            else np.full(n, np.nan)
+        )
         excess = y - arc_y
     actions_ok = np.isfinite(a).all(axis=(1, 2)) & (a.shape[1] > 0)
     lon_ok = actions_ok & np.isfinite(v0)
@@ -241,7 +245,9 @@ def planned_intents(
     lat[ok & shifting & (side_shift < 0)] = "change_lane_right"
     lat[ok & following] = "follow_lane"
     with np.errstate(invalid="ignore"):
-        side = np.where(turning | (np.abs(dpsi) >= t.direction), side_turn, np.where(np.abs(excess) >= t.follow, side_shift, 0.0))
+        side = np.where(
+            turning | (np.abs(dpsi) >= t.direction), side_turn, np.where(np.abs(excess) >= t.follow, side_shift, 0.0)
+        )
     side = np.where(ok, side, 0.0).astype(np.int8)
 
     reasons = []
@@ -253,21 +259,31 @@ def planned_intents(
             if not np.isfinite(v0[i]):
                 parts.append("longitudinal: no current speed (history)")
             elif lon[i] == UNKNOWN:
-                parts.append(f"longitudinal: borderline (initial {v0[i]:.2f} m/s, final {v_end[i]:.2f} m/s, mean acceleration {acc[i]:+.2f} m/s²)")
+                parts.append(
+                    f"longitudinal: borderline (initial {v0[i]:.2f} m/s, final {v_end[i]:.2f} m/s, mean acceleration {acc[i]:+.2f} m/s²)"
+                )
             if not lat_ok[i]:
                 parts.append("lateral: no finite trajectory")
             elif not long_enough[i]:
                 parts.append(f"lateral: path of {path[i]:.2f} m, under {t.min_path} m")
             elif lat[i] == UNKNOWN:
-                parts.append(f"lateral: borderline (heading change {dpsi[i]:+.3f} rad, offset beyond the arc {excess[i]:+.2f} m)")
+                parts.append(
+                    f"lateral: borderline (heading change {dpsi[i]:+.3f} rad, offset beyond the arc {excess[i]:+.2f} m)"
+                )
         reasons.append("; ".join(parts))
     return PlannedIntents(lon.astype(str), lat.astype(str), side, reasons, v0, v_end, acc, path, dpsi, y, excess, t)
 
 
 # (stated, planned) pairs that agree though the classes differ
 _LON_AGREE = {
-    ("decelerate", "stop"), ("stop", "decelerate"), ("accelerate", "start"), ("start", "accelerate"),
-    ("stop", "stay_stopped"), ("stay_stopped", "stop"), ("keep_speed", "stay_stopped"), ("decelerate", "stay_stopped"),
+    ("decelerate", "stop"),
+    ("stop", "decelerate"),
+    ("accelerate", "start"),
+    ("start", "accelerate"),
+    ("stop", "stay_stopped"),
+    ("stay_stopped", "stop"),
+    ("keep_speed", "stay_stopped"),
+    ("decelerate", "stay_stopped"),
 }
 _SIDE = {"turn_left": 1, "change_lane_left": 1, "turn_right": -1, "change_lane_right": -1}
 
@@ -295,7 +311,10 @@ def _lat_verdict(stated: str, planned: str, side: int) -> tuple[str, str]:
         return UNKNOWN, f"says follow_lane, plans {planned} (the lane may bend)"
     want = _SIDE[stated]
     if side == -want:
-        return "contradicts", f"says {stated}, plans {planned if planned != UNKNOWN else 'a path'} to the {'right' if want > 0 else 'left'}"
+        return (
+            "contradicts",
+            f"says {stated}, plans {planned if planned != UNKNOWN else 'a path'} to the {'right' if want > 0 else 'left'}",
+        )
     if planned == UNKNOWN:
         return UNKNOWN, "planned lateral behaviour unknown"
     if _SIDE.get(planned) == want or side == want:
@@ -356,10 +375,16 @@ def intent_consistency(
         av, ar = _lat_verdict(stated.lateral[i], planned.lateral[i], int(planned.side[i]))
         lon_v[i], lat_v[i] = lv, av
         silent_lat = stated.lateral[i] == UNKNOWN and "contradictory" not in _axis_part(stated.reason[i], "lateral")
-        silent_lon = stated.longitudinal[i] == UNKNOWN and "contradictory" not in _axis_part(stated.reason[i], "longitudinal")
+        silent_lon = stated.longitudinal[i] == UNKNOWN and "contradictory" not in _axis_part(
+            stated.reason[i], "longitudinal"
+        )
         if "contradicts" in (lv, av):
             verdict[i] = "contradicts"
-        elif (lv, av) == ("consistent", "consistent") or (lv == "consistent" and silent_lat) or (av == "consistent" and silent_lon):
+        elif (
+            (lv, av) == ("consistent", "consistent")
+            or (lv == "consistent" and silent_lat)
+            or (av == "consistent" and silent_lon)
+        ):
             verdict[i] = "consistent"
         else:
             verdict[i] = UNKNOWN
@@ -385,7 +410,7 @@ def intent_consistency(
 def _axis_part(reason: str, axis: str) -> str:
     """The part of a reason about ``axis`` (without its prefix), or the whole reason when it names no axis."""
     parts = [p.strip() for p in reason.split("; ") if p.strip()]
-    mine = [p[len(axis) + 2:] for p in parts if p.startswith(axis + ": ")]
+    mine = [p[len(axis) + 2 :] for p in parts if p.startswith(axis + ": ")]
     if mine:
         return "; ".join(mine)
     return "; ".join(p for p in parts if not p.startswith(("longitudinal: ", "lateral: ")))
@@ -411,7 +436,9 @@ def _rows(record: Mapping[str, Any], key: str, steps: int) -> FloatArray:
     return a
 
 
-def run_consistency(run_dir: str | os.PathLike[str], thresholds: Thresholds = Thresholds(), steps: int = 6) -> RunConsistency:
+def run_consistency(
+    run_dir: str | os.PathLike[str], thresholds: Thresholds = Thresholds(), steps: int = 6
+) -> RunConsistency:
     """:func:`intent_consistency` of every frame of a run directory (the last record of each frame).
 
     Reads ``intent_text`` (None: the stage failed), ``actions``, ``history_actions`` and ``trajectory`` of each
@@ -448,7 +475,9 @@ def _interval(pair: FloatArray) -> list[float] | None:
     return [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
 
 
-def summarize_consistency(entries: Sequence[tuple[str, RunConsistency]], resampling: Resampling | None = None) -> dict[str, Any]:
+def summarize_consistency(
+    entries: Sequence[tuple[str, RunConsistency]], resampling: Resampling | None = None
+) -> dict[str, Any]:
     """Per model (label, :class:`RunConsistency`): frames, counts of each verdict, the consistency rate and the
     contradiction rate (shares of all frames) with scene-bootstrap intervals (one core call,
     ``lightemma._core.cluster_bootstrap``), and the confusion matrices stated × planned of both axes. Per pair of
@@ -473,20 +502,22 @@ def summarize_consistency(entries: Sequence[tuple[str, RunConsistency]], resampl
         c = run.consistency
         n = len(c)
         counts = {v: int((c.verdict == v).sum()) for v in VERDICTS}
-        models.append({
-            "label": label,
-            "frames": n,
-            "scenes": len(set(run.scenes.tolist())),
-            **counts,
-            "consistency_rate": counts["consistent"] / n if n else math.nan,
-            "consistency_ci": _interval(ci[k, 0]) if n else None,
-            "contradiction_rate": counts["contradicts"] / n if n else math.nan,
-            "contradiction_ci": _interval(ci[k, 1]) if n else None,
-            "confusion": {
-                "longitudinal": confusion(c.stated.longitudinal, c.planned.longitudinal, LONGITUDINAL),
-                "lateral": confusion(c.stated.lateral, c.planned.lateral, LATERAL),
-            },
-        })
+        models.append(
+            {
+                "label": label,
+                "frames": n,
+                "scenes": len(set(run.scenes.tolist())),
+                **counts,
+                "consistency_rate": counts["consistent"] / n if n else math.nan,
+                "consistency_ci": _interval(ci[k, 0]) if n else None,
+                "contradiction_rate": counts["contradicts"] / n if n else math.nan,
+                "contradiction_ci": _interval(ci[k, 1]) if n else None,
+                "confusion": {
+                    "longitudinal": confusion(c.stated.longitudinal, c.planned.longitudinal, LONGITUDINAL),
+                    "lateral": confusion(c.stated.lateral, c.planned.lateral, LATERAL),
+                },
+            }
+        )
     pairs, pgroups, pkeys = [], [], []
     for i in range(len(entries)):
         for j in range(i + 1, len(entries)):
@@ -498,7 +529,9 @@ def summarize_consistency(entries: Sequence[tuple[str, RunConsistency]], resampl
             scenes = ra.scenes[ia] if len(ia) else np.zeros(0, dtype=object)
             entry: dict[str, Any] = {"a": la, "b": lb, "frames": len(common), "scenes": len(set(scenes.tolist()))}
             for name, verdict in (("consistency", "consistent"), ("contradiction", "contradicts")):
-                d = (ra.consistency.verdict[ia] == verdict).astype(np.float64) - (rb.consistency.verdict[ib] == verdict).astype(np.float64)
+                d = (ra.consistency.verdict[ia] == verdict).astype(np.float64) - (
+                    rb.consistency.verdict[ib] == verdict
+                ).astype(np.float64)
                 entry[f"{name}_diff"] = float(d.mean()) if len(d) else math.nan
                 pgroups.append((d, scenes))
                 pkeys.append(f"intent-{name}:{la}|{lb}")
@@ -510,7 +543,13 @@ def summarize_consistency(entries: Sequence[tuple[str, RunConsistency]], resampl
             for m, name in enumerate(("consistency", "contradiction")):
                 entry[f"{name}_p"] = float(p[2 * k + m])
                 entry[f"{name}_p_holm"] = float(adjusted[2 * k + m])
-    return {"rules": INTENT_RULES, "thresholds": Thresholds().to_dict(), "resampling": resampling.to_dict(), "models": models, "pairs": pairs}
+    return {
+        "rules": INTENT_RULES,
+        "thresholds": Thresholds().to_dict(),
+        "resampling": resampling.to_dict(),
+        "models": models,
+        "pairs": pairs,
+    }
 
 
 # -- described objects (stage 1) --------------------------------------------------------------------------------------

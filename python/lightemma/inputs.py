@@ -77,12 +77,16 @@ def history_noise(inputs: str) -> tuple[float, float] | None:
         return None
     match = _NOISE.fullmatch(inputs)
     if match is None:
-        raise InputError(f"--inputs {inputs}: history noise is history-noise@SIGMA or history-noise@SIGMA,SIGMA_K "
-                         "(SIGMA m/s on speeds, SIGMA_K 1/m on curvatures, plain decimals)")
+        raise InputError(
+            f"--inputs {inputs}: history noise is history-noise@SIGMA or history-noise@SIGMA,SIGMA_K "
+            "(SIGMA m/s on speeds, SIGMA_K 1/m on curvatures, plain decimals)"
+        )
     speed, curvature = float(match[1]), float(match[2] or 0.0)
     if not (speed <= MAX_SPEED_SIGMA and curvature <= MAX_CURVATURE_SIGMA) or speed == curvature == 0.0:
-        raise InputError(f"--inputs {inputs}: needs 0 <= SIGMA <= {MAX_SPEED_SIGMA:g} m/s and 0 <= SIGMA_K <= "
-                         f"{MAX_CURVATURE_SIGMA:g} 1/m, not both 0")
+        raise InputError(
+            f"--inputs {inputs}: needs 0 <= SIGMA <= {MAX_SPEED_SIGMA:g} m/s and 0 <= SIGMA_K <= "
+            f"{MAX_CURVATURE_SIGMA:g} 1/m, not both 0"
+        )
     return speed, curvature
 
 
@@ -105,8 +109,14 @@ def describe_perturbation(inputs: str) -> dict[str, Any]:
     noise = history_noise(inputs)
     if noise is not None:
         seed = f"sha256('lightemma-history-noise|{inputs}|SAMPLE_TOKEN')[:8], big-endian"
-        return {"history_perturbation": {"kind": "noise", "sigma_speed_m_s": noise[0],
-                                         "sigma_curvature_per_m": noise[1], "seed": seed}}
+        return {
+            "history_perturbation": {
+                "kind": "noise",
+                "sigma_speed_m_s": noise[0],
+                "sigma_curvature_per_m": noise[1],
+                "seed": seed,
+            }
+        }
     k = history_stale(inputs)
     if k is not None:
         return {"history_perturbation": {"kind": "stale", "steps": k, "delay_s": 0.5 * k}}

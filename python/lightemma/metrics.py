@@ -122,7 +122,9 @@ def evaluate_all(
     p, g, single = _pair(pred, gt)
     m = None if mask is None else as_mask(mask, p.shape[0], single)
     rows = _core.evaluate_all(p, g, float(miss_threshold), m)
-    return {c: Metrics(*values, convention=c, miss_threshold=float(miss_threshold)) for c, values in zip(CONVENTIONS, rows)}
+    return {
+        c: Metrics(*values, convention=c, miss_threshold=float(miss_threshold)) for c, values in zip(CONVENTIONS, rows)
+    }
 
 
 FRAME_METRICS: tuple[str, ...] = ("ade_1s", "ade_2s", "ade_3s", "ade_avg", "fde")

@@ -96,7 +96,9 @@ def api_models(environ: os._Environ[str] | dict[str, str] | None = None) -> list
     return [model for variable, model in API_MODELS if environ.get(variable)]
 
 
-def skipped_api_models(environ: os._Environ[str] | dict[str, str] | None = None, *, use_api: bool = True) -> dict[str, str]:
+def skipped_api_models(
+    environ: os._Environ[str] | dict[str, str] | None = None, *, use_api: bool = True
+) -> dict[str, str]:
     """The paper models the demo will not run, each with the reason (no key, or ``--no-api``)."""
     environ = os.environ if environ is None else environ
     if not use_api:
@@ -124,10 +126,15 @@ def run_demo(
     ``api_base`` sends the API models to another OpenAI-compatible server.
     """
     if scenes is not None and (isinstance(scenes, bool) or not isinstance(scenes, int) or scenes < 1):
-        raise UserError(f"scenes must be at least 1 (or None: one per scenario kind), got {scenes!r}",
-                        cli=f"--scenes must be at least 1, got {scenes!r}")
+        raise UserError(
+            f"scenes must be at least 1 (or None: one per scenario kind), got {scenes!r}",
+            cli=f"--scenes must be at least 1, got {scenes!r}",
+        )
     if isinstance(api_limit, bool) or not isinstance(api_limit, int) or api_limit < 1:  # 0 would run every frame
-        raise UserError(f"api_limit must be at least 1 frame, got {api_limit!r}", cli=f"--api-limit must be at least 1, got {api_limit!r}")
+        raise UserError(
+            f"api_limit must be at least 1 frame, got {api_limit!r}",
+            cli=f"--api-limit must be at least 1, got {api_limit!r}",
+        )
     out = Path(out).resolve()
     _prepare(out)
     from lightemma.frames.model import SYNTH_MARKER, summary_line
@@ -138,9 +145,24 @@ def run_demo(
     log(f"1/3 writing a synthetic dataset ({scenes} scenes × {keyframes} keyframes) to {out / 'data'}")
     if (out / "data" / SYNTH_MARKER).is_file():  # an earlier demo's dataset, maybe of other --scenes/--keyframes:
         shutil.rmtree(out / "data")  # write_dataset never rewrites the shared files of another dataset
-    dataroot = Path(write_dataset(out / "data", scenes=scenes, seed=0, version=VERSION, keyframes=keyframes, images=True, sweeps=False, overwrite=True))
+    dataroot = Path(
+        write_dataset(
+            out / "data",
+            scenes=scenes,
+            seed=0,
+            version=VERSION,
+            keyframes=keyframes,
+            images=True,
+            sweeps=False,
+            overwrite=True,
+        )
+    )
     common: _RunArgs = {
-        "dataroot": dataroot, "version": VERSION, "split": "all", "output": out / "runs", "progress": False
+        "dataroot": dataroot,
+        "version": VERSION,
+        "split": "all",
+        "output": out / "runs",
+        "progress": False,
     }
     run_dirs = []
     models = [(m, method, "full") for m, method in BASELINE_RUNS]
@@ -157,8 +179,15 @@ def run_demo(
             api: _ApiArgs = {"timeout": 60.0, "max_retries": 2, "api_base": api_base} if limit else {}
             with warnings.catch_warnings(record=True) as caught:  # the run's warnings (the ego baseline's small fit)
                 warnings.simplefilter("always", UserWarning)  # the others as the filters in place say
-                result = lightemma.run(model, integrate_method=method, limit=limit, concurrency=8 if limit else 32,
-                                       inputs=inputs, **api, **common)
+                result = lightemma.run(
+                    model,
+                    integrate_method=method,
+                    limit=limit,
+                    concurrency=8 if limit else 32,
+                    inputs=inputs,
+                    **api,
+                    **common,
+                )
             for warning in caught:  # one line each; the runner's own warnings are UserWarnings that start "warning: "
                 shown = "" if issubclass(warning.category, UserWarning) else f"{warning.category.__name__}: "
                 log(f"    {shown}{warning.message}")
@@ -172,8 +201,10 @@ def run_demo(
         run_dirs.append(Path(result.run_dir))
     api_ran = any(not model.startswith("baseline:") for model, _, _ in models if model not in skipped)
     if api_ran:
-        log(f"3/3 evaluating and writing the report to {out / 'report'}: every model is scored on the frames scored in "
-            f"every run (the API models ran on the first {api_limit} frames, the baselines on all)")
+        log(
+            f"3/3 evaluating and writing the report to {out / 'report'}: every model is scored on the frames scored in "
+            f"every run (the API models ran on the first {api_limit} frames, the baselines on all)"
+        )
     else:
         log(f"3/3 evaluating and writing the report to {out / 'report'}")
     try:
@@ -182,7 +213,9 @@ def run_demo(
         if not api_ran or "no frame is valid for every run" not in str(exc):
             raise
         api_ran = False  # the runs share no scored frame: each is scored on its own, and the report's warnings say so
-        log("    warning: no frame is scored in every run, so the report scores each model on its own frames, which "
-            "differ between the API models and the baselines: do not rank them against each other")
+        log(
+            "    warning: no frame is scored in every run, so the report scores each model on its own frames, which "
+            "differ between the API models and the baselines: do not rank them against each other"
+        )
         index = write_report([out / "runs"], out / "report", convention="all", with_paper=True, top=3)
     return DemoResult(out=out, dataroot=dataroot, run_dirs=run_dirs, index=index, skipped=skipped, common=api_ran)

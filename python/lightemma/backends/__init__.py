@@ -19,5 +19,16 @@ from __future__ import annotations
 from lightemma.backends.base import STAGES, Backend, ChatRequest, ChatResult, GenerationParams
 from lightemma.backends.factory import BACKENDS, KINDS, backend_class, backend_kind, create_backend, local_backend
 
-__all__ = ["BACKENDS", "KINDS", "STAGES", "Backend", "ChatRequest", "ChatResult", "GenerationParams", "backend_class",
-           "backend_kind", "create_backend", "local_backend"]
+__all__ = [
+    "BACKENDS",
+    "KINDS",
+    "STAGES",
+    "Backend",
+    "ChatRequest",
+    "ChatResult",
+    "GenerationParams",
+    "backend_class",
+    "backend_kind",
+    "create_backend",
+    "local_backend",
+]

@@ -43,7 +43,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from lightemma._litellm import lazy as litellm  # imported at first use: the direct transport to an unlisted model never does
+from lightemma._litellm import (
+    lazy as litellm,
+)  # imported at first use: the direct transport to an unlisted model never does
 from lightemma.backends.base import Backend, ChatRequest, ChatResult, GenerationParams, is_truncated
 from lightemma.backends.local import conversation
 from lightemma.backends.ratelimit import RateLimiter
@@ -72,20 +74,34 @@ OPENAI_COMPATIBLE = ("openai", "hosted_vllm", "aiohttp_openai", "openai_like", "
 # the providers litellm calls through the OpenAI SDK's client (the others post through its own HTTP handler)
 OPENAI_SDK_PROVIDERS = ("openai", "text-completion-openai")
 # The providers of the paper's API models; an empty variable counts as missing.
-PROVIDER_KEYS = {"openai": ("OPENAI_API_KEY",), "anthropic": ("ANTHROPIC_API_KEY",), "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY")}
+PROVIDER_KEYS = {
+    "openai": ("OPENAI_API_KEY",),
+    "anthropic": ("ANTHROPIC_API_KEY",),
+    "gemini": ("GEMINI_API_KEY", "GOOGLE_API_KEY"),
+}
 # Each provider's own API hosts: its key goes there as the provider's variables hold it. Any other --api-base gets
 # no provider key, only the key of a variable the user names for it (--api-key-env NAME).
-PROVIDER_HOSTS = {"openai": ("api.openai.com",), "anthropic": ("api.anthropic.com",),
-                  "gemini": ("generativelanguage.googleapis.com",)}
+PROVIDER_HOSTS = {
+    "openai": ("api.openai.com",),
+    "anthropic": ("api.anthropic.com",),
+    "gemini": ("generativelanguage.googleapis.com",),
+}
 # Variables litellm, the OpenAI SDK and the batch adapters read for a provider's base URL when no --api-base is given.
-BASE_VARIABLES = {"openai": ("OPENAI_BASE_URL", "OPENAI_API_BASE"), "anthropic": ("ANTHROPIC_API_BASE", "ANTHROPIC_BASE_URL"),
-                  "gemini": ("GEMINI_API_BASE",)}
+BASE_VARIABLES = {
+    "openai": ("OPENAI_BASE_URL", "OPENAI_API_BASE"),
+    "anthropic": ("ANTHROPIC_API_BASE", "ANTHROPIC_BASE_URL"),
+    "gemini": ("GEMINI_API_BASE",),
+}
 MAX_PRICE = 1e6  # USD per million tokens a --price may give (the dearest list price is ~1e2): beyond it, a typo or inf
 ESTIMATED_TOKENS_PER_CALL = 2000  # reserved from the TPM bucket until the provider reports usage
 # What a provider accepts per image, as base64 characters (what is sent), and the longest side in pixels.
 # Anthropic: 5 MB per image, 8000 px; OpenAI: 20 MB per image; Gemini: 20 MB per request (kept under).
-IMAGE_LIMITS: dict[str, tuple[int, int | None]] = {"anthropic": (5_000_000, 8000), "openai": (20_000_000, None),
-                                                   "gemini": (18_000_000, None), "vertex_ai": (18_000_000, None)}
+IMAGE_LIMITS: dict[str, tuple[int, int | None]] = {
+    "anthropic": (5_000_000, 8000),
+    "openai": (20_000_000, None),
+    "gemini": (18_000_000, None),
+    "vertex_ai": (18_000_000, None),
+}
 DEFAULT_IMAGE_LIMIT: tuple[int, int | None] = (20_000_000, None)
 # Providers whose usage block leaves out a cache count that is zero (Gemini omits zero fields; Anthropic's are
 # always there): a reported usage without one means no cached tokens, not unknown.
@@ -133,7 +149,9 @@ def require_api_key(model: str, api_base: str | None = None, api_key_env: str | 
         missing = [] if check.get("keys_in_environment") else list(check.get("missing_keys") or [])
     if missing:
         joined = " or ".join(missing)
-        raise UserError(f"no API key for model {model!r}: set the environment variable {joined} (or pass --api-base for an OpenAI-compatible server)")
+        raise UserError(
+            f"no API key for model {model!r}: set the environment variable {joined} (or pass --api-base for an OpenAI-compatible server)"
+        )
     return None
 
 
@@ -153,10 +171,12 @@ def base_from_environment(provider: str | None, api_base: str | None) -> tuple[s
             continue
         if not is_provider_host(provider, value):
             keys = " / ".join(PROVIDER_KEYS.get(provider or "", ())) or "the provider's key"
-            raise UserError(f"the environment variable {name} is set to {redact_url(value)!r}: {provider} calls and "
-                            f"{keys} would go there, not to {provider}'s own API; unset it, or give that server as "
-                            f"--api-base (with --api-key-env NAME for its key), or declare it {provider}'s own host "
-                            f"with {PROVIDER_HOSTS_ENV}={provider}=HOST[:PORT]")
+            raise UserError(
+                f"the environment variable {name} is set to {redact_url(value)!r}: {provider} calls and "
+                f"{keys} would go there, not to {provider}'s own API; unset it, or give that server as "
+                f"--api-base (with --api-key-env NAME for its key), or declare it {provider}'s own host "
+                f"with {PROVIDER_HOSTS_ENV}={provider}=HOST[:PORT]"
+            )
         return name, value
     return None
 
@@ -191,7 +211,9 @@ def check_api_base(api_base: str) -> tuple[str, int]:
         parts = urlsplit(api_base)
         host, port = parts.hostname, parts.port
     except ValueError as exc:
-        raise UserError(f"--api-base {shown!r} is not a usable URL ({exc}); give one like http://HOST:8000/v1") from None
+        raise UserError(
+            f"--api-base {shown!r} is not a usable URL ({exc}); give one like http://HOST:8000/v1"
+        ) from None
     if parts.scheme.lower() not in ("http", "https") or not host:
         guess = f"http://{shown}" if "://" not in shown else shown
         raise UserError(f"--api-base {shown!r} needs a scheme and a host (http:// or https://), e.g. {guess}")
@@ -208,8 +230,10 @@ def check_reachable(api_base: str, timeout: float = CONNECT_TIMEOUT) -> None:
             pass
     except OSError as exc:
         why = "no answer within " + f"{timeout:g} s" if isinstance(exc, TimeoutError) else (exc.strerror or str(exc))
-        raise UserError(f"--api-base {redact_url(api_base)}: cannot connect to {host}:{port} ({why}); check that the "
-                        "server runs and the URL (scheme, host, port)") from None
+        raise UserError(
+            f"--api-base {redact_url(api_base)}: cannot connect to {host}:{port} ({why}); check that the "
+            "server runs and the URL (scheme, host, port)"
+        ) from None
 
 
 PROVIDER_HOSTS_ENV = "LIGHTEMMA_PROVIDER_HOSTS"
@@ -229,10 +253,13 @@ def _extra_provider_hosts(provider: str) -> list[str]:
 def check_price(price: Any) -> None:
     """``--price``: two numbers from 0 to :data:`MAX_PRICE` (USD per million input / output tokens), else a one-line
     :class:`UserError`."""
-    if len(price) != 2 or not all(isinstance(p, (int, float)) and not isinstance(p, bool) and 0 <= p <= MAX_PRICE
-                                  for p in price):
-        raise UserError(f"--price needs two numbers from 0 to {MAX_PRICE:g} (USD per million input / output tokens), "
-                        f"got {' '.join(f'{p:g}' if isinstance(p, float) else str(p) for p in price)}")
+    if len(price) != 2 or not all(
+        isinstance(p, (int, float)) and not isinstance(p, bool) and 0 <= p <= MAX_PRICE for p in price
+    ):
+        raise UserError(
+            f"--price needs two numbers from 0 to {MAX_PRICE:g} (USD per million input / output tokens), "
+            f"got {' '.join(f'{p:g}' if isinstance(p, float) else str(p) for p in price)}"
+        )
 
 
 def is_provider_host(provider: str | None, api_base: str) -> bool:
@@ -288,8 +315,10 @@ def _check_canonical_host(api_base: str) -> None:
         canonical = socket.inet_ntoa(socket.inet_aton(host))
     except OSError:
         return  # a name, resolved at the call
-    raise UserError(f"--api-base {redact_url(api_base)}: write the address {host} as {canonical} for --transport direct "
-                    "(its client takes only the canonical form)")
+    raise UserError(
+        f"--api-base {redact_url(api_base)}: write the address {host} as {canonical} for --transport direct "
+        "(its client takes only the canonical form)"
+    )
 
 
 def insecure_endpoint(api_base: str | None, key_variable: str | None = None) -> str | None:
@@ -316,15 +345,22 @@ def check_model(model: str, name: str, api_base: str | None) -> str:
         return provider
     close = suggest(name)
     hint = f"; did you mean {' or '.join(close)}?" if close else ""
-    how = (f"for a model served at --api-base, name it openai/{name}" if api_base
-           else "give a registry name (`lightemma models` lists them) or a litellm model string such as anthropic/claude-sonnet-4-6")
-    raise UserError(f"unknown model {name!r}: it is not in the registry and litellm cannot tell its provider{hint}; {how}")
+    how = (
+        f"for a model served at --api-base, name it openai/{name}"
+        if api_base
+        else "give a registry name (`lightemma models` lists them) or a litellm model string such as anthropic/claude-sonnet-4-6"
+    )
+    raise UserError(
+        f"unknown model {name!r}: it is not in the registry and litellm cannot tell its provider{hint}; {how}"
+    )
 
 
 def _provider(model: str) -> str | None:
     prefix = model.split("/", 1)[0] if "/" in model else None
     if prefix in OPENAI_COMPATIBLE:
-        return prefix  # what litellm.get_llm_provider says of an explicit OpenAI-compatible prefix, without importing it
+        return (
+            prefix  # what litellm.get_llm_provider says of an explicit OpenAI-compatible prefix, without importing it
+        )
     try:
         return litellm.get_llm_provider(model)[1]
     except Exception:  # noqa: BLE001 - an unknown provider is litellm's error to report at call time
@@ -333,7 +369,9 @@ def _provider(model: str) -> str | None:
 
 def _secret_values() -> tuple[str, ...]:
     """Values of environment variables that look like credentials, to scrub from messages."""
-    return tuple(v for k, v in os.environ.items() if len(v) >= 8 and any(t in k.upper() for t in ("KEY", "TOKEN", "SECRET")))
+    return tuple(
+        v for k, v in os.environ.items() if len(v) >= 8 and any(t in k.upper() for t in ("KEY", "TOKEN", "SECRET"))
+    )
 
 
 def _b64_len(n: int) -> int:
@@ -359,7 +397,9 @@ def fit_image(data: bytes, max_b64: int, max_side: int | None) -> tuple[bytes, d
     original = image.size
     if max_side and max(image.size) > max_side:
         scale = max_side / max(image.size)
-        image = image.resize((max(1, int(image.width * scale)), max(1, int(image.height * scale))), Image.Resampling.LANCZOS)
+        image = image.resize(
+            (max(1, int(image.width * scale)), max(1, int(image.height * scale))), Image.Resampling.LANCZOS
+        )
 
     def encode(img: Any, quality: int) -> bytes:
         buffer = io.BytesIO()
@@ -367,15 +407,22 @@ def fit_image(data: bytes, max_b64: int, max_side: int | None) -> tuple[bytes, d
         return buffer.getvalue()
 
     def report(img: Any, out: bytes, quality: int) -> dict[str, Any]:
-        return {"from_bytes": len(data), "to_bytes": len(out), "quality": quality, "size": list(img.size),
-                "original_size": list(original)}
+        return {
+            "from_bytes": len(data),
+            "to_bytes": len(out),
+            "quality": quality,
+            "size": list(img.size),
+            "original_size": list(original),
+        }
 
     for quality in (90, 80, 70, 60, 50):  # quality first: the picture keeps its resolution
         out = encode(image, quality)
         if _b64_len(len(out)) <= max_b64:
             return out, report(image, out, quality)
     while min(image.size) > 16:  # then size
-        image = image.resize((max(1, int(image.width * 0.75)), max(1, int(image.height * 0.75))), Image.Resampling.LANCZOS)
+        image = image.resize(
+            (max(1, int(image.width * 0.75)), max(1, int(image.height * 0.75))), Image.Resampling.LANCZOS
+        )
         out = encode(image, 80)
         if _b64_len(len(out)) <= max_b64:
             return out, report(image, out, 80)
@@ -471,13 +518,22 @@ class APIBackend(Backend):
         self.api_base_shown = redact_url(api_base)  # what messages and records show: no credentials
         self.api_key_env = api_key_env
         self.model = litellm_model(self.model_info, api_base)
-        self.provider = check_model(self.model, self.model_info.key, api_base)  # before the key: a typo is the first thing to say
+        self.provider = check_model(
+            self.model, self.model_info.key, api_base
+        )  # before the key: a typo is the first thing to say
         #: a declared gateway named by a base-URL variable of the environment (``OPENAI_BASE_URL`` …), or None
         self.base_variable = base_from_environment(self.provider, api_base)
         self._api_key = api_key if api_key is not None else require_api_key(self.model, api_base, api_key_env)
         #: one-line warnings for the caller to show once (plain http to another host)
-        self.notices: list[str] = [n for n in (insecure_endpoint(api_base, api_key_env or (
-            "the key passed" if api_key is not None and api_key != NO_KEY else None)),) if n]
+        self.notices: list[str] = [
+            n
+            for n in (
+                insecure_endpoint(
+                    api_base, api_key_env or ("the key passed" if api_key is not None and api_key != NO_KEY else None)
+                ),
+            )
+            if n
+        ]
         if self.base_variable is not None:
             name, value = self.base_variable
             warning = insecure_endpoint(value, " / ".join(PROVIDER_KEYS.get(self.provider or "", ())) or None)
@@ -497,7 +553,9 @@ class APIBackend(Backend):
                 raise UserError(f"max_image_bytes must be at least 1024, got {max_image_bytes}")
             limit_b64 = int(max_image_bytes)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
-        self._secrets = tuple(s for s in (*url_secrets(api_base), *_secret_values(), self._api_key or "") if s and s != NO_KEY)
+        self._secrets = tuple(
+            s for s in (*url_secrets(api_base), *_secret_values(), self._api_key or "") if s and s != NO_KEY
+        )
         # a model served from another --api-base is not the provider's: no list price (litellm's or the registry's)
         self.served_elsewhere = bool(api_base and not is_provider_host(self.provider, api_base))
         self.price_given = price
@@ -524,7 +582,9 @@ class APIBackend(Backend):
         self._client_loop: Any = None
         if transport == "direct":
             if not api_base or _provider(self.model) not in OPENAI_COMPATIBLE:
-                raise UserError(f"transport 'direct' needs --api-base and an OpenAI-compatible model string (openai/NAME), got {self.model!r}")
+                raise UserError(
+                    f"transport 'direct' needs --api-base and an OpenAI-compatible model string (openai/NAME), got {self.model!r}"
+                )
             from lightemma.backends.openai_http import OpenAIHTTPClient
 
             _check_canonical_host(api_base)
@@ -570,21 +630,34 @@ class APIBackend(Backend):
         the prompt, which makes no answer format-proof.
         """
         if self.api_base and self.provider in OPENAI_COMPATIBLE:
-            return {"mechanism": "response_format json_schema (strict), enforced by the OpenAI-compatible server at "
-                                 f"{self.api_base_shown}", "pair_count_enforced": True}
+            return {
+                "mechanism": "response_format json_schema (strict), enforced by the OpenAI-compatible server at "
+                f"{self.api_base_shown}",
+                "pair_count_enforced": True,
+            }
         if not litellm.supports_response_schema(model=self.model):
-            raise UserError(f"--answer-format structured: litellm {_litellm_version()} does not mark {self.model} as able to "
-                            "follow a JSON schema (it would only paste the schema into the prompt); use --answer-format text "
-                            "or a model that supports structured outputs")
+            raise UserError(
+                f"--answer-format structured: litellm {_litellm_version()} does not mark {self.model} as able to "
+                "follow a JSON schema (it would only paste the schema into the prompt); use --answer-format text "
+                "or a model that supports structured outputs"
+            )
         if self.provider == "anthropic":
             native = _litellm_entry(self.model).get("supports_native_structured_output") is True
-            mechanism = ("Anthropic structured outputs (output_format json_schema, mapped by litellm)" if native else
-                         "Anthropic forced tool call (litellm's json_tool_call; the schema guides but is not grammar-enforced)")
-            return {"mechanism": mechanism, "pair_count_enforced": False,
-                    "note": "Anthropic accepts no minItems/maxItems: litellm moves the pair count into the schema's description"}
+            mechanism = (
+                "Anthropic structured outputs (output_format json_schema, mapped by litellm)"
+                if native
+                else "Anthropic forced tool call (litellm's json_tool_call; the schema guides but is not grammar-enforced)"
+            )
+            return {
+                "mechanism": mechanism,
+                "pair_count_enforced": False,
+                "note": "Anthropic accepts no minItems/maxItems: litellm moves the pair count into the schema's description",
+            }
         if self.provider in ("gemini", "vertex_ai"):
-            return {"mechanism": "Gemini response schema (responseMimeType application/json, mapped by litellm)",
-                    "pair_count_enforced": True}
+            return {
+                "mechanism": "Gemini response schema (responseMimeType application/json, mapped by litellm)",
+                "pair_count_enforced": True,
+            }
         return {"mechanism": "response_format json_schema (strict)", "pair_count_enforced": True}
 
     def effective_params(self, params: GenerationParams) -> dict[str, Any]:
@@ -601,37 +674,56 @@ class APIBackend(Backend):
             "transport": self.transport,
             "model": self.model,
             "api_base": self.api_base_shown,
-            "api_base_from_environment": (f"{self.base_variable[0]}={redact_url(self.base_variable[1])}"
-                                          if self.base_variable else None),
+            "api_base_from_environment": (
+                f"{self.base_variable[0]}={redact_url(self.base_variable[1])}" if self.base_variable else None
+            ),
             "api_key_env": self.api_key_env,
             "registry": self.model_info.to_dict(),
             "litellm_version": _litellm_version(),
             "token_counting": "provider-reported usage (prompt_tokens / completion_tokens)",
             "cached_input_tokens": "provider-reported: OpenAI prompt_tokens_details.cached_tokens, Anthropic "
-                                   "cache_read_input_tokens (writes: cache_creation_input_tokens), Gemini cachedContentTokenCount",
-            "prompt_cache": ("cache_control breakpoint after the image (and at the end of a conversation request a later "
-                             "stage extends)" if self.provider == "anthropic" else
-                             "automatic prefix cache of the provider: every request of a frame starts with the same image"),
-            "cost": (run_price(self.model_info, given=self.price_given)["source"]
-                     if self.price_given is not None else
-                     f"unknown: served from --api-base {self.api_base_shown}, not at the provider's list price (give --price)"
-                     if self.served_elsewhere else
-                     "litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
-                     "else the registry's provider prices" if self.transport == "litellm" else
-                     "litellm.cost_per_token on the provider-reported tokens (cached tokens at the cached price), "
-                     "else the registry's provider prices"),
+            "cache_read_input_tokens (writes: cache_creation_input_tokens), Gemini cachedContentTokenCount",
+            "prompt_cache": (
+                "cache_control breakpoint after the image (and at the end of a conversation request a later "
+                "stage extends)"
+                if self.provider == "anthropic"
+                else "automatic prefix cache of the provider: every request of a frame starts with the same image"
+            ),
+            "cost": (
+                run_price(self.model_info, given=self.price_given)["source"]
+                if self.price_given is not None
+                else f"unknown: served from --api-base {self.api_base_shown}, not at the provider's list price (give --price)"
+                if self.served_elsewhere
+                else "litellm's cost of the call (bundled price list, cached and cache-write tokens at their prices), "
+                "else the registry's provider prices"
+                if self.transport == "litellm"
+                else "litellm.cost_per_token on the provider-reported tokens (cached tokens at the cached price), "
+                "else the registry's provider prices"
+            ),
             "temperature_sent": self._sends_temperature,
-            "reasoning": {"reasons": bool(self.reasoning_budget), "budget_tokens": self.reasoning_budget,
-                          "max_tokens_sent": "--max-tokens + budget_tokens (the answer keeps --max-tokens of room)"},
+            "reasoning": {
+                "reasons": bool(self.reasoning_budget),
+                "budget_tokens": self.reasoning_budget,
+                "max_tokens_sent": "--max-tokens + budget_tokens (the answer keeps --max-tokens of room)",
+            },
             "finish_reason": "as the provider reported it (litellm normalises length / MAX_TOKENS / max_tokens to 'length')",
-            "image_limit": {"base64_chars": self._images.max_b64, "max_side_px": self._images.max_side,
-                            "over_it": "re-encoded as JPEG, quality 90 → 50, then ×0.75 in size, until it fits"},
+            "image_limit": {
+                "base64_chars": self._images.max_b64,
+                "max_side_px": self._images.max_side,
+                "over_it": "re-encoded as JPEG, quality 90 → 50, then ×0.75 in size, until it fits",
+            },
             "timeout_s": self.timeout,
             "deadline": "lightemma's own, per call: connect to last byte",
-            "retry": {"max_retries": self.retry.max_retries, "base_s": self.retry.base, "cap_s": self.retry.cap,
-                      "max_retry_after_s": self.retry.max_wait},
-            "rate_limit": {"rpm": self.limiter.requests.capacity if self.limiter.requests else None,
-                           "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None},
+            "retry": {
+                "max_retries": self.retry.max_retries,
+                "base_s": self.retry.base,
+                "cap_s": self.retry.cap,
+                "max_retry_after_s": self.retry.max_wait,
+            },
+            "rate_limit": {
+                "rpm": self.limiter.requests.capacity if self.limiter.requests else None,
+                "tpm": self.limiter.tokens.capacity if self.limiter.tokens else None,
+            },
             "cache": str(self.cache.path) if self.cache is not None else None,
             "gpus": 0,
         }
@@ -641,8 +733,12 @@ class APIBackend(Backend):
         """Images re-encoded to fit the provider's limit so far (count and the first few), or None if none were."""
         if not self._images.reencoded:
             return None
-        return {"count": self._images.reencoded, "limit_base64_chars": self._images.max_b64,
-                "max_side_px": self._images.max_side, "examples": list(self._images.examples)}
+        return {
+            "count": self._images.reencoded,
+            "limit_base64_chars": self._images.max_b64,
+            "max_side_px": self._images.max_side,
+            "examples": list(self._images.examples),
+        }
 
     @property
     def cache_failure(self) -> str | None:
@@ -682,8 +778,12 @@ class APIBackend(Backend):
             try:
                 url, digest = self._images.get(str(req.image_path))
             except OSError as exc:
-                failed = ChatResult(text=None, error="ImageReadError", error_message=short_message(exc),
-                                    seconds=time.perf_counter() - start)
+                failed = ChatResult(
+                    text=None,
+                    error="ImageReadError",
+                    error_message=short_message(exc),
+                    seconds=time.perf_counter() - start,
+                )
                 return [self._observe(req, failed)] * n
             image_part = {"type": "image_url", "image_url": {"url": url}}
         messages = conversation(req, image_part)
@@ -699,14 +799,31 @@ class APIBackend(Backend):
         found: dict[int, ChatResult] = {}
         if self.cache is not None and (params.get("temperature", None) == 0 or req.samples > 1):
             for i in range(n):  # a sampled run's draws are cached too, each by its sample index
-                cache_key = request_key(self.model, self.api_base_shown, params, req.text, digest, req.turns,
-                                        req.attempt, req.inputs, sample=req.sample if n == 1 else i)
+                cache_key = request_key(
+                    self.model,
+                    self.api_base_shown,
+                    params,
+                    req.text,
+                    digest,
+                    req.turns,
+                    req.attempt,
+                    req.inputs,
+                    sample=req.sample if n == 1 else i,
+                )
                 keys[i] = cache_key
                 hit = self.cache.get(cache_key)
                 if hit is not None:
-                    found[i] = self._observe(req, ChatResult(
-                        text=hit["text"], input_tokens=hit["input_tokens"], output_tokens=hit["output_tokens"],
-                        seconds=time.perf_counter() - start, cost_cents=0.0, cached=True))
+                    found[i] = self._observe(
+                        req,
+                        ChatResult(
+                            text=hit["text"],
+                            input_tokens=hit["input_tokens"],
+                            output_tokens=hit["output_tokens"],
+                            seconds=time.perf_counter() - start,
+                            cost_cents=0.0,
+                            cached=True,
+                        ),
+                    )
         missing = [i for i in range(n) if i not in found]
         if not missing:
             return [found[i] for i in range(n)]
@@ -737,8 +854,16 @@ class APIBackend(Backend):
                     await asyncio.sleep(self.retry.delay(retries, after))
                     retries += 1
                     continue
-                failed = self._observe(req, ChatResult(text=None, error=err, error_message=message,
-                                                       seconds=time.perf_counter() - start, retries=retries))
+                failed = self._observe(
+                    req,
+                    ChatResult(
+                        text=None,
+                        error=err,
+                        error_message=message,
+                        seconds=time.perf_counter() - start,
+                        retries=retries,
+                    ),
+                )
                 return [found.get(i, failed) for i in range(n)]
             result = results[0]
             reported = [t for t in (result.input_tokens, result.output_tokens) if t is not None]
@@ -746,8 +871,13 @@ class APIBackend(Backend):
             self.limiter.settle(ESTIMATED_TOKENS_PER_CALL, sum(reported) if reported else None)
             for i, one in zip(missing, results):
                 key = keys[i]
-                if key is not None and self.cache is not None and one.text is not None and one.ok \
-                        and not is_truncated(one.finish_reason):
+                if (
+                    key is not None
+                    and self.cache is not None
+                    and one.text is not None
+                    and one.ok
+                    and not is_truncated(one.finish_reason)
+                ):
                     self.cache.put(key, self.model, one.text, one.input_tokens, one.output_tokens, one.cost_cents)
                 found[i] = self._observe(req, one)
             return [found[i] for i in range(n)]
@@ -756,7 +886,9 @@ class APIBackend(Backend):
         """Feed the call's outcome to the failure streak; raise :class:`RunFatalError` when the run cannot succeed."""
         signature = None if result.ok else failure_signature(result.error or "Error", result.error_message)
         scene = getattr(req.frame, "scene_name", None) if req.frame is not None else None
-        frames = self.streak.observe(req.stage, req.frame_id, signature, scene=scene if isinstance(scene, str) else None)
+        frames = self.streak.observe(
+            req.stage, req.frame_id, signature, scene=scene if isinstance(scene, str) else None
+        )
         if frames is not None:
             raise self._fatal(result.error or "Error", result.error_message or "", frames=frames, stage=req.stage)
         return result
@@ -764,21 +896,32 @@ class APIBackend(Backend):
     def _too_long_a_wait(self, err: str, message: str, after: float | None) -> RunFatalError:
         """The run-fatal error for a server that asks for a longer pause (Retry-After) than lightemma waits."""
         asked = "forever" if after == float("inf") else f"{after:g} s"
-        what = (f"the provider asks to wait {asked} before the next request (Retry-After), longer than lightemma waits "
-                f"for one ({self.retry.max_wait:g} s)")
+        what = (
+            f"the provider asks to wait {asked} before the next request (Retry-After), longer than lightemma waits "
+            f"for one ({self.retry.max_wait:g} s)"
+        )
         if err == "RateLimitError":
-            return RunFatalError(f"{self.model}: {err}: {message} — {what}: the account's rate limit or quota is exhausted; "
-                                 "resume later, or set --rpm / --tpm to the account's limits", cause="quota-exhausted", error=err)
-        return RunFatalError(f"{self.model}: {err}: {message} — {what}: the provider is unavailable; resume later",
-                             cause="provider-error", error=err)
+            return RunFatalError(
+                f"{self.model}: {err}: {message} — {what}: the account's rate limit or quota is exhausted; "
+                "resume later, or set --rpm / --tpm to the account's limits",
+                cause="quota-exhausted",
+                error=err,
+            )
+        return RunFatalError(
+            f"{self.model}: {err}: {message} — {what}: the provider is unavailable; resume later",
+            cause="provider-error",
+            error=err,
+        )
 
     def _key_variables(self) -> str:
         if self.api_key_env:
             return f"{self.api_key_env} (sent to {self.api_base_shown})"
         if self.api_base and not is_provider_host(self.provider, self.api_base):
             names = PROVIDER_KEYS.get(self.provider or "", ("OPENAI_API_KEY",))
-            return (f"a variable named with --api-key-env (e.g. --api-key-env {names[0]}): no provider key is sent to "
-                    f"--api-base {self.api_base_shown} unless its variable is named")
+            return (
+                f"a variable named with --api-key-env (e.g. --api-key-env {names[0]}): no provider key is sent to "
+                f"--api-base {self.api_base_shown} unless its variable is named"
+            )
         known = PROVIDER_KEYS.get(self.provider or "")
         return " or ".join(known) if known else "the provider's API key variable"
 
@@ -788,55 +931,101 @@ class APIBackend(Backend):
         seen = f" on {frames} frames in a row ({stage} stage), nothing succeeding in between" if frames else ""
         what = f"{self.model}: {err}: {message}"
         if err == "AuthenticationError":
-            return RunFatalError(f"{what} — the API key was rejected; set a valid key in {self._key_variables()}",
-                                 cause="authentication", error=err)
+            return RunFatalError(
+                f"{what} — the API key was rejected; set a valid key in {self._key_variables()}",
+                cause="authentication",
+                error=err,
+            )
         if err == "PermissionDeniedError":
-            return RunFatalError(f"{what} — the key may not use this model; check the key in {self._key_variables()} "
-                                 "and the account's access", cause="authentication", error=err)
+            return RunFatalError(
+                f"{what} — the key may not use this model; check the key in {self._key_variables()} "
+                "and the account's access",
+                cause="authentication",
+                error=err,
+            )
         if err == "PaymentRequiredError":
             return RunFatalError(f"{what} — the provider account needs credit or billing", cause="billing", error=err)
         if err == "NotFoundError":
-            fix = ("check --model (the name the server serves, as openai/NAME) and --api-base (it usually ends in /v1)"
-                   if self.api_base else "check --model; `lightemma models` lists the registry")
+            fix = (
+                "check --model (the name the server serves, as openai/NAME) and --api-base (it usually ends in /v1)"
+                if self.api_base
+                else "check --model; `lightemma models` lists the registry"
+            )
             return RunFatalError(f"{what} — unknown model or endpoint; {fix}", cause="unknown-model", error=err)
         if err == "UnsupportedParamsError":
-            return RunFatalError(f"{what} — the provider rejects a parameter lightemma sends "
-                                 f"({', '.join(self.effective_params(GenerationParams()))})", cause="invalid-request", error=err)
+            return RunFatalError(
+                f"{what} — the provider rejects a parameter lightemma sends "
+                f"({', '.join(self.effective_params(GenerationParams()))})",
+                cause="invalid-request",
+                error=err,
+            )
         if err == "EmptyResponse" and "finish_reason=length" in message:
             budget = f", of which {self.reasoning_budget} for reasoning" if self.reasoning_budget else ""
-            return RunFatalError(f"{self.model}: the model spent its whole output budget without answering (finish_reason "
-                                 f"length, no answer text){seen}; raise --max-tokens (each stage may now use --max-tokens"
-                                 f"{' + ' + str(self.reasoning_budget) if self.reasoning_budget else ''} output tokens{budget})",
-                                 cause="reasoning-budget", error=err)
+            return RunFatalError(
+                f"{self.model}: the model spent its whole output budget without answering (finish_reason "
+                f"length, no answer text){seen}; raise --max-tokens (each stage may now use --max-tokens"
+                f"{' + ' + str(self.reasoning_budget) if self.reasoning_budget else ''} output tokens{budget})",
+                cause="reasoning-budget",
+                error=err,
+            )
         if err == "EmptyResponse":
-            return RunFatalError(f"{what}{seen} — the model answers with no text; check the model and its server",
-                                 cause="empty-answers", error=err)
+            return RunFatalError(
+                f"{what}{seen} — the model answers with no text; check the model and its server",
+                cause="empty-answers",
+                error=err,
+            )
         if err in ("APIConnectionError", "Timeout"):
-            fix = f"check {where} and the network" + (f", or raise --timeout (now {self.timeout:g} s)" if err == "Timeout" else "")
-            return RunFatalError(f"{what}{seen} after {self.retry.max_retries} retries each — cannot reach the model; {fix}",
-                                 cause="unreachable", error=err)
+            fix = f"check {where} and the network" + (
+                f", or raise --timeout (now {self.timeout:g} s)" if err == "Timeout" else ""
+            )
+            return RunFatalError(
+                f"{what}{seen} after {self.retry.max_retries} retries each — cannot reach the model; {fix}",
+                cause="unreachable",
+                error=err,
+            )
         if err == "RateLimitError":
-            return RunFatalError(f"{what}{seen} after {self.retry.max_retries} retries each — rate limited; lower --concurrency "
-                                 "or set --rpm / --tpm to the account's limits", cause="rate-limit", error=err)
+            return RunFatalError(
+                f"{what}{seen} after {self.retry.max_retries} retries each — rate limited; lower --concurrency "
+                "or set --rpm / --tpm to the account's limits",
+                cause="rate-limit",
+                error=err,
+            )
         if err == "ImageReadError":
-            return RunFatalError(f"{what}{seen} — the frames' images cannot be read; check the dataset's samples/ folder",
-                                 cause="images", error=err)
+            return RunFatalError(
+                f"{what}{seen} — the frames' images cannot be read; check the dataset's samples/ folder",
+                cause="images",
+                error=err,
+            )
         if err == "ResponseEncodingError":
-            return RunFatalError(f"{what}{seen} — every reply's body is in an encoding lightemma does not read, or does not "
-                                 f"decode; check {where}", cause="invalid-response", error=err)
+            return RunFatalError(
+                f"{what}{seen} — every reply's body is in an encoding lightemma does not read, or does not "
+                f"decode; check {where}",
+                cause="invalid-response",
+                error=err,
+            )
         if err == "ResponseTooLargeError":
             from lightemma.backends.openai_http import MAX_BODY_BYTES
 
-            return RunFatalError(f"{what}{seen} — every reply is larger than the {MAX_BODY_BYTES >> 20} MiB lightemma reads "
-                                 f"(a chat completion is a few KiB); check {where} and the model it serves",
-                                 cause="invalid-response", error=err)
+            return RunFatalError(
+                f"{what}{seen} — every reply is larger than the {MAX_BODY_BYTES >> 20} MiB lightemma reads "
+                f"(a chat completion is a few KiB); check {where} and the model it serves",
+                cause="invalid-response",
+                error=err,
+            )
         if err in ("BadRequestError", "UnprocessableEntityError", "ContentPolicyViolationError"):
-            return RunFatalError(f"{what}{seen} — every request is rejected the same way; fix what the message names "
-                                 "(model, --max-tokens, images, the server)", cause="invalid-request", error=err)
-        return RunFatalError(f"{what}{seen} — the provider keeps failing; try again later", cause="provider-error", error=err)
+            return RunFatalError(
+                f"{what}{seen} — every request is rejected the same way; fix what the message names "
+                "(model, --max-tokens, images, the server)",
+                cause="invalid-request",
+                error=err,
+            )
+        return RunFatalError(
+            f"{what}{seen} — the provider keeps failing; try again later", cause="provider-error", error=err
+        )
 
-    async def _send(self, messages: list[dict[str, Any]], params: dict[str, Any], start: float, retries: int,
-                    n: int = 1) -> list[ChatResult]:
+    async def _send(
+        self, messages: list[dict[str, Any]], params: dict[str, Any], start: float, retries: int, n: int = 1
+    ) -> list[ChatResult]:
         """One call over the configured transport: its ``n`` answers (choices; a reply with fewer gives error
         results for the rest); the call's usage and cost on the first, 0 on the others. Raises on a failed call."""
         if self._http is not None:
@@ -850,33 +1039,68 @@ class APIBackend(Backend):
 
             with body_guard():  # what the body hooks refuse (too large, an encoding) is raised as itself
                 response = await litellm.acompletion(
-                    model=self.model, messages=messages, api_base=self._litellm_base, api_key=self._api_key,
-                    timeout=self.timeout, num_retries=0, max_retries=0, **self._litellm_extra, **self._bounded_client(), **params,
+                    model=self.model,
+                    messages=messages,
+                    api_base=self._litellm_base,
+                    api_key=self._api_key,
+                    timeout=self.timeout,
+                    num_retries=0,
+                    max_retries=0,
+                    **self._litellm_extra,
+                    **self._bounded_client(),
+                    **params,
                 )
             usage = _usage(getattr(response, "usage", None), self.provider)
-            answers = [(getattr(getattr(c, "message", None), "content", None), getattr(c, "finish_reason", None))
-                       for c in (getattr(response, "choices", None) or [None])]
+            answers = [
+                (getattr(getattr(c, "message", None), "content", None), getattr(c, "finish_reason", None))
+                for c in (getattr(response, "choices", None) or [None])
+            ]
             cost = self._litellm_cost(response, usage)
         seconds = time.perf_counter() - start
         out = []
         for i in range(n):
             text, finish = answers[i] if i < len(answers) else (None, None)
             finish = str(finish) if finish is not None else None
-            common: dict[str, Any] = dict(input_tokens=usage.input, output_tokens=usage.output, seconds=seconds,
-                                          cost_cents=cost, retries=retries, finish_reason=finish,
-                                          reasoning_tokens=usage.reasoning, cached_input_tokens=usage.cached,
-                                          cache_write_tokens=usage.written)
+            common: dict[str, Any] = dict(
+                input_tokens=usage.input,
+                output_tokens=usage.output,
+                seconds=seconds,
+                cost_cents=cost,
+                retries=retries,
+                finish_reason=finish,
+                reasoning_tokens=usage.reasoning,
+                cached_input_tokens=usage.cached,
+                cache_write_tokens=usage.written,
+            )
             if i > 0:  # the call is counted once, on its first answer: a share of it is not reported
-                common.update(input_tokens=0, output_tokens=0, cost_cents=0.0, reasoning_tokens=0,
-                              cached_input_tokens=0, cache_write_tokens=0)
+                common.update(
+                    input_tokens=0,
+                    output_tokens=0,
+                    cost_cents=0.0,
+                    reasoning_tokens=0,
+                    cached_input_tokens=0,
+                    cache_write_tokens=0,
+                )
             reasoning = usage.reasoning
             if i >= len(answers):
-                out.append(ChatResult(text=None, error="EmptyResponse", error_message=f"the reply holds {len(answers)} "
-                                      f"answers, {n} were asked for (n)", **common))
+                out.append(
+                    ChatResult(
+                        text=None,
+                        error="EmptyResponse",
+                        error_message=f"the reply holds {len(answers)} answers, {n} were asked for (n)",
+                        **common,
+                    )
+                )
             elif not text or not str(text).strip():
                 spent = f", {reasoning} reasoning tokens" if reasoning else ""
-                out.append(ChatResult(text=None, error="EmptyResponse",
-                                      error_message=f"no answer text (finish_reason={finish}{spent})", **common))
+                out.append(
+                    ChatResult(
+                        text=None,
+                        error="EmptyResponse",
+                        error_message=f"no answer text (finish_reason={finish}{spent})",
+                        **common,
+                    )
+                )
             else:
                 out.append(ChatResult(text=str(text), **common))
         return out
@@ -889,8 +1113,11 @@ class APIBackend(Backend):
         if self._client_loop is not loop:
             from lightemma.backends.openai_http import limited_litellm_handler, limited_openai_client
 
-            self._client = (limited_openai_client(self.sent_key or NO_KEY, self._litellm_base or None)
-                            if self.provider in OPENAI_SDK_PROVIDERS else limited_litellm_handler())
+            self._client = (
+                limited_openai_client(self.sent_key or NO_KEY, self._litellm_base or None)
+                if self.provider in OPENAI_SDK_PROVIDERS
+                else limited_litellm_handler()
+            )
             self._client_loop = loop
         return {"client": self._client}
 
@@ -923,9 +1150,15 @@ class APIBackend(Backend):
             self._litellm_prices = False  # litellm cannot price a model its list lacks (ModelNotMappedError)
         if self._litellm_prices:
             try:
-                usd = sum(litellm.cost_per_token(model=self.model, prompt_tokens=usage.input, completion_tokens=usage.output,
-                                                 cache_read_input_tokens=usage.cached or 0,
-                                                 cache_creation_input_tokens=usage.written or 0))
+                usd = sum(
+                    litellm.cost_per_token(
+                        model=self.model,
+                        prompt_tokens=usage.input,
+                        completion_tokens=usage.output,
+                        cache_read_input_tokens=usage.cached or 0,
+                        cache_creation_input_tokens=usage.written or 0,
+                    )
+                )
                 return float(usd) * 100.0
             except Exception:  # noqa: BLE001 - not in litellm's list: the registry's price below, and stop asking
                 self._litellm_prices = False
@@ -984,6 +1217,7 @@ def _usage(usage: Any, provider: str | None = None) -> Usage:
     fills a missing block with zeros), is unknown. Cache counts a provider left out are zero for
     :data:`ZERO_WHEN_ABSENT` providers, unknown for the others (an OpenAI-compatible server may not say).
     """
+
     def get(obj: Any, name: str) -> Any:
         return obj.get(name) if isinstance(obj, Mapping) else getattr(obj, name, None)
 

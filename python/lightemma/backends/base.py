@@ -200,8 +200,10 @@ class Backend(abc.ABC):
         manifest; a :class:`~lightemma.errors.UserError` when it cannot.
 
         Default: it cannot (the UserError names the backend and the fix)."""
-        raise UserError(f"--answer-format structured: the {self.name} backend cannot constrain answers to a JSON "
-                        "schema; use --answer-format text")
+        raise UserError(
+            f"--answer-format structured: the {self.name} backend cannot constrain answers to a JSON "
+            "schema; use --answer-format text"
+        )
 
     def sampling(self) -> str | None:
         """How this backend draws K independent samples of a request (``--samples K``): ``"n"`` (one request asks

@@ -57,7 +57,9 @@ def baseline_actions(kind: str, frame: Any) -> np.ndarray:
     if kind == "oracle":
         return _field(frame, "gt_actions").copy()
     if kind == "ego":
-        raise InputError("baseline:ego predicts from a fit over the frame set (BaselineBackend.prepare), not from one frame")
+        raise InputError(
+            "baseline:ego predicts from a fit over the frame set (BaselineBackend.prepare), not from one frame"
+        )
     raise InputError(f"unknown baseline {kind!r} (choose from {', '.join(KINDS)})")
 
 
@@ -89,7 +91,13 @@ class BaselineBackend(Backend):
 
     @property
     def info(self) -> Mapping[str, Any]:
-        out = {"backend": "baseline", "kind": self.kind, "model": self.name, "gpus": None, "token_counting": "none (no model)"}
+        out = {
+            "backend": "baseline",
+            "kind": self.kind,
+            "model": self.name,
+            "gpus": None,
+            "token_counting": "none (no model)",
+        }
         if self._fit is not None:
             out["fit"] = self._fit.record
         return out
@@ -114,34 +122,54 @@ class BaselineBackend(Backend):
 
         dataset = dataset or {}
         if not dataset.get("dataroot") or not dataset.get("version"):
-            raise UserError("baseline:ego --fit-split needs a dataset (--dataroot, --version) to load the training split from")
+            raise UserError(
+                "baseline:ego --fit-split needs a dataset (--dataroot, --version) to load the training split from"
+            )
 
-        train = load_frames(dataset["dataroot"], dataset["version"], split=self.fit_split, window=dataset.get("window") or "reference",
-                            on_missing_image="keep", on_bad_record=dataset.get("on_bad_record") or "skip")
+        train = load_frames(
+            dataset["dataroot"],
+            dataset["version"],
+            split=self.fit_split,
+            window=dataset.get("window") or "reference",
+            on_missing_image="keep",
+            on_bad_record=dataset.get("on_bad_record") or "skip",
+        )
         self._fit = EgoFit.fit_split(train, frames, split=self.fit_split, folds=folds)
 
     def _answer(self, request: ChatRequest) -> ChatResult:
         if request.stage in STAGE_TEXTS:
-            return ChatResult(text=STAGE_TEXTS[request.stage], input_tokens=0, output_tokens=0, cost_cents=0.0,
-                              finish_reason="stop", reasoning_tokens=0)
+            return ChatResult(
+                text=STAGE_TEXTS[request.stage],
+                input_tokens=0,
+                output_tokens=0,
+                cost_cents=0.0,
+                finish_reason="stop",
+                reasoning_tokens=0,
+            )
         if request.stage != "actions":
             return ChatResult(text=None, error="ValueError", error_message=f"unknown stage {request.stage!r}")
         if request.frame is None:
-            return ChatResult(text=None, error="ValueError", error_message=f"baseline needs the frame of {request.frame_id}")
+            return ChatResult(
+                text=None, error="ValueError", error_message=f"baseline needs the frame of {request.frame_id}"
+            )
         try:
             actions = self._ego(request) if self.kind == "ego" else baseline_actions(self.kind, request.frame)
             text = format_actions(actions) if request.response_schema is None else format_actions_json(actions)
         except ValueError as exc:
             return ChatResult(text=None, error="ValueError", error_message=str(exc))
-        return ChatResult(text=text, input_tokens=0, output_tokens=0, cost_cents=0.0, finish_reason="stop", reasoning_tokens=0)
+        return ChatResult(
+            text=text, input_tokens=0, output_tokens=0, cost_cents=0.0, finish_reason="stop", reasoning_tokens=0
+        )
 
     def _ego(self, request: ChatRequest) -> np.ndarray:
         if self._fit is None:
             raise ValueError("baseline:ego was not fitted (BaselineBackend.prepare) before it was asked")
         actions = self._fit.predictions.get(request.frame_id)
         if actions is None:
-            raise ValueError(f"baseline:ego has no prediction for {request.frame_id} (not in the fitted frame set, "
-                             "or its history is not finite)")
+            raise ValueError(
+                f"baseline:ego has no prediction for {request.frame_id} (not in the fitted frame set, "
+                "or its history is not finite)"
+            )
         return actions
 
     def structured_output(self) -> dict[str, Any]:
@@ -175,8 +203,14 @@ def _subset_record(record: Mapping[str, Any], taken: str) -> dict[str, Any]:
     per_fold = [int(f["fit_frames"]) for f in folds]
     frames = int(record.get("frames_predicted", 0)) + int(record.get("frames_without_prediction", 0))
     scenes = len({s for f in folds for s in f.get("predicted_scenes", [])})
-    fits = f"{min(per_fold)}–{max(per_fold)}" if per_fold and min(per_fold) != max(per_fold) else f"{per_fold[0] if per_fold else 0}"
-    warning = (f"warning: baseline:ego is cross-fitted on the {frames} frame(s) of {taken} only ({scenes} scenes; each fold's "
-               f"fit sees {fits} frames): its ADE is worse than a fit on the full set and every model's gain over the best "
-               "baseline is inflated; fit it with --fit-split train or run it on the full set")
+    fits = (
+        f"{min(per_fold)}–{max(per_fold)}"
+        if per_fold and min(per_fold) != max(per_fold)
+        else f"{per_fold[0] if per_fold else 0}"
+    )
+    warning = (
+        f"warning: baseline:ego is cross-fitted on the {frames} frame(s) of {taken} only ({scenes} scenes; each fold's "
+        f"fit sees {fits} frames): its ADE is worse than a fit on the full set and every model's gain over the best "
+        "baseline is inflated; fit it with --fit-split train or run it on the full set"
+    )
     return {"taken_by": taken, "frames": frames, "scenes": scenes, "fit_frames_per_fold": per_fold, "warning": warning}

@@ -66,9 +66,13 @@ class BatchStats:
     sizes: list[int] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, float | int]:
-        return {"batches": self.batches, "requests": self.requests, "seconds": round(self.seconds, 4),
-                "mean_batch_size": round(self.requests / self.batches, 3) if self.batches else 0.0,
-                "max_batch_size": max(self.sizes, default=0)}
+        return {
+            "batches": self.batches,
+            "requests": self.requests,
+            "seconds": round(self.seconds, 4),
+            "mean_batch_size": round(self.requests / self.batches, 3) if self.batches else 0.0,
+            "max_batch_size": max(self.sizes, default=0),
+        }
 
 
 def _retrieved(future: asyncio.Future[ChatResult]) -> None:
@@ -97,9 +101,16 @@ def error_result(exc: BaseException, seconds: float = 0.0) -> ChatResult:
 class MicroBatcher:
     """Gather concurrently submitted requests into batches of ``batch_size`` run by one worker thread."""
 
-    def __init__(self, run_batch: RunBatch, *, batch_size: int = 8, batch_window: float = DEFAULT_BATCH_WINDOW,
-                 name: str = "lightemma-batcher", describe_fatal: DescribeFatal | None = None,
-                 deadline: float | None = None) -> None:
+    def __init__(
+        self,
+        run_batch: RunBatch,
+        *,
+        batch_size: int = 8,
+        batch_window: float = DEFAULT_BATCH_WINDOW,
+        name: str = "lightemma-batcher",
+        describe_fatal: DescribeFatal | None = None,
+        deadline: float | None = None,
+    ) -> None:
         if batch_size < 1:
             raise InputError(f"batch_size must be at least 1, got {batch_size}")
         if batch_window < 0:
@@ -163,7 +174,10 @@ class MicroBatcher:
         self.fatal = RunFatalError(
             f"the model did not finish a batch within --timeout {self.deadline:g} s (+{self.grace:g} s grace) and its "
             "generation cannot be interrupted; the run stops here (finished frames are saved) — raise --timeout, or lower "
-            "--batch-size / --max-tokens", cause="local-timeout", error="Timeout")
+            "--batch-size / --max-tokens",
+            cause="local-timeout",
+            error="Timeout",
+        )
         with self._cond:
             leftover = list(self._queue)
             self._queue.clear()

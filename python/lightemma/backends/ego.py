@@ -43,8 +43,12 @@ from lightemma.errors import ShapeError, UserError
 
 FOLDS = 5  # scene folds of the cross-fit (and of λ's cross-validation)
 LAMBDAS: tuple[float, ...] = tuple(float(x) for x in np.logspace(-3, 3, 13))
-FEATURES: tuple[str, ...] = (*(f"v{k}" for k in range(1, 7)), *(f"kappa{k}" for k in range(1, 7)),
-                             *(f"a{k}" for k in range(1, 6)), *(f"yaw_rate{k}" for k in range(1, 7)))
+FEATURES: tuple[str, ...] = (
+    *(f"v{k}" for k in range(1, 7)),
+    *(f"kappa{k}" for k in range(1, 7)),
+    *(f"a{k}" for k in range(1, 6)),
+    *(f"yaw_rate{k}" for k in range(1, 7)),
+)
 TARGETS: tuple[str, ...] = tuple(f"{name}{k}" for k in range(1, 7) for name in ("v", "kappa"))  # gt_actions row-major
 MIN_FIT_SCENES = 20  # a fit on fewer scenes has seen few kinds of driving: the run warns (see the module docstring)
 MIN_FIT_FRAMES = 10 * len(FEATURES)  # 230: ten frames per feature, or the run warns
@@ -59,10 +63,12 @@ def small_fit_warning(fits: Sequence[tuple[int, int]], where: str) -> str | None
     scenes, frames = min(s for s, _ in fits), min(f for _, f in fits)
     if scenes >= MIN_FIT_SCENES and frames >= MIN_FIT_FRAMES:
         return None
-    return (f"warning: baseline:ego is fitted on few frames: {where} sees as few as {scenes} scene(s) and "
-            f"{frames} frame(s) (fewer than {MIN_FIT_SCENES} scenes or {MIN_FIT_FRAMES} frames); it extrapolates to "
-            "kinds of driving it has not seen, so its ADE overstates the baseline's error and every model's gain over "
-            "it; fit it on more scenes (--fit-split train, or run it on a larger set)")
+    return (
+        f"warning: baseline:ego is fitted on few frames: {where} sees as few as {scenes} scene(s) and "
+        f"{frames} frame(s) (fewer than {MIN_FIT_SCENES} scenes or {MIN_FIT_FRAMES} frames); it extrapolates to "
+        "kinds of driving it has not seen, so its ADE overstates the baseline's error and every model's gain over "
+        "it; fit it on more scenes (--fit-split train, or run it on a larger set)"
+    )
 
 
 def ego_features(history: np.ndarray) -> np.ndarray:
@@ -91,8 +97,10 @@ def _arrays(frames: Frames) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[st
     """(features (N, 23), targets (N, 12), scene names (N,), frame ids) of ``frames``."""
     history = np.stack([_field(f, "history_actions") for f in frames]) if len(frames) else np.zeros((0, 6, 2))
     future = np.stack([_field(f, "gt_actions") for f in frames]) if len(frames) else np.zeros((0, 6, 2))
-    scenes = np.asarray([str(getattr(f, "scene_name", None) if not isinstance(f, dict) else f.get("scene_name")) for f in frames],
-                        dtype=object)
+    scenes = np.asarray(
+        [str(getattr(f, "scene_name", None) if not isinstance(f, dict) else f.get("scene_name")) for f in frames],
+        dtype=object,
+    )
     ids = [str(getattr(f, "frame_id", None) if not isinstance(f, dict) else f.get("frame_id")) for f in frames]
     return ego_features(history), future.reshape(len(frames), 12), scenes, ids
 
@@ -108,12 +116,19 @@ class _Fit:
 
         n_scenes = len(np.unique(scenes))
         if n_scenes < 2:
-            raise UserError(f"baseline:ego needs at least 2 scenes to choose λ by scene cross-validation; its fit has {n_scenes}")
+            raise UserError(
+                f"baseline:ego needs at least 2 scenes to choose λ by scene cross-validation; its fit has {n_scenes}"
+            )
         self.y_mean = Y.mean(axis=0)
         self.y_scale = Y.std(axis=0)
         self.y_scale[self.y_scale == 0] = 1.0
-        search = GridSearchCV(Pipeline([("scale", StandardScaler()), ("ridge", Ridge())]), {"ridge__alpha": list(lambdas)},
-                              cv=GroupKFold(n_splits=min(folds, n_scenes)), scoring="neg_mean_squared_error", refit=True)
+        search = GridSearchCV(
+            Pipeline([("scale", StandardScaler()), ("ridge", Ridge())]),
+            {"ridge__alpha": list(lambdas)},
+            cv=GroupKFold(n_splits=min(folds, n_scenes)),
+            scoring="neg_mean_squared_error",
+            refit=True,
+        )
         search.fit(X, (Y - self.y_mean) / self.y_scale, groups=scenes)
         self.model = search.best_estimator_
         self.lam = float(search.best_params_["ridge__alpha"])
@@ -135,9 +150,15 @@ class _Fit:
 
     def record(self) -> dict[str, Any]:
         coef, intercept = self.linear_map()
-        return {"lambda": self.lam, "cv_folds": self.inner_folds, "cv_mse_standardised": self.cv_mse,
-                "fit_frames": self.frames, "fit_scenes": len(self.scenes),
-                "coefficients": coef.tolist(), "intercepts": intercept.tolist()}
+        return {
+            "lambda": self.lam,
+            "cv_folds": self.inner_folds,
+            "cv_mse_standardised": self.cv_mse,
+            "fit_frames": self.frames,
+            "fit_scenes": len(self.scenes),
+            "coefficients": coef.tolist(),
+            "intercepts": intercept.tolist(),
+        }
 
 
 def _usable(X: np.ndarray, Y: np.ndarray | None = None) -> np.ndarray:
@@ -168,10 +189,16 @@ class EgoFit:
     def _make(cls, ids: list[str], X: np.ndarray, pred: np.ndarray, record: dict[str, Any]) -> EgoFit:
         ok = _usable(X)
         predictions = {fid: pred[i].reshape(6, 2) for i, fid in enumerate(ids) if ok[i]}
-        record = {"method": record.pop("method"), "features": list(FEATURES), "targets": list(TARGETS),
-                  "model": "StandardScaler + Ridge (scikit-learn), one λ for all targets, intercept",
-                  "lambdas": list(LAMBDAS), **record, "frames_predicted": len(predictions),
-                  "frames_without_prediction": len(ids) - len(predictions)}
+        record = {
+            "method": record.pop("method"),
+            "features": list(FEATURES),
+            "targets": list(TARGETS),
+            "model": "StandardScaler + Ridge (scikit-learn), one λ for all targets, intercept",
+            "lambdas": list(LAMBDAS),
+            **record,
+            "frames_predicted": len(predictions),
+            "frames_without_prediction": len(ids) - len(predictions),
+        }
         record["predictions_sha256"] = cls.fingerprint(predictions)
         return cls(predictions, record)
 
@@ -184,9 +211,11 @@ class EgoFit:
         train_ok = _usable(X, Y)
         n_scenes = len(np.unique(scenes))
         if n_scenes < 3:
-            raise UserError(f"baseline:ego cross-fits by scene and needs at least 3 scenes (each fold's λ is chosen by a scene "
-                            f"cross-validation inside the other folds); these frames hold {n_scenes}; run more scenes or "
-                            "fit on a training split (--fit-split train)")
+            raise UserError(
+                f"baseline:ego cross-fits by scene and needs at least 3 scenes (each fold's λ is chosen by a scene "
+                f"cross-validation inside the other folds); these frames hold {n_scenes}; run more scenes or "
+                "fit on a training split (--fit-split train)"
+            )
         k = min(folds, n_scenes)
         pred = np.full((len(ids), 12), np.nan)
         fold_records = []
@@ -198,31 +227,49 @@ class EgoFit:
                 pred[usable] = fit.predict(X[usable])
             held_out = sorted(str(s) for s in np.unique(scenes[test]))
             assert not set(held_out) & set(fit.scenes)  # a fold is never predicted by a fit that saw its scenes
-            fold_records.append({"fold": number, "predicted_scenes": held_out, "predicted_frames": int(len(test)), **fit.record()})
-        record: dict[str, Any] = {"method": f"cross-fit by scene ({k} folds, GroupKFold), λ by nested scene CV",
-                                  "folds": fold_records}
+            fold_records.append(
+                {"fold": number, "predicted_scenes": held_out, "predicted_frames": int(len(test)), **fit.record()}
+            )
+        record: dict[str, Any] = {
+            "method": f"cross-fit by scene ({k} folds, GroupKFold), λ by nested scene CV",
+            "folds": fold_records,
+        }
         warning = small_fit_warning([(f["fit_scenes"], f["fit_frames"]) for f in fold_records], "each fold's fit")
         return cls._make(ids, X, pred, {**record, "warning": warning} if warning else record)
 
     @classmethod
-    def fit_split(cls, train_frames: Frames, frames: Sequence[Any], *, split: str, folds: int = FOLDS,
-                  lambdas: Sequence[float] = LAMBDAS) -> EgoFit:
+    def fit_split(
+        cls,
+        train_frames: Frames,
+        frames: Sequence[Any],
+        *,
+        split: str,
+        folds: int = FOLDS,
+        lambdas: Sequence[float] = LAMBDAS,
+    ) -> EgoFit:
         """One fit on ``train_frames`` (the ``split`` split), predicting ``frames``; UserError when they share a scene."""
         Xt, Yt, scenes_t, _ = _arrays(train_frames)
         X, _, scenes, ids = _arrays(frames)
         shared = sorted(set(scenes_t.tolist()) & set(scenes.tolist()))
         if shared:
-            raise UserError(f"baseline:ego --fit-split {split}: {len(shared)} evaluated scene(s) are in the training split too "
-                            f"({', '.join(shared[:3])}{', …' if len(shared) > 3 else ''}); evaluate another split (e.g. --split val)")
+            raise UserError(
+                f"baseline:ego --fit-split {split}: {len(shared)} evaluated scene(s) are in the training split too "
+                f"({', '.join(shared[:3])}{', …' if len(shared) > 3 else ''}); evaluate another split (e.g. --split val)"
+            )
         ok = _usable(Xt, Yt)
         if not ok.any():
-            raise UserError(f"baseline:ego --fit-split {split}: the split has no frame with a finite history and future")
+            raise UserError(
+                f"baseline:ego --fit-split {split}: the split has no frame with a finite history and future"
+            )
         fit = _Fit(Xt[ok], Yt[ok], scenes_t[ok], folds, lambdas)
         pred = np.full((len(ids), 12), np.nan)
         usable = _usable(X)
         if usable.any():
             pred[usable] = fit.predict(X[usable])
-        record: dict[str, Any] = {"method": f"one fit on the {split!r} split, λ by {fit.inner_folds}-fold scene CV",
-                                  "fit_split": split, "fit": fit.record()}
+        record: dict[str, Any] = {
+            "method": f"one fit on the {split!r} split, λ by {fit.inner_folds}-fold scene CV",
+            "fit_split": split,
+            "fit": fit.record(),
+        }
         warning = small_fit_warning([(len(fit.scenes), fit.frames)], f"the fit on {split!r}")
         return cls._make(ids, X, pred, {**record, "warning": warning} if warning else record)

@@ -47,18 +47,33 @@ class BackendKind:
 
 #: every backend kind lightemma builds: kind → its class (imported when first built)
 KINDS: dict[str, BackendKind] = {
-    "api": BackendKind("lightemma.backends.api", "APIBackend", "", "a model behind a provider's API (litellm or "
-                       "the direct OpenAI-compatible transport)"),
-    "batch": BackendKind("lightemma.backends.batch", "BatchBackend", "", "a model behind a provider's batch API "
-                         "(OpenAI, Anthropic, Gemini)"),
-    "hf": BackendKind("lightemma.backends.hf", "HFBackend", "hf", "a local checkpoint run by transformers in "
-                      "this process"),
-    "vllm": BackendKind("lightemma.backends.vllm", "VLLMBackend", "vllm", "a local checkpoint run by vLLM in "
-                        "this process"),
-    "ray": BackendKind("lightemma.backends.ray", "RayBackend", "ray", "replicas of a local checkpoint (hf or "
-                       "vllm) as Ray actors"),
-    "baseline": BackendKind("lightemma.backends.baseline", "BaselineBackend", "", "a baseline that answers from "
-                            "the frame itself (constant, cv, oracle, ego)"),
+    "api": BackendKind(
+        "lightemma.backends.api",
+        "APIBackend",
+        "",
+        "a model behind a provider's API (litellm or the direct OpenAI-compatible transport)",
+    ),
+    "batch": BackendKind(
+        "lightemma.backends.batch",
+        "BatchBackend",
+        "",
+        "a model behind a provider's batch API (OpenAI, Anthropic, Gemini)",
+    ),
+    "hf": BackendKind(
+        "lightemma.backends.hf", "HFBackend", "hf", "a local checkpoint run by transformers in this process"
+    ),
+    "vllm": BackendKind(
+        "lightemma.backends.vllm", "VLLMBackend", "vllm", "a local checkpoint run by vLLM in this process"
+    ),
+    "ray": BackendKind(
+        "lightemma.backends.ray", "RayBackend", "ray", "replicas of a local checkpoint (hf or vllm) as Ray actors"
+    ),
+    "baseline": BackendKind(
+        "lightemma.backends.baseline",
+        "BaselineBackend",
+        "",
+        "a baseline that answers from the frame itself (constant, cv, oracle, ego)",
+    ),
 }
 
 
@@ -104,9 +119,17 @@ def local_backend(kind: str, checkpoint: str, **options: Any) -> Backend:
     return _build(kind, checkpoint, **options)
 
 
-def create_backend(model: str, *, backend: str | None = None, api_base: str | None = None, replicas: int = 1,
-                   ray_address: str | None = None, gpus_per_replica: float | None = None, batch: bool = False,
-                   **options: Any) -> Backend:
+def create_backend(
+    model: str,
+    *,
+    backend: str | None = None,
+    api_base: str | None = None,
+    replicas: int = 1,
+    ray_address: str | None = None,
+    gpus_per_replica: float | None = None,
+    batch: bool = False,
+    **options: Any,
+) -> Backend:
     """A ready backend for ``model``, of any kind in :data:`KINDS`. ``options`` go to the backend's constructor.
 
     For the API backend: ``timeout``, ``retry`` (RetryPolicy), ``rpm``, ``tpm``,
@@ -123,19 +146,27 @@ def create_backend(model: str, *, backend: str | None = None, api_base: str | No
     """
     kind = backend_kind(model, backend, api_base)
     if options.get("price") is not None and kind != "api":
-        raise UserError(f"--price is the price of a provider's tokens; {model} runs on the {kind} backend and "
-                        "is billed none: drop --price")
+        raise UserError(
+            f"--price is the price of a provider's tokens; {model} runs on the {kind} backend and "
+            "is billed none: drop --price"
+        )
     if batch and kind != "api":
         raise UserError(f"--batch is for models behind a provider's API; {model} runs on the {kind} backend")
     distributed = replicas != 1 or ray_address is not None or gpus_per_replica is not None
     if distributed and kind not in ("hf", "vllm"):
-        raise UserError(f"--replicas, --ray-address and --gpus-per-replica are for local models (--backend hf or "
-                        f"vllm); {model} runs on the {kind} backend")
+        raise UserError(
+            f"--replicas, --ray-address and --gpus-per-replica are for local models (--backend hf or "
+            f"vllm); {model} runs on the {kind} backend"
+        )
     if api_base and kind != "api":
-        fix = ("drop --api-base: a baseline computes its answers itself" if kind == "baseline" else
-               f"drop --api-base to run the model here, or drop --backend {kind} to reach the server")
-        raise UserError(f"--api-base is for models behind an API; {model} runs on the {kind} backend, which would "
-                        f"ignore it ({fix})")
+        fix = (
+            "drop --api-base: a baseline computes its answers itself"
+            if kind == "baseline"
+            else f"drop --api-base to run the model here, or drop --backend {kind} to reach the server"
+        )
+        raise UserError(
+            f"--api-base is for models behind an API; {model} runs on the {kind} backend, which would ignore it ({fix})"
+        )
     if kind == "baseline":
         return _build("baseline", model.split(":", 1)[1] if ":" in model else model, **options)
     if kind in ("hf", "vllm"):
@@ -144,11 +175,20 @@ def create_backend(model: str, *, backend: str | None = None, api_base: str | No
         if replicas < 1:
             raise UserError(f"--replicas must be at least 1, got {replicas}")
         if replicas > 1 or ray_address is not None:
-            return _build("ray", kind, checkpoint, replicas=replicas, address=ray_address,
-                          gpus_per_replica=gpus_per_replica, **options)
+            return _build(
+                "ray",
+                kind,
+                checkpoint,
+                replicas=replicas,
+                address=ray_address,
+                gpus_per_replica=gpus_per_replica,
+                **options,
+            )
         if gpus_per_replica is not None:
-            raise UserError("--gpus-per-replica goes with --replicas N (N > 1) or --ray-address; in one process, "
-                            "--device chooses the GPUs")
+            raise UserError(
+                "--gpus-per-replica goes with --replicas N (N > 1) or --ray-address; in one process, "
+                "--device chooses the GPUs"
+            )
         return local_backend(kind, checkpoint, **options)
     return _build("batch" if batch else "api", model, api_base=api_base, **options)
 
@@ -160,13 +200,30 @@ def _build(kind: str, *args: Any, **options: Any) -> Backend:
     return backend
 
 
-def run_backend(model: str, *, backend: str | None, api_base: str | None, output: str | os.PathLike[str],
-                timeout: float | None, rpm: float | None, tpm: float | None, max_retries: int, backoff_base: float,
-                backoff_cap: float, transport: str = "litellm", api_key_env: str | None = None,
-                price: Sequence[float] | None = None, cache: str | None = None,
-                backend_options: Mapping[str, Any] | None = None, replicas: int = 1, ray_address: str | None = None,
-                gpus_per_replica: float | None = None, batch: bool = False, batch_poll: float | None = None,
-                log: Callable[[str], None] | None = None) -> Backend:
+def run_backend(
+    model: str,
+    *,
+    backend: str | None,
+    api_base: str | None,
+    output: str | os.PathLike[str],
+    timeout: float | None,
+    rpm: float | None,
+    tpm: float | None,
+    max_retries: int,
+    backoff_base: float,
+    backoff_cap: float,
+    transport: str = "litellm",
+    api_key_env: str | None = None,
+    price: Sequence[float] | None = None,
+    cache: str | None = None,
+    backend_options: Mapping[str, Any] | None = None,
+    replicas: int = 1,
+    ray_address: str | None = None,
+    gpus_per_replica: float | None = None,
+    batch: bool = False,
+    batch_poll: float | None = None,
+    log: Callable[[str], None] | None = None,
+) -> Backend:
     """The backend a run's settings name (the runner's one call), its notices shown once.
 
     ``api_base`` is the endpoint as the user gave it (credentials and all; the run's settings record it
@@ -184,11 +241,22 @@ def run_backend(model: str, *, backend: str | None, api_base: str | None, output
     if batch and kind == "api":
         ignored = [flag for flag, value in (("--cache", cache), ("--rpm", rpm), ("--tpm", tpm)) if value]
         if ignored:
-            raise UserError(f"{', '.join(ignored)} do(es) not apply to --batch (the provider paces a batch itself, "
-                            "and the run's batch journal keeps every result); drop them or drop --batch")
+            raise UserError(
+                f"{', '.join(ignored)} do(es) not apply to --batch (the provider paces a batch itself, "
+                "and the run's batch journal keeps every result); drop them or drop --batch"
+            )
         # the endpoint as the user gave it, the key variable named: the same key rule as a normal run
-        built = create_backend(model, backend=kind, api_base=api_base, batch=True, **placement, api_key_env=api_key_env,
-                               timeout=timeout, poll_seconds=batch_poll or 30.0, price=given_price)
+        built = create_backend(
+            model,
+            backend=kind,
+            api_base=api_base,
+            batch=True,
+            **placement,
+            api_key_env=api_key_env,
+            timeout=timeout,
+            poll_seconds=batch_poll or 30.0,
+            price=given_price,
+        )
         return _with_notices(built, log)
     options = dict(backend_options or {})
     if kind == "api":
@@ -199,7 +267,10 @@ def run_backend(model: str, *, backend: str | None, api_base: str | None, output
         from lightemma.backends.retry import RetryPolicy
 
         options.update(
-            timeout=timeout, rpm=rpm, tpm=tpm, transport=transport,
+            timeout=timeout,
+            rpm=rpm,
+            tpm=tpm,
+            transport=transport,
             retry=RetryPolicy(max_retries=max_retries, base=backoff_base, cap=backoff_cap),
             cache=ResponseCache(cache if os.path.isabs(cache) else Path(output) / cache, log=log) if cache else None,
         )

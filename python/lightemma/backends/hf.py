@@ -49,10 +49,20 @@ class HFBackend(Backend):
 
     name = "hf"
 
-    def __init__(self, model: str, *, batch_size: int = 8, batch_window: float = DEFAULT_BATCH_WINDOW,
-                 max_pixels: int | None = None, dtype: str = "auto", device: str | None = None,
-                 device_map: str | dict[str, Any] | None = None, attn_implementation: str | None = None,
-                 trust_remote_code: bool = False, timeout: float | None = None) -> None:
+    def __init__(
+        self,
+        model: str,
+        *,
+        batch_size: int = 8,
+        batch_window: float = DEFAULT_BATCH_WINDOW,
+        max_pixels: int | None = None,
+        dtype: str = "auto",
+        device: str | None = None,
+        device_map: str | dict[str, Any] | None = None,
+        attn_implementation: str | None = None,
+        trust_remote_code: bool = False,
+        timeout: float | None = None,
+    ) -> None:
         if dtype not in DTYPES:
             raise UserError(f"--dtype must be one of {', '.join(DTYPES)}, got {dtype!r}")
         check_options(batch_size, max_pixels)
@@ -66,11 +76,17 @@ class HFBackend(Backend):
         self._torch = torch
         self.device = device or ("cuda" if torch.cuda.is_available() else "cpu")
         on_gpu = self.device.startswith("cuda")
-        self.dtype = {"auto": torch.bfloat16 if on_gpu else torch.float32, "bfloat16": torch.bfloat16,
-                      "float16": torch.float16, "float32": torch.float32}[dtype]
+        self.dtype = {
+            "auto": torch.bfloat16 if on_gpu else torch.float32,
+            "bfloat16": torch.bfloat16,
+            "float16": torch.float16,
+            "float32": torch.float32,
+        }[dtype]
         if device_map is None and self.device == "cuda":  # all visible GPUs; "cuda:N" pins one
             device_map = "auto"
-        self._model, self._processor = self._load(transformers, model, device_map, attn_implementation, trust_remote_code)
+        self._model, self._processor = self._load(
+            transformers, model, device_map, attn_implementation, trust_remote_code
+        )
         if device_map is None:
             self._model.to(self.device)
         self.device_map = device_map
@@ -84,26 +100,38 @@ class HFBackend(Backend):
         self.oom_splits = 0  # batches halved after running out of GPU memory
         self._grammars: dict[Any, Any] = {}  # ResponseSchema -> xgrammar CompiledGrammar
         self._transformers_version = transformers.__version__
-        self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
-                                     name=f"lightemma-hf-{self.model_type}", describe_fatal=self._describe_fatal,
-                                     deadline=self.timeout)
+        self._batcher = MicroBatcher(
+            self._run_batch,
+            batch_size=batch_size,
+            batch_window=batch_window,
+            name=f"lightemma-hf-{self.model_type}",
+            describe_fatal=self._describe_fatal,
+            deadline=self.timeout,
+        )
 
     def _describe_fatal(self, exc: BaseException) -> str:
         """The one line for a model that fails every batch the same way."""
         if isinstance(exc, Timeout):
-            return (f"{self.model_id}: every batch runs past --timeout {self.timeout:g} s ({short_message(exc)}); raise "
-                    "--timeout, or lower --batch-size / --max-tokens")
+            return (
+                f"{self.model_id}: every batch runs past --timeout {self.timeout:g} s ({short_message(exc)}); raise "
+                "--timeout, or lower --batch-size / --max-tokens"
+            )
         if isinstance(exc, self._oom_error):
-            return (f"{self.model_id}: out of GPU memory even for one request; lower --max-pixels, "
-                    "or spread the model over more GPUs (--device cuda)")
-        return (f"transformers {self._transformers_version} cannot generate with {self.model_type}: "
-                f"{type(exc).__name__}: {short_message(exc)} — install the tested versions "
-                "(pip install -c constraints.txt '.[hf]' in the lightemma checkout) or another transformers release")
+            return (
+                f"{self.model_id}: out of GPU memory even for one request; lower --max-pixels, "
+                "or spread the model over more GPUs (--device cuda)"
+            )
+        return (
+            f"transformers {self._transformers_version} cannot generate with {self.model_type}: "
+            f"{type(exc).__name__}: {short_message(exc)} — install the tested versions "
+            "(pip install -c constraints.txt '.[hf]' in the lightemma checkout) or another transformers release"
+        )
 
     # -- loading ----------------------------------------------------------------------------------
 
-    def _load(self, transformers: Any, model: str, device_map: Any, attn_implementation: str | None,
-              trust_remote_code: bool) -> tuple[Any, Any]:
+    def _load(
+        self, transformers: Any, model: str, device_map: Any, attn_implementation: str | None, trust_remote_code: bool
+    ) -> tuple[Any, Any]:
         kwargs: dict[str, Any] = {"dtype": self.dtype, "trust_remote_code": trust_remote_code}
         if device_map is not None:
             kwargs["device_map"] = device_map
@@ -113,14 +141,17 @@ class HFBackend(Backend):
             processor = transformers.AutoProcessor.from_pretrained(model, trust_remote_code=trust_remote_code)
             loaded = transformers.AutoModelForImageTextToText.from_pretrained(model, **kwargs)
         except (OSError, ValueError, KeyError) as exc:
-            raise UserError(f"cannot load {model!r} as an image-text-to-text model with transformers "
-                            f"{transformers.__version__}: {short_message(exc, 400)}") from None
+            raise UserError(
+                f"cannot load {model!r} as an image-text-to-text model with transformers "
+                f"{transformers.__version__}: {short_message(exc, 400)}"
+            ) from None
         loaded.eval()
         # Decode plainly: the checkpoint's sampling settings (top-k/top-p, repetition penalty, …) are not
         # used, so that hf and vllm decode the same way; only its special token ids are kept.
         self.checkpoint_generation_config = loaded.generation_config.to_diff_dict()
         loaded.generation_config = transformers.GenerationConfig(
-            **{k: getattr(loaded.generation_config, k) for k in ("bos_token_id", "eos_token_id", "pad_token_id")})
+            **{k: getattr(loaded.generation_config, k) for k in ("bos_token_id", "eos_token_id", "pad_token_id")}
+        )
         tokenizer = processor.tokenizer
         tokenizer.padding_side = "left"  # generation continues every row from its last real token
         if tokenizer.pad_token_id is None:
@@ -183,8 +214,12 @@ class HFBackend(Backend):
             "batch_size": self._batcher.batch_size,
             "batch_window_s": self._batcher.batch_window,
             "timeout_s": self.timeout,
-            "deadline": ("per batch: generation stops at --timeout (the batch fails as Timeout); a batch still running "
-                         "5-10 s later stops the run, resumable" if self.timeout else None),
+            "deadline": (
+                "per batch: generation stops at --timeout (the batch fails as Timeout); a batch still running "
+                "5-10 s later stops the run, resumable"
+                if self.timeout
+                else None
+            ),
             "batching": "micro-batches of one stage, built around the oldest pending request; left padding",
             "max_pixels": self.max_pixels,
             "image_cap": self._image_cap,
@@ -209,8 +244,11 @@ class HFBackend(Backend):
         require("xgrammar", "hf")
         from importlib.metadata import version
 
-        return {"mechanism": f"xgrammar {version('xgrammar')} grammar of the JSON schema (no free whitespace), applied by "
-                             "its transformers logits processor", "pair_count_enforced": True}
+        return {
+            "mechanism": f"xgrammar {version('xgrammar')} grammar of the JSON schema (no free whitespace), applied by "
+            "its transformers logits processor",
+            "pair_count_enforced": True,
+        }
 
     def _logits_processors(self, requests: Sequence[ChatRequest]) -> list[Any]:
         """The xgrammar logits processor for a batch with a response schema (one per ``generate``), else none."""
@@ -282,8 +320,11 @@ class HFBackend(Backend):
 
     def _decoding(self, params: Any) -> dict[str, Any]:
         """``generate`` arguments for ``params``: greedy at temperature 0, else pure temperature sampling."""
-        common = {"max_new_tokens": params.max_tokens, "eos_token_id": sorted(self._eos_ids),
-                  "pad_token_id": self._processor.tokenizer.pad_token_id}
+        common = {
+            "max_new_tokens": params.max_tokens,
+            "eos_token_id": sorted(self._eos_ids),
+            "pad_token_id": self._processor.tokenizer.pad_token_id,
+        }
         if params.temperature > 0:
             return {**common, "do_sample": True, "temperature": params.temperature, "top_k": 0, "top_p": 1.0}
         return {**common, "do_sample": False}
@@ -292,8 +333,10 @@ class HFBackend(Backend):
         """Chat template + processor for a batch: padded tensors on the model's first device."""
         has_image = bool(requests[0].image_path)
         image_part = {"type": "image"} if has_image else None
-        texts = [self._processor.apply_chat_template(conversation(r, image_part), add_generation_prompt=True, tokenize=False)
-                 for r in requests]
+        texts = [
+            self._processor.apply_chat_template(conversation(r, image_part), add_generation_prompt=True, tokenize=False)
+            for r in requests
+        ]
         cap = self.max_pixels if self._image_cap and self._image_cap.startswith("Pillow") else None
         images = [[load_image(str(r.image_path), cap)] for r in requests] if has_image else None
         inputs = self._processor(text=texts, images=images, padding=True, return_tensors="pt")
@@ -306,6 +349,13 @@ class HFBackend(Backend):
         """
         end = next((i for i, t in enumerate(row) if t in self._eos_ids), None)
         n_out = len(row) if end is None else end + 1
-        text = self._processor.tokenizer.decode(row[:n_out if end is None else end], skip_special_tokens=True)
-        return ChatResult(text=text, input_tokens=input_tokens, output_tokens=n_out, seconds=seconds, cost_cents=None,
-                          finish_reason="length" if end is None else "stop", cached_input_tokens=0)
+        text = self._processor.tokenizer.decode(row[: n_out if end is None else end], skip_special_tokens=True)
+        return ChatResult(
+            text=text,
+            input_tokens=input_tokens,
+            output_tokens=n_out,
+            seconds=seconds,
+            cost_cents=None,
+            finish_reason="length" if end is None else "stop",
+            cached_input_tokens=0,
+        )

@@ -31,13 +31,17 @@ def require(module: str, extra: str) -> Any:
     try:
         return importlib.import_module(module)
     except ImportError as exc:
-        raise UserError(f"the {extra} backend needs {module.split('.')[0]} ({exc}); install it with: "
-                        f"pip install 'lightemma[{extra}]'") from None
+        raise UserError(
+            f"the {extra} backend needs {module.split('.')[0]} ({exc}); install it with: "
+            f"pip install 'lightemma[{extra}]'"
+        ) from None
 
 
 #: how both local backends decode (recorded in ``info``)
-DECODING = ("greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
-            "sampling settings (top-k/top-p, repetition penalty) are not used")
+DECODING = (
+    "greedy at temperature 0, else pure temperature sampling; the checkpoint's generation_config "
+    "sampling settings (top-k/top-p, repetition penalty) are not used"
+)
 
 
 def check_options(batch_size: int, max_pixels: int | None) -> None:
@@ -111,9 +115,12 @@ def is_mllama(model: str, model_type: str | None = None) -> bool:
 def token_counting(model_type: str) -> str:
     """How input/output tokens are counted for a model of ``model_type`` (recorded in the manifest)."""
     if model_type == MLLAMA_MODEL_TYPE:
-        image = ("one <|image|> token per image (the image itself enters through cross-attention "
-                 "and has no prompt tokens)")
+        image = (
+            "one <|image|> token per image (the image itself enters through cross-attention and has no prompt tokens)"
+        )
     else:
         image = "the image placeholder tokens the processor expands the image into (one per merged vision patch)"
-    return (f"input: non-padding prompt token ids after the model's processor and chat template, including {image}; "
-            "output: generated token ids up to and including the first end-of-turn token")
+    return (
+        f"input: non-padding prompt token ids after the model's processor and chat template, including {image}; "
+        "output: generated token ids up to and including the first end-of-turn token"
+    )

@@ -40,25 +40,59 @@ class HTTPCallError(Exception):
 
 
 class BadRequestError(HTTPCallError): ...
+
+
 class AuthenticationError(HTTPCallError): ...
+
+
 class PermissionDeniedError(HTTPCallError): ...
+
+
 class NotFoundError(HTTPCallError): ...
+
+
 class UnprocessableEntityError(HTTPCallError): ...
+
+
 class RateLimitError(HTTPCallError): ...
+
+
 class InternalServerError(HTTPCallError): ...
+
+
 class BadGatewayError(HTTPCallError): ...
+
+
 class ServiceUnavailableError(HTTPCallError): ...
+
+
 class Timeout(HTTPCallError): ...
+
+
 class APIConnectionError(HTTPCallError): ...
+
+
 class APIError(HTTPCallError): ...
+
+
 class ResponseTooLargeError(HTTPCallError): ...  # not retried: the same request would get the same body
+
+
 class ResponseEncodingError(HTTPCallError): ...  # a body in an encoding not asked for, or not decodable: not retried
 
 
 _BY_STATUS: dict[int, type[HTTPCallError]] = {
-    400: BadRequestError, 401: AuthenticationError, 403: PermissionDeniedError, 404: NotFoundError, 408: Timeout,
-    422: UnprocessableEntityError, 429: RateLimitError, 500: InternalServerError, 502: BadGatewayError,
-    503: ServiceUnavailableError, 504: Timeout,
+    400: BadRequestError,
+    401: AuthenticationError,
+    403: PermissionDeniedError,
+    404: NotFoundError,
+    408: Timeout,
+    422: UnprocessableEntityError,
+    429: RateLimitError,
+    500: InternalServerError,
+    502: BadGatewayError,
+    503: ServiceUnavailableError,
+    504: Timeout,
 }
 
 
@@ -109,7 +143,7 @@ class OpenAIHTTPClient:
                     raise _error_for(response.status, response.headers, body)
         except HTTPCallError:
             raise
-        except asyncio.TimeoutError:
+        except TimeoutError:
             raise Timeout(f"no answer within {self._timeout.total} s") from None
         except aiohttp.ClientError as exc:
             # aiohttp inflates as it parses: a coding it cannot decode, or a corrupt, cut-off or overlong compressed
@@ -117,8 +151,9 @@ class OpenAIHTTPClient:
             named = re.search(r"content-encoding: ?([\w-]+)(?: \(([\w-]+)\))?", str(exc), re.IGNORECASE)
             coding = (named.group(2) or named.group(1)).lower() if named else encoding
             if coding and coding not in _INFLATE:
-                raise ResponseEncodingError(f"the response body is encoded as {coding!r}, which lightemma did not ask "
-                                            "for and does not decode") from None
+                raise ResponseEncodingError(
+                    f"the response body is encoded as {coding!r}, which lightemma did not ask for and does not decode"
+                ) from None
             if coding and (named or isinstance(exc, aiohttp.ClientPayloadError)):
                 raise ResponseEncodingError(f"the response body is not valid {coding} ({type(exc).__name__})") from None
             raise APIConnectionError(f"connection error: {type(exc).__name__}: {exc}") from None
@@ -132,9 +167,13 @@ class OpenAIHTTPClient:
 
     async def _read(self, response: aiohttp.ClientResponse) -> bytes:
         """The body, read in chunks and never past :attr:`max_body` bytes (a larger one fails the call)."""
+
         def too_large(size: str) -> ResponseTooLargeError:
-            return ResponseTooLargeError(f"HTTP {response.status}: the response body is {size}, more than the "
-                                         f"{self.max_body} bytes lightemma reads", status=response.status)
+            return ResponseTooLargeError(
+                f"HTTP {response.status}: the response body is {size}, more than the "
+                f"{self.max_body} bytes lightemma reads",
+                status=response.status,
+            )
 
         if response.content_length is not None and response.content_length > self.max_body:
             raise too_large(f"{response.content_length} bytes")
@@ -215,18 +254,30 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
                         chunk = self.decoder.feed(chunk)
                     size += len(chunk)
                     if size > max_body or wire > max_body:
-                        raise _failed(self.slot, ResponseTooLargeError(
-                            f"the response body is over {max_body:,} bytes{' decoded' if size > max_body and self.decoder else ''}, "
-                            "more than lightemma reads"))
+                        raise _failed(
+                            self.slot,
+                            ResponseTooLargeError(
+                                f"the response body is over {max_body:,} bytes{' decoded' if size > max_body and self.decoder else ''}, "
+                                "more than lightemma reads"
+                            ),
+                        )
                     yield chunk
                 if self.decoder is not None:
                     yield self.decoder.flush()
             except _TooLarge:
-                raise _failed(self.slot, ResponseTooLargeError(f"the response body is over {self.limit:,} bytes decoded, more "
-                                                               "than lightemma reads")) from None
+                raise _failed(
+                    self.slot,
+                    ResponseTooLargeError(
+                        f"the response body is over {self.limit:,} bytes decoded, more than lightemma reads"
+                    ),
+                ) from None
             except zlib.error as exc:
-                raise _failed(self.slot, ResponseEncodingError(f"the response body is not valid {self.decoder.encoding if self.decoder else ''} "
-                                                               f"({exc})")) from None
+                raise _failed(
+                    self.slot,
+                    ResponseEncodingError(
+                        f"the response body is not valid {self.decoder.encoding if self.decoder else ''} ({exc})"
+                    ),
+                ) from None
 
         async def aclose(self) -> None:
             await self.inner.aclose()
@@ -239,13 +290,22 @@ def body_limit_hooks(max_body: int = MAX_BODY_BYTES) -> dict[str, list[Any]]:
         limit = slot.get("max_body", max_body) if slot is not None else max_body  # a call's own limit (body_guard)
         length = response.headers.get("content-length")
         if length and length.isdigit() and int(length) > limit:
-            raise _failed(slot, ResponseTooLargeError(f"the response body is {int(length):,} bytes, more than the {limit:,} bytes "
-                                                      "lightemma reads"))
+            raise _failed(
+                slot,
+                ResponseTooLargeError(
+                    f"the response body is {int(length):,} bytes, more than the {limit:,} bytes lightemma reads"
+                ),
+            )
         codings = [c.strip().lower() for c in response.headers.get("content-encoding", "").split(",")]
         codings = [c for c in codings if c and c != "identity"]
         if len(codings) > 1 or (codings and codings[0] not in _INFLATE):
-            raise _failed(slot, ResponseEncodingError(f"the response body is encoded as {', '.join(codings)!r}, which "
-                                                      "lightemma did not ask for and does not decode"))
+            raise _failed(
+                slot,
+                ResponseEncodingError(
+                    f"the response body is encoded as {', '.join(codings)!r}, which "
+                    "lightemma did not ask for and does not decode"
+                ),
+            )
         if codings:
             del response.headers["content-encoding"]  # decoded below, within the limit: httpx must not decode it again
         response.stream = _Stream(response.stream, slot, codings[0] if codings else None, limit)

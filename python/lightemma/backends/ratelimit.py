@@ -13,7 +13,9 @@ import time
 
 from lightemma.errors import InputError
 
-MAX_PAUSE = 60.0  # seconds: the longest a server-asked pause (Retry-After) holds the callers (RetryPolicy.cap's default)
+MAX_PAUSE = (
+    60.0  # seconds: the longest a server-asked pause (Retry-After) holds the callers (RetryPolicy.cap's default)
+)
 
 
 class _Bucket:

@@ -66,8 +66,10 @@ MAX_SENDS = 3
 LOCAL_OBJECT_STORE_BYTES = 256 * 1024**2
 #: seconds between checks of whether a dead replica has been restarted
 PROBE_INTERVAL = 0.25
-ROUTING = ("a frame's stages and re-asks go to one replica (its home), chosen at the frame's first request: "
-           "the replica with the fewest requests in flight, then the fewest frames so far")
+ROUTING = (
+    "a frame's stages and re-asks go to one replica (its home), chosen at the frame's first request: "
+    "the replica with the fewest requests in flight, then the fewest frames so far"
+)
 
 
 def import_ray() -> Any:
@@ -75,7 +77,9 @@ def import_ray() -> Any:
     try:
         import ray
     except ImportError as exc:
-        raise UserError(f"--replicas and --ray-address need Ray ({exc}); install it with: pip install 'lightemma[ray]'") from None
+        raise UserError(
+            f"--replicas and --ray-address need Ray ({exc}); install it with: pip install 'lightemma[ray]'"
+        ) from None
     return ray
 
 
@@ -104,8 +108,11 @@ class ReplicaServer:
         try:
             self._backend = local_backend(kind, model, **dict(options))
         except BaseException as exc:  # noqa: BLE001 - reported by ready(), never lost in a traceback
-            self._failure = {"error": type(exc).__name__, "message": str(exc) or type(exc).__name__,
-                             "user_error": isinstance(exc, UserError)}
+            self._failure = {
+                "error": type(exc).__name__,
+                "message": str(exc) or type(exc).__name__,
+                "user_error": isinstance(exc, UserError),
+            }
 
     def _built(self) -> Backend:
         """The replica's backend; asked only of a replica that is ready (the driver never uses one that is not)."""
@@ -120,9 +127,13 @@ class ReplicaServer:
 
         context = ray.get_runtime_context()
         group = ray.util.get_current_placement_group()
-        return {"node_id": context.get_node_id(), "ip": ray.util.get_node_ip_address(), "pid": os.getpid(),
-                "gpu_ids": [str(g) for g in context.get_accelerator_ids().get("GPU", [])],
-                "placement_group": group.id.hex() if group is not None else None}
+        return {
+            "node_id": context.get_node_id(),
+            "ip": ray.util.get_node_ip_address(),
+            "pid": os.getpid(),
+            "gpu_ids": [str(g) for g in context.get_accelerator_ids().get("GPU", [])],
+            "placement_group": group.id.hex() if group is not None else None,
+        }
 
     async def ready(self) -> dict[str, Any]:
         """The backend's ``info`` and where it runs, or why it could not be built."""
@@ -177,7 +188,9 @@ class Router:
     ``handle.ready.remote()`` returning awaitables); ray is imported for its exception classes only.
     """
 
-    def __init__(self, replicas: list[Replica], *, max_sends: int = MAX_SENDS, probe_interval: float = PROBE_INTERVAL) -> None:
+    def __init__(
+        self, replicas: list[Replica], *, max_sends: int = MAX_SENDS, probe_interval: float = PROBE_INTERVAL
+    ) -> None:
         from ray import exceptions
 
         self._errors = exceptions
@@ -204,15 +217,23 @@ class Router:
                 self._lost(replica, exc)
                 if sends >= self.max_sends:
                     self.given_up += 1
-                    return ChatResult(text=None, retries=sends - 1, error="ReplicaDied",
-                                      error_message=f"the replicas answering this request died {sends} times "
-                                                    f"(last: {_actor_error(exc)})")
+                    return ChatResult(
+                        text=None,
+                        retries=sends - 1,
+                        error="ReplicaDied",
+                        error_message=f"the replicas answering this request died {sends} times "
+                        f"(last: {_actor_error(exc)})",
+                    )
                 self.redispatched += 1
                 continue
             except self._errors.RayTaskError as exc:  # a bug in the replica, not a dead replica: this request fails
                 cause = exc.cause if isinstance(getattr(exc, "cause", None), BaseException) else exc
-                return ChatResult(text=None, retries=sends - 1, error=type(cause).__name__,
-                                  error_message=short_message(cause) or type(cause).__name__)
+                return ChatResult(
+                    text=None,
+                    retries=sends - 1,
+                    error=type(cause).__name__,
+                    error_message=short_message(cause) or type(cause).__name__,
+                )
             finally:
                 replica.inflight -= 1
             if isinstance(out, _Fatal):
@@ -237,9 +258,12 @@ class Router:
                 return best
             if all(r.state == "dead" for r in self.replicas):
                 last = next((r.last_error for r in reversed(self.replicas) if r.last_error), "unknown")
-                raise RunFatalError(f"all {len(self.replicas)} model replicas died and Ray has no restarts left for them "
-                                    f"(last: {last}); see the Ray logs of the failed actors (docs/local.md#replicas-over-ray)",
-                                    cause="local-model", error="ActorDiedError")
+                raise RunFatalError(
+                    f"all {len(self.replicas)} model replicas died and Ray has no restarts left for them "
+                    f"(last: {last}); see the Ray logs of the failed actors (docs/local.md#replicas-over-ray)",
+                    cause="local-model",
+                    error="ActorDiedError",
+                )
             await asyncio.sleep(self.probe_interval)  # every live replica is restarting: wait for one
 
     def _lost(self, replica: Replica, exc: BaseException) -> None:
@@ -277,8 +301,14 @@ class Router:
             return
 
     def _event(self, replica: Replica, what: str, error: str | None) -> None:
-        self.events.append({"replica": replica.index, "event": what, "after_s": round(time.monotonic() - self._start, 3),
-                            **({"error": error} if error else {})})
+        self.events.append(
+            {
+                "replica": replica.index,
+                "event": what,
+                "after_s": round(time.monotonic() - self._start, 3),
+                **({"error": error} if error else {}),
+            }
+        )
 
     async def stop(self) -> None:
         for task in list(self._watchers):
@@ -320,16 +350,28 @@ class RayBackend(Backend):
     or a replica's model are not as needed.
     """
 
-    def __init__(self, kind: str, model: str, *, replicas: int, address: str | None = None,
-                 gpus_per_replica: float | None = None, max_restarts: int = DEFAULT_MAX_RESTARTS,
-                 runtime_env: Mapping[str, Any] | None = None, max_sends: int = MAX_SENDS, **options: Any) -> None:
+    def __init__(
+        self,
+        kind: str,
+        model: str,
+        *,
+        replicas: int,
+        address: str | None = None,
+        gpus_per_replica: float | None = None,
+        max_restarts: int = DEFAULT_MAX_RESTARTS,
+        runtime_env: Mapping[str, Any] | None = None,
+        max_sends: int = MAX_SENDS,
+        **options: Any,
+    ) -> None:
         if kind not in ("hf", "vllm"):
             raise UserError(f"--replicas runs local models (--backend hf or vllm), not the {kind} backend")
         if replicas < 1:
             raise UserError(f"--replicas must be at least 1, got {replicas}")
         if gpus_per_replica is not None and kind != "hf":
-            raise UserError("--gpus-per-replica is for --backend hf; a vLLM replica uses "
-                            "--tensor-parallel-size × --pipeline-parallel-size GPUs")
+            raise UserError(
+                "--gpus-per-replica is for --backend hf; a vLLM replica uses "
+                "--tensor-parallel-size × --pipeline-parallel-size GPUs"
+            )
         if gpus_per_replica is not None and not gpus_per_replica >= 0:
             raise UserError(f"--gpus-per-replica must be at least 0, got {gpus_per_replica:g}")
         if max_restarts < 0:
@@ -350,14 +392,20 @@ class RayBackend(Backend):
             if kind == "vllm":
                 gpus = float(shards)
                 if gpus_total < 1:
-                    raise UserError(f"vLLM replicas need GPUs, and the Ray cluster ({self._cluster['address']}) has none; "
-                                    "use --backend hf for CPU replicas")
+                    raise UserError(
+                        f"vLLM replicas need GPUs, and the Ray cluster ({self._cluster['address']}) has none; "
+                        "use --backend hf for CPU replicas"
+                    )
             else:
                 gpus = float(gpus_per_replica) if gpus_per_replica is not None else (1.0 if gpus_total >= 1 else 0.0)
             self._check_resources(replicas, gpus, gpus_total, cpus=shards if sharded else 1)
             self.gpus_per_replica = gpus
-            actor_options: dict[str, Any] = {"max_restarts": max_restarts, "max_task_retries": 0, "num_cpus": 1,
-                                             "num_gpus": 0 if sharded else gpus}
+            actor_options: dict[str, Any] = {
+                "max_restarts": max_restarts,
+                "max_task_retries": 0,
+                "num_cpus": 1,
+                "num_gpus": 0 if sharded else gpus,
+            }
             if runtime_env:
                 actor_options["runtime_env"] = dict(runtime_env)
             replica_options = dict(options)
@@ -370,13 +418,17 @@ class RayBackend(Backend):
             for _ in range(replicas):
                 options_i = dict(actor_options)
                 if sharded:
-                    options_i["scheduling_strategy"] = self._placement(ray, shards, pipeline=int(options.get("pipeline_parallel_size", 1) or 1) > 1)
+                    options_i["scheduling_strategy"] = self._placement(
+                        ray, shards, pipeline=int(options.get("pipeline_parallel_size", 1) or 1) > 1
+                    )
                 handles.append(actor_class.options(**options_i).remote(kind, model, replica_options))
             try:
                 statuses = ray.get([h.ready.remote() for h in handles])
             except ray.exceptions.RayActorError as exc:  # a replica's process died while loading the model
-                raise UserError(f"a replica of {model} died while loading the model: {_actor_error(exc)}; "
-                                "see the Ray logs of the failed actor") from None
+                raise UserError(
+                    f"a replica of {model} died while loading the model: {_actor_error(exc)}; "
+                    "see the Ray logs of the failed actor"
+                ) from None
         except BaseException:
             self._teardown(handles)
             raise
@@ -385,11 +437,16 @@ class RayBackend(Backend):
             self._teardown(handles)
             i, status = failed[0]
             message = status["message"]
-            raise UserError(message if status["user_error"] else
-                            f"replica {i} of {model} could not start on Ray node {status['where'].get('ip')}: "
-                            f"{status['error']}: {short_message(message, 400)}")
-        self.replicas = [Replica(i, h, self._placement_groups[i] if sharded else None, where=dict(s["where"]))
-                         for i, (h, s) in enumerate(zip(handles, statuses))]
+            raise UserError(
+                message
+                if status["user_error"]
+                else f"replica {i} of {model} could not start on Ray node {status['where'].get('ip')}: "
+                f"{status['error']}: {short_message(message, 400)}"
+            )
+        self.replicas = [
+            Replica(i, h, self._placement_groups[i] if sharded else None, where=dict(s["where"]))
+            for i, (h, s) in enumerate(zip(handles, statuses))
+        ]
         self.router = Router(self.replicas, max_sends=max_sends)
         self.max_restarts = max_restarts
         first = dict(statuses[0]["info"])
@@ -403,9 +460,12 @@ class RayBackend(Backend):
             "ray": {
                 "version": ray.__version__,
                 **self._cluster,
-                "placement": (f"one placement group per replica, {shards} × {{GPU: 1, CPU: 1}}: the replica's actor (1 CPU) "
-                              "and vLLM's Ray workers (1 GPU each)" if sharded else
-                              f"one actor per replica, num_gpus={gpus:g}, num_cpus=1"),
+                "placement": (
+                    f"one placement group per replica, {shards} × {{GPU: 1, CPU: 1}}: the replica's actor (1 CPU) "
+                    "and vLLM's Ray workers (1 GPU each)"
+                    if sharded
+                    else f"one actor per replica, num_gpus={gpus:g}, num_cpus=1"
+                ),
                 "max_restarts": max_restarts,
                 "max_task_retries": 0,
                 "max_sends": max_sends,
@@ -426,7 +486,9 @@ class RayBackend(Backend):
             try:
                 ray.init(address=address, **quiet)
             except (ConnectionError, RuntimeError, ValueError) as exc:
-                raise UserError(f"cannot join the Ray cluster at --ray-address {address}: {short_message(exc, 300)}") from None
+                raise UserError(
+                    f"cannot join the Ray cluster at --ray-address {address}: {short_message(exc, 300)}"
+                ) from None
             return True, {"cluster": "joined", "address": _gcs_address(ray), "given_address": address}
         ray.init(address="local", num_cpus=cpus, object_store_memory=LOCAL_OBJECT_STORE_BYTES, **quiet)
         return True, {"cluster": "started locally", "address": _gcs_address(ray), "num_cpus": cpus}
@@ -437,8 +499,10 @@ class RayBackend(Backend):
         for what, each, total in (("GPU", gpus, gpus_total), ("CPU", cpus, cpus_total)):
             need = replicas * each
             if need > total + 1e-9:
-                raise UserError(f"--replicas {replicas} × {each:g} {what}(s) per replica needs {need:g} {what}s; the Ray "
-                                f"cluster ({self._cluster['address']}) has {total:g}")
+                raise UserError(
+                    f"--replicas {replicas} × {each:g} {what}(s) per replica needs {need:g} {what}s; the Ray "
+                    f"cluster ({self._cluster['address']}) has {total:g}"
+                )
 
     def _placement(self, ray: Any, shards: int, *, pipeline: bool) -> Any:
         """A placement group for one sharded vLLM replica, as a scheduling strategy for its actor."""

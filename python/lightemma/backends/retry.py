@@ -24,21 +24,36 @@ from typing import overload
 from lightemma.errors import InputError
 
 # Retried: rate limits, server errors, timeouts, dropped or truncated connections.
-RETRYABLE = frozenset({
-    "RateLimitError", "InternalServerError", "ServiceUnavailableError", "BadGatewayError", "Timeout",
-    "APITimeoutError", "APIConnectionError", "APIError",
-})
+RETRYABLE = frozenset(
+    {
+        "RateLimitError",
+        "InternalServerError",
+        "ServiceUnavailableError",
+        "BadGatewayError",
+        "Timeout",
+        "APITimeoutError",
+        "APIConnectionError",
+        "APIError",
+    }
+)
 # Not retried here: an empty answer (e.g. every output token spent on reasoning) is the model's,
 # and repeating the same request mostly repeats it; the chain's re-ask handles it as a failed attempt.
 # Fatal for the whole run: retrying any frame cannot help (bad key, unknown model, bad parameters).
-FATAL = frozenset({"AuthenticationError", "PermissionDeniedError", "NotFoundError", "UnsupportedParamsError", "PaymentRequiredError"})
+FATAL = frozenset(
+    {"AuthenticationError", "PermissionDeniedError", "NotFoundError", "UnsupportedParamsError", "PaymentRequiredError"}
+)
 
 _SECRETISH = re.compile(r"(sk-[A-Za-z0-9_\-]{6,}|AIza[0-9A-Za-z_\-]{10,}|(?i:bearer)\s+\S+|(?i:api[_-]?key)[=:]\s*\S+)")
 
 
 # HTTP statuses whose meaning does not depend on the wording: litellm files some 401s under
 # BadRequestError when the provider words them unusually ("You didn't provide an API key").
-_BY_STATUS = {401: "AuthenticationError", 402: "PaymentRequiredError", 403: "PermissionDeniedError", 404: "NotFoundError"}
+_BY_STATUS = {
+    401: "AuthenticationError",
+    402: "PaymentRequiredError",
+    403: "PermissionDeniedError",
+    404: "NotFoundError",
+}
 
 
 class CallDeadline(Exception):
@@ -92,7 +107,7 @@ def redact_url(url: str | None) -> str | None:
     elif not netloc and "@" in url.split("?", 1)[0].split("#", 1)[0]:
         # no authority parsed (no scheme, "http:/…", "http//…"): whatever precedes an "@" may be credentials
         head = re.split(r"[?#]", url, maxsplit=1)[0]
-        return _SECRETISH.sub("***", "***@" + head.rsplit("@", 1)[1] + url[len(head):])
+        return _SECRETISH.sub("***", "***@" + head.rsplit("@", 1)[1] + url[len(head) :])
     query = parts.query
     if query:
         pairs = parse_qsl(query, keep_blank_values=True)
@@ -144,8 +159,11 @@ def retry_after_seconds(exc: BaseException) -> float | None:
     Seconds (``"3"``, ``"0.5"``) or an HTTP date (seconds from now). ``inf`` stays ``inf`` (a wait no
     run can make: the caller refuses it); a value that is neither, or NaN, is None (no server wait).
     """
-    candidates = (getattr(exc, "litellm_response_headers", None), getattr(getattr(exc, "response", None), "headers", None),
-                  getattr(exc, "headers", None))
+    candidates = (
+        getattr(exc, "litellm_response_headers", None),
+        getattr(getattr(exc, "response", None), "headers", None),
+        getattr(exc, "headers", None),
+    )
     for headers in candidates:
         if not headers:
             continue
@@ -174,8 +192,8 @@ def _parse_retry_after(value: str) -> float | None:
         import datetime as _dt
 
         if when.tzinfo is None:
-            when = when.replace(tzinfo=_dt.timezone.utc)
-        seconds = (when - _dt.datetime.now(_dt.timezone.utc)).total_seconds()
+            when = when.replace(tzinfo=_dt.UTC)
+        seconds = (when - _dt.datetime.now(_dt.UTC)).total_seconds()
     if seconds != seconds:  # NaN
         return None
     return max(0.0, seconds)
@@ -205,7 +223,7 @@ class RetryPolicy:
 
     def delay(self, retries_done: int, retry_after: float | None = None, rng: random.Random | None = None) -> float:
         """Seconds to wait before retry number ``retries_done + 1``."""
-        ceiling = min(self.cap, self.base * (2 ** retries_done))
+        ceiling = min(self.cap, self.base * (2**retries_done))
         wait = (rng or random).uniform(0.0, ceiling)
         if retry_after is not None:
             wait = max(wait, min(retry_after, self.cap))  # the limiter pause holds the rest, up to max_wait
@@ -251,7 +269,9 @@ class FailureStreak:
         self.succeeded = False
         self._groups: dict[str, dict[tuple[str, str], dict[str, str | None]]] = {}
 
-    def observe(self, stage: str, frame_id: str, signature: tuple[str, str] | None, scene: str | None = None) -> int | None:
+    def observe(
+        self, stage: str, frame_id: str, signature: tuple[str, str] | None, scene: str | None = None
+    ) -> int | None:
         """Record one call's outcome (``signature`` None = success); the streak's frame count when it is fatal.
 
         ``scene``: the frame's scene, where known (see the class docstring).

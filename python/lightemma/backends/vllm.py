@@ -30,7 +30,15 @@ from typing import Any
 
 from lightemma.backends.base import Backend, ChatRequest, ChatResult
 from lightemma.backends.batching import MicroBatcher
-from lightemma.backends.local import DECODING, check_options, conversation, is_mllama, load_image, require, token_counting
+from lightemma.backends.local import (
+    DECODING,
+    check_options,
+    conversation,
+    is_mllama,
+    load_image,
+    require,
+    token_counting,
+)
 from lightemma.backends.retry import short_message
 from lightemma.errors import UserError
 
@@ -57,12 +65,24 @@ class VLLMBackend(Backend):
 
     name = "vllm"
 
-    def __init__(self, model: str, *, batch_size: int = DEFAULT_BATCH_SIZE, batch_window: float = DEFAULT_BATCH_WINDOW,
-                 tensor_parallel_size: int = 1, pipeline_parallel_size: int = 1, gpu_memory_utilization: float = 0.9,
-                 max_pixels: int | None = None,
-                 dtype: str = "auto", max_model_len: int | None = None, seed: int = 0,
-                 enable_prefix_caching: bool = True, trust_remote_code: bool = False,
-                 engine_options: Mapping[str, Any] | None = None, vllm: Any = None) -> None:
+    def __init__(
+        self,
+        model: str,
+        *,
+        batch_size: int = DEFAULT_BATCH_SIZE,
+        batch_window: float = DEFAULT_BATCH_WINDOW,
+        tensor_parallel_size: int = 1,
+        pipeline_parallel_size: int = 1,
+        gpu_memory_utilization: float = 0.9,
+        max_pixels: int | None = None,
+        dtype: str = "auto",
+        max_model_len: int | None = None,
+        seed: int = 0,
+        enable_prefix_caching: bool = True,
+        trust_remote_code: bool = False,
+        engine_options: Mapping[str, Any] | None = None,
+        vllm: Any = None,
+    ) -> None:
         if is_mllama(model):
             raise UserError(MLLAMA_REFUSAL.format(model=model))
         if tensor_parallel_size < 1:
@@ -99,13 +119,20 @@ class VLLMBackend(Backend):
         if is_mllama(model, self.model_type):
             raise UserError(MLLAMA_REFUSAL.format(model=model))
         self.prefix_cached_tokens = 0
-        self._batcher = MicroBatcher(self._run_batch, batch_size=batch_size, batch_window=batch_window,
-                                     name="lightemma-vllm", describe_fatal=self._describe_fatal)
+        self._batcher = MicroBatcher(
+            self._run_batch,
+            batch_size=batch_size,
+            batch_window=batch_window,
+            name="lightemma-vllm",
+            describe_fatal=self._describe_fatal,
+        )
 
     def _describe_fatal(self, exc: BaseException) -> str:
         """The one line for an engine that fails every batch the same way."""
-        return (f"vLLM {getattr(self._vllm, '__version__', '?')} cannot generate with {self.model_type}: "
-                f"{type(exc).__name__}: {short_message(exc)}")
+        return (
+            f"vLLM {getattr(self._vllm, '__version__', '?')} cannot generate with {self.model_type}: "
+            f"{type(exc).__name__}: {short_message(exc)}"
+        )
 
     def _engine_model_type(self) -> str:
         """The checkpoint's ``model_type`` as the engine loaded it ("unknown" where it cannot be read)."""
@@ -123,7 +150,9 @@ class VLLMBackend(Backend):
 
     @property
     def info(self) -> Mapping[str, Any]:
-        engine = {k: v for k, v in self.engine_kwargs.items() if isinstance(v, (str, int, float, bool, dict, type(None)))}
+        engine = {
+            k: v for k, v in self.engine_kwargs.items() if isinstance(v, (str, int, float, bool, dict, type(None)))
+        }
         return {
             "backend": "vllm",
             "model": self.model_id,
@@ -137,7 +166,7 @@ class VLLMBackend(Backend):
             "batch_size": self._batcher.batch_size,
             "batch_window_s": self._batcher.batch_window,
             "batching": "one LLM.chat per micro-batch of one stage (vLLM continuous batching inside); image first, "
-                        "prefix caching " + ("on" if self.enable_prefix_caching else "off"),
+            "prefix caching " + ("on" if self.enable_prefix_caching else "off"),
             "max_pixels": self.max_pixels,
             "image_cap": "Pillow downscale before vLLM's processor" if self.max_pixels else None,
             "decoding": DECODING,
@@ -166,11 +195,15 @@ class VLLMBackend(Backend):
         """How stage 3 is constrained to the actions JSON schema (recorded in the manifest), or a UserError."""
         params = getattr(getattr(self._vllm, "sampling_params", None), "StructuredOutputsParams", None)
         if params is None:
-            raise UserError(f"--answer-format structured: vLLM {getattr(self._vllm, '__version__', '?')} has no "
-                            "StructuredOutputsParams (vLLM 0.12 or later has); use --answer-format text")
-        return {"mechanism": "vLLM structured outputs: SamplingParams(structured_outputs=StructuredOutputsParams("
-                             "json=schema, disable_any_whitespace=True)); vLLM picks the grammar engine (xgrammar by default)",
-                "pair_count_enforced": True}
+            raise UserError(
+                f"--answer-format structured: vLLM {getattr(self._vllm, '__version__', '?')} has no "
+                "StructuredOutputsParams (vLLM 0.12 or later has); use --answer-format text"
+            )
+        return {
+            "mechanism": "vLLM structured outputs: SamplingParams(structured_outputs=StructuredOutputsParams("
+            "json=schema, disable_any_whitespace=True)); vLLM picks the grammar engine (xgrammar by default)",
+            "pair_count_enforced": True,
+        }
 
     def conversation(self, request: ChatRequest) -> list[dict[str, Any]]:
         """The conversation for ``request``: earlier turns (if any), the PIL image first in the first user turn."""
@@ -185,8 +218,11 @@ class VLLMBackend(Backend):
         extra: dict[str, Any] = {}
         if request.response_schema is not None:
             extra["structured_outputs"] = self._vllm.sampling_params.StructuredOutputsParams(
-                json=request.response_schema.as_dict(), disable_any_whitespace=True)
-        return self._vllm.SamplingParams(temperature=max(0.0, params.temperature), max_tokens=params.max_tokens, **extra)
+                json=request.response_schema.as_dict(), disable_any_whitespace=True
+            )
+        return self._vllm.SamplingParams(
+            temperature=max(0.0, params.temperature), max_tokens=params.max_tokens, **extra
+        )
 
     def _run_batch(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
         """One ``LLM.chat`` over the batch's conversations (same stage, params and schema); results in order."""
@@ -205,7 +241,12 @@ class VLLMBackend(Backend):
         completion = output.outputs[0]
         finish = getattr(completion, "finish_reason", None)
         cached = getattr(output, "num_cached_tokens", None)
-        return ChatResult(text=completion.text, input_tokens=len(output.prompt_token_ids or []),
-                          output_tokens=len(completion.token_ids), seconds=seconds, cost_cents=None,
-                          finish_reason=str(finish) if finish is not None else None,
-                          cached_input_tokens=int(cached) if isinstance(cached, int) and cached >= 0 else None)
+        return ChatResult(
+            text=completion.text,
+            input_tokens=len(output.prompt_token_ids or []),
+            output_tokens=len(completion.token_ids),
+            seconds=seconds,
+            cost_cents=None,
+            finish_reason=str(finish) if finish is not None else None,
+            cached_input_tokens=int(cached) if isinstance(cached, int) and cached >= 0 else None,
+        )

@@ -70,8 +70,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     # litellm's clients leave coroutines of calls a stop cancelled unawaited; Python warns of each as it collects them,
     # three lines under the stop's one line. They are litellm's (its class names), said of calls already cancelled.
-    warnings.filterwarnings("ignore", category=RuntimeWarning,
-                            message=r"coroutine '(OpenAI|Anthropic|Gemini|Vertex|BaseLLM|LiteLLM|AsyncHTTPHandler)\w*\.\w+' was never awaited")
+    warnings.filterwarnings(
+        "ignore",
+        category=RuntimeWarning,
+        message=r"coroutine '(OpenAI|Anthropic|Gemini|Vertex|BaseLLM|LiteLLM|AsyncHTTPHandler)\w*\.\w+' was never awaited",
+    )
     parser = build_parser()
     args = parser.parse_args(argv)
     if getattr(args, "func", None) is None:

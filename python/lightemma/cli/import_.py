@@ -18,13 +18,28 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "Euler integration). Importing the same folder again writes nothing. See docs/import.md."
         ),
     )
-    parser.add_argument("sources", nargs="+", metavar="SRC", type=Path,
-                        help="a model folder (holding output/*.json) or a folder holding several")
-    parser.add_argument("--output", type=Path, default=Path("runs"), metavar="DIR", help="where the runs go (default: runs)")
-    parser.add_argument("--dataset-kind", default="nuscenes", choices=["nuscenes", "synthetic"],
-                        help="what the reference scripts ran on (default: nuscenes; recorded, shown by evaluate --with-paper)")
-    parser.add_argument("--jobs", type=int, metavar="N",
-                        help="model folders imported at once, each in its own process (default: one per folder, at most 4 and the CPUs)")
+    parser.add_argument(
+        "sources",
+        nargs="+",
+        metavar="SRC",
+        type=Path,
+        help="a model folder (holding output/*.json) or a folder holding several",
+    )
+    parser.add_argument(
+        "--output", type=Path, default=Path("runs"), metavar="DIR", help="where the runs go (default: runs)"
+    )
+    parser.add_argument(
+        "--dataset-kind",
+        default="nuscenes",
+        choices=["nuscenes", "synthetic"],
+        help="what the reference scripts ran on (default: nuscenes; recorded, shown by evaluate --with-paper)",
+    )
+    parser.add_argument(
+        "--jobs",
+        type=int,
+        metavar="N",
+        help="model folders imported at once, each in its own process (default: one per folder, at most 4 and the CPUs)",
+    )
     parser.add_argument("--quiet", action="store_true", help="no progress bar")
     parser.set_defaults(func=run)
     return parser
@@ -36,18 +51,30 @@ def run(args: argparse.Namespace) -> int:
     from lightemma.runs.reference import find_model_folders
 
     def warn(line: str) -> None:
-        print(f"lightemma import: warning: {printable(line)}", file=sys.stderr, flush=True)  # one line, whatever the names
+        print(
+            f"lightemma import: warning: {printable(line)}", file=sys.stderr, flush=True
+        )  # one line, whatever the names
 
     jobs = args.jobs if args.jobs is not None else default_jobs(sum(len(find_model_folders(s)) for s in args.sources))
     try:
-        results = import_reference(args.sources, args.output, dataset_kind=args.dataset_kind, warn=warn,
-                                   progress=not args.quiet and sys.stderr.isatty(), jobs=jobs)
+        results = import_reference(
+            args.sources,
+            args.output,
+            dataset_kind=args.dataset_kind,
+            warn=warn,
+            progress=not args.quiet and sys.stderr.isatty(),
+            jobs=jobs,
+        )
     except KeyboardInterrupt as exc:  # SIGINT, SIGTERM or SIGHUP: the workers are stopped, no partial folder is left
         if not hasattr(exc, "runs_total") or not hasattr(exc, "runs_done"):  # the importer sets both together
             raise
         name, signum = getattr(exc, "name", "SIGINT"), getattr(exc, "signum", signal.SIGINT)
-        print(f"lightemma import: interrupted by {name}; {exc.runs_done} of {exc.runs_total} model folder(s) imported, "
-              "run the same command again to import the rest", file=sys.stderr, flush=True)
+        print(
+            f"lightemma import: interrupted by {name}; {exc.runs_done} of {exc.runs_total} model folder(s) imported, "
+            "run the same command again to import the rest",
+            file=sys.stderr,
+            flush=True,
+        )
         return 128 + int(signum)
     for result in results:
         print(printable(result.describe()))

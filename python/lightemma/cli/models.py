@@ -30,21 +30,23 @@ def rows() -> list[dict[str, Any]]:
     out = []
     for entry, info in zip(list_models(), MODELS):
         price, batch = entry["price"], batch_price(info)
-        out.append({
-            "key": entry["key"],
-            "display_name": entry["display_name"],
-            "provider_id": entry["model_id"],
-            "backend": entry["backend"],
-            "input_usd_per_mtok": price["input_usd_per_mtok"],
-            "output_usd_per_mtok": price["output_usd_per_mtok"],
-            "price_source": price["source"],
-            "batch_input_usd_per_mtok": batch["input_usd_per_mtok"],
-            "batch_output_usd_per_mtok": batch["output_usd_per_mtok"],
-            "batch_price_source": batch["source"] if batch["input_usd_per_mtok"] is not None else None,
-            "reasoning": entry["reasoning"],
-            "reasoning_budget": entry["reasoning_budget"],
-            "in_paper": entry["in_paper"],
-        })
+        out.append(
+            {
+                "key": entry["key"],
+                "display_name": entry["display_name"],
+                "provider_id": entry["model_id"],
+                "backend": entry["backend"],
+                "input_usd_per_mtok": price["input_usd_per_mtok"],
+                "output_usd_per_mtok": price["output_usd_per_mtok"],
+                "price_source": price["source"],
+                "batch_input_usd_per_mtok": batch["input_usd_per_mtok"],
+                "batch_output_usd_per_mtok": batch["output_usd_per_mtok"],
+                "batch_price_source": batch["source"] if batch["input_usd_per_mtok"] is not None else None,
+                "reasoning": entry["reasoning"],
+                "reasoning_budget": entry["reasoning_budget"],
+                "in_paper": entry["in_paper"],
+            }
+        )
     return out
 
 
@@ -54,18 +56,24 @@ def _money(value: float | None) -> str:
 
 def markdown(table: list[dict[str, Any]]) -> str:
     """The registry as a Markdown table."""
-    lines = ["| --model | name | provider id | backend | $ / MTok in | $ / MTok out | price source | --batch $ in / out | reasoning |",
-             "|---|---|---|---|---:|---:|---|---:|---|"]
+    lines = [
+        "| --model | name | provider id | backend | $ / MTok in | $ / MTok out | price source | --batch $ in / out | reasoning |",
+        "|---|---|---|---|---:|---:|---|---:|---|",
+    ]
     for r in table:
         reasoning = f"yes (+{r['reasoning_budget']} output tokens)" if r["reasoning"] else "no"
         if not r["reasoning"] and r["provider_id"].startswith("anthropic/"):
             reasoning = "no (extended thinking not requested)"
-        lines.append(f"| `{r['key']}` | {r['display_name']} | `{r['provider_id']}` | {r['backend']} | "
-                     f"{_money(r['input_usd_per_mtok'])} | {_money(r['output_usd_per_mtok'])} | {r['price_source']} | "
-                     f"{_money(r['batch_input_usd_per_mtok'])} / {_money(r['batch_output_usd_per_mtok'])} | {reasoning} |")
+        lines.append(
+            f"| `{r['key']}` | {r['display_name']} | `{r['provider_id']}` | {r['backend']} | "
+            f"{_money(r['input_usd_per_mtok'])} | {_money(r['output_usd_per_mtok'])} | {r['price_source']} | "
+            f"{_money(r['batch_input_usd_per_mtok'])} / {_money(r['batch_output_usd_per_mtok'])} | {reasoning} |"
+        )
     lines.append("")
-    lines.append("Any other litellm model string (anthropic/…, gemini/…) or openai/NAME with --api-base also works; "
-                 "local checkpoints run with --backend hf or vllm.")
+    lines.append(
+        "Any other litellm model string (anthropic/…, gemini/…) or openai/NAME with --api-base also works; "
+        "local checkpoints run with --backend hf or vllm."
+    )
     return "\n".join(lines) + "\n"
 
 

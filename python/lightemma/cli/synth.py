@@ -48,8 +48,13 @@ def add_parser(subparsers) -> argparse.ArgumentParser:
     parser.add_argument("--seed", type=int, default=0, help="random seed; same seed, same dataset (default 0)")
     parser.add_argument("--version", default=DEFAULT_VERSION, help=f"version folder name (default {DEFAULT_VERSION})")
     parser.add_argument("--keyframes", type=_positive, default=40, help="keyframes per scene (default 40)")
-    parser.add_argument("--image-size", type=_size, default=(800, 450), metavar="WxH",
-                        help="image size (default 800x450; nuScenes is 1600x900)")
+    parser.add_argument(
+        "--image-size",
+        type=_size,
+        default=(800, 450),
+        metavar="WxH",
+        help="image size (default 800x450; nuScenes is 1600x900)",
+    )
     parser.add_argument("--no-images", action="store_true", help="write the tables only (no JPEGs)")
     parser.add_argument("--no-sweeps", action="store_true", help="keyframes only, no 12 Hz sweeps")
     parser.add_argument("--force", action="store_true", help="replace an existing version folder")
@@ -74,19 +79,28 @@ def run(args: argparse.Namespace) -> int:
         progress=sys.stderr.isatty(),
     )
     frames = len(window_range(args.keyframes, "reference")) * args.scenes
-    print(f"wrote {args.scenes} synthetic scenes ({args.keyframes} keyframes each, {frames} frames in the "
-          f"reference window) to {root}/{args.version}")
+    print(
+        f"wrote {args.scenes} synthetic scenes ({args.keyframes} keyframes each, {frames} frames in the "
+        f"reference window) to {root}/{args.version}"
+    )
     if not frames:
         full = len(window_range(args.keyframes, "full")) * args.scenes
-        print(f"lightemma synth: warning: a scene needs at least 15 keyframes for a frame in the reference window "
-              f"(14 for --window full); with --keyframes {args.keyframes} "
-              + ("there is no frame to run" if not full else f"only --window full has frames ({full})"), file=sys.stderr)
+        print(
+            f"lightemma synth: warning: a scene needs at least 15 keyframes for a frame in the reference window "
+            f"(14 for --window full); with --keyframes {args.keyframes} "
+            + ("there is no frame to run" if not full else f"only --window full has frames ({full})"),
+            file=sys.stderr,
+        )
     # v1.0-mini takes all of its scenes by default; any other version folder must say so
     split = ("", "") if args.version == DEFAULT_VERSION else (" --split all", ", split='all'")
     if args.no_images:  # runs skip frames without their CAM_FRONT image: only the tables are of use
-        print(f"tables only (--no-images): runs need the images; load the frames in Python with "
-              f"lightemma.load_frames({str(root)!r}, {args.version!r}{split[1]}, on_missing_image='keep')")
+        print(
+            f"tables only (--no-images): runs need the images; load the frames in Python with "
+            f"lightemma.load_frames({str(root)!r}, {args.version!r}{split[1]}, on_missing_image='keep')"
+        )
         return 0
-    print(f"run a baseline on it: lightemma run --model baseline:cv --dataroot {root} --version {args.version}{split[0]}")
+    print(
+        f"run a baseline on it: lightemma run --model baseline:cv --dataroot {root} --version {args.version}{split[0]}"
+    )
     print(f"load it in Python:    lightemma.load_frames({str(root)!r}, {args.version!r}{split[1]})")
     return 0

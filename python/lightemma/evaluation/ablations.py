@@ -52,8 +52,13 @@ def comparison_key(info: Any) -> tuple[Any, ...]:
     """What an ablation run shares with the full run it is paired with: model, integrator, chain, answer format and
     prompt set (a :class:`~lightemma.evaluation.RunInfo`)."""
     prompt_set = (getattr(info, "manifest", None) or {}).get("prompt_set")
-    return (info.model, info.integrator, info.chain, info.answer_format,
-            prompt_set.get("name") if isinstance(prompt_set, Mapping) else None)
+    return (
+        info.model,
+        info.integrator,
+        info.chain,
+        info.answer_format,
+        prompt_set.get("name") if isinstance(prompt_set, Mapping) else None,
+    )
 
 
 def _variant_key(run: RunData) -> tuple[Any, ...]:
@@ -80,18 +85,28 @@ class _Columns:
             names = [run.scene_names[c] if run.scene_names else fid for c, fid in zip(run.scenes()[rows], ids)]
             for fid, name in zip(ids, names):
                 self.scene.setdefault(fid, str(name))
-            self.values.append({m.key: dict(zip(ids, m.values(run, rows, convention).tolist())) for m in PAIRED_METRICS})
+            self.values.append(
+                {m.key: dict(zip(ids, m.values(run, rows, convention).tolist())) for m in PAIRED_METRICS}
+            )
 
     def paired(self, a: int, b: int, metric: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(values of a, values of b, scene names) on the frames scored in both, in a's order."""
         va, vb = self.values[a][metric], self.values[b][metric]
         common = [f for f in va if f in vb]
-        return (np.array([va[f] for f in common]), np.array([vb[f] for f in common]),
-                np.array([self.scene[f] for f in common], dtype=object))
+        return (
+            np.array([va[f] for f in common]),
+            np.array([vb[f] for f in common]),
+            np.array([self.scene[f] for f in common], dtype=object),
+        )
 
 
-def _with_statistics(rows: list[dict[str, Any]], groups: dict[str, list[tuple[np.ndarray, np.ndarray] | None]], keys: dict[str, list[str]],
-                     diff_name: str, resampling: Resampling) -> None:
+def _with_statistics(
+    rows: list[dict[str, Any]],
+    groups: dict[str, list[tuple[np.ndarray, np.ndarray] | None]],
+    keys: dict[str, list[str]],
+    diff_name: str,
+    resampling: Resampling,
+) -> None:
     """Add ``<metric>_ci95``, ``_p``, ``_p_holm``, ``_significant`` to ``rows``: per metric one core call, Holm over the rows."""
     alpha = 1.0 - resampling.confidence
     for metric in PAIRED_METRICS:
@@ -111,12 +126,22 @@ def _with_statistics(rows: list[dict[str, Any]], groups: dict[str, list[tuple[np
             row[f"{k}_ci95"] = ci_all[i]
             row[f"{k}_p"] = None if np.isnan(p_all[i]) else float(p_all[i])
             row[f"{k}_p_holm"] = None if np.isnan(adjusted[i]) else float(adjusted[i])
-            row[f"{k}_significant"] = bool(row[f"{k}_p_holm"] is not None and row[f"{k}_p_holm"] <= alpha) \
-                if row.get(f"{k}_{diff_name}") is not None else None
+            row[f"{k}_significant"] = (
+                bool(row[f"{k}_p_holm"] is not None and row[f"{k}_p_holm"] <= alpha)
+                if row.get(f"{k}_{diff_name}") is not None
+                else None
+            )
 
 
-def input_ablations(runs: Sequence[RunData], labels: Sequence[str], convention: str, resampling: Resampling, *,
-                    only: set[str] | None = None, warnings: list[str] | None = None) -> list[dict[str, Any]]:
+def input_ablations(
+    runs: Sequence[RunData],
+    labels: Sequence[str],
+    convention: str,
+    resampling: Resampling,
+    *,
+    only: set[str] | None = None,
+    warnings: list[str] | None = None,
+) -> list[dict[str, Any]]:
     """One row per ablation run that has a full run of the same model and variant (see the module docstring).
 
     Row keys: ``model`` (the full run's label), ``ablation`` (``no-image`` …), ``ablated`` (its label),
@@ -136,9 +161,15 @@ def input_ablations(runs: Sequence[RunData], labels: Sequence[str], convention: 
         if len(candidates) == 1:
             pairs.append((candidates[0], i))
         elif warnings is not None:
-            what = "no full run" if not candidates else f"{len(candidates)} full runs ({', '.join(labels[c] for c in candidates)})"
-            warnings.append(f"{labels[i]}: {what} of the same model and variant to pair the ablation with; left out of "
-                            "\"does the image matter?\"" + ("" if not candidates else " (evaluate one full run with it)"))
+            what = (
+                "no full run"
+                if not candidates
+                else f"{len(candidates)} full runs ({', '.join(labels[c] for c in candidates)})"
+            )
+            warnings.append(
+                f"{labels[i]}: {what} of the same model and variant to pair the ablation with; left out of "
+                '"does the image matter?"' + ("" if not candidates else " (evaluate one full run with it)")
+            )
     if not pairs:
         return []
     cols = _Columns(runs, convention, only)
@@ -146,21 +177,43 @@ def input_ablations(runs: Sequence[RunData], labels: Sequence[str], convention: 
     groups: dict[str, list[Any]] = {m.key: [] for m in PAIRED_METRICS}
     keys: dict[str, list[str]] = {m.key: [] for m in PAIRED_METRICS}
     for a, b in pairs:
-        row: dict[str, Any] = {"model": labels[a], "ablation": runs[b].info.inputs, "ablated": labels[b], "convention": convention}
+        row: dict[str, Any] = {
+            "model": labels[a],
+            "ablation": runs[b].info.inputs,
+            "ablated": labels[b],
+            "convention": convention,
+        }
         for metric in PAIRED_METRICS:
             va, vb, scenes = cols.paired(a, b, metric.key)
             if metric is PAIRED_METRICS[0]:
                 row.update(frames=len(va), scenes=len(set(scenes.tolist())))
-            _add_pair(row, groups, keys, metric.key, (("full", va), ("ablated", vb)), "diff", va - vb, scenes,
-                      f"ablation|{labels[a]}|{labels[b]}|{metric.key}|{convention}")
+            _add_pair(
+                row,
+                groups,
+                keys,
+                metric.key,
+                (("full", va), ("ablated", vb)),
+                "diff",
+                va - vb,
+                scenes,
+                f"ablation|{labels[a]}|{labels[b]}|{metric.key}|{convention}",
+            )
         rows.append(row)
     _with_statistics(rows, groups, keys, "diff", resampling)
     return rows
 
 
-def _add_pair(row: dict[str, Any], groups: dict[str, list[Any]], keys: dict[str, list[str]], metric: str,
-              sides: tuple[tuple[str, np.ndarray], tuple[str, np.ndarray]], diff_name: str, diff: np.ndarray, scenes: np.ndarray,
-              key: str) -> None:
+def _add_pair(
+    row: dict[str, Any],
+    groups: dict[str, list[Any]],
+    keys: dict[str, list[str]],
+    metric: str,
+    sides: tuple[tuple[str, np.ndarray], tuple[str, np.ndarray]],
+    diff_name: str,
+    diff: np.ndarray,
+    scenes: np.ndarray,
+    key: str,
+) -> None:
     """One metric of one paired row: each side's mean, the mean difference (None without common frames), and the
     per-frame differences with their scenes and the bootstrap key for :func:`_with_statistics`."""
     has = len(diff) > 0
@@ -170,8 +223,14 @@ def _add_pair(row: dict[str, Any], groups: dict[str, list[Any]], keys: dict[str,
     keys[metric].append(key)
 
 
-def baseline_gains(runs: Sequence[RunData], labels: Sequence[str], convention: str, resampling: Resampling, *,
-                   only: set[str] | None = None) -> list[dict[str, Any]]:
+def baseline_gains(
+    runs: Sequence[RunData],
+    labels: Sequence[str],
+    convention: str,
+    resampling: Resampling,
+    *,
+    only: set[str] | None = None,
+) -> list[dict[str, Any]]:
     """Per model run (every non-baseline run, ablated ones too), its gain over the best baseline (see the module docstring).
 
     The best baseline is, among the runs of :data:`GAIN_BASELINES`, the one with the lowest mean of the first
@@ -196,8 +255,14 @@ def baseline_gains(runs: Sequence[RunData], labels: Sequence[str], convention: s
             if len(vm):
                 scores.append((float(vb.mean()), b))
         best = min(scores, key=lambda s: (s[0], labels[s[1]]))[1] if scores else None
-        row: dict[str, Any] = {"model": labels[m], "inputs": runs[m].info.inputs, "baseline": labels[best] if best is not None else None,
-                               "convention": convention, "frames": 0, "scenes": 0}
+        row: dict[str, Any] = {
+            "model": labels[m],
+            "inputs": runs[m].info.inputs,
+            "baseline": labels[best] if best is not None else None,
+            "convention": convention,
+            "frames": 0,
+            "scenes": 0,
+        }
         for metric in PAIRED_METRICS:
             if best is None:
                 vm = vb = np.zeros(0)
@@ -206,8 +271,17 @@ def baseline_gains(runs: Sequence[RunData], labels: Sequence[str], convention: s
                 vm, vb, scenes = cols.paired(m, best, metric.key)
             if metric.key == first:
                 row.update(frames=len(vm), scenes=len(set(scenes.tolist())))
-            _add_pair(row, groups, keys, metric.key, (("model", vm), ("baseline", vb)), "gain", vb - vm, scenes,
-                      f"gain|{labels[m]}|{labels[best] if best is not None else ''}|{metric.key}|{convention}")
+            _add_pair(
+                row,
+                groups,
+                keys,
+                metric.key,
+                (("model", vm), ("baseline", vb)),
+                "gain",
+                vb - vm,
+                scenes,
+                f"gain|{labels[m]}|{labels[best] if best is not None else ''}|{metric.key}|{convention}",
+            )
         rows.append(row)
     _with_statistics(rows, groups, keys, "gain", resampling)
     return rows

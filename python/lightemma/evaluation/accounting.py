@@ -62,7 +62,11 @@ def efficiency(run: RunData, rows: np.ndarray) -> dict[str, Any]:
     return {
         # a batch run's frames wait for their batches: per-frame latency is n/a, the batch turnaround is shown instead
         "seconds_per_frame": None if batch else _mean(run.seconds[rows]),
-        **({"batch_turnaround_s": run.info.batch_turnaround_s, "not_applicable": ["seconds_per_frame"]} if batch else {}),
+        **(
+            {"batch_turnaround_s": run.info.batch_turnaround_s, "not_applicable": ["seconds_per_frame"]}
+            if batch
+            else {}
+        ),
         "cost_cents_per_frame": _mean(cost),
         "cost_known_pct": _pct(np.isfinite(cost)),
         "input_tokens": _mean(run.input_tokens[rows]),

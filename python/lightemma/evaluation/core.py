@@ -51,17 +51,27 @@ class ModelResult:
     efficiency: dict[str, Any]
     parse: dict[str, Any] = field(default_factory=dict)  # the parse definition behind statuses and metrics
     dataset_kind: str | None = None  # "nuscenes", "synthetic" or None (from the manifest)
-    outcomes: dict[str, int] = field(default_factory=dict)  # of the accounted frames: scored, failed, implausible, api_errors
+    outcomes: dict[str, int] = field(
+        default_factory=dict
+    )  # of the accounted frames: scored, failed, implausible, api_errors
     # convention -> ade_avg/fde -> [low, high] (None: no interval; "unavailable" -> why, when values too large to resample)
     intervals: dict[str, dict[str, Any]] = field(default_factory=dict)
     chain: str = "independent"  # request variant (docs/run.md): independent stages or one conversation
     answer_format: str = "text"  # stage-3 answers as text or structured JSON
     inputs: str = "full"  # input ablation (docs/run.md#input-ablations): full, no-image, blank-image, no-history
-    safety: dict[str, dict[str, Any]] = field(default_factory=dict)  # convention -> off-road / collision keys (evaluation/safety.py)
-    planning: dict[str, Any] = field(default_factory=dict)  # planning-score keys (evaluation/planning_score.py ROW_KEYS)
-    explanations: dict[str, Any] = field(default_factory=dict)  # explanation-audit keys (evaluation/intent_audit.py ROW_KEYS)
+    safety: dict[str, dict[str, Any]] = field(
+        default_factory=dict
+    )  # convention -> off-road / collision keys (evaluation/safety.py)
+    planning: dict[str, Any] = field(
+        default_factory=dict
+    )  # planning-score keys (evaluation/planning_score.py ROW_KEYS)
+    explanations: dict[str, Any] = field(
+        default_factory=dict
+    )  # explanation-audit keys (evaluation/intent_audit.py ROW_KEYS)
     fingerprint: dict[str, Any] | None = None  # the run's frame set (lightemma.frames.fingerprint.run_fingerprint)
-    manifest: dict[str, Any] = field(default_factory=dict)  # the run's manifest, for provenance (evaluation/descriptors.py)
+    manifest: dict[str, Any] = field(
+        default_factory=dict
+    )  # the run's manifest, for provenance (evaluation/descriptors.py)
     # --samples K > 1: convention -> samples, minade, minfde, spread_m, sampled_frames (lightemma.evaluation.samples);
     # "best" / "mean" -> the safety and planning keys of the best sample and of the mean trajectory; empty for K = 1
     sampling: dict[str, Any] = field(default_factory=dict)
@@ -110,8 +120,17 @@ class ModelResult:
 
     def efficiency_row(self) -> dict[str, Any]:
         """A flat dict: model, family, time, cost, tokens, GPUs, run wall time, frames/s."""
-        return {"model": self.label, "family": self.family, "frames": self.frames_accounted, **self._coverage(), **self.efficiency,
-                "dataset_kind": self.dataset_kind, "chain": self.chain, "answer_format": self.answer_format, "inputs": self.inputs}
+        return {
+            "model": self.label,
+            "family": self.family,
+            "frames": self.frames_accounted,
+            **self._coverage(),
+            **self.efficiency,
+            "dataset_kind": self.dataset_kind,
+            "chain": self.chain,
+            "answer_format": self.answer_format,
+            "inputs": self.inputs,
+        }
 
 
 @dataclass
@@ -131,7 +150,9 @@ class Evaluation:
     safety: Any = None  # lightemma.evaluation.safety.SafetyResult when safety metrics were computed
     pairwise_safety: list[dict[str, Any]] | None = None  # see lightemma.evaluation.safety.pairwise_safety
     planning: Any = None  # lightemma.evaluation.planning_score.PlanningResult when the planning score was computed
-    explanations: Any = None  # lightemma.evaluation.intent_audit.ExplanationResult when the explanation audit was computed
+    explanations: Any = (
+        None  # lightemma.evaluation.intent_audit.ExplanationResult when the explanation audit was computed
+    )
     miss_threshold: float = 2.0  # metres, behind miss_rate (its descriptor: miss@<threshold>m/1)
     robustness: Any = None  # lightemma.evaluation.robustness.RobustnessResult when sweep runs were evaluated
 
@@ -208,7 +229,9 @@ def expand_run_dirs(paths: Iterable[str | os.PathLike[str]]) -> list[Path]:
 
 
 def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
-    names = CONVENTIONS if convention == "all" else ((convention,) if isinstance(convention, str) else tuple(convention))
+    names = (
+        CONVENTIONS if convention == "all" else ((convention,) if isinstance(convention, str) else tuple(convention))
+    )
     for name in names:
         if name not in CONVENTIONS:
             raise UserError(f"unknown convention {name!r} (choose from {', '.join(CONVENTIONS)} or all)")
@@ -216,8 +239,13 @@ def _conventions(convention: str | Sequence[str]) -> tuple[str, ...]:
 
 
 #: the paper's protocol: a run's label names each setting in which it departs from these (docs/evaluate.md)
-PAPER_SETTINGS: tuple[tuple[str, str], ...] = (("window", "reference"), ("integrator", "euler"), ("chain", "independent"),
-                                               ("answer_format", "text"), ("inputs", "full"))
+PAPER_SETTINGS: tuple[tuple[str, str], ...] = (
+    ("window", "reference"),
+    ("integrator", "euler"),
+    ("chain", "independent"),
+    ("answer_format", "text"),
+    ("inputs", "full"),
+)
 
 
 def _window(info: Any) -> str:
@@ -233,9 +261,18 @@ def _window(info: Any) -> str:
 
 
 def _compose(info: Any, extra: Sequence[str] = ()) -> str:
-    settings = {"window": _window(info), "integrator": info.integrator, "chain": info.chain, "answer_format": info.answer_format,
-                "inputs": getattr(info, "inputs", "full")}
-    parts = [f"{settings[key]} window" if key == "window" else settings[key] for key, paper in PAPER_SETTINGS if settings[key] != paper]
+    settings = {
+        "window": _window(info),
+        "integrator": info.integrator,
+        "chain": info.chain,
+        "answer_format": info.answer_format,
+        "inputs": getattr(info, "inputs", "full"),
+    }
+    parts = [
+        f"{settings[key]} window" if key == "window" else settings[key]
+        for key, paper in PAPER_SETTINGS
+        if settings[key] != paper
+    ]
     parts += extra
     name = getattr(info, "name", None)
     return printable(info.label + (f" [{', '.join(parts)}]" if parts else "") + (f' "{name}"' if name else ""))
@@ -310,7 +347,9 @@ def score(
             every = evaluate_all(pred, gt, miss_threshold=miss_threshold)
             results = {c: every[c].to_dict() for c in conventions}
         else:
-            results = {c: evaluate(pred, gt, convention=c, miss_threshold=miss_threshold).to_dict() for c in conventions}
+            results = {
+                c: evaluate(pred, gt, convention=c, miss_threshold=miss_threshold).to_dict() for c in conventions
+            }
         for convention, metrics in results.items():
             for key in METRIC_KEYS:
                 sums[convention][key] += float(metrics[key]) * len(block)
@@ -339,7 +378,9 @@ def evaluate_loaded(
     """
     conventions = _conventions(convention)
     runs = sorted(runs, key=lambda r: (family_rank(r.info.family), r.info.generation or 99, r.info.label))
-    fingerprints = [run_fingerprint(r.info.run_dir, r.info.manifest or {}, r.frame_ids) for r in runs]  # a bad one: refused
+    fingerprints = [
+        run_fingerprint(r.info.run_dir, r.info.manifest or {}, r.frame_ids) for r in runs
+    ]  # a bad one: refused
     warnings = [w for r in runs for w in r.warnings]
     shared: list[str] | None = None
     present: set[str] | None = None
@@ -389,10 +430,24 @@ def evaluate_loaded(
         )
         entries.append((label, run, scored))
     _with_samples(results, entries, conventions)
-    evaluation = _with_uncertainty(Evaluation(results, conventions, common, len(shared) if shared is not None else None, warnings, resampling,
-                                              miss_threshold=miss_threshold), entries, shared, pairwise)
+    evaluation = _with_uncertainty(
+        Evaluation(
+            results,
+            conventions,
+            common,
+            len(shared) if shared is not None else None,
+            warnings,
+            resampling,
+            miss_threshold=miss_threshold,
+        ),
+        entries,
+        shared,
+        pairwise,
+    )
     if safety:
-        _with_safety(evaluation, entries, shared, pairwise, dataroot, version, history=_PLANNING_HISTORY if planning else 0)
+        _with_safety(
+            evaluation, entries, shared, pairwise, dataroot, version, history=_PLANNING_HISTORY if planning else 0
+        )
     if planning:
         _with_planning(evaluation, entries, shared, pairwise, dataroot, version)
     if safety or planning:
@@ -404,7 +459,9 @@ def evaluate_loaded(
     return evaluation
 
 
-def _with_samples(results: list[ModelResult], entries: list[tuple[str, RunData, np.ndarray]], conventions: tuple[str, ...]) -> None:
+def _with_samples(
+    results: list[ModelResult], entries: list[tuple[str, RunData, np.ndarray]], conventions: tuple[str, ...]
+) -> None:
     """--samples K runs: minADE@K, minFDE@K and the spread of the samples per convention (lightemma.evaluation.samples)."""
     from lightemma.evaluation.samples import sample_metrics
 
@@ -412,8 +469,16 @@ def _with_samples(results: list[ModelResult], entries: list[tuple[str, RunData, 
         result.sampling = sample_metrics(run, scored, conventions)
 
 
-def _with_sample_scores(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
-                        dataroot: str | os.PathLike[str] | None, version: str | None, *, safety: bool, planning: bool) -> None:
+def _with_sample_scores(
+    evaluation: Evaluation,
+    entries: list[tuple[str, RunData, np.ndarray]],
+    shared: list[str] | None,
+    dataroot: str | os.PathLike[str] | None,
+    version: str | None,
+    *,
+    safety: bool,
+    planning: bool,
+) -> None:
     """--samples K runs: the safety and planning scores of the best sample (by ADE) and of the mean trajectory, as
     ``sampling["best"]`` / ``sampling["mean"]`` (the keys of the run's own safety and planning rows)."""
     from lightemma.evaluation.samples import best_and_mean, run_samples
@@ -422,7 +487,9 @@ def _with_sample_scores(evaluation: Evaluation, entries: list[tuple[str, RunData
     if not sampled:
         return
     only = set(shared) if shared is not None else None
-    no_intervals = Resampling(n_resamples=0, seed=evaluation.resampling.seed, confidence=evaluation.resampling.confidence)
+    no_intervals = Resampling(
+        n_resamples=0, seed=evaluation.resampling.seed, confidence=evaluation.resampling.confidence
+    )
     for label, run, scored in sampled:
         pair = best_and_mean(run, scored, evaluation.main_convention)
         if pair is None:
@@ -434,24 +501,39 @@ def _with_sample_scores(evaluation: Evaluation, entries: list[tuple[str, RunData
             if safety:
                 from lightemma.evaluation.safety import evaluate_safety
 
-                result = evaluate_safety(derived, (evaluation.main_convention,), no_intervals, dataroot=dataroot,
-                                         version=version, history=_PLANNING_HISTORY if planning else 0)
+                result = evaluate_safety(
+                    derived,
+                    (evaluation.main_convention,),
+                    no_intervals,
+                    dataroot=dataroot,
+                    version=version,
+                    history=_PLANNING_HISTORY if planning else 0,
+                )
                 row.update(result.rows.get(label, {}).get(evaluation.main_convention, {}))
             if planning:
                 from lightemma.evaluation.planning_score import evaluate_planning
 
-                planning_result = evaluate_planning(derived, no_intervals, dataroot=dataroot, version=version,
-                                                    safety=None, pairwise=False, only=only)
+                planning_result = evaluate_planning(
+                    derived, no_intervals, dataroot=dataroot, version=version, safety=None, pairwise=False, only=only
+                )
                 row.update(planning_result.rows.get(label, {}))
             model.sampling[name] = row
 
 
-def _with_robustness(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None) -> None:
+def _with_robustness(
+    evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None
+) -> None:
     """Sweep runs: each variant paired with its sweep's clean run (lightemma.evaluation.robustness)."""
     from lightemma.evaluation.robustness import evaluate_robustness
 
-    evaluation.robustness = evaluate_robustness(entries, evaluation.main_convention, evaluation.resampling, safety=evaluation.safety,
-                                                planning=evaluation.planning, only=set(shared) if shared is not None else None)
+    evaluation.robustness = evaluate_robustness(
+        entries,
+        evaluation.main_convention,
+        evaluation.resampling,
+        safety=evaluation.safety,
+        planning=evaluation.planning,
+        only=set(shared) if shared is not None else None,
+    )
     if evaluation.robustness is not None:
         evaluation.warnings.extend(evaluation.robustness.warnings)
 
@@ -473,24 +555,44 @@ def _refuse_mixed_maps(evaluation: Evaluation) -> None:
         raise UserError(conflict)
 
 
-_PLANNING_HISTORY = 4  # earlier keyframes the planning score reads (lightemma.evaluation.planning_score.HISTORY_KEYFRAMES)
+_PLANNING_HISTORY = (
+    4  # earlier keyframes the planning score reads (lightemma.evaluation.planning_score.HISTORY_KEYFRAMES)
+)
 
 
-def _with_planning(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
-                   pairwise: bool, dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
+def _with_planning(
+    evaluation: Evaluation,
+    entries: list[tuple[str, RunData, np.ndarray]],
+    shared: list[str] | None,
+    pairwise: bool,
+    dataroot: str | os.PathLike[str] | None,
+    version: str | None,
+) -> None:
     """NAVSIM's planning score (PDMS / EPDMS and sub-scores) per model and the ground truth's (docs/definitions.md#planning-score)."""
     from lightemma.evaluation.planning_score import evaluate_planning
 
-    result = evaluate_planning(entries, evaluation.resampling, dataroot=dataroot, version=version, safety=evaluation.safety,
-                               pairwise=pairwise, only=set(shared) if shared is not None else None)
+    result = evaluate_planning(
+        entries,
+        evaluation.resampling,
+        dataroot=dataroot,
+        version=version,
+        safety=evaluation.safety,
+        pairwise=pairwise,
+        only=set(shared) if shared is not None else None,
+    )
     for model in evaluation.models:
         model.planning = result.rows.get(model.label, {})
     evaluation.planning = result
     evaluation.warnings.extend(result.warnings)
 
 
-def _with_explanations(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None,
-                       dataroot: str | os.PathLike[str] | None, version: str | None) -> None:
+def _with_explanations(
+    evaluation: Evaluation,
+    entries: list[tuple[str, RunData, np.ndarray]],
+    shared: list[str] | None,
+    dataroot: str | os.PathLike[str] | None,
+    version: str | None,
+) -> None:
     """The explanation audit: stated intent against the plan, the ground truth and the ablations
     (docs/definitions.md#explanation-audit)."""
     from lightemma.evaluation.intent_audit import evaluate_explanations
@@ -505,43 +607,70 @@ def _with_explanations(evaluation: Evaluation, entries: list[tuple[str, RunData,
     evaluation.warnings.extend(result.warnings)
 
 
-def _with_safety(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool,
-                 dataroot: str | os.PathLike[str] | None, version: str | None, history: int = 0) -> None:
+def _with_safety(
+    evaluation: Evaluation,
+    entries: list[tuple[str, RunData, np.ndarray]],
+    shared: list[str] | None,
+    pairwise: bool,
+    dataroot: str | os.PathLike[str] | None,
+    version: str | None,
+    history: int = 0,
+) -> None:
     """Off-road and collision rates beside ADE, the ground-truth floor, and paired tests (docs/definitions.md#safety)."""
     from lightemma.evaluation.safety import evaluate_safety, pairwise_safety
 
-    result = evaluate_safety(entries, evaluation.conventions, evaluation.resampling, dataroot=dataroot, version=version, history=history)
+    result = evaluate_safety(
+        entries, evaluation.conventions, evaluation.resampling, dataroot=dataroot, version=version, history=history
+    )
     for model in evaluation.models:
         model.safety = result.rows.get(model.label, {})
     evaluation.safety = result
     evaluation.warnings.extend(result.warnings)
     if pairwise:
         labels = [label for label, _, _ in entries]
-        evaluation.pairwise_safety = pairwise_safety(result, labels, evaluation.main_convention, evaluation.resampling,
-                                                     only=set(shared) if shared is not None else None)
+        evaluation.pairwise_safety = pairwise_safety(
+            result,
+            labels,
+            evaluation.main_convention,
+            evaluation.resampling,
+            only=set(shared) if shared is not None else None,
+        )
 
 
-def _with_uncertainty(evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool) -> Evaluation:
+def _with_uncertainty(
+    evaluation: Evaluation, entries: list[tuple[str, RunData, np.ndarray]], shared: list[str] | None, pairwise: bool
+) -> Evaluation:
     """Scene-bootstrap intervals for every row and, when asked, the paired comparisons (docs/statistics.md)."""
     from lightemma.evaluation.uncertainty import model_intervals, pairwise_ade
 
-    for result, intervals in zip(evaluation.models, model_intervals(entries, evaluation.conventions, evaluation.resampling)):
+    for result, intervals in zip(
+        evaluation.models, model_intervals(entries, evaluation.conventions, evaluation.resampling)
+    ):
         result.intervals = intervals
     runs, labels = [run for _, run, _ in entries], [label for label, _, _ in entries]
     if pairwise:
-        evaluation.pairwise = pairwise_ade(runs, labels, evaluation.main_convention, evaluation.resampling, only=set(shared) if shared is not None else None)
+        evaluation.pairwise = pairwise_ade(
+            runs,
+            labels,
+            evaluation.main_convention,
+            evaluation.resampling,
+            only=set(shared) if shared is not None else None,
+        )
     _with_ablations(evaluation, runs, labels, shared)
     return evaluation
 
 
 def _with_ablations(evaluation: Evaluation, runs: list[RunData], labels: list[str], shared: list[str] | None) -> None:
-    """"Does the image matter?": the input ablations against their full runs, each model against the best baseline."""
+    """ "Does the image matter?": the input ablations against their full runs, each model against the best baseline."""
     from lightemma.evaluation.ablations import baseline_gains, input_ablations
 
     only = set(shared) if shared is not None else None
-    evaluation.input_ablations = input_ablations(runs, labels, evaluation.main_convention, evaluation.resampling, only=only,
-                                                 warnings=evaluation.warnings)
-    evaluation.baseline_gains = baseline_gains(runs, labels, evaluation.main_convention, evaluation.resampling, only=only)
+    evaluation.input_ablations = input_ablations(
+        runs, labels, evaluation.main_convention, evaluation.resampling, only=only, warnings=evaluation.warnings
+    )
+    evaluation.baseline_gains = baseline_gains(
+        runs, labels, evaluation.main_convention, evaluation.resampling, only=only
+    )
 
 
 def evaluate_runs(
@@ -584,9 +713,21 @@ def evaluate_runs(
 
     conventions = _conventions(convention)  # check the arguments before reading any run
     dirs, left_out = discover_runs(run_dirs)  # a corrupt manifest or a linked run: left out with a warning
-    runs = [load_run(d, parse=parse, keep_implausible=keep_implausible, details=planning) for d in dirs]  # actions: plan headings
-    evaluation = evaluate_loaded(runs, convention=conventions, common=common, miss_threshold=miss_threshold, resampling=resampling,
-                                 pairwise=pairwise, safety=safety, planning=planning, dataroot=dataroot, version=version,
-                                 explanations=explanations)
+    runs = [
+        load_run(d, parse=parse, keep_implausible=keep_implausible, details=planning) for d in dirs
+    ]  # actions: plan headings
+    evaluation = evaluate_loaded(
+        runs,
+        convention=conventions,
+        common=common,
+        miss_threshold=miss_threshold,
+        resampling=resampling,
+        pairwise=pairwise,
+        safety=safety,
+        planning=planning,
+        dataroot=dataroot,
+        version=version,
+        explanations=explanations,
+    )
     evaluation.warnings[:0] = left_out
     return evaluation

@@ -311,19 +311,63 @@ ADE_BY_CONVENTION: dict[str, str] = {"lightemma": "ade@lightemma/1", "stp3": "l2
 _K = f"{_DEFS}#k-samples"
 _BEST_OF_K = "best of K samples (Alpamayo-R1 minADE over sampled trajectories; WOD-E2E)"
 SAMPLE_METRICS: dict[str, Descriptor] = {
-    **{f"minade@{c}": _d(f"minade@{c}/1", f"minADE@K: per frame the lowest ADE avg ({c} convention) of its K samples",
-                         "metric", "m", _METERS, True, _BEST_OF_K, _K) for c in ("lightemma", "stp3", "uniad")},
-    "minfde": _d("minfde/1", "minFDE@K: per frame the lowest FDE of its K samples", "metric", "m", _METERS, True,
-                 _BEST_OF_K, _K),
-    "spread_m": _d("spread@final/1", "Mean pairwise distance of the K samples' final points", "metric", "m", _METERS,
-                   None, "lightemma", _K),
+    **{
+        f"minade@{c}": _d(
+            f"minade@{c}/1",
+            f"minADE@K: per frame the lowest ADE avg ({c} convention) of its K samples",
+            "metric",
+            "m",
+            _METERS,
+            True,
+            _BEST_OF_K,
+            _K,
+        )
+        for c in ("lightemma", "stp3", "uniad")
+    },
+    "minfde": _d(
+        "minfde/1", "minFDE@K: per frame the lowest FDE of its K samples", "metric", "m", _METERS, True, _BEST_OF_K, _K
+    ),
+    "spread_m": _d(
+        "spread@final/1",
+        "Mean pairwise distance of the K samples' final points",
+        "metric",
+        "m",
+        _METERS,
+        None,
+        "lightemma",
+        _K,
+    ),
     "samples": _d("samples/1", "Samples per frame (K)", "count", None, (1, None), None, "lightemma", _K),
-    "sampled_frames": _d("sampled_frames/1", "Scored frames with a usable sample beyond sample 0", "count", "frames",
-                         (0, None), None, "lightemma", _K),
-    "best": _d("best_sample/1", "Safety and planning keys of the best sample (by ADE avg)", "label", None, None, None,
-               "lightemma", _K),
-    "mean": _d("mean_sample/1", "Safety and planning keys of the mean of the K samples", "label", None, None, None,
-               "lightemma", _K),
+    "sampled_frames": _d(
+        "sampled_frames/1",
+        "Scored frames with a usable sample beyond sample 0",
+        "count",
+        "frames",
+        (0, None),
+        None,
+        "lightemma",
+        _K,
+    ),
+    "best": _d(
+        "best_sample/1",
+        "Safety and planning keys of the best sample (by ADE avg)",
+        "label",
+        None,
+        None,
+        None,
+        "lightemma",
+        _K,
+    ),
+    "mean": _d(
+        "mean_sample/1",
+        "Safety and planning keys of the mean of the K samples",
+        "label",
+        None,
+        None,
+        None,
+        "lightemma",
+        _K,
+    ),
 }
 #: the collision descriptor of each collision convention (a row's ``collision_convention``)
 COLLISION_BY_CONVENTION: dict[str, str] = {
@@ -418,47 +462,129 @@ FIELDS: dict[str, Descriptor] = {
         ),
         # the explanation audit (lightemma.evaluation.intent_audit.KEYS): shares of frames
         **{
-            key: _d(f"{key}@intent_lightemma/1", title, "rate", "share", _SHARE, lower, "lightemma (rules intent@lightemma/1)", _X)
+            key: _d(
+                f"{key}@intent_lightemma/1",
+                title,
+                "rate",
+                "share",
+                _SHARE,
+                lower,
+                "lightemma (rules intent@lightemma/1)",
+                _X,
+            )
             for key, title, lower in (
                 ("consistent", "Share of frames whose stated intent is consistent with the plan", False),
                 ("contradicts", "Share of frames whose stated intent contradicts the plan", True),
                 ("intent_unknown", "Share of frames whose stated intent cannot be checked against the plan", True),
-                ("intent_accuracy", "Share of frames whose stated intent is consistent with the ground truth's behaviour", False),
+                (
+                    "intent_accuracy",
+                    "Share of frames whose stated intent is consistent with the ground truth's behaviour",
+                    False,
+                ),
                 ("intent_changed", "Share of frames whose stated intent changes under the ablation", None),
             )
         },
-        **{f"{key}_na": _d("na/1", "Why the value is missing", "label", None, None, None, "lightemma", _X)
-           for key in ("consistent", "contradicts", "intent_unknown", "intent_accuracy", "intent_changed")},
-        **{f"{key}_ci95": _d("ci95@scene_bootstrap/1", "95 % scene-level bootstrap interval of the share", "interval", "share",
-                             _SHARE, None, "lightemma (cluster bootstrap over scenes)", _U)
-           for key in ("consistent", "contradicts", "intent_unknown", "intent_accuracy", "intent_changed")},
+        **{
+            f"{key}_na": _d("na/1", "Why the value is missing", "label", None, None, None, "lightemma", _X)
+            for key in ("consistent", "contradicts", "intent_unknown", "intent_accuracy", "intent_changed")
+        },
+        **{
+            f"{key}_ci95": _d(
+                "ci95@scene_bootstrap/1",
+                "95 % scene-level bootstrap interval of the share",
+                "interval",
+                "share",
+                _SHARE,
+                None,
+                "lightemma (cluster bootstrap over scenes)",
+                _U,
+            )
+            for key in ("consistent", "contradicts", "intent_unknown", "intent_accuracy", "intent_changed")
+        },
         "explanation_frames": _d(
-            "explanation_frames/1", "Frames behind the explanation audit", "count", "frames", (0, None), None, "lightemma", _X
+            "explanation_frames/1",
+            "Frames behind the explanation audit",
+            "count",
+            "frames",
+            (0, None),
+            None,
+            "lightemma",
+            _X,
         ),
         # the described objects (lightemma.evaluation.object_audit): shares of frames / of mentions
         **{
-            key: _d(f"{key}@objects_lightemma/1", title, "rate", "share", _SHARE, lower,
-                    "lightemma (rules objects@lightemma/1; nuScenes annotations in view of CAM_FRONT)", _O)
+            key: _d(
+                f"{key}@objects_lightemma/1",
+                title,
+                "rate",
+                "share",
+                _SHARE,
+                lower,
+                "lightemma (rules objects@lightemma/1; nuScenes annotations in view of CAM_FRONT)",
+                _O,
+            )
             for key, title, lower in (
-                ("hallucinated_pedestrian", "Share of frames whose description affirms a pedestrian none of the image's boxes is", True),
-                ("missed_pedestrian", "Share of frames with a pedestrian in view whose description does not affirm one", True),
+                (
+                    "hallucinated_pedestrian",
+                    "Share of frames whose description affirms a pedestrian none of the image's boxes is",
+                    True,
+                ),
+                (
+                    "missed_pedestrian",
+                    "Share of frames with a pedestrian in view whose description does not affirm one",
+                    True,
+                ),
                 ("mention_precision", "Share of affirmed class mentions whose class is in view", False),
                 ("mention_recall", "Share of frames with the class in view whose description affirms it", False),
             )
         },
-        **{f"{key}_na": _d("na/1", "Why the value is missing", "label", None, None, None, "lightemma", _O)
-           for key in ("hallucinated_pedestrian", "missed_pedestrian", "mention_precision", "mention_recall")},
-        **{f"{key}_ci95": _d("ci95@scene_bootstrap/1", "95 % scene-level bootstrap interval of the share", "interval", "share",
-                             _SHARE, None, "lightemma (cluster bootstrap over scenes)", _U)
-           for key in ("hallucinated_pedestrian", "missed_pedestrian", "mention_precision", "mention_recall")},
+        **{
+            f"{key}_na": _d("na/1", "Why the value is missing", "label", None, None, None, "lightemma", _O)
+            for key in ("hallucinated_pedestrian", "missed_pedestrian", "mention_precision", "mention_recall")
+        },
+        **{
+            f"{key}_ci95": _d(
+                "ci95@scene_bootstrap/1",
+                "95 % scene-level bootstrap interval of the share",
+                "interval",
+                "share",
+                _SHARE,
+                None,
+                "lightemma (cluster bootstrap over scenes)",
+                _U,
+            )
+            for key in ("hallucinated_pedestrian", "missed_pedestrian", "mention_precision", "mention_recall")
+        },
         "object_frames": _d(
-            "object_frames/1", "Frames with a readable description and annotation states", "count", "frames", (0, None), None,
-            "lightemma", _O
+            "object_frames/1",
+            "Frames with a readable description and annotation states",
+            "count",
+            "frames",
+            (0, None),
+            None,
+            "lightemma",
+            _O,
         ),
-        "mentions": _d("mentions@objects_lightemma/1", "Frames whose description affirms the class", "count", "frames", (0, None),
-                       None, "lightemma (rules objects@lightemma/1)", _O),
-        "in_view": _d("in_view@objects_lightemma/1", "Frames with the class in view of CAM_FRONT", "count", "frames", (0, None),
-                      None, "lightemma (nuScenes annotations)", _O),
+        "mentions": _d(
+            "mentions@objects_lightemma/1",
+            "Frames whose description affirms the class",
+            "count",
+            "frames",
+            (0, None),
+            None,
+            "lightemma (rules objects@lightemma/1)",
+            _O,
+        ),
+        "in_view": _d(
+            "in_view@objects_lightemma/1",
+            "Frames with the class in view of CAM_FRONT",
+            "count",
+            "frames",
+            (0, None),
+            None,
+            "lightemma (nuScenes annotations)",
+            _O,
+        ),
         "class": _d("class/1", "Object class", "label", None, None, None, "lightemma", _O),
         "planning_frames": _d(
             "planning_frames/1", "Frames behind the planning score", "count", "frames", (0, None), None, "lightemma", _P
@@ -680,7 +806,11 @@ FIELDS: dict[str, Descriptor] = {
                 ("sweep", "The sweep folder of the row's runs", f"{_DEFS}#robustness-sweeps"),
                 ("variant", "The sweep variant of the row's run", f"{_DEFS}#robustness-sweeps"),
                 ("clean", "The sweep's clean run the variant is paired with", f"{_DEFS}#robustness-sweeps"),
-                ("corruption", "The image corruption of the variant (none: not a corruption)", f"{_DEFS}#robustness-sweeps"),
+                (
+                    "corruption",
+                    "The image corruption of the variant (none: not a corruption)",
+                    f"{_DEFS}#robustness-sweeps",
+                ),
                 ("severity", "The corruption's severity, 1-5 (none: not a corruption)", f"{_DEFS}#robustness-sweeps"),
             )
         },
@@ -834,13 +964,26 @@ def column_descriptors(
     out: dict[str, dict[str, Any] | None] = {}
     for key in keys:
         d = describe(key, convention=conv, collision_convention=cc, miss_threshold=miss_threshold)
-        if table_name in ("input_ablations", "baseline_gains", "robustness", "visual_reliance") and key.endswith("_ci95") \
-                and d is not None:
+        if (
+            table_name in ("input_ablations", "baseline_gains", "robustness", "visual_reliance")
+            and key.endswith("_ci95")
+            and d is not None
+        ):
             # these tables' intervals are of the paired difference (lightemma.evaluation.ablations): any sign
-            base = describe(key[: -len("_ci95")], convention=conv, collision_convention=cc, miss_threshold=miss_threshold)
+            base = describe(
+                key[: -len("_ci95")], convention=conv, collision_convention=cc, miss_threshold=miss_threshold
+            )
             if base is not None:
-                d = _d("ci95@scene_bootstrap/1", f"95 % scene-level bootstrap interval of the paired difference of {base.id}",
-                       "interval", base.unit, (None, None), None, "lightemma (cluster bootstrap over scenes)", _U)
+                d = _d(
+                    "ci95@scene_bootstrap/1",
+                    f"95 % scene-level bootstrap interval of the paired difference of {base.id}",
+                    "interval",
+                    base.unit,
+                    (None, None),
+                    None,
+                    "lightemma (cluster bootstrap over scenes)",
+                    _U,
+                )
         entry = d.to_dict() if d is not None else None
         out[key] = entry
         if entry is not None and key in MAP_KEYS and maps is not None:
@@ -1011,8 +1154,9 @@ def map_line(evaluation: Any) -> str | None:
     if block["drivable_area"] is None:
         return None
     version = block["expansion_version"]
-    return (f"Maps: drivable area {block['drivable_area']}, "
-            + (f"map expansion {version}" if version else "no map expansion (base map masks carry no version)"))
+    return f"Maps: drivable area {block['drivable_area']}, " + (
+        f"map expansion {version}" if version else "no map expansion (base map masks carry no version)"
+    )
 
 
 # ------------------------------------------------------------------------------------------------------- reading back

@@ -44,10 +44,15 @@ from lightemma.runs.store import read_run
 #: the JSON / row keys of the audit (rates in [0, 1])
 KEYS: tuple[str, ...] = ("consistent", "contradicts", "intent_unknown", "intent_accuracy")
 #: every key an explanations row has
-ROW_KEYS: tuple[str, ...] = (*KEYS, *(f"{k}_ci95" for k in KEYS), *(f"{k}_na" for k in KEYS), "explanation_frames",
-                             # the described objects (lightemma.evaluation.object_audit.ROW_KEYS)
-                             *(f"{k}{s}" for k in ("hallucinated_pedestrian", "missed_pedestrian")
-                               for s in ("", "_ci95", "_na")), "object_frames")
+ROW_KEYS: tuple[str, ...] = (
+    *KEYS,
+    *(f"{k}_ci95" for k in KEYS),
+    *(f"{k}_na" for k in KEYS),
+    "explanation_frames",
+    # the described objects (lightemma.evaluation.object_audit.ROW_KEYS)
+    *(f"{k}{s}" for k in ("hallucinated_pedestrian", "missed_pedestrian") for s in ("", "_ci95", "_na")),
+    "object_frames",
+)
 #: the ablations whose stated intents are compared with the full run's
 INTENT_ABLATIONS: tuple[str, ...] = ("no-image", "blank-image")
 NO_TEXTS = "no stage-2 texts (a baseline, or a run without them)"  # a baseline's placeholder texts are none
@@ -100,9 +105,13 @@ class ExplanationResult:
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able: the rules, the thresholds, each model's row (by label) and the ablation rows."""
-        return {"rules": INTENT_RULES, "thresholds": Thresholds().to_dict(), "rows": self.rows,
-                "ablations": self.ablations,
-                "objects": {"rules": OBJECT_RULES, "range_m": RANGE_M, "classes": self.object_classes}}
+        return {
+            "rules": INTENT_RULES,
+            "thresholds": Thresholds().to_dict(),
+            "rows": self.rows,
+            "ablations": self.ablations,
+            "objects": {"rules": OBJECT_RULES, "range_m": RANGE_M, "classes": self.object_classes},
+        }
 
 
 def says_stop_drives_on(audit: RunAudit) -> np.ndarray:
@@ -124,14 +133,22 @@ def _audit(run: Any, keep: set[str]) -> RunAudit:
     idx = np.array(rows, dtype=np.intp)
     c = rc.consistency
     has_text = np.array([c.stated.reason[i] != "no stage-2 text" for i in rows], dtype=bool)
-    return RunAudit([rc.frame_ids[i] for i in rows], rc.scenes[idx] if len(idx) else np.zeros(0, dtype=object),
-                    c.verdict[idx], [c.reason[i] for i in rows], c.stated.longitudinal[idx], c.stated.lateral[idx],
-                    has_text,
-                    c.longitudinal[idx], [c.stated.reason[i] for i in rows])
+    return RunAudit(
+        [rc.frame_ids[i] for i in rows],
+        rc.scenes[idx] if len(idx) else np.zeros(0, dtype=object),
+        c.verdict[idx],
+        [c.reason[i] for i in rows],
+        c.stated.longitudinal[idx],
+        c.stated.lateral[idx],
+        has_text,
+        c.longitudinal[idx],
+        [c.stated.reason[i] for i in rows],
+    )
 
 
-def _truth(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[str] | None,
-           version: str | None) -> None:
+def _truth(
+    audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[str] | None, version: str | None
+) -> None:
     """Fill each audit's ``truth_verdict`` from its dataset's frames (loaded once per dataset), or its
     ``truth_reason``."""
     wanted: dict[tuple[str, str], set[str]] = {}
@@ -146,8 +163,9 @@ def _truth(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[
     loaded: dict[tuple[str, str], Any] = {}
     for ds, scenes in wanted.items():
         try:
-            loaded[ds] = load_frames(ds[0], ds[1], split="all", scenes=sorted(scenes), window="full",
-                                     on_missing_image="keep")
+            loaded[ds] = load_frames(
+                ds[0], ds[1], split="all", scenes=sorted(scenes), window="full", on_missing_image="keep"
+            )
         except Exception as exc:  # an unreadable dataset: every run on it is n/a with the reason
             loaded[ds] = f"the dataset {ds[0]} ({ds[1]}) cannot be read: {exc}"
     for label, ds in where.items():
@@ -168,9 +186,11 @@ def _truth(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[
             off = np.abs(recorded - fs.gt_positions[rows]).max(axis=(1, 2)) if len(rows) else np.zeros(0)
         bad = ~(off <= GT_TOLERANCE_M)
         if bad.any():
-            audit.truth_reason = (f"the run's ground truth differs from {ds[0]} ({ds[1]}) at {int(bad.sum())} "
-                                  "frame(s), "
-                                  f"e.g. {audit.frame_ids[int(np.argmax(bad))]}: another dataset?")
+            audit.truth_reason = (
+                f"the run's ground truth differs from {ds[0]} ({ds[1]}) at {int(bad.sum())} "
+                "frame(s), "
+                f"e.g. {audit.frame_ids[int(np.argmax(bad))]}: another dataset?"
+            )
             continue
         blank = [""] * len(rows)
         stated = Intents(audit.stated_longitudinal, audit.stated_lateral, audit.stated_reason, blank, blank)
@@ -201,8 +221,9 @@ def _rates(audit: RunAudit, label: str, resampling: Resampling) -> dict[str, Any
     return row
 
 
-def _ablations(entries: Sequence[tuple[str, Any, np.ndarray]], audits: dict[str, RunAudit],
-               resampling: Resampling) -> list[dict[str, Any]]:
+def _ablations(
+    entries: Sequence[tuple[str, Any, np.ndarray]], audits: dict[str, RunAudit], resampling: Resampling
+) -> list[dict[str, Any]]:
     full: dict[tuple[Any, ...], list[str]] = {}
     for label, run, _ in entries:
         if run.info.inputs == "full":
@@ -216,18 +237,29 @@ def _ablations(entries: Sequence[tuple[str, Any, np.ndarray]], audits: dict[str,
             continue
         a, b = audits[candidates[0]], audits[label]
         in_b = {fid: i for i, fid in enumerate(b.frame_ids)}
-        pairs = [(i, in_b[fid]) for i, fid in enumerate(a.frame_ids)
-                 if fid in in_b and a.has_text[i] and b.has_text[in_b[fid]]]
+        pairs = [
+            (i, in_b[fid])
+            for i, fid in enumerate(a.frame_ids)
+            if fid in in_b and a.has_text[i] and b.has_text[in_b[fid]]
+        ]
         ia = np.array([p for p, _ in pairs], dtype=np.intp)
         ib = np.array([q for _, q in pairs], dtype=np.intp)
-        row: dict[str, Any] = {"model": candidates[0], "ablation": run.info.inputs, "ablated": label,
-                               "frames": len(pairs),
-                               "intent_changed": None, "intent_changed_ci95": None, "intent_changed_na": None}
+        row: dict[str, Any] = {
+            "model": candidates[0],
+            "ablation": run.info.inputs,
+            "ablated": label,
+            "frames": len(pairs),
+            "intent_changed": None,
+            "intent_changed_ci95": None,
+            "intent_changed_na": None,
+        }
         if not pairs:
             row["intent_changed_na"] = "no frame with a stage-2 text in both runs"
         else:
-            changed = ((a.stated_longitudinal[ia] != b.stated_longitudinal[ib])
-                       | (a.stated_lateral[ia] != b.stated_lateral[ib])).astype(np.float64)
+            changed = (
+                (a.stated_longitudinal[ia] != b.stated_longitudinal[ib])
+                | (a.stated_lateral[ia] != b.stated_lateral[ib])
+            ).astype(np.float64)
             row["intent_changed"] = float(changed.mean())
             groups.append((changed, a.scenes[ia]))
             keys.append(f"intent-changed:{candidates[0]}|{label}")
@@ -241,8 +273,9 @@ def _ablations(entries: Sequence[tuple[str, Any, np.ndarray]], audits: dict[str,
     return rows
 
 
-def _objects(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[str] | None,
-             version: str | None) -> dict[str, Any]:
+def _objects(
+    audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLike[str] | None, version: str | None
+) -> dict[str, Any]:
     """Per label the described-objects audit (:func:`lightemma.evaluation.object_audit.audit_run`) of the audited
     frames: stage-1 texts (``scene_text``) of the run's records against the annotations of its dataset (loaded
     once per dataset), or n/a with the reason."""
@@ -257,16 +290,23 @@ def _objects(audits: dict[str, tuple[Any, RunAudit]], dataroot: str | os.PathLik
     out = {}
     for label, (run, audit) in audits.items():
         records = read_run(run.info.run_dir).records
-        texts = [r.get("scene_text") if isinstance(r.get("scene_text"), str) else None
-                 for r in (records.get(fid, {}) for fid in audit.frame_ids)]
+        texts = [
+            r.get("scene_text") if isinstance(r.get("scene_text"), str) else None
+            for r in (records.get(fid, {}) for fid in audit.frame_ids)
+        ]
         ds = where[label]
         out[label] = audit_run(audit.frame_ids, audit.scenes, texts, ds if isinstance(ds, str) else loaded[ds])
     return out
 
 
-def evaluate_explanations(entries: Sequence[tuple[str, Any, np.ndarray]], resampling: Resampling, *,
-                          dataroot: str | os.PathLike[str] | None = None, version: str | None = None,
-                          only: set[str] | None = None) -> ExplanationResult:
+def evaluate_explanations(
+    entries: Sequence[tuple[str, Any, np.ndarray]],
+    resampling: Resampling,
+    *,
+    dataroot: str | os.PathLike[str] | None = None,
+    version: str | None = None,
+    only: set[str] | None = None,
+) -> ExplanationResult:
     """The audit of every run: ``entries`` are (label, :class:`~lightemma.evaluation.loading.RunData`, scored rows) as
     :func:`lightemma.evaluation.core.evaluate_loaded` builds them; ``only`` restricts every run to those frame ids
     (``--common``). The ground truth comes from ``dataroot``/``version`` (default: each run's manifest's dataset).
@@ -288,8 +328,13 @@ def evaluate_explanations(entries: Sequence[tuple[str, Any, np.ndarray]], resamp
     object_row, object_classes = object_rows(objects, resampling, baselines)
     for label, row in rows.items():
         row.update(object_row[label])
-    result = ExplanationResult(rows, _ablations(entries, {k: a for k, (_, a) in audits.items()}, resampling),
-                               {k: a for k, (_, a) in audits.items()}, objects=objects, object_classes=object_classes)
+    result = ExplanationResult(
+        rows,
+        _ablations(entries, {k: a for k, (_, a) in audits.items()}, resampling),
+        {k: a for k, (_, a) in audits.items()},
+        objects=objects,
+        object_classes=object_classes,
+    )
     for label, row in rows.items():
         reason = row.get("intent_accuracy_na")
         if reason and row.get("consistent_na") is None and not reason.startswith("no dataroot"):

@@ -46,15 +46,21 @@ class RunData:
     trajectory: np.ndarray  # (N, 6, 2), NaN where the run has no valid prediction
     gt_positions: np.ndarray  # (N, 6, 2)
     status: np.ndarray  # (N,) int8: 0 ok, 1 corrected, 2 failed, -1 unknown
-    first_status: np.ndarray  # (N,) int8: status of the first received answer; -2 none received (API errors), -1 unknown
+    first_status: (
+        np.ndarray
+    )  # (N,) int8: status of the first received answer; -2 none received (API errors), -1 unknown
     seconds: np.ndarray  # (N,) float64, NaN unknown
     input_tokens: np.ndarray
     output_tokens: np.ndarray
     cost_cents: np.ndarray
-    cached_input_tokens: np.ndarray | None = None  # (N,) float64 of input_tokens served from a prompt cache, NaN unknown
+    cached_input_tokens: np.ndarray | None = (
+        None  # (N,) float64 of input_tokens served from a prompt cache, NaN unknown
+    )
     history_actions: np.ndarray | None = None  # (N, 6, 2) with details=True
     actions: np.ndarray | None = None  # (N, 6, 2) predicted, with details=True
-    failure: np.ndarray | None = None  # (N,) int8 outcome code (definitions.OUTCOMES): why a frame is not scored (0: it is)
+    failure: np.ndarray | None = (
+        None  # (N,) int8 outcome code (definitions.OUTCOMES): why a frame is not scored (0: it is)
+    )
     scene_index: np.ndarray | None = None  # (N,) int32 into scene_names
     scene_names: list[str] = field(default_factory=list)
     caught_implausible: int = 0  # frames evaluation found implausible that the run had not marked
@@ -83,7 +89,11 @@ class RunData:
 
     def outcomes(self, rows: np.ndarray | None = None) -> dict[str, int]:
         """Frames (of ``rows``, default all) scored / failed / implausible / lost to API errors."""
-        failure = self.failure if self.failure is not None else np.where(self.status == STATUS_CODES["failed"], OUTCOME_CODES["format"], 0)
+        failure = (
+            self.failure
+            if self.failure is not None
+            else np.where(self.status == STATUS_CODES["failed"], OUTCOME_CODES["format"], 0)
+        )
         valid = self.valid
         if rows is not None:
             failure, valid = failure[rows], valid[rows]
@@ -98,15 +108,19 @@ class RunData:
         return {fid: i for i, fid in enumerate(self.frame_ids)}
 
 
-
-
 def _read_records(run_dir: Path, parse: ParseDefinition | None) -> RawColumns:
     """Stream ``frames.jsonl`` into :class:`~lightemma.runs.columns.RawColumns` (re-parsed under ``parse`` when given)."""
     return read_columns(run_dir, None if parse is None else (lambda records: rescored(records, parse)))
 
 
-def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: ParseDefinition | None = None,
-             keep_implausible: bool = False, sidecar: bool = True) -> RunData:
+def load_run(
+    run_dir: str | os.PathLike[str],
+    *,
+    details: bool = False,
+    parse: ParseDefinition | None = None,
+    keep_implausible: bool = False,
+    sidecar: bool = True,
+) -> RunData:
     """Read one run directory into :class:`RunData`, streaming ``frames.jsonl``.
 
     ``details=True`` also keeps history and predicted actions (for scenario
@@ -140,12 +154,27 @@ def load_run(run_dir: str | os.PathLike[str], *, details: bool = False, parse: P
         raw = _read_records(run_dir, parse)
         if key is not None and key_unchanged(run_dir, key):  # not appended to while it was read
             write_sidecar(run_dir, raw, key)
-    return _assemble(info, raw, details=details, definition=definition, rescored_=parse is not None, limits=limits,
-                     recorded_set=recorded_set)
+    return _assemble(
+        info,
+        raw,
+        details=details,
+        definition=definition,
+        rescored_=parse is not None,
+        limits=limits,
+        recorded_set=recorded_set,
+    )
 
 
-def _assemble(info: RunInfo, raw: RawColumns, *, details: bool, definition: ParseDefinition, rescored_: bool,
-              limits: Plausibility, recorded_set: list[str] | None) -> RunData:
+def _assemble(
+    info: RunInfo,
+    raw: RawColumns,
+    *,
+    details: bool,
+    definition: ParseDefinition,
+    rescored_: bool,
+    limits: Plausibility,
+    recorded_set: list[str] | None,
+) -> RunData:
     """:class:`RunData` from all records' columns: the frame set, usable ground truth, last record wins."""
     cols = raw.columns
     ids = raw.frame_ids
@@ -214,7 +243,9 @@ def _assemble(info: RunInfo, raw: RawColumns, *, details: bool, definition: Pars
     gt = take(col("gt"))
     bad += int((~np.isfinite(gt).all(axis=(1, 2))).sum())
     status = take(col("status"))
-    failure, caught = final_failure(take(col("failure")), status == STATUS_CODES["failed"], trajectory, take(gate), limits)
+    failure, caught = final_failure(
+        take(col("failure")), status == STATUS_CODES["failed"], trajectory, take(gate), limits
+    )
     data = RunData(
         info=info,
         frame_ids=frame_ids,
@@ -256,11 +287,15 @@ def _warnings(data: RunData) -> list[str]:
     if data.truncated_tail:
         out.append(f"{where}: ignored a truncated last line (the run was interrupted)")
     if data.corrupt_lines:
-        out.append(f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl"
-                   + (f" ({data.corrupt_example})" if data.corrupt_example else ""))
+        out.append(
+            f"{where}: skipped {data.corrupt_lines} corrupt line(s) of frames.jsonl"
+            + (f" ({data.corrupt_example})" if data.corrupt_example else "")
+        )
     if data.bad_records:
-        out.append(f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions: 6 pairs of "
-                   f"finite numbers within {MAX_POSITION_M:g} m)")
+        out.append(
+            f"{where}: skipped {data.bad_records} record(s) without usable ground truth (gt_positions: 6 pairs of "
+            f"finite numbers within {MAX_POSITION_M:g} m)"
+        )
     if data.caught_implausible:
         lim = data.plausibility
         out.append(
@@ -268,14 +303,20 @@ def _warnings(data: RunData) -> list[str]:
             f"{lim.max_speed:g} m/s, |curvature| ≤ {lim.max_curvature:g} 1/m) without being marked; counted as implausible, not scored"
         )
     if data.foreign_records:
-        out.append(f"{where}: dropped {data.foreign_records} record(s) whose frame id is not in the run's frame set "
-                   f"(frame_ids.txt), e.g. {data.foreign_example!r}")
+        out.append(
+            f"{where}: dropped {data.foreign_records} record(s) whose frame id is not in the run's frame set "
+            f"(frame_ids.txt), e.g. {data.foreign_example!r}"
+        )
     if not data.info.complete:
-        out.append(f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far")
+        out.append(
+            f"{where}: run still in progress or interrupted (no finished_at); evaluating the {len(data)} frame(s) finished so far"
+        )
     elif data.frame_set_size is not None and len(data) + data.bad_records < data.frame_set_size:
         missing = data.frame_set_size - len(data) - data.bad_records
-        out.append(f"{where}: the run is marked finished but {missing} of its {data.frame_set_size} frame(s) have no record in "
-                   f"frames.jsonl (lines lost?); evaluating the {len(data)} recorded; lightemma run --resume {where} runs the rest")
+        out.append(
+            f"{where}: the run is marked finished but {missing} of its {data.frame_set_size} frame(s) have no record in "
+            f"frames.jsonl (lines lost?); evaluating the {len(data)} recorded; lightemma run --resume {where} runs the rest"
+        )
     if not data.frame_ids:
         out.append(f"{where}: no frames to evaluate")
     return out
@@ -322,8 +363,10 @@ def discover_runs(paths: Iterable[str | os.PathLike[str]]) -> tuple[list[Path], 
                     with suppress(OSError, RunStoreError):
                         held = find_run_dirs(link)
                         if held:
-                            warnings.append(f"left out {printable(link)}: a symbolic link to {printable(os.readlink(link))} holding "
-                                            f"{len(held)} run(s), not followed; give it by its own path to include it")
+                            warnings.append(
+                                f"left out {printable(link)}: a symbolic link to {printable(os.readlink(link))} holding "
+                                f"{len(held)} run(s), not followed; give it by its own path to include it"
+                            )
     found = expand_run_dirs(given)
     named = {Path(os.path.abspath(p)) for p in given if (p / MANIFEST_FILE).is_file()}
     dirs: list[Path] = []

@@ -17,8 +17,8 @@ from datetime import datetime
 from pathlib import Path
 from typing import Any
 
-from lightemma.models.names import FAMILIES, infer_family, known_model
 from lightemma.frames.model import SYNTH_MARKER
+from lightemma.models.names import FAMILIES, infer_family, known_model
 from lightemma.runs.store import read_manifest
 
 
@@ -132,7 +132,12 @@ def _family(manifest: Mapping[str, Any], model: str, known: Any) -> str:
 
 def _gpus(manifest: Mapping[str, Any]) -> int | None:
     """GPUs the run used: the backend's report, else the registry's (0 means none: an API)."""
-    for value in (manifest.get("gpus"), _get(manifest, "backend", "gpus"), _get(manifest, "backend_info", "gpus"), _get(manifest, "model_info", "gpus")):
+    for value in (
+        manifest.get("gpus"),
+        _get(manifest, "backend", "gpus"),
+        _get(manifest, "backend_info", "gpus"),
+        _get(manifest, "model_info", "gpus"),
+    ):
         gpus = _as_int(value)
         if gpus:
             return gpus
@@ -199,5 +204,9 @@ def _batch_turnaround(manifest: Mapping[str, Any]) -> float | None:
     for session in manifest.get("sessions") or []:
         report = session.get("batch") if isinstance(session, Mapping) else None
         if isinstance(report, Mapping):
-            turns += [float(t) for t in report.get("turnaround_s") or [] if isinstance(t, (int, float)) and not isinstance(t, bool)]
+            turns += [
+                float(t)
+                for t in report.get("turnaround_s") or []
+                if isinstance(t, (int, float)) and not isinstance(t, bool)
+            ]
     return sum(turns) / len(turns) if turns else None

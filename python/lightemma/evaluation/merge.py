@@ -52,13 +52,17 @@ def _frame_set(path: Path, doc: dict[str, Any]) -> str:
     names = {u for u in used if u is not None}  # all of used: None was ruled out above
     if len(names) != 1:
         raise _fail(
-            path, None, "provenance.frame_sets",
+            path,
+            None,
+            "provenance.frame_sets",
             f"its runs cover {len(names)} frame sets ({', '.join(sorted(names))}); "
             "only evaluations of one frame set merge",
         )
     if doc.get("common"):
         raise _fail(
-            path, None, "common",
+            path,
+            None,
+            "common",
             "scored with --common (on the frames common to its own runs); evaluate without --common to merge",
         )
     return next(iter(names))
@@ -66,13 +70,13 @@ def _frame_set(path: Path, doc: dict[str, Any]) -> str:
 
 def _check_tables(path: Path, doc: dict[str, Any]) -> None:
     if "paper" in doc["provenance"]:
-        raise _fail(
-            path, None, "provenance.paper", "has the paper's rows (--with-paper); evaluate without it to merge"
-        )
+        raise _fail(path, None, "provenance.paper", "has the paper's rows (--with-paper); evaluate without it to merge")
     for t, table in enumerate(doc["tables"]):
         if not _PER_RUN.match(str(table["name"])):
             raise _fail(
-                path, None, f"tables[{t}] ({table['name']})",
+                path,
+                None,
+                f"tables[{t}] ({table['name']})",
                 "compares runs within this file (paired comparisons, generations, ablations); "
                 "evaluate without --pairwise to merge",
             )
@@ -98,8 +102,12 @@ def merge_documents(paths: Sequence[str | Path]) -> dict[str, Any]:
         for run in doc["provenance"]["runs"]:
             label = run.get("model")
             if label in labels:
-                raise _fail(labels[label], path, "provenance.runs[].model",
-                            f"model {label!r} is in both (each run is merged once)")
+                raise _fail(
+                    labels[label],
+                    path,
+                    "provenance.runs[].model",
+                    f"model {label!r} is in both (each run is merged once)",
+                )
             labels[label] = path
     for (path, doc), fs in zip(docs[1:], frame_sets[1:]):
         if fs != frame_set:
@@ -108,8 +116,12 @@ def merge_documents(paths: Sequence[str | Path]) -> dict[str, Any]:
             if doc.get(key) != first.get(key):
                 raise _fail(first_path, path, key, f"{first.get(key)!r} is not {doc.get(key)!r}")
         if doc["provenance"]["miss_threshold_m"] != first["provenance"]["miss_threshold_m"]:
-            raise _fail(first_path, path, "provenance.miss_threshold_m",
-                        f"{first['provenance']['miss_threshold_m']!r} is not {doc['provenance']['miss_threshold_m']!r}")
+            raise _fail(
+                first_path,
+                path,
+                "provenance.miss_threshold_m",
+                f"{first['provenance']['miss_threshold_m']!r} is not {doc['provenance']['miss_threshold_m']!r}",
+            )
         other = [t["name"] for t in doc["tables"]]
         if other != names:
             raise _fail(first_path, path, "tables", f"tables {', '.join(names)} are not {', '.join(other)}")
@@ -121,8 +133,12 @@ def merge_documents(paths: Sequence[str | Path]) -> dict[str, Any]:
                     raise _fail(first_path, path, f"columns.{name}.{key}", f"only in {only}")
                 if a[key] != b[key]:
                     differs = next(k for k in a[key] if a[key].get(k) != b[key].get(k))
-                    raise _fail(first_path, path, f"columns.{name}.{key}.{differs}",
-                                f"{a[key].get(differs)!r} is not {b[key].get(differs)!r}")
+                    raise _fail(
+                        first_path,
+                        path,
+                        f"columns.{name}.{key}.{differs}",
+                        f"{a[key].get(differs)!r} is not {b[key].get(differs)!r}",
+                    )
 
     tables = []
     for i, name in enumerate(names):
@@ -137,8 +153,12 @@ def merge_documents(paths: Sequence[str | Path]) -> dict[str, Any]:
             if reference is None:
                 reference = refs
             elif refs != reference:
-                raise _fail(first_path, path, f"tables[{i}] ({name}) reference rows",
-                            "the ground truth's rows differ (other frames scored or other map / annotations)")
+                raise _fail(
+                    first_path,
+                    path,
+                    f"tables[{i}] ({name}) reference rows",
+                    "the ground truth's rows differ (other frames scored or other map / annotations)",
+                )
             notes += [n for n in table.get("notes", []) if n not in notes]
         title = first["tables"][i]["title"]
         rows = run_rows + (reference or [])

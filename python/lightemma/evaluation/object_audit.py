@@ -58,8 +58,16 @@ CATEGORY_CLASSES: tuple[tuple[str, str, bool], ...] = (
 )
 #: how far (m, horizontal, from the ego) a box of each class counts as in view: the nuScenes detection benchmark's
 #: class ranges (nuscenes/eval/detection/configs/detection_cvpr_2019.json ``class_range``)
-RANGE_M: dict[str, float] = {"pedestrian": 40.0, "cyclist": 40.0, "motorcycle": 40.0, "car": 50.0, "truck": 50.0,
-                             "bus": 50.0, "traffic_cone": 30.0, "barrier": 30.0}
+RANGE_M: dict[str, float] = {
+    "pedestrian": 40.0,
+    "cyclist": 40.0,
+    "motorcycle": 40.0,
+    "car": 50.0,
+    "truck": 50.0,
+    "bus": 50.0,
+    "traffic_cone": 30.0,
+    "barrier": 30.0,
+}
 #: visibility levels of at least 40 % (nuScenes' ``visibility`` table); v0-40 and unknown levels are not in view
 VISIBLE_LEVELS: frozenset[str] = frozenset({"v40-60", "v60-80", "v80-100"})
 #: a corner counts in the image when it projects inside it and lies this far (m) in front of the camera
@@ -135,8 +143,11 @@ def front_objects(dataroot: str | os.PathLike[str], version: str, samples: set[s
     if not out.annotated:
         return out
     channel_of_sensor = {s["token"]: s.get("channel") for s in read_table(root, version, "sensor")}
-    calib = {c["token"]: c for c in read_table(root, version, "calibrated_sensor")
-             if channel_of_sensor.get(_ref(c, "sensor_token")) == "CAM_FRONT"}
+    calib = {
+        c["token"]: c
+        for c in read_table(root, version, "calibrated_sensor")
+        if channel_of_sensor.get(_ref(c, "sensor_token")) == "CAM_FRONT"
+    }
     front: dict[str, dict[str, Any]] = {}
     for sd in read_table(root, version, "sample_data"):
         st = _ref(sd, "sample_token")
@@ -173,8 +184,10 @@ def front_objects(dataroot: str | os.PathLike[str], version: str, samples: set[s
             continue
         cameras[st] = (np.asarray(ego_t), r_ego, np.asarray(cam_t), r_cam, k, size[0], size[1])
     categories = {c["token"]: str(c.get("name", "")) for c in read_table(root, version, "category")}
-    instance_classes = {i["token"]: classes_of(categories.get(_ref(i, "category_token") or "", ""))
-                        for i in read_table(root, version, "instance")}
+    instance_classes = {
+        i["token"]: classes_of(categories.get(_ref(i, "category_token") or "", ""))
+        for i in read_table(root, version, "instance")
+    }
     levels = {v["token"]: v.get("level") for v in read_table(root, version, "visibility")}
     n = len(CHECKED)
     states = {st: np.full(n, ABSENT, dtype=np.int8) for st in cameras}
@@ -192,8 +205,10 @@ def front_objects(dataroot: str | os.PathLike[str], version: str, samples: set[s
             centre = _finite(ann.get("translation"), 3)
             dims = _finite(ann.get("size"), 3)
             if centre is None or dims is None or dims[2] <= 0:
-                raise DatasetError(f"{where} {ann['token']}: translation and size must be three finite numbers, "
-                                   f"height > 0 (got {ann.get('translation')!r}, {ann.get('size')!r})")
+                raise DatasetError(
+                    f"{where} {ann['token']}: translation and size must be three finite numbers, "
+                    f"height > 0 (got {ann.get('translation')!r}, {ann.get('size')!r})"
+                )
             rot = quaternion_to_matrix(unit_quaternion(ann.get("rotation")))
         except (DatasetError, ValueError) as exc:
             cameras.pop(st)
@@ -245,8 +260,9 @@ def object_check(mentions: np.ndarray, states: np.ndarray) -> ObjectCheck:
     m = np.asarray(mentions).astype(str)
     s = np.asarray(states)
     if m.ndim != 2 or m.shape[1] != len(OBJECT_CLASSES) or s.shape != (m.shape[0], len(CHECKED)):
-        raise ValueError(f"mentions must be (N, {len(OBJECT_CLASSES)}) and states (N, {len(CHECKED)}), "
-                         f"got {m.shape} and {s.shape}")
+        raise ValueError(
+            f"mentions must be (N, {len(OBJECT_CLASSES)}) and states (N, {len(CHECKED)}), got {m.shape} and {s.shape}"
+        )
     cols = [OBJECT_CLASSES.index(c) for c in CHECKED]
     mc = m[:, cols]
     readable = (mc != UNKNOWN).all(axis=1)
@@ -284,8 +300,9 @@ ROW_KEYS: tuple[str, ...] = ("hallucinated_pedestrian", "missed_pedestrian")
 CLASS_KEYS: tuple[str, ...] = ("mention_precision", "mention_recall")
 
 
-def audit_run(frame_ids: Sequence[str], scenes: np.ndarray, texts: Sequence[str | None],
-              front: FrontObjects | str) -> RunObjects:
+def audit_run(
+    frame_ids: Sequence[str], scenes: np.ndarray, texts: Sequence[str | None], front: FrontObjects | str
+) -> RunObjects:
     """The object audit of one run's frames (ids ``scene/sample_token``) from their stage-1 ``texts`` and the
     annotation states ``front`` (or the reason there are none)."""
     from lightemma.evaluation.safety import sample_token_of
@@ -306,9 +323,14 @@ def audit_run(frame_ids: Sequence[str], scenes: np.ndarray, texts: Sequence[str 
         if reason is None and not has.any():
             reason = next(iter(front.reasons.values()), "no frame with annotation states")
     check = object_check(mentions, states)
-    check = ObjectCheck(check.precision_eligible & has[:, None], check.recall_eligible & has[:, None],
-                        check.correct & has[:, None], check.hallucinated_pedestrian & has,
-                        check.missed_pedestrian & has, check.checked & has)
+    check = ObjectCheck(
+        check.precision_eligible & has[:, None],
+        check.recall_eligible & has[:, None],
+        check.correct & has[:, None],
+        check.hallucinated_pedestrian & has,
+        check.missed_pedestrian & has,
+        check.checked & has,
+    )
     return RunObjects(list(frame_ids), scenes, mentions, states, has, check, reason)
 
 
@@ -316,8 +338,9 @@ def _interval(pair: np.ndarray) -> list[float] | None:
     return [float(pair[0]), float(pair[1])] if np.isfinite(pair).all() else None
 
 
-def object_rows(audits: Mapping[str, RunObjects], resampling: Any, no_texts: Mapping[str, str]) -> tuple[
-        dict[str, dict[str, Any]], list[dict[str, Any]]]:
+def object_rows(
+    audits: Mapping[str, RunObjects], resampling: Any, no_texts: Mapping[str, str]
+) -> tuple[dict[str, dict[str, Any]], list[dict[str, Any]]]:
     """Per model label its tag rates (:data:`ROW_KEYS` with ``_ci95`` / ``_na``, ``object_frames``) and the
     "Described objects" rows (model × class: ``frames``, ``mentions``, ``in_view``, :data:`CLASS_KEYS` with ``_ci95``
     and ``_na``). ``no_texts``: label → why it has no stage-1 texts (a baseline): every value n/a with that reason."""
@@ -340,8 +363,10 @@ def object_rows(audits: Mapping[str, RunObjects], resampling: Any, no_texts: Map
                 row[f"{key}_na"] = why_none or "no frame with a readable description and annotation states"
         else:
             sel = c.checked
-            for key, tag in (("hallucinated_pedestrian", c.hallucinated_pedestrian),
-                             ("missed_pedestrian", c.missed_pedestrian)):
+            for key, tag in (
+                ("hallucinated_pedestrian", c.hallucinated_pedestrian),
+                ("missed_pedestrian", c.missed_pedestrian),
+            ):
                 values = tag[sel].astype(np.float64)
                 row[key] = float(values.mean())
                 groups.append((values, a.scenes[sel]))
@@ -350,9 +375,13 @@ def object_rows(audits: Mapping[str, RunObjects], resampling: Any, no_texts: Map
         rows[label] = row
         for j, cls in enumerate([*CHECKED, *UNCHECKABLE]):
             col = a.mentions[:, j] if len(a.mentions) else np.zeros(0, dtype=str)
-            crow: dict[str, Any] = {"model": label, "class": cls, "frames": frames,
-                                    "mentions": None if no_texts.get(label) else int((col == "affirmed").sum()),
-                                    "in_view": None}
+            crow: dict[str, Any] = {
+                "model": label,
+                "class": cls,
+                "frames": frames,
+                "mentions": None if no_texts.get(label) else int((col == "affirmed").sum()),
+                "in_view": None,
+            }
             for key in CLASS_KEYS:
                 crow.update({key: None, f"{key}_ci95": None, f"{key}_na": None})
             if cls in UNCHECKABLE:
@@ -363,11 +392,16 @@ def object_rows(audits: Mapping[str, RunObjects], resampling: Any, no_texts: Map
                     crow[f"{key}_na"] = why_none
             else:
                 crow["in_view"] = int((a.states[:, j] == PRESENT)[a.has_states].sum())
-                for key, eligible in (("mention_precision", c.precision_eligible[:, j]),
-                                      ("mention_recall", c.recall_eligible[:, j])):
+                for key, eligible in (
+                    ("mention_precision", c.precision_eligible[:, j]),
+                    ("mention_recall", c.recall_eligible[:, j]),
+                ):
                     if not eligible.any():
-                        crow[f"{key}_na"] = ("no affirmed mention of the class checkable against the annotations"
-                                             if key == "mention_precision" else "the class is never in view")
+                        crow[f"{key}_na"] = (
+                            "no affirmed mention of the class checkable against the annotations"
+                            if key == "mention_precision"
+                            else "the class is never in view"
+                        )
                         continue
                     values = c.correct[eligible, j].astype(np.float64)
                     crow[key] = float(values.mean())

@@ -82,7 +82,9 @@ def implausible_trajectory(trajectory: np.ndarray, limits: Plausibility) -> np.n
         return (np.hypot(trajectory[..., 0], trajectory[..., 1]) > reach).any(axis=1)
 
 
-def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarray, actions_gate: np.ndarray, limits: Plausibility) -> tuple[np.ndarray, np.ndarray]:
+def final_failure(
+    recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarray, actions_gate: np.ndarray, limits: Plausibility
+) -> tuple[np.ndarray, np.ndarray]:
     """Per frame, why it is not scored (an outcome code, :data:`lightemma.definitions.OUTCOMES`; 0 = scored if ground truth is usable).
 
     ``recorded`` holds the records' own codes (-1 when absent), ``failed`` whether
@@ -95,7 +97,9 @@ def final_failure(recorded: np.ndarray, failed: np.ndarray, trajectory: np.ndarr
     codes[unmarked & failed] = OUTCOME_CODES["format"]
     open_ = unmarked & ~failed
     finite = np.isfinite(trajectory).all(axis=(1, 2))
-    caught = open_ & (actions_gate | (finite & implausible_trajectory(np.where(finite[:, None, None], trajectory, 0.0), limits)))
+    caught = open_ & (
+        actions_gate | (finite & implausible_trajectory(np.where(finite[:, None, None], trajectory, 0.0), limits))
+    )
     codes[caught] = OUTCOME_CODES["implausible"]
     codes[open_ & ~caught & ~finite] = OUTCOME_CODES["format"]  # "ok" yet no usable trajectory
     return codes, caught

@@ -37,8 +37,14 @@ from lightemma.errors import DatasetError
 KEYS: tuple[str, ...] = ("pdms", "epdms", "epdms_map", "nc", "dac", "ddc", "tlc", "ep", "ttc", "lk", "c", "hc", "ec")
 AGGREGATE_KEYS: tuple[str, ...] = ("pdms", "epdms", "epdms_map")
 #: every key a planning row has: ``<key>``, ``<key>_ci95``, ``<key>_na`` per key, and the frame counts
-ROW_KEYS: tuple[str, ...] = (*KEYS, *(f"{k}_ci95" for k in KEYS), *(f"{k}_na" for k in KEYS), "planning_frames",
-                             "planning_map", "map_version")
+ROW_KEYS: tuple[str, ...] = (
+    *KEYS,
+    *(f"{k}_ci95" for k in KEYS),
+    *(f"{k}_na" for k in KEYS),
+    "planning_frames",
+    "planning_map",
+    "map_version",
+)
 GT_LABEL = "Ground truth (human)"
 #: earlier keyframes read per frame: 2 for the initial state, 4 for the 1.5 s of recorded past of history comfort
 HISTORY_KEYFRAMES = 4
@@ -51,8 +57,11 @@ TRAJECTORY_TOLERANCE_M = 1e-3
 CHUNK_FRAMES = 512
 _NO_DATAROOT = "no dataroot (pass --dataroot and --version)"
 #: reasons that are not worth a warning: said in every table (tlc) or the other aggregate is the score
-_QUIET = ("nuScenes has no traffic-light states", "annotations given: the score is epdms",
-          "no annotations (agents' boxes) for this version: see epdms_map")
+_QUIET = (
+    "nuScenes has no traffic-light states",
+    "annotations given: the score is epdms",
+    "no annotations (agents' boxes) for this version: see epdms_map",
+)
 
 
 @dataclass
@@ -72,7 +81,9 @@ class RunPlanning:
     map_kinds: list[str] = field(default_factory=list)  # drivable area behind the values: expansion, mask
     #: map key (``expansion:<location>``) -> the map expansion's version behind the values (safety.DrivableArea.version)
     map_versions: dict[str, str] = field(default_factory=dict)
-    path: np.ndarray | None = None  # (n, 31, 2) the simulated plans' x, y in their keyframes' ego frames (m), NaN where none
+    path: np.ndarray | None = (
+        None  # (n, 31, 2) the simulated plans' x, y in their keyframes' ego frames (m), NaN where none
+    )
 
 
 @dataclass
@@ -92,8 +103,9 @@ class PlanningResult:
     def shown(self) -> bool:
         """Whether the tables show the score: some run was read against a dataset, or some dataset could not be read
         (its n/a reason is news); runs without any dataroot give no table (their rows only say so)."""
-        return self.ground_truth is not None or any(rp.reason not in (None, _NO_DATAROOT) and not rp.values
-                                                    for rp in self.runs.values())
+        return self.ground_truth is not None or any(
+            rp.reason not in (None, _NO_DATAROOT) and not rp.values for rp in self.runs.values()
+        )
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-able: the headline aggregate, each model's row (by label) and the ground truth's row."""
@@ -164,8 +176,11 @@ def _frames(data: Any, tokens: list[str], scenes: list[str]) -> _Frames:
     for i, tok in enumerate(tokens):
         if tok not in data.poses:
             why = data.pose_reasons.get(tok)
-            reason[i] = (f"unusable CAM_FRONT ego pose: {why}" if why
-                         else f"no CAM_FRONT ego pose for sample {tok} in {data.version}")
+            reason[i] = (
+                f"unusable CAM_FRONT ego pose: {why}"
+                if why
+                else f"no CAM_FRONT ego pose for sample {tok} in {data.version}"
+            )
             continue
         pose[i] = data.poses[tok]
         earlier = []
@@ -179,20 +194,25 @@ def _frames(data: Any, tokens: list[str], scenes: list[str]) -> _Frames:
             interval[i] = (data.timestamps[tok] - data.timestamps[prev[i]]) / 1e6
         pts = np.array([data.poses[tok][:2]] + [e[:2] for e in earlier], dtype=np.float64)[::-1]  # oldest first
         local = to_ego_frame(pts[None], pose[i, None, :2], pose[i, 2:3])[0]
-        hist[i, -len(local):] = local
+        hist[i, -len(local) :] = local
         hist[i, -1] = 0.0  # exactly the origin
         stamps = [data.timestamps.get(k, np.nan) for k in [tok, *data.past.get(tok, [])[: len(earlier)]]]
-        hist_t[i, -len(local):] = np.array(stamps, dtype=np.float64)[::-1] / 1e6  # oldest first, as pts
+        hist_t[i, -len(local) :] = np.array(stamps, dtype=np.float64)[::-1] / 1e6  # oldest first, as pts
         if len(earlier) < 2:
-            reason[i] = (f"sample {tok} has {len(earlier)} earlier keyframe(s) with a pose; the initial ego state "
-                         "needs 2 (the first second of a scene)")
+            reason[i] = (
+                f"sample {tok} has {len(earlier)} earlier keyframe(s) with a pose; the initial ego state "
+                "needs 2 (the first second of a scene)"
+            )
         elif len(earlier) < HISTORY_KEYFRAMES:
-            past_reason[i] = (f"sample {tok} has {len(earlier)} earlier keyframe(s) with a pose; history comfort needs "
-                              f"{HISTORY_KEYFRAMES} (1.5 s of recorded past)")
+            past_reason[i] = (
+                f"sample {tok} has {len(earlier)} earlier keyframe(s) with a pose; history comfort needs "
+                f"{HISTORY_KEYFRAMES} (1.5 s of recorded past)"
+            )
         later = [t for t in data.future.get(tok, []) if t in data.poses]
         if len(later) < STEPS:
-            reason[i] = reason[i] or (f"sample {tok} has {len(later)} later keyframe(s) with a pose; the ground truth "
-                                      f"needs {STEPS}")
+            reason[i] = reason[i] or (
+                f"sample {tok} has {len(later)} later keyframe(s) with a pose; the ground truth needs {STEPS}"
+            )
             continue
         fut = np.array([data.poses[t] for t in later[:STEPS]], dtype=np.float64)
         gt[i, :, :2] = to_ego_frame(fut[None, :, :2], pose[i, None, :2], pose[i, 2:3])[0]
@@ -251,8 +271,9 @@ def _keyframe_boxes(data: Any, sample: str) -> tuple[np.ndarray, np.ndarray]:
     return (np.concatenate([agents, objects]) if len(objects) else agents), kinds
 
 
-def _agents(data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.ndarray],
-            ids: dict[str, int]) -> tuple[np.ndarray, dict[int, str]]:
+def _agents(
+    data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.ndarray], ids: dict[str, int]
+) -> tuple[np.ndarray, dict[int, str]]:
     """Boxes (len(idx), 7, A, 8) of the frames ``idx`` at their keyframe and the six later ones, tracked by instance
     (one slot per instance), with velocities from the track's neighbouring keyframes, the keyframe before included
     (central difference where both exist, else one-sided; NaN — a degenerate box, n/a — for a track seen at one
@@ -263,8 +284,14 @@ def _agents(data: Any, tokens: list[str], idx: np.ndarray, cache: dict[str, np.n
         tok = tokens[i]
         keys = [tok, *data.future.get(tok, [])[:STEPS]]
         bad_objects = getattr(data, "bad_objects", {})
-        refused = next((data.bad_boxes[k] if k in data.bad_boxes else bad_objects[k] for k in keys
-                        if k in data.bad_boxes or k in bad_objects), None)
+        refused = next(
+            (
+                data.bad_boxes[k] if k in data.bad_boxes else bad_objects[k]
+                for k in keys
+                if k in data.bad_boxes or k in bad_objects
+            ),
+            None,
+        )
         if refused is not None:
             bad[r] = f"a refused annotation: {refused}"
         if len(keys) < STEPS + 1:
@@ -349,11 +376,15 @@ def _plan_actions(run: Any, rows: np.ndarray) -> tuple[np.ndarray | None, str | 
     return np.asarray(actions, dtype=np.float64)[rows], None
 
 
-def _plans(entries: Sequence[tuple[str, Any, np.ndarray]], members: list[int], frames: _Frames,
-           position: dict[str, int], data: Any) -> _Plans:
-    from lightemma.planning.simulation import plan_poses, simulate
-
+def _plans(
+    entries: Sequence[tuple[str, Any, np.ndarray]],
+    members: list[int],
+    frames: _Frames,
+    position: dict[str, int],
+    data: Any,
+) -> _Plans:
     from lightemma.evaluation.safety import _recorded_pose_conflicts
+    from lightemma.planning.simulation import plan_poses, simulate
 
     runs, rows, fr, poses, reasons = [], [], [], [], []
     for m in members:
@@ -389,11 +420,15 @@ def _plans(entries: Sequence[tuple[str, Any, np.ndarray]], members: list[int], f
                     gap = float(np.max(np.abs(traj - p[j, :, :2]))) if np.isfinite(traj).all() else math.inf
                     gt_gap = float(np.max(np.abs(np.asarray(run.gt_positions[r]) - frames.gt_poses[f, :, :2])))
                     if not gap <= TRAJECTORY_TOLERANCE_M:
-                        reason = (f"the run's trajectory is {gap:.3g} m from the integration of its actions "
-                                  f"({integrator}): two readings of the plan disagree")
+                        reason = (
+                            f"the run's trajectory is {gap:.3g} m from the integration of its actions "
+                            f"({integrator}): two readings of the plan disagree"
+                        )
                     elif not gt_gap <= GT_TOLERANCE_M:
-                        reason = (f"the run's ground truth is {gt_gap:.3g} m from the dataroot's later poses of sample "
-                                  f"{fid.rsplit('/', 1)[-1]} (is the dataroot the dataset the run was made on?)")
+                        reason = (
+                            f"the run's ground truth is {gt_gap:.3g} m from the dataroot's later poses of sample "
+                            f"{fid.rsplit('/', 1)[-1]} (is the dataroot the dataset the run was made on?)"
+                        )
             reasons.append(reason)
     n = len(runs)
     frame = np.asarray(fr, dtype=np.int64)
@@ -404,8 +439,9 @@ def _plans(entries: Sequence[tuple[str, Any, np.ndarray]], members: list[int], f
     return _Plans(runs, rows, frame, states, reasons)
 
 
-def _comforts(states: np.ndarray, frame: np.ndarray, frames: _Frames, prev_row: list[int | None],
-              first_reason: list[str | None]) -> dict[str, tuple[np.ndarray, list[str | None]]]:
+def _comforts(
+    states: np.ndarray, frame: np.ndarray, frames: _Frames, prev_row: list[int | None], first_reason: list[str | None]
+) -> dict[str, tuple[np.ndarray, list[str | None]]]:
     """c, hc, ec of plans (ego frame states) with reasons; ``prev_row[i]``: the row of the plan of the same run at the
     previous keyframe, or None (``first_reason[i]`` says why)."""
     from lightemma.planning.simulation import MAX_INTERVAL, comfort, extended_comfort, history_comfort
@@ -436,9 +472,11 @@ def _comforts(states: np.ndarray, frame: np.ndarray, frames: _Frames, prev_row: 
         for (i, _), v in zip(pairs, value.tolist()):
             ec[i] = v
     out: dict[str, tuple[np.ndarray, list[str | None]]] = {
-        "c": (c, [None] * n), "hc": (hc, hc_reason), "ec": (ec, ec_reason)
+        "c": (c, [None] * n),
+        "hc": (hc, hc_reason),
+        "ec": (ec, ec_reason),
     }
-    for name, (v, why) in out.items():
+    for v, why in out.values():
         for i in np.flatnonzero(~np.isfinite(v)).tolist():
             if why[i] is None:
                 why[i] = "the plan's simulated states hold a NaN or infinity"
@@ -470,8 +508,9 @@ def _planning_map(area: Any, cache: dict[str, Any]) -> tuple[Any, str | None]:
 _KERNEL_BOX = re.compile(r"frame \d+ has a degenerate agent box \(step (\d+), slot (\d+)[^)]*\)")
 
 
-def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], members: list[int], ego: Any,
-                   map_cache: dict[str, Any]) -> tuple[dict[int, RunPlanning], dict[str, Any]]:
+def _score_dataset(
+    data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], members: list[int], ego: Any, map_cache: dict[str, Any]
+) -> tuple[dict[int, RunPlanning], dict[str, Any]]:
     """Score every run of ``members`` on one dataset; returns per entry its RunPlanning and the ground truth's values
     (``frame_ids``, ``values``, ``reasons``) on every frame of those runs."""
     from lightemma.planning.scores import drive_scores, interpolate_boxes, route_lanes
@@ -502,8 +541,10 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
             first.append("the first keyframe of its scene: no previous plan")
         elif p not in position or (plans.run[i], position[p]) not in at:
             prev_row.append(None)
-            first.append("no scored plan of this run at the previous keyframe (the first frame of the run's window, "
-                         "or that frame was not scored)")
+            first.append(
+                "no scored plan of this run at the previous keyframe (the first frame of the run's window, "
+                "or that frame was not scored)"
+            )
         else:
             prev_row.append(at[(plans.run[i], position[p])])
             first.append(None)
@@ -512,9 +553,15 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
     for f in range(f_count):
         p = frames.prev[f]
         gt_prev.append(position.get(p) if p is not None else None)
-        gt_first.append(None if gt_prev[-1] is not None else (
-            "the first keyframe of its scene: no previous plan" if p is None else
-            "the previous keyframe is not among the evaluated frames (the first frame of the window)"))
+        gt_first.append(
+            None
+            if gt_prev[-1] is not None
+            else (
+                "the first keyframe of its scene: no previous plan"
+                if p is None
+                else "the previous keyframe is not among the evaluated frames (the first frame of the window)"
+            )
+        )
     comfort_plan = _comforts(plans.states, plans.frame, frames, prev_row, first)
     comfort_gt = _comforts(gt_ego, np.arange(f_count), frames, gt_prev, gt_first)
     plan_global = _to_global(plans.states, frames.pose[plans.frame]) if n else plans.states
@@ -536,8 +583,11 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
     map_of = [""] * f_count  # the map key of a frame whose map layers were read
     versions: dict[str, str] = {}  # map key -> the expansion's version
     for key, fs in by_map.items():
-        area = data.areas.get(key, f"sample has no log/map in {data.version}") if key else \
-            f"sample has no log/map in {data.version}"
+        area = (
+            data.areas.get(key, f"sample has no log/map in {data.version}")
+            if key
+            else f"sample has no log/map in {data.version}"
+        )
         pmap, map_reason = _planning_map(area, map_cache)
         for f in fs:
             kind_of[f] = getattr(area, "kind", "") if map_reason is None else ""
@@ -546,14 +596,18 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
         if version:
             versions[key] = version
         for start in range(0, len(fs), CHUNK_FRAMES):
-            idx = np.asarray(fs[start:start + CHUNK_FRAMES], dtype=np.int64)
+            idx = np.asarray(fs[start : start + CHUNK_FRAMES], dtype=np.int64)
             local = {int(f): j for j, f in enumerate(idx.tolist())}
             rows = [i for f in idx.tolist() for i in plans_of_frame.get(f, [])]
             rows_a = np.asarray(rows, dtype=np.int64)
             gt_chunk = gt_global[idx]
             states = np.concatenate([plan_global[rows_a], gt_chunk]) if len(rows) else gt_chunk
-            frame = np.concatenate([np.array([local[int(plans.frame[i])] for i in rows], dtype=np.int64),
-                                    np.arange(len(idx), dtype=np.int64)])
+            frame = np.concatenate(
+                [
+                    np.array([local[int(plans.frame[i])] for i in rows], dtype=np.int64),
+                    np.arange(len(idx), dtype=np.int64),
+                ]
+            )
             h = gt_chunk[..., 2]
             centres = gt_chunk[..., :2] + ego.rear_axle_to_center * np.stack([np.cos(h), np.sin(h)], -1)
             bad: dict[int, str] = {}
@@ -569,13 +623,25 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
             c = np.concatenate([part("c", comfort_plan, rows_a), part("c", comfort_gt, idx)])
             hc = np.concatenate([part("hc", comfort_plan, rows_a), part("hc", comfort_gt, idx)])
             ec = np.concatenate([part("ec", comfort_plan, rows_a), part("ec", comfort_gt, idx)])
-            out = drive_scores(states, gt_chunk, frame=frame, agents=agents, map=pmap, frame_lanes=lanes,
-                               route=centres, centreline=centres, c=c, hc=hc, ec=ec, ego=ego)
+            out = drive_scores(
+                states,
+                gt_chunk,
+                frame=frame,
+                agents=agents,
+                map=pmap,
+                frame_lanes=lanes,
+                route=centres,
+                centreline=centres,
+                c=c,
+                hc=hc,
+                ec=ec,
+                ego=ego,
+            )
             targets = [*rows, *(-1 - idx).tolist()]  # a plan's row, or -1 - frame for the ground truth's
             for k in KEYS:
                 v = out.values[k]
                 values[k][rows_a] = v[: len(rows)]
-                gt_values[k][idx] = v[len(rows):]
+                gt_values[k][idx] = v[len(rows) :]
                 if k == "tlc":  # always n/a, one reason
                     for j, i in enumerate(targets):
                         if i < 0:
@@ -599,8 +665,12 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
                         why = _KERNEL_BOX.sub(bad[local[f]], why)
                     elif why is not None and "degenerate agent box" in why:
                         why = _KERNEL_BOX.sub(
-                            lambda mt: (f"an agent seen at one keyframe only has no velocity (step {mt.group(1)}, "
-                                        f"slot {mt.group(2)}) or a degenerate box"), why)
+                            lambda mt: (
+                                f"an agent seen at one keyframe only has no velocity (step {mt.group(1)}, "
+                                f"slot {mt.group(2)}) or a degenerate box"
+                            ),
+                            why,
+                        )
                     if is_gt:
                         gt_reasons[k][f] = why
                     else:
@@ -610,17 +680,24 @@ def _score_dataset(data: Any, entries: Sequence[tuple[str, Any, np.ndarray]], me
         _, run, scored = entries[m]
         order = np.flatnonzero(np.asarray(plans.run, dtype=np.int64) == m) if n else np.zeros(0, np.int64)
         sel = order.tolist()
-        per_run[m] = RunPlanning([run.frame_ids[r] for r in scored.tolist()], scored,
-                                 {k: values[k][order] for k in KEYS}, {k: [reasons[k][i] for i in sel] for k in KEYS},
-                                 plan_global[order] if n else np.zeros((0, 31, 11)),
-                                 map_kinds=sorted({kind_of[int(plans.frame[i])] for i in sel} - {""}),
-                                 map_versions={k: versions[k]
-                                               for k in sorted({map_of[int(plans.frame[i])] for i in sel})
-                                               if k in versions},
-                                 path=plans.states[order][..., :2] if n else np.zeros((0, 31, 2)))
-    gt = {"frame_ids": [fid_of[t] for t in tokens], "values": gt_values, "reasons": gt_reasons, "path": gt_ego[..., :2],
-          "map_kinds": sorted(set(kind_of) - {""}),
-          "map_versions": {k: versions[k] for k in sorted(set(map_of)) if k in versions}}
+        per_run[m] = RunPlanning(
+            [run.frame_ids[r] for r in scored.tolist()],
+            scored,
+            {k: values[k][order] for k in KEYS},
+            {k: [reasons[k][i] for i in sel] for k in KEYS},
+            plan_global[order] if n else np.zeros((0, 31, 11)),
+            map_kinds=sorted({kind_of[int(plans.frame[i])] for i in sel} - {""}),
+            map_versions={k: versions[k] for k in sorted({map_of[int(plans.frame[i])] for i in sel}) if k in versions},
+            path=plans.states[order][..., :2] if n else np.zeros((0, 31, 2)),
+        )
+    gt = {
+        "frame_ids": [fid_of[t] for t in tokens],
+        "values": gt_values,
+        "reasons": gt_reasons,
+        "path": gt_ego[..., :2],
+        "map_kinds": sorted(set(kind_of) - {""}),
+        "map_versions": {k: versions[k] for k in sorted(set(map_of)) if k in versions},
+    }
     return per_run, gt
 
 
@@ -665,8 +742,9 @@ def _warnings(rp: RunPlanning, label: str) -> list[str]:
     out = []
     for why, (keys, rows) in groups.items():
         first = rp.frame_ids[min(rows)]
-        out.append(f"{label}: planning score: {len(rows)} frame(s) have no {', '.join(keys)} (n/a): {why} "
-                   f"(e.g. {first})")
+        out.append(
+            f"{label}: planning score: {len(rows)} frame(s) have no {', '.join(keys)} (n/a): {why} (e.g. {first})"
+        )
     return out
 
 
@@ -707,7 +785,7 @@ def evaluate_planning(
     result = PlanningResult(rows={}, ground_truth=None, runs={}, warnings=warnings)
     datasets: dict[tuple[str, str], list[int]] = {}
     reasons: dict[int, str] = {}
-    for m, (label, run, _) in enumerate(entries):
+    for m, (_label, run, _) in enumerate(entries):
         ds = _resolve_dataset(run, dataroot, version)
         if isinstance(ds, str):
             reasons[m] = ds
@@ -744,8 +822,14 @@ def evaluate_planning(
             why = reasons.get(m, _NO_DATAROOT)
             rp = RunPlanning([run.frame_ids[r] for r in scored.tolist()], scored, reason=why)
             result.runs[label] = rp
-            result.rows[label] = {"planning_frames": 0, **{k: None for k in KEYS}, **{f"{k}_ci95": None for k in KEYS},
-                                  **{f"{k}_na": why for k in KEYS}, "planning_map": None, "map_version": None}
+            result.rows[label] = {
+                "planning_frames": 0,
+                **{k: None for k in KEYS},
+                **{f"{k}_ci95": None for k in KEYS},
+                **{f"{k}_na": why for k in KEYS},
+                "planning_map": None,
+                "map_version": None,
+            }
             continue
         rp = per_run[m]
         result.runs[label] = rp
@@ -767,13 +851,23 @@ def evaluate_planning(
         gt_why = {k: [r for g in gt_parts for r in g["reasons"][k]] for k in KEYS}
         kinds = sorted({k for g in gt_parts for k in g["map_kinds"]})
         gt_versions = {k: v for g in gt_parts for k, v in g["map_versions"].items()}
-        gt_rp = RunPlanning(fids, np.arange(len(fids)), values, gt_why, map_kinds=kinds, map_versions=gt_versions,
-                            path=np.concatenate([g["path"] for g in gt_parts]))
+        gt_rp = RunPlanning(
+            fids,
+            np.arange(len(fids)),
+            values,
+            gt_why,
+            map_kinds=kinds,
+            map_versions=gt_versions,
+            path=np.concatenate([g["path"] for g in gt_parts]),
+        )
         result.runs[GT_LABEL] = gt_rp
         warnings.extend(_warnings(gt_rp, GT_LABEL))
-        result.ground_truth = {"model": GT_LABEL, **_row(values, gt_why, len(fids)),
-                               "planning_map": "+".join(kinds) or None,
-                               "map_version": map_versions(list(gt_versions.values()))}
+        result.ground_truth = {
+            "model": GT_LABEL,
+            **_row(values, gt_why, len(fids)),
+            "planning_map": "+".join(kinds) or None,
+            "map_version": map_versions(list(gt_versions.values())),
+        }
         scenes = _scenes(fids)
         for k in KEYS:
             ok = np.isfinite(values[k])
@@ -793,8 +887,9 @@ def evaluate_planning(
     return result
 
 
-def pairwise_planning(result: PlanningResult, labels: Sequence[str], resampling: Any, *,
-                      only: set[str] | None = None) -> list[dict[str, Any]]:
+def pairwise_planning(
+    result: PlanningResult, labels: Sequence[str], resampling: Any, *, only: set[str] | None = None
+) -> list[dict[str, Any]]:
     """Every pair of runs (a before b) on the headline aggregate, on the frames where both have a value: mean paired
     difference a − b, scene-bootstrap interval, sign-flip p over scenes, Holm over all pairs. Rows as
     :func:`lightemma.evaluation.safety.pairwise_safety`'s (``metric`` is the aggregate's key)."""
@@ -806,8 +901,11 @@ def pairwise_planning(result: PlanningResult, labels: Sequence[str], resampling:
         rp = result.runs.get(label)
         if rp is None or not rp.values:
             continue
-        per[label] = {f: float(v) for f, v in zip(rp.frame_ids, rp.values[key])
-                      if math.isfinite(v) and (only is None or f in only)}
+        per[label] = {
+            f: float(v)
+            for f, v in zip(rp.frame_ids, rp.values[key])
+            if math.isfinite(v) and (only is None or f in only)
+        }
     codes: dict[str, int] = {}
     out: list[dict[str, Any]] = []
     groups: list[tuple[np.ndarray, np.ndarray]] = []
@@ -816,8 +914,16 @@ def pairwise_planning(result: PlanningResult, labels: Sequence[str], resampling:
     for a in range(len(labels)):
         for b in range(a + 1, len(labels)):
             la, lb = labels[a], labels[b]
-            row: dict[str, Any] = {"model_a": la, "model_b": lb, "metric": key, "frames": 0, "scenes": 0, "diff": None,
-                                   "ci95": None, "p_value": None}
+            row: dict[str, Any] = {
+                "model_a": la,
+                "model_b": lb,
+                "metric": key,
+                "frames": 0,
+                "scenes": 0,
+                "diff": None,
+                "ci95": None,
+                "p_value": None,
+            }
             if la in per and lb in per:
                 common = sorted(set(per[la]) & set(per[lb]))
                 if common:
@@ -852,6 +958,8 @@ def frame_tags(rp: RunPlanning) -> dict[str, np.ndarray]:
     if not rp.values:
         return {tag: np.zeros(n, bool) for tag in PLANNING_TAGS}
     with np.errstate(invalid="ignore"):
-        return {"wrong-way": np.isfinite(rp.values["ddc"]) & (rp.values["ddc"] < 1.0),
-                "uncomfortable": rp.values["c"] == 0.0,
-                "no-progress": rp.values["ep"] == 0.0}
+        return {
+            "wrong-way": np.isfinite(rp.values["ddc"]) & (rp.values["ddc"] < 1.0),
+            "uncomfortable": rp.values["c"] == 0.0,
+            "no-progress": rp.values["ep"] == 0.0,
+        }

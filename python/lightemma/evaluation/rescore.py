@@ -52,7 +52,9 @@ class ParseDefinition:
             raise UserError(f"unknown parse mode {self.mode!r} (choose from {', '.join(PARSE_MODES)})")
         if self.mode == "paper":
             if self.speed_range is not None or self.max_abs_curvature is not None:
-                raise UserError("--speed-range and --max-curvature apply to lenient, strict and json parsing; the paper's rules have no plausibility limits")
+                raise UserError(
+                    "--speed-range and --max-curvature apply to lenient, strict and json parsing; the paper's rules have no plausibility limits"
+                )
         else:
             speed = DEFAULT_SPEED_RANGE if self.speed_range is None else self.speed_range
             curvature = DEFAULT_MAX_ABS_CURVATURE if self.max_abs_curvature is None else self.max_abs_curvature
@@ -102,9 +104,13 @@ class ParseDefinition:
         if not isinstance(data, Mapping):
             return cls()
         speed = data.get("speed_range")
-        return cls(mode=str(data.get("mode") or "lenient"),
-                   speed_range=(float(speed[0]), float(speed[1])) if isinstance(speed, (list, tuple)) and len(speed) == 2 else None,
-                   max_abs_curvature=float(data["max_abs_curvature"]) if data.get("max_abs_curvature") is not None else None)
+        return cls(
+            mode=str(data.get("mode") or "lenient"),
+            speed_range=(float(speed[0]), float(speed[1]))
+            if isinstance(speed, (list, tuple)) and len(speed) == 2
+            else None,
+            max_abs_curvature=float(data["max_abs_curvature"]) if data.get("max_abs_curvature") is not None else None,
+        )
 
 
 def recorded_parse(manifest: Mapping[str, Any]) -> ParseDefinition:
@@ -122,7 +128,9 @@ def _attempts(record: Mapping[str, Any]) -> list[dict[str, Any]]:
     return [{"answer": answer, "status": record.get("status"), "reason": ""}] if isinstance(answer, str) else []
 
 
-def _apply(record: dict[str, Any], attempts: list[dict[str, Any]], parsed: list[tuple[str, str, str, Any] | None]) -> dict[str, Any]:
+def _apply(
+    record: dict[str, Any], attempts: list[dict[str, Any]], parsed: list[tuple[str, str, str, Any] | None]
+) -> dict[str, Any]:
     """The record with statuses, actions and first status from the new parses (trajectory left to the loader)."""
     first = None
     chosen = None
@@ -147,7 +155,9 @@ def _apply(record: dict[str, Any], attempts: list[dict[str, Any]], parsed: list[
     return out
 
 
-def rescored(records: Iterable[dict[str, Any]], definition: ParseDefinition, *, block: int = _BLOCK) -> Iterator[dict[str, Any]]:
+def rescored(
+    records: Iterable[dict[str, Any]], definition: ParseDefinition, *, block: int = _BLOCK
+) -> Iterator[dict[str, Any]]:
     """Stream ``records`` re-parsed under ``definition`` (see the module docstring); one parser call per block."""
     options = definition.parser_options()
     pending: list[tuple[dict[str, Any], list[dict[str, Any]]]] = []
@@ -155,8 +165,12 @@ def rescored(records: Iterable[dict[str, Any]], definition: ParseDefinition, *, 
     def flush() -> Iterator[dict[str, Any]]:
         answers = [a["answer"] for _, attempts in pending for a in attempts if isinstance(a.get("answer"), str)]
         # each answer with its frame's history, as the prompt printed it: a list quoting it as the past is skipped
-        histories = history_rows(record.get("history_actions") for record, attempts in pending
-                                 for a in attempts if isinstance(a.get("answer"), str))
+        histories = history_rows(
+            record.get("history_actions")
+            for record, attempts in pending
+            for a in attempts
+            if isinstance(a.get("answer"), str)
+        )
         parsed = parse_actions(answers, n=6, history=histories, **options) if answers else None
         k = 0
         for record, attempts in pending:
@@ -165,8 +179,14 @@ def rescored(records: Iterable[dict[str, Any]], definition: ParseDefinition, *, 
                 if isinstance(attempt.get("answer"), str):
                     assert parsed is not None
                     ok = parsed.status[k] != "failed"
-                    results.append((str(parsed.status[k]), str(parsed.reason[k]), str(parsed.failure[k]),
-                                    parsed.actions[k].tolist() if ok else None))
+                    results.append(
+                        (
+                            str(parsed.status[k]),
+                            str(parsed.reason[k]),
+                            str(parsed.failure[k]),
+                            parsed.actions[k].tolist() if ok else None,
+                        )
+                    )
                     k += 1
                 else:
                     results.append(None)

@@ -60,7 +60,6 @@ class EgoModel:
         return {"length": self.length, "width": self.width, "offset": self.offset, "min_step": self.min_step}
 
 
-
 EGO = EgoModel()
 
 
@@ -319,19 +318,35 @@ def frame_warnings(fs: FrameSafety, frame_ids: Sequence[str], what: str) -> list
             if reasons[i] and reasons[i] not in ("no trajectory", "no annotations"):
                 groups.setdefault(reasons[i], []).append(int(i))
         for reason, rows in groups.items():
-            out.append(f"{what}: {len(rows)} frame(s) have no {which} value (n/a): {reason} (e.g. {frame_ids[rows[0]]})")
+            out.append(
+                f"{what}: {len(rows)} frame(s) have no {which} value (n/a): {reason} (e.g. {frame_ids[rows[0]]})"
+            )
     outside = np.flatnonzero(fs.outside_mask)
     if len(outside):
-        out.append(f"{what}: the map mask does not cover the footprint of {len(outside)} frame(s) (e.g. {frame_ids[outside[0]]}); "
-                   "those points count as off the drivable area")
+        out.append(
+            f"{what}: the map mask does not cover the footprint of {len(outside)} frame(s) (e.g. {frame_ids[outside[0]]}); "
+            "those points count as off the drivable area"
+        )
     return out
 
 
 # -- evaluation of runs ------------------------------------------------------------------------------
 
 #: row keys this module adds to every accuracy row (values are shares 0..1; tables print %)
-ROW_KEYS = (*AREA_KEYS, *COLLISION_KEYS, "offroad_ci95", "collision_ci95", "safety_frames", "offroad_frames", "collision_frames",
-            "area_source", "map_version", "offroad_na", "collision_na", "collision_convention")
+ROW_KEYS = (
+    *AREA_KEYS,
+    *COLLISION_KEYS,
+    "offroad_ci95",
+    "collision_ci95",
+    "safety_frames",
+    "offroad_frames",
+    "collision_frames",
+    "area_source",
+    "map_version",
+    "offroad_na",
+    "collision_na",
+    "collision_convention",
+)
 FLOOR_LABEL = "Ground truth (floor)"
 _NO_DATAROOT = "no dataroot (pass --dataroot and --version)"
 
@@ -365,7 +380,11 @@ class SafetyResult:
     gt_collision_scenes: list[str] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"floor": self.floor, "gt_off_road_scenes": self.gt_off_scenes, "gt_collision_scenes": self.gt_collision_scenes}
+        return {
+            "floor": self.floor,
+            "gt_off_road_scenes": self.gt_off_scenes,
+            "gt_collision_scenes": self.gt_collision_scenes,
+        }
 
 
 def run_map_versions(rs: RunSafety) -> dict[str, str]:
@@ -393,9 +412,11 @@ def map_version_conflict(per_run: Mapping[str, Mapping[str, str]]) -> str | None
             first = seen.setdefault(key, (v, label))
             if first[0] != v:
                 location = key.removeprefix("expansion:")
-                return (f"{first[1]} and {label} were scored against different versions of the {location} map "
-                        f"expansion ({first[0]} and {v}); their off-road and planning scores are not comparable: "
-                        "score every run against one dataset (--dataroot DIR --version V) or evaluate them apart")
+                return (
+                    f"{first[1]} and {label} were scored against different versions of the {location} map "
+                    f"expansion ({first[0]} and {v}); their off-road and planning scores are not comparable: "
+                    "score every run against one dataset (--dataroot DIR --version V) or evaluate them apart"
+                )
     return None
 
 
@@ -427,10 +448,17 @@ def _row(values: Mapping[str, np.ndarray], fs: FrameSafety, convention: str) -> 
     r = rates(values)
     area_ok, coll_ok = np.isfinite(values["offroad"]), np.isfinite(values["collision"])
     kinds = sorted({k for k in fs.area_kind if k})
-    return {**r, "safety_frames": int(len(fs.area_ok)), "offroad_frames": int(area_ok.sum()), "collision_frames": int(coll_ok.sum()),
-            "area_source": "+".join(kinds) if kinds else None, "map_version": map_versions(fs.area_version),
-            "offroad_na": None if area_ok.any() else (na_reason(fs, "area") or "no frame"),
-            "collision_na": None if coll_ok.any() else (na_reason(fs, "collision") or "no frame"), "collision_convention": convention}
+    return {
+        **r,
+        "safety_frames": int(len(fs.area_ok)),
+        "offroad_frames": int(area_ok.sum()),
+        "collision_frames": int(coll_ok.sum()),
+        "area_source": "+".join(kinds) if kinds else None,
+        "map_version": map_versions(fs.area_version),
+        "offroad_na": None if area_ok.any() else (na_reason(fs, "area") or "no frame"),
+        "collision_na": None if coll_ok.any() else (na_reason(fs, "collision") or "no frame"),
+        "collision_convention": convention,
+    }
 
 
 def _intervals(groups: list[tuple[np.ndarray, np.ndarray]], keys: list[str], resampling: Any) -> np.ndarray:
@@ -504,10 +532,17 @@ def evaluate_safety(
         if reason is not None or not isinstance(data, SafetyData):
             result.runs[label] = RunSafety(fids, rows, None, None, reason)
             na = {k: None for k in ROW_KEYS}
-            result.rows[label] = {c: {**na, "offroad_na": reason, "collision_na": reason, "collision_convention": COLLISION_FOR_ADE[c]} for c in conventions}
+            result.rows[label] = {
+                c: {**na, "offroad_na": reason, "collision_na": reason, "collision_convention": COLLISION_FOR_ADE[c]}
+                for c in conventions
+            }
             continue
         tokens = [sample_token_of(f) for f in fids]
-        conflicts = _recorded_pose_conflicts(run, fids, tokens, data, warnings, label) if getattr(run.info, "imported", False) else {}
+        conflicts = (
+            _recorded_pose_conflicts(run, fids, tokens, data, warnings, label)
+            if getattr(run.info, "imported", False)
+            else {}
+        )
         model = frame_safety(run.trajectory[rows], tokens, data, ego)
         truth = frame_safety(run.gt_positions[rows], tokens, data, ego)
         for j, why in conflicts.items():
@@ -551,8 +586,10 @@ def evaluate_safety(
         result.gt_off_scenes = sorted({f.rsplit("/", 1)[0] for f, o in zip(fids, off) if o})
         result.gt_collision_scenes = sorted({f.rsplit("/", 1)[0] for f, o in zip(fids, hit) if o})
         if result.gt_off_scenes:
-            warnings.append(f"the ground truth itself leaves the drivable area in {int(off.sum())} frame(s) of scene(s) "
-                            f"{', '.join(result.gt_off_scenes[:10])}{' …' if len(result.gt_off_scenes) > 10 else ''} (the floor row counts them)")
+            warnings.append(
+                f"the ground truth itself leaves the drivable area in {int(off.sum())} frame(s) of scene(s) "
+                f"{', '.join(result.gt_off_scenes[:10])}{' …' if len(result.gt_off_scenes) > 10 else ''} (the floor row counts them)"
+            )
         for c in conventions:
             cc = COLLISION_FOR_ADE[c]
             values = safety_values(truth, cc)  # unmasked: the ground truth's own rate
@@ -591,10 +628,14 @@ def pose_jump_warnings(gt: Any, frame_ids: Sequence[str], label: str) -> list[st
         return []
     worst = int(bad[np.argmax(step[bad])])
     most = POSE_JUMP_SPEED * KEYFRAME_SECONDS
-    return [(f"{label}: the ground truth of {len(bad)} frame(s) moves more than {most:g} m "
-             f"in one {KEYFRAME_SECONDS:g} s step (over {POSE_JUMP_SPEED:g} m/s: a physically impossible ego pose jump "
-             f"in the dataset; e.g. {frame_ids[worst]}: {step[worst]:.1f} m); their ADE and safety values are measured "
-             "against it")]
+    return [
+        (
+            f"{label}: the ground truth of {len(bad)} frame(s) moves more than {most:g} m "
+            f"in one {KEYFRAME_SECONDS:g} s step (over {POSE_JUMP_SPEED:g} m/s: a physically impossible ego pose jump "
+            f"in the dataset; e.g. {frame_ids[worst]}: {step[worst]:.1f} m); their ADE and safety values are measured "
+            "against it"
+        )
+    ]
 
 
 #: an imported frame whose recorded pose is further than this from the dataroot's is not placed (n/a)
@@ -602,7 +643,9 @@ POSE_CONFLICT_M = 5.0
 POSE_NOTE_M = 0.05  # smaller differences are sensor timing (CAM_FRONT vs another channel's pose), noted only
 
 
-def _recorded_pose_conflicts(run: Any, fids: list[str], tokens: list[str], data: SafetyData, warnings: list[str], label: str) -> dict[int, str]:
+def _recorded_pose_conflicts(
+    run: Any, fids: list[str], tokens: list[str], data: SafetyData, warnings: list[str], label: str
+) -> dict[int, str]:
     """Compare an imported run's recorded global position and heading (``ego_position``, ``ego_heading``) with
     the dataroot's pose of the same sample; frames that disagree by more than :data:`POSE_CONFLICT_M` get n/a."""
     from lightemma.evaluation.loading import read_frame_records
@@ -621,28 +664,42 @@ def _recorded_pose_conflicts(run: Any, fids: list[str], tokens: list[str], data:
         except (TypeError, ValueError):
             continue
         if d > POSE_CONFLICT_M:
-            out[j] = f"the recorded ego position is {d:.1f} m from {data.version}'s pose of sample {tok} (another dataset?)"
+            out[j] = (
+                f"the recorded ego position is {d:.1f} m from {data.version}'s pose of sample {tok} (another dataset?)"
+            )
         elif d > POSE_NOTE_M or dh > 1e-3:
             noted += 1
             worst = max(worst, d)
     if out:
-        warnings.append(f"{label}: {len(out)} frame(s) have no safety value: {next(iter(out.values()))} (is --dataroot the dataset the run was made on?)")
+        warnings.append(
+            f"{label}: {len(out)} frame(s) have no safety value: {next(iter(out.values()))} (is --dataroot the dataset the run was made on?)"
+        )
     if noted:
-        warnings.append(f"{label}: the recorded pose differs from {data.version}'s CAM_FRONT pose in {noted} frame(s), by up to {worst:.2f} m "
-                        "(the dataroot's pose is used)")
+        warnings.append(
+            f"{label}: the recorded pose differs from {data.version}'s CAM_FRONT pose in {noted} frame(s), by up to {worst:.2f} m "
+            "(the dataroot's pose is used)"
+        )
     return out
 
 
 def _concat(parts: Sequence[FrameSafety]) -> FrameSafety:
     if len(parts) == 1:
         return parts[0]
-    return FrameSafety(np.concatenate([p.area for p in parts]), np.concatenate([p.area_ok for p in parts]), [r for p in parts for r in p.area_reason],
-                       [k for p in parts for k in p.area_kind], np.concatenate([p.collide for p in parts]),
-                       np.concatenate([p.coll_ok for p in parts]), [r for p in parts for r in p.coll_reason],
-                       [v for p in parts for v in (p.area_version or [""] * len(p.area_ok))])
+    return FrameSafety(
+        np.concatenate([p.area for p in parts]),
+        np.concatenate([p.area_ok for p in parts]),
+        [r for p in parts for r in p.area_reason],
+        [k for p in parts for k in p.area_kind],
+        np.concatenate([p.collide for p in parts]),
+        np.concatenate([p.coll_ok for p in parts]),
+        [r for p in parts for r in p.coll_reason],
+        [v for p in parts for v in (p.area_version or [""] * len(p.area_ok))],
+    )
 
 
-def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str, resampling: Any, *, only: set[str] | None = None) -> list[dict[str, Any]]:
+def pairwise_safety(
+    result: SafetyResult, labels: Sequence[str], convention: str, resampling: Any, *, only: set[str] | None = None
+) -> list[dict[str, Any]]:
     """Every pair of runs (a before b) on the frames where both have a value: mean paired difference a − b of
     ``offroad`` and of ``collision`` (the collision convention of ``convention``'s table), scene-bootstrap
     interval, sign-flip p-value over scenes, Holm over all pairs and both metrics. Rows as :func:`pairwise_ade`'s,
@@ -659,7 +716,11 @@ def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str
         values = safety_values(rs.model, cc, gt=rs.truth)
         per[label] = {}
         for key in ("offroad", "collision"):
-            per[label][key] = {f: float(v) for f, v in zip(rs.frame_ids, values[key]) if math.isfinite(v) and (only is None or f in only)}
+            per[label][key] = {
+                f: float(v)
+                for f, v in zip(rs.frame_ids, values[key])
+                if math.isfinite(v) and (only is None or f in only)
+            }
         for f in rs.frame_ids:
             scene_of.setdefault(f, f.rsplit("/", 1)[0])
     codes: dict[str, int] = {}
@@ -671,7 +732,17 @@ def pairwise_safety(result: SafetyResult, labels: Sequence[str], convention: str
         for a in range(len(labels)):
             for b in range(a + 1, len(labels)):
                 la, lb = labels[a], labels[b]
-                row: dict[str, Any] = {"model_a": la, "model_b": lb, "metric": key, "convention": cc, "frames": 0, "scenes": 0, "diff": None, "ci95": None, "p_value": None}
+                row: dict[str, Any] = {
+                    "model_a": la,
+                    "model_b": lb,
+                    "metric": key,
+                    "convention": cc,
+                    "frames": 0,
+                    "scenes": 0,
+                    "diff": None,
+                    "ci95": None,
+                    "p_value": None,
+                }
                 if la in per and lb in per:
                     common = sorted(set(per[la][key]) & set(per[lb][key]))
                     if common:
@@ -699,4 +770,7 @@ def frame_tags(rs: RunSafety) -> dict[str, np.ndarray]:
     n = len(rs.frame_ids)
     if rs.model is None:
         return {"collides": np.zeros(n, bool), "off_road": np.zeros(n, bool)}
-    return {"collides": rs.model.collide.any(axis=(1, 2)) & rs.model.coll_ok, "off_road": rs.model.off_steps.any(axis=1) & rs.model.area_ok}
+    return {
+        "collides": rs.model.collide.any(axis=(1, 2)) & rs.model.coll_ok,
+        "off_road": rs.model.off_steps.any(axis=1) & rs.model.area_ok,
+    }

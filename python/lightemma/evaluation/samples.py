@@ -90,8 +90,13 @@ def sample_metrics(run: RunData, rows: np.ndarray, conventions: tuple[str, ...])
             if ok.any():
                 values = frame_metrics(trajs[ok, s], gt[ok], convention=convention)
                 ade[ok, s], fde[ok, s] = values[:, ade_col], values[:, fde_col]
-        out[convention] = {"samples": k, "minade": _mean(ade.min(axis=1)), "minfde": _mean(fde.min(axis=1)),
-                           "spread_m": _mean(np.asarray(spreads)), "sampled_frames": int(have[:, 1:].any(axis=1).sum())}
+        out[convention] = {
+            "samples": k,
+            "minade": _mean(ade.min(axis=1)),
+            "minfde": _mean(fde.min(axis=1)),
+            "spread_m": _mean(np.asarray(spreads)),
+            "sampled_frames": int(have[:, 1:].any(axis=1).sum()),
+        }
     return out
 
 

@@ -61,7 +61,14 @@ from lightemma.evaluation.planning_score import PLANNING_TAGS  # noqa: E402  (be
 #: image) and ``missed-pedestrian`` (a pedestrian in view, not affirmed).
 EXPLANATION_TAGS: tuple[str, ...] = ("says-stop-drives-on", "hallucinated-pedestrian", "missed-pedestrian")
 # tags whose worst frames illustrate the paper's failure cases
-CASE_TAGS: tuple[str, ...] = ("straight_after_right_turn", "straight_after_left_turn", "turning_left", "turning_right", "braking", "starting")
+CASE_TAGS: tuple[str, ...] = (
+    "straight_after_right_turn",
+    "straight_after_left_turn",
+    "turning_left",
+    "turning_right",
+    "braking",
+    "starting",
+)
 
 
 @dataclass(frozen=True)
@@ -130,7 +137,9 @@ def mean_curvature(positions: np.ndarray) -> np.ndarray:
     return np.divide(weighted, total, out=np.zeros_like(total), where=total > 0)
 
 
-def tag_frames(gt_positions: np.ndarray, history_actions: np.ndarray, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
+def tag_frames(
+    gt_positions: np.ndarray, history_actions: np.ndarray, thresholds: Thresholds = Thresholds()
+) -> dict[str, np.ndarray]:
     """Boolean masks (N,) per tag in :data:`TAGS`; a frame may carry several tags or none."""
     th = thresholds
     history = np.asarray(history_actions, dtype=np.float64)
@@ -168,7 +177,9 @@ def _rows_of(run: RunData, frame_ids: Sequence[str] | None) -> np.ndarray:
     return np.fromiter((index[f] for f in frame_ids), dtype=np.int64, count=len(frame_ids))
 
 
-def _aligned_tags(result: Any, names: Sequence[str], tags_of: Any, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
+def _aligned_tags(
+    result: Any, names: Sequence[str], tags_of: Any, run: RunData, rows: np.ndarray
+) -> dict[str, np.ndarray]:
     """Tags ``names`` of ``rows`` of a run from ``tags_of(result)`` (arrays over ``result.frame_ids``), aligned by
     frame id; False where ``result`` is None or lacks the frame."""
     out = {tag: np.zeros(len(rows), dtype=bool) for tag in names}
@@ -200,6 +211,7 @@ def _planning_masks(planning: Any, label: str, run: RunData, rows: np.ndarray) -
 
 def _explanation_masks(explanations: Any, label: str, run: RunData, rows: np.ndarray) -> dict[str, np.ndarray]:
     """:data:`EXPLANATION_TAGS` of ``rows`` of a run from its explanation audit (False where it has none)."""
+
     def aligned(frame_ids: Sequence[str], tag: np.ndarray) -> np.ndarray:
         out = np.zeros(len(rows), dtype=bool)
         where = {f: i for i, f in enumerate(frame_ids)}
@@ -220,8 +232,15 @@ def _explanation_masks(explanations: Any, label: str, run: RunData, rows: np.nda
     return masks
 
 
-def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", frame_ids: Sequence[str] | None = None, safety: Any = None,
-                    planning: Any = None, explanations: Any = None) -> list[dict[str, Any]]:
+def per_tag_metrics(
+    runs: Sequence[RunData],
+    *,
+    convention: str = "lightemma",
+    frame_ids: Sequence[str] | None = None,
+    safety: Any = None,
+    planning: Any = None,
+    explanations: Any = None,
+) -> list[dict[str, Any]]:
     """One row per tag (and ``all``): frames and, per model, ADE avg / FDE / miss rate on them.
 
     Each model is scored on its valid frames, or on ``frame_ids`` (e.g. the
@@ -245,15 +264,28 @@ def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", f
             masks.update(_explanation_masks(explanations, label, run, rows))
         per_model.append((run, rows, {"all": np.ones(len(rows), dtype=bool), **masks}))
     out = []
-    for tag in ("all", *TAGS, *(SAFETY_TAGS if safety is not None else ()), *(PLANNING_TAGS if planning is not None else ()),
-                *(EXPLANATION_TAGS if explanations is not None else ())):
+    for tag in (
+        "all",
+        *TAGS,
+        *(SAFETY_TAGS if safety is not None else ()),
+        *(PLANNING_TAGS if planning is not None else ()),
+        *(EXPLANATION_TAGS if explanations is not None else ()),
+    ):
         row: dict[str, Any] = {"tag": tag, "frames": int(per_model[0][2][tag].sum()) if per_model else 0}
         for label, (run, rows, masks) in zip(labels, per_model):
             chosen = rows[masks[tag]]
             row[f"{label} frames"] = len(chosen)
             if len(chosen):
-                m = evaluate(np.ascontiguousarray(run.trajectory[chosen]), np.ascontiguousarray(run.gt_positions[chosen]), convention=convention).to_dict()
-                row[label] = {"ade_avg": float(m["ade_avg"]), "fde": float(m["fde"]), "miss_rate": float(m["miss_rate"])}
+                m = evaluate(
+                    np.ascontiguousarray(run.trajectory[chosen]),
+                    np.ascontiguousarray(run.gt_positions[chosen]),
+                    convention=convention,
+                ).to_dict()
+                row[label] = {
+                    "ade_avg": float(m["ade_avg"]),
+                    "fde": float(m["fde"]),
+                    "miss_rate": float(m["miss_rate"]),
+                }
             else:
                 row[label] = None
         out.append(row)
@@ -263,7 +295,9 @@ def per_tag_metrics(runs: Sequence[RunData], *, convention: str = "lightemma", f
 MAX_FIT_FRAMES = 1000  # Theil–Sen costs O(n² log n): larger samples are thinned (fixed seed) to this many frames
 
 
-def robust_slope(x: np.ndarray, y: np.ndarray, *, confidence: float = 0.95, max_frames: int = MAX_FIT_FRAMES) -> dict[str, Any] | None:
+def robust_slope(
+    x: np.ndarray, y: np.ndarray, *, confidence: float = 0.95, max_frames: int = MAX_FIT_FRAMES
+) -> dict[str, Any] | None:
     """Theil–Sen slope of y on x with its confidence interval (``scipy.stats.theilslopes``).
 
     The median of the slopes between all pairs of points: a single point far off
@@ -282,7 +316,12 @@ def robust_slope(x: np.ndarray, y: np.ndarray, *, confidence: float = 0.95, max_
     with np.errstate(invalid="ignore"):  # heavy ties in x can leave no interval (NaN), said as None
         fit = theilslopes(y, x, alpha=confidence)
     ci = [float(fit.low_slope), float(fit.high_slope)]
-    return {"slope": float(fit.slope), "intercept": float(fit.intercept), "ci95": ci if all(np.isfinite(ci)) else None, "n": len(x)}
+    return {
+        "slope": float(fit.slope),
+        "intercept": float(fit.intercept),
+        "ci95": ci if all(np.isfinite(ci)) else None,
+        "n": len(x),
+    }
 
 
 def curvature_samples(run: RunData, thresholds: Thresholds = Thresholds()) -> dict[str, np.ndarray]:
@@ -292,7 +331,9 @@ def curvature_samples(run: RunData, thresholds: Thresholds = Thresholds()) -> di
     out because a path was too short to define a curvature."""
     history = _require_history(run)
     moving = np.flatnonzero(run.valid & (history[:, -1, 0] >= thresholds.moving_speed))
-    long_enough = (path_length(run.gt_positions[moving]) >= thresholds.min_path) & (path_length(run.trajectory[moving]) >= thresholds.min_path)
+    long_enough = (path_length(run.gt_positions[moving]) >= thresholds.min_path) & (
+        path_length(run.trajectory[moving]) >= thresholds.min_path
+    )
     rows = moving[long_enough]
     k_hist = history[rows, -1, 1]
     tags = tag_frames(run.gt_positions[rows], history[rows], thresholds)
@@ -353,7 +394,10 @@ def history_bias(runs: Sequence[RunData], thresholds: Thresholds = Thresholds())
     that go straight just after a turn, the share of the last history curvature
     still present (1 = the turn carried on unchanged, 0 = straight).
     """
-    return [bias_row(label, curvature_samples(run, thresholds), thresholds) for label, run in zip(unique_labels(list(runs)), runs)]
+    return [
+        bias_row(label, curvature_samples(run, thresholds), thresholds)
+        for label, run in zip(unique_labels(list(runs)), runs)
+    ]
 
 
 def _share(mask: np.ndarray) -> float | None:
@@ -399,11 +443,16 @@ def _scene_of(run: RunData, rows: np.ndarray, frame_ids: Sequence[str]) -> list[
     """Scene name per row (the run's scene index), else the frame id up to its last ``/``."""
     if run.scene_index is not None and run.scene_names:
         names = run.scene_names
-        return [names[s] if 0 <= s < len(names) else fid.rsplit("/", 1)[0] for s, fid in zip(run.scene_index[rows].tolist(), frame_ids)]
+        return [
+            names[s] if 0 <= s < len(names) else fid.rsplit("/", 1)[0]
+            for s, fid in zip(run.scene_index[rows].tolist(), frame_ids)
+        ]
     return [fid.rsplit("/", 1)[0] for fid in frame_ids]
 
 
-def disagreements(runs: Sequence[RunData], *, top: int = 5, exclude_baselines: bool = True, min_spread: float = MIN_SPREAD) -> list[dict[str, Any]]:
+def disagreements(
+    runs: Sequence[RunData], *, top: int = 5, exclude_baselines: bool = True, min_spread: float = MIN_SPREAD
+) -> list[dict[str, Any]]:
     """The ``top`` frames (valid in every compared run) whose predicted 3 s endpoints spread most,
     at most one per scene and each spread at least ``min_spread`` metres.
 
@@ -434,13 +483,15 @@ def disagreements(runs: Sequence[RunData], *, top: int = 5, exclude_baselines: b
         if scenes[i] in seen:
             continue
         seen.add(scenes[i])
-        out.append({
-            "frame_id": shared[i],
-            "scene": scenes[i],
-            "spread_m": float(spread[i]),
-            "models": [labels[id(r)] for r in compared],
-            "fde": {labels[id(r)]: float(np.linalg.norm(ends[m, i] - gt_end[i])) for m, r in enumerate(compared)},
-        })
+        out.append(
+            {
+                "frame_id": shared[i],
+                "scene": scenes[i],
+                "spread_m": float(spread[i]),
+                "models": [labels[id(r)] for r in compared],
+                "fde": {labels[id(r)]: float(np.linalg.norm(ends[m, i] - gt_end[i])) for m, r in enumerate(compared)},
+            }
+        )
     return out
 
 
@@ -450,12 +501,16 @@ def worst_frame_per_tag(runs: Sequence[RunData], tags: Sequence[str] = CASE_TAGS
     if not shared:
         return []
     rows = [_rows_of(r, shared) for r in runs]
-    fde = np.stack([np.linalg.norm(r.trajectory[idx, -1] - r.gt_positions[idx, -1], axis=1) for r, idx in zip(runs, rows)]).mean(axis=0)
+    fde = np.stack(
+        [np.linalg.norm(r.trajectory[idx, -1] - r.gt_positions[idx, -1], axis=1) for r, idx in zip(runs, rows)]
+    ).mean(axis=0)
     masks = tag_frames(runs[0].gt_positions[rows[0]], _require_history(runs[0])[rows[0]])
     out = []
     for tag in tags:
         candidates = np.flatnonzero(masks[tag])
         if len(candidates):
             i = candidates[np.argmax(fde[candidates])]
-            out.append({"tag": tag, "frame_id": shared[i], "mean_fde": float(fde[i]), "frames_with_tag": len(candidates)})
+            out.append(
+                {"tag": tag, "frame_id": shared[i], "mean_fde": float(fde[i]), "frames_with_tag": len(candidates)}
+            )
     return out

@@ -72,11 +72,17 @@ def cluster_sums(values: ArrayLike, clusters: ArrayLike) -> tuple[np.ndarray, np
     _, inverse = np.unique(labels, return_inverse=True)
     inverse = inverse.reshape(-1)
     n = int(inverse.max()) + 1 if len(inverse) else 0
-    sums = np.stack([np.bincount(inverse, weights=v[:, j], minlength=n) for j in range(v.shape[1])], axis=1) if n else np.zeros((0, v.shape[1]))
+    sums = (
+        np.stack([np.bincount(inverse, weights=v[:, j], minlength=n) for j in range(v.shape[1])], axis=1)
+        if n
+        else np.zeros((0, v.shape[1]))
+    )
     return sums, np.bincount(inverse, minlength=n).astype(np.float64)
 
 
-def _stack(groups: Sequence[tuple[ArrayLike, ArrayLike]], metrics: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
+def _stack(
+    groups: Sequence[tuple[ArrayLike, ArrayLike]], metrics: int | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[int]]:
     sums, counts, offsets, n_clusters = [], [], [0], []
     for values, clusters in groups:
         s, c = cluster_sums(values, clusters)
@@ -98,7 +104,9 @@ def _streams(keys: Sequence[str], rows: int) -> np.ndarray:
     return np.fromiter((stream_id(k) for k in keys), dtype=np.uint64, count=rows)
 
 
-def bootstrap_ci(groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[str], resampling: Resampling = Resampling()) -> np.ndarray:
+def bootstrap_ci(
+    groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[str], resampling: Resampling = Resampling()
+) -> np.ndarray:
     """Scene-bootstrap intervals of frame-weighted means, all groups in one core call.
 
     ``groups``: per row, (values (N,) or (N, M), scene labels (N,)); values must be
@@ -110,7 +118,15 @@ def bootstrap_ci(groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[s
     sums, counts, offsets, n_clusters = _stack(groups)
     if resampling.n_resamples == 0:
         return np.full((len(n_clusters), sums.shape[1], 2), np.nan)
-    out = _core.cluster_bootstrap(sums, counts, offsets, _streams(keys, len(n_clusters)), resampling.n_resamples, resampling.seed, resampling.confidence)
+    out = _core.cluster_bootstrap(
+        sums,
+        counts,
+        offsets,
+        _streams(keys, len(n_clusters)),
+        resampling.n_resamples,
+        resampling.seed,
+        resampling.confidence,
+    )
     out[np.asarray(n_clusters) < 2] = np.nan
     return out
 
@@ -183,7 +199,9 @@ def rate_ci(groups: Sequence[tuple[ArrayLike, ArrayLike]], resampling: Resamplin
     return out
 
 
-def sign_flip_p(groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[str], resampling: Resampling = Resampling()) -> np.ndarray:
+def sign_flip_p(
+    groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[str], resampling: Resampling = Resampling()
+) -> np.ndarray:
     """Two-sided p-values (R,) of "the mean paired difference is 0", flipping signs of whole scenes.
 
     ``groups``: per row, (per-frame differences (N,), scene labels (N,)).
@@ -193,7 +211,9 @@ def sign_flip_p(groups: Sequence[tuple[ArrayLike, ArrayLike]], keys: Sequence[st
     sums, counts, offsets, n_clusters = _stack(groups, metrics=1)
     if resampling.n_resamples == 0:
         return np.full(len(n_clusters), np.nan)
-    return _core.sign_flip_test(sums, counts, offsets, _streams(keys, len(n_clusters)), resampling.n_resamples, resampling.seed)
+    return _core.sign_flip_test(
+        sums, counts, offsets, _streams(keys, len(n_clusters)), resampling.n_resamples, resampling.seed
+    )
 
 
 def holm(p_values: ArrayLike) -> np.ndarray:

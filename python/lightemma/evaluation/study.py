@@ -79,7 +79,13 @@ _PAPER_LIKE: tuple[tuple[str, float, float, int, int, float | None], ...] = (
 )
 
 
-def paper_like_models(*, garbage: str = "meta-llama/Llama-3.2-11B-Vision-Instruct", garbage_rate: float = 0.5, garbage_marked: bool = True, count: int = 13) -> list[StudyModel]:
+def paper_like_models(
+    *,
+    garbage: str = "meta-llama/Llama-3.2-11B-Vision-Instruct",
+    garbage_rate: float = 0.5,
+    garbage_marked: bool = True,
+    count: int = 13,
+) -> list[StudyModel]:
     """Thirteen models named like the paper's, with error scales after its Table II (ADE ≈ 1.4 × speed error).
 
     ``garbage`` answers 1e12 m/s on ``garbage_rate`` of its frames; Gemini-2.5-Flash
@@ -145,7 +151,9 @@ def _scene_drive(rng: np.random.Generator, steps: int) -> np.ndarray:
     return np.stack([v, kappa], axis=1)
 
 
-def study_scenes(n_scenes: int = 150, frames_per_scene: int = 26, *, seed: int = 0, scene_sd: float = 0.35) -> StudyScenes:
+def study_scenes(
+    n_scenes: int = 150, frames_per_scene: int = 26, *, seed: int = 0, scene_sd: float = 0.35
+) -> StudyScenes:
     """Simulate ``n_scenes`` drives and cut them into frames (reference window: c = 7 … K − 8)."""
     rng = np.random.default_rng([seed, 7001])
     keyframes = frames_per_scene + 14
@@ -170,17 +178,29 @@ def study_scenes(n_scenes: int = 150, frames_per_scene: int = 26, *, seed: int =
         names.append(name)
         index.append(np.full(len(current), s))
     difficulty = np.exp(rng.normal(0.0, scene_sd, n_scenes))
-    return StudyScenes(ids, names, np.concatenate(index), np.concatenate(gts), np.concatenate(hists), np.concatenate(futures), difficulty)
+    return StudyScenes(
+        ids,
+        names,
+        np.concatenate(index),
+        np.concatenate(gts),
+        np.concatenate(hists),
+        np.concatenate(futures),
+        difficulty,
+    )
 
 
-def predict(scenes: StudyScenes, model: StudyModel, *, seed: int = 0, model_scene_sd: float = 0.15) -> dict[str, np.ndarray]:
+def predict(
+    scenes: StudyScenes, model: StudyModel, *, seed: int = 0, model_scene_sd: float = 0.15
+) -> dict[str, np.ndarray]:
     """A model's predicted actions and trajectories (N, 6, 2) and outcome masks, reproducible per model string."""
     rng = np.random.default_rng([seed, *model.model.encode()])
     n = len(scenes)
     own = np.exp(rng.normal(0.0, model_scene_sd, len(scenes.scene_names)))
     scale = (scenes.difficulty * own)[scenes.scene_index]
     truth = scenes.future_actions
-    speed = truth[..., 0] + (model.speed_error * scale)[:, None] * (rng.normal(0.0, 1.0, (n, 1)) + 0.3 * rng.normal(0.0, 1.0, (n, 6)))
+    speed = truth[..., 0] + (model.speed_error * scale)[:, None] * (
+        rng.normal(0.0, 1.0, (n, 1)) + 0.3 * rng.normal(0.0, 1.0, (n, 6))
+    )
     curvature = (1 - model.history_bias) * truth[..., 1] + model.history_bias * scenes.history_actions[:, -1:, 1]
     curvature = curvature + model.curvature_error * scale[:, None] * rng.normal(0.0, 1.0, (n, 6))
     actions = np.stack([np.clip(speed, 0.0, None), curvature], axis=2)
@@ -202,7 +222,15 @@ def predict(scenes: StudyScenes, model: StudyModel, *, seed: int = 0, model_scen
 
 def _records(scenes: StudyScenes, model: StudyModel, p: dict[str, np.ndarray], record_failure: bool) -> Any:
     for i in range(len(scenes)):
-        failure = "api_error" if p["api_error"][i] else "format" if p["failed"][i] else "implausible" if p["garbage"][i] and model.garbage_marked else ""
+        failure = (
+            "api_error"
+            if p["api_error"][i]
+            else "format"
+            if p["failed"][i]
+            else "implausible"
+            if p["garbage"][i] and model.garbage_marked
+            else ""
+        )
         failed = bool(failure)
         first = "failed" if failed else ("corrected" if p["fe"][i] else "ok")
         keep = not failed or failure == "implausible"  # an implausible answer keeps what was read
@@ -219,10 +247,14 @@ def _records(scenes: StudyScenes, model: StudyModel, p: dict[str, np.ndarray], r
             "seconds": float(p["seconds"][i]),
             "input_tokens": int(p["input_tokens"][i]),
             "output_tokens": int(p["output_tokens"][i]),
-            "cost_cents": None if model.cost_cents is None else float(model.cost_cents * p["seconds"][i] / model.seconds),
+            "cost_cents": None
+            if model.cost_cents is None
+            else float(model.cost_cents * p["seconds"][i] / model.seconds),
             "scene_text": "synthetic scene",
             "intent_text": "synthetic intent",
-            "answer": "garbage" if p["garbage"][i] else "[" + ", ".join(f"({v:.3f}, {c:.4f})" for v, c in p["actions"][i]) + "]",
+            "answer": "garbage"
+            if p["garbage"][i]
+            else "[" + ", ".join(f"({v:.3f}, {c:.4f})" for v, c in p["actions"][i]) + "]",
             "error": "APIError: synthetic" if failure == "api_error" else None,
         }
         if record_failure:
@@ -250,10 +282,23 @@ def write_study(
     for model in models:
         if not record_failure:
             model = replace(model, garbage_marked=False)
-        manifest = {"model": model.model, "integrator": "euler", "concurrency": 32, "backend": {"kind": "synthetic-study"}, **model.manifest}
+        manifest = {
+            "model": model.model,
+            "integrator": "euler",
+            "concurrency": 32,
+            "backend": {"kind": "synthetic-study"},
+            **model.manifest,
+        }
         run_dir = create_run_dir(output, model.model, manifest)
         with open(run_dir / FRAMES_FILE, "w", encoding="utf-8") as fh:
-            fh.writelines(json.dumps(r) + "\n" for r in _records(scenes, model, predict(scenes, model, seed=seed), record_failure))
-        update_manifest(run_dir, started_at="2026-01-01T00:00:00+00:00", finished_at="2026-01-01T02:00:00+00:00", wall_seconds=7200.0)
+            fh.writelines(
+                json.dumps(r) + "\n" for r in _records(scenes, model, predict(scenes, model, seed=seed), record_failure)
+            )
+        update_manifest(
+            run_dir,
+            started_at="2026-01-01T00:00:00+00:00",
+            finished_at="2026-01-01T02:00:00+00:00",
+            wall_seconds=7200.0,
+        )
         dirs.append(run_dir)
     return dirs

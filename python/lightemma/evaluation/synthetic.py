@@ -46,11 +46,23 @@ def make_record(
         "sample_token": f"token-{frame_id}",
         "status": status,
         "first_status": first,
-        "attempts": [{"answer": answer, "status": first, "reason": "" if first == "ok" else "synthetic", "input_tokens": input_tokens, "output_tokens": output_tokens, "seconds": seconds, "cost_cents": cost_cents}],
+        "attempts": [
+            {
+                "answer": answer,
+                "status": first,
+                "reason": "" if first == "ok" else "synthetic",
+                "input_tokens": input_tokens,
+                "output_tokens": output_tokens,
+                "seconds": seconds,
+                "cost_cents": cost_cents,
+            }
+        ],
         "actions": None if actions is None else np.asarray(actions, dtype=float).tolist(),
         "trajectory": None if trajectory is None else np.asarray(trajectory, dtype=float).tolist(),
         "gt_positions": np.asarray(gt_positions, dtype=float).tolist(),
-        "history_actions": np.zeros((6, 2)).tolist() if history_actions is None else np.asarray(history_actions, dtype=float).tolist(),
+        "history_actions": np.zeros((6, 2)).tolist()
+        if history_actions is None
+        else np.asarray(history_actions, dtype=float).tolist(),
         "seconds": seconds,
         "input_tokens": input_tokens,
         "output_tokens": output_tokens,
@@ -85,8 +97,12 @@ def synthetic_records(
         acc = truth.uniform(-2.0, 1.5, batch)[:n]
         curv = (truth.normal(0.0, 0.03, batch) * (truth.random(batch) < 0.4))[:n]
         steps = np.arange(1, 7) * STEP_SECONDS
-        gt_act = np.stack([np.clip(v0[:, None] + acc[:, None] * steps, 0.0, None), np.repeat(curv[:, None], 6, 1)], axis=2)
-        hist = np.stack([np.clip(v0[:, None] - acc[:, None] * steps[::-1], 0.0, None), np.repeat(curv[:, None] * 0.8, 6, 1)], axis=2)
+        gt_act = np.stack(
+            [np.clip(v0[:, None] + acc[:, None] * steps, 0.0, None), np.repeat(curv[:, None], 6, 1)], axis=2
+        )
+        hist = np.stack(
+            [np.clip(v0[:, None] - acc[:, None] * steps[::-1], 0.0, None), np.repeat(curv[:, None] * 0.8, 6, 1)], axis=2
+        )
         pred_act = gt_act + np.stack([rng.normal(0, noise, (n, 6)), rng.normal(0, noise * 0.01, (n, 6))], axis=2)
         pred_act[..., 0] = np.clip(pred_act[..., 0], 0.0, None)
         gt, pred = integrate(gt_act, method="euler"), integrate(pred_act, method="euler")
@@ -110,7 +126,11 @@ def synthetic_records(
                 output_tokens=int(rng.integers(200, 700)),
                 cost_cents=None if cost_cents is None else float(cost_cents * rng.uniform(0.5, 1.5)),
                 scene_name=f"scene-{index // frames_per_scene:04d}",
-                texts={"scene": filler, "intent": filler, "answer": "[" + ", ".join(f"({v:.3f}, {c:.4f})" for v, c in pred_act[i]) + "]"},
+                texts={
+                    "scene": filler,
+                    "intent": filler,
+                    "answer": "[" + ", ".join(f"({v:.3f}, {c:.4f})" for v, c in pred_act[i]) + "]",
+                },
             )
 
 
@@ -129,7 +149,13 @@ def write_synthetic_run(
     ``record_options`` go to :func:`synthetic_records`. Lines are written in
     large buffered blocks (fast enough for a million records).
     """
-    base = {"model": model, "started_at": "2026-01-01T00:00:00+00:00", "integrator": "euler", "concurrency": 8, "backend": {"kind": "synthetic", "gpus": None}}
+    base = {
+        "model": model,
+        "started_at": "2026-01-01T00:00:00+00:00",
+        "integrator": "euler",
+        "concurrency": 8,
+        "backend": {"kind": "synthetic", "gpus": None},
+    }
     run_dir = create_run_dir(output, model, {**base, **dict(manifest or {})})
     with open(run_dir / FRAMES_FILE, "w", encoding="utf-8") as fh:
         block: list[str] = []

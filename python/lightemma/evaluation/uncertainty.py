@@ -30,7 +30,11 @@ def frame_values(run: RunData, rows: np.ndarray, convention: str) -> np.ndarray:
     out = np.empty((len(rows), len(_COLUMNS)))
     for start in range(0, len(rows), BLOCK):
         block = rows[start : start + BLOCK]
-        values = frame_metrics(np.ascontiguousarray(run.trajectory[block]), np.ascontiguousarray(run.gt_positions[block]), convention=convention)
+        values = frame_metrics(
+            np.ascontiguousarray(run.trajectory[block]),
+            np.ascontiguousarray(run.gt_positions[block]),
+            convention=convention,
+        )
         out[start : start + len(block)] = values[:, _COLUMNS]
     return out
 
@@ -57,7 +61,9 @@ def too_large(values: np.ndarray, scenes: np.ndarray, what: str = "ADE avg") -> 
     return f"interval unavailable: values too large to resample ({what} up to {largest:.3g} m)"
 
 
-def model_intervals(entries: Sequence[tuple[str, RunData, np.ndarray]], conventions: Sequence[str], resampling: Resampling) -> list[dict[str, dict[str, list[float] | None]]]:
+def model_intervals(
+    entries: Sequence[tuple[str, RunData, np.ndarray]], conventions: Sequence[str], resampling: Resampling
+) -> list[dict[str, dict[str, list[float] | None]]]:
     """Per entry (label, run, scored rows): {convention: {"ade_avg": [low, high], "fde": [low, high]}}.
 
     One core call for every model and convention; a model's random numbers
@@ -101,13 +107,24 @@ def _global_columns(runs: Sequence[RunData], convention: str, only: set[str] | N
         if only is not None:
             rows = rows[np.fromiter((run.frame_ids[i] in only for i in rows), dtype=bool, count=len(rows))]
         values[r, where[rows]] = frame_values(run, rows, convention)[:, 0]
-        names = np.asarray(run.scene_names, dtype=object)[run.scenes()] if run.scene_names else np.asarray(run.frame_ids, dtype=object)
+        names = (
+            np.asarray(run.scene_names, dtype=object)[run.scenes()]
+            if run.scene_names
+            else np.asarray(run.frame_ids, dtype=object)
+        )
         unset = scene[where] < 0
         scene[where[unset]] = [scene_codes.setdefault(n, len(scene_codes)) for n in names[unset]]
     return values, scene
 
 
-def pairwise_ade(runs: Sequence[RunData], labels: Sequence[str], convention: str, resampling: Resampling, *, only: set[str] | None = None) -> list[dict[str, Any]]:
+def pairwise_ade(
+    runs: Sequence[RunData],
+    labels: Sequence[str],
+    convention: str,
+    resampling: Resampling,
+    *,
+    only: set[str] | None = None,
+) -> list[dict[str, Any]]:
     """Every pair (a, b) of runs, a listed before b, on the frames scored in both (within ``only`` if given).
 
     Row keys: ``model_a``, ``model_b``, ``convention``, ``frames``, ``scenes``,
@@ -133,7 +150,13 @@ def pairwise_ade(runs: Sequence[RunData], labels: Sequence[str], convention: str
     p = sign_flip_p(groups, keys, resampling) if groups else np.zeros(0)
     rows, k = [], 0
     for a, b, common in pairs:
-        row: dict[str, Any] = {"model_a": labels[a], "model_b": labels[b], "convention": convention, "frames": int(common.sum()), "scenes": int(len(np.unique(scene[common])))}
+        row: dict[str, Any] = {
+            "model_a": labels[a],
+            "model_b": labels[b],
+            "convention": convention,
+            "frames": int(common.sum()),
+            "scenes": int(len(np.unique(scene[common]))),
+        }
         if common.any() and why[k]:
             with np.errstate(over="ignore", invalid="ignore"):
                 mean = float(np.sum((values[a, common] - values[b, common]) / int(common.sum())))
@@ -141,7 +164,11 @@ def pairwise_ade(runs: Sequence[RunData], labels: Sequence[str], convention: str
             k += 1
         elif common.any():
             diff = groups[k][0]
-            row.update(ade_avg_diff=float(diff.mean()), ci95=_interval(ci[k, 0]), p_value=None if np.isnan(p[k]) else float(p[k]))
+            row.update(
+                ade_avg_diff=float(diff.mean()),
+                ci95=_interval(ci[k, 0]),
+                p_value=None if np.isnan(p[k]) else float(p[k]),
+            )
             k += 1
         else:
             row.update(ade_avg_diff=None, ci95=None, p_value=None)
@@ -181,5 +208,16 @@ def generation_verdicts(models: Sequence[Any], pairwise: Sequence[dict[str, Any]
             ci = row["ci95"]
             ci_change = None if ci is None else sorted([-flip * ci[0], -flip * ci[1]])
             verdict = ("better" if change < 0 else "worse") if row["significant"] else "not distinguishable"
-            out.append({"family": family, "model": newer.label, "predecessor": older.label, "frames": row["frames"], "change": change, "ci95": ci_change, "p_holm": row["p_holm"], "verdict": verdict})
+            out.append(
+                {
+                    "family": family,
+                    "model": newer.label,
+                    "predecessor": older.label,
+                    "frames": row["frames"],
+                    "change": change,
+                    "ci95": ci_change,
+                    "p_holm": row["p_holm"],
+                    "verdict": verdict,
+                }
+            )
     return out

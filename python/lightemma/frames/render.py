@@ -13,8 +13,8 @@ precision: ``np.float32(4.512)`` is ``4.512``, not ``4.51200008392334``, the flo
 from __future__ import annotations
 
 import math
-from decimal import Decimal
 from collections.abc import Sequence
+from decimal import Decimal
 from typing import Any
 
 import numpy as np
@@ -63,8 +63,9 @@ def _rows(actions: np.ndarray | Sequence[Sequence[float]]) -> list[Any]:
         rows = actions.tolist()
     else:
         narrow, rows = None, [list(row) if isinstance(row, (Sequence, np.ndarray)) else row for row in actions]
-    return [[_narrow_float(v, narrow) for v in row] if isinstance(row, list) else _narrow_float(row, narrow)
-            for row in rows]
+    return [
+        [_narrow_float(v, narrow) for v in row] if isinstance(row, list) else _narrow_float(row, narrow) for row in rows
+    ]
 
 
 def format_history(actions: np.ndarray | Sequence[Sequence[float]]) -> str:
@@ -107,8 +108,10 @@ def history_placeholders(actions: np.ndarray | Sequence[Sequence[float]]) -> dic
     """The prompt placeholders of a frame's history actions (T, 2): ``history``, ``speeds``, ``curvatures``."""
     rows = _rows(actions)
     if any(not isinstance(row, list) or len(row) != 2 for row in rows):
-        raise ShapeError(f"history actions must have shape (T, 2), got rows of length "
-                         f"{sorted({len(r) if isinstance(r, list) else 0 for r in rows})}")
+        raise ShapeError(
+            f"history actions must have shape (T, 2), got rows of length "
+            f"{sorted({len(r) if isinstance(r, list) else 0 for r in rows})}"
+        )
     return {
         "history": format_history(np.asarray(rows, dtype=np.float64).reshape(-1, 2)),
         "speeds": format_python_list([row[0] for row in rows]),

@@ -53,5 +53,10 @@ def sample_frames(frames: Any, n: int, seed: int = 0) -> Any:
 def describe_sample(frames: Any, n: int, seed: int) -> dict[str, Any]:
     """What the manifest records of a sample: N asked, seed, frames and scenes taken, the rule."""
     names = list(frames.scene_names) if hasattr(frames, "scene_names") else [f.scene_name for f in frames]
-    return {"n": int(n), "seed": int(seed), "frames": len(names), "scenes": len(set(names)),
-            "rule": "one frame per scene per round, scenes in a seeded order (lightemma.frames.sample)"}
+    return {
+        "n": int(n),
+        "seed": int(seed),
+        "frames": len(names),
+        "scenes": len(set(names)),
+        "rule": "one frame per scene per round, scenes in a seeded order (lightemma.frames.sample)",
+    }

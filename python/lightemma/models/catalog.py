@@ -39,8 +39,12 @@ ANTHROPIC_PRICES = "docs.anthropic.com/en/docs/about-claude/pricing (stored copy
 GOOGLE_PRICES = "ai.google.dev/gemini-api/docs/pricing (as quoted by morphllm.com/gemini-api-pricing, stored copy)"
 PRICE_READ = "2026-11-22"
 # Batch prices: 50 % of the interactive price for input and output tokens at all three providers.
-OPENAI_BATCH_PRICES = "platform.openai.com/docs/guides/batch (50 % of the synchronous price; per model in litellm's list)"
-ANTHROPIC_BATCH_PRICES = "docs.anthropic.com/en/docs/build-with-claude/batch-processing#pricing (50 % of standard prices)"
+OPENAI_BATCH_PRICES = (
+    "platform.openai.com/docs/guides/batch (50 % of the synchronous price; per model in litellm's list)"
+)
+ANTHROPIC_BATCH_PRICES = (
+    "docs.anthropic.com/en/docs/build-with-claude/batch-processing#pricing (50 % of standard prices)"
+)
 GOOGLE_BATCH_PRICES = "ai.google.dev/gemini-api/docs/batch-mode (50 % of the interactive price)"
 BATCH_DISCOUNT = 0.5
 #: output tokens added to --max-tokens for a reasoning model's hidden reasoning
@@ -90,29 +94,61 @@ class ModelInfo:
 
 
 def _api(key: str, display: str, family: str, gen: int, model_id: str, **kw: Any) -> ModelInfo:
-    return ModelInfo(key=key, display_name=display, family=family, generation=gen, model_id=model_id, backend="api", **kw)
+    return ModelInfo(
+        key=key, display_name=display, family=family, generation=gen, model_id=model_id, backend="api", **kw
+    )
 
 
 def _local(key: str, display: str, family: str, gen: int, checkpoint: str, gpus: int) -> ModelInfo:
-    return ModelInfo(key=key, display_name=display, family=family, generation=gen, model_id=checkpoint, backend="hf", gpus=gpus)
+    return ModelInfo(
+        key=key, display_name=display, family=family, generation=gen, model_id=checkpoint, backend="hf", gpus=gpus
+    )
 
 
 _REASONS = dict(reasoning=True, reasoning_budget=DEFAULT_REASONING_BUDGET)
 # Sonnet 3.7 and 4: $3 input, $15 output, cache hits $0.30, 5-minute cache writes $3.75 per million tokens
-_ANTHROPIC_SONNET = dict(input_usd_per_mtok=3.0, output_usd_per_mtok=15.0, cache_read_usd_per_mtok=0.30,
-                         cache_write_usd_per_mtok=3.75, price_source=ANTHROPIC_PRICES, price_read=PRICE_READ,
-                         batch_input_usd_per_mtok=1.5, batch_output_usd_per_mtok=7.5, batch_price_source=ANTHROPIC_BATCH_PRICES)
+_ANTHROPIC_SONNET = dict(
+    input_usd_per_mtok=3.0,
+    output_usd_per_mtok=15.0,
+    cache_read_usd_per_mtok=0.30,
+    cache_write_usd_per_mtok=3.75,
+    price_source=ANTHROPIC_PRICES,
+    price_read=PRICE_READ,
+    batch_input_usd_per_mtok=1.5,
+    batch_output_usd_per_mtok=7.5,
+    batch_price_source=ANTHROPIC_BATCH_PRICES,
+)
 
 PAPER_MODELS: tuple[ModelInfo, ...] = (
     _api("gpt-4o", "GPT-4o", "GPT", 1, "gpt-4o"),
     _api("gpt-5.0", "GPT-5.0", "GPT", 2, "gpt-5", supports_temperature=False, **_REASONS),
     _api("gpt-5.2", "GPT-5.2", "GPT", 3, "gpt-5.2", supports_temperature=False, **_REASONS),
-    _api("claude-3.7-sonnet", "Claude-3.7-Sonnet", "Claude", 1, "anthropic/claude-3-7-sonnet-20250219", **_ANTHROPIC_SONNET),
-    _api("claude-4.0-sonnet", "Claude-4.0-Sonnet", "Claude", 2, "anthropic/claude-sonnet-4-20250514", **_ANTHROPIC_SONNET),
+    _api(
+        "claude-3.7-sonnet",
+        "Claude-3.7-Sonnet",
+        "Claude",
+        1,
+        "anthropic/claude-3-7-sonnet-20250219",
+        **_ANTHROPIC_SONNET,
+    ),
+    _api(
+        "claude-4.0-sonnet", "Claude-4.0-Sonnet", "Claude", 2, "anthropic/claude-sonnet-4-20250514", **_ANTHROPIC_SONNET
+    ),
     _api("claude-4.6-sonnet", "Claude-4.6-Sonnet", "Claude", 3, "anthropic/claude-sonnet-4-6"),
-    _api("gemini-2.0-flash", "Gemini-2.0-Flash", "Gemini", 1, "gemini/gemini-2.0-flash",
-         input_usd_per_mtok=0.10, output_usd_per_mtok=0.40, price_source=GOOGLE_PRICES, price_read=PRICE_READ,
-         batch_input_usd_per_mtok=0.05, batch_output_usd_per_mtok=0.20, batch_price_source=GOOGLE_BATCH_PRICES),
+    _api(
+        "gemini-2.0-flash",
+        "Gemini-2.0-Flash",
+        "Gemini",
+        1,
+        "gemini/gemini-2.0-flash",
+        input_usd_per_mtok=0.10,
+        output_usd_per_mtok=0.40,
+        price_source=GOOGLE_PRICES,
+        price_read=PRICE_READ,
+        batch_input_usd_per_mtok=0.05,
+        batch_output_usd_per_mtok=0.20,
+        batch_price_source=GOOGLE_BATCH_PRICES,
+    ),
     _api("gemini-2.5-flash", "Gemini-2.5-Flash", "Gemini", 2, "gemini/gemini-2.5-flash", **_REASONS),
     _api("gemini-3.0-flash", "Gemini-3.0-Flash", "Gemini", 3, "gemini/gemini-3-flash-preview", **_REASONS),
     _local("qwen-2.0-vl-7b", "Qwen-2.0-VL-7B", "Qwen", 1, "Qwen/Qwen2-VL-7B-Instruct", 1),
@@ -124,10 +160,21 @@ PAPER_MODELS: tuple[ModelInfo, ...] = (
 )
 
 BASELINES: tuple[ModelInfo, ...] = tuple(
-    ModelInfo(key=f"baseline:{kind}", display_name=f"Baseline ({label})", family="baseline", generation=0,
-              model_id=f"baseline:{kind}", backend="baseline", in_paper=False)
-    for kind, label in (("constant", "constant actions"), ("cv", "constant velocity"), ("oracle", "oracle actions"),
-                        ("ego", "ego status"))
+    ModelInfo(
+        key=f"baseline:{kind}",
+        display_name=f"Baseline ({label})",
+        family="baseline",
+        generation=0,
+        model_id=f"baseline:{kind}",
+        backend="baseline",
+        in_paper=False,
+    )
+    for kind, label in (
+        ("constant", "constant actions"),
+        ("cv", "constant velocity"),
+        ("oracle", "oracle actions"),
+        ("ego", "ego status"),
+    )
 )
 
 MODELS: tuple[ModelInfo, ...] = PAPER_MODELS + BASELINES
@@ -161,7 +208,9 @@ def resolve(name: str) -> ModelInfo:
     if _norm(name).startswith("baseline:"):
         kinds = ", ".join(m.key for m in BASELINES)
         raise UserError(f"unknown baseline {name!r}; known: {kinds}")
-    return ModelInfo(key=name, display_name=name, family="other", generation=0, model_id=name, backend="api", in_paper=False)
+    return ModelInfo(
+        key=name, display_name=name, family="other", generation=0, model_id=name, backend="api", in_paper=False
+    )
 
 
 # Model names the LightEMMA reference scripts use for their result folders

@@ -39,7 +39,14 @@ _PATTERNS: dict[str, str] = {
     "llama-4.0-17b-scout": r"llama-4(-0)?-(17b-)?scout",
 }
 
-_FAMILY_HINTS = (("baseline:", "Baseline"), ("gpt", "GPT"), ("claude", "Claude"), ("gemini", "Gemini"), ("qwen", "Qwen"), ("llama", "LLaMA"))
+_FAMILY_HINTS = (
+    ("baseline:", "Baseline"),
+    ("gpt", "GPT"),
+    ("claude", "Claude"),
+    ("gemini", "Gemini"),
+    ("qwen", "Qwen"),
+    ("llama", "LLaMA"),
+)
 
 
 def _normalise(model: str) -> str:
@@ -82,7 +89,9 @@ def paper_model_name(model: str) -> str | None:
     return known.display_name if known is not None else None
 
 
-def beside_paper(models: Sequence[Any], rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], keys: Sequence[str]) -> list[dict[str, Any]]:
+def beside_paper(
+    models: Sequence[Any], rows: list[dict[str, Any]], paper_rows: list[dict[str, Any]], keys: Sequence[str]
+) -> list[dict[str, Any]]:
     """Each run's row followed by the paper's row of the same model and a row of differences (run − paper).
 
     ``models`` are the runs' :class:`~lightemma.evaluation.core.ModelResult` in

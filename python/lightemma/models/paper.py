@@ -64,7 +64,11 @@ ANOMALOUS: dict[str, tuple[str, ...]] = {
 
 #: (name prefix, family) of the paper's rows, in the paper's family order
 FAMILY_PREFIXES: tuple[tuple[str, str], ...] = (
-    ("GPT-", "GPT"), ("Claude-", "Claude"), ("Gemini-", "Gemini"), ("Qwen-", "Qwen"), ("LLaMA-", "LLaMA"),
+    ("GPT-", "GPT"),
+    ("Claude-", "Claude"),
+    ("Gemini-", "Gemini"),
+    ("Qwen-", "Qwen"),
+    ("LLaMA-", "LLaMA"),
 )
 
 

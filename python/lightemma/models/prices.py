@@ -62,19 +62,30 @@ class Price(Mapping[str, Any]):
             value = getattr(self, name)
             if value is None:
                 continue
-            if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) \
-                    or not 0 <= value <= MAX_USD_PER_MTOK:
-                raise ValueError(f"price {name} must be a number from 0 to {MAX_USD_PER_MTOK:g} or None, got {value!r} "
-                                 f"({self.source})")
+            if (
+                isinstance(value, bool)
+                or not isinstance(value, (int, float))
+                or not math.isfinite(value)
+                or not 0 <= value <= MAX_USD_PER_MTOK
+            ):
+                raise ValueError(
+                    f"price {name} must be a number from 0 to {MAX_USD_PER_MTOK:g} or None, got {value!r} "
+                    f"({self.source})"
+                )
         if (self.input_usd_per_mtok is None) != (self.output_usd_per_mtok is None):
             raise ValueError(f"a price needs both its input and output prices or neither ({self.source})")
         if not isinstance(self.source, str) or not self.source:
             raise ValueError(f"a price needs its source, got {self.source!r}")
-        if self.discount is not None and (not self.batch or isinstance(self.discount, bool)
-                                          or not isinstance(self.discount, (int, float))
-                                          or not math.isfinite(self.discount) or self.discount < 0):
-            raise ValueError(f"a discount is a number of at least 0 on a batch price, got {self.discount!r} "
-                             f"({self.source})")
+        if self.discount is not None and (
+            not self.batch
+            or isinstance(self.discount, bool)
+            or not isinstance(self.discount, (int, float))
+            or not math.isfinite(self.discount)
+            or self.discount < 0
+        ):
+            raise ValueError(
+                f"a discount is a number of at least 0 on a batch price, got {self.discount!r} ({self.source})"
+            )
 
     @classmethod
     def unknown(cls, source: str, *, batch: bool = False) -> Price:
@@ -164,20 +175,31 @@ def price(info: ModelInfo) -> Price:
         return Price.unknown("no model" if info.backend == "baseline" else "local model: GPUs, not tokens")
     entry = _litellm_entry(info.model_id)
     if entry.get("input_cost_per_token") is not None and entry.get("output_cost_per_token") is not None:
+
         def per_mtok(key: str) -> float | None:
             return float(entry[key]) * 1e6 if entry.get(key) is not None else None
 
-        return Price(per_mtok("input_cost_per_token"), per_mtok("output_cost_per_token"),
-                     per_mtok("cache_read_input_token_cost"), per_mtok("cache_creation_input_token_cost"),
-                     f"litellm {_litellm_version()} bundled price list")
+        return Price(
+            per_mtok("input_cost_per_token"),
+            per_mtok("output_cost_per_token"),
+            per_mtok("cache_read_input_token_cost"),
+            per_mtok("cache_creation_input_token_cost"),
+            f"litellm {_litellm_version()} bundled price list",
+        )
     if info.input_usd_per_mtok is not None and info.output_usd_per_mtok is not None:
-        return Price(info.input_usd_per_mtok, info.output_usd_per_mtok, info.cache_read_usd_per_mtok,
-                     info.cache_write_usd_per_mtok, f"{info.price_source}, read {info.price_read}")
+        return Price(
+            info.input_usd_per_mtok,
+            info.output_usd_per_mtok,
+            info.cache_read_usd_per_mtok,
+            info.cache_write_usd_per_mtok,
+            f"{info.price_source}, read {info.price_read}",
+        )
     return Price.unknown("unknown (costs recorded as null)")
 
 
-def run_price(info: ModelInfo, *, batch: bool = False, given: Sequence[float] | None = None,
-              served_from: str | None = None) -> Price:
+def run_price(
+    info: ModelInfo, *, batch: bool = False, given: Sequence[float] | None = None, served_from: str | None = None
+) -> Price:
     """The price a run bills its calls at, shaped like :func:`price`: ``given`` (``--price``: USD per million input /
     output tokens, for every call of the run, batched or not; cached and cache-write input tokens at the input
     price), else unknown when the model is
@@ -185,8 +207,13 @@ def run_price(info: ModelInfo, *, batch: bool = False, given: Sequence[float] | 
     (``batch``) or :func:`price`. :class:`~lightemma.backends.api.APIBackend` and
     :class:`~lightemma.backends.batch.BatchBackend` price calls this way, and ``--estimate`` / ``--max-cost`` with them."""
     if given is not None:  # every input token at the input price: cached and cache-write ones too
-        return Price(float(given[0]), float(given[1]), float(given[0]), float(given[0]),
-                     f"--price {float(given[0]):g} {float(given[1]):g} (USD per million input / output tokens)")
+        return Price(
+            float(given[0]),
+            float(given[1]),
+            float(given[0]),
+            float(given[0]),
+            f"--price {float(given[0]):g} {float(given[1]):g} (USD per million input / output tokens)",
+        )
     if served_from is not None:
         return Price.unknown(f"none: served from {served_from}")
     return batch_price(info) if batch else price(info)
@@ -222,11 +249,20 @@ def batch_price(info: ModelInfo) -> Price:
     """
     base = price(info)
     if info.backend != "api" or base.input_usd_per_mtok is None or base.output_usd_per_mtok is None:
-        return Price(base.input_usd_per_mtok, base.output_usd_per_mtok, base.cache_read_usd_per_mtok,
-                     base.cache_write_usd_per_mtok, base.source, batch=True)
+        return Price(
+            base.input_usd_per_mtok,
+            base.output_usd_per_mtok,
+            base.cache_read_usd_per_mtok,
+            base.cache_write_usd_per_mtok,
+            base.source,
+            batch=True,
+        )
     entry = _litellm_entry(info.model_id)
     if entry.get("input_cost_per_token_batches") is not None and entry.get("output_cost_per_token_batches") is not None:
-        pin, pout = float(entry["input_cost_per_token_batches"]) * 1e6, float(entry["output_cost_per_token_batches"]) * 1e6
+        pin, pout = (
+            float(entry["input_cost_per_token_batches"]) * 1e6,
+            float(entry["output_cost_per_token_batches"]) * 1e6,
+        )
         source = f"litellm {_litellm_version()} bundled price list (batches)"
     elif info.batch_input_usd_per_mtok is not None and info.batch_output_usd_per_mtok is not None:
         pin, pout = info.batch_input_usd_per_mtok, info.batch_output_usd_per_mtok
@@ -239,8 +275,15 @@ def batch_price(info: ModelInfo) -> Price:
     def scaled(value: float | None) -> float | None:
         return None if value is None else value * discount
 
-    return Price(pin, pout, scaled(base.cache_read_usd_per_mtok), scaled(base.cache_write_usd_per_mtok), source,
-                 batch=True, discount=discount)
+    return Price(
+        pin,
+        pout,
+        scaled(base.cache_read_usd_per_mtok),
+        scaled(base.cache_write_usd_per_mtok),
+        source,
+        batch=True,
+        discount=discount,
+    )
 
 
 def _batch_source(info: ModelInfo) -> str:

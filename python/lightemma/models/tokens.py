@@ -70,8 +70,9 @@ class ImageRule:
         if self.kind == "patch":
             return math.ceil(_patches(width, height) * self.multiplier - 1e-9)
         if self.kind == "anthropic":
-            scale = min(1.0, ANTHROPIC_MAX_SIDE / max(width, height),
-                        math.sqrt(ANTHROPIC_MAX_PIXELS / (width * height)))
+            scale = min(
+                1.0, ANTHROPIC_MAX_SIDE / max(width, height), math.sqrt(ANTHROPIC_MAX_PIXELS / (width * height))
+            )
             return math.ceil(round(width * scale) * round(height * scale) / 750)
         if self.kind == "gemini-tile":
             if width <= 384 and height <= 384:
@@ -105,23 +106,33 @@ def _patches(width: int, height: int) -> int:
 
 
 def _openai_tile(name: str, base: int, tile: int, quoted: str) -> ImageRule:
-    return ImageRule(name=f"OpenAI tiles (detail high): {base} + {tile} per 512-px tile", kind="tile", base=base,
-                     tile=tile, source=f"{OPENAI_VISION_DOC}, {name} row; as quoted by {quoted} (stored copies), "
-                     f"read {IMAGE_RULES_READ}")
+    return ImageRule(
+        name=f"OpenAI tiles (detail high): {base} + {tile} per 512-px tile",
+        kind="tile",
+        base=base,
+        tile=tile,
+        source=f"{OPENAI_VISION_DOC}, {name} row; as quoted by {quoted} (stored copies), read {IMAGE_RULES_READ}",
+    )
 
 
 def _openai_patch(name: str, multiplier: float) -> ImageRule:
-    return ImageRule(name=f"OpenAI 32-px patches (at most {PATCH_LIMIT}) × {multiplier:g}", kind="patch",
-                     multiplier=multiplier, source=f"{OPENAI_VISION_DOC}, patch rule, {name} multiplier; as quoted by "
-                     f"github.com/xn1cklas/tokenlens/issues/7 and community.openai.com/t/1230130 (stored copies), "
-                     f"read {IMAGE_RULES_READ}")
+    return ImageRule(
+        name=f"OpenAI 32-px patches (at most {PATCH_LIMIT}) × {multiplier:g}",
+        kind="patch",
+        multiplier=multiplier,
+        source=f"{OPENAI_VISION_DOC}, patch rule, {name} multiplier; as quoted by "
+        f"github.com/xn1cklas/tokenlens/issues/7 and community.openai.com/t/1230130 (stored copies), "
+        f"read {IMAGE_RULES_READ}",
+    )
 
 
 _DATE = r"(-\d{4}-\d{2}-\d{2})?"
 _GPT4O_QUOTES = "v2ex.com/t/1044688 (the page's text with its 765- and 1105-token examples) and a64.in's calculator"
 _GPT4O_MINI_QUOTES = "github.com/epam/ai-dial-adapter-openai/issues/165 and github.com/autogenhub/autogen/pull/57"
-_CLAUDE = (r"claude-(3-haiku|3-sonnet|3-opus|3-5-sonnet|3-5-haiku|3-7-sonnet|sonnet-4|opus-4|opus-4-1|sonnet-4-5|"
-           r"haiku-4-5|opus-4-5|sonnet-4-6|opus-4-6)(-\d{8}|-latest)?")
+_CLAUDE = (
+    r"claude-(3-haiku|3-sonnet|3-opus|3-5-sonnet|3-5-haiku|3-7-sonnet|sonnet-4|opus-4|opus-4-1|sonnet-4-5|"
+    r"haiku-4-5|opus-4-5|sonnet-4-6|opus-4-6)(-\d{8}|-latest)?"
+)
 #: (pattern over the model id without its provider prefix, rule), first match wins. Left out on purpose, with why:
 #: gpt-4.1 (the docs' patch rule at × 1 and the billed tile rule disagree: community.openai.com/t/1230130);
 #: gpt-5-mini and gpt-5-nano (the docs' × 1.62 / × 2.46 and OpenAI's pricing calculator's × 1.2 / × 1.5 disagree:
@@ -133,21 +144,38 @@ IMAGE_RULES: tuple[tuple[str, ImageRule], ...] = (
     (rf"gpt-4\.1-mini{_DATE}", _openai_patch("gpt-4.1-mini", 1.62)),
     (rf"gpt-4\.1-nano{_DATE}", _openai_patch("gpt-4.1-nano", 2.46)),
     (rf"o4-mini{_DATE}", _openai_patch("o4-mini", 1.72)),
-    (_CLAUDE,
-     ImageRule(name=f"Anthropic: long side ≤ {ANTHROPIC_MAX_SIDE} px, area ≤ 1092 × 1092 px, width × height / 750",
-               kind="anthropic", provider="anthropic",
-               source=f"{ANTHROPIC_VISION_DOC} (stored copies of docs.anthropic.com/en/docs/vision "
-               f"and platform.claude.com/docs/*/build-with-claude/vision), read {IMAGE_RULES_READ}")),
-    (r"gemini-2\.(0|5)-[a-z0-9.-]+",
-     ImageRule(name="Gemini 2.x: 258 within 384 × 384 px, else 258 per 768 × 768 tile", kind="gemini-tile",
-               provider="gemini",
-               source=f"{GEMINI_TOKENS_DOC}; as quoted by geminibyexample.com/027-calculate-input-tokens (stored "
-               f"copy), read {IMAGE_RULES_READ}")),
-    (r"gemini-3(\.\d+)?-[a-z0-9.-]+",
-     ImageRule(name="Gemini 3: at most 1120 per image (media resolution high, the default for images)",
-               kind="per-image", tokens_per_image=1120, exact=False, provider="gemini",
-               source=f"{GEMINI_MEDIA_RESOLUTION_DOC}; as quoted by fastgptplus.com/en/posts/gemini-3-pro-media-"
-               f"resolution-parameter (stored copy), read {IMAGE_RULES_READ}")),
+    (
+        _CLAUDE,
+        ImageRule(
+            name=f"Anthropic: long side ≤ {ANTHROPIC_MAX_SIDE} px, area ≤ 1092 × 1092 px, width × height / 750",
+            kind="anthropic",
+            provider="anthropic",
+            source=f"{ANTHROPIC_VISION_DOC} (stored copies of docs.anthropic.com/en/docs/vision "
+            f"and platform.claude.com/docs/*/build-with-claude/vision), read {IMAGE_RULES_READ}",
+        ),
+    ),
+    (
+        r"gemini-2\.(0|5)-[a-z0-9.-]+",
+        ImageRule(
+            name="Gemini 2.x: 258 within 384 × 384 px, else 258 per 768 × 768 tile",
+            kind="gemini-tile",
+            provider="gemini",
+            source=f"{GEMINI_TOKENS_DOC}; as quoted by geminibyexample.com/027-calculate-input-tokens (stored "
+            f"copy), read {IMAGE_RULES_READ}",
+        ),
+    ),
+    (
+        r"gemini-3(\.\d+)?-[a-z0-9.-]+",
+        ImageRule(
+            name="Gemini 3: at most 1120 per image (media resolution high, the default for images)",
+            kind="per-image",
+            tokens_per_image=1120,
+            exact=False,
+            provider="gemini",
+            source=f"{GEMINI_MEDIA_RESOLUTION_DOC}; as quoted by fastgptplus.com/en/posts/gemini-3-pro-media-"
+            f"resolution-parameter (stored copy), read {IMAGE_RULES_READ}",
+        ),
+    ),
 )
 #: provider prefixes of litellm model strings whose bare model name the rules above are about
 _RULE_PREFIXES = ("openai/", "anthropic/", "gemini/", "vertex_ai/")
@@ -160,7 +188,7 @@ def image_rule(model: ModelInfo | str) -> ImageRule | None:
     name = _norm(model_id)
     for prefix in _RULE_PREFIXES:
         if name.startswith(prefix):
-            name = name[len(prefix):]
+            name = name[len(prefix) :]
             break
     if "/" in name:  # another provider's route (openrouter/…, azure/…): its billing is not the rule's
         return None
@@ -178,16 +206,18 @@ def _named_rule(model: str) -> ImageRule:
     return rule
 
 
-_PROVIDER_RULES = {provider: _named_rule(model) for provider, model in
-                   (("openai", "gpt-4o"), ("anthropic", "claude-3-7-sonnet"), ("gemini", "gemini-2.0-flash"))}
+_PROVIDER_RULES = {
+    provider: _named_rule(model)
+    for provider, model in (("openai", "gpt-4o"), ("anthropic", "claude-3-7-sonnet"), ("gemini", "gemini-2.0-flash"))
+}
 #: where each provider's image-token rules are published (shown by ``--estimate``)
 IMAGE_TOKEN_RULES = {
     "openai": f"{OPENAI_VISION_DOC} (detail high: fit in 2048 × 2048, short side to 768, base + tile per 512-px tile, "
-              "per model; or 32-px patches × a per-model multiplier)",
+    "per model; or 32-px patches × a per-model multiplier)",
     "anthropic": f"{ANTHROPIC_VISION_DOC} (long side to at most 1568 px, area to at most ~1,600 tokens, tokens = "
-                 "width × height / 750)",
+    "width × height / 750)",
     "gemini": f"{GEMINI_TOKENS_DOC} (258 tokens for an image within 384 × 384, else 258 per 768 × 768 tile; Gemini 3: "
-              f"{GEMINI_MEDIA_RESOLUTION_DOC})",
+    f"{GEMINI_MEDIA_RESOLUTION_DOC})",
 }
 
 

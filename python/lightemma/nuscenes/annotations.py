@@ -160,8 +160,10 @@ def _box(ann: Mapping[str, Any], where: str = "sample_annotation") -> tuple[floa
     w, length = size[0], size[1]  # nuScenes size = (width, length, height)
     sized = 0 < w <= MAX_AGENT_SIZE_M and 0 < length <= MAX_AGENT_SIZE_M
     if not sized or max(abs(xy[0]), abs(xy[1])) > MAX_COORDINATE_M:
-        raise DatasetError(f"{where} {tok}: degenerate box ({shown}); sizes must be in (0, {MAX_AGENT_SIZE_M:g}] m "
-                           f"and the centre within ±{MAX_COORDINATE_M:g} m")
+        raise DatasetError(
+            f"{where} {tok}: degenerate box ({shown}); sizes must be in (0, {MAX_AGENT_SIZE_M:g}] m "
+            f"and the centre within ±{MAX_COORDINATE_M:g} m"
+        )
     try:
         yaw = _yaw(ann.get("rotation"))
     except ValueError as exc:
@@ -176,8 +178,9 @@ def _keeps(ann: Mapping[str, Any], agents: str, v0_40: set[str]) -> bool:
         counts = [ann.get("num_lidar_pts"), ann.get("num_radar_pts")]
         numbers = [c for c in counts if isinstance(c, int) and not isinstance(c, bool) and c >= 0]
         if len(numbers) != len(counts):
-            raise InputError(f"num_lidar_pts / num_radar_pts = {counts} are not counts "
-                             "(the 'valid' agent filter needs them)")
+            raise InputError(
+                f"num_lidar_pts / num_radar_pts = {counts} are not counts (the 'valid' agent filter needs them)"
+            )
         return numbers[0] + numbers[1] > 0
     if agents == "visible":
         return _ref(ann, "visibility_token") not in v0_40
@@ -190,8 +193,14 @@ def _ref(record: Mapping[str, Any], field: str) -> str | None:
     return value if isinstance(value, str) else None
 
 
-def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples: set[str] | None = None,
-                     agents: str = "all", history: int = 0) -> SafetyData:
+def load_safety_data(
+    dataroot: str | os.PathLike[str],
+    version: str,
+    *,
+    samples: set[str] | None = None,
+    agents: str = "all",
+    history: int = 0,
+) -> SafetyData:
     """Read poses, agents and drivable areas of ``dataroot/version`` (only ``samples`` and their futures if given).
 
     The drivable area of a log is the map expansion's ``drivable_area`` (``maps/expansion/<location>.json``)
@@ -298,8 +307,11 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
         categories = {c["token"]: str(c.get("name", "")) for c in read_table(root, version, "category")}
         instances = read_table(root, version, "instance")
         klass = {i["token"]: agent_class(categories.get(_ref(i, "category_token"), "")) for i in instances}
-        static = {i["token"] for i in instances if static_object(categories.get(_ref(i, "category_token"), ""))} \
-            if history > 0 else set()
+        static = (
+            {i["token"] for i in instances if static_object(categories.get(_ref(i, "category_token"), ""))}
+            if history > 0
+            else set()
+        )
         objects: dict[str, tuple[list, list]] = {}
         v0_40 = set()
         if agents == "visible":
@@ -349,5 +361,3 @@ def load_safety_data(dataroot: str | os.PathLike[str], version: str, *, samples:
                 data.objects[st] = np.asarray(ob, dtype=np.float64).reshape(-1, 5)
                 data.object_instances[st] = oi
     return data
-
-

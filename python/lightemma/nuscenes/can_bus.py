@@ -86,16 +86,25 @@ def can_bus_folder(dataroot: str | os.PathLike[str]) -> str | None:
 
 def pose_file(folder: str | os.PathLike[str], scene_name: str) -> str:
     """``<folder>/<scene_name>_pose.json``; raises DatasetError for a scene name that is not a plain file name."""
-    if not isinstance(scene_name, str) or not scene_name or scene_name in (".", "..") or "\0" in scene_name \
-            or "/" in scene_name or os.sep in scene_name:
+    if (
+        not isinstance(scene_name, str)
+        or not scene_name
+        or scene_name in (".", "..")
+        or "\0" in scene_name
+        or "/" in scene_name
+        or os.sep in scene_name
+    ):
         raise DatasetError(f"scene name {scene_name!r} cannot name a CAN bus file in {folder}")
     return os.path.join(os.fspath(folder), f"{scene_name}_pose.json")
 
 
 def _vector(msg: dict, field: str, path: str, i: int) -> list[float]:
     value = msg.get(field)
-    if not isinstance(value, list) or len(value) != 3 or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value):
+    if (
+        not isinstance(value, list)
+        or len(value) != 3
+        or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value)
+    ):
         shown = repr(value) if len(repr(value)) <= 60 else repr(value)[:57] + "..."
         raise DatasetError(f"CAN bus file {path}: message {i} has {field} = {shown}; expected 3 finite numbers")
     return [float(v) for v in value]
@@ -127,18 +136,19 @@ def read_pose_messages(path: str | os.PathLike[str]) -> PoseMessages:
             raise DatasetError(f"CAN bus file {path}: message {i} is not an object")
         t = msg.get("utime")
         if not isinstance(t, int) or isinstance(t, bool) or not 0 <= t <= np.iinfo(np.int64).max:
-            raise DatasetError(f"CAN bus file {path}: message {i} has utime = {t!r:.40}; expected a non-negative "
-                               "integer (µs)")
+            raise DatasetError(
+                f"CAN bus file {path}: message {i} has utime = {t!r:.40}; expected a non-negative integer (µs)"
+            )
         if t < previous:
-            raise DatasetError(f"CAN bus file {path}: message {i} has utime {t}, before the previous message's "
-                               f"{previous}")
+            raise DatasetError(
+                f"CAN bus file {path}: message {i} has utime {t}, before the previous message's {previous}"
+            )
         previous = t
         utime.append(t)
         vel.append(_vector(msg, "vel", path, i))
         accel.append(_vector(msg, "accel", path, i))
         rate.append(_vector(msg, "rotation_rate", path, i))
-    return PoseMessages(path, np.asarray(utime, dtype=np.int64), np.asarray(vel), np.asarray(accel),
-                        np.asarray(rate))
+    return PoseMessages(path, np.asarray(utime, dtype=np.int64), np.asarray(vel), np.asarray(accel), np.asarray(rate))
 
 
 def _readings_at(messages: PoseMessages, timestamps: npt.NDArray[np.int64]) -> CanReadings:
@@ -154,8 +164,10 @@ def _readings_at(messages: PoseMessages, timestamps: npt.NDArray[np.int64]) -> C
     for i, (t, j) in enumerate(zip(timestamps.tolist(), pick.tolist())):
         offset = abs(int(u[j]) - t)
         if offset > MAX_OFFSET_US:
-            reasons[i] = (f"no CAN bus pose message within {MAX_OFFSET_US} µs of keyframe time {t} in "
-                          f"{messages.path} (nearest {offset} µs away)")
+            reasons[i] = (
+                f"no CAN bus pose message within {MAX_OFFSET_US} µs of keyframe time {t} in "
+                f"{messages.path} (nearest {offset} µs away)"
+            )
             continue
         values[i] = (messages.vel[j, 0], messages.accel[j, 0], messages.accel[j, 1], messages.rotation_rate[j, 2])
         used[i] = u[j]

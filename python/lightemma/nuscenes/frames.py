@@ -80,9 +80,7 @@ def _check_window(window: str) -> None:
 def _check_options(window: str, on_missing_image: str, on_bad_record: str = "skip") -> None:
     _check_window(window)
     if on_missing_image not in ON_MISSING_IMAGE:
-        raise InputError(
-            f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}"
-        )
+        raise InputError(f"unknown on_missing_image {on_missing_image!r}; choose one of {', '.join(ON_MISSING_IMAGE)}")
     if on_bad_record not in ON_BAD_RECORD:
         raise InputError(f"unknown on_bad_record {on_bad_record!r}; choose one of {', '.join(ON_BAD_RECORD)}")
 
@@ -115,7 +113,8 @@ def _numbers(record: dict[str, Any], table: str, field: str, size: int, what: st
     value = record.get(field)
     token = record.get("token", "?")
     if not isinstance(value, (list, tuple)) or not all(
-            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value):
+        isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+    ):
         raise _bad(table, token, field, value, f"is not a list of {size} numbers ({what})")
     if len(value) != size:
         raise _bad(table, token, field, value, f"has {len(value)} value(s), needs {size} ({what})")
@@ -130,8 +129,13 @@ def _translation(record: dict[str, Any], table: str) -> np.ndarray:
     :data:`lightemma.nuscenes.geometry.MAX_COORDINATE_M` (the safety reader's bound, one rule for both)."""
     xyz = _numbers(record, table, "translation", 3, "x, y, z in metres")
     if max(abs(xyz[0]), abs(xyz[1])) > geometry.MAX_COORDINATE_M:
-        raise _bad(table, record.get("token", "?"), "translation", record.get("translation"),
-                   f"is beyond ±{geometry.MAX_COORDINATE_M:g} m (x, y in metres)")
+        raise _bad(
+            table,
+            record.get("token", "?"),
+            "translation",
+            record.get("translation"),
+            f"is beyond ±{geometry.MAX_COORDINATE_M:g} m (x, y in metres)",
+        )
     return xyz
 
 
@@ -158,8 +162,13 @@ def _timestamp(record: dict[str, Any], table: str) -> int:
     elif isinstance(value, int) and not isinstance(value, bool):
         whole = value
     if whole is None or not 0 <= whole <= TIMESTAMP_MAX:
-        raise _bad(table, record.get("token", "?"), "timestamp", value,
-                   "is not a finite, whole, non-negative number of microseconds within int64")
+        raise _bad(
+            table,
+            record.get("token", "?"),
+            "timestamp",
+            value,
+            "is not a finite, whole, non-negative number of microseconds within int64",
+        )
     return whole
 
 
@@ -196,7 +205,11 @@ def dataset_path(dataroot: str | os.PathLike[str], record: dict[str, Any], table
     norm = os.path.normpath(name)
     if norm == os.curdir:
         raise _bad(table, token, field, name, "names the dataroot itself, not a file in it")
-    if norm == os.pardir or norm.startswith(os.pardir + os.sep) or (os.altsep and norm.startswith(os.pardir + os.altsep)):
+    if (
+        norm == os.pardir
+        or norm.startswith(os.pardir + os.sep)
+        or (os.altsep and norm.startswith(os.pardir + os.altsep))
+    ):
         raise _bad(table, token, field, name, "leaves the dataroot; a dataset file must lie inside it")
     return os.path.join(os.fspath(dataroot), name)
 
@@ -236,13 +249,18 @@ class Tables:
 
     def get(self, table: str, token: str) -> dict[str, Any]:
         """A record by table name (``sample``, ``sample_data``, ``ego_pose``, ``calibrated_sensor``) and token."""
-        rows = {"sample": self.samples, "sample_data": self.sample_data, "ego_pose": self.ego_poses,
-                "calibrated_sensor": self.calibrated_sensors}[table]
+        rows = {
+            "sample": self.samples,
+            "sample_data": self.sample_data,
+            "ego_pose": self.ego_poses,
+            "calibrated_sensor": self.calibrated_sensors,
+        }[table]
         try:
             return rows[token]
         except (KeyError, TypeError):
-            raise DatasetError(f"{table} {token!r} is not in {os.path.join(self.dataroot, self.version, table)}.json"
-                               ) from None
+            raise DatasetError(
+                f"{table} {token!r} is not in {os.path.join(self.dataroot, self.version, table)}.json"
+            ) from None
 
 
 def _field(record: dict[str, Any], table: str, field: str, kind: type | tuple[type, ...] = str) -> Any:
@@ -258,8 +276,9 @@ def _field(record: dict[str, Any], table: str, field: str, kind: type | tuple[ty
 
 
 def _inconsistent(table_root: str, what: str) -> DatasetError:
-    return DatasetError(f"nuScenes tables in {table_root} are inconsistent: {what}; "
-                        "is this an unmodified nuScenes version folder?")
+    return DatasetError(
+        f"nuScenes tables in {table_root} are inconsistent: {what}; is this an unmodified nuScenes version folder?"
+    )
 
 
 def load_tables(dataroot: str | os.PathLike[str], version: str) -> Tables:
@@ -279,8 +298,9 @@ def load_tables(dataroot: str | os.PathLike[str], version: str) -> Tables:
     for token, cs in calibrated.items():
         sensor = sensors.get(_field(cs, "calibrated_sensor", "sensor_token"))
         if sensor is None:
-            raise _inconsistent(table_root, f"calibrated_sensor {token} names sensor {cs['sensor_token']}, "
-                                            "which is not in sensor.json")
+            raise _inconsistent(
+                table_root, f"calibrated_sensor {token} names sensor {cs['sensor_token']}, which is not in sensor.json"
+            )
         channel_of[token] = sensor.get("channel")
     samples = {r["token"]: r for r in read_table(root, version, "sample")}
     front: dict[str, str] = {}
@@ -288,17 +308,23 @@ def load_tables(dataroot: str | os.PathLike[str], version: str) -> Tables:
     for sd in read_table(root, version, "sample_data"):
         cs_token = sd.get("calibrated_sensor_token")
         if cs_token not in channel_of:
-            raise _inconsistent(table_root, f"sample_data {sd['token']} names calibrated_sensor {cs_token!r}, "
-                                            "which is not in calibrated_sensor.json")
+            raise _inconsistent(
+                table_root,
+                f"sample_data {sd['token']} names calibrated_sensor {cs_token!r}, "
+                "which is not in calibrated_sensor.json",
+            )
         if sd.get("is_key_frame") is not True or channel_of[cs_token] != CAMERA:
             continue
         sample_token = _field(sd, "sample_data", "sample_token")
         if sample_token not in samples:
-            raise _inconsistent(table_root, f"sample_data {sd['token']} names sample {sample_token}, "
-                                            "which is not in sample.json")
+            raise _inconsistent(
+                table_root, f"sample_data {sd['token']} names sample {sample_token}, which is not in sample.json"
+            )
         if sample_token in front:
-            raise DatasetError(f"sample {sample_token} has two {CAMERA} keyframes in sample_data: "
-                               f"{front[sample_token]} and {sd['token']}")
+            raise DatasetError(
+                f"sample {sample_token} has two {CAMERA} keyframes in sample_data: "
+                f"{front[sample_token]} and {sd['token']}"
+            )
         front[sample_token] = sd["token"]
         front_sd[sd["token"]] = sd
     wanted = {sd.get("ego_pose_token") for sd in front_sd.values()}
@@ -307,10 +333,16 @@ def load_tables(dataroot: str | os.PathLike[str], version: str) -> Tables:
     for scene in scenes:
         _field(scene, "scene", "name")
         _field(scene, "scene", "first_sample_token")
-    return Tables(dataroot=root, version=version, scenes=scenes, samples=samples, sample_data=front_sd,
-                  ego_poses=poses, calibrated_sensors={t: calibrated[t] for t in {sd["calibrated_sensor_token"]
-                                                                                 for sd in front_sd.values()}},
-                  front_keyframes=front)
+    return Tables(
+        dataroot=root,
+        version=version,
+        scenes=scenes,
+        samples=samples,
+        sample_data=front_sd,
+        ego_poses=poses,
+        calibrated_sensors={t: calibrated[t] for t in {sd["calibrated_sensor_token"] for sd in front_sd.values()}},
+        front_keyframes=front,
+    )
 
 
 # -- scenes ------------------------------------------------------------------------
@@ -370,9 +402,7 @@ def resolve_scenes(
         else:
             splits = predefined_splits()
             if split not in splits:
-                raise DatasetError(
-                    f"unknown split {split!r}; choose one of {', '.join([ALL_SCENES, *splits])}"
-                )
+                raise DatasetError(f"unknown split {split!r}; choose one of {', '.join([ALL_SCENES, *splits])}")
             wanted = splits[split]
             absent = [s for s in wanted if s not in available_set]
             if absent:
@@ -382,8 +412,14 @@ def resolve_scenes(
                 shown = ", ".join(absent[:5]) + (f" and {len(absent) - 5} more" if len(absent) > 5 else "")
                 message = f"{len(absent)} of the {len(wanted)} scenes of split {split!r} are not in version {version}: {shown}{hint}"
                 raise DatasetError(
-                    message + ("; a synthetic dataset is loaded with split='all' or an explicit scene list" if synthetic else ""),
-                    cli=message + ("; a synthetic dataset is loaded with --split all or --scenes NAME ..." if synthetic else ""),
+                    message
+                    + (
+                        "; a synthetic dataset is loaded with split='all' or an explicit scene list"
+                        if synthetic
+                        else ""
+                    ),
+                    cli=message
+                    + ("; a synthetic dataset is loaded with --split all or --scenes NAME ..." if synthetic else ""),
                 )
             chosen = sorted(wanted)
     if scenes is not None:
@@ -441,11 +477,19 @@ def _scene_keyframes(tables: Tables, scene: dict[str, Any], cs_cache: dict[str, 
             cs = tables.calibrated_sensors[cs_token]
             intrinsic = cs.get("camera_intrinsic")
             rows = intrinsic if isinstance(intrinsic, list) and len(intrinsic) == 3 else None
-            if rows is None or not all(isinstance(r, list) and len(r) == 3 and all(_is_finite_number(v) for v in r)
-                                       for r in rows):
-                raise _bad("calibrated_sensor", cs_token, "camera_intrinsic", intrinsic,
-                           f"is not a finite 3x3 matrix (needed for {CAMERA})")
-            extrinsic = geometry.extrinsic_matrix(_translation(cs, "calibrated_sensor"), _rotation(cs, "calibrated_sensor"))
+            if rows is None or not all(
+                isinstance(r, list) and len(r) == 3 and all(_is_finite_number(v) for v in r) for r in rows
+            ):
+                raise _bad(
+                    "calibrated_sensor",
+                    cs_token,
+                    "camera_intrinsic",
+                    intrinsic,
+                    f"is not a finite 3x3 matrix (needed for {CAMERA})",
+                )
+            extrinsic = geometry.extrinsic_matrix(
+                _translation(cs, "calibrated_sensor"), _rotation(cs, "calibrated_sensor")
+            )
             cs_cache[cs_token] = (np.asarray([[_float(v) for v in r] for r in rows], dtype=np.float64), extrinsic)
         position = _translation(pose, "ego_pose")
         tokens.append(token)
@@ -478,21 +522,27 @@ def extract_frames(
 ) -> FrameSet:
     """Frames of the chosen scenes of tables read by :func:`load_tables` (see :func:`load_frames`)."""
     if not isinstance(tables, Tables):
-        raise TypeError(f"extract_frames takes the Tables of lightemma.nuscenes.load_tables(dataroot, version), "
-                        f"not {type(tables).__name__} (frames are no longer read through the devkit's NuScenes)")
+        raise TypeError(
+            f"extract_frames takes the Tables of lightemma.nuscenes.load_tables(dataroot, version), "
+            f"not {type(tables).__name__} (frames are no longer read through the devkit's NuScenes)"
+        )
     _check_options(window, on_missing_image, on_bad_record)
     dataroot = tables.dataroot
     by_name: dict[str, dict[str, Any]] = {}
     for scene in tables.scenes:
         if scene["name"] in by_name:
-            raise DatasetError(f"scene name {scene['name']} is used by two scenes: {by_name[scene['name']]['token']} "
-                               f"and {scene['token']}")
+            raise DatasetError(
+                f"scene name {scene['name']} is used by two scenes: {by_name[scene['name']]['token']} "
+                f"and {scene['token']}"
+            )
         by_name[scene["name"]] = scene
     split, names = resolve_scenes(by_name, tables.version, split=split, scenes=scenes)
 
     cs_cache: dict[str, tuple] = {}
     xy_parts, yaw_parts, t_parts, current_parts = [], [], [], []
-    meta: dict[str, list] = {k: [] for k in ("frame_ids", "scene_names", "scene_tokens", "sample_tokens", "image_paths", "cs")}
+    meta: dict[str, list] = {
+        k: [] for k in ("frame_ids", "scene_names", "scene_tokens", "sample_tokens", "image_paths", "cs")
+    }
     kf_index: list[int] = []
     skipped: list[str] = []
     bad_records: list[str] = []
@@ -503,8 +553,10 @@ def extract_frames(
             kf = _scene_keyframes(tables, by_name[name], cs_cache)
         except BadRecordError as exc:
             if on_bad_record == "error":
-                raise BadRecordError(f"scene {name}: {exc} (pass on_bad_record='skip' to skip such scenes)",
-                                     cli=f"scene {name}: {exc} (pass --on-bad-record skip to skip such scenes)") from None
+                raise BadRecordError(
+                    f"scene {name}: {exc} (pass on_bad_record='skip' to skip such scenes)",
+                    cli=f"scene {name}: {exc} (pass --on-bad-record skip to skip such scenes)",
+                ) from None
             log.warning("scene %s skipped: %s", name, exc)
             skipped.append(name)
             bad_records.append(f"scene {name}: {exc}")
@@ -519,15 +571,26 @@ def extract_frames(
         cs = window_range(n, window)
         if len(cs) == 0:
             need = HISTORY + FUTURE + 1 + WINDOWS[window]
-            log.warning("scene %s has %d keyframes, fewer than the %d a %r window needs; skipped", name, n, need, window)
+            log.warning(
+                "scene %s has %d keyframes, fewer than the %d a %r window needs; skipped", name, n, need, window
+            )
             skipped.append(name)
             continue
         used.append(name)
         for k, dist, dt in geometry.pose_jumps(kf["xy"], kf["t"]):
-            log.warning("scene %s: the %s ego pose of sample %s (keyframe %d) is %.1f m from the keyframe before it, "
-                        "%.2f s earlier (%.0f m/s, beyond the %g m/s bound of a physically possible move): the frames "
-                        "around it have a wrong history or ground truth", name, CAMERA, kf["sample_tokens"][k], k,
-                        dist, dt, dist / dt, geometry.POSE_JUMP_SPEED)
+            log.warning(
+                "scene %s: the %s ego pose of sample %s (keyframe %d) is %.1f m from the keyframe before it, "
+                "%.2f s earlier (%.0f m/s, beyond the %g m/s bound of a physically possible move): the frames "
+                "around it have a wrong history or ground truth",
+                name,
+                CAMERA,
+                kf["sample_tokens"][k],
+                k,
+                dist,
+                dt,
+                dist / dt,
+                geometry.POSE_JUMP_SPEED,
+            )
         xy_parts.append(kf["xy"])
         yaw_parts.append(kf["yaw"])
         t_parts.append(kf["t"])
@@ -596,14 +659,16 @@ def _handle_missing_images(fs: FrameSet, policy: str) -> FrameSet:
     listing = ", ".join(ids[:10]) + (f" and {len(ids) - 10} more" if len(ids) > 10 else "")
     example = fs.image_paths[missing[0]]
     if policy == "error":
-        raise DatasetError(
-            f"{len(missing)} of {len(fs)} frame image(s) missing (first: {example}): {listing}"
-        )
+        raise DatasetError(f"{len(missing)} of {len(fs)} frame image(s) missing (first: {example}): {listing}")
     if policy == "keep":
-        log.warning("%d of %d frame image(s) missing (first: %s), frames kept: %s", len(missing), len(fs), example, listing)
+        log.warning(
+            "%d of %d frame image(s) missing (first: %s), frames kept: %s", len(missing), len(fs), example, listing
+        )
         object.__setattr__(fs, "missing_images", ids)
         return fs
-    log.warning("%d of %d frame image(s) missing (first: %s), frames skipped: %s", len(missing), len(fs), example, listing)
+    log.warning(
+        "%d of %d frame image(s) missing (first: %s), frames skipped: %s", len(missing), len(fs), example, listing
+    )
     drop = set(missing)
     kept = fs._take([i for i in range(len(fs)) if i not in drop])
     object.__setattr__(kept, "missing_images", ids)
@@ -650,7 +715,13 @@ def load_frames(
     """
     _check_options(window, on_missing_image, on_bad_record)  # before the slow table load
     tables = load_tables(dataroot, version)
-    frames = extract_frames(tables, split=split, scenes=scenes, window=window, on_missing_image=on_missing_image,
-                            on_bad_record=on_bad_record)
+    frames = extract_frames(
+        tables,
+        split=split,
+        scenes=scenes,
+        window=window,
+        on_missing_image=on_missing_image,
+        on_bad_record=on_bad_record,
+    )
     log.info("loaded %s", frames.summary_line())
     return frames

@@ -48,8 +48,11 @@ def unit_quaternion(values: object) -> np.ndarray:
     hide the corruption.
     """
     numbers = (int, float, np.floating, np.integer)
-    if not isinstance(values, (list, tuple, np.ndarray)) or len(values) != 4 or not all(
-            isinstance(v, numbers) and not isinstance(v, (bool, np.bool_)) for v in values):
+    if (
+        not isinstance(values, (list, tuple, np.ndarray))
+        or len(values) != 4
+        or not all(isinstance(v, numbers) and not isinstance(v, (bool, np.bool_)) for v in values)
+    ):
         raise InputError("is not a list of 4 numbers (a quaternion w, x, y, z)")
     try:
         q = np.asarray([float(v) for v in values], dtype=np.float64)
@@ -63,8 +66,9 @@ def unit_quaternion(values: object) -> np.ndarray:
     return q / norm
 
 
-def pose_jumps(xy: np.ndarray, timestamps_us: np.ndarray,
-               max_speed: float = POSE_JUMP_SPEED) -> list[tuple[int, float, float]]:
+def pose_jumps(
+    xy: np.ndarray, timestamps_us: np.ndarray, max_speed: float = POSE_JUMP_SPEED
+) -> list[tuple[int, float, float]]:
     """Physically impossible moves between consecutive keyframes of one scene.
 
     ``xy`` (N, 2) global positions (m), ``timestamps_us`` (N,) strictly increasing µs. Returns
@@ -150,11 +154,7 @@ def menger_curvature(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> np.ndarray:
     ab = b - a
     ac = c - a
     cross = ab[..., 0] * ac[..., 1] - ab[..., 1] * ac[..., 0]  # = 2·A
-    prod = (
-        np.linalg.norm(ab, axis=-1)
-        * np.linalg.norm(c - b, axis=-1)
-        * np.linalg.norm(ac, axis=-1)
-    )
+    prod = np.linalg.norm(ab, axis=-1) * np.linalg.norm(c - b, axis=-1) * np.linalg.norm(ac, axis=-1)
     out = np.zeros(np.broadcast(cross, prod).shape)
     nz = prod != 0.0
     out[nz] = 2.0 * cross[nz] / prod[nz]

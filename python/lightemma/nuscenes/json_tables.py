@@ -57,8 +57,11 @@ def check_dataroot(dataroot: str | os.PathLike[str], version: str) -> str:
         hint = f"; versions found there: {', '.join(present)}" if present else "; no version folders found there"
         raise DatasetError(f"nuScenes version folder {table_root} does not exist{hint}")
     # a table that is there but is no regular file is named by read_table
-    missing = [os.path.join(table_root, f"{t}.json") for t in TABLES
-               if not os.path.lexists(os.path.join(table_root, f"{t}.json"))]
+    missing = [
+        os.path.join(table_root, f"{t}.json")
+        for t in TABLES
+        if not os.path.lexists(os.path.join(table_root, f"{t}.json"))
+    ]
     if missing:  # each named in the words of read_table
         raise DatasetError("; ".join(f"nuScenes table {path} is missing" for path in missing))
     return root

@@ -157,12 +157,16 @@ def read_map_mask(path: str | os.PathLike[str]) -> DrivableArea:
     _regular_file(path, "map mask")
     width, height, depth, colour = _png_header(path)
     if width * height > MAX_MASK_PIXELS:
-        raise DatasetError(f"map mask {path} claims {width} × {height} pixels, more than the {MAX_MASK_PIXELS:,} "
-                           "a base map mask can have (nuScenes' largest is 1.19 G pixels); not decoded")
+        raise DatasetError(
+            f"map mask {path} claims {width} × {height} pixels, more than the {MAX_MASK_PIXELS:,} "
+            "a base map mask can have (nuScenes' largest is 1.19 G pixels); not decoded"
+        )
     if colour not in (0, 3) or depth == 16:
         kind = f"{depth}-bit {_PNG_COLOUR.get(colour, f'colour type {colour}')}"
-        raise DatasetError(f"map mask {path} is a {kind} PNG; a base map mask is 8-bit grayscale (255 drivable), "
-                           "1-bit grayscale or a gray palette")
+        raise DatasetError(
+            f"map mask {path} is a {kind} PNG; a base map mask is 8-bit grayscale (255 drivable), "
+            "1-bit grayscale or a gray palette"
+        )
     try:
         with open(path, "rb") as f:
             img = PngImagePlugin.PngImageFile(f)  # Image.open's pixel limit is replaced by the bound above
@@ -183,8 +187,10 @@ def read_map_mask(path: str | os.PathLike[str]) -> DrivableArea:
         rgb = np.asarray(palette or [], dtype=np.int64).reshape(-1, 3)
         assert used is not None
         if len(used) and (used.max() >= len(rgb) or not (rgb[used] == rgb[used, :1]).all()):
-            raise DatasetError(f"map mask {path} is a palette PNG with colours (or indices beyond its palette); "
-                               "a base map mask is grayscale")
+            raise DatasetError(
+                f"map mask {path} is a palette PNG with colours (or indices beyond its palette); "
+                "a base map mask is grayscale"
+            )
         lut = np.zeros(256, dtype=np.uint8)
         lut[: len(rgb)] = rgb[:256, 0]
         mask = lut[mask]
@@ -194,8 +200,10 @@ def read_map_mask(path: str | os.PathLike[str]) -> DrivableArea:
         raise DatasetError(f"map mask {path} has shape {mask.shape}; expected a one-channel image")
     top = int(mask.max()) if mask.size else None  # a reduction: no mask-sized temporary
     if top != MASK_FOREGROUND:
-        raise DatasetError(f"map mask {path} has no pixel of value {MASK_FOREGROUND} (drivable); its largest value is "
-                           f"{top}: not a drivable-area mask in the devkit's encoding")
+        raise DatasetError(
+            f"map mask {path} has no pixel of value {MASK_FOREGROUND} (drivable); its largest value is "
+            f"{top}: not a drivable-area mask in the devkit's encoding"
+        )
     return DrivableArea("mask", os.fspath(path), mask=np.ascontiguousarray(mask, dtype=np.uint8))
 
 
@@ -209,8 +217,10 @@ def _map_coordinate(value: Any, path: Any, node: Any, axis: str) -> float:
         if math.isfinite(v) and abs(v) <= MAX_COORDINATE_M:
             return v
     shown = repr(value) if len(repr(value)) <= 40 else repr(value)[:37] + "..."
-    raise DatasetError(f"map expansion {path}: node {node} has {axis} = {shown}; a coordinate must be a finite number "
-                       f"within ±{MAX_COORDINATE_M:g} m")
+    raise DatasetError(
+        f"map expansion {path}: node {node} has {axis} = {shown}; a coordinate must be a finite number "
+        f"within ±{MAX_COORDINATE_M:g} m"
+    )
 
 
 #: a map expansion's ``version`` field: digits and dots (nuScenes' expansions are ``1.0`` … ``1.3``)
@@ -258,11 +268,13 @@ def read_expansion_doc(path: str | os.PathLike[str]) -> Any:
         del data
         return json.loads(text)
     except RecursionError:
-        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
-                           "(the JSON is nested too deep)") from None
+        raise DatasetError(
+            f"map expansion {path}: cannot read its drivable_area layer (the JSON is nested too deep)"
+        ) from None
     except ValueError as exc:
-        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
-                           f"({type(exc).__name__}: {exc})") from None
+        raise DatasetError(
+            f"map expansion {path}: cannot read its drivable_area layer ({type(exc).__name__}: {exc})"
+        ) from None
 
 
 def _drivable_area(doc: Any, path: str | os.PathLike[str]) -> DrivableArea:
@@ -279,21 +291,28 @@ def _drivable_area(doc: Any, path: str | os.PathLike[str]) -> DrivableArea:
                 for ring in [poly["exterior_node_tokens"], *(h["node_tokens"] for h in poly.get("holes", []))]:
                     if not isinstance(ring, list) or len(ring) < 3:
                         n = len(ring) if isinstance(ring, list) else "no list of"
-                        raise DatasetError(f"map expansion {path}: polygon {ptok} has a ring of {n} node(s); "
-                                           "a ring needs at least 3")
+                        raise DatasetError(
+                            f"map expansion {path}: polygon {ptok} has a ring of {n} node(s); a ring needs at least 3"
+                        )
                     for t in ring:
                         node = nodes[t]
                         xy.append((_map_coordinate(node["x"], path, t, "x"), _map_coordinate(node["y"], path, t, "y")))
                     rings.append(len(xy))
                 polygons.append(len(rings) - 1)
     except (KeyError, TypeError, AttributeError) as exc:
-        raise DatasetError(f"map expansion {path}: cannot read its drivable_area layer "
-                           f"({type(exc).__name__}: {exc})") from None
+        raise DatasetError(
+            f"map expansion {path}: cannot read its drivable_area layer ({type(exc).__name__}: {exc})"
+        ) from None
     if len(polygons) == 1:  # every position would be off-road: no number, as for a mask without a drivable pixel
         raise DatasetError(f"map expansion {path}: its drivable_area layer holds no polygon")
-    return DrivableArea("expansion", os.fspath(path), xy=np.asarray(xy, dtype=np.float64).reshape(-1, 2),
-                        rings=np.asarray(rings, dtype=np.int64), polygons=np.asarray(polygons, dtype=np.int64),
-                        version=version)
+    return DrivableArea(
+        "expansion",
+        os.fspath(path),
+        xy=np.asarray(xy, dtype=np.float64).reshape(-1, 2),
+        rings=np.asarray(rings, dtype=np.int64),
+        polygons=np.asarray(polygons, dtype=np.int64),
+        version=version,
+    )
 
 
 def file_problem(path: Path) -> str | None:
@@ -307,8 +326,6 @@ def file_problem(path: Path) -> str | None:
 
 #: a map location as nuScenes names them (singapore-onenorth, boston-seaport): letters, digits, - and _, no path
 MAP_NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_-]{0,99}")
-
-
 
 
 @dataclass(frozen=True)
@@ -335,16 +352,25 @@ def _layer_rings(doc: Any, records: list[Any], name: str, path: str | os.PathLik
             rings = []
             for ring in [poly["exterior_node_tokens"], *(h["node_tokens"] for h in poly.get("holes", []))]:
                 if not isinstance(ring, list) or len(ring) < 3:
-                    raise DatasetError(f"map expansion {path}: {name} {rec.get('token')} has a ring of fewer than "
-                                       "3 nodes")
-                rings.append(np.array([[_map_coordinate(nodes[t]["x"], path, t, "x"),
-                                        _map_coordinate(nodes[t]["y"], path, t, "y")] for t in ring], dtype=np.float64))
+                    raise DatasetError(
+                        f"map expansion {path}: {name} {rec.get('token')} has a ring of fewer than 3 nodes"
+                    )
+                rings.append(
+                    np.array(
+                        [
+                            [_map_coordinate(nodes[t]["x"], path, t, "x"), _map_coordinate(nodes[t]["y"], path, t, "y")]
+                            for t in ring
+                        ],
+                        dtype=np.float64,
+                    )
+                )
             out.append(rings)
     except (KeyError, TypeError, AttributeError, ValueError) as exc:
         if isinstance(exc, DatasetError):
             raise
-        raise DatasetError(f"map expansion {path}: cannot read its {name} layer ({type(exc).__name__}: {exc})") \
-            from None
+        raise DatasetError(
+            f"map expansion {path}: cannot read its {name} layer ({type(exc).__name__}: {exc})"
+        ) from None
     return out
 
 
@@ -360,5 +386,6 @@ def read_expansion_layers(path: str | os.PathLike[str]) -> ExpansionLayers:
         crossings = [r for r in doc.get("road_segment", []) if r.get("is_intersection") is True]
     except (TypeError, AttributeError) as exc:
         raise DatasetError(f"map expansion {path}: cannot read its lane / road_segment layers ({exc})") from None
-    return ExpansionLayers(drivable, _layer_rings(doc, lane_records, "lane", path),
-                           _layer_rings(doc, crossings, "road_segment", path))
+    return ExpansionLayers(
+        drivable, _layer_rings(doc, lane_records, "lane", path), _layer_rings(doc, crossings, "road_segment", path)
+    )

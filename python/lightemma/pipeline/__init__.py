@@ -11,8 +11,16 @@ from __future__ import annotations
 import importlib
 from typing import TYPE_CHECKING, Any
 
-_EXPORTS = {"ChainPolicy": "chain", "run_frame": "chain", "RunResult": "runner", "resume": "runner", "run": "runner",
-            "RunConfig": "config", "format_summary": "summary", "summarize": "summary"}
+_EXPORTS = {
+    "ChainPolicy": "chain",
+    "run_frame": "chain",
+    "RunResult": "runner",
+    "resume": "runner",
+    "run": "runner",
+    "RunConfig": "config",
+    "format_summary": "summary",
+    "summarize": "summary",
+}
 
 __all__ = ["ChainPolicy", "RunConfig", "RunResult", "format_summary", "resume", "run", "run_frame", "summarize"]
 

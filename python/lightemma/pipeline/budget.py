@@ -20,8 +20,15 @@ from lightemma.prompts import PromptSet
 from lightemma.runs.store import read_run
 
 
-def session_budget(run_dir: Path, config: RunConfig, todo: Sequence[Any], backend: Backend, prompts: PromptSet, *,
-                   resuming: bool = False) -> Any:
+def session_budget(
+    run_dir: Path,
+    config: RunConfig,
+    todo: Sequence[Any],
+    backend: Backend,
+    prompts: PromptSet,
+    *,
+    resuming: bool = False,
+) -> Any:
     """The session's ``--max-cost`` budget (None without one): the run's recorded spending, what each call is
     admitted at (:func:`admitted_cents_per_call`)."""
     limit = config.max_cost_cents
@@ -45,31 +52,49 @@ def check_admits_a_frame(config: RunConfig, frames: Sequence[Any], backend: Back
     if limit < calls * per_call:
         frame = calls * per_call
         what = "three calls" if calls == Budget.CHAIN_CALLS else f"{calls} calls ({config.prompting.samples} samples)"
-        raise UserError(f"--max-cost {limit:g}: not one frame fits within it (a frame is admitted at "
-                        f"{frame:.3f} ¢, its {what} at {per_call:.3f} ¢ each); give at least --max-cost "
-                        f"{math.ceil(frame * 1000) / 1000:g}, or drop it")
+        raise UserError(
+            f"--max-cost {limit:g}: not one frame fits within it (a frame is admitted at "
+            f"{frame:.3f} ¢, its {what} at {per_call:.3f} ¢ each); give at least --max-cost "
+            f"{math.ceil(frame * 1000) / 1000:g}, or drop it"
+        )
 
 
-def admitted_cents_per_call(config: RunConfig, todo: Sequence[Any], backend: Backend, prompts: PromptSet, *,
-                            resuming: bool = False) -> float:
+def admitted_cents_per_call(
+    config: RunConfig, todo: Sequence[Any], backend: Backend, prompts: PromptSet, *, resuming: bool = False
+) -> float:
     """The cents ``--max-cost`` admits each call of ``todo`` at (the estimate per call, or its upper bound where the
     model's image tokens are unknown: :meth:`~lightemma.pipeline.estimate.Estimate.admitted_cents_per_call`); a
     one-line :class:`UserError` where no spending can be bounded. Reads and writes nothing: a new run checks it before
     its run directory exists."""
     info = resolve(config.model)
     price = list(config.api.price) if config.api.price is not None else None
-    planned = estimate(todo, info, backend.provider, prompts, max_tokens=config.prompting.max_tokens,
-                       chain=config.prompting.chain, inputs=config.prompting.inputs, given_price=price,
-                       served_from=backend.api_base_shown if backend.served_elsewhere else None)
+    planned = estimate(
+        todo,
+        info,
+        backend.provider,
+        prompts,
+        max_tokens=config.prompting.max_tokens,
+        chain=config.prompting.chain,
+        inputs=config.prompting.inputs,
+        given_price=price,
+        served_from=backend.api_base_shown if backend.served_elsewhere else None,
+    )
     batch = bool(config.batch.enabled)
     per_call = planned.admitted_cents_per_call(batch)
     if per_call is not None:
         return per_call
     bound = planned.batch_bound if batch else planned.bound
     if bound is None or bound.unknown == "price":
-        fix = ("a resume keeps the run's price (it has none): drop --max-cost, or start a new run with --price IN OUT"
-               if resuming else "give it with --price IN OUT, or drop --max-cost")
-        raise UserError(f"--max-cost: the price of {config.model} is unknown ({planned.price_source}), so no spending "
-                        f"can be bounded; {fix}")
-    raise UserError(f"--max-cost: the image tokens of {config.model} are unknown (no published image rule) and "
-                    f"{bound.source}, so no spending can be bounded: drop --max-cost (--estimate shows what is known)")
+        fix = (
+            "a resume keeps the run's price (it has none): drop --max-cost, or start a new run with --price IN OUT"
+            if resuming
+            else "give it with --price IN OUT, or drop --max-cost"
+        )
+        raise UserError(
+            f"--max-cost: the price of {config.model} is unknown ({planned.price_source}), so no spending "
+            f"can be bounded; {fix}"
+        )
+    raise UserError(
+        f"--max-cost: the image tokens of {config.model} are unknown (no published image rule) and "
+        f"{bound.source}, so no spending can be bounded: drop --max-cost (--estimate shows what is known)"
+    )

@@ -89,7 +89,9 @@ class ChainPolicy:
         if self.max_attempts < 1:
             raise InputError(f"max_attempts must be at least 1, got {self.max_attempts}")
         if self.integrate_method not in INTEGRATION_METHODS:
-            raise InputError(f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}")
+            raise InputError(
+                f"integrate method must be one of {', '.join(INTEGRATION_METHODS)}, got {self.integrate_method!r}"
+            )
 
         plausibility(self.speed_range, self.max_abs_curvature)  # ValueError for malformed limits
         if self.chain not in CHAINS:
@@ -116,9 +118,17 @@ class ChainPolicy:
         return {"mode": self.parse_mode, **plausibility(self.speed_range, self.max_abs_curvature)}
 
     def to_dict(self) -> dict[str, Any]:
-        out = {"temperature": self.params.temperature, "max_tokens": self.params.max_tokens, "reask": self.reask,
-               "max_attempts": self.max_attempts, "integrate_method": self.integrate_method, "chain": self.chain,
-               "answer_format": self.answer_format, "inputs": self.inputs, "parse": self.parse_record()}
+        out = {
+            "temperature": self.params.temperature,
+            "max_tokens": self.params.max_tokens,
+            "reask": self.reask,
+            "max_attempts": self.max_attempts,
+            "integrate_method": self.integrate_method,
+            "chain": self.chain,
+            "answer_format": self.answer_format,
+            "inputs": self.inputs,
+            "parse": self.parse_record(),
+        }
         if self.samples > 1:  # a one-chain run's params are as they always were
             out["samples"] = self.samples
         return out | describe_perturbation(self.inputs)  # a corruption's or history perturbation's definition
@@ -188,12 +198,24 @@ class _Attempt:
         """This attempt, ended by a text cut off at the output-token limit: ``failed``, ``failure: "truncated"``."""
         if self.truncated == "actions":
             return self.finish(self.calls[-1]["text"], "failed", "truncated", "truncated")
-        return self.finish(None, "failed", f"truncated: the {self.truncated} text hit the output-token limit and was not passed on",
-                           "truncated")
+        return self.finish(
+            None,
+            "failed",
+            f"truncated: the {self.truncated} text hit the output-token limit and was not passed on",
+            "truncated",
+        )
 
     def finish(self, answer: str | None, status: str, reason: str, failure: str) -> AttemptRecord:
-        return attempt_record(attempt=self.number, calls=self.calls, answer=answer, status=status, reason=reason,
-                              failure=failure, error=self.error, **_totals(self.calls))
+        return attempt_record(
+            attempt=self.number,
+            calls=self.calls,
+            answer=answer,
+            status=status,
+            reason=reason,
+            failure=failure,
+            error=self.error,
+            **_totals(self.calls),
+        )
 
 
 def _parse(answer: str, policy: ChainPolicy, history: Any = None) -> tuple[str, str, str, np.ndarray]:
@@ -202,18 +224,29 @@ def _parse(answer: str, policy: ChainPolicy, history: Any = None) -> tuple[str, 
     ``history`` is the frame's (6, 2) history the prompt printed: a list in the answer equal to it is a
     quotation beside another list where the text calls it the past (see :func:`lightemma.parse_actions`).
     """
-    parsed = parse_actions([answer], n=6, mode=policy.parse_mode, speed_range=policy.speed_range,
-                           max_abs_curvature=policy.max_abs_curvature, history=history_rows([history]))
-    return (str(parsed.status[0]), str(parsed.reason[0]), str(parsed.failure[0]),
-            np.asarray(parsed.actions[0], dtype=np.float64))
+    parsed = parse_actions(
+        [answer],
+        n=6,
+        mode=policy.parse_mode,
+        speed_range=policy.speed_range,
+        max_abs_curvature=policy.max_abs_curvature,
+        history=history_rows([history]),
+    )
+    return (
+        str(parsed.status[0]),
+        str(parsed.reason[0]),
+        str(parsed.failure[0]),
+        np.asarray(parsed.actions[0], dtype=np.float64),
+    )
 
 
 def _as_list(value: Any) -> Any:
     return None if value is None else np.asarray(value, dtype=np.float64).tolist()
 
 
-async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy,
-                    earlier: Mapping[str, Any] | None = None) -> dict[str, Any]:
+async def run_frame(
+    frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy, earlier: Mapping[str, Any] | None = None
+) -> dict[str, Any]:
     """Run the chain on one frame and return its run record (docs/definitions.md#run-records).
 
     ``frame`` needs ``frame_id``, ``scene_name``, ``sample_token``,
@@ -240,10 +273,18 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
             before[index] = entry
     first: list[ChatResult] | None = None
     if not any((b or {}).get("attempts") for b in before):  # a fresh frame: stage 1 of every sample in one go
-        request = _request(frame, policy, "scene", prompts.render("scene"), (), 1, request_image(frame, policy.inputs), 0)
+        request = _request(
+            frame, policy, "scene", prompts.render("scene"), (), 1, request_image(frame, policy.inputs), 0
+        )
         first = await backend.generate_samples(request, k)
-    tasks = [asyncio.ensure_future(_run_chain(frame, backend, prompts, policy, before[s], sample=s,
-                                              first=first[s] if first is not None else None)) for s in range(k)]
+    tasks = [
+        asyncio.ensure_future(
+            _run_chain(
+                frame, backend, prompts, policy, before[s], sample=s, first=first[s] if first is not None else None
+            )
+        )
+        for s in range(k)
+    ]
     try:
         records = await asyncio.gather(*tasks)
     except BaseException:  # a run-fatal error (or a stop) in one sample: the frame's other chains end with it
@@ -255,11 +296,38 @@ async def run_frame(frame: Any, backend: Backend, prompts: PromptSet, policy: Ch
 
 
 #: the fields of a sample's own entry in a frame record's ``samples`` list (docs/run.md#k-samples)
-SAMPLE_FIELDS = ("status", "failure", "first_status", "n_attempts", "attempts", "actions", "trajectory", "scene_text",
-                 "intent_text", "answer", "error", "seconds", "call_seconds", "input_tokens", "output_tokens",
-                 "reasoning_tokens", "cached_input_tokens", "cache_write_tokens", "cost_cents", "cached", "cached_calls",
-                 "retries")
-_SUMMED = ("input_tokens", "output_tokens", "reasoning_tokens", "cached_input_tokens", "cache_write_tokens", "cost_cents")
+SAMPLE_FIELDS = (
+    "status",
+    "failure",
+    "first_status",
+    "n_attempts",
+    "attempts",
+    "actions",
+    "trajectory",
+    "scene_text",
+    "intent_text",
+    "answer",
+    "error",
+    "seconds",
+    "call_seconds",
+    "input_tokens",
+    "output_tokens",
+    "reasoning_tokens",
+    "cached_input_tokens",
+    "cache_write_tokens",
+    "cost_cents",
+    "cached",
+    "cached_calls",
+    "retries",
+)
+_SUMMED = (
+    "input_tokens",
+    "output_tokens",
+    "reasoning_tokens",
+    "cached_input_tokens",
+    "cache_write_tokens",
+    "cost_cents",
+)
 
 
 def _merge_samples(records: list[dict[str, Any]], seconds: float) -> dict[str, Any]:
@@ -278,18 +346,44 @@ def _merge_samples(records: list[dict[str, Any]], seconds: float) -> dict[str, A
     return out
 
 
-def _request(frame: Any, policy: ChainPolicy, stage: str, text: str, turns: tuple[tuple[str, str], ...], attempt: int,
-             image: str | None, sample: int) -> ChatRequest:
+def _request(
+    frame: Any,
+    policy: ChainPolicy,
+    stage: str,
+    text: str,
+    turns: tuple[tuple[str, str], ...],
+    attempt: int,
+    image: str | None,
+    sample: int,
+) -> ChatRequest:
     """The request of one stage of one sample's chain."""
-    return ChatRequest(text=text, stage=stage, frame_id=frame.frame_id, image_path=image, params=policy.params, frame=frame,
-                       turns=turns, response_schema=policy.response_schema(stage),
-                       prefix_of_next=policy.chain == "conversation" and stage != "actions", attempt=attempt,
-                       inputs=policy.inputs, sample=sample, samples=policy.samples)
+    return ChatRequest(
+        text=text,
+        stage=stage,
+        frame_id=frame.frame_id,
+        image_path=image,
+        params=policy.params,
+        frame=frame,
+        turns=turns,
+        response_schema=policy.response_schema(stage),
+        prefix_of_next=policy.chain == "conversation" and stage != "actions",
+        attempt=attempt,
+        inputs=policy.inputs,
+        sample=sample,
+        samples=policy.samples,
+    )
 
 
-async def _run_chain(frame: Any, backend: Backend, prompts: PromptSet, policy: ChainPolicy,
-                     earlier: Mapping[str, Any] | None = None, *, sample: int = 0,
-                     first: ChatResult | None = None) -> dict[str, Any]:
+async def _run_chain(
+    frame: Any,
+    backend: Backend,
+    prompts: PromptSet,
+    policy: ChainPolicy,
+    earlier: Mapping[str, Any] | None = None,
+    *,
+    sample: int = 0,
+    first: ChatResult | None = None,
+) -> dict[str, Any]:
     """One chain of ``frame`` (sample ``sample``): its record as :func:`run_frame` describes it. ``first``: the
     answer to its first stage-1 request, already drawn."""
     start = time.perf_counter()
@@ -307,8 +401,11 @@ async def _run_chain(frame: Any, backend: Backend, prompts: PromptSet, policy: C
     def turns(*texts: str) -> tuple[tuple[str, str], ...]:
         return _earlier_turns(policy, prompts, history, *texts)
 
-    before = [cast(AttemptRecord, a) for a in (earlier or {}).get("attempts") or ()
-              if isinstance(a, Mapping) and isinstance(a.get("calls"), list)]
+    before = [
+        cast(AttemptRecord, a)
+        for a in (earlier or {}).get("attempts") or ()
+        if isinstance(a, Mapping) and isinstance(a.get("calls"), list)
+    ]
     attempts: list[AttemptRecord] = []
     scene: str | None = None
     intent: str | None = None
@@ -321,11 +418,17 @@ async def _run_chain(frame: Any, backend: Backend, prompts: PromptSet, policy: C
         if scene is None:
             scene = attempt.record("scene", await ask("scene", prompts.render("scene")))
         if scene is not None and intent is None:
-            intent = attempt.record("intent", await ask("intent", prompts.render("intent", scene=scene, **history), turns(scene)))
+            intent = attempt.record(
+                "intent", await ask("intent", prompts.render("intent", scene=scene, **history), turns(scene))
+            )
         answer = None
         if scene is not None and intent is not None:
-            answer = attempt.record("actions", await ask("actions", prompts.render("actions", scene=scene, intent=intent, **history),
-                                                         turns(scene, intent)))
+            answer = attempt.record(
+                "actions",
+                await ask(
+                    "actions", prompts.render("actions", scene=scene, intent=intent, **history), turns(scene, intent)
+                ),
+            )
         if answer is None:
             if attempt.truncated:
                 attempts.append(attempt.finish_truncated())
@@ -352,7 +455,9 @@ def _number(value: Any) -> float:
     return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) and value >= 0 else 0.0
 
 
-def _earlier_turns(policy: ChainPolicy, prompts: PromptSet, history: dict[str, str], *texts: str) -> tuple[tuple[str, str], ...]:
+def _earlier_turns(
+    policy: ChainPolicy, prompts: PromptSet, history: dict[str, str], *texts: str
+) -> tuple[tuple[str, str], ...]:
     """The (prompt, answer) turns before a stage in the conversation chain: scene, then intent (none when independent)."""
     if policy.chain != "conversation":
         return ()
@@ -360,8 +465,16 @@ def _earlier_turns(policy: ChainPolicy, prompts: PromptSet, history: dict[str, s
     return tuple(zip(prompts_sent, texts))
 
 
-def _frame_record(frame: Any, attempts: list[AttemptRecord], scene: str | None, intent: str | None, answer: str | None,
-                  actions: np.ndarray | None, policy: ChainPolicy, seconds: float) -> FrameRecord:
+def _frame_record(
+    frame: Any,
+    attempts: list[AttemptRecord],
+    scene: str | None,
+    intent: str | None,
+    answer: str | None,
+    actions: np.ndarray | None,
+    policy: ChainPolicy,
+    seconds: float,
+) -> FrameRecord:
     trajectory = None
     if actions is not None:
         trajectory = integrate(actions, dt=STEP_SECONDS, method=policy.integrate_method)

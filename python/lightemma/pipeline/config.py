@@ -126,8 +126,14 @@ BACKEND_OPTION_SETTINGS: tuple[Setting, ...] = (
 )
 
 _BY_NAME: dict[str, Setting] = {s.name: s for s in (*SETTINGS, *DATASET_SETTINGS, *BACKEND_OPTION_SETTINGS)}
-_KINDS = {"text": "text", "int": "a whole number", "number": "a finite number", "object": "an object", "list": "a list",
-          "bool": "true or false"}
+_KINDS = {
+    "text": "text",
+    "int": "a whole number",
+    "number": "a finite number",
+    "object": "an object",
+    "list": "a list",
+    "bool": "true or false",
+}
 
 
 def setting(name: str) -> Setting | None:
@@ -171,8 +177,14 @@ def problem(row: Setting, value: Any) -> str | None:
     minimum), ``nan``, ``-inf``, ``inf`` or ``span`` (outside the range). The one check of every setting."""
     if value is None:
         return None if row.nullable else "type"
-    types: tuple[type, ...] = {"text": (str,), "int": (int,), "number": (int, float), "object": (Mapping,),
-                               "list": (list, tuple), "bool": (bool,)}[row.kind]
+    types: tuple[type, ...] = {
+        "text": (str,),
+        "int": (int,),
+        "number": (int, float),
+        "object": (Mapping,),
+        "list": (list, tuple),
+        "bool": (bool,),
+    }[row.kind]
     of_kind = isinstance(value, types) and (row.kind == "bool" or not isinstance(value, bool))
     if not of_kind:
         return "type"
@@ -235,8 +247,13 @@ def default(name: str) -> Any:
     if row.group is None:
         owner: Any = RunConfig
     else:
-        owner = {"dataset": DatasetSettings, "prompting": PromptingSettings, "api": ApiSettings, "local": LocalSettings,
-                 "batch": BatchSettings}[row.group]
+        owner = {
+            "dataset": DatasetSettings,
+            "prompting": PromptingSettings,
+            "api": ApiSettings,
+            "local": LocalSettings,
+            "batch": BatchSettings,
+        }[row.group]
     found = {f.name: f for f in fields(owner)}[row.attr or row.key]
     return found.default_factory() if callable(found.default_factory) else found.default
 
@@ -268,8 +285,9 @@ def _pair(name: str, value: Any) -> None:
         return
 
     if not (len(value) == 2 and all(finite(x) and 0 <= x <= MAX_PRICE for x in value)):
-        raise InvalidSetting(name, list(value),
-                             f"two numbers (input, output USD per million tokens), each 0..{MAX_PRICE:g}")
+        raise InvalidSetting(
+            name, list(value), f"two numbers (input, output USD per million tokens), each 0..{MAX_PRICE:g}"
+        )
 
 
 def _frozen_map(value: Any) -> Any:
@@ -308,10 +326,16 @@ class DatasetSettings:
 
     def to_manifest(self) -> dict[str, Any]:
         """The manifest's ``config.dataset``."""
-        return {"dataroot": self.dataroot, "version": self.version if self.dataroot else None, "split": self.split,
-                "scenes": list(self.scenes) if self.scenes else None, "window": self.window, "limit": self.limit,
-                "on_bad_record": self.on_bad_record,
-                "sample": {"n": self.sample, "seed": self.sample_seed} if self.sample is not None else None}
+        return {
+            "dataroot": self.dataroot,
+            "version": self.version if self.dataroot else None,
+            "split": self.split,
+            "scenes": list(self.scenes) if self.scenes else None,
+            "window": self.window,
+            "limit": self.limit,
+            "on_bad_record": self.on_bad_record,
+            "sample": {"n": self.sample, "seed": self.sample_seed} if self.sample is not None else None,
+        }
 
 
 @dataclass(frozen=True, slots=True)
@@ -388,8 +412,10 @@ class LocalSettings:
             if row.group == "local" and row.key != "ray_address":
                 check(row.name, options if row.key == "backend_options" else getattr(self, row.key))
         if "api_key" in options:
-            raise UserError("backend_options are recorded in the run manifest, so they cannot carry an api_key; "
-                            "set the provider's environment variable instead")
+            raise UserError(
+                "backend_options are recorded in the run manifest, so they cannot carry an api_key; "
+                "set the provider's environment variable instead"
+            )
         for row in BACKEND_OPTION_SETTINGS:  # a number out of range (other kinds are the backend's to refuse)
             value = options.get(row.key)
             if finite(value) and problem(row, value) is not None:
@@ -410,9 +436,13 @@ class BatchSettings:
 
 
 def _check_name(name: str | None) -> None:
-    if name is not None and (not isinstance(name, str) or not name.strip() or len(name) > 80
-                             or any(ord(ch) < 32 for ch in name)
-                             or unicode_clean(name) != name):  # bytes that are not UTF-8 (a Latin-1 terminal)
+    if name is not None and (
+        not isinstance(name, str)
+        or not name.strip()
+        or len(name) > 80
+        or any(ord(ch) < 32 for ch in name)
+        or unicode_clean(name) != name
+    ):  # bytes that are not UTF-8 (a Latin-1 terminal)
         raise InvalidSetting("name", name, "1 to 80 printable characters of UTF-8 text")
 
 
@@ -444,8 +474,13 @@ class RunConfig:
             if row.group is None:
                 check(row.name, getattr(self, row.key))
         _check_name(self.name)
-        for name, kind in (("dataset", DatasetSettings), ("prompting", PromptingSettings), ("api", ApiSettings),
-                           ("local", LocalSettings), ("batch", BatchSettings)):
+        for name, kind in (
+            ("dataset", DatasetSettings),
+            ("prompting", PromptingSettings),
+            ("api", ApiSettings),
+            ("local", LocalSettings),
+            ("batch", BatchSettings),
+        ):
             if not isinstance(getattr(self, name), kind):
                 raise InvalidSetting(name, getattr(self, name), f"a {kind.__name__}")
 
@@ -497,9 +532,15 @@ class RunConfig:
                 top[row.key] = value
             else:
                 groups[row.group][row.attr or row.key] = value
-        return cls(model=model, **top, dataset=DatasetSettings(**groups["dataset"]),
-                   prompting=PromptingSettings(**groups["prompting"]), api=ApiSettings(**groups["api"]),
-                   local=LocalSettings(**groups["local"]), batch=BatchSettings(**groups["batch"]))
+        return cls(
+            model=model,
+            **top,
+            dataset=DatasetSettings(**groups["dataset"]),
+            prompting=PromptingSettings(**groups["prompting"]),
+            api=ApiSettings(**groups["api"]),
+            local=LocalSettings(**groups["local"]),
+            batch=BatchSettings(**groups["batch"]),
+        )
 
     def replace(self, **keywords: Any) -> RunConfig:
         """A copy with the settings ``keywords`` names (by parameter: ``concurrency=``, ``timeout=``, ``rpm=``, …)
@@ -533,7 +574,6 @@ class RunConfig:
             if row.key == "samples" and value == 1:  # one chain per frame: the config block as it always was
                 continue
             if row.key == "api_base":  # recorded without credentials (backends.retry.redact_url)
-
                 value = redact_url(value)
             out[row.key] = value
         out["dataset"] = self.dataset.to_manifest()
@@ -550,8 +590,9 @@ class RunConfig:
             raise UserError(f"{where}: the manifest has no run config; it was not written by `lightemma run`")
 
         def refuse(name: str, value: Any, kind: str) -> UserError:
-            return UserError(f"{where}: the manifest's config.{name} is {short_repr(value)}, not {kind}; "
-                             "start a new run")
+            return UserError(
+                f"{where}: the manifest's config.{name} is {short_repr(value)}, not {kind}; start a new run"
+            )
 
         missing = [row.key for row in SETTINGS if row.required and row.key not in config]
         if missing:
@@ -583,8 +624,10 @@ class RunConfig:
             dataset.update(sample=None, sample_seed=0)
         options = config.get("backend_options")
         if isinstance(options, Mapping) and "api_key" in options:
-            raise UserError(f"{where}: the manifest's backend_options carry an api_key; keys come from the environment "
-                            "only (--api-key-env NAME): start a new run")
+            raise UserError(
+                f"{where}: the manifest's backend_options carry an api_key; keys come from the environment "
+                "only (--api-key-env NAME): start a new run"
+            )
         flat: dict[str, Any] = {}
         for row in SETTINGS:
             value = config.get(row.key, row.absent)
@@ -596,9 +639,14 @@ class RunConfig:
                     raise refuse(row.key, value, manifest_requirement(row, what))
             flat[row.key] = value
 
-        pairs = (("speed_range", lambda v: len(v) == 2 and all(map(finite, v)) and v[0] < v[1], "[low, high]"),
-                 ("price", lambda v: len(v) == 2 and all(finite(x) and 0 <= x <= MAX_PRICE for x in v),
-                  f"[input, output] USD per million, each 0..{MAX_PRICE:g}"))
+        pairs = (
+            ("speed_range", lambda v: len(v) == 2 and all(map(finite, v)) and v[0] < v[1], "[low, high]"),
+            (
+                "price",
+                lambda v: len(v) == 2 and all(finite(x) and 0 <= x <= MAX_PRICE for x in v),
+                f"[input, output] USD per million, each 0..{MAX_PRICE:g}",
+            ),
+        )
         for name, good, kind in pairs:
             if flat[name] is not None and not good(flat[name]):
                 raise refuse(name, flat[name], kind)

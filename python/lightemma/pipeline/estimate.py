@@ -84,8 +84,14 @@ class CostBound:
         return None if self.cents_per_call is None else Budget.CHAIN_CALLS * self.cents_per_call
 
 
-def frame_cost_upper_bound(info: ModelInfo, *, max_tokens: int, batch: bool = False,
-                           given_price: Sequence[float] | None = None, served_from: str | None = None) -> CostBound:
+def frame_cost_upper_bound(
+    info: ModelInfo,
+    *,
+    max_tokens: int,
+    batch: bool = False,
+    given_price: Sequence[float] | None = None,
+    served_from: str | None = None,
+) -> CostBound:
     """The upper bound of what one call (and, ``.cents_per_frame``, one frame's chain) of ``info`` can cost, in US
     cents, at the price the run bills (:func:`lightemma.models.prices.run_price`: ``given_price`` is ``--price``; a model
     ``served_from`` another ``--api-base`` has no list price and no known context window).
@@ -105,9 +111,14 @@ def frame_cost_upper_bound(info: ModelInfo, *, max_tokens: int, batch: bool = Fa
     prices = (p["input_usd_per_mtok"], p.get("cache_write_usd_per_mtok"), p.get("cache_read_usd_per_mtok"))
     dearest = max(x for x in prices if x is not None)
     cents = (window * dearest + output * p["output_usd_per_mtok"]) / 1e6 * 100.0
-    return CostBound(cents, window, output, f"{window:,} input tokens (the context window: litellm's "
-                     f"max_input_tokens) + {output:,} output tokens (--max-tokens + reasoning budget) per call at "
-                     f"{p['source']}")
+    return CostBound(
+        cents,
+        window,
+        output,
+        f"{window:,} input tokens (the context window: litellm's "
+        f"max_input_tokens) + {output:,} output tokens (--max-tokens + reasoning budget) per call at "
+        f"{p['source']}",
+    )
 
 
 @dataclass(frozen=True)
@@ -174,16 +185,23 @@ class Estimate:
             return "unknown" if cents is None else f"~${cents / 100:,.2f}"
 
         if self.image_tokens is None:  # no published rule: the image part is unknown, and so is the total
-            inputs = (f"~{self.text_tokens:,} text input tokens + unknown image tokens (no published image rule for "
-                      f"{self.model}; {sizes})")
+            inputs = (
+                f"~{self.text_tokens:,} text input tokens + unknown image tokens (no published image rule for "
+                f"{self.model}; {sizes})"
+            )
         else:
             at_most = "at most " if not self.image_rule_exact else ""
-            images = ("0 image: --inputs no-image" if self.inputs == "no-image"
-                      else f"{at_most}{self.image_tokens:,} image, {sizes}, {self.provider} rule")
+            images = (
+                "0 image: --inputs no-image"
+                if self.inputs == "no-image"
+                else f"{at_most}{self.image_tokens:,} image, {sizes}, {self.provider} rule"
+            )
             inputs = f"~{self.input_tokens:,} input tokens ({images})"
         frames = f"{self.frames:,} frames × {self.samples} samples" if self.samples > 1 else f"{self.frames:,} frames"
-        return (f"estimate: {frames}, {self.calls:,} calls, {inputs} + ~{self.output_tokens:,} output "
-                f"tokens: {money(self.cost_cents)} normal, {money(self.batch_cost_cents)} with --batch")
+        return (
+            f"estimate: {frames}, {self.calls:,} calls, {inputs} + ~{self.output_tokens:,} output "
+            f"tokens: {money(self.cost_cents)} normal, {money(self.batch_cost_cents)} with --batch"
+        )
 
     def report(self) -> str:
         """The ``--estimate`` report: the line, then where each figure comes from."""
@@ -200,22 +218,38 @@ class Estimate:
             for label, b in (("", self.bound), (" with --batch", self.batch_bound)):
                 if b is None:
                     continue
-                lines.append(f"  --max-cost{label}: no bound known ({b.source}); refused" if b.cents_per_call is None
-                             else f"  --max-cost{label}: each call admitted at its upper bound, "
-                             f"{b.cents_per_call:.3f} ¢: {b.source}")
+                lines.append(
+                    f"  --max-cost{label}: no bound known ({b.source}); refused"
+                    if b.cents_per_call is None
+                    else f"  --max-cost{label}: each call admitted at its upper bound, "
+                    f"{b.cents_per_call:.3f} ¢: {b.source}"
+                )
         return "\n".join(lines)
 
 
 def no_bill(model: str, kind: str, frames: int) -> str:
     """The one line ``--estimate`` prints for a run with no provider bill: a baseline or a local backend (``kind``)."""
-    where = "here as a baseline, from the frame's numbers (no model)" if kind == "baseline" else \
-        f"on this machine through the {kind} backend (local compute)"
+    where = (
+        "here as a baseline, from the frame's numbers (no model)"
+        if kind == "baseline"
+        else f"on this machine through the {kind} backend (local compute)"
+    )
     return f"estimate: {frames:,} frames, 0 calls to a provider, no cost: {model} runs {where}; there is no bill to estimate"
 
 
-def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, prompts: Any, *, max_tokens: int,
-             chain: str = "independent", inputs: str = "full", given_price: Sequence[float] | None = None,
-             served_from: str | None = None, samples: int = 1) -> Estimate:
+def estimate(
+    frames: Sequence[Any],
+    info: ModelInfo,
+    provider: str | None,
+    prompts: Any,
+    *,
+    max_tokens: int,
+    chain: str = "independent",
+    inputs: str = "full",
+    given_price: Sequence[float] | None = None,
+    served_from: str | None = None,
+    samples: int = 1,
+) -> Estimate:
     """The :class:`Estimate` of running ``info`` over ``frames`` with ``prompts`` (a PromptSet selected for the run's
     variant, ``inputs`` included); ``inputs`` ``no-image`` counts no image token. Priced as the run bills its calls
     (:func:`lightemma.models.prices.run_price`): at ``given_price`` (``--price``) when given, unknown when the model is
@@ -228,7 +262,10 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
     shows_images = inputs != "no-image"
     typical, output_source = typical_output_tokens(info)
     out_per_frame = min(typical, 3 * max_tokens)
-    scene_out, intent_out = "x" * (4 * round(out_per_frame * SCENE_SHARE)), "x" * (4 * round(out_per_frame * INTENT_SHARE))
+    scene_out, intent_out = (
+        "x" * (4 * round(out_per_frame * SCENE_SHARE)),
+        "x" * (4 * round(out_per_frame * INTENT_SHARE)),
+    )
     sizes: dict[str, int] = {}
     cache: dict[str, tuple[int, int] | None] = {}
     image_total = text_total = missing = 0
@@ -246,8 +283,11 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
             if rule is not None:
                 image_total += 3 * rule.tokens(size[0], size[1])
         history = history_placeholders(frame.history_actions)
-        texts = [prompts.render("scene"), prompts.render("intent", scene=scene_out, **history),
-                 prompts.render("actions", scene=scene_out, intent=intent_out, **history)]
+        texts = [
+            prompts.render("scene"),
+            prompts.render("intent", scene=scene_out, **history),
+            prompts.render("actions", scene=scene_out, intent=intent_out, **history),
+        ]
         messages = (1, 3, 5) if chain == "conversation" else (1, 1, 1)
         if chain == "conversation":  # the earlier prompts and answers are resent as turns
             texts[1] += texts[0] + scene_out
@@ -271,20 +311,42 @@ def estimate(frames: Sequence[Any], info: ModelInfo, provider: str | None, promp
         rule_text = rule.describe()
     else:
         family = IMAGE_TOKEN_RULES[rule_provider if rule_provider != "vertex_ai" else "gemini"]
-        rule_text = (f"unknown: no published image rule for {info.model_id} (lightemma.models.tokens.IMAGE_RULES says which "
-                     f"rules are and why others are left out; the provider's rules: {family})")
+        rule_text = (
+            f"unknown: no published image rule for {info.model_id} (lightemma.models.tokens.IMAGE_RULES says which "
+            f"rules are and why others are left out; the provider's rules: {family})"
+        )
     bounds = {}
     if unknown_images:
-        bounds = {key: frame_cost_upper_bound(info, max_tokens=max_tokens, batch=is_batch, given_price=given_price,
-                                              served_from=served_from)
-                  for key, is_batch in (("bound", False), ("batch_bound", True))}
+        bounds = {
+            key: frame_cost_upper_bound(
+                info, max_tokens=max_tokens, batch=is_batch, given_price=given_price, served_from=served_from
+            )
+            for key, is_batch in (("bound", False), ("batch_bound", True))
+        }
     # the label names the rule counted (the model's own), not the route: Claude behind --api-base is 'anthropic rule'
     label = rule.provider if rule is not None else rule_provider
-    return Estimate(model=info.key, provider=label, frames=n, calls=3 * n * samples, samples=samples, input_tokens=total_in,
-                    image_tokens=images, output_tokens=output, image_sizes=sizes, missing_images=missing,
-                    cost_cents=cost(list_price), batch_cost_cents=cost(batch), price_source=list_price["source"],
-                    batch_price_source=batch["source"], output_source=output_source, image_rule=rule_text,
-                    inputs=inputs, text_tokens=text_total, image_rule_exact=rule is None or rule.exact, **bounds)
+    return Estimate(
+        model=info.key,
+        provider=label,
+        frames=n,
+        calls=3 * n * samples,
+        samples=samples,
+        input_tokens=total_in,
+        image_tokens=images,
+        output_tokens=output,
+        image_sizes=sizes,
+        missing_images=missing,
+        cost_cents=cost(list_price),
+        batch_cost_cents=cost(batch),
+        price_source=list_price["source"],
+        batch_price_source=batch["source"],
+        output_source=output_source,
+        image_rule=rule_text,
+        inputs=inputs,
+        text_tokens=text_total,
+        image_rule_exact=rule is None or rule.exact,
+        **bounds,
+    )
 
 
 class Budget:
@@ -295,7 +357,9 @@ class Budget:
 
     CHAIN_CALLS = 3
 
-    def __init__(self, limit_cents: float, per_call_cents: float, spent_cents: float = 0.0, chain_calls: int = CHAIN_CALLS) -> None:
+    def __init__(
+        self, limit_cents: float, per_call_cents: float, spent_cents: float = 0.0, chain_calls: int = CHAIN_CALLS
+    ) -> None:
         self.chain_calls = int(chain_calls)  # the calls a frame's first call reserves: 3 × K with --samples K
         self.limit_cents = float(limit_cents)
         self.per_call_cents = float(per_call_cents)
@@ -330,5 +394,7 @@ class Budget:
         self.reserved_cents -= self.per_call_cents * self._held.pop(frame_id, 0)
 
     def message(self) -> str:
-        return (f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent and {max(self.reserved_cents, 0.0):.2f} ¢ in flight; "
-                f"the next frame (about {self.chain_calls * self.per_call_cents:.3f} ¢) would pass the limit")
+        return (
+            f"--max-cost {self.limit_cents:g}: {self.spent_cents:.2f} ¢ spent and {max(self.reserved_cents, 0.0):.2f} ¢ in flight; "
+            f"the next frame (about {self.chain_calls * self.per_call_cents:.3f} ¢) would pass the limit"
+        )

@@ -15,14 +15,25 @@ class Progress:
         self.failed = 0
         self.errors = 0
         self.cost_cents = 0.0
-        self._bar = tqdm(total=total, initial=initial, unit="frame", desc=desc, disable=not enabled,
-                         file=sys.stderr, dynamic_ncols=True, mininterval=0.5, smoothing=0.05)
+        self._bar = tqdm(
+            total=total,
+            initial=initial,
+            unit="frame",
+            desc=desc,
+            disable=not enabled,
+            file=sys.stderr,
+            dynamic_ncols=True,
+            mininterval=0.5,
+            smoothing=0.05,
+        )
 
     def update(self, record: dict[str, Any]) -> None:
         self.failed += record["status"] == "failed"
         self.errors += sum(1 for a in record["attempts"] for c in a["calls"] if c["error"])
         self.cost_cents += record["cost_cents"] or 0.0
-        self._bar.set_postfix_str(f"failed={self.failed} errors={self.errors} cost=${self.cost_cents / 100:.2f}", refresh=False)
+        self._bar.set_postfix_str(
+            f"failed={self.failed} errors={self.errors} cost=${self.cost_cents / 100:.2f}", refresh=False
+        )
         self._bar.update(1)
 
     def close(self) -> None:

@@ -32,7 +32,7 @@ import threading
 import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -94,18 +94,25 @@ class RunResult:
 
     def report(self) -> str:
         """The final summary as text."""
-        return format_summary(self.summary, title=f"{self.manifest.get('display_name', self.manifest['model'])} — {self.run_dir}")
+        return format_summary(
+            self.summary, title=f"{self.manifest.get('display_name', self.manifest['model'])} — {self.run_dir}"
+        )
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
 def _git_revision() -> str | None:
     """``git describe`` of the source tree lightemma runs from (None outside a checkout)."""
     try:
-        out = subprocess.run(["git", "describe", "--always", "--dirty", "--abbrev=40"], cwd=Path(__file__).resolve().parent,
-                             capture_output=True, text=True, timeout=5)
+        out = subprocess.run(
+            ["git", "describe", "--always", "--dirty", "--abbrev=40"],
+            cwd=Path(__file__).resolve().parent,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        )
     except (OSError, subprocess.SubprocessError):
         return None
     return out.stdout.strip() or None if out.returncode == 0 else None
@@ -114,10 +121,18 @@ def _git_revision() -> str | None:
 def _policy(config: RunConfig) -> ChainPolicy:
     """The chain's policy ``config`` sets (a ValueError for a mode the chain does not know)."""
     p = config.prompting
-    return ChainPolicy(params=GenerationParams(temperature=p.temperature, max_tokens=p.max_tokens), reask=p.reask,
-                       max_attempts=p.max_attempts, integrate_method=p.integrate_method, speed_range=p.speed_range,
-                       max_abs_curvature=p.max_abs_curvature, chain=p.chain, answer_format=p.answer_format,
-                       inputs=p.inputs, samples=p.samples)
+    return ChainPolicy(
+        params=GenerationParams(temperature=p.temperature, max_tokens=p.max_tokens),
+        reask=p.reask,
+        max_attempts=p.max_attempts,
+        integrate_method=p.integrate_method,
+        speed_range=p.speed_range,
+        max_abs_curvature=p.max_abs_curvature,
+        chain=p.chain,
+        answer_format=p.answer_format,
+        inputs=p.inputs,
+        samples=p.samples,
+    )
 
 
 def _check_sampling(backend: Backend, config: RunConfig, log: Log | None) -> None:
@@ -127,11 +142,15 @@ def _check_sampling(backend: Backend, config: RunConfig, log: Log | None) -> Non
     if k == 1:
         return
     if backend.sampling() is None:
-        raise UserError(f"--samples {k}: the {backend.name} backend cannot sample ({config.model} gives one answer per "
-                        "frame); drop --samples")
+        raise UserError(
+            f"--samples {k}: the {backend.name} backend cannot sample ({config.model} gives one answer per "
+            "frame); drop --samples"
+        )
     if temperature == 0 and log:
-        log(f"warning: --samples {k} at --temperature 0: a deterministic model gives the same answer {k} times "
-            "(set --temperature above 0 for independent samples); the run goes on")
+        log(
+            f"warning: --samples {k} at --temperature 0: a deterministic model gives the same answer {k} times "
+            "(set --temperature above 0 for independent samples); the run goes on"
+        )
 
 
 def _structured_output(backend: Backend, policy: ChainPolicy) -> dict[str, Any] | None:
@@ -142,13 +161,22 @@ def _structured_output(backend: Backend, policy: ChainPolicy) -> dict[str, Any] 
     return {**backend.structured_output(), "schema": ACTIONS_SCHEMA.as_dict(), "parse_mode": policy.parse_mode}
 
 
-def _served_model_info(info: Any, price: tuple[float, float] | None, gpus: int | None, *, served: bool) -> dict[str, Any]:
+def _served_model_info(
+    info: Any, price: tuple[float, float] | None, gpus: int | None, *, served: bool
+) -> dict[str, Any]:
     """The registry entry as a model served from another ``--api-base`` records it: not the provider's list price nor
     the registry's GPU count (the paper's hardware), but what ``--price`` / ``--gpus`` say (else unknown / 0)."""
     out = info.to_dict()
     if served:
-        out.update(input_usd_per_mtok=None, output_usd_per_mtok=None, cache_read_usd_per_mtok=None,
-                   cache_write_usd_per_mtok=None, price_source=None, price_read=None, gpus=0)
+        out.update(
+            input_usd_per_mtok=None,
+            output_usd_per_mtok=None,
+            cache_read_usd_per_mtok=None,
+            cache_write_usd_per_mtok=None,
+            price_source=None,
+            price_read=None,
+            gpus=0,
+        )
     if price is not None:
         out.update(input_usd_per_mtok=float(price[0]), output_usd_per_mtok=float(price[1]), price_source="--price")
     if gpus is not None:
@@ -159,12 +187,20 @@ def _served_model_info(info: Any, price: tuple[float, float] | None, gpus: int |
 def _load_frames(dataset: dict[str, Any]) -> Sequence[Any]:
     """Load the frames a manifest's ``dataset`` describes (dataroot, version, split/scenes, window, limit)."""
     if not dataset.get("dataroot") or not dataset.get("version"):
-        raise UserError("this run was made from frames passed in memory; pass frames=... to resume it",
-                        cli="this run was made from frames passed in memory, not from a dataset; resume it from "
-                        "Python: lightemma.resume(RUN_DIR, frames=FRAMES)")
+        raise UserError(
+            "this run was made from frames passed in memory; pass frames=... to resume it",
+            cli="this run was made from frames passed in memory, not from a dataset; resume it from "
+            "Python: lightemma.resume(RUN_DIR, frames=FRAMES)",
+        )
 
-    frames = load_frames(dataset["dataroot"], dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"),
-                         window=dataset.get("window", "reference"), on_bad_record=dataset.get("on_bad_record") or "skip")
+    frames = load_frames(
+        dataset["dataroot"],
+        dataset["version"],
+        split=dataset.get("split"),
+        scenes=dataset.get("scenes"),
+        window=dataset.get("window", "reference"),
+        on_bad_record=dataset.get("on_bad_record") or "skip",
+    )
     return _subset(frames, dataset)
 
 
@@ -173,10 +209,14 @@ def _subset(frames: Any, dataset: Mapping[str, Any]) -> Sequence[Any]:
     sample = dataset.get("sample")
     if sample:
         if dataset.get("limit") is not None:
-            raise UserError("--sample and --limit are exclusive: --limit takes the first N frames, --sample N spreads N over the scenes")
+            raise UserError(
+                "--sample and --limit are exclusive: --limit takes the first N frames, --sample N spreads N over the scenes"
+            )
         n = int(sample["n"])
         if n > len(frames):  # a sample cannot hold more frames than the set: refused, not recorded as N frames
-            raise UserError(f"--sample {n} is more than the {len(frames)} frames of the set; drop --sample to take them all")
+            raise UserError(
+                f"--sample {n} is more than the {len(frames)} frames of the set; drop --sample to take them all"
+            )
         return sample_frames(frames, n, int(sample.get("seed") or 0))
     return _head(frames, dataset.get("limit"))
 
@@ -188,9 +228,15 @@ def _require_frames(frames: Sequence[Any]) -> None:
     skipped = list(getattr(frames, "skipped_scenes", []) or [])
     missing = list(getattr(frames, "missing_images", []) or [])
     if missing and not skipped:  # the frames exist; their images do not
-        raise UserError(f"no frames to run: the CAM_FRONT image of every frame ({len(missing)}) is missing (see the "
-                        "warning above); --dataroot must be the folder holding samples/CAM_FRONT/*.jpg")
-    why = f": every scene was skipped ({', '.join(skipped[:5])}{', …' if len(skipped) > 5 else ''}; see the warnings above)" if skipped else ""
+        raise UserError(
+            f"no frames to run: the CAM_FRONT image of every frame ({len(missing)}) is missing (see the "
+            "warning above); --dataroot must be the folder holding samples/CAM_FRONT/*.jpg"
+        )
+    why = (
+        f": every scene was skipped ({', '.join(skipped[:5])}{', …' if len(skipped) > 5 else ''}; see the warnings above)"
+        if skipped
+        else ""
+    )
     raise UserError(f"no frames to run{why}; choose other scenes (--split, --scenes) or --window full")
 
 
@@ -210,8 +256,6 @@ def _describe(frames: Any, dataset: dict[str, Any]) -> dict[str, Any]:
 
     out["fingerprint"] = of_dataset(out, getattr(frames, "frame_ids", None) or [f.frame_id for f in frames])
     return out
-
-
 
 
 def resume_command(run_dir: str | os.PathLike[str], config: RunConfig | Mapping[str, Any] | None = None) -> str:
@@ -246,8 +290,11 @@ def _exit_now(run_dir: Path, signum: int, command: str | None = None) -> None:
         (run_dir / LOCK_PID_FILE).unlink(missing_ok=True)
     except OSError:
         pass
-    os.write(2, f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
-                f"Continue with: {command or resume_command(run_dir)}\n".encode())
+    os.write(
+        2,
+        f"lightemma run: {signal.Signals(signum).name} again: exiting now; finished frames are saved. "
+        f"Continue with: {command or resume_command(run_dir)}\n".encode(),
+    )
     os._exit(128 + signum)
 
 
@@ -307,8 +354,10 @@ class _Guard(Backend):
             results = list(await call())
             # a call of unknown cost (no usage reported, a price not known for its cached tokens) counts at the
             # estimate, never as free: the limit holds whatever a provider leaves out (a cache hit costs nothing)
-            spent = sum(r.cost_cents if r.cost_cents is not None else (0.0 if r.cached else self.budget.per_call_cents)
-                        for r in results)
+            spent = sum(
+                r.cost_cents if r.cost_cents is not None else (0.0 if r.cached else self.budget.per_call_cents)
+                for r in results
+            )
             return results
         finally:
             self.budget.settle(reserved, spent)
@@ -328,9 +377,18 @@ class _Outcome:
     interrupted: int | None = None  # the signal (SIGINT, SIGTERM, SIGHUP) that stopped it, if one did
 
 
-async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, prompts: PromptSet, policy: ChainPolicy,
-                   concurrency: int, bar: Progress, earlier: Mapping[str, dict[str, Any]], budget: Any = None,
-                   command: str | None = None) -> _Outcome:
+async def _execute(
+    frames: Sequence[Any],
+    backend: Backend,
+    writer: RunWriter,
+    prompts: PromptSet,
+    policy: ChainPolicy,
+    concurrency: int,
+    bar: Progress,
+    earlier: Mapping[str, dict[str, Any]],
+    budget: Any = None,
+    command: str | None = None,
+) -> _Outcome:
     """Run every frame, ``concurrency`` at a time, appending each record as it finishes; stop on a run-fatal cause.
 
     ``earlier``: frame id -> the failed record a frame is run again after (its attempts are kept).
@@ -366,9 +424,14 @@ async def _execute(frames: Sequence[Any], backend: Backend, writer: RunWriter, p
                 halt(RunFatalError(os_error_line(exc, "write a frame record to"), cause="disk"))
                 return
             except RecordTooLargeError as exc:  # never written to be skipped unread later: the run says so and stops
-                halt(RunFatalError(f"{exc}: the model's answers are that long; not written (a resume asks that frame "
-                                   "again; a smaller --max-tokens bounds the answers)", cause="record-too-large",
-                                   error="RecordTooLargeError"))
+                halt(
+                    RunFatalError(
+                        f"{exc}: the model's answers are that long; not written (a resume asks that frame "
+                        "again; a smaller --max-tokens bounds the answers)",
+                        cause="record-too-large",
+                        error="RecordTooLargeError",
+                    )
+                )
                 return
             bar.update(record)
             outcome.done += 1
@@ -421,14 +484,25 @@ def _write_manifest(run_dir: Path, _command: str | None = None, **fields: Any) -
     try:
         return update_manifest(run_dir, **fields)
     except OSError as exc:
-        raise RunStoreError(os_error_line(exc, "update the manifest in") + f"; the frames written so far are safe in "
-                            f"{run_dir / FRAMES_FILE}; after freeing space, continue with: "
-                            f"{_command or resume_command(run_dir)}") from None
+        raise RunStoreError(
+            os_error_line(exc, "update the manifest in") + f"; the frames written so far are safe in "
+            f"{run_dir / FRAMES_FILE}; after freeing space, continue with: "
+            f"{_command or resume_command(run_dir)}"
+        ) from None
 
 
-def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: PromptSet, config: RunConfig,
-             progress: bool, kind: str, already: int, log: Log | None,
-             earlier: Mapping[str, dict[str, Any]] | None = None) -> RunResult:
+def _session(
+    run_dir: Path,
+    todo: Sequence[Any],
+    backend: Backend,
+    prompts: PromptSet,
+    config: RunConfig,
+    progress: bool,
+    kind: str,
+    already: int,
+    log: Log | None,
+    earlier: Mapping[str, dict[str, Any]] | None = None,
+) -> RunResult:
     """Run ``todo`` into ``run_dir`` and mark the run finished; the shared tail of run and resume.
 
     ``earlier``: the failed records of frames run again (frame id -> record), whose attempts the new records keep.
@@ -443,15 +517,26 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     manifest = read_manifest(run_dir)
     command = resume_command(run_dir, config)
     sessions = list(manifest.get("sessions", []))
-    sessions.append({"kind": kind, "started_at": _now(), "frames_todo": len(todo), "concurrency": config.concurrency,
-                     "timeout": config.timeout, "rpm": config.api.rpm, "tpm": config.api.tpm, "pid": os.getpid()})
+    sessions.append(
+        {
+            "kind": kind,
+            "started_at": _now(),
+            "frames_todo": len(todo),
+            "concurrency": config.concurrency,
+            "timeout": config.timeout,
+            "rpm": config.api.rpm,
+            "tpm": config.api.tpm,
+            "pid": os.getpid(),
+        }
+    )
     _write_manifest(run_dir, command, sessions=sessions, finished_at=None)
     try:
         writer = RunWriter(run_dir)
     except OSError as exc:
         asyncio.run(backend.aclose())
-        raise RunStoreError(os_error_line(exc, "open the frame records")
-                            + f"; continue later with: {command}") from None
+        raise RunStoreError(
+            os_error_line(exc, "open the frame records") + f"; continue later with: {command}"
+        ) from None
     # a batch backend journals its batches in the run directory and checks each finished wave's reported cost
     # against --max-cost
     backend.attach(run_dir, log, budget=budget)
@@ -464,8 +549,20 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
         try:
             with writer:
                 if todo:
-                    outcome = asyncio.run(_execute(todo, backend, writer, prompts, _policy(config), concurrency, bar, earlier or {},
-                                                   budget, command))
+                    outcome = asyncio.run(
+                        _execute(
+                            todo,
+                            backend,
+                            writer,
+                            prompts,
+                            _policy(config),
+                            concurrency,
+                            bar,
+                            earlier or {},
+                            budget,
+                            command,
+                        )
+                    )
                     if outcome.interrupted is not None:
                         raise Interrupted(outcome.interrupted)
                 else:
@@ -506,8 +603,10 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
     if images:
         sessions[-1]["images_reencoded"] = images
         if log:
-            log(f"{images['count']} image(s) were larger than the provider accepts and were re-encoded to fit "
-                "(see images_reencoded in the manifest)")
+            log(
+                f"{images['count']} image(s) were larger than the provider accepts and were re-encoded to fit "
+                "(see images_reencoded in the manifest)"
+            )
     stop = outcome.stop
     if stop is not None:
         sessions[-1]["stopped"] = {"cause": stop.cause, "error": stop.error, "message": str(stop)}
@@ -518,16 +617,32 @@ def _session(run_dir: Path, todo: Sequence[Any], backend: Backend, prompts: Prom
             after = f"continue with a longer wait: {command} --timeout SECONDS"
         else:
             after = f"after the fix, continue with: {command}"
-        raise RunStopped(f"{stop} — the run stopped; {outcome.done} frame(s) finished in this session are saved in {run_dir}; "
-                         f"{after}",
-                         cause=stop.cause, error=stop.error, run_dir=run_dir, frames_run=outcome.done)
+        raise RunStopped(
+            f"{stop} — the run stopped; {outcome.done} frame(s) finished in this session are saved in {run_dir}; "
+            f"{after}",
+            cause=stop.cause,
+            error=stop.error,
+            run_dir=run_dir,
+            frames_run=outcome.done,
+        )
     manifest = _write_manifest(run_dir, command, sessions=sessions, finished_at=_now(), summary=summary)
     return RunResult(run_dir=run_dir, manifest=manifest, summary=summary, frames_run=outcome.done)
 
 
-def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT_PROMPT_SET, chain: str = "independent",
-                 answer_format: str = "text", inputs: str = "full", max_tokens: int = 512, api_base: str | None = None,
-                 backend: str | None = None, price: Sequence[float] | None = None, samples: int = 1) -> Any:
+def estimate_run(
+    model: str,
+    *,
+    frames: Sequence[Any],
+    prompt_set: str = DEFAULT_PROMPT_SET,
+    chain: str = "independent",
+    answer_format: str = "text",
+    inputs: str = "full",
+    max_tokens: int = 512,
+    api_base: str | None = None,
+    backend: str | None = None,
+    price: Sequence[float] | None = None,
+    samples: int = 1,
+) -> Any:
     """The :class:`~lightemma.pipeline.estimate.Estimate` of running ``model`` over ``frames`` with the prompts and
     images of ``inputs`` — nothing is called; ``samples`` K chains per frame count K times.
 
@@ -549,8 +664,18 @@ def estimate_run(model: str, *, frames: Sequence[Any], prompt_set: str = DEFAULT
     if price is not None:
         check_price(price)
     served_from = redact_url(api_base) if api_base and not is_provider_host(provider, api_base) else None
-    return estimate(frames, info, provider, prompts, max_tokens=max_tokens, chain=chain, inputs=inputs,
-                    given_price=price, served_from=served_from, samples=samples)
+    return estimate(
+        frames,
+        info,
+        provider,
+        prompts,
+        max_tokens=max_tokens,
+        chain=chain,
+        inputs=inputs,
+        given_price=price,
+        served_from=served_from,
+        samples=samples,
+    )
 
 
 def _backend(config: RunConfig, output: Path, log: Log | None) -> Backend:
@@ -558,17 +683,40 @@ def _backend(config: RunConfig, output: Path, log: Log | None) -> Backend:
     anything else happens. ``output``: the directory a relative response-cache path is under."""
     api, local = config.api, config.local
     return run_backend(
-        config.model, backend=config.backend, api_base=api.api_base, output=output, timeout=config.timeout,
-        rpm=api.rpm, tpm=api.tpm, max_retries=api.max_retries, backoff_base=api.backoff_base,
-        backoff_cap=api.backoff_cap, transport=api.transport or "litellm", api_key_env=api.api_key_env,
-        price=api.price, cache=api.cache, backend_options=dict(local.backend_options), replicas=local.replicas or 1,
-        ray_address=local.ray_address, gpus_per_replica=local.gpus_per_replica, batch=config.batch.enabled,
-        batch_poll=config.batch.poll if config.batch.enabled else None, log=log)
+        config.model,
+        backend=config.backend,
+        api_base=api.api_base,
+        output=output,
+        timeout=config.timeout,
+        rpm=api.rpm,
+        tpm=api.tpm,
+        max_retries=api.max_retries,
+        backoff_base=api.backoff_base,
+        backoff_cap=api.backoff_cap,
+        transport=api.transport or "litellm",
+        api_key_env=api.api_key_env,
+        price=api.price,
+        cache=api.cache,
+        backend_options=dict(local.backend_options),
+        replicas=local.replicas or 1,
+        ray_address=local.ray_address,
+        gpus_per_replica=local.gpus_per_replica,
+        batch=config.batch.enabled,
+        batch_poll=config.batch.poll if config.batch.enabled else None,
+        log=log,
+    )
 
 
-def run(model: str | None = None, *, config: RunConfig | None = None, frames: Sequence[Any] | None = None,
-        output: str | os.PathLike[str] = "runs", progress: bool = True, log: Log | None = None,
-        **settings: Any) -> RunResult:
+def run(
+    model: str | None = None,
+    *,
+    config: RunConfig | None = None,
+    frames: Sequence[Any] | None = None,
+    output: str | os.PathLike[str] = "runs",
+    progress: bool = True,
+    log: Log | None = None,
+    **settings: Any,
+) -> RunResult:
     """Run ``model`` over a frame set through the three-stage chain; returns the run's summary.
 
     The run's settings are a :class:`~lightemma.pipeline.config.RunConfig`: given as ``config=``, or built from
@@ -614,16 +762,19 @@ def run(model: str | None = None, *, config: RunConfig | None = None, frames: Se
     elif not isinstance(config, RunConfig):
         raise TypeError(f"config must be a RunConfig, got {type(config).__name__}")
     if frames is None and config.dataset.dataroot is None:
-        raise UserError("give dataroot (a nuScenes directory) or frames=...",
-                        cli="give --dataroot (a nuScenes directory)")
+        raise UserError(
+            "give dataroot (a nuScenes directory) or frames=...", cli="give --dataroot (a nuScenes directory)"
+        )
     info = resolve(config.model)
     try:
         policy = _policy(config)  # validates reask / attempts / method / chain / answer format before any work
     except ValueError as exc:
         raise UserError(str(exc)) from None
     if policy.inputs != "full" and backend_kind(config.model, config.backend, config.api.api_base) == "baseline":
-        raise UserError(f"--inputs {policy.inputs} is an ablation of what a model is shown; {config.model} reads the "
-                        "frame's numbers itself and is shown nothing: drop --inputs")
+        raise UserError(
+            f"--inputs {policy.inputs} is an ablation of what a model is shown; {config.model} reads the "
+            "frame's numbers itself and is shown nothing: drop --inputs"
+        )
     prompts = load_prompt_set(config.prompting.prompt_set).select(policy.chain, policy.answer_format, policy.inputs)
     output = Path(output)
     instance = _backend(config, output, log)
@@ -640,9 +791,19 @@ def run(model: str | None = None, *, config: RunConfig | None = None, frames: Se
         planned = None
         if instance.info.get("kind") == "api":  # a paid run: its bill first, in one line
             p = config.prompting
-            planned = estimate_run(config.model, frames=frames, prompt_set=p.prompt_set, chain=p.chain,
-                                   answer_format=p.answer_format, inputs=p.inputs, max_tokens=p.max_tokens,
-                                   api_base=config.api.api_base, backend=config.backend, price=price, samples=p.samples)
+            planned = estimate_run(
+                config.model,
+                frames=frames,
+                prompt_set=p.prompt_set,
+                chain=p.chain,
+                answer_format=p.answer_format,
+                inputs=p.inputs,
+                max_tokens=p.max_tokens,
+                api_base=config.api.api_base,
+                backend=config.backend,
+                price=price,
+                samples=p.samples,
+            )
         _prepare(instance, frames, dataset, log=log)
         manifest = {
             "model": config.model,
@@ -688,12 +849,26 @@ def run(model: str | None = None, *, config: RunConfig | None = None, frames: Se
             raise
 
 
-def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frames: Sequence[Any] | None = None,
-           concurrency: int | None = None, replicas: int | None = None, ray_address: str | None = None,
-           gpus_per_replica: float | None = None, max_cost_cents: float | None = None, api_base: str | None = None,
-           api_key_env: str | None = None, cache: str | bool | None = None, backend_options: Mapping[str, Any] | None = None,
-           timeout: float | None = None, rpm: float | None = None, tpm: float | None = None, progress: bool = True,
-           log: Log | None = None) -> RunResult:
+def resume(
+    run_dir: str | os.PathLike[str],
+    *,
+    retry_failed: bool = False,
+    frames: Sequence[Any] | None = None,
+    concurrency: int | None = None,
+    replicas: int | None = None,
+    ray_address: str | None = None,
+    gpus_per_replica: float | None = None,
+    max_cost_cents: float | None = None,
+    api_base: str | None = None,
+    api_key_env: str | None = None,
+    cache: str | bool | None = None,
+    backend_options: Mapping[str, Any] | None = None,
+    timeout: float | None = None,
+    rpm: float | None = None,
+    tpm: float | None = None,
+    progress: bool = True,
+    log: Log | None = None,
+) -> RunResult:
     """Finish the run in ``run_dir`` from its manifest (:meth:`RunConfig.from_manifest
     <lightemma.pipeline.config.RunConfig.from_manifest>`), skipping frames already recorded.
 
@@ -726,33 +901,55 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
     if not isinstance(raw, Mapping) or not raw.get("model"):
         raise RunStoreError(f"{run_dir}: the manifest has no run config; it was not written by `lightemma run`")
     config = RunConfig.from_manifest(raw, run_dir)
-    for name, kind, what, needed in (("model", str, "text", True), ("prompt_set", dict, "an object", False),
-                                     ("dataset", dict, "an object", False), ("sessions", list, "a list", False)):
+    for name, kind, what, needed in (
+        ("model", str, "text", True),
+        ("prompt_set", dict, "an object", False),
+        ("dataset", dict, "an object", False),
+        ("sessions", list, "a list", False),
+    ):
         value = manifest.get(name)
         if (needed or value is not None) and not isinstance(value, kind):  # the manifest's own blocks, beside config
             raise UserError(f"{run_dir}: the manifest's {name} is {short_repr(value)}, not {what}; start a new run")
     check_trusted(run_dir, config, api_base, api_key_env, cache, ray_address, backend_options)
-    given = {"timeout": timeout, "rpm": rpm, "tpm": tpm, "concurrency": concurrency, "max_cost_cents": max_cost_cents,
-             "replicas": replicas, "ray_address": ray_address, "gpus_per_replica": gpus_per_replica}
-    session = {k: float(v) if k in ("timeout", "rpm", "tpm") and isinstance(v, int | float) else v
-               for k, v in given.items() if v is not None}
+    given = {
+        "timeout": timeout,
+        "rpm": rpm,
+        "tpm": tpm,
+        "concurrency": concurrency,
+        "max_cost_cents": max_cost_cents,
+        "replicas": replicas,
+        "ray_address": ray_address,
+        "gpus_per_replica": gpus_per_replica,
+    }
+    session = {
+        k: float(v) if k in ("timeout", "rpm", "tpm") and isinstance(v, int | float) else v
+        for k, v in given.items()
+        if v is not None
+    }
     config = config.replace(**session, api_base=api_base)  # the endpoint as given (the trust policy's check)
     recorded = manifest.get("prompt_set", {})
     # a shipped name or a file's path (the recorded name is the set's own), as the run's variant uses it
     p = config.prompting
     prompts = load_prompt_set(p.prompt_set).select(p.chain, p.answer_format, p.inputs)
     if prompts.hash != recorded.get("hash") or prompts.variant_hash != recorded.get("variant_hash"):
-        run_hash, now_hash = ((recorded.get("hash"), prompts.hash) if prompts.hash != recorded.get("hash") else
-                              (recorded.get("variant_hash"), prompts.variant_hash))
-        raise UserError(f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
-                        f"(run: {run_hash}, now: {now_hash}); start a new run instead of resuming")
+        run_hash, now_hash = (
+            (recorded.get("hash"), prompts.hash)
+            if prompts.hash != recorded.get("hash")
+            else (recorded.get("variant_hash"), prompts.variant_hash)
+        )
+        raise UserError(
+            f"{run_dir}: prompt set {prompts.name!r} has changed since this run started "
+            f"(run: {run_hash}, now: {now_hash}); start a new run instead of resuming"
+        )
     with RunLock(run_dir):  # before anything is read for the todo list: a second writer would redo the same frames
         manifest = read_manifest(run_dir)  # as the last writer left it
         try:
             instance = _backend(config, run_dir.parent.parent, log)
         except (TypeError, AttributeError) as exc:  # a hand-edited manifest: another backend's option, a wrong type
-            raise UserError(f"{run_dir}: the manifest's settings cannot build the run's backend ({type(exc).__name__}: "
-                            f"{short_repr(str(exc), 160)}); start a new run") from None
+            raise UserError(
+                f"{run_dir}: the manifest's settings cannot build the run's backend ({type(exc).__name__}: "
+                f"{short_repr(str(exc), 160)}); start a new run"
+            ) from None
         try:
             _structured_output(instance, _policy(config))
             _check_sampling(instance, config, log)
@@ -775,7 +972,9 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
                 return failed and (retry_failed or (stopped_by is not None and record.get("error") == stopped_by))
 
             todo = [f for f in all_frames if f.frame_id not in records or redo(records[f.frame_id])]
-            again = sum(1 for f in all_frames if f.frame_id in records and redo(records[f.frame_id]) and not retry_failed)
+            again = sum(
+                1 for f in all_frames if f.frame_id in records and redo(records[f.frame_id]) and not retry_failed
+            )
             if todo:
                 instance.check_endpoint()  # a dead --api-base is refused now, not after minutes of retries
         except BaseException:
@@ -786,12 +985,29 @@ def resume(run_dir: str | os.PathLike[str], *, retry_failed: bool = False, frame
             extra = f", of which {again} failed with {stopped_by}, the error that stopped the run" if again else ""
             log(f"resuming {run_dir}: {len(records)} frame(s) recorded, {len(todo)} to run{extra}")
         earlier = {f.frame_id: records[f.frame_id] for f in todo if f.frame_id in records}
-        return _session(run_dir, todo, instance, prompts, config, progress, "retry-failed" if retry_failed else "resume",
-                        len(all_frames) - len(todo), log, earlier)
+        return _session(
+            run_dir,
+            todo,
+            instance,
+            prompts,
+            config,
+            progress,
+            "retry-failed" if retry_failed else "resume",
+            len(all_frames) - len(todo),
+            log,
+            earlier,
+        )
 
 
-def _prepare(backend: Backend, frames: Sequence[Any], dataset: Mapping[str, Any], *, recorded: Any = None,
-             run_dir: Path | None = None, log: Log | None = None) -> None:
+def _prepare(
+    backend: Backend,
+    frames: Sequence[Any],
+    dataset: Mapping[str, Any],
+    *,
+    recorded: Any = None,
+    run_dir: Path | None = None,
+    log: Log | None = None,
+) -> None:
     """Let a backend that learns from the frame set (``baseline:ego``) fit before the run; on a resume, refuse a fit
     whose predictions differ from the recorded ones (``recorded``: the manifest's ``backend``). A fit's warnings
     (cross-fitted on a ``--sample`` / ``--limit`` subset: ``fit.subset.warning``; fitted on few scenes or frames:
@@ -799,8 +1015,10 @@ def _prepare(backend: Backend, frames: Sequence[Any], dataset: Mapping[str, Any]
     backend.prepare(frames, dataset)
     fit = dict(backend.info).get("fit")
     subset = fit.get("subset") if isinstance(fit, Mapping) else None
-    for warning in (subset.get("warning") if isinstance(subset, Mapping) else None,  # a --sample / --limit subset
-                    fit.get("warning") if isinstance(fit, Mapping) else None):  # a fit on few scenes or frames
+    for warning in (
+        subset.get("warning") if isinstance(subset, Mapping) else None,  # a --sample / --limit subset
+        fit.get("warning") if isinstance(fit, Mapping) else None,
+    ):  # a fit on few scenes or frames
         if not warning:
             continue
         if log:
@@ -810,11 +1028,17 @@ def _prepare(backend: Backend, frames: Sequence[Any], dataset: Mapping[str, Any]
 
             warnings.warn(str(warning), stacklevel=3)
     before = recorded.get("fit") if isinstance(recorded, Mapping) else None
-    if run_dir is not None and isinstance(fit, Mapping) and isinstance(before, Mapping) \
-            and fit.get("predictions_sha256") != before.get("predictions_sha256"):
-        raise UserError(f"{run_dir}: {backend.name}'s fit gives other predictions now than when the run started "
-                        f"(run: {before.get('predictions_sha256')}, now: {fit.get('predictions_sha256')}); start a new run "
-                        "instead of resuming")
+    if (
+        run_dir is not None
+        and isinstance(fit, Mapping)
+        and isinstance(before, Mapping)
+        and fit.get("predictions_sha256") != before.get("predictions_sha256")
+    ):
+        raise UserError(
+            f"{run_dir}: {backend.name}'s fit gives other predictions now than when the run started "
+            f"(run: {before.get('predictions_sha256')}, now: {fit.get('predictions_sha256')}); start a new run "
+            "instead of resuming"
+        )
 
 
 def _stopped_error(manifest: dict[str, Any]) -> str | None:
@@ -834,8 +1058,10 @@ def _same_frame_set(run_dir: Path, frames: Sequence[Any]) -> None:
     before = set(recorded)
     if now != before:
         gone, new = len(before - now), len(now - before)
-        raise UserError(f"{run_dir}: the frames loaded now are not the run's frame set ({gone} of its {len(before)} frames "
-                        f"missing, {new} new): the dataset changed since the run started; start a new run instead of resuming")
+        raise UserError(
+            f"{run_dir}: the frames loaded now are not the run's frame set ({gone} of its {len(before)} frames "
+            f"missing, {new} new): the dataset changed since the run started; start a new run instead of resuming"
+        )
 
 
 def _version() -> str:

@@ -20,7 +20,9 @@ def _mean(values: list[float]) -> float | None:
     return float(np.mean(values)) if values else None
 
 
-def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | None = None, frames_run: int | None = None) -> dict[str, Any]:
+def summarize(
+    records: Iterable[Mapping[str, Any]], *, wall_seconds: float | None = None, frames_run: int | None = None
+) -> dict[str, Any]:
     """Aggregate run records (one per frame, the final one) into a summary dict.
 
     ``wall_seconds`` and ``frames_run`` describe this session (frames actually
@@ -62,14 +64,25 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
         "mean_cost_cents": _mean(known_costs),
         "frames_cost_unknown": n - len(known_costs),
         "attempts": sum(r.get("n_attempts", len(r.get("attempts", []))) for r in records),
-        "api_errors": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", []) if c.get("error")),
+        "api_errors": sum(
+            1 for r in records for a in r.get("attempts", []) for c in a.get("calls", []) if c.get("error")
+        ),
         "cached_calls": sum(r.get("cached_calls", 0) for r in records),
         # unknown stays unknown: frames whose tokens a provider did not (fully) report are left out of the means
-        "frames_tokens_unknown": sum(1 for r in records if r.get("input_tokens") is None or r.get("output_tokens") is None),
-        "mean_reasoning_tokens": _mean([r["reasoning_tokens"] for r in records if r.get("reasoning_tokens") is not None]),
+        "frames_tokens_unknown": sum(
+            1 for r in records if r.get("input_tokens") is None or r.get("output_tokens") is None
+        ),
+        "mean_reasoning_tokens": _mean(
+            [r["reasoning_tokens"] for r in records if r.get("reasoning_tokens") is not None]
+        ),
         "cached_input_percent": _cached_percent(records),
-        "truncated_calls": sum(1 for r in records for a in r.get("attempts", []) for c in a.get("calls", [])
-                               if is_truncated(c.get("finish_reason"))),
+        "truncated_calls": sum(
+            1
+            for r in records
+            for a in r.get("attempts", [])
+            for c in a.get("calls", [])
+            if is_truncated(c.get("finish_reason"))
+        ),
         "top_failure": _top_failure(records),
     }
     if wall_seconds is not None:
@@ -81,15 +94,21 @@ def summarize(records: Iterable[Mapping[str, Any]], *, wall_seconds: float | Non
 
 def _cached_percent(records: list[Mapping[str, Any]]) -> float | None:
     """100 × Σ cached input tokens ÷ Σ input tokens over the frames reporting both (None when none does)."""
-    both = [(r["cached_input_tokens"], r["input_tokens"]) for r in records
-            if r.get("cached_input_tokens") is not None and r.get("input_tokens")]
+    both = [
+        (r["cached_input_tokens"], r["input_tokens"])
+        for r in records
+        if r.get("cached_input_tokens") is not None and r.get("input_tokens")
+    ]
     return 100.0 * sum(c for c, _ in both) / sum(t for _, t in both) if both else None
 
 
 def _top_failure(records: list[Mapping[str, Any]]) -> str | None:
     """The most common reason the last attempt of a failed frame gives (None when no frame failed)."""
-    reasons = Counter(str((r.get("attempts") or [{}])[-1].get("reason") or r.get("error") or "unknown")
-                      for r in records if r.get("status") == "failed")
+    reasons = Counter(
+        str((r.get("attempts") or [{}])[-1].get("reason") or r.get("error") or "unknown")
+        for r in records
+        if r.get("status") == "failed"
+    )
     return reasons.most_common(1)[0][0] if reasons else None
 
 
@@ -105,11 +124,22 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         f"FE            {_fmt(summary['fe_percent'], '.2f', ' %')}   FE corr {_fmt(summary['fe_corr_percent'], '.2f', ' %')}"
         + _unanswered(summary),
         f"ADE avg       {_fmt(summary['ade_avg'], '.3f', ' m')}  over {summary['ade_frames']} frame(s)",
-        (f"time/frame    n/a (batch mode; mean batch turnaround {_fmt(summary.get('batch_turnaround_s'), '.0f', ' s')})"
-         if summary.get("batch") else f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}"),
+        (
+            f"time/frame    n/a (batch mode; mean batch turnaround {_fmt(summary.get('batch_turnaround_s'), '.0f', ' s')})"
+            if summary.get("batch")
+            else f"time/frame    {_fmt(summary['mean_seconds_per_frame'], '.2f', ' s')}"
+        ),
         f"tokens/frame  in {_fmt(summary['mean_input_tokens'], '.0f')}, out {_fmt(summary['mean_output_tokens'], '.0f')}"
-        + (f" (of which reasoning {_fmt(summary['mean_reasoning_tokens'], '.0f')})" if summary.get("mean_reasoning_tokens") else "")
-        + (f", {summary['cached_input_percent']:.1f} % of input from the prompt cache" if summary.get("cached_input_percent") else "")
+        + (
+            f" (of which reasoning {_fmt(summary['mean_reasoning_tokens'], '.0f')})"
+            if summary.get("mean_reasoning_tokens")
+            else ""
+        )
+        + (
+            f", {summary['cached_input_percent']:.1f} % of input from the prompt cache"
+            if summary.get("cached_input_percent")
+            else ""
+        )
         + (f"  ({summary['frames_tokens_unknown']} unknown)" if summary.get("frames_tokens_unknown") else ""),
         f"cost          {_fmt(summary['total_cost_cents'], '.2f', ' ¢')} total, {_fmt(summary['mean_cost_cents'], '.3f', ' ¢')}/frame"
         + (f"  ({summary['frames_cost_unknown']} frame(s) unpriced)" if summary["frames_cost_unknown"] else ""),
@@ -117,8 +147,10 @@ def format_summary(summary: Mapping[str, Any], *, title: str = "") -> str:
         + (f", {summary['truncated_calls']} truncated" if summary.get("truncated_calls") else ""),
     ]
     if "wall_seconds" in summary:
-        lines.append(f"wall time     {summary['wall_seconds']:.1f} s for {summary['frames_run']} frame(s), "
-                     f"{_fmt(summary['frames_per_second'], '.2f', ' frames/s')}")
+        lines.append(
+            f"wall time     {summary['wall_seconds']:.1f} s for {summary['frames_run']} frame(s), "
+            f"{_fmt(summary['frames_per_second'], '.2f', ' frames/s')}"
+        )
     return "\n".join(lines)
 
 

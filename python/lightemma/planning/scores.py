@@ -211,8 +211,11 @@ def planning_map(layers: ExpansionLayers) -> PlanningMap:
     if area.polygons is not None and len(area.polygons) > 1:
         assert area.xy is not None and area.rings is not None  # read_expansion sets xy, rings and polygons together
         drivable = PolygonSet(area.xy, area.rings, area.polygons)
-    return PlanningMap(drivable=drivable, lanes=PolygonSet.from_rings(layers.lanes) if layers.lanes else None,
-                       intersections=PolygonSet.from_rings(layers.intersections) if layers.intersections else None)
+    return PlanningMap(
+        drivable=drivable,
+        lanes=PolygonSet.from_rings(layers.lanes) if layers.lanes else None,
+        intersections=PolygonSet.from_rings(layers.intersections) if layers.intersections else None,
+    )
 
 
 def _in_ring(ring: FloatArray, pts: FloatArray) -> npt.NDArray[np.bool_]:
@@ -252,8 +255,9 @@ def route_lanes(
             offsets.append(len(ids))
             continue
         lo, hi = gt[f, :, :2].min(0) - radius, gt[f, :, :2].max(0) + radius
-        near = np.nonzero((bounds[:, 0] <= hi[0]) & (bounds[:, 2] >= lo[0]) & (bounds[:, 1] <= hi[1])
-                          & (bounds[:, 3] >= lo[1]))[0]
+        near = np.nonzero(
+            (bounds[:, 0] <= hi[0]) & (bounds[:, 2] >= lo[0]) & (bounds[:, 1] <= hi[1]) & (bounds[:, 3] >= lo[1])
+        )[0]
         for p in near.tolist():
             r0, r1 = polys[p], polys[p + 1]
             inside = _in_ring(xy[rings[r0] : rings[r0 + 1]], c)
@@ -390,9 +394,7 @@ def subscores(
     return out_values, out_reasons
 
 
-def _given(
-    x: npt.ArrayLike | None, n: int, name: str
-) -> tuple[FloatArray, list[str | None]]:
+def _given(x: npt.ArrayLike | None, n: int, name: str) -> tuple[FloatArray, list[str | None]]:
     """A comfort input (N,) (0/1, NaN n/a) from part A's kernels, or all n/a when not given."""
     if x is None:
         return np.full(n, np.nan), [f"{name} not given"] * n
@@ -402,9 +404,7 @@ def _given(
     return a.copy(), [None if ok else f"{name} is n/a in its input" for ok in np.isfinite(a).tolist()]
 
 
-def _normalised_progress(
-    raw: FloatArray, mult: FloatArray, gt_raw: FloatArray, gt_mult: FloatArray
-) -> FloatArray:
+def _normalised_progress(raw: FloatArray, mult: FloatArray, gt_raw: FloatArray, gt_mult: FloatArray) -> FloatArray:
     """NAVSIM's ``_aggregate_pdm_scores`` progress over the pair (ground truth standing in for PDM-Closed, plan):
     norm = max(raw·mult) over the pair; raw / norm clipped to [0, 1] when norm > 5 m, else 1. NaN in → NaN."""
     norm = np.maximum(raw * mult, gt_raw * gt_mult)
@@ -494,16 +494,22 @@ def drive_scores(
     both = np.concatenate([st, gt])
     both_frame = np.concatenate([fr, np.arange(f, dtype=np.int64)])
     vals, why = subscores(
-        both, both_frame, agents=agents, map=map, frame_lanes=frame_lanes, route=route,
-        centreline=centreline, n_frames=f, ego=ego, dt=dt,
+        both,
+        both_frame,
+        agents=agents,
+        map=map,
+        frame_lanes=frame_lanes,
+        route=route,
+        centreline=centreline,
+        n_frames=f,
+        ego=ego,
+        dt=dt,
     )
     plan = {k: (v[:n], why[k][:n]) for k, v in vals.items()}
     gt_v = {k: v[n:] for k, v in vals.items()}
     gt_of = {k: v[fr] for k, v in gt_v.items()}
 
-    parts: dict[str, tuple[FloatArray, list[str | None]]] = {
-        k: plan[k] for k in ("nc", "dac", "ddc", "ttc", "lk")
-    }
+    parts: dict[str, tuple[FloatArray, list[str | None]]] = {k: plan[k] for k in ("nc", "dac", "ddc", "ttc", "lk")}
     parts["tlc"] = (np.full(n, np.nan), [_TLC_REASON] * n)
     parts["c"] = _given(c, n, "c")
     parts["hc"] = _given(hc, n, "hc")

@@ -55,8 +55,15 @@ HISTORY_FORMS: tuple[tuple[str, ...], ...] = (("history",), ("speeds", "curvatur
 HISTORY_KEYS = ("history", "speeds", "curvatures")
 CHAINS = ("independent", "conversation")
 ANSWER_FORMATS = ("text", "structured")
-VARIANTS = ("structured", "conversation", "conversation+structured", "no-history", "no-history+structured",
-            "conversation+no-history", "conversation+no-history+structured")
+VARIANTS = (
+    "structured",
+    "conversation",
+    "conversation+structured",
+    "no-history",
+    "no-history+structured",
+    "conversation+no-history",
+    "conversation+no-history+structured",
+)
 # placeholders each stage must carry in a conversation variant: the earlier stages' texts are turns, not pasted
 CONVERSATION_PLACEHOLDERS: dict[str, tuple[str, ...]] = {"scene": (), "intent": ("history",), "actions": ()}
 
@@ -74,8 +81,15 @@ def variant_name(chain: str = "independent", answer_format: str = "text", inputs
     if answer_format not in ANSWER_FORMATS:
         raise InputError(f"answer format must be one of {', '.join(ANSWER_FORMATS)}, got {answer_format!r}")
     check_inputs(inputs)
-    parts = [p for p, on in (("conversation", chain == "conversation"), ("no-history", inputs == "no-history"),
-                             ("structured", answer_format == "structured")) if on]
+    parts = [
+        p
+        for p, on in (
+            ("conversation", chain == "conversation"),
+            ("no-history", inputs == "no-history"),
+            ("structured", answer_format == "structured"),
+        )
+        if on
+    ]
     return "+".join(parts) or None
 
 
@@ -98,7 +112,9 @@ def _check_placeholders(origin: str, where: str, stages: dict[str, str], require
         if "history" in needed and not any(all("{" + p + "}" in template for p in form) for form in HISTORY_FORMS):
             absent.append("history")
         if absent:
-            names = ", ".join("{history} (or {speeds} and {curvatures})" if p == "history" else "{" + p + "}" for p in absent)
+            names = ", ".join(
+                "{history} (or {speeds} and {curvatures})" if p == "history" else "{" + p + "}" for p in absent
+            )
             raise UserError(f"{origin}: the {where}{stage!r} template lacks placeholder(s) {names}")
 
 
@@ -110,14 +126,22 @@ def _variants(data: dict[str, Any], origin: str) -> dict[str, dict[str, str]]:
     for name, stages in variants.items():
         if name not in VARIANTS:
             raise UserError(f"{origin}: unknown variant {name!r} (known: {', '.join(VARIANTS)})")
-        if not isinstance(stages, dict) or not stages or any(s not in STAGES or not isinstance(t, str) for s, t in stages.items()):
-            raise UserError(f"{origin}: variant {name!r} must map stage names ({', '.join(STAGES)}) to template strings")
+        if (
+            not isinstance(stages, dict)
+            or not stages
+            or any(s not in STAGES or not isinstance(t, str) for s, t in stages.items())
+        ):
+            raise UserError(
+                f"{origin}: variant {name!r} must map stage names ({', '.join(STAGES)}) to template strings"
+            )
         required = CONVERSATION_PLACEHOLDERS if name.startswith("conversation") else PLACEHOLDERS
         if "no-history" in name.split("+"):
             left = _history_left(stages)
             if left:
-                raise UserError(f"{origin}: the {name} variant's {left[0]!r} template holds a history placeholder "
-                                "({history}, {speeds} or {curvatures}); a no-history template must not")
+                raise UserError(
+                    f"{origin}: the {name} variant's {left[0]!r} template holds a history placeholder "
+                    "({history}, {speeds} or {curvatures}); a no-history template must not"
+                )
             required = {s: tuple(p for p in req if p != "history") for s, req in required.items()}
         _check_placeholders(origin, f"{name} variant's ", stages, required)
     return {name: dict(stages) for name, stages in variants.items()}
@@ -151,9 +175,17 @@ class PromptSet:
             raise UserError(f"{origin}: stage template(s) {', '.join(missing)} missing (need {', '.join(STAGES)})")
         _check_placeholders(origin, "", {s: stages[s] for s in STAGES}, PLACEHOLDERS)
         variants = _variants(data, origin)
-        base = {k: v for k, v in data.items() if k != "variants"}  # the paper's chain: hashed as before variants existed
-        return cls(name=data["name"], description=str(data.get("description", "")), stages=dict(stages),
-                   hash=content_hash(base), variants=variants, paper_stages=dict(stages))
+        base = {
+            k: v for k, v in data.items() if k != "variants"
+        }  # the paper's chain: hashed as before variants existed
+        return cls(
+            name=data["name"],
+            description=str(data.get("description", "")),
+            stages=dict(stages),
+            hash=content_hash(base),
+            variants=variants,
+            paper_stages=dict(stages),
+        )
 
     def select(self, chain: str = "independent", answer_format: str = "text", inputs: str = "full") -> PromptSet:
         """This set as a run with ``chain``, ``answer_format`` and ``inputs`` uses it: the variant's templates in place.
@@ -166,19 +198,40 @@ class PromptSet:
         if name is None:
             return replace(self, stages=paper, variant=None, variant_hash=None, paper_stages=paper)
         if name not in self.variants:
-            flags = " and ".join(f for f, on in (("--chain conversation", chain == "conversation"),
-                                                 ("--inputs no-history", inputs == "no-history"),
-                                                 ("--answer-format structured", answer_format == "structured")) if on)
-            raise UserError(f"prompt set {self.name!r} has no {name!r} variant, which {flags} needs; add its templates "
-                            "under \"variants\" (docs/run.md, Prompt sets)")
+            flags = " and ".join(
+                f
+                for f, on in (
+                    ("--chain conversation", chain == "conversation"),
+                    ("--inputs no-history", inputs == "no-history"),
+                    ("--answer-format structured", answer_format == "structured"),
+                )
+                if on
+            )
+            raise UserError(
+                f"prompt set {self.name!r} has no {name!r} variant, which {flags} needs; add its templates "
+                'under "variants" (docs/run.md, Prompt sets)'
+            )
         stages = {**paper, **self.variants[name]}
         left = _history_left(stages) if inputs == "no-history" else []
         if left:
-            raise UserError(f"prompt set {self.name!r}: its {name!r} variant has no {left[0]!r} template, so that stage "
-                            "would keep the history; give every stage that holds the history a template there")
-        return replace(self, stages=stages, variant=name, variant_hash=content_hash(self.variants[name]), paper_stages=paper)
+            raise UserError(
+                f"prompt set {self.name!r}: its {name!r} variant has no {left[0]!r} template, so that stage "
+                "would keep the history; give every stage that holds the history a template there"
+            )
+        return replace(
+            self, stages=stages, variant=name, variant_hash=content_hash(self.variants[name]), paper_stages=paper
+        )
 
-    def render(self, stage: str, *, scene: str = "", history: str = "", intent: str = "", speeds: str = "", curvatures: str = "") -> str:
+    def render(
+        self,
+        stage: str,
+        *,
+        scene: str = "",
+        history: str = "",
+        intent: str = "",
+        speeds: str = "",
+        curvatures: str = "",
+    ) -> str:
         """The text of ``stage`` with the earlier stages' texts and the history filled in.
 
         ``history``, ``speeds`` and ``curvatures`` are the renderings of
@@ -187,7 +240,9 @@ class PromptSet:
         model's scene or intent text) is data, so a ``{intent}`` or ``{history}`` inside it stays as written.
         """
         values = {"scene": scene, "history": history, "intent": intent, "speeds": speeds, "curvatures": curvatures}
-        keys = [k for k in PLACEHOLDERS[stage] if k != "history"] + (list(HISTORY_KEYS) if "history" in PLACEHOLDERS[stage] else [])
+        keys = [k for k in PLACEHOLDERS[stage] if k != "history"] + (
+            list(HISTORY_KEYS) if "history" in PLACEHOLDERS[stage] else []
+        )
         if not keys:
             return self.stages[stage]
         pattern = re.compile("|".join(re.escape("{" + k + "}") for k in keys))
@@ -224,6 +279,8 @@ def load_prompt_set(name: str = DEFAULT_PROMPT_SET) -> PromptSet:
     if not isinstance(data, dict):
         raise UserError(f"{origin}: expected a JSON object")
     if without_lone_surrogates(data) != data:
-        raise UserError(f"{origin}: holds a lone surrogate (an escape such as \\ud83d, half of an emoji), which no request "
-                        "can carry; fix the file")
+        raise UserError(
+            f"{origin}: holds a lone surrogate (an escape such as \\ud83d, half of an emoji), which no request "
+            "can carry; fix the file"
+        )
     return PromptSet.from_dict(data, origin=origin)

@@ -44,7 +44,9 @@ class Difference:
 
         def cut(text: str) -> str:
             piece = text[start : self.position + 40]
-            return lead + piece + ("…" if len(text) > self.position + 40 else "") if piece else lead + "(text ends here)"
+            return (
+                lead + piece + ("…" if len(text) > self.position + 40 else "") if piece else lead + "(text ends here)"
+            )
 
         return cut(self.stored), cut(self.rendered)
 
@@ -99,9 +101,13 @@ def check_prompts(prompts: PromptSet, run_dir: str | os.PathLike[str], *, limit:
     run_dir = Path(run_dir)
     manifest = read_manifest(run_dir)
     if not manifest.get("imported"):
-        raise UserError(f"{run_dir} was not imported from reference results, so it stores no prompts to check against "
-                        "(lightemma import makes such runs)")
-    templates = (manifest.get("prompt_set") or {}).get("templates") if isinstance(manifest.get("prompt_set"), Mapping) else None
+        raise UserError(
+            f"{run_dir} was not imported from reference results, so it stores no prompts to check against "
+            "(lightemma import makes such runs)"
+        )
+    templates = (
+        (manifest.get("prompt_set") or {}).get("templates") if isinstance(manifest.get("prompt_set"), Mapping) else None
+    )
     checks = {stage: StageCheck(stage) for stage in STAGES}
     seen = 0
     for record in iter_records(run_dir):

@@ -44,7 +44,9 @@ def coverage_flags(evaluation: Evaluation) -> dict[str, str]:
 def _notes(evaluation: Evaluation, *, intervals: bool = False) -> list[str]:
     notes = []
     if coverage_flags(evaluation):
-        notes.append(f"Flagged: fewer than {100 * LOW_COVERAGE:.0f} % of the model's frames were scored; its numbers describe only the frames it managed.")
+        notes.append(
+            f"Flagged: fewer than {100 * LOW_COVERAGE:.0f} % of the model's frames were scored; its numbers describe only the frames it managed."
+        )
     if intervals and evaluation.resampling.n_resamples:
         r = evaluation.resampling
         notes.append(
@@ -69,10 +71,18 @@ def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool 
     notes = [*count_notes, *notes]
     if any(row.get("samples") for row in rows):  # --samples K runs: minADE@K / minFDE@K beside ADE and FDE
         at = next(i for i, c in enumerate(columns) if c.key == "fde") + 1
-        columns = (*columns[:at], Column("samples", "K"), Column("minade", "minADE@K (m)", fixed(2)),
-                   Column("minfde", "minFDE@K (m)", fixed(2)), Column("spread_m", "Spread@K (m)", fixed(2)), *columns[at:])
-        notes.append("K: samples per frame (--samples); minADE@K / minFDE@K: per frame the best of its K samples, "
-                     "averaged; Spread@K: mean pairwise distance of the samples' final points (docs/definitions.md#k-samples).")
+        columns = (
+            *columns[:at],
+            Column("samples", "K"),
+            Column("minade", "minADE@K (m)", fixed(2)),
+            Column("minfde", "minFDE@K (m)", fixed(2)),
+            Column("spread_m", "Spread@K (m)", fixed(2)),
+            *columns[at:],
+        )
+        notes.append(
+            "K: samples per frame (--samples); minADE@K / minFDE@K: per frame the best of its K samples, "
+            "averaged; Spread@K: mean pairwise distance of the samples' final points (docs/definitions.md#k-samples)."
+        )
     if with_paper and convention == PAPER_CONVENTION:
         rows = beside_paper(evaluation.models, rows, paper_accuracy_rows(), ACCURACY_DIFF_KEYS)
         for row in rows:
@@ -82,8 +92,14 @@ def accuracy_table(evaluation: Evaluation, convention: str, *, with_paper: bool 
         return Table(title, columns, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
     if evaluation.safety is None:
         return Table(title, columns, rows, name=f"accuracy_{convention}", flags=flags, notes=notes)
-    return Table(title, (*columns, *SAFETY_COLUMNS), _with_floor(evaluation, rows, convention), name=f"accuracy_{convention}",
-                 flags=flags, notes=notes + safety_notes(evaluation, convention))
+    return Table(
+        title,
+        (*columns, *SAFETY_COLUMNS),
+        _with_floor(evaluation, rows, convention),
+        name=f"accuracy_{convention}",
+        flags=flags,
+        notes=notes + safety_notes(evaluation, convention),
+    )
 
 
 def _outcome_columns(rows: list[dict]) -> tuple[tuple[Column, ...], list[str]]:
@@ -98,7 +114,9 @@ def _outcome_columns(rows: list[dict]) -> tuple[tuple[Column, ...], list[str]]:
         return ACCURACY_COLUMNS, []
     at = next(i for i, c in enumerate(ACCURACY_COLUMNS) if c.key == "api_errors") + 1
     columns = (*ACCURACY_COLUMNS[:at], Column("unscored_other", "Other unscored"), *ACCURACY_COLUMNS[at:])
-    return columns, ["Other unscored: frames neither scored nor failed, implausible or lost to API errors (no usable ground truth, or no finite trajectory)."]
+    return columns, [
+        "Other unscored: frames neither scored nor failed, implausible or lost to API errors (no usable ground truth, or no finite trajectory)."
+    ]
 
 
 def _with_floor(evaluation: Evaluation, rows: list[dict], convention: str) -> list[dict]:
@@ -114,7 +132,11 @@ def safety_notes(evaluation: Evaluation, convention: str) -> list[str]:
         "stp3": "Col. Ts: per-step collision rate averaged over 0.5 s … T (ST-P3/VAD); Collision: their mean",
         "any": "Col. Ts: share of frames colliding anywhere in 0.5 s … T (BEV-Planner); Collision: the frame outcome over 3 s",
     }[cc]
-    masked = "steps where the ground truth collides too are not counted (as in its source)" if cc in ("uniad", "stp3") else "ground-truth collisions not masked"
+    masked = (
+        "steps where the ground truth collides too are not counted (as in its source)"
+        if cc in ("uniad", "stp3")
+        else "ground-truth collisions not masked"
+    )
     return [
         f"Safety ({cc} collision convention): {how}; {masked}. Off-road: some corner of the {EGO_LENGTH} × {EGO_WIDTH} m ego footprint "
         f"(centre {EGO_OFFSET:.3f} m ahead of the rear axle, heading along the trajectory, kept for steps < {MIN_STEP:g} m) off the drivable area "
@@ -129,8 +151,14 @@ def safety_table(evaluation: Evaluation, convention: str) -> Table:
     """The safety columns of one convention in a table of their own (beside ``--with-paper``'s accuracy table)."""
     cols = (Column("model", "Model"), Column("frames", "Frames"), *SAFETY_COLUMNS)
     rows = _with_floor(evaluation, evaluation.accuracy_rows(convention), convention)
-    return Table(f"Safety — {convention} convention", cols, rows, name=f"safety_{convention}", flags=coverage_flags(evaluation),
-                 notes=safety_notes(evaluation, convention))
+    return Table(
+        f"Safety — {convention} convention",
+        cols,
+        rows,
+        name=f"safety_{convention}",
+        flags=coverage_flags(evaluation),
+        notes=safety_notes(evaluation, convention),
+    )
 
 
 PAIRWISE_SAFETY_COLUMNS: tuple[Column, ...] = (
@@ -150,11 +178,20 @@ def pairwise_safety_table(evaluation: Evaluation) -> Table:
     """Every pair of runs on off-road and collision (``pairwise_safety``)."""
     r = evaluation.resampling
     cc = (evaluation.pairwise_safety or [{}])[0].get("convention", "")
-    notes = [f"A − B in percentage points (< 0: A is safer), paired on the frames where both have a value; {100 * r.confidence:g} % "
-             f"scene-bootstrap interval; p from {r.n_resamples} sign flips of scene-level differences; Holm family: the {len(evaluation.pairwise_safety or [])} rows of this table "
-             f"(every pair, off-road and collision together). Collision: {cc} convention.", HOLM_FAMILIES]
-    return Table(f"Paired comparisons — off-road and collision, {evaluation.main_convention} table", PAIRWISE_SAFETY_COLUMNS,
-                 list(evaluation.pairwise_safety or []), name="pairwise_safety", flags=coverage_flags(evaluation), notes=notes)
+    notes = [
+        f"A − B in percentage points (< 0: A is safer), paired on the frames where both have a value; {100 * r.confidence:g} % "
+        f"scene-bootstrap interval; p from {r.n_resamples} sign flips of scene-level differences; Holm family: the {len(evaluation.pairwise_safety or [])} rows of this table "
+        f"(every pair, off-road and collision together). Collision: {cc} convention.",
+        HOLM_FAMILIES,
+    ]
+    return Table(
+        f"Paired comparisons — off-road and collision, {evaluation.main_convention} table",
+        PAIRWISE_SAFETY_COLUMNS,
+        list(evaluation.pairwise_safety or []),
+        name="pairwise_safety",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 def efficiency_table(evaluation: Evaluation, *, with_paper: bool = False) -> Table:
@@ -163,13 +200,25 @@ def efficiency_table(evaluation: Evaluation, *, with_paper: bool = False) -> Tab
     if with_paper:
         rows = beside_paper(evaluation.models, rows, paper_efficiency_rows(), EFFICIENCY_DIFF_KEYS)
     columns, notes = EFFICIENCY_COLUMNS, _notes(evaluation)
-    if any("batch_turnaround_s" in row for row in rows):  # a batch run: its latency is n/a, its batches' turnaround shown
+    if any(
+        "batch_turnaround_s" in row for row in rows
+    ):  # a batch run: its latency is n/a, its batches' turnaround shown
         at = next(i for i, c in enumerate(columns) if c.key == "seconds_per_frame") + 1
         columns = (*columns[:at], BATCH_TURNAROUND_COLUMN, *columns[at:])
-        notes = [*notes, "Batch runs (lightemma run --batch): per-frame time is n/a (a frame waits for its batches); "
-                 "Batch turnaround is the mean time from a batch's submission to its results; cost at batch prices "
-                 "(or at the run's --price)."]
-    return Table("Efficiency — per frame, all attempts", columns, rows, name="efficiency", flags=coverage_flags(evaluation), notes=notes)
+        notes = [
+            *notes,
+            "Batch runs (lightemma run --batch): per-frame time is n/a (a frame waits for its batches); "
+            "Batch turnaround is the mean time from a batch's submission to its results; cost at batch prices "
+            "(or at the run's --price).",
+        ]
+    return Table(
+        "Efficiency — per frame, all attempts",
+        columns,
+        rows,
+        name="efficiency",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 PAIRWISE_COLUMNS: tuple[Column, ...] = (
@@ -194,8 +243,10 @@ GENERATION_COLUMNS: tuple[Column, ...] = (
 
 
 #: said under every table with a "p (Holm)" column: its family is its own rows, so one comparison can differ between tables
-HOLM_FAMILIES = ("Each table corrects over its own family (its rows, as said above): the same comparison can be significant in "
-                 "one table and not in another, whose family is larger or smaller.")
+HOLM_FAMILIES = (
+    "Each table corrects over its own family (its rows, as said above): the same comparison can be significant in "
+    "one table and not in another, whose family is larger or smaller."
+)
 
 
 def pairwise_table(evaluation: Evaluation) -> Table:
@@ -204,19 +255,37 @@ def pairwise_table(evaluation: Evaluation) -> Table:
     notes = [
         f"A − B < 0: A is better. Paired on the frames scored in both runs; {100 * r.confidence:g} % scene-bootstrap interval; "
         f"p from {r.n_resamples} sign flips of scene-level differences; Holm family: all {len(evaluation.pairwise or [])} pairs of this table; "
-        f"significant: p (Holm) ≤ {1 - r.confidence:.2f}.", HOLM_FAMILIES,
+        f"significant: p (Holm) ≤ {1 - r.confidence:.2f}.",
+        HOLM_FAMILIES,
         *_notes(evaluation)[:1],
     ]
     title = f"Paired comparisons — ADE avg, {evaluation.main_convention} convention"
-    return Table(title, PAIRWISE_COLUMNS, list(evaluation.pairwise or []), name="pairwise_ade", flags=coverage_flags(evaluation), notes=notes)
+    return Table(
+        title,
+        PAIRWISE_COLUMNS,
+        list(evaluation.pairwise or []),
+        name="pairwise_ade",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 def generations_table(evaluation: Evaluation) -> Table:
     """Per family, each generation against its predecessor: better, worse or not distinguishable."""
-    notes = ["Change = newer − older (negative: the newer generation is better); a verdict needs p (Holm) ≤ "
-             f"{1 - evaluation.resampling.confidence:.2f}, else not distinguishable. p (Holm) is the paired-comparisons table's (Holm family: "
-             f"all {len(evaluation.pairwise or [])} pairs of runs).", *_notes(evaluation)[:1]]
-    return Table("Generations — is each generation better than its predecessor?", GENERATION_COLUMNS, evaluation.generations(), name="generations", flags=coverage_flags(evaluation), notes=notes)
+    notes = [
+        "Change = newer − older (negative: the newer generation is better); a verdict needs p (Holm) ≤ "
+        f"{1 - evaluation.resampling.confidence:.2f}, else not distinguishable. p (Holm) is the paired-comparisons table's (Holm family: "
+        f"all {len(evaluation.pairwise or [])} pairs of runs).",
+        *_notes(evaluation)[:1],
+    ]
+    return Table(
+        "Generations — is each generation better than its predecessor?",
+        GENERATION_COLUMNS,
+        evaluation.generations(),
+        name="generations",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 def _significant(value: object) -> str:
@@ -229,45 +298,76 @@ def _paired_metric_columns(diff: str, sides: tuple[tuple[str, str], tuple[str, s
     for m in PAIRED_METRICS:
         unit = f" ({m.unit})" if m.unit else ""
         out += [Column(f"{m.key}_{side}", f"{m.title} {name}{unit}", fixed(3)) for side, name in sides]
-        out += [Column(f"{m.key}_{diff}", f"{m.title} {diff_header}{unit} [95% CI]", fixed(3), ci=f"{m.key}_ci95"),
-                Column(f"{m.key}_p_holm", f"{m.title} p (Holm)", fixed(4)),
-                Column(f"{m.key}_significant", f"{m.title} significant", _significant)]
+        out += [
+            Column(f"{m.key}_{diff}", f"{m.title} {diff_header}{unit} [95% CI]", fixed(3), ci=f"{m.key}_ci95"),
+            Column(f"{m.key}_p_holm", f"{m.title} p (Holm)", fixed(4)),
+            Column(f"{m.key}_significant", f"{m.title} significant", _significant),
+        ]
     return out
 
 
 def _paired_note(evaluation: Evaluation, rows: int) -> str:
     r = evaluation.resampling
-    return (f"Paired on the frames scored in both runs; {100 * r.confidence:g} % scene-bootstrap interval; p from {r.n_resamples} "
-            f"sign flips of scene-level differences; Holm family: the {rows} row(s) of this table, per metric; significant: "
-            f"p (Holm) ≤ {1 - r.confidence:.2f}. " + HOLM_FAMILIES)
+    return (
+        f"Paired on the frames scored in both runs; {100 * r.confidence:g} % scene-bootstrap interval; p from {r.n_resamples} "
+        f"sign flips of scene-level differences; Holm family: the {rows} row(s) of this table, per metric; significant: "
+        f"p (Holm) ≤ {1 - r.confidence:.2f}. " + HOLM_FAMILIES
+    )
 
 
 def input_ablation_table(evaluation: Evaluation) -> Table:
     """Does the image matter? Each ablation run against its model's full run: full − ablated, CI, Holm p (``input_ablations``)."""
-    columns = [Column("model", "Model (full inputs)"), Column("ablation", "Ablation"), Column("frames", "Common frames"),
-               Column("scenes", "Scenes"),
-               *_paired_metric_columns("diff", (("full", "full"), ("ablated", "ablated")), "full − ablated")]
-    notes = ["full − ablated < 0: the model is better with what the ablation takes away (the image, or the history) — it uses it; "
-             "≈ 0: it does not. no-image: no image in any stage; blank-image: a uniform grey image of the frame's size; "
-             "no-history: the prompts without the history numbers; corrupt:NAME@S: the image corrupted at severity S; "
-             "history-noise@SV[,SK] / history-stale@K: a perturbed history (docs/definitions.md#input-ablations).",
-             _paired_note(evaluation, len(evaluation.input_ablations)), *_notes(evaluation)[:1]]
-    return Table(f"Does the image matter? — input ablations, {evaluation.main_convention} convention", columns,
-                 list(evaluation.input_ablations), name="input_ablations", flags=coverage_flags(evaluation), notes=notes)
+    columns = [
+        Column("model", "Model (full inputs)"),
+        Column("ablation", "Ablation"),
+        Column("frames", "Common frames"),
+        Column("scenes", "Scenes"),
+        *_paired_metric_columns("diff", (("full", "full"), ("ablated", "ablated")), "full − ablated"),
+    ]
+    notes = [
+        "full − ablated < 0: the model is better with what the ablation takes away (the image, or the history) — it uses it; "
+        "≈ 0: it does not. no-image: no image in any stage; blank-image: a uniform grey image of the frame's size; "
+        "no-history: the prompts without the history numbers; corrupt:NAME@S: the image corrupted at severity S; "
+        "history-noise@SV[,SK] / history-stale@K: a perturbed history (docs/definitions.md#input-ablations).",
+        _paired_note(evaluation, len(evaluation.input_ablations)),
+        *_notes(evaluation)[:1],
+    ]
+    return Table(
+        f"Does the image matter? — input ablations, {evaluation.main_convention} convention",
+        columns,
+        list(evaluation.input_ablations),
+        name="input_ablations",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 def baseline_gain_table(evaluation: Evaluation) -> Table:
     """Each model's gain over the best baseline (constant, cv, ego) on their common frames (``baseline_gains``)."""
-    columns = [Column("model", "Model"), Column("inputs", "Inputs"), Column("baseline", "Best baseline"),
-               Column("frames", "Common frames"), Column("scenes", "Scenes"),
-               *_paired_metric_columns("gain", (("model", "model"), ("baseline", "baseline")), "gain (baseline − model)")]
-    notes = ["Gain > 0: the model beats the best of the constant, constant-velocity and ego-status baselines by that much "
-             "(best: the lowest ADE avg on the frames scored in both); ≤ 0: the history alone does as well. An ego baseline "
-             "cross-fitted on a --sample / --limit subset fits on few frames and inflates every gain (its run warns; "
-             "manifest backend.fit.subset): use --fit-split train or the full set.",
-             _paired_note(evaluation, len(evaluation.baseline_gains)), *_notes(evaluation)[:1]]
-    return Table(f"Gain over the best baseline — {evaluation.main_convention} convention", columns, list(evaluation.baseline_gains),
-                 name="baseline_gains", flags=coverage_flags(evaluation), notes=notes)
+    columns = [
+        Column("model", "Model"),
+        Column("inputs", "Inputs"),
+        Column("baseline", "Best baseline"),
+        Column("frames", "Common frames"),
+        Column("scenes", "Scenes"),
+        *_paired_metric_columns("gain", (("model", "model"), ("baseline", "baseline")), "gain (baseline − model)"),
+    ]
+    notes = [
+        "Gain > 0: the model beats the best of the constant, constant-velocity and ego-status baselines by that much "
+        "(best: the lowest ADE avg on the frames scored in both); ≤ 0: the history alone does as well. An ego baseline "
+        "cross-fitted on a --sample / --limit subset fits on few frames and inflates every gain (its run warns; "
+        "manifest backend.fit.subset): use --fit-split train or the full set.",
+        _paired_note(evaluation, len(evaluation.baseline_gains)),
+        *_notes(evaluation)[:1],
+    ]
+    return Table(
+        f"Gain over the best baseline — {evaluation.main_convention} convention",
+        columns,
+        list(evaluation.baseline_gains),
+        name="baseline_gains",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 def ablation_tables(evaluation: Evaluation) -> list[Table]:
@@ -283,7 +383,9 @@ def ablation_tables(evaluation: Evaluation) -> list[Table]:
 def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> list[Table]:
     """Efficiency first (Table I), then accuracy per evaluated convention (Table II), then the paired comparisons if computed,
     then the input ablations and gains over the best baseline where the runs hold them."""
-    tables = [efficiency_table(evaluation, with_paper=with_paper)] + [accuracy_table(evaluation, c, with_paper=with_paper) for c in evaluation.conventions]
+    tables = [efficiency_table(evaluation, with_paper=with_paper)] + [
+        accuracy_table(evaluation, c, with_paper=with_paper) for c in evaluation.conventions
+    ]
     if with_paper and evaluation.safety is not None and PAPER_CONVENTION in evaluation.conventions:
         tables.append(safety_table(evaluation, PAPER_CONVENTION))
     if evaluation.pairwise:  # computed, and at least two runs
@@ -292,7 +394,9 @@ def evaluation_tables(evaluation: Evaluation, *, with_paper: bool = False) -> li
             tables.append(generations_table(evaluation))
     if any(r["diff"] is not None for r in evaluation.pairwise_safety or []):  # some pair has common frames with values
         tables.append(pairwise_safety_table(evaluation))
-    if evaluation.planning is not None and evaluation.planning.shown:  # the planning score (NAVSIM), after the safety columns
+    if (
+        evaluation.planning is not None and evaluation.planning.shown
+    ):  # the planning score (NAVSIM), after the safety columns
         tables.append(planning_table(evaluation))
         if any(r["diff"] is not None for r in evaluation.planning.pairwise or []):
             tables.append(pairwise_planning_table(evaluation))
@@ -312,8 +416,7 @@ def provenance_footer(lines: list[str], fmt: str) -> str:
     if fmt == "md":
         return "\n#### Provenance\n\n" + "".join(f"- {markdown_text(line)}\n" for line in lines)
     mark = {"latex": "%", "csv": "#"}[fmt]
-    return "\n" + "".join(f"{mark} {printable(line)}\n" for line in [f"provenance:", *lines])
-
+    return "\n" + "".join(f"{mark} {printable(line)}\n" for line in ["provenance:", *lines])
 
 
 def provenance_table(evaluation: Evaluation) -> Table:
@@ -334,14 +437,24 @@ def provenance_table(evaluation: Evaluation) -> Table:
         source = run["safety_source"] or run.get("planning_source") or {}
         area = source.get("drivable_area") or source.get("map")
         version = source.get("map_expansion_version")
-        value = (f"frames {run['frame_set']}; prompts {prompt.get('name')} {prompt.get('hash') or ''}; parse {run['parse']}; "
-                 f"{run['integrator']}; drivable area {area or 'n/a'}"
-                 + (f" (map expansion {version})" if version else "") + "; lightemma "
-                 f"{run['lightemma_version'] or '?'}" + (" (imported)" if run["imported"] else ""))
+        value = (
+            f"frames {run['frame_set']}; prompts {prompt.get('name')} {prompt.get('hash') or ''}; parse {run['parse']}; "
+            f"{run['integrator']}; drivable area {area or 'n/a'}"
+            + (f" (map expansion {version})" if version else "")
+            + "; lightemma "
+            f"{run['lightemma_version'] or '?'}" + (" (imported)" if run["imported"] else "")
+        )
         rows.append({"item": run["model"], "value": value})
-    return Table("Provenance", (Column("item", "What"), Column("value", "Which")), rows, name="provenance",
-                 notes=["What each number is: docs/evaluate.md#what-each-number-is; every column's descriptor: "
-                        "lightemma evaluate --format json."])
+    return Table(
+        "Provenance",
+        (Column("item", "What"), Column("value", "Which")),
+        rows,
+        name="provenance",
+        notes=[
+            "What each number is: docs/evaluate.md#what-each-number-is; every column's descriptor: "
+            "lightemma evaluate --format json."
+        ],
+    )
 
 
 #: the explanation audit's columns (docs/definitions.md#explanation-audit): rates in [0, 1], n/a with the reason
@@ -353,15 +466,25 @@ EXPLANATION_COLUMNS: tuple[Column, ...] = (
     Column("intent_unknown", "Unknown [95% CI]", fixed(3), ci="intent_unknown_ci95", na="intent_unknown_na"),
     Column("intent_accuracy", "Intent accuracy [95% CI]", fixed(3), ci="intent_accuracy_ci95", na="intent_accuracy_na"),
     # the described objects (docs/definitions.md#described-objects)
-    Column("hallucinated_pedestrian", "Hallucinated pedestrian [95% CI]", fixed(3), ci="hallucinated_pedestrian_ci95",
-           na="hallucinated_pedestrian_na"),
-    Column("missed_pedestrian", "Missed pedestrian [95% CI]", fixed(3), ci="missed_pedestrian_ci95",
-           na="missed_pedestrian_na"),
+    Column(
+        "hallucinated_pedestrian",
+        "Hallucinated pedestrian [95% CI]",
+        fixed(3),
+        ci="hallucinated_pedestrian_ci95",
+        na="hallucinated_pedestrian_na",
+    ),
+    Column(
+        "missed_pedestrian",
+        "Missed pedestrian [95% CI]",
+        fixed(3),
+        ci="missed_pedestrian_ci95",
+        na="missed_pedestrian_na",
+    ),
 )
 
 
 def explanations_table(evaluation: Evaluation) -> Table:
-    """"Explanations": per model the shares of frames whose stated intent (stage 2) is consistent with, contradicts or
+    """ "Explanations": per model the shares of frames whose stated intent (stage 2) is consistent with, contradicts or
     cannot be checked against its plan (stage 3), and its intent accuracy against the ground truth's behaviour
     (``Evaluation.explanations``, lightemma.evaluation.intent_audit)."""
     rows = [{"model": m.label, **m.explanations} for m in evaluation.models]
@@ -376,42 +499,84 @@ def explanations_table(evaluation: Evaluation) -> Table:
         "view (docs/definitions.md#described-objects).",
     ]
     if r.n_resamples:
-        notes.append(f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed}).")
-    return Table("Explanations", EXPLANATION_COLUMNS, rows, name="explanations", flags=coverage_flags(evaluation), notes=notes)
+        notes.append(
+            f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed})."
+        )
+    return Table(
+        "Explanations", EXPLANATION_COLUMNS, rows, name="explanations", flags=coverage_flags(evaluation), notes=notes
+    )
 
 
 def described_objects_table(evaluation: Evaluation) -> Table:
-    """"Described objects": per model and class, how often the stage-1 description affirms the class, how often it is
+    """ "Described objects": per model and class, how often the stage-1 description affirms the class, how often it is
     in view, and the mention precision and recall against the annotations (``ExplanationResult.object_classes``,
     lightemma.evaluation.object_audit)."""
-    cols = (Column("model", "Model"), Column("class", "Class"), Column("frames", "Frames"),
-            Column("mentions", "Mentions"), Column("in_view", "In view"),
-            Column("mention_precision", "Precision [95% CI]", fixed(3), ci="mention_precision_ci95",
-                   na="mention_precision_na"),
-            Column("mention_recall", "Recall [95% CI]", fixed(3), ci="mention_recall_ci95", na="mention_recall_na"))
-    return Table("Described objects", cols, list(evaluation.explanations.object_classes), name="described_objects",
-                 notes=["The object classes the stage-1 description affirms (rules objects@lightemma/1; negated and hedged "
-                        "mentions are not claims) against the annotated boxes in view of CAM_FRONT (some corner in the "
-                        "image, visibility >= 40 %, within the class's nuScenes detection range). Precision: share of the "
-                        "affirmed mentions whose class is in view, over frames where it is in view or absent from the "
-                        "image; recall: share of the frames with the class in view whose description affirms it. Traffic "
-                        "lights and signs are map objects without annotations: n/a (docs/definitions.md#described-objects)."])
+    cols = (
+        Column("model", "Model"),
+        Column("class", "Class"),
+        Column("frames", "Frames"),
+        Column("mentions", "Mentions"),
+        Column("in_view", "In view"),
+        Column(
+            "mention_precision", "Precision [95% CI]", fixed(3), ci="mention_precision_ci95", na="mention_precision_na"
+        ),
+        Column("mention_recall", "Recall [95% CI]", fixed(3), ci="mention_recall_ci95", na="mention_recall_na"),
+    )
+    return Table(
+        "Described objects",
+        cols,
+        list(evaluation.explanations.object_classes),
+        name="described_objects",
+        notes=[
+            "The object classes the stage-1 description affirms (rules objects@lightemma/1; negated and hedged "
+            "mentions are not claims) against the annotated boxes in view of CAM_FRONT (some corner in the "
+            "image, visibility >= 40 %, within the class's nuScenes detection range). Precision: share of the "
+            "affirmed mentions whose class is in view, over frames where it is in view or absent from the "
+            "image; recall: share of the frames with the class in view whose description affirms it. Traffic "
+            "lights and signs are map objects without annotations: n/a (docs/definitions.md#described-objects)."
+        ],
+    )
 
 
 def intent_ablation_table(evaluation: Evaluation) -> Table:
-    """"Stated intent without the image": per ablation run, the share of frames whose stated intent differs from the
+    """ "Stated intent without the image": per ablation run, the share of frames whose stated intent differs from the
     full run's (``ExplanationResult.ablations``)."""
-    cols = (Column("model", "Model"), Column("ablation", "Ablation"), Column("ablated", "Ablated run"), Column("frames", "Frames"),
-            Column("intent_changed", "Intent changed [95% CI]", fixed(3), ci="intent_changed_ci95", na="intent_changed_na"))
-    return Table("Stated intent without the image", cols, list(evaluation.explanations.ablations), name="intent_ablations",
-                 notes=["Share of the frames both runs answered with a stage-2 text whose stated intent (longitudinal and "
-                        "lateral class, unknown included) differs between the full run and its ablation "
-                        "(docs/definitions.md#explanation-audit)."])
+    cols = (
+        Column("model", "Model"),
+        Column("ablation", "Ablation"),
+        Column("ablated", "Ablated run"),
+        Column("frames", "Frames"),
+        Column("intent_changed", "Intent changed [95% CI]", fixed(3), ci="intent_changed_ci95", na="intent_changed_na"),
+    )
+    return Table(
+        "Stated intent without the image",
+        cols,
+        list(evaluation.explanations.ablations),
+        name="intent_ablations",
+        notes=[
+            "Share of the frames both runs answered with a stage-2 text whose stated intent (longitudinal and "
+            "lateral class, unknown included) differs between the full run and its ablation "
+            "(docs/definitions.md#explanation-audit)."
+        ],
+    )
 
 
 #: the planning score's columns (docs/definitions.md#planning-score): means in [0, 1], n/a with the reason
-_PLANNING_TITLES = {"pdms": "PDMS", "epdms": "EPDMS", "epdms_map": "EPDMS-map", "nc": "NC", "dac": "DAC", "ddc": "DDC",
-                    "tlc": "TLC", "ep": "EP", "ttc": "TTC", "lk": "LK", "c": "C", "hc": "HC", "ec": "EC"}
+_PLANNING_TITLES = {
+    "pdms": "PDMS",
+    "epdms": "EPDMS",
+    "epdms_map": "EPDMS-map",
+    "nc": "NC",
+    "dac": "DAC",
+    "ddc": "DDC",
+    "tlc": "TLC",
+    "ep": "EP",
+    "ttc": "TTC",
+    "lk": "LK",
+    "c": "C",
+    "hc": "HC",
+    "ec": "EC",
+}
 
 
 def planning_columns(headline: str) -> tuple[Column, ...]:
@@ -425,7 +590,7 @@ def planning_columns(headline: str) -> tuple[Column, ...]:
 
 
 def planning_table(evaluation: Evaluation) -> Table:
-    """"Planning score (NAVSIM)": per model its PDMS / EPDMS (or EPDMS-map) and sub-scores, and the ground truth's own row
+    """ "Planning score (NAVSIM)": per model its PDMS / EPDMS (or EPDMS-map) and sub-scores, and the ground truth's own row
     scored by the same code (``Evaluation.planning``, lightemma.evaluation.planning_score)."""
     result = evaluation.planning
     rows = [{"model": m.label, **m.planning} for m in evaluation.models]
@@ -443,9 +608,17 @@ def planning_table(evaluation: Evaluation) -> Table:
         "more than 5 m).",
     ]
     if r.n_resamples:
-        notes.append(f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed}).")
-    return Table("Planning score (NAVSIM)", planning_columns(result.headline), rows, name="planning",
-                 flags=coverage_flags(evaluation), notes=notes)
+        notes.append(
+            f"[low, high]: {100 * r.confidence:g} % scene-level bootstrap interval ({r.n_resamples} resamples, seed {r.seed})."
+        )
+    return Table(
+        "Planning score (NAVSIM)",
+        planning_columns(result.headline),
+        rows,
+        name="planning",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 def pairwise_planning_table(evaluation: Evaluation) -> Table:
@@ -453,22 +626,38 @@ def pairwise_planning_table(evaluation: Evaluation) -> Table:
     result = evaluation.planning
     r = evaluation.resampling
     title = _PLANNING_TITLES.get(result.headline, result.headline)
-    cols = (Column("model_a", "Model A"), Column("model_b", "Model B"), Column("frames", "Common frames"),
-            Column("scenes", "Scenes"), Column("diff", f"{title} A − B [95% CI]", fixed(3), ci="ci95"),
-            Column("p_value", "p", fixed(4)), Column("p_holm", "p (Holm)", fixed(4)), Column("significant", "Significant", _significant))
-    notes = [f"A − B > 0: A scores higher. Paired on the frames where both have a value; {100 * r.confidence:g} % scene-bootstrap "
-             f"interval; p from {r.n_resamples} sign flips of scene-level differences; Holm family: the {len(result.pairwise or [])} rows of "
-             "this table.", HOLM_FAMILIES]
-    return Table(f"Paired comparisons — planning score ({title})", cols, list(result.pairwise or []), name="pairwise_planning",
-                 flags=coverage_flags(evaluation), notes=notes)
+    cols = (
+        Column("model_a", "Model A"),
+        Column("model_b", "Model B"),
+        Column("frames", "Common frames"),
+        Column("scenes", "Scenes"),
+        Column("diff", f"{title} A − B [95% CI]", fixed(3), ci="ci95"),
+        Column("p_value", "p", fixed(4)),
+        Column("p_holm", "p (Holm)", fixed(4)),
+        Column("significant", "Significant", _significant),
+    )
+    notes = [
+        f"A − B > 0: A scores higher. Paired on the frames where both have a value; {100 * r.confidence:g} % scene-bootstrap "
+        f"interval; p from {r.n_resamples} sign flips of scene-level differences; Holm family: the {len(result.pairwise or [])} rows of "
+        "this table.",
+        HOLM_FAMILIES,
+    ]
+    return Table(
+        f"Paired comparisons — planning score ({title})",
+        cols,
+        list(result.pairwise or []),
+        name="pairwise_planning",
+        flags=coverage_flags(evaluation),
+        notes=notes,
+    )
 
 
 # ------------------------------------------------------------------------------------- tables that refuse to mix
 
 
-
-_REFERENCE_LABEL = ("Reference rows, not runs: the ground truth's on every evaluated frame of all frame sets, the "
-                    "paper's on its own")
+_REFERENCE_LABEL = (
+    "Reference rows, not runs: the ground truth's on every evaluated frame of all frame sets, the paper's on its own"
+)
 
 
 def _is_run_row(row: dict[str, Any], labels: set[str] | dict[str, Any]) -> bool:
@@ -544,13 +733,22 @@ def frame_set_tables(tables: list[Table], evaluation: Evaluation) -> list[Table]
             rows = [r for r, k in zip(table.rows, where, strict=True) if k == key]
             if rows:
                 title = f"{table.title} — frame set {described[key]}"
-                out.append(replace(table, title=title, rows=rows, notes=[*table.notes, *notes], frame_set=key,
-                                   frame_set_label=described[key]))
+                out.append(
+                    replace(
+                        table,
+                        title=title,
+                        rows=rows,
+                        notes=[*table.notes, *notes],
+                        frame_set=key,
+                        frame_set_label=described[key],
+                    )
+                )
         rest = [r for r, k in zip(table.rows, where, strict=True) if k is None]
         if rest:
             title = f"{table.title} — reference rows (on every evaluated frame, all frame sets)"
-            out.append(replace(table, title=title, rows=rest, frame_set=REFERENCE_FRAME_SET,
-                               frame_set_label=_REFERENCE_LABEL))
+            out.append(
+                replace(table, title=title, rows=rest, frame_set=REFERENCE_FRAME_SET, frame_set_label=_REFERENCE_LABEL)
+            )
     return out
 
 
@@ -571,8 +769,12 @@ def json_frame_set_rows(tables: list[Table], evaluation: Evaluation) -> list[Tab
     from dataclasses import replace
 
     fps = {m.label: m.fingerprint["id"] if m.fingerprint is not None else None for m in evaluation.models}
-    return [replace(t, rows=[{**r, "frame_set": fps[r["model"]]} if _is_run_row(r, fps) else r for r in t.rows])
-            if _run_rows(t, evaluation) else t for t in tables]
+    return [
+        replace(t, rows=[{**r, "frame_set": fps[r["model"]]} if _is_run_row(r, fps) else r for r in t.rows])
+        if _run_rows(t, evaluation)
+        else t
+        for t in tables
+    ]
 
 
 def _mixed_settings_notes(evaluation: Evaluation) -> list[str]:

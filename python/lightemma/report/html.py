@@ -197,8 +197,14 @@ def intent_entries(ft: FrameTable, explanations: Any) -> dict[int, list[dict[str
         tags: dict[str, list[str]] = {}
         if objects is not None:
             for k, fid in enumerate(objects.frame_ids):
-                found = [t for t, v in (("hallucinated pedestrian", objects.check.hallucinated_pedestrian[k]),
-                                        ("missed pedestrian", objects.check.missed_pedestrian[k])) if v]
+                found = [
+                    t
+                    for t, v in (
+                        ("hallucinated pedestrian", objects.check.hallucinated_pedestrian[k]),
+                        ("missed pedestrian", objects.check.missed_pedestrian[k]),
+                    )
+                    if v
+                ]
                 if found:
                     tags[fid] = found
         for k, fid in enumerate(audit.frame_ids):
@@ -206,10 +212,14 @@ def intent_entries(ft: FrameTable, explanations: Any) -> dict[int, list[dict[str
             if j is None or not audit.has_text[k]:
                 continue
             row = out.setdefault(j, [None] * len(ft.labels))
-            row[i] = {"lon": str(audit.stated_longitudinal[k]), "lat": str(audit.stated_lateral[k]),
-                      "verdict": str(audit.verdict[k]), "reason": printable(audit.reason[k]),
-                      "truth": None if audit.truth_verdict is None else str(audit.truth_verdict[k]),
-                      "objects": tags.get(fid, [])}
+            row[i] = {
+                "lon": str(audit.stated_longitudinal[k]),
+                "lat": str(audit.stated_lateral[k]),
+                "verdict": str(audit.verdict[k]),
+                "reason": printable(audit.reason[k]),
+                "truth": None if audit.truth_verdict is None else str(audit.truth_verdict[k]),
+                "objects": tags.get(fid, []),
+            }
     return out
 
 
@@ -237,8 +247,14 @@ def simulated_paths(ft: FrameTable, planning: Any) -> list[list[float | None]] |
     return [_round(p, 2) for p in out]
 
 
-def frame_data(ft: FrameTable, models: Sequence[Mapping[str, Any]], images: Mapping[int, str], safety: Any = None,
-               planning: Any = None, explanations: Any = None) -> dict[str, Any]:
+def frame_data(
+    ft: FrameTable,
+    models: Sequence[Mapping[str, Any]],
+    images: Mapping[int, str],
+    safety: Any = None,
+    planning: Any = None,
+    explanations: Any = None,
+) -> dict[str, Any]:
     """The payload of ``html/data.js``: columns over frames, one list per model for per-model values
     (``collides`` / ``off_road``: :func:`safety_flags`; ``sim``: :func:`simulated_paths`; ``contra`` /
     ``contra_gt``: :func:`intent_flags`)."""
@@ -251,7 +267,9 @@ def frame_data(ft: FrameTable, models: Sequence[Mapping[str, Any]], images: Mapp
         "failures": [name or "scored" for name in OUTCOMES],
         "bands": [[lo, None if math.isinf(hi) else hi, name] for lo, hi, name in ERROR_BANDS],
         "chunk": TEXT_CHUNK,
-        "ids": [printable(fid) for fid in ft.frame_ids],  # shown only: a control or bidirectional character as a visible escape
+        "ids": [
+            printable(fid) for fid in ft.frame_ids
+        ],  # shown only: a control or bidirectional character as a visible escape
         "scene": [printable(scene) for scene in ft.scene],
         "tagbits": ft.tags().tolist(),
         "spread": _round(ft.spread(), 2),
@@ -279,9 +297,14 @@ def _sort_key(value: Any) -> Any:
 
 def table_html(table: Table, links: Mapping[str, str]) -> str:
     """One :class:`Table` as a sortable HTML table; ``links`` maps a cell's model label or tag to a frame-browser query."""
-    numeric = [any(_sort_key(row.get(col.key)) is not None for row in table.rows) for col in table.columns]  # right-aligned
+    numeric = [
+        any(_sort_key(row.get(col.key)) is not None for row in table.rows) for col in table.columns
+    ]  # right-aligned
     num = ' class="num"'
-    head = "".join(f'<th scope="col" data-col="{k}"{num if numeric[k] else ""}>{html.escape(h)}</th>' for k, h in enumerate(table.headers()))
+    head = "".join(
+        f'<th scope="col" data-col="{k}"{num if numeric[k] else ""}>{html.escape(h)}</th>'
+        for k, h in enumerate(table.headers())
+    )
     body = []
     for row, cells in zip(table.rows, _cells(table, na_once=True)):
         tds = []
@@ -306,8 +329,10 @@ def table_html(table: Table, links: Mapping[str, str]) -> str:
         attr = f' data-frame-set="{html.escape(table.frame_set)}"'
         label = f'<p class="frame-set-label">{html.escape(text)}</p>'
     title = html.escape(printable(table.title))
-    return (f'<section class="table" id="table-{html.escape(table.stem)}"{attr}>{label}<h3>{title}</h3>'
-            f'<div class="scroll"><table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>{notes}</section>')
+    return (
+        f'<section class="table" id="table-{html.escape(table.stem)}"{attr}>{label}<h3>{title}</h3>'
+        f'<div class="scroll"><table class="sortable"><thead><tr>{head}</tr></thead><tbody>{"".join(body)}</tbody></table></div>{notes}</section>'
+    )
 
 
 def tables_html(tables: Sequence[Table], links: Mapping[str, str]) -> str:
@@ -354,7 +379,11 @@ def write_thumbnail(camera: Any, path: Path) -> tuple[float, list[int]] | None:
     if camera.image is not None:
         full = Image.fromarray(camera.image)
         width = full.width
-        thumb = full.resize((THUMB_WIDTH, max(1, round(full.height * THUMB_WIDTH / full.width))), Image.Resampling.BILINEAR) if full.width > THUMB_WIDTH else full
+        thumb = (
+            full.resize((THUMB_WIDTH, max(1, round(full.height * THUMB_WIDTH / full.width))), Image.Resampling.BILINEAR)
+            if full.width > THUMB_WIDTH
+            else full
+        )
     else:
         header = open_image(camera.path)
         if header is None:
@@ -408,15 +437,26 @@ def write_html(
     text with its contradiction highlighted, and the frame-browser filter on contradictions (:func:`intent_flags`).
     """
     ft = FrameTable(runs, labels)
-    models = [{"label": printable(lab), "color": colors.get(lab, "#444444"), "family": run.info.family, "baseline": run.info.family == "Baseline"}
-              for lab, run in zip(labels, runs)]
+    models = [
+        {
+            "label": printable(lab),
+            "color": colors.get(lab, "#444444"),
+            "family": run.info.family,
+            "baseline": run.info.family == "Baseline",
+        }
+        for lab, run in zip(labels, runs)
+    ]
     data_dir = out / "html"
     (data_dir / "texts").mkdir(parents=True, exist_ok=True)
     images: dict[int, str] = {}
     scales: dict[int, float] = {}
     cameras = cameras or {}
     sizes: dict[int, list[int]] = {}
-    with_image = [(j, cameras[fid]) for j, fid in enumerate(ft.frame_ids) if cameras.get(fid) is not None and (cameras[fid].image is not None or cameras[fid].path)]
+    with_image = [
+        (j, cameras[fid])
+        for j, fid in enumerate(ft.frame_ids)
+        if cameras.get(fid) is not None and (cameras[fid].image is not None or cameras[fid].path)
+    ]
     if with_image:
         (data_dir / "images").mkdir(exist_ok=True)
     for j, camera in _progress(with_image, progress, "camera thumbnails"):
@@ -425,8 +465,9 @@ def write_html(
         if written is not None:
             scales[j], sizes[j] = written
             images[j] = name
-    (data_dir / "data.js").write_text(_script("LE.data", frame_data(ft, models, images, safety, planning, explanations)),
-                                      encoding="utf-8")
+    (data_dir / "data.js").write_text(
+        _script("LE.data", frame_data(ft, models, images, safety, planning, explanations)), encoding="utf-8"
+    )
     intents = intent_entries(ft, explanations)
     for k in range(0, max(1, -(-len(ft) // TEXT_CHUNK))):
         chunk: dict[str, Any] = {}
@@ -444,7 +485,10 @@ def write_html(
     links.update({f"tag:{tag}": f"#frames?tag={tag}" for tag in TAGS})
     links["tag:all"] = "#frames"
     body_tables = tables_html(tables, links)
-    body_figures = "\n".join(f'<figure><img src="{html.escape(src)}" alt="{html.escape(cap)}" loading="lazy"><figcaption>{html.escape(cap)}</figcaption></figure>' for src, cap in figures)
+    body_figures = "\n".join(
+        f'<figure><img src="{html.escape(src)}" alt="{html.escape(cap)}" loading="lazy"><figcaption>{html.escape(cap)}</figcaption></figure>'
+        for src, cap in figures
+    )
     replacements = {
         "{{title}}": html.escape(title),
         "{{css}}": (ASSETS / "report.css").read_text(encoding="utf-8"),
@@ -454,7 +498,9 @@ def write_html(
         "{{figures}}": body_figures,
     }
     template = (ASSETS / "report.html").read_text(encoding="utf-8")
-    page = re.sub(r"\{\{(\w+)\}\}", lambda m: replacements["{{" + m.group(1) + "}}"], template)  # one pass: no inserted text is scanned again
+    page = re.sub(
+        r"\{\{(\w+)\}\}", lambda m: replacements["{{" + m.group(1) + "}}"], template
+    )  # one pass: no inserted text is scanned again
     index = out / "index.html"
     index.write_text(page, encoding="utf-8")
     return index

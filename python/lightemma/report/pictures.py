@@ -38,18 +38,34 @@ class CameraSource:
         dataset = dict(dataset or {})
         dataroot = self.dataroot or dataset.get("dataroot")
         if not dataroot or not dataset.get("version"):
-            self.problems.append("a run's manifest names no dataset (dataroot and version); pictures have no camera view")
+            self.problems.append(
+                "a run's manifest names no dataset (dataroot and version); pictures have no camera view"
+            )
             return
         try:
-            frames = load_frames(dataroot, dataset["version"], split=dataset.get("split"), scenes=dataset.get("scenes"), window=dataset.get("window") or "reference")
+            frames = load_frames(
+                dataroot,
+                dataset["version"],
+                split=dataset.get("split"),
+                scenes=dataset.get("scenes"),
+                window=dataset.get("window") or "reference",
+            )
         except Exception as exc:  # any dataset problem only costs the camera view  # noqa: BLE001
-            self.problems.append(f"could not load the dataset at {dataroot} ({type(exc).__name__}: {exc}); pictures have no camera view")
+            self.problems.append(
+                f"could not load the dataset at {dataroot} ({type(exc).__name__}: {exc}); pictures have no camera view"
+            )
             return
         for frame in frames:
             self._frames.setdefault(frame.frame_id, frame)
 
-    def cameras(self, runs: Iterable[RunData], frame_ids: Iterable[str], *, load: bool = True,
-                records: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Camera | None]:
+    def cameras(
+        self,
+        runs: Iterable[RunData],
+        frame_ids: Iterable[str],
+        *,
+        load: bool = True,
+        records: Mapping[str, Mapping[str, Any]] | None = None,
+    ) -> dict[str, Camera | None]:
         """frame id → Camera (or None when its dataset could not be read).
 
         Imported runs carry each frame's calibration and image name in their
@@ -63,7 +79,11 @@ class CameraSource:
         for run in runs:
             if run.info.imported:
                 wanted = [fid for fid in frame_ids if out.get(fid) is None]
-                found = {fid: records[fid] for fid in wanted if fid in records} if records is not None else read_frame_records(run.info.run_dir, wanted)
+                found = (
+                    {fid: records[fid] for fid in wanted if fid in records}
+                    if records is not None
+                    else read_frame_records(run.info.run_dir, wanted)
+                )
                 for fid, record in found.items():
                     out[fid] = self._from_record(record, load=load)
             else:
@@ -87,9 +107,15 @@ class CameraSource:
             candidates.append(Path(str(record["image_path"])))
         path = next((c for c in candidates if c.is_file()), None)
         if path is None:
-            self.problems.append("images of imported runs not found; pass --dataroot (the nuScenes folder holding samples/CAM_FRONT)")
-        return Camera(image=load_image(path) if load else None, intrinsic=np.asarray(params["camera_intrinsic"], dtype=np.float64),
-                      extrinsic=extrinsic_matrix(params["translation"], params["rotation"]), path=path)
+            self.problems.append(
+                "images of imported runs not found; pass --dataroot (the nuScenes folder holding samples/CAM_FRONT)"
+            )
+        return Camera(
+            image=load_image(path) if load else None,
+            intrinsic=np.asarray(params["camera_intrinsic"], dtype=np.float64),
+            extrinsic=extrinsic_matrix(params["translation"], params["rotation"]),
+            path=path,
+        )
 
 
 def visible_lines(text: Any) -> str:
@@ -101,4 +127,7 @@ def visible_lines(text: Any) -> str:
 def stage_texts(record: Mapping[str, Any] | None) -> dict[str, str]:
     """The three stage texts of a record: scene, intent and the stage-3 answer (:func:`visible_lines`)."""
     record = record or {}
-    return {key: visible_lines(record.get(field) or "") for key, field in (("scene", "scene_text"), ("intent", "intent_text"), ("answer", "answer"))}
+    return {
+        key: visible_lines(record.get(field) or "")
+        for key, field in (("scene", "scene_text"), ("intent", "intent_text"), ("answer", "answer"))
+    }

@@ -65,15 +65,21 @@ def _na_cell(col: Column, row: dict[str, Any], keys: dict[str, str] | None = Non
     return None
 
 
-def na_reasons(table: "Table") -> dict[str, str]:
+def na_reasons(table: Table) -> dict[str, str]:
     """Each distinct reason of the table's ``n/a (why)`` cells, in order, mapped to its cell marker: ``""`` when the
     table has one reason (every n/a cell says the same), else ``" [1]"``, ``" [2]"``, …"""
-    found = list(dict.fromkeys(str(row[col.na]) for row in table.rows for col in table.columns
-                               if col.na and row.get(col.key) is None and row.get(col.na)))
+    found = list(
+        dict.fromkeys(
+            str(row[col.na])
+            for row in table.rows
+            for col in table.columns
+            if col.na and row.get(col.key) is None and row.get(col.na)
+        )
+    )
     return {why: "" if len(found) == 1 else f" [{k}]" for k, why in enumerate(found, 1)}
 
 
-def table_notes(table: "Table") -> list[str]:
+def table_notes(table: Table) -> list[str]:
     """The table's notes, then one line per n/a reason (:func:`na_reasons`): a reason is said once per table,
     not in each of its cells."""
     keys = na_reasons(table)
@@ -83,7 +89,11 @@ def table_notes(table: "Table") -> list[str]:
 def with_interval(value: Any, interval: Any, fmt: Callable[[Any], str]) -> str:
     """``value [low, high]`` when the interval is two finite numbers, else the value alone."""
     cell = fmt(value)
-    if isinstance(interval, (list, tuple)) and len(interval) == 2 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in interval):
+    if (
+        isinstance(interval, (list, tuple))
+        and len(interval) == 2
+        and all(isinstance(v, (int, float)) and math.isfinite(v) for v in interval)
+    ):
         cell += f" [{fmt(interval[0])}, {fmt(interval[1])}]"
     return cell
 
@@ -229,7 +239,11 @@ def markdown_code(text: Any) -> str:
     text = printable(text)
     runs = [len(r) for r in re.findall("`+", text)]
     fence = "`" * (max(runs, default=0) + 1)
-    pad = " " if not text or text.startswith("`") or text.endswith("`") or (text.startswith(" ") and text.endswith(" ")) else ""
+    pad = (
+        " "
+        if not text or text.startswith("`") or text.endswith("`") or (text.startswith(" ") and text.endswith(" "))
+        else ""
+    )
     return f"{fence}{pad}{text}{pad}{fence}"
 
 
@@ -242,7 +256,12 @@ def to_markdown(table: Table) -> str:
     """A GitHub-flavoured Markdown table under a ``###`` title; every cell one line of inert text (:func:`markdown_cell`:
     no raw HTML, no link), title and notes too."""
     headers = [markdown_cell(h) for h in table.headers()]
-    lines = [f"### {markdown_text(table.title)}", "", "| " + " | ".join(headers) + " |", "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|"]
+    lines = [
+        f"### {markdown_text(table.title)}",
+        "",
+        "| " + " | ".join(headers) + " |",
+        "|" + "|".join(["---"] + ["---:"] * (len(headers) - 1)) + "|",
+    ]
     lines += ["| " + " | ".join(markdown_cell(c) for c in cells) + " |" for cells in _cells(table, na_once=True)]
     if table_notes(table):
         lines += [""] + [markdown_text(note) for note in table_notes(table)]
@@ -262,7 +281,18 @@ def to_csv(table: Table) -> str:
     return buf.getvalue()
 
 
-_LATEX_ESCAPES = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\^{}"}
+_LATEX_ESCAPES = {
+    "\\": r"\textbackslash{}",
+    "&": r"\&",
+    "%": r"\%",
+    "$": r"\$",
+    "#": r"\#",
+    "_": r"\_",
+    "{": r"\{",
+    "}": r"\}",
+    "~": r"\textasciitilde{}",
+    "^": r"\^{}",
+}
 
 
 def _latex_escape(text: str) -> str:
@@ -273,7 +303,14 @@ def _latex_escape(text: str) -> str:
 def to_latex(table: Table) -> str:
     """A ``tabular`` in the style of the paper (``\\hline`` rules, model column left)."""
     spec = "l" + "c" * (len(table.columns) - 1)
-    lines = [f"% {printable(table.title)}", *(f"% {printable(note)}" for note in table_notes(table)), f"\\begin{{tabular}}{{{spec}}}", r"\hline", " & ".join(_latex_escape(h) for h in table.headers()) + r" \\", r"\hline"]
+    lines = [
+        f"% {printable(table.title)}",
+        *(f"% {printable(note)}" for note in table_notes(table)),
+        f"\\begin{{tabular}}{{{spec}}}",
+        r"\hline",
+        " & ".join(_latex_escape(h) for h in table.headers()) + r" \\",
+        r"\hline",
+    ]
     lines += [" & ".join(_latex_escape(cell) for cell in cells) + r" \\" for cells in _cells(table, na_once=True)]
     lines += [r"\hline", r"\end{tabular}"]
     return "\n".join(lines) + "\n"
@@ -289,7 +326,13 @@ def to_json(tables: Sequence[Table], extra: dict[str, Any] | None = None) -> str
     """All tables as one JSON document: raw (unformatted) row values keyed by table name."""
     doc: dict[str, Any] = dict(extra or {})
     doc["tables"] = [
-        {"name": t.name, "title": t.title, "rows": [{k: _jsonable(v) for k, v in row.items()} for row in t.rows], **({"notes": t.notes} if t.notes else {})} for t in tables
+        {
+            "name": t.name,
+            "title": t.title,
+            "rows": [{k: _jsonable(v) for k, v in row.items()} for row in t.rows],
+            **({"notes": t.notes} if t.notes else {}),
+        }
+        for t in tables
     ]
     return json.dumps(doc, indent=2, default=str) + "\n"
 

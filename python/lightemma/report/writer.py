@@ -119,6 +119,7 @@ class _Writer:
     def table(self, table: Table, *, latex: bool = True) -> None:
         """Write ``tables/<stem>.{md,csv,tex}`` (each file ending with the provenance footer, :attr:`footer`, as
         ``lightemma evaluate``'s output does) and add the table to index.md and the HTML page."""
+
         def footer(fmt: str) -> str:
             return provenance_footer(self.footer, fmt) if self.footer else ""
 
@@ -140,7 +141,11 @@ class _Writer:
 
         paths = save_figure(fig, self.out / "figures" / stem, formats=("png", "svg") if self.svg else ("png",))
         png = paths[0]
-        self.lines += [f"![{alt}]({self.rel(png)})", f"*{text}*" + (f" ([svg]({self.rel(paths[1])}))" if self.svg else ""), ""]
+        self.lines += [
+            f"![{alt}]({self.rel(png)})",
+            f"*{text}*" + (f" ([svg]({self.rel(paths[1])}))" if self.svg else ""),
+            "",
+        ]
         self.figures.append((self.rel(png), caption))
         return png
 
@@ -153,19 +158,28 @@ def _scenario_table(rows: list[dict[str, Any]], labels: Sequence[str], flags: di
     for row in rows:
         counts = [row.get(f"{label} frames", 0) for label in labels]
         same = len(set(counts)) <= 1
-        out = {"tag": row["tag"], "frames": (counts[0] if counts else row.get("frames", 0)) if same else f"{min(counts)}–{max(counts)}"}
+        out = {
+            "tag": row["tag"],
+            "frames": (counts[0] if counts else row.get("frames", 0)) if same else f"{min(counts)}–{max(counts)}",
+        }
         for label, n in zip(labels, counts):
             value = row.get(label)
             out[label] = "-" if not value else f"{value['ade_avg']:.2f}" + ("" if same else f" (n {n})")
         shown.append(out)
     columns = [Column("tag", "Tag"), Column("frames", "Frames")] + [Column(label, label) for label in labels]
-    notes = [] if all(isinstance(r["frames"], int) for r in shown) else [
-        "Frames: the tag's frames per model where models differ in them (a range); each model's own count is in its cell (n)."]
+    notes = (
+        []
+        if all(isinstance(r["frames"], int) for r in shown)
+        else [
+            "Frames: the tag's frames per model where models differ in them (a range); each model's own count is in its cell (n)."
+        ]
+    )
     return Table("ADE avg by scenario tag", columns, shown, name="scenarios", flags=flags, notes=notes)
 
 
-def _scenario_parts(evaluation: Evaluation, runs: Sequence[RunData], labels: Sequence[str],
-                    shared: Sequence[str] | None) -> list[tuple[dict[str, Any], list[int]]]:
+def _scenario_parts(
+    evaluation: Evaluation, runs: Sequence[RunData], labels: Sequence[str], shared: Sequence[str] | None
+) -> list[tuple[dict[str, Any], list[int]]]:
     """The scenario table's parts: ``({}, every run)`` when the runs share one frame set or are compared on their common
     frames (``shared``); else, runs on different frame sets with no frame in common, one part per frame set (title,
     ``frame_set``, ``frame_set_label`` for :class:`Table`, and the indices of its runs in ``runs``), so that no tag's
@@ -208,7 +222,14 @@ def _bias_table(rows: list[dict[str, Any]], flags: dict[str, str]) -> Table:
         "moving at ≥ 1 m/s whose true and predicted 3 s paths are ≥ 2 m (shorter paths define no curvature). Turn goes on: share of "
         "turning frames (|last history curvature| ≥ 0.03 1/m) whose future curvature has the history's sign."
     ]
-    return Table("History bias: predicted vs true curvature against the last history curvature", columns, rows, name="history_bias", flags=flags, notes=notes)
+    return Table(
+        "History bias: predicted vs true curvature against the last history curvature",
+        columns,
+        rows,
+        name="history_bias",
+        flags=flags,
+        notes=notes,
+    )
 
 
 def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
@@ -217,14 +238,34 @@ def _generation_lines(rows: list[dict[str, Any]]) -> list[str]:
     for r in rows:
         ci = r["ci95"]
         p = r["p_holm"]
-        detail = f"{r['change']:+.3f} m" + (f" [{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "") + ("" if p is None else f", p (Holm) {p:.3f}" if p >= 0.001 else ", p (Holm) < 0.001")
-        model, predecessor = markdown_text(r["model"]), markdown_text(r["predecessor"])  # names from outside: inert Markdown
-        by_family.setdefault(markdown_text(r["family"]), []).append(f"{model} is **{r['verdict']}** than {predecessor} ({detail})" if r["verdict"] != "not distinguishable" else f"{model} is **not distinguishable** from {predecessor} ({detail})")
+        detail = (
+            f"{r['change']:+.3f} m"
+            + (f" [{ci[0]:+.3f}, {ci[1]:+.3f}]" if ci else "")
+            + ("" if p is None else f", p (Holm) {p:.3f}" if p >= 0.001 else ", p (Holm) < 0.001")
+        )
+        model, predecessor = (
+            markdown_text(r["model"]),
+            markdown_text(r["predecessor"]),
+        )  # names from outside: inert Markdown
+        by_family.setdefault(markdown_text(r["family"]), []).append(
+            f"{model} is **{r['verdict']}** than {predecessor} ({detail})"
+            if r["verdict"] != "not distinguishable"
+            else f"{model} is **not distinguishable** from {predecessor} ({detail})"
+        )
     return [f"- **{family}**: " + "; ".join(parts) + "." for family, parts in by_family.items()]
 
 
-def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], picks: list[tuple[str, str, str]], cameras: dict[str, Any], colors: dict[str, str], *,
-                    shown: dict[str, Sequence[str]] | None = None, progress: bool = False) -> None:
+def _frame_pictures(
+    w: _Writer,
+    runs: Sequence[RunData],
+    labels: Sequence[str],
+    picks: list[tuple[str, str, str]],
+    cameras: dict[str, Any],
+    colors: dict[str, str],
+    *,
+    shown: dict[str, Sequence[str]] | None = None,
+    progress: bool = False,
+) -> None:
     """For each (kind, frame_id, caption): a grid of the models (those of ``shown[frame_id]`` when given — the
     models a caption's number was measured on — else all), and the worst model's picture with its texts."""
     from lightemma.report.figures import frame_figure, model_grid
@@ -249,12 +290,27 @@ def _frame_pictures(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], 
             continue
         w.lines.append(f"**{markdown_text(caption)}** — frame {markdown_code(fid)}")
         w.lines.append("")
-        w.figure(model_grid(gt, preds, camera=cameras.get(fid), title=printable(f"{fid}: {caption}"), errors=errors, colors=colors), f"frames/{kind}_{_slug(fid)}_grid", f"all models on {fid}")
-        models = [lab for lab, run in zip(labels, runs) if lab in errors and run.info.family != "Baseline"] or list(errors)
+        w.figure(
+            model_grid(
+                gt, preds, camera=cameras.get(fid), title=printable(f"{fid}: {caption}"), errors=errors, colors=colors
+            ),
+            f"frames/{kind}_{_slug(fid)}_grid",
+            f"all models on {fid}",
+        )
+        models = [lab for lab, run in zip(labels, runs) if lab in errors and run.info.family != "Baseline"] or list(
+            errors
+        )
         worst = max(models, key=lambda m: errors[m])  # stage texts of a baseline say nothing
         run = runs[list(labels).index(worst)]
         texts = stage_texts(records[id(run)].get(fid))
-        fig = frame_figure(gt, {worst: preds[worst]}, camera=cameras.get(fid), texts=texts, title=printable(f"{fid}: {worst} (ADE {errors[worst]:.2f} m)"), colors=colors)
+        fig = frame_figure(
+            gt,
+            {worst: preds[worst]},
+            camera=cameras.get(fid),
+            texts=texts,
+            title=printable(f"{fid}: {worst} (ADE {errors[worst]:.2f} m)"),
+            colors=colors,
+        )
         w.figure(fig, f"frames/{kind}_{_slug(fid)}_{_slug(worst)}", f"{worst} on {fid}, with its stage texts")
 
 
@@ -262,23 +318,33 @@ _ABLATION_TABLES = ("input_ablations", "baseline_gains")
 
 
 def _ablation_section(w: _Writer, tables: Sequence[Table]) -> None:
-    """"Does the model look at the road?": the input ablations and the gains over the best baseline, where the runs hold them."""
+    """ "Does the model look at the road?": the input ablations and the gains over the best baseline, where the runs hold them."""
     shown = [t for t in tables if t.name in _ABLATION_TABLES]
     if not shown:
         return
-    w.lines += ["## Does the model look at the road?", "",
-                "Each input ablation against its model's full run, and each model against the best of the constant, "
-                "constant-velocity and ego-status baselines (the history alone), paired on common frames (docs/evaluate.md).", ""]
+    w.lines += [
+        "## Does the model look at the road?",
+        "",
+        "Each input ablation against its model's full run, and each model against the best of the constant, "
+        "constant-velocity and ego-status baselines (the history alone), paired on common frames (docs/evaluate.md).",
+        "",
+    ]
     for table in shown:
         w.table(table)
 
     ablations = [r for t in shown if t.name == "input_ablations" for r in t.rows]  # every frame set's part
     gains = [r for t in shown if t.name == "baseline_gains" for r in t.rows]
-    w.figure(ablation_figure(ablations, gains), "input_ablations", "full − ablated ADE avg per ablation run, and each model's gain over "
-             "the best baseline, with 95 % scene-bootstrap intervals; filled: significant after Holm")
+    w.figure(
+        ablation_figure(ablations, gains),
+        "input_ablations",
+        "full − ablated ADE avg per ablation run, and each model's gain over "
+        "the best baseline, with 95 % scene-bootstrap intervals; filled: significant after Holm",
+    )
 
 
-def _safety_views(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], safety: Any, colors: dict[str, str], per_model: int = 1) -> None:
+def _safety_views(
+    w: _Writer, runs: Sequence[RunData], labels: Sequence[str], safety: Any, colors: dict[str, str], per_model: int = 1
+) -> None:
     """Bird's-eye views of each model's first colliding and first off-road frames (figures/bev.py)."""
     picks: dict[str, str] = {}
     for label in labels:
@@ -291,9 +357,13 @@ def _safety_views(w: _Writer, runs: Sequence[RunData], labels: Sequence[str], sa
                 picks.setdefault(rs.frame_ids[i], f"{label} {why}")
     if not picks:
         return
-    w.lines += ["## Safety — bird's-eye views", "",
-                "Grey: drivable area; black boxes: annotated agents over the next 3 s (darker = later); outlines: ego footprints "
-                "(green: ground truth), filled red where they overlap an agent, dashed red where a corner is off the drivable area.", ""]
+    w.lines += [
+        "## Safety — bird's-eye views",
+        "",
+        "Grey: drivable area; black boxes: annotated agents over the next 3 s (darker = later); outlines: ego footprints "
+        "(green: ground truth), filled red where they overlap an agent, dashed red where a corner is off the drivable area.",
+        "",
+    ]
     by_label = {label: run for label, run in zip(labels, runs)}
     for k, (fid, why) in enumerate(picks.items()):
         trajectories, gt, data = [], None, None
@@ -370,7 +440,7 @@ def _foreign_files(out: Path) -> list[str] | None:
 
 def _holds_runs(folder: Path) -> Path | None:
     """The first lightemma run directory at or below ``folder`` (a ``manifest.json`` of the run store), else None."""
-    for root, dirs, files in os.walk(folder):
+    for root, _dirs, files in os.walk(folder):
         if MANIFEST_FILE in files:
             return Path(root)
     return None
@@ -398,14 +468,20 @@ def _check_target(out: Path, force: bool) -> list[str]:
         raise UserError(f"report folder {out} {why}", cli=f"--out {out} {why}")
     foreign = _foreign_files(out)
     if foreign is None:
-        why = ("is a lightemma report without the list of its files (an older lightemma wrote it), so files added to it "
-               "cannot be told apart: refusing to replace it; delete it yourself or choose another folder")
+        why = (
+            "is a lightemma report without the list of its files (an older lightemma wrote it), so files added to it "
+            "cannot be told apart: refusing to replace it; delete it yourself or choose another folder"
+        )
         raise UserError(f"report folder {out} {why}", cli=f"--out {out} {why}")
     if foreign and not force:
-        named = ", ".join(printable(f) for f in foreign[:3]) + (f" and {len(foreign) - 3} more" if len(foreign) > 3 else "")
+        named = ", ".join(printable(f) for f in foreign[:3]) + (
+            f" and {len(foreign) - 3} more" if len(foreign) > 3 else ""
+        )
         why = f"holds {len(foreign)} file(s) its report did not write ({named}): refusing to replace it"
-        raise UserError(f"report folder {out} {why} (force=True replaces only the report's own files and keeps these)",
-                        cli=f"--out {out} {why} (--force replaces only the report's own files and keeps these)")
+        raise UserError(
+            f"report folder {out} {why} (force=True replaces only the report's own files and keeps these)",
+            cli=f"--out {out} {why} (--force replaces only the report's own files and keeps these)",
+        )
     return foreign
 
 
@@ -437,10 +513,14 @@ def _check_inputs(out: Path, given: Sequence[Path], run_dirs: Sequence[Path], da
     run directory, a folder of runs given or the dataroot given; or that is or contains a dataroot any run records —
     the swap would replace it. Resolved real paths are compared."""
     target = Path(os.path.realpath(out))
-    inputs = [(Path(d), "input run directory", "", True) for d in run_dirs] + [(Path(g), "runs folder", "", True) for g in given if Path(g).is_dir()]
+    inputs = [(Path(d), "input run directory", "", True) for d in run_dirs] + [
+        (Path(g), "runs folder", "", True) for g in given if Path(g).is_dir()
+    ]
     if dataroot is not None:
         inputs.append((Path(dataroot), "dataroot", "", True))
-    inputs += [(path, "dataroot", note, False) for path, note in _recorded_dataroots(run_dirs)]  # a report inside one replaces nothing of it
+    inputs += [
+        (path, "dataroot", note, False) for path, note in _recorded_dataroots(run_dirs)
+    ]  # a report inside one replaces nothing of it
     clashes = []  # (rank, relation, what, path, note): "is" named before "contains" before "lies inside"
     for path, what, note, inside in inputs:
         real = Path(os.path.realpath(path))
@@ -452,8 +532,13 @@ def _check_inputs(out: Path, given: Sequence[Path], run_dirs: Sequence[Path], da
             clashes.append((2, "lies inside", what, path, note))
     if clashes:
         _, relation, what, path, note = min(clashes, key=lambda c: c[0])
-        message = f"{out} {relation} the {what} {printable(path)}{note}: the report would replace it; choose another folder"
-        raise UserError(f"report folder {message} (force does not override this)", cli=f"--out {message} (--force does not override this)")
+        message = (
+            f"{out} {relation} the {what} {printable(path)}{note}: the report would replace it; choose another folder"
+        )
+        raise UserError(
+            f"report folder {message} (force does not override this)",
+            cli=f"--out {message} (--force does not override this)",
+        )
 
 
 def _keep_files(old: Path, new: Path, keep: Sequence[str]) -> None:
@@ -485,7 +570,14 @@ def _delete_own(old: Path, kept_in: Path | None) -> list[str]:
         copy = kept_in / rel if kept_in is not None else None
         same = copy is not None and (
             (path.is_symlink() and copy.is_symlink() and os.readlink(path) == os.readlink(copy))
-            or (not path.is_symlink() and path.is_file() and copy.is_file() and not copy.is_symlink() and filecmp.cmp(path, copy, shallow=False)))
+            or (
+                not path.is_symlink()
+                and path.is_file()
+                and copy.is_file()
+                and not copy.is_symlink()
+                and filecmp.cmp(path, copy, shallow=False)
+            )
+        )
         if rel in own or same:
             with contextlib.suppress(FileNotFoundError):
                 path.unlink()
@@ -508,7 +600,9 @@ def _swap_in(tmp: Path, out: Path) -> None:
     old = None
     if out.exists():
         old = out.with_name(f".{out.name}.old-{os.getpid()}")
-        if old.exists() or old.is_symlink():  # kept by an earlier report of this process: it holds files no report wrote
+        if (
+            old.exists() or old.is_symlink()
+        ):  # kept by an earlier report of this process: it holds files no report wrote
             raise UserError(f"{old} is in the way of replacing the report {out}: move it away first")
         os.rename(out, old)
     try:
@@ -520,8 +614,11 @@ def _swap_in(tmp: Path, out: Path) -> None:
     if old is not None:
         left = _delete_own(old, out)
         if left:
-            print(f"lightemma report: warning: kept {printable(old)}: it holds {len(left)} file(s) the old report did not write "
-                  f"and that are not in the new one ({printable(left[0])}{', …' if len(left) > 1 else ''})", file=sys.stderr)
+            print(
+                f"lightemma report: warning: kept {printable(old)}: it holds {len(left)} file(s) the old report did not write "
+                f"and that are not in the new one ({printable(left[0])}{', …' if len(left) > 1 else ''})",
+                file=sys.stderr,
+            )
 
 
 def _remove_stale(out: Path) -> None:
@@ -557,8 +654,9 @@ def warning_kind(text: str, names: Sequence[str] = ()) -> str:
     return _VARYING.sub("#", text)
 
 
-def summarise_warnings(warnings: Sequence[str], examples: int = WARNING_EXAMPLES,
-                       names: Sequence[str] = ()) -> list[tuple[str, list[str]]]:
+def summarise_warnings(
+    warnings: Sequence[str], examples: int = WARNING_EXAMPLES, names: Sequence[str] = ()
+) -> list[tuple[str, list[str]]]:
     """Warnings grouped by :func:`warning_kind` (``names``: the run labels), in order of first appearance:
     (headline, examples) per group.
 
@@ -582,7 +680,9 @@ def _drop_empty_runs(runs: list[RunData]) -> tuple[list[RunData], list[str]]:
     empty = [r for r in runs if not r.valid.any()]
     if not empty or len(empty) == len(runs):
         return runs, []
-    return [r for r in runs if r.valid.any()], [f"left out {r.info.run_dir}: no scored frame (an empty or aborted run)" for r in empty]
+    return [r for r in runs if r.valid.any()], [
+        f"left out {r.info.run_dir}: no scored frame (an empty or aborted run)" for r in empty
+    ]
 
 
 def write_report(
@@ -631,12 +731,17 @@ def write_report(
     given = Path(out)
     out = Path(os.path.abspath(given))  # "." has no name to put a hidden folder beside
     if isinstance(top, bool) or not isinstance(top, int) or top < 0:
-        raise UserError(f"top must be a whole number of frames, 0 or more, got {top!r}", cli=f"--top must be 0 or more, got {top!r}")
+        raise UserError(
+            f"top must be a whole number of frames, 0 or more, got {top!r}", cli=f"--top must be 0 or more, got {top!r}"
+        )
     if dataroot is not None and not os.path.isdir(dataroot):
         what = "is not a folder" if os.path.exists(dataroot) else "does not exist"
         raise UserError(f"dataroot {dataroot} {what}", cli=f"--dataroot {dataroot} {what}")
     if dataroot is not None and version and not os.path.isdir(os.path.join(dataroot, version)):
-        raise UserError(f"dataroot {dataroot} has no folder {version}", cli=f"--version {version}: --dataroot {dataroot} has no folder {version}")
+        raise UserError(
+            f"dataroot {dataroot} has no folder {version}",
+            cli=f"--version {version}: --dataroot {dataroot} has no folder {version}",
+        )
     given_dirs = [Path(d) for d in run_dirs]  # an iterator is read once
     dirs = expand_run_dirs(given_dirs)  # every run found, a corrupt one too: none may be replaced
     _check_inputs(given, given_dirs, dirs, dataroot)
@@ -648,9 +753,24 @@ def write_report(
         shutil.rmtree(tmp)
     tmp.mkdir()
     try:
-        _write(tmp, given_dirs, convention=convention, common=common, with_paper=with_paper, top=top, dataroot=dataroot, pictures=pictures,
-               frames=frames, case_tags=case_tags, pairwise=pairwise, resampling=resampling, svg=svg, progress=progress,
-               version=version, safety=safety)
+        _write(
+            tmp,
+            given_dirs,
+            convention=convention,
+            common=common,
+            with_paper=with_paper,
+            top=top,
+            dataroot=dataroot,
+            pictures=pictures,
+            frames=frames,
+            case_tags=case_tags,
+            pairwise=pairwise,
+            resampling=resampling,
+            svg=svg,
+            progress=progress,
+            version=version,
+            safety=safety,
+        )
         marker = {"written_by": "lightemma report", "files": _report_files(tmp)}  # what a re-report may replace
         (tmp / REPORT_MARKER).write_text(json.dumps(marker) + "\n", encoding="utf-8")
         keep = _check_target(out, force)  # again: files added to the old report while this one was written
@@ -688,25 +808,51 @@ def _frame_set_id(model: Any) -> str:
 
 
 def _runs_table(evaluation: Evaluation, flags: dict[str, str]) -> Table:
-    rows = [{"model": m.label, "family": m.family, "run": str(m.run_dir), "frames": m.frames_in_run, "complete": "yes" if m.complete else "no",
-             "integrator": m.integrator, "chain": m.chain, "answer_format": m.answer_format, "inputs": m.inputs,
-             "frame_set": _frame_set_id(m)} for m in evaluation.models]
-    columns = [Column("model", "Model"), Column("family", "Family"), Column("run", "Run"), Column("frames", "Frames in run"), Column("complete", "Finished"),
-               Column("integrator", "Integrator"), Column("chain", "Chain"), Column("answer_format", "Answer format"), Column("inputs", "Inputs"),
-               Column("frame_set", "Frame set")]
+    rows = [
+        {
+            "model": m.label,
+            "family": m.family,
+            "run": str(m.run_dir),
+            "frames": m.frames_in_run,
+            "complete": "yes" if m.complete else "no",
+            "integrator": m.integrator,
+            "chain": m.chain,
+            "answer_format": m.answer_format,
+            "inputs": m.inputs,
+            "frame_set": _frame_set_id(m),
+        }
+        for m in evaluation.models
+    ]
+    columns = [
+        Column("model", "Model"),
+        Column("family", "Family"),
+        Column("run", "Run"),
+        Column("frames", "Frames in run"),
+        Column("complete", "Finished"),
+        Column("integrator", "Integrator"),
+        Column("chain", "Chain"),
+        Column("answer_format", "Answer format"),
+        Column("inputs", "Inputs"),
+        Column("frame_set", "Frame set"),
+    ]
     return Table("Runs", columns, rows, name="runs", flags=flags)
 
 
 def _planning_section(w: _Writer, evaluation: Evaluation, colors: dict[str, str], flags: dict[str, str]) -> None:
     """The planning score by sub-score: one bar per model and the ground truth (when some value is there)."""
     result = evaluation.planning
-    rows = [{"model": m.label, **m.planning} for m in evaluation.models] + ([result.ground_truth] if result.ground_truth else [])
+    rows = [{"model": m.label, **m.planning} for m in evaluation.models] + (
+        [result.ground_truth] if result.ground_truth else []
+    )
     if not any(r.get(k) is not None for r in rows for k in KEYS):
         return
     w.lines += ["## Planning score by sub-score", ""]
-    w.figure(planning_figure(rows, colors=colors, notes=flags, gt_label=GT_LABEL), "planning",
-             "NAVSIM's planning score per model and the ground truth's own: the aggregates, then each sub-score, means over "
-             "the frames with a value and their 95 % scene-bootstrap intervals; n/a where no frame has one (the table says why)")
+    w.figure(
+        planning_figure(rows, colors=colors, notes=flags, gt_label=GT_LABEL),
+        "planning",
+        "NAVSIM's planning score per model and the ground truth's own: the aggregates, then each sub-score, means over "
+        "the frames with a value and their 95 % scene-bootstrap intervals; n/a where no frame has one (the table says why)",
+    )
 
 
 def _write(
@@ -743,28 +889,61 @@ def _write(
     missing = [fid for fid in frames if fid not in known]
     if missing:
         raise UserError(f"frame(s) not in any run: {', '.join(missing[:5])}{' …' if len(missing) > 5 else ''}")
-    evaluation: Evaluation = evaluate_loaded(runs, convention=convention, common=common, resampling=resampling, pairwise=pairwise and len(runs) > 1,
-                                             safety=safety, dataroot=dataroot if version else None, version=version)
+    evaluation: Evaluation = evaluate_loaded(
+        runs,
+        convention=convention,
+        common=common,
+        resampling=resampling,
+        pairwise=pairwise and len(runs) > 1,
+        safety=safety,
+        dataroot=dataroot if version else None,
+        version=version,
+    )
     evaluation.warnings[:0] = [*left_out, *skipped]
     steps.step("evaluated")
     order = {m.run_dir: i for i, m in enumerate(evaluation.models)}
     runs.sort(key=lambda r: order[r.info.run_dir])
     labels = unique_labels(runs)
-    colors = run_colors(labels)  # one colour per run, distinct in every figure that draws runs together (not per family)
+    colors = run_colors(
+        labels
+    )  # one colour per run, distinct in every figure that draws runs together (not per family)
     if len(labels) > len(RUN_PALETTE):
-        evaluation.warnings.append(f"{len(labels)} runs, {len(RUN_PALETTE)} distinct colours: from run {len(RUN_PALETTE) + 1} on, "
-                                   "the figures repeat colours (tell runs apart by their legends' order)")
+        evaluation.warnings.append(
+            f"{len(labels)} runs, {len(RUN_PALETTE)} distinct colours: from run {len(RUN_PALETTE) + 1} on, "
+            "the figures repeat colours (tell runs apart by their legends' order)"
+        )
     flags = coverage_flags(evaluation)
     w = _Writer(out, svg=svg)
 
     w.footer = footer_lines(evaluation)  # software, frame sets, maps, metric ids: under every table file
-    w.lines += ["# lightemma report", "", "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).", "",
-                "| Model | Family | Run | Frames in run | Finished | Integrator | Chain | Answer format | Inputs | Frame set |",
-                "|---|---|---|---:|---|---|---|---|---|---|"]
-    w.lines += ["| " + " | ".join(markdown_cell(c) for c in (m.label + flags.get(m.label, ""), m.family, m.run_dir, m.frames_in_run,
-                                                             "yes" if m.complete else "no", m.integrator, m.chain, m.answer_format, m.inputs,
-                                                             _frame_set_id(m))) + " |"
-                for m in evaluation.models]  # every cell one line: names from outside cannot split a row
+    w.lines += [
+        "# lightemma report",
+        "",
+        "Browse it: [index.html](index.html) (tables, figures and every frame; opens from disk).",
+        "",
+        "| Model | Family | Run | Frames in run | Finished | Integrator | Chain | Answer format | Inputs | Frame set |",
+        "|---|---|---|---:|---|---|---|---|---|---|",
+    ]
+    w.lines += [
+        "| "
+        + " | ".join(
+            markdown_cell(c)
+            for c in (
+                m.label + flags.get(m.label, ""),
+                m.family,
+                m.run_dir,
+                m.frames_in_run,
+                "yes" if m.complete else "no",
+                m.integrator,
+                m.chain,
+                m.answer_format,
+                m.inputs,
+                _frame_set_id(m),
+            )
+        )
+        + " |"
+        for m in evaluation.models
+    ]  # every cell one line: names from outside cannot split a row
     w.lines.append("")
 
     summary = summarise_warnings(evaluation.warnings, names=[*labels, FLOOR_LABEL, "ground truth"])
@@ -785,33 +964,53 @@ def _write(
         print(f"lightemma report: every warning: {WARNINGS_FILE} in the report", file=sys.stderr)
 
     if flags:
-        w.lines += [f"**Fewer than half of the frames scored** for {markdown_text(', '.join(flags))}: their numbers describe only the frames they managed; every table flags them.", ""]
+        w.lines += [
+            f"**Fewer than half of the frames scored** for {markdown_text(', '.join(flags))}: their numbers describe only the frames they managed; every table flags them.",
+            "",
+        ]
     w.lines += ["## Tables I and II", ""]
     groups = frame_set_groups(evaluation)
     if groups is not None:  # runs on different frame sets: never ranked in one column (docs/evaluate.md)
-        w.lines += [f"**Runs on {len(groups)} frame sets**: every table shows each frame set apart (its fingerprint "
-                    "and frame count in the title), never ranking runs across frame sets; `--common` scores every run "
-                    "on the frames common to all.", ""]
+        w.lines += [
+            f"**Runs on {len(groups)} frame sets**: every table shows each frame set apart (its fingerprint "
+            "and frame count in the title), never ranking runs across frame sets; `--common` scores every run "
+            "on the frames common to all.",
+            "",
+        ]
     tables = frame_set_tables(evaluation_tables(evaluation, with_paper=with_paper), evaluation)
     for table in tables:
-        if table.name in ("pairwise_ade", "generations", "pairwise_safety", "pairwise_planning", *_ABLATION_TABLES,
-                          "robustness", "visual_reliance"):  # their own sections below
+        if table.name in (
+            "pairwise_ade",
+            "generations",
+            "pairwise_safety",
+            "pairwise_planning",
+            *_ABLATION_TABLES,
+            "robustness",
+            "visual_reliance",
+        ):  # their own sections below
             continue
         w.table(table)
 
-    numbers = {**evaluation.to_dict(), "provenance": provenance(evaluation, with_paper=with_paper,
-                                                                 dataroot=dataroot if version else None, version=version),
-               **({"frame_set_groups": groups} if groups is not None else {})}
+    numbers = {
+        **evaluation.to_dict(),
+        "provenance": provenance(
+            evaluation, with_paper=with_paper, dataroot=dataroot if version else None, version=version
+        ),
+        **({"frame_set_groups": groups} if groups is not None else {}),
+    }
     (out / "tables" / "evaluation.json").write_text(json.dumps(numbers, indent=2, default=str) + "\n", encoding="utf-8")
 
     w.table(provenance_table(evaluation))
-    w.lines += [f"All numbers as JSON: [tables/evaluation.json](tables/evaluation.json)", ""]
+    w.lines += ["All numbers as JSON: [tables/evaluation.json](tables/evaluation.json)", ""]
 
     w.lines += ["## Fig. 1 — ADE by family and generation", ""]
     main_convention = evaluation.main_convention
     points = bubble_points(evaluation, convention=main_convention, with_paper=with_paper)
     if any(p["ade_avg"] is not None for p in points):
-        caption = "ADE avg per model (scored frames) with its 95 % scene-bootstrap interval; bubble area ∝ time per frame; colour = family, one shade per model" + ("; hollow = the paper's" if with_paper else "")
+        caption = (
+            "ADE avg per model (scored frames) with its 95 % scene-bootstrap interval; bubble area ∝ time per frame; colour = family, one shade per model"
+            + ("; hollow = the paper's" if with_paper else "")
+        )
         w.figure(bubble_chart(points), "bubble", caption)
     else:
         w.lines += ["No model has a scored frame yet; no chart.", ""]
@@ -819,24 +1018,34 @@ def _write(
     if evaluation.planning is not None:  # the planning score broken into its sub-scores (report/figures/subscores.py)
         _planning_section(w, evaluation, colors, flags)
     if evaluation.explanations is not None and evaluation.explanations.shown:  # report/figures/consistency.py
-
         w.lines += ["## Explanations", ""]
-        w.figure(explanations_figure([{"model": m.label, **m.explanations} for m in evaluation.models], colors=colors,
-                                     notes=flags), "explanations",
-                 "Per model the share of frames whose stated intent is consistent with its own plan, and with what the car "
-                 "did (intent accuracy), with 95 % scene-bootstrap intervals; n/a for runs without stage-2 texts")
+        w.figure(
+            explanations_figure(
+                [{"model": m.label, **m.explanations} for m in evaluation.models], colors=colors, notes=flags
+            ),
+            "explanations",
+            "Per model the share of frames whose stated intent is consistent with its own plan, and with what the car "
+            "did (intent accuracy), with 95 % scene-bootstrap intervals; n/a for runs without stage-2 texts",
+        )
 
     if evaluation.pairwise is not None:
         w.lines += ["## Paired comparisons", ""]
         generations = evaluation.generations()
         if generations:
-            w.lines += ["Is each generation better than its predecessor? (ADE avg change newer − older, 95 % scene-bootstrap interval, Holm-adjusted p over all pairs)", ""]
+            w.lines += [
+                "Is each generation better than its predecessor? (ADE avg change newer − older, 95 % scene-bootstrap interval, Holm-adjusted p over all pairs)",
+                "",
+            ]
             w.lines += _generation_lines(generations) + [""]
         for table in tables:
             if table.name in ("pairwise_ade", "generations", "pairwise_safety", "pairwise_planning"):
                 w.table(table)
         labels_shown = [m.label for m in evaluation.models]
-        w.figure(pairwise_figure(evaluation.pairwise, labels_shown, notes=flags), "pairwise", f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm")
+        w.figure(
+            pairwise_figure(evaluation.pairwise, labels_shown, notes=flags),
+            "pairwise",
+            f"ADE avg of row − column model on their common frames ({main_convention}); * significant after Holm",
+        )
 
     _ablation_section(w, tables)
 
@@ -847,21 +1056,45 @@ def _write(
     w.lines += ["## Scenarios", "", f"ADE avg (m) per scenario tag, on {scope}. Tag rules: docs/evaluate.md.", ""]
     steps.step("tables and charts")
     for part, members in _scenario_parts(evaluation, runs, labels, shared if groups is None or shared else None):
-        rows = per_tag_metrics([runs[i] for i in members], convention=main_convention, frame_ids=shared or None,
-                               safety=evaluation.safety, planning=evaluation.planning,
-                               explanations=evaluation.explanations)
+        rows = per_tag_metrics(
+            [runs[i] for i in members],
+            convention=main_convention,
+            frame_ids=shared or None,
+            safety=evaluation.safety,
+            planning=evaluation.planning,
+            explanations=evaluation.explanations,
+        )
         table = _scenario_table(rows, [labels[i] for i in members], flags)
         w.table(replace(table, **part), latex=False)
     w.lines += ["Case 1 of the paper (a finished turn carried into the prediction), measured over all frames:", ""]
     bias = history_bias(runs)
     for table in frame_set_tables([_bias_table(bias, flags)], evaluation):  # each run on its own frames: by frame set
         w.table(table, latex=False)
-    w.figure(history_bias_figure(runs, colors=colors, rows=bias, notes=flags), "history_bias", "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn")
+    w.figure(
+        history_bias_figure(runs, colors=colors, rows=bias, notes=flags),
+        "history_bias",
+        "predicted and true future curvature against the last history curvature: Theil–Sen slopes with 95 % intervals, and the carry-over just after a turn",
+    )
 
     picks = [("frame", fid, "requested frame") for fid in frames]
     spread = disagreements(runs, top=top)
-    picks += [("disagree", d["frame_id"], f"the {len(d['models'])} models shown disagree by {d['spread_m']:.1f} m at 3 s" + ("" if len(d["models"]) == len(runs) else " (baselines not compared)")) for d in spread]
-    picks += [("case", c["frame_id"], f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)") for c in worst_frame_per_tag(runs, CASE_TAGS if case_tags is None else case_tags)]
+    picks += [
+        (
+            "disagree",
+            d["frame_id"],
+            f"the {len(d['models'])} models shown disagree by {d['spread_m']:.1f} m at 3 s"
+            + ("" if len(d["models"]) == len(runs) else " (baselines not compared)"),
+        )
+        for d in spread
+    ]
+    picks += [
+        (
+            "case",
+            c["frame_id"],
+            f"worst `{c['tag']}` frame (mean FDE {c['mean_fde']:.2f} m of {c['frames_with_tag']} tagged)",
+        )
+        for c in worst_frame_per_tag(runs, CASE_TAGS if case_tags is None else case_tags)
+    ]
     picks = _merge_picks(picks)
     steps.step("scenario analysis")
     source = CameraSource(dataroot)
@@ -869,7 +1102,16 @@ def _write(
         cameras = source.cameras(runs, [fid for _, fid, _ in picks])
         w.lines += ["## Frames: requested, where models disagree most, and the worst of each failure case", ""]
         w.lines += [f"> {markdown_text(p)}" for p in dict.fromkeys(source.problems)] + ([""] if source.problems else [])
-        _frame_pictures(w, runs, labels, picks, cameras, colors, shown={d["frame_id"]: d["models"] for d in spread}, progress=progress)
+        _frame_pictures(
+            w,
+            runs,
+            labels,
+            picks,
+            cameras,
+            colors,
+            shown={d["frame_id"]: d["models"] for d in spread},
+            progress=progress,
+        )
     if pictures and evaluation.safety is not None:
         _safety_views(w, runs, labels, evaluation.safety, colors)
     steps.step("frame pictures")
@@ -889,10 +1131,27 @@ def _write(
     all_ids = list(dict.fromkeys(fid for run in runs for fid in run.frame_ids))
     html_cameras = source.cameras(runs, all_ids, load=False, records=calibrations) if pictures else {}
     notes = [*summary, *summarise_warnings(list(dict.fromkeys(source.problems)))]
-    intro = "".join(f'<p class="note">{html_escape.escape(printable(head))}'
-                    + "".join(f"<br>e.g. also: {html_escape.escape(printable(x))}" for x in more) + "</p>" for head, more in notes)
-    write_html(out, title="lightemma report", intro_html=intro, tables=[_runs_table(evaluation, flags), *w.tables], figures=w.figures, runs=runs, labels=labels,
-               colors=colors, texts=texts, cameras=html_cameras, progress=progress, safety=evaluation.safety,
-               planning=evaluation.planning, explanations=evaluation.explanations)
+    intro = "".join(
+        f'<p class="note">{html_escape.escape(printable(head))}'
+        + "".join(f"<br>e.g. also: {html_escape.escape(printable(x))}" for x in more)
+        + "</p>"
+        for head, more in notes
+    )
+    write_html(
+        out,
+        title="lightemma report",
+        intro_html=intro,
+        tables=[_runs_table(evaluation, flags), *w.tables],
+        figures=w.figures,
+        runs=runs,
+        labels=labels,
+        colors=colors,
+        texts=texts,
+        cameras=html_cameras,
+        progress=progress,
+        safety=evaluation.safety,
+        planning=evaluation.planning,
+        explanations=evaluation.explanations,
+    )
     steps.step("index.html")
     steps.close()

@@ -84,8 +84,28 @@ class _Columns:
     """
 
     PAIRS = ("trajectory", "actions", "gt", "history")
-    NAMES = (*PAIRS, "status", "first", "seconds", "inp", "out", "cost", "cached", "failure", "scene", "traj_none", "gt_ok")
-    DTYPES = {"status": np.int8, "first": np.int8, "failure": np.int8, "scene": np.int32, "traj_none": bool, "gt_ok": bool}
+    NAMES = (
+        *PAIRS,
+        "status",
+        "first",
+        "seconds",
+        "inp",
+        "out",
+        "cost",
+        "cached",
+        "failure",
+        "scene",
+        "traj_none",
+        "gt_ok",
+    )
+    DTYPES = {
+        "status": np.int8,
+        "first": np.int8,
+        "failure": np.int8,
+        "scene": np.int32,
+        "traj_none": bool,
+        "gt_ok": bool,
+    }
 
     def __init__(self) -> None:
         self.pending: dict[str, list[Any]] = {n: [] for n in self.NAMES}
@@ -118,8 +138,11 @@ class _Columns:
         p["failure"].append(failure_code(failure))
         recorded_status = record.get("status")
         p["status"].append(STATUS_CODES.get(recorded_status, UNKNOWN_STATUS))  # type: ignore[arg-type]  # else: unknown
-        p["first"].append(STATUS_CODES.get(first_answer_status(record), UNKNOWN_STATUS) if answer_received(record)
-                          else API_ERROR_STATUS)
+        p["first"].append(
+            STATUS_CODES.get(first_answer_status(record), UNKNOWN_STATUS)
+            if answer_received(record)
+            else API_ERROR_STATUS
+        )
         p["seconds"].append(_number(record.get("seconds")))
         p["inp"].append(_number(record.get("input_tokens")))
         p["out"].append(_number(record.get("output_tokens")))
@@ -133,7 +156,9 @@ class _Columns:
             if values:
                 if name in self.PAIRS:
                     chunk = pairs_array(values)
-                    if name == "gt":  # beyond 100 km is no position (1e308 overflows every distance): no usable ground truth
+                    if (
+                        name == "gt"
+                    ):  # beyond 100 km is no position (1e308 overflows every distance): no usable ground truth
                         with np.errstate(invalid="ignore"):
                             far = (np.abs(chunk) > MAX_POSITION_M).any(axis=(1, 2))
                         if far.any():
@@ -143,7 +168,9 @@ class _Columns:
                 self.chunks[name].append(chunk)
                 values.clear()
 
-    def finish(self, corrupt_lines: int = 0, truncated_tail: bool = False, corrupt_example: str | None = None) -> RawColumns:
+    def finish(
+        self, corrupt_lines: int = 0, truncated_tail: bool = False, corrupt_example: str | None = None
+    ) -> RawColumns:
         self.flush()
         columns = {}
         for name in self.NAMES:
@@ -220,7 +247,9 @@ def write_sidecar(run_dir: str | os.PathLike[str], raw: RawColumns, key: np.ndar
     run_dir = Path(run_dir)
     _remove_stale_temporaries(run_dir)
     arrays = {f"col_{name}": value for name, value in raw.columns.items()}
-    counts = np.array([len(raw.frame_ids), len(raw.scene_names), raw.corrupt_lines, int(raw.truncated_tail)], dtype=np.int64)
+    counts = np.array(
+        [len(raw.frame_ids), len(raw.scene_names), raw.corrupt_lines, int(raw.truncated_tail)], dtype=np.int64
+    )
     example = np.frombuffer((raw.corrupt_example or "").encode("utf-8", "surrogatepass"), dtype=np.uint8)
     if not run_dir.is_dir():
         return False
@@ -269,8 +298,14 @@ def read_sidecar(run_dir: str | os.PathLike[str], key: np.ndarray | None) -> Raw
                     return None
                 columns[name] = value
             example = z["corrupt_example"].tobytes().decode("utf-8", "surrogatepass") or None
-            raw = RawColumns(_split_names(z["frame_ids"], n), columns, _split_names(z["scene_names"], n_scenes), corrupt, bool(truncated),
-                             example)
+            raw = RawColumns(
+                _split_names(z["frame_ids"], n),
+                columns,
+                _split_names(z["scene_names"], n_scenes),
+                corrupt,
+                bool(truncated),
+                example,
+            )
         if n and (columns["scene"].min() < 0 or columns["scene"].max() >= n_scenes):
             return None
         return raw
@@ -292,8 +327,9 @@ def key_unchanged(run_dir: str | os.PathLike[str], key: np.ndarray) -> bool:
     return now is not None and np.array_equal(now, key)
 
 
-def read_columns(run_dir: Path, transform: Callable[[Iterable[dict[str, Any]]], Iterator[dict[str, Any]]] | None = None
-                 ) -> RawColumns:
+def read_columns(
+    run_dir: Path, transform: Callable[[Iterable[dict[str, Any]]], Iterator[dict[str, Any]]] | None = None
+) -> RawColumns:
     """Stream ``frames.jsonl`` into :class:`RawColumns`; ``transform`` maps the records first (a re-parse) when given.
 
     :class:`~lightemma.errors.RunStoreError` when the file cannot be read."""

@@ -33,7 +33,7 @@ import sys
 import threading
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -108,8 +108,16 @@ class ImportResult:
         if self.outcome == "nothing to import":
             return f"{self.source}: no usable frame in {self.files} scene file(s); no run written"
         s = self.summary
-        skipped = f", skipped {self.files_skipped} file(s) and {self.frames_skipped} frame(s)" if self.files_skipped or self.frames_skipped else ""
-        fe = f"FE {s['fe_percent']:.2f} %, FE corr {s['fe_corr_percent']:.2f} %" if s.get("fe_percent") is not None else "no answer received"
+        skipped = (
+            f", skipped {self.files_skipped} file(s) and {self.frames_skipped} frame(s)"
+            if self.files_skipped or self.frames_skipped
+            else ""
+        )
+        fe = (
+            f"FE {s['fe_percent']:.2f} %, FE corr {s['fe_corr_percent']:.2f} %"
+            if s.get("fe_percent") is not None
+            else "no answer received"
+        )
         return f"{self.source}: {self.frames} frame(s) from {self.files} scene file(s) → {self.run_dir} ({fe}, paper rules{skipped})"
 
 
@@ -121,7 +129,9 @@ def source_hash(files: Sequence[Path], root: Path) -> str:
             content = hashlib.sha256(read_regular_file(path)).hexdigest()
         except ReferenceFileError as exc:  # changed since it was listed: skipped (and named) when read
             content = f"unreadable: {exc}"
-        digest.update(b"\0" + os.fsencode(path.relative_to(root).as_posix()) + f"\0{content}".encode())  # names as bytes
+        digest.update(
+            b"\0" + os.fsencode(path.relative_to(root).as_posix()) + f"\0{content}".encode()
+        )  # names as bytes
     return "sha256:" + digest.hexdigest()
 
 
@@ -141,7 +151,11 @@ def _first_metadata_model(folder: ModelFolder) -> str | None:
             doc = loads_bounded(read_regular_file(path))
         except (ReferenceFileError, ValueError):
             continue
-        model = doc.get("metadata", {}).get("model") if isinstance(doc, dict) and isinstance(doc.get("metadata"), dict) else None
+        model = (
+            doc.get("metadata", {}).get("model")
+            if isinstance(doc, dict) and isinstance(doc.get("metadata"), dict)
+            else None
+        )
         if isinstance(model, str) and model:
             return model
     return None
@@ -197,8 +211,15 @@ def _call_record(call: StageCall, prices: tuple[float, float] | None, prompt: di
     )
 
 
-def _record(frame: ReferenceFrame, source_file: str, parse: tuple[str, str, str] | None, actions: Any, trajectory: Any,
-            prices: tuple[float, float] | None, templates: PromptTemplates) -> FrameRecord:
+def _record(
+    frame: ReferenceFrame,
+    source_file: str,
+    parse: tuple[str, str, str] | None,
+    actions: Any,
+    trajectory: Any,
+    prices: tuple[float, float] | None,
+    templates: PromptTemplates,
+) -> FrameRecord:
     """The run record of one frame (the chain's fields, plus what only the reference has)."""
     texts = {"scene": frame.calls[0].text, "intent": frame.calls[1].text}  # as the reference had them, failed calls too
     calls = [_call_record(c, prices, templates.encode(c.stage, c.prompt, texts)) for c in frame.calls]
@@ -212,8 +233,9 @@ def _record(frame: ReferenceFrame, source_file: str, parse: tuple[str, str, str]
         status, reason, failure, answer, error = "failed", f"API error: {CALL_FAILURE}", "api_error", None, CALL_FAILURE
     else:
         (status, reason, failure), answer, error = parse, frame.answer, None
-    attempt = attempt_record(attempt=1, calls=calls, answer=answer, status=status, reason=reason, failure=failure,
-                             error=error, **totals)
+    attempt = attempt_record(
+        attempt=1, calls=calls, answer=answer, status=status, reason=reason, failure=failure, error=error, **totals
+    )
     scene_text, intent_text = (None if c.call_failed else c.text for c in frame.calls[:2])
     return frame_record(
         frame_id=frame.frame_id,
@@ -275,12 +297,20 @@ class _Tally:
     def summary(self) -> dict[str, Any]:
         n = sum(self.status.values())
         pct = (lambda k: 100.0 * k / self.received) if self.received else (lambda k: None)
-        return {"frames": n, **self.status, "api_errors": self.api_errors, "answers_received": self.received,
-                "fe_percent": pct(self.first_not_ok), "fe_corr_percent": pct(self.first_failed), "parse": dict(IMPORT_PARSE)}
+        return {
+            "frames": n,
+            **self.status,
+            "api_errors": self.api_errors,
+            "answers_received": self.received,
+            "fe_percent": pct(self.first_not_ok),
+            "fe_corr_percent": pct(self.first_failed),
+            "parse": dict(IMPORT_PARSE),
+        }
 
 
-def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: Warn,
-                   templates: PromptTemplates) -> list[FrameRecord]:
+def _scene_records(
+    scene: SceneFile, prices: tuple[float, float] | None, warn: Warn, templates: PromptTemplates
+) -> list[FrameRecord]:
     """Records of one scene file's frames: answers parsed in one batch, trajectories integrated in one."""
     frames = scene.frames
     received = [i for i, f in enumerate(frames) if not f.calls[-1].call_failed]
@@ -288,8 +318,12 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
     actions: list[Any] = [None] * len(frames)
     trajectories: list[Any] = [None] * len(frames)
     if received:
-        parsed = parse_actions([frames[i].answer for i in received], n=6, mode=IMPORT_PARSE["mode"],
-                               history=history_rows(frames[i].history_actions for i in received))
+        parsed = parse_actions(
+            [frames[i].answer for i in received],
+            n=6,
+            mode=IMPORT_PARSE["mode"],
+            history=history_rows(frames[i].history_actions for i in received),
+        )
         ok = parsed.status != "failed"
         paths = integrate(np.where(ok[:, None, None], parsed.actions, 0.0), method=IMPORT_INTEGRATOR)
         mismatched, worst = 0, 0.0
@@ -298,8 +332,10 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
             if ok[j]:
                 actions[i] = parsed.actions[j].tolist()
                 if not np.isfinite(paths[j]).all():  # numbers so large that the positions overflow
-                    warn(f"{scene.path}: frame {frames[i].frame_index}: its actions integrate to non-finite positions; "
-                         "recorded without a trajectory, never scored")
+                    warn(
+                        f"{scene.path}: frame {frames[i].frame_index}: its actions integrate to non-finite positions; "
+                        "recorded without a trajectory, never scored"
+                    )
                     continue
                 trajectories[i] = paths[j].tolist()
                 theirs = frames[i].reference_trajectory
@@ -308,9 +344,14 @@ def _scene_records(scene: SceneFile, prices: tuple[float, float] | None, warn: W
                     if gap > TRAJECTORY_TOLERANCE:
                         mismatched, worst = mismatched + 1, max(worst, gap)
         if mismatched:
-            warn(f"{scene.path}: {mismatched} frame(s) whose stored predictions.trajectory differs from the Euler "
-                 f"integration of their answer (up to {worst:.3g} m); the answer is what is scored")
-    return [_record(f, unicode_clean(scene.path.name), parses[i], actions[i], trajectories[i], prices, templates) for i, f in enumerate(frames)]
+            warn(
+                f"{scene.path}: {mismatched} frame(s) whose stored predictions.trajectory differs from the Euler "
+                f"integration of their answer (up to {worst:.3g} m); the answer is what is scored"
+            )
+    return [
+        _record(f, unicode_clean(scene.path.name), parses[i], actions[i], trajectories[i], prices, templates)
+        for i, f in enumerate(frames)
+    ]
 
 
 def _is_6x2(value: Any) -> bool:
@@ -324,21 +365,38 @@ def _report_problems(scene: SceneFile, warn: Warn) -> None:
     for problem in scene.problems[:MAX_FRAME_WARNINGS]:
         warn(f"{scene.path.parent}/{problem}; frame skipped")
     if len(scene.problems) > MAX_FRAME_WARNINGS:
-        warn(f"{scene.path}: {len(scene.problems) - MAX_FRAME_WARNINGS} more frame(s) skipped for the same kinds of reason")
+        warn(
+            f"{scene.path}: {len(scene.problems) - MAX_FRAME_WARNINGS} more frame(s) skipped for the same kinds of reason"
+        )
     soft = [f for f in scene.frames if f.soft_problems]
     if soft:
         first = soft[0]
-        warn(f"{scene.path}: {len(soft)} frame(s) with unreadable token or time counts, recorded as unknown "
-             f"(frame {first.frame_index}: {'; '.join(first.soft_problems)})")
+        warn(
+            f"{scene.path}: {len(soft)} frame(s) with unreadable token or time counts, recorded as unknown "
+            f"(frame {first.frame_index}: {'; '.join(first.soft_problems)})"
+        )
 
 
 def _now() -> str:
-    return datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return datetime.now(UTC).isoformat(timespec="seconds")
 
 
-def _manifest(folder: ModelFolder, model: str, info: ModelInfo | None, digest: str, run_id: str, metadata_model: str | None,
-              stamp: str | None, scenes: list[str], tally: _Tally, files_skipped: list[str], frames_skipped: int,
-              dataset_kind: str, prices: tuple[float, float] | None, templates: PromptTemplates) -> dict[str, Any]:
+def _manifest(
+    folder: ModelFolder,
+    model: str,
+    info: ModelInfo | None,
+    digest: str,
+    run_id: str,
+    metadata_model: str | None,
+    stamp: str | None,
+    scenes: list[str],
+    tally: _Tally,
+    files_skipped: list[str],
+    frames_skipped: int,
+    dataset_kind: str,
+    prices: tuple[float, float] | None,
+    templates: PromptTemplates,
+) -> dict[str, Any]:
     return {
         "format": FORMAT,
         "run_id": run_id,
@@ -360,26 +418,54 @@ def _manifest(folder: ModelFolder, model: str, info: ModelInfo | None, digest: s
             "frames_skipped": frames_skipped,
             "imported_at": _now(),
         },
-        "backend": {"kind": "imported", "gpus": info.gpus if info else None,
-                    "token_counting": "provider-reported, as the reference scripts stored them",
-                    "cost": "registry price × stored tokens" if prices else None},
-        "params": {"integrate_method": IMPORT_INTEGRATOR, "parse": dict(IMPORT_PARSE), "reask": None, "max_attempts": 1},
+        "backend": {
+            "kind": "imported",
+            "gpus": info.gpus if info else None,
+            "token_counting": "provider-reported, as the reference scripts stored them",
+            "cost": "registry price × stored tokens" if prices else None,
+        },
+        "params": {
+            "integrate_method": IMPORT_INTEGRATOR,
+            "parse": dict(IMPORT_PARSE),
+            "reask": None,
+            "max_attempts": 1,
+        },
         "integrator": IMPORT_INTEGRATOR,
         # the reference's prompts: each stage's shared text once here, each frame's own part in its calls
-        "prompt_set": {"name": "reference scripts (prompts stored per frame)", "hash": None,
-                       "templates": templates.to_manifest()},
-        "dataset": {"kind": dataset_kind, "dataroot": None, "version": None, "split": None, "scenes": scenes,
-                    "window": "reference", "n_frames": sum(tally.status.values())},
+        "prompt_set": {
+            "name": "reference scripts (prompts stored per frame)",
+            "hash": None,
+            "templates": templates.to_manifest(),
+        },
+        "dataset": {
+            "kind": dataset_kind,
+            "dataroot": None,
+            "version": None,
+            "split": None,
+            "scenes": scenes,
+            "window": "reference",
+            "n_frames": sum(tally.status.values()),
+        },
         "lightemma_version": __version__,
         "started_at": None,
         "finished_at": _now(),
-        "summary": {**tally.summary(), "files": len(folder.files) - len(files_skipped), "files_skipped": len(files_skipped),
-                    "frames_skipped": frames_skipped},
+        "summary": {
+            **tally.summary(),
+            "files": len(folder.files) - len(files_skipped),
+            "files_skipped": len(files_skipped),
+            "frames_skipped": frames_skipped,
+        },
     }
 
 
-def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, dataset_kind: str = "nuscenes",
-                  warn: Warn = lambda _: None, on_file: Callable[[], None] = lambda: None) -> ImportResult:
+def import_folder(
+    folder: ModelFolder,
+    output: str | os.PathLike[str],
+    *,
+    dataset_kind: str = "nuscenes",
+    warn: Warn = lambda _: None,
+    on_file: Callable[[], None] = lambda: None,
+) -> ImportResult:
     """Import one model folder into ``output``; see the module docstring. Returns what was done."""
     if dataset_kind not in DATASET_KINDS:
         raise UserError(f"--dataset-kind must be one of {', '.join(DATASET_KINDS)}, got {dataset_kind!r}")
@@ -437,17 +523,25 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
                         continue
                     seen.add(built["frame_id"])
                     problems: list[str] = []
-                    record = bounded_values(built, problems)  # what frames.jsonl will hold, for the tally and the sidecar too
+                    record = bounded_values(
+                        built, problems
+                    )  # what frames.jsonl will hold, for the tally and the sidecar too
                     if problems and not unknown_named:  # a frame's totals beyond the bounds (each call was within them)
                         unknown_named = True
-                        warn(f"{path}: frame {record['frame_id']}: {'; '.join(problems[:3])}; recorded as unknown "
-                             "(later frames of this file with such values are not named)")
+                        warn(
+                            f"{path}: frame {record['frame_id']}: {'; '.join(problems[:3])}; recorded as unknown "
+                            "(later frames of this file with such values are not named)"
+                        )
                     tally.add(record)
                     columns.add(record)
                     lines.append(encode_line(record, bounded=True))
                 if duplicates:  # one line per file, however many frames it repeats
                     first = ", ".join(duplicates[:DUPLICATE_EXAMPLES])
-                    more = f" (first {DUPLICATE_EXAMPLES}: {first})" if len(duplicates) > DUPLICATE_EXAMPLES else f" ({first})"
+                    more = (
+                        f" (first {DUPLICATE_EXAMPLES}: {first})"
+                        if len(duplicates) > DUPLICATE_EXAMPLES
+                        else f" ({first})"
+                    )
                     warn(f"{path}: {len(duplicates)} frame(s) already read from another file{more}; skipped")
                 if lines:
                     scenes.append(scene.scene_name)
@@ -458,10 +552,28 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
             _remove_empty(created)
             result.outcome = "nothing to import"
             return result
-        manifest = _manifest(folder, model, info, digest, run_id, metadata_model, stamp, sorted(set(scenes)), tally, files_skipped,
-                             frames_skipped, dataset_kind, prices, templates)
+        manifest = _manifest(
+            folder,
+            model,
+            info,
+            digest,
+            run_id,
+            metadata_model,
+            stamp,
+            sorted(set(scenes)),
+            tally,
+            files_skipped,
+            frames_skipped,
+            dataset_kind,
+            prices,
+            templates,
+        )
 
-        manifest["dataset"]["fingerprint"] = {**of_dataset(manifest["dataset"], seen), "derived": True, "from": "import"}
+        manifest["dataset"]["fingerprint"] = {
+            **of_dataset(manifest["dataset"], seen),
+            "derived": True,
+            "from": "import",
+        }
         write_json_atomic(tmp / MANIFEST_FILE, manifest)
         write_sidecar(tmp, columns.finish(), source_key(tmp))
         os.rename(tmp, final)
@@ -474,7 +586,9 @@ def import_folder(folder: ModelFolder, output: str | os.PathLike[str], *, datase
 
 
 PARTIAL_SUFFIX = ".partial"
-_PARTIAL = re.compile(r"^\.ref-[0-9a-f]{12}\.(\d+)\.[A-Za-z0-9_]+\.partial$")  # .<run id>.<pid of the importer>.<random>.partial
+_PARTIAL = re.compile(
+    r"^\.ref-[0-9a-f]{12}\.(\d+)\.[A-Za-z0-9_]+\.partial$"
+)  # .<run id>.<pid of the importer>.<random>.partial
 
 
 def remove_stale_partials(model_dir: Path, warn: Warn = lambda _: None) -> list[Path]:
@@ -559,9 +673,15 @@ def default_jobs(folders: int) -> int:
     return max(1, min(folders, os.cpu_count() or 1, 4))
 
 
-def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os.PathLike[str] = "runs", *,
-                     dataset_kind: str = "nuscenes", warn: Warn = lambda _: None, progress: bool = False,
-                     jobs: int = 1) -> list[ImportResult]:
+def import_reference(
+    sources: Iterable[str | os.PathLike[str]],
+    output: str | os.PathLike[str] = "runs",
+    *,
+    dataset_kind: str = "nuscenes",
+    warn: Warn = lambda _: None,
+    progress: bool = False,
+    jobs: int = 1,
+) -> list[ImportResult]:
     """Import reference result folders (each a model folder or a folder holding several) into ``output``.
 
     Returns one :class:`ImportResult` per model folder. Skipped files and frames
@@ -578,7 +698,9 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
         raise UserError("no source folder given")
     from tqdm import tqdm
 
-    bar = tqdm(total=sum(len(f.files) for f in folders), unit="file", desc="import", disable=not progress, dynamic_ncols=True)
+    bar = tqdm(
+        total=sum(len(f.files) for f in folders), unit="file", desc="import", disable=not progress, dynamic_ncols=True
+    )
 
     def say(line: str) -> None:
         bar.clear()
@@ -590,14 +712,20 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
         with stop_signals(lambda signum: _exit_now(workers, signum)):  # Interrupted: the caller stops the workers
             if jobs == 1 or len(folders) == 1:
                 for f in folders:  # a stop signal inside import_folder removes its partial folder there
-                    results.append(import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1)))
+                    results.append(
+                        import_folder(f, output, dataset_kind=dataset_kind, warn=say, on_file=lambda: bar.update(1))
+                    )
                 return results
             import multiprocessing
             from concurrent.futures import ProcessPoolExecutor
 
             context = multiprocessing.get_context("spawn")  # no fork of a process with threads (the progress bar's)
-            pool = ProcessPoolExecutor(max_workers=min(jobs, len(folders)), mp_context=context, initializer=_die_with_parent,
-                                       initargs=(os.getpid(),))
+            pool = ProcessPoolExecutor(
+                max_workers=min(jobs, len(folders)),
+                mp_context=context,
+                initializer=_die_with_parent,
+                initargs=(os.getpid(),),
+            )
             futures: list[Any] = []
             try:
                 for f in folders:
@@ -611,7 +739,11 @@ def import_reference(sources: Iterable[str | os.PathLike[str]], output: str | os
                     results.append(result)
             except KeyboardInterrupt:  # Ctrl-C, SIGTERM, SIGHUP: stop the workers now, before they write more runs
                 _stop_workers(pool, _pool_processes(pool, workers), futures, output)
-                results += [f.result()[0] for f in futures[len(results):] if f.done() and not f.cancelled() and f.exception() is None]
+                results += [
+                    f.result()[0]
+                    for f in futures[len(results) :]
+                    if f.done() and not f.cancelled() and f.exception() is None
+                ]
                 raise
             finally:
                 pool.shutdown(wait=True)
@@ -684,6 +816,9 @@ def _exit_now(workers: Sequence[Any], signum: int) -> None:
     """A second stop signal during an import: kill the workers, say so in one line, exit 128 + the signal at once (the
     next import removes what is left half-written)."""
     _kill(workers)
-    os.write(2, f"lightemma import: {signal.Signals(signum).name} again: exiting now; "
-                "run the same command again to import the rest\n".encode())
+    os.write(
+        2,
+        f"lightemma import: {signal.Signals(signum).name} again: exiting now; "
+        "run the same command again to import the rest\n".encode(),
+    )
     os._exit(128 + signum)

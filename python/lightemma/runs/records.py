@@ -23,15 +23,18 @@ MAX_NUMBER_DIGITS = 18  # an integer token longer than this (beyond 10^18) is no
 # unknown (None, :func:`bounded_values`), the readers skip a line holding one (:func:`record_problem`).
 MAX_TOKENS = 10**9  # tokens of one call, and of a frame's calls together (a whole number 0..10^9)
 MAX_SECONDS = 2_592_000.0  # seconds of one call, and of one frame: 30 days (a batched frame waits for 3 waves of
-                           # batches of up to 24 h each, and their resubmissions)
+# batches of up to 24 h each, and their resubmissions)
 MAX_COST_CENTS = 1e9  # cents of one call, and of a frame's calls together (10 million dollars)
 MAX_POSITION_M = 1e5  # |coordinate| of a ground-truth position, metres (100 km from the ego vehicle)
 
 TOKEN_FIELDS = ("input_tokens", "output_tokens", "reasoning_tokens", "cached_input_tokens", "cache_write_tokens")
 SECONDS_FIELDS = ("seconds", "call_seconds")
 COST_FIELDS = ("cost_cents",)
-VALUE_BOUNDS: dict[str, float] = {**dict.fromkeys(TOKEN_FIELDS, MAX_TOKENS), **dict.fromkeys(SECONDS_FIELDS, MAX_SECONDS),
-                                  **dict.fromkeys(COST_FIELDS, MAX_COST_CENTS)}
+VALUE_BOUNDS: dict[str, float] = {
+    **dict.fromkeys(TOKEN_FIELDS, MAX_TOKENS),
+    **dict.fromkeys(SECONDS_FIELDS, MAX_SECONDS),
+    **dict.fromkeys(COST_FIELDS, MAX_COST_CENTS),
+}
 _NUMBER_TYPES = (int, float)
 _BOUND_ITEMS = tuple(VALUE_BOUNDS.items())
 
@@ -90,7 +93,9 @@ def _bounded_fields(values: Mapping[str, Any], where: str, problems: list[str] |
     return out
 
 
-def _bounded_items(items: Any, where: str, bound: Callable[[Mapping[str, Any], str], dict[str, Any] | None]) -> list | None:
+def _bounded_items(
+    items: Any, where: str, bound: Callable[[Mapping[str, Any], str], dict[str, Any] | None]
+) -> list | None:
     """A copy of the list ``items`` with each mapping in it as ``bound(item, "where[i].")`` made it, or None when
     ``items`` is no list or nothing in it changed."""
     if type(items) is not list:
@@ -120,7 +125,9 @@ def bounded_values(record: Mapping[str, Any], problems: list[str] | None = None)
     The record itself when nothing needed replacing (the common case: no copy), else a copy (the input is never changed).
     """
     out = _bounded_fields(record, "", problems)
-    attempts = _bounded_items(record.get("attempts"), "attempts", lambda attempt, where: _bounded_attempt(attempt, where, problems))
+    attempts = _bounded_items(
+        record.get("attempts"), "attempts", lambda attempt, where: _bounded_attempt(attempt, where, problems)
+    )
     if attempts is not None:
         out = {**(out if out is not None else record), "attempts": attempts}
     return record if out is None else out
@@ -155,7 +162,9 @@ def record_problem(record: Mapping[str, Any]) -> str | None:
             if isinstance(attempt, Mapping):
                 status = attempt.get("status")
                 if status is not None and type(status) is not str:
-                    return f"attempts[{i}].status is {type(status).__name__} {_shown(status)}, expected a string or null"
+                    return (
+                        f"attempts[{i}].status is {type(status).__name__} {_shown(status)}, expected a string or null"
+                    )
     return None
 
 

@@ -21,8 +21,8 @@ import os
 import re
 import stat
 from collections.abc import Iterator, Mapping, Sequence
-from itertools import chain
 from dataclasses import dataclass, field
+from itertools import chain
 from pathlib import Path
 from typing import Any
 
@@ -64,8 +64,9 @@ def read_regular_file(path: Path, limit: int = MAX_SCENE_FILE_BYTES) -> bytes:
         if exc.kind == "too-large":
             raise ReferenceFileError(f"{exc.size} bytes, above the limit of {limit} bytes for a scene file") from None
         if exc.kind == "grew":
-            raise ReferenceFileError(f"grew above the limit of {limit} bytes for a scene file while being read") \
-                from None
+            raise ReferenceFileError(
+                f"grew above the limit of {limit} bytes for a scene file while being read"
+            ) from None
         raise ReferenceFileError(exc.reason.removeprefix("is ")) from None  # unreadable (…), not a regular file (…)
 
 
@@ -169,7 +170,9 @@ def _model_folder(path: Path) -> ModelFolder:
         if not stat.S_ISREG(info.st_mode):
             skipped.append((entry, f"not a regular file ({file_kind(info.st_mode)})"))
         elif info.st_size > MAX_SCENE_FILE_BYTES:
-            skipped.append((entry, f"{info.st_size} bytes, above the limit of {MAX_SCENE_FILE_BYTES} bytes for a scene file"))
+            skipped.append(
+                (entry, f"{info.st_size} bytes, above the limit of {MAX_SCENE_FILE_BYTES} bytes for a scene file")
+            )
         else:
             files.append(entry)
     return ModelFolder(path=path, files=files, skipped=skipped)
@@ -265,8 +268,13 @@ def _all_finite_numbers(values: list[Any]) -> bool:
 
 def _pairs(value: Any, n: int, what: str) -> list[list[Any]]:
     """``n`` pairs of finite numbers, as given; :class:`_Bad` naming ``what`` otherwise."""
-    if type(value) is list and len(value) == n and set(map(type, value)) == _LIST and set(map(len, value)) == _TWO \
-            and _all_finite_numbers(list(chain.from_iterable(value))):
+    if (
+        type(value) is list
+        and len(value) == n
+        and set(map(type, value)) == _LIST
+        and set(map(len, value)) == _TWO
+        and _all_finite_numbers(list(chain.from_iterable(value)))
+    ):
         return value
     if not isinstance(value, list):
         raise _Bad(f"{what} is {'missing' if value is None else type(value).__name__}, expected {n} pairs")
@@ -325,7 +333,9 @@ def _stage_calls(frame: Mapping[str, Any], soft: list[str]) -> list[StageCall]:
         raise _Bad("no inference object (the three prompts and answers)")
     answer = inference.get("pred_actions_str")
     if not isinstance(answer, str):
-        raise _Bad(f"inference.pred_actions_str (the stage-3 answer) is {'missing' if answer is None else type(answer).__name__}, expected a string")
+        raise _Bad(
+            f"inference.pred_actions_str (the stage-3 answer) is {'missing' if answer is None else type(answer).__name__}, expected a string"
+        )
     tokens = frame.get("token_usage")
     times = frame.get("time_usage")
     calls = []
@@ -337,8 +347,11 @@ def _stage_calls(frame: Mapping[str, Any], soft: list[str]) -> list[StageCall]:
         inp = _count(usage.get("input")) if isinstance(usage, dict) else None
         out = _count(usage.get("output")) if isinstance(usage, dict) else None
         if tokens is not None and (inp is None or out is None):
-            soft.append(f"token_usage.{prompt_key} unreadable" if not isinstance(usage, dict) else
-                        f"token_usage.{prompt_key} = {_short(usage)} unreadable (a count is a whole number 0..10^9)")
+            soft.append(
+                f"token_usage.{prompt_key} unreadable"
+                if not isinstance(usage, dict)
+                else f"token_usage.{prompt_key} = {_short(usage)} unreadable (a count is a whole number 0..10^9)"
+            )
         seconds = times.get(prompt_key) if isinstance(times, dict) else None
         if seconds is not None and not in_bounds(seconds, MAX_SECONDS):  # finite, 0..a day per call
             soft.append(f"time_usage.{prompt_key} = {_short(seconds)} unreadable")
@@ -346,8 +359,17 @@ def _stage_calls(frame: Mapping[str, Any], soft: list[str]) -> list[StageCall]:
         elif times is not None and seconds is None:
             soft.append(f"time_usage.{prompt_key} missing")
         failed = text is not None and not out and bool(_CALL_FAILURE.match(text))
-        calls.append(StageCall(stage, join_lines(inference.get(prompt_key)), text, inp, out,
-                               float(seconds) if seconds is not None else None, failed))
+        calls.append(
+            StageCall(
+                stage,
+                join_lines(inference.get(prompt_key)),
+                text,
+                inp,
+                out,
+                float(seconds) if seconds is not None else None,
+                failed,
+            )
+        )
     return calls
 
 
@@ -426,7 +448,9 @@ def read_scene_file(path: Path, data: bytes) -> SceneFile:
     except UnicodeDecodeError as exc:
         raise ReferenceFileError(f"not UTF-8 text ({exc.reason} at byte {exc.start})") from None
     except json.JSONDecodeError as exc:
-        raise ReferenceFileError(f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno}; truncated?)") from None
+        raise ReferenceFileError(
+            f"not valid JSON ({exc.msg} at line {exc.lineno} column {exc.colno}; truncated?)"
+        ) from None
     except ValueError as exc:
         raise ReferenceFileError(f"not usable JSON ({exc})") from None
     if not isinstance(doc, dict) or not isinstance(doc.get("frames"), list):
@@ -456,7 +480,14 @@ def read_scene_file(path: Path, data: bytes) -> SceneFile:
         frames.append(frame)
     model = metadata.get("model")
     stamp = metadata.get("timestamp")
-    return SceneFile(path, scene_name, model if isinstance(model, str) else None, stamp if isinstance(stamp, str) else None, frames, problems)
+    return SceneFile(
+        path,
+        scene_name,
+        model if isinstance(model, str) else None,
+        stamp if isinstance(stamp, str) else None,
+        frames,
+        problems,
+    )
 
 
 def _index_key(frame: Any, position: int) -> tuple[float, int]:
@@ -465,7 +496,9 @@ def _index_key(frame: Any, position: int) -> tuple[float, int]:
     return (index if type(index) is int else math.inf, position)
 
 
-def iter_scene_files(folder: ModelFolder, contents: Sequence[bytes] | None = None) -> Iterator[tuple[Path, SceneFile | ReferenceFileError]]:
+def iter_scene_files(
+    folder: ModelFolder, contents: Sequence[bytes] | None = None
+) -> Iterator[tuple[Path, SceneFile | ReferenceFileError]]:
     """Read each scene file of ``folder`` in name order; a file that cannot be read yields its error."""
     for i, path in enumerate(folder.files):
         try:

@@ -33,7 +33,7 @@ import tempfile
 import threading
 from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +43,7 @@ import orjson
 from lightemma._files import FileRefused, read_regular_file
 from lightemma.errors import RunStoreError, os_error_line
 from lightemma.runs.records import MAX_NUMBER_DIGITS, bounded_values, loads_bounded, record_problem
+
 
 class RecordTooLargeError(RunStoreError):
     """A frame record whose line would pass :data:`MAX_LINE_BYTES` (answers of that size): not written."""
@@ -109,7 +110,9 @@ def encode_line(record: Mapping[str, Any], problems: list[str] | None = None, *,
         record = bounded_values(record, problems)
     try:
         return orjson.dumps(record, default=_to_jsonable, option=orjson.OPT_APPEND_NEWLINE | orjson.OPT_STRICT_INTEGER)
-    except orjson.JSONEncodeError:  # ASCII escapes: a lone surrogate (from a reference file's "\ud83d") reads back as it was
+    except (
+        orjson.JSONEncodeError
+    ):  # ASCII escapes: a lone surrogate (from a reference file's "\ud83d") reads back as it was
         dropped: list[int] = []
         clean = _sanitize(record, dropped)
         if problems is not None and dropped:
@@ -147,7 +150,7 @@ def slugify(name: str) -> str:
 
 def new_run_id(now: datetime | None = None) -> str:
     """A sortable, unique run id such as ``20261122T021700Z-3fa9c1``."""
-    now = now or datetime.now(timezone.utc)
+    now = now or datetime.now(UTC)
     return f"{now.strftime('%Y%m%dT%H%M%SZ')}-{secrets.token_hex(3)}"
 
 
@@ -155,15 +158,23 @@ def _output_dir(path: Path) -> None:
     """``mkdir -p path``, or a :class:`RunStoreError` saying in one line why it cannot be."""
     for part in (path, *path.parents):
         if part.exists() and not part.is_dir():
-            raise RunStoreError(f"cannot create the output directory {path}: {part} is a file, not a directory (choose another --output)")
+            raise RunStoreError(
+                f"cannot create the output directory {path}: {part} is a file, not a directory (choose another --output)"
+            )
     try:
         path.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         raise RunStoreError(os_error_line(exc, "create the output directory") + " (choose another --output)") from None
 
 
-def create_run_dir(output: str | os.PathLike[str], model: str, manifest: Mapping[str, Any], *, run_id: str | None = None,
-                   frame_ids: list[str] | None = None) -> Path:
+def create_run_dir(
+    output: str | os.PathLike[str],
+    model: str,
+    manifest: Mapping[str, Any],
+    *,
+    run_id: str | None = None,
+    frame_ids: list[str] | None = None,
+) -> Path:
     """Create ``<output>/<slug(model)>/<run_id>/`` with its manifest, an empty ``frames.jsonl`` and ``frame_ids.txt``.
 
     All or nothing: the files are written into a temporary directory that is then renamed into place.
@@ -186,7 +197,9 @@ def create_run_dir(output: str | os.PathLike[str], model: str, manifest: Mapping
         os.rename(tmp, run_dir)
         tmp = None
     except OSError as exc:
-        raise RunStoreError(os_error_line(exc, "create the run directory") + f" (under {parent}); nothing was written") from None
+        raise RunStoreError(
+            os_error_line(exc, "create the run directory") + f" (under {parent}); nothing was written"
+        ) from None
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
@@ -229,8 +242,9 @@ def read_small_text(path: Path, limit: int) -> str:
         return read_regular_file(path, limit).decode("utf-8")
     except FileRefused as exc:
         if exc.kind == "too-large":
-            raise RunStoreError(f"{path} is {exc.size:,} bytes, over the {limit:,} a run directory's file may be") \
-                from None
+            raise RunStoreError(
+                f"{path} is {exc.size:,} bytes, over the {limit:,} a run directory's file may be"
+            ) from None
         if exc.kind == "grew":
             raise RunStoreError(f"{path} is over the {limit:,} bytes a run directory's file may be") from None
         raise RunStoreError(f"{path} {exc.reason}") from None  # is unreadable (…), is not a regular file (…)
@@ -258,8 +272,10 @@ class RunLock:
         try:
             lock.acquire(timeout=0)
         except Timeout:
-            raise RunStoreError(f"{self.run_dir} is being written by another lightemma process (PID {self.holder() or 'unknown'}); "
-                                "wait for it to finish (or stop it) before running this again") from None
+            raise RunStoreError(
+                f"{self.run_dir} is being written by another lightemma process (PID {self.holder() or 'unknown'}); "
+                "wait for it to finish (or stop it) before running this again"
+            ) from None
         except OSError as exc:
             raise RunStoreError(os_error_line(exc, "lock the run directory")) from None
         self._lock = lock
@@ -307,7 +323,9 @@ def read_manifest(run_dir: str | os.PathLike[str]) -> dict[str, Any]:
         why = "nested too deeply" if isinstance(exc, RecursionError) else exc
         raise RunStoreError(f"{path} is unreadable: {why}") from None
     if not isinstance(manifest, dict) or manifest.get("format") != FORMAT:
-        raise RunStoreError(f"{path} is not a lightemma run manifest (format {manifest.get('format') if isinstance(manifest, dict) else None!r}, expected {FORMAT!r})")
+        raise RunStoreError(
+            f"{path} is not a lightemma run manifest (format {manifest.get('format') if isinstance(manifest, dict) else None!r}, expected {FORMAT!r})"
+        )
     return manifest
 
 
@@ -364,8 +382,10 @@ class RunContents:
             out.append(f"{self.run_dir}: ignored a truncated last line (the run was interrupted)")
         if self.corrupt_lines:
             shown = ", ".join(map(str, self.corrupt_lines[:10]))
-            out.append(f"{self.run_dir}: skipped {len(self.corrupt_lines)} corrupt line(s) of {FRAMES_FILE} (line {shown}{', …' if len(self.corrupt_lines) > 10 else ''})"
-                       + (f"; {self.corrupt_example}" if self.corrupt_example else ""))
+            out.append(
+                f"{self.run_dir}: skipped {len(self.corrupt_lines)} corrupt line(s) of {FRAMES_FILE} (line {shown}{', …' if len(self.corrupt_lines) > 10 else ''})"
+                + (f"; {self.corrupt_example}" if self.corrupt_example else "")
+            )
         if not self.complete:
             out.append(f"{self.run_dir}: run not finished; using the {len(self.records)} frame(s) done so far")
         return out
@@ -427,12 +447,17 @@ def find_run_dirs(path: str | os.PathLike[str]) -> list[Path]:
         return [path]
     if not path.is_dir():
         if path.exists():
-            raise RunStoreError(f"{path} is a file, not a run directory; give the folder that holds {MANIFEST_FILE} "
-                                f"({path.parent if path.name in (MANIFEST_FILE, FRAMES_FILE) else 'a run directory'})")
+            raise RunStoreError(
+                f"{path} is a file, not a run directory; give the folder that holds {MANIFEST_FILE} "
+                f"({path.parent if path.name in (MANIFEST_FILE, FRAMES_FILE) else 'a run directory'})"
+            )
         raise RunStoreError(f"{path} does not exist")
     # hidden directories are a run directory still being created (or one whose creation was cut off)
-    return sorted(p.parent for p in path.glob(f"**/{MANIFEST_FILE}")
-                  if not any(part.startswith(".") for part in p.parent.relative_to(path).parts))
+    return sorted(
+        p.parent
+        for p in path.glob(f"**/{MANIFEST_FILE}")
+        if not any(part.startswith(".") for part in p.parent.relative_to(path).parts)
+    )
 
 
 class RunWriter:
@@ -442,7 +467,9 @@ class RunWriter:
     the frame it belonged to was not finished and will be redone).
     """
 
-    def __init__(self, run_dir: str | os.PathLike[str], *, fsync: bool = False, log: Callable[[str], None] | None = None) -> None:
+    def __init__(
+        self, run_dir: str | os.PathLike[str], *, fsync: bool = False, log: Callable[[str], None] | None = None
+    ) -> None:
         self.path = Path(run_dir) / FRAMES_FILE
         self._fsync = fsync
         self.log = log  # where the one warning about values recorded as unknown goes (else stderr)
@@ -486,8 +513,10 @@ class RunWriter:
         problems: list[str] = []
         data = encode_line(record, problems)
         if len(data) > MAX_LINE_BYTES:  # a line no reader would read back: refused, never written to be skipped later
-            raise RecordTooLargeError(f"frame {str(record.get('frame_id'))[:120]!r}: its record is {len(data):,} bytes, over "
-                                      f"the {MAX_LINE_BYTES:,} a line of {FRAMES_FILE} may be")
+            raise RecordTooLargeError(
+                f"frame {str(record.get('frame_id'))[:120]!r}: its record is {len(data):,} bytes, over "
+                f"the {MAX_LINE_BYTES:,} a line of {FRAMES_FILE} may be"
+            )
         if problems:
             self._warn_unknown(record, problems)
         with self._lock:
@@ -503,8 +532,10 @@ class RunWriter:
             self.unknown_values += 1
             if self.unknown_values > 1:
                 return
-        line = (f"warning: {self.path}: frame {record.get('frame_id')!r}: {'; '.join(problems[:3])}{'; …' if len(problems) > 3 else ''} "
-                "— recorded as unknown (null); later records with such values are not named")
+        line = (
+            f"warning: {self.path}: frame {record.get('frame_id')!r}: {'; '.join(problems[:3])}{'; …' if len(problems) > 3 else ''} "
+            "— recorded as unknown (null); later records with such values are not named"
+        )
         if self.log is not None:
             self.log(line)
         else:

@@ -54,7 +54,7 @@ def _skeleton(prompt: str, texts: Mapping[str, str | None]) -> str | None:
             return None
         at = out.find(text)
         if at >= 0:
-            out = out[:at] + mark + out[at + len(text):]
+            out = out[:at] + mark + out[at + len(text) :]
     return out
 
 
@@ -155,7 +155,7 @@ def _common_length(a: str, b: str, limit: int, *, suffix: bool = False) -> int:
     lo, hi = 0, limit
     while lo < hi:
         mid = (lo + hi + 1) // 2
-        same = a[len(a) - mid:] == b[len(b) - mid:] if suffix else a[:mid] == b[:mid]
+        same = a[len(a) - mid :] == b[len(b) - mid :] if suffix else a[:mid] == b[:mid]
         lo, hi = (mid, hi) if same else (lo, mid - 1)
     return lo
 
@@ -174,7 +174,7 @@ def _common_ends(a: str, b: str) -> tuple[str, str] | None:
             m -= 1
     if n + m < MIN_SHARED * max(len(a), len(b)):  # of the longer: a short prompt and a long one are two forms
         return None
-    return a[:n], a[len(a) - m:] if m else ""
+    return a[:n], a[len(a) - m :] if m else ""
 
 
 def _in_number(text: str, at: int) -> bool:
@@ -182,7 +182,9 @@ def _in_number(text: str, at: int) -> bool:
     return 0 < at < len(text) and text[at - 1] in _NUMBER_CHARS and text[at] in _NUMBER_CHARS
 
 
-def call_prompt(call: Mapping[str, Any], texts: Mapping[str, str | None], templates: Mapping[str, Sequence[str]] | None) -> str | None:
+def call_prompt(
+    call: Mapping[str, Any], texts: Mapping[str, str | None], templates: Mapping[str, Sequence[str]] | None
+) -> str | None:
     """The prompt a stored call was sent: its ``prompt``, or its template (from the run manifest's
     ``prompt_set.templates``) filled with the frame's ``scene`` / ``intent`` texts and the call's ``prompt_fill``.
 
@@ -193,8 +195,13 @@ def call_prompt(call: Mapping[str, Any], texts: Mapping[str, str | None], templa
         return prompt if isinstance(prompt, str) else None
     stage_templates = (templates or {}).get(call.get("stage"))  # type: ignore[arg-type]  # any other stage: None
     index, fill = call.get("prompt_template"), call.get("prompt_fill")
-    if not isinstance(stage_templates, Sequence) or type(index) is not int or not 0 <= index < len(stage_templates) \
-            or not isinstance(fill, str) or not isinstance(stage_templates[index], str):
+    if (
+        not isinstance(stage_templates, Sequence)
+        or type(index) is not int
+        or not 0 <= index < len(stage_templates)
+        or not isinstance(fill, str)
+        or not isinstance(stage_templates[index], str)
+    ):
         return None
     try:
         return _render(stage_templates[index], texts, fill)
@@ -215,5 +222,9 @@ def frame_texts(calls: Sequence[Mapping[str, Any]]) -> dict[str, str | None]:
         stage = call.get("stage") if isinstance(call, Mapping) else None
         if stage in out:
             text = call.get("text")
-            out[stage] = text if isinstance(text, str) else (call.get("error_message") if isinstance(call.get("error_message"), str) else None)
+            out[stage] = (
+                text
+                if isinstance(text, str)
+                else (call.get("error_message") if isinstance(call.get("error_message"), str) else None)
+            )
     return out

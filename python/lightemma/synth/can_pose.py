@@ -45,12 +45,14 @@ def pose_messages(scn: Scenario) -> list[dict]:
     kin = kinematics(scn, utimes)
     out = []
     for u, (x, y, yaw), (v, a, a_lat, rate) in zip(utimes.tolist(), poses.tolist(), kin.tolist()):
-        out.append({
-            "utime": int(u),
-            "pos": [x, y, 0.0],
-            "orientation": [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)],
-            "vel": [v, 0.0, 0.0],
-            "accel": [a, a_lat, 0.0],
-            "rotation_rate": [0.0, 0.0, rate],
-        })
+        out.append(
+            {
+                "utime": int(u),
+                "pos": [x, y, 0.0],
+                "orientation": [math.cos(yaw / 2.0), 0.0, 0.0, math.sin(yaw / 2.0)],
+                "vel": [v, 0.0, 0.0],
+                "accel": [a, a_lat, 0.0],
+                "rotation_rate": [0.0, 0.0, rate],
+            }
+        )
     return out

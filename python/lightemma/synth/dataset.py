@@ -31,8 +31,8 @@ import numpy as np
 from PIL import Image
 
 from lightemma.errors import UserError
-from lightemma.nuscenes.json_tables import TABLES
 from lightemma.frames.model import SYNTH_MARKER
+from lightemma.nuscenes.json_tables import TABLES
 from lightemma.synth import can_pose as synth_can
 from lightemma.synth import maps as synth_maps
 from lightemma.synth.camera import Camera
@@ -43,7 +43,10 @@ GENERATOR = "lightemma-synth/1"
 CHANNEL = "CAM_FRONT"
 CATEGORIES = (
     ("vehicle.car", "Vehicle designed primarily for personal use, e.g. sedans, hatch-backs, wagons, vans, SUVs."),
-    ("vehicle.truck", "Vehicles primarily designed to haul cargo including pick-ups, lorries, trucks and semi-tractors."),
+    (
+        "vehicle.truck",
+        "Vehicles primarily designed to haul cargo including pick-ups, lorries, trucks and semi-tractors.",
+    ),
     ("human.pedestrian.adult", "Adult subcategory."),
 )
 ATTRIBUTES = (
@@ -103,13 +106,15 @@ def build_tables(
     sensor_token = token(seed, "sensor", CHANNEL)
     cs_token = token(seed, "calibrated_sensor", CHANNEL)
     t["sensor"] = [{"token": sensor_token, "channel": CHANNEL, "modality": "camera"}]
-    t["calibrated_sensor"] = [{
-        "token": cs_token,
-        "sensor_token": sensor_token,
-        "translation": list(camera.translation),
-        "rotation": list(camera.rotation),
-        "camera_intrinsic": camera.intrinsic.tolist(),
-    }]
+    t["calibrated_sensor"] = [
+        {
+            "token": cs_token,
+            "sensor_token": sensor_token,
+            "translation": list(camera.translation),
+            "rotation": list(camera.rotation),
+            "camera_intrinsic": camera.intrinsic.tolist(),
+        }
+    ]
     maps: dict[str, list[str]] = {}
 
     for scn in scenarios:
@@ -117,33 +122,39 @@ def build_tables(
         log_name = f"synth-{seed:04d}-{i:04d}-{scn.location}"
         log_token = token(seed, "log", i)
         maps.setdefault(scn.location, []).append(log_token)
-        t["log"].append({
-            "token": log_token,
-            "logfile": log_name,
-            "vehicle": "synth",
-            "date_captured": "2018-08-01",
-            "location": scn.location,
-        })
+        t["log"].append(
+            {
+                "token": log_token,
+                "logfile": log_name,
+                "vehicle": "synth",
+                "date_captured": "2018-08-01",
+                "location": scn.location,
+            }
+        )
         scene_token = token(seed, "scene", i)
         kf_times = list(scn.keyframe_times_us)
         sample_tokens = [token(seed, "sample", i, k) for k in range(len(kf_times))]
         for k, ts in enumerate(kf_times):
-            t["sample"].append({
-                "token": sample_tokens[k],
-                "timestamp": ts,
-                "prev": sample_tokens[k - 1] if k > 0 else "",
-                "next": sample_tokens[k + 1] if k + 1 < len(kf_times) else "",
-                "scene_token": scene_token,
-            })
-        t["scene"].append({
-            "token": scene_token,
-            "log_token": log_token,
-            "nbr_samples": len(kf_times),
-            "first_sample_token": sample_tokens[0],
-            "last_sample_token": sample_tokens[-1],
-            "name": scn.name,
-            "description": scn.description,
-        })
+            t["sample"].append(
+                {
+                    "token": sample_tokens[k],
+                    "timestamp": ts,
+                    "prev": sample_tokens[k - 1] if k > 0 else "",
+                    "next": sample_tokens[k + 1] if k + 1 < len(kf_times) else "",
+                    "scene_token": scene_token,
+                }
+            )
+        t["scene"].append(
+            {
+                "token": scene_token,
+                "log_token": log_token,
+                "nbr_samples": len(kf_times),
+                "first_sample_token": sample_tokens[0],
+                "last_sample_token": sample_tokens[-1],
+                "name": scn.name,
+                "description": scn.description,
+            }
+        )
         # CAM_FRONT sample_data chain: keyframe, 5 sweeps, keyframe, ...
         records: list[tuple[int, bool, str]] = []  # (timestamp, is_key_frame, sample_token)
         sweep_lists = sweep_times_us(scn.keyframe_times_us) if sweeps else [[] for _ in kf_times[1:]]
@@ -156,28 +167,32 @@ def build_tables(
         poses = scn.pose(secs)
         for j, ((ts, key, st), pose) in enumerate(zip(records, poses)):
             ep_token = token(seed, "ego_pose", i, ts)
-            t["ego_pose"].append({
-                "token": ep_token,
-                "timestamp": ts,
-                "rotation": quaternion_from_yaw(float(pose[2])),
-                "translation": [float(pose[0]), float(pose[1]), 0.0],
-            })
+            t["ego_pose"].append(
+                {
+                    "token": ep_token,
+                    "timestamp": ts,
+                    "rotation": quaternion_from_yaw(float(pose[2])),
+                    "translation": [float(pose[0]), float(pose[1]), 0.0],
+                }
+            )
             folder = "samples" if key else "sweeps"
             filename = f"{folder}/{CHANNEL}/{log_name}__{CHANNEL}__{ts}.jpg"
-            t["sample_data"].append({
-                "token": sd_tokens[j],
-                "sample_token": st,
-                "ego_pose_token": ep_token,
-                "calibrated_sensor_token": cs_token,
-                "timestamp": ts,
-                "fileformat": "jpg",
-                "is_key_frame": key,
-                "height": camera.height,
-                "width": camera.width,
-                "filename": filename,
-                "prev": sd_tokens[j - 1] if j > 0 else "",
-                "next": sd_tokens[j + 1] if j + 1 < len(records) else "",
-            })
+            t["sample_data"].append(
+                {
+                    "token": sd_tokens[j],
+                    "sample_token": st,
+                    "ego_pose_token": ep_token,
+                    "calibrated_sensor_token": cs_token,
+                    "timestamp": ts,
+                    "fileformat": "jpg",
+                    "is_key_frame": key,
+                    "height": camera.height,
+                    "width": camera.width,
+                    "filename": filename,
+                    "prev": sd_tokens[j - 1] if j > 0 else "",
+                    "next": sd_tokens[j + 1] if j + 1 < len(records) else "",
+                }
+            )
             images.append((filename, float(secs[j]), scn))
         if scn.lead is not None:
             _lead_annotations(t, scn, seed, sample_tokens, cat_tokens["vehicle.car"], attr_tokens)
@@ -186,12 +201,14 @@ def build_tables(
 
     for location, logs in sorted(maps.items()):
         map_token = token(seed, "map", location)
-        t["map"].append({
-            "token": map_token,
-            "log_tokens": logs,
-            "category": "semantic_prior",
-            "filename": f"maps/{map_token}.png",
-        })
+        t["map"].append(
+            {
+                "token": map_token,
+                "log_tokens": logs,
+                "category": "semantic_prior",
+                "filename": f"maps/{map_token}.png",
+            }
+        )
     return t, images
 
 
@@ -203,8 +220,18 @@ def _lead_annotations(t, scn: Scenario, seed: int, sample_tokens: list[str], cat
     lead = scn.lead
     assert lead is not None
     attributes = [[attrs["vehicle.moving" if v > 0.1 else "vehicle.stopped"]] for v in lead.profile.v(secs)]
-    _track(t, token(seed, "instance", i, "lead"), ann_tokens, sample_tokens, cat_token, scn.lead_pose(secs), lead,
-           attributes, lidar_pts=120, radar_pts=3)
+    _track(
+        t,
+        token(seed, "instance", i, "lead"),
+        ann_tokens,
+        sample_tokens,
+        cat_token,
+        scn.lead_pose(secs),
+        lead,
+        attributes,
+        lidar_pts=120,
+        radar_pts=3,
+    )
 
 
 def _agent_annotations(t, scn: Scenario, agent, seed: int, sample_tokens: list[str], cat_token: str, attrs) -> None:
@@ -217,36 +244,61 @@ def _agent_annotations(t, scn: Scenario, agent, seed: int, sample_tokens: list[s
         attribute = [attrs["vehicle.moving" if abs(agent.v) > 0.1 else "vehicle.parked"]]
     else:
         attribute = []
-    _track(t, token(seed, "instance", i, agent.name), ann_tokens, sample_tokens, cat_token, poses, agent,
-           [attribute] * len(poses), lidar_pts=60, radar_pts=0)
+    _track(
+        t,
+        token(seed, "instance", i, agent.name),
+        ann_tokens,
+        sample_tokens,
+        cat_token,
+        poses,
+        agent,
+        [attribute] * len(poses),
+        lidar_pts=60,
+        radar_pts=0,
+    )
 
 
-def _track(t, inst_token: str, ann_tokens: list[str], sample_tokens: list[str], cat_token: str, poses, box,
-           attributes: list[list[str]], *, lidar_pts: int, radar_pts: int) -> None:
+def _track(
+    t,
+    inst_token: str,
+    ann_tokens: list[str],
+    sample_tokens: list[str],
+    cat_token: str,
+    poses,
+    box,
+    attributes: list[list[str]],
+    *,
+    lidar_pts: int,
+    radar_pts: int,
+) -> None:
     """One instance and its chain of sample_annotations (one per keyframe pose (x, y, yaw); ``box`` has width,
     length and height in metres), as the nuScenes tables link them."""
     for k, pose in enumerate(poses):
-        t["sample_annotation"].append({
-            "token": ann_tokens[k],
-            "sample_token": sample_tokens[k],
-            "instance_token": inst_token,
-            "visibility_token": "4",
-            "attribute_tokens": attributes[k],
-            "translation": [float(pose[0]), float(pose[1]), box.height / 2],
-            "size": [box.width, box.length, box.height],
-            "rotation": quaternion_from_yaw(float(pose[2])),
-            "prev": ann_tokens[k - 1] if k > 0 else "",
-            "next": ann_tokens[k + 1] if k + 1 < len(ann_tokens) else "",
-            "num_lidar_pts": lidar_pts,
-            "num_radar_pts": radar_pts,
-        })
-    t["instance"].append({
-        "token": inst_token,
-        "category_token": cat_token,
-        "nbr_annotations": len(ann_tokens),
-        "first_annotation_token": ann_tokens[0],
-        "last_annotation_token": ann_tokens[-1],
-    })
+        t["sample_annotation"].append(
+            {
+                "token": ann_tokens[k],
+                "sample_token": sample_tokens[k],
+                "instance_token": inst_token,
+                "visibility_token": "4",
+                "attribute_tokens": attributes[k],
+                "translation": [float(pose[0]), float(pose[1]), box.height / 2],
+                "size": [box.width, box.length, box.height],
+                "rotation": quaternion_from_yaw(float(pose[2])),
+                "prev": ann_tokens[k - 1] if k > 0 else "",
+                "next": ann_tokens[k + 1] if k + 1 < len(ann_tokens) else "",
+                "num_lidar_pts": lidar_pts,
+                "num_radar_pts": radar_pts,
+            }
+        )
+    t["instance"].append(
+        {
+            "token": inst_token,
+            "category_token": cat_token,
+            "nbr_annotations": len(ann_tokens),
+            "first_annotation_token": ann_tokens[0],
+            "last_annotation_token": ann_tokens[-1],
+        }
+    )
 
 
 def _png(mask: np.ndarray) -> bytes:
@@ -336,8 +388,10 @@ def write_dataset(
     if table_root.exists() and not table_root.is_dir():
         raise UserError(f"cannot write version {version} to {root}: {table_root} is a file, not a folder")
     if table_root.exists() and any(table_root.iterdir()) and not overwrite:
-        raise UserError(f"{table_root} already exists; pass overwrite=True to replace it",
-                        cli=f"{table_root} already exists; add --force to replace it")
+        raise UserError(
+            f"{table_root} already exists; pass overwrite=True to replace it",
+            cli=f"{table_root} already exists; add --force to replace it",
+        )
     camera = Camera(int(image_size[0]), int(image_size[1]))
     scenarios = synth_maps.build_scenarios(scenes, seed=seed, keyframes=keyframes)
     tables, todo = build_tables(scenarios, seed=seed, camera=camera, sweeps=sweeps)
@@ -380,8 +434,13 @@ def write_dataset(
         # base map masks written per location (False: larger than synth.maps.MAX_MASK_PIXELS, a placeholder instead)
         "map_masks": masks,
         "scenes": [
-            {"name": s.name, "kind": s.kind, "description": s.description, "params": s.params,
-             "agents": [a.name for a in synth_maps.scene_agents(s)]}
+            {
+                "name": s.name,
+                "kind": s.kind,
+                "description": s.description,
+                "params": s.params,
+                "agents": [a.name for a in synth_maps.scene_agents(s)],
+            }
             for s in scenarios
         ],
     }

@@ -126,8 +126,12 @@ def _road(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, s_ego: float) -
     s = np.concatenate([np.arange(-6.0, 40.0, 1.0), np.arange(40.0, 150.0, 2.5)]) + s_ego
     pose = scn.path.pose(s)
     view.polygons(draw, _strip(pose, RIGHT_EDGE - SHOULDER, LEFT_EDGE + SHOULDER), ASPHALT)
-    lines = [(RIGHT_EDGE - 0.075, RIGHT_EDGE + 0.075, WHITE), (LEFT_EDGE - 0.075, LEFT_EDGE + 0.075, WHITE),
-             (CENTRE - 0.2, CENTRE - 0.08, YELLOW), (CENTRE + 0.08, CENTRE + 0.2, YELLOW)]
+    lines = [
+        (RIGHT_EDGE - 0.075, RIGHT_EDGE + 0.075, WHITE),
+        (LEFT_EDGE - 0.075, LEFT_EDGE + 0.075, WHITE),
+        (CENTRE - 0.2, CENTRE - 0.08, YELLOW),
+        (CENTRE + 0.08, CENTRE + 0.2, YELLOW),
+    ]
     for lo, hi, colour in lines:
         view.polygons(draw, _strip(pose, lo, hi), colour)
 
@@ -140,8 +144,14 @@ def _intersection(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None
     base = np.array([x, y, 0.0])
     centre = base + scn.light.crossing * h
     half_w, half_l = 6.0, 60.0
-    quad = np.stack([centre - half_w * h - half_l * n, centre + half_w * h - half_l * n,
-                     centre + half_w * h + half_l * n, centre - half_w * h + half_l * n])
+    quad = np.stack(
+        [
+            centre - half_w * h - half_l * n,
+            centre + half_w * h - half_l * n,
+            centre + half_w * h + half_l * n,
+            centre - half_w * h + half_l * n,
+        ]
+    )
     view.polygon(draw, quad, ASPHALT)
 
 
@@ -208,11 +218,15 @@ def _lead(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario, t: float) -> No
     # shadow-dark bumper band, rear window and brake lights on the rear face
     braking = float(lead.profile.a(t)) < 0 or float(lead.profile.v(t)) < 0.1  # v: scn.lead_speed
     lamp = (255, 30, 30) if braking else (140, 25, 25)
-    view.polygon(draw, np.array([corner(-1, -0.85, 0.95), corner(-1, 0.85, 0.95),
-                                 corner(-1, 0.85, 1.4), corner(-1, -0.85, 1.4)]), (30, 35, 45))
+    view.polygon(
+        draw,
+        np.array([corner(-1, -0.85, 0.95), corner(-1, 0.85, 0.95), corner(-1, 0.85, 1.4), corner(-1, -0.85, 1.4)]),
+        (30, 35, 45),
+    )
     for b0, b1 in ((-0.95, -0.65), (0.65, 0.95)):
-        view.polygon(draw, np.array([corner(-1, b0, 0.7), corner(-1, b1, 0.7),
-                                     corner(-1, b1, 0.88), corner(-1, b0, 0.88)]), lamp)
+        view.polygon(
+            draw, np.array([corner(-1, b0, 0.7), corner(-1, b1, 0.7), corner(-1, b1, 0.88), corner(-1, b0, 0.88)]), lamp
+        )
 
 
 def render_frame(scn: Scenario, t: float, camera: Camera) -> Image.Image:
@@ -242,6 +256,7 @@ def _stop_line(draw: ImageDraw.ImageDraw, view: _View, scn: Scenario) -> None:
     x, y, yaw = scn.path.pose(scn.light.stop_s)
     h, n = _axes(yaw)
     base = np.array([x, y, 0.0])
-    stop = np.stack([base + RIGHT_EDGE * n, base + RIGHT_EDGE * n - 0.5 * h,
-                     base + CENTRE * n - 0.5 * h, base + CENTRE * n])
+    stop = np.stack(
+        [base + RIGHT_EDGE * n, base + RIGHT_EDGE * n - 0.5 * h, base + CENTRE * n - 0.5 * h, base + CENTRE * n]
+    )
     view.polygon(draw, stop, WHITE)

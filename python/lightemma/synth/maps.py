@@ -94,12 +94,32 @@ def scene_agents(scn: Scenario) -> tuple[Agent, ...]:
         v = float(scn.params.get("speed", 10.0))
         return (Agent("oncoming", "vehicle.car", s0=120.0, lateral=LANE_WIDTH, v=-v, yaw_offset=math.pi),)
     if scn.kind in ("accelerate", "straight-after-turn"):
-        return (Agent("parked-1", "vehicle.car", s0=25.0, lateral=kerb), Agent("parked-2", "vehicle.car", s0=60.0, lateral=kerb))
+        return (
+            Agent("parked-1", "vehicle.car", s0=25.0, lateral=kerb),
+            Agent("parked-2", "vehicle.car", s0=60.0, lateral=kerb),
+        )
     if scn.kind in ("left-turn", "right-turn"):
         return (
-            Agent("pedestrian-kerb", "human.pedestrian.adult", s0=15.0, lateral=ROAD_RIGHT - 1.0, length=0.7, width=0.7, height=1.75),
-            Agent("pedestrian-far", "human.pedestrian.adult", s0=40.0, lateral=ROAD_LEFT - 1.0, v=0.0, yaw_offset=math.pi / 2,
-                  length=0.7, width=0.7, height=1.75),
+            Agent(
+                "pedestrian-kerb",
+                "human.pedestrian.adult",
+                s0=15.0,
+                lateral=ROAD_RIGHT - 1.0,
+                length=0.7,
+                width=0.7,
+                height=1.75,
+            ),
+            Agent(
+                "pedestrian-far",
+                "human.pedestrian.adult",
+                s0=40.0,
+                lateral=ROAD_LEFT - 1.0,
+                v=0.0,
+                yaw_offset=math.pi / 2,
+                length=0.7,
+                width=0.7,
+                height=1.75,
+            ),
         )
     if scn.kind == "brake-red-light":
         return (Agent("parked", "vehicle.car", s0=20.0, lateral=kerb),)
@@ -216,14 +236,24 @@ def arcline_path(scn: Scenario, piece: Piece, oncoming: bool) -> dict:
     start, end = [float(v) for v in line[0]], [float(v) for v in line[-1]]
     ds = piece.s_to - piece.s_from
     if not piece.curved:
-        return {"start_pose": start, "end_pose": end, "shape": "LSR", "radius": STRAIGHT_RADIUS,
-                "segment_length": [0.0, float(ds), 0.0]}
+        return {
+            "start_pose": start,
+            "end_pose": end,
+            "shape": "LSR",
+            "radius": STRAIGHT_RADIUS,
+            "segment_length": [0.0, float(ds), 0.0],
+        }
     k = piece.curvature
     if oncoming:
         k = -k / (1.0 - k * LANE_WIDTH)
     length = abs(piece.curvature * ds / k)  # the same turn angle on the offset curve
-    return {"start_pose": start, "end_pose": end, "shape": "LSL" if k > 0 else "RSR", "radius": float(1.0 / abs(k)),
-            "segment_length": [float(length), 0.0, 0.0]}
+    return {
+        "start_pose": start,
+        "end_pose": end,
+        "shape": "LSL" if k > 0 else "RSR",
+        "radius": float(1.0 / abs(k)),
+        "segment_length": [float(length), 0.0, 0.0],
+    }
 
 
 def expansion_json(scenarios: list[Scenario], location: str, token) -> dict:
@@ -242,10 +272,29 @@ def expansion_json(scenarios: list[Scenario], location: str, token) -> dict:
         areas.append({"token": token("drivable_area", location, scn.index), "polygon_tokens": [ptok]})
     xs = [n["x"] for n in nodes] or [0.0]
     ys = [n["y"] for n in nodes] or [0.0]
-    layers = ("line", "road_segment", "road_block", "lane", "ped_crossing", "walkway", "stop_line", "carpark_area",
-              "road_divider", "lane_divider", "traffic_light", "lane_connector")
-    doc: dict = {"version": "1.3", "canvas_edge": [max(xs) + MARGIN, max(ys) + MARGIN], "node": nodes, "polygon": polygons,
-                 "drivable_area": areas, "arcline_path_3": {}, "connectivity": {}}
+    layers = (
+        "line",
+        "road_segment",
+        "road_block",
+        "lane",
+        "ped_crossing",
+        "walkway",
+        "stop_line",
+        "carpark_area",
+        "road_divider",
+        "lane_divider",
+        "traffic_light",
+        "lane_connector",
+    )
+    doc: dict = {
+        "version": "1.3",
+        "canvas_edge": [max(xs) + MARGIN, max(ys) + MARGIN],
+        "node": nodes,
+        "polygon": polygons,
+        "drivable_area": areas,
+        "arcline_path_3": {},
+        "connectivity": {},
+    }
     doc.update({name: [] for name in layers})
     for scn in scenarios:
         _road_layers(doc, scn, location, token)
@@ -281,15 +330,24 @@ def _road_layers(doc: dict, scn: Scenario, location: str, token) -> None:
     a, _ = _arc_range(scn)
     area = token("drivable_area", location, scn.index)
     yaw = float(scn.path.pose(a)[2])
-    doc["carpark_area"].append({"token": token("carpark_area", location, scn.index),
-                                "polygon_token": polygon("carpark", a, a + CARPARK_LENGTH, "r", "l"),
-                                "orientation": float((yaw + math.pi) % (2 * math.pi) - math.pi),
-                                "road_block_token": ""})
+    doc["carpark_area"].append(
+        {
+            "token": token("carpark_area", location, scn.index),
+            "polygon_token": polygon("carpark", a, a + CARPARK_LENGTH, "r", "l"),
+            "orientation": float((yaw + math.pi) % (2 * math.pi) - math.pi),
+            "road_block_token": "",
+        }
+    )
     chains: dict[bool, list[str]] = {False: [], True: []}
     for i, piece in enumerate(road_pieces(scn)):
-        doc["road_segment"].append({"token": token("road_segment", location, scn.index, i),
-                                    "polygon_token": polygon(f"road_segment-{i}", piece.s_from, piece.s_to, "r", "l"),
-                                    "is_intersection": piece.curved, "drivable_area_token": area})
+        doc["road_segment"].append(
+            {
+                "token": token("road_segment", location, scn.index, i),
+                "polygon_token": polygon(f"road_segment-{i}", piece.s_from, piece.s_to, "r", "l"),
+                "is_intersection": piece.curved,
+                "drivable_area_token": area,
+            }
+        )
         for oncoming in (False, True):
             name = f"{'oncoming' if oncoming else 'ego'}-{i}"
             t = token("lane", location, scn.index, name)
@@ -299,10 +357,17 @@ def _road_layers(doc: dict, scn: Scenario, location: str, token) -> None:
                 doc["lane_connector"].append({"token": t, "polygon_token": ptok})
             else:
                 start, end = (piece.s_to, piece.s_from) if oncoming else (piece.s_from, piece.s_to)
-                doc["lane"].append({"token": t, "polygon_token": ptok, "lane_type": "CAR",
-                                    "from_edge_line_token": line(f"{name}-from", start, right, left),
-                                    "to_edge_line_token": line(f"{name}-to", end, right, left),
-                                    "left_lane_divider_segments": [], "right_lane_divider_segments": []})
+                doc["lane"].append(
+                    {
+                        "token": t,
+                        "polygon_token": ptok,
+                        "lane_type": "CAR",
+                        "from_edge_line_token": line(f"{name}-from", start, right, left),
+                        "to_edge_line_token": line(f"{name}-to", end, right, left),
+                        "left_lane_divider_segments": [],
+                        "right_lane_divider_segments": [],
+                    }
+                )
             doc["arcline_path_3"][t] = [arcline_path(scn, piece, oncoming)]
             chains[oncoming].append(t)
     chains[True].reverse()  # the oncoming lane is driven from the road's far end

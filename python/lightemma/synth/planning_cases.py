@@ -137,8 +137,10 @@ def _keyframe(scn: Scenario, keyframe: int) -> float:
     ahead = float(scn.profile.s(t0 + 3.0)) + 2 * CENTRE_OFFSET + 10.0
     k = scn.path.curvature(np.linspace(s0 - 5.0, ahead, 200))
     if np.any(k != 0.0):
-        raise InputError(f"scene {scn.name} keyframe {keyframe}: the road curves within the plan's reach; the plan "
-                         "cases need a straight stretch")
+        raise InputError(
+            f"scene {scn.name} keyframe {keyframe}: the road curves within the plan's reach; the plan "
+            "cases need a straight stretch"
+        )
     return t0
 
 
@@ -176,8 +178,17 @@ def wrong_way(scn: Scenario, keyframe: int) -> PlanCase:
     travel = np.where(out[1:], np.hypot(*np.diff(c, axis=0).T), 0.0)
     window = np.array([travel[max(0, t - 10) : t].sum() for t in range(1, 31)])
     step = int(np.argmax(window >= 6.0)) + 1
-    return PlanCase("wrong-way", "ddc", scn.name, keyframe, v, poses, _time(step),
-                    f"drifts into the oncoming lane at {v:.2f} m/s", {"oncoming_from": float(np.argmax(out)) / 10})
+    return PlanCase(
+        "wrong-way",
+        "ddc",
+        scn.name,
+        keyframe,
+        v,
+        poses,
+        _time(step),
+        f"drifts into the oncoming lane at {v:.2f} m/s",
+        {"oncoming_from": float(np.argmax(out)) / 10},
+    )
 
 
 def hard_brake(scn: Scenario, keyframe: int) -> PlanCase:
@@ -189,8 +200,17 @@ def hard_brake(scn: Scenario, keyframe: int) -> PlanCase:
     if v < 3.0:
         raise InputError(f"scene {scn.name} keyframe {keyframe}: speed {v:.2f} m/s; hard_brake needs ≥ 3 m/s")
     x = _braking(v, HARD_BRAKE, 1.0, POSE_TIMES)
-    return PlanCase("hard-brake", "c", scn.name, keyframe, v, _poses(x, np.zeros(6)), 1.0,
-                    f"brakes at {HARD_BRAKE} m/s² from {v:.2f} m/s after 1 s", {"rest_at": 1.0 + v / HARD_BRAKE})
+    return PlanCase(
+        "hard-brake",
+        "c",
+        scn.name,
+        keyframe,
+        v,
+        _poses(x, np.zeros(6)),
+        1.0,
+        f"brakes at {HARD_BRAKE} m/s² from {v:.2f} m/s after 1 s",
+        {"rest_at": 1.0 + v / HARD_BRAKE},
+    )
 
 
 def swerve(scn: Scenario, keyframe: int) -> PlanCase:
@@ -214,9 +234,17 @@ def swerve(scn: Scenario, keyframe: int) -> PlanCase:
             break
     if step < 0:  # pragma: no cover - the poses above are 0.5 m off from the first step on
         raise AssertionError("swerve: no run of 20 steps")
-    return PlanCase("swerve", "lk", scn.name, keyframe, v, poses, _time(step),
-                    f"swerves {SWERVE_OFFSET} m left and stays at {v:.2f} m/s",
-                    {"far_steps": float(far.sum()), "far_from": float(np.argmax(far)) / 10})
+    return PlanCase(
+        "swerve",
+        "lk",
+        scn.name,
+        keyframe,
+        v,
+        poses,
+        _time(step),
+        f"swerves {SWERVE_OFFSET} m left and stays at {v:.2f} m/s",
+        {"far_steps": float(far.sum()), "far_from": float(np.argmax(far)) / 10},
+    )
 
 
 def stop_short(scn: Scenario, keyframe: int) -> PlanCase:
@@ -228,13 +256,23 @@ def stop_short(scn: Scenario, keyframe: int) -> PlanCase:
     t0 = _keyframe(scn, keyframe)
     v = float(scn.speed(t0))
     if v < 2.0 or float(scn.profile.a(t0)) != 0.0:
-        raise InputError(f"scene {scn.name} keyframe {keyframe}: speed {v:.2f} m/s, acceleration "
-                         f"{float(scn.profile.a(t0)):.2f} m/s²; stop_short needs ≥ 2 m/s at constant speed")
+        raise InputError(
+            f"scene {scn.name} keyframe {keyframe}: speed {v:.2f} m/s, acceleration "
+            f"{float(scn.profile.a(t0)):.2f} m/s²; stop_short needs ≥ 2 m/s at constant speed"
+        )
     x = _braking(v, STOP_DECEL, 0.0, POSE_TIMES)
     gt = float(scn.profile.s(t0 + 3.0) - scn.profile.s(t0))
-    return PlanCase("stop-short", "ep", scn.name, keyframe, v, _poses(x, np.zeros(6)), 3.0,
-                    f"brakes at {STOP_DECEL} m/s² and covers {x[-1]:.2f} m (the scene drives {gt:.2f} m)",
-                    {"progress": float(x[-1]), "gt_progress": gt, "rest_at": v / STOP_DECEL})
+    return PlanCase(
+        "stop-short",
+        "ep",
+        scn.name,
+        keyframe,
+        v,
+        _poses(x, np.zeros(6)),
+        3.0,
+        f"brakes at {STOP_DECEL} m/s² and covers {x[-1]:.2f} m (the scene drives {gt:.2f} m)",
+        {"progress": float(x[-1]), "gt_progress": gt, "rest_at": v / STOP_DECEL},
+    )
 
 
 def _lead_boxes(gap: float, speed: float) -> np.ndarray:
@@ -295,9 +333,18 @@ def follow_too_close(scn: Scenario, keyframe: int) -> PlanCase:
     step = _ttc_step(xr, ur, lead)
     if step < 0:  # pragma: no cover - 0.9 (v − v_lead) > gap at step 0 by construction
         raise AssertionError("follow_too_close: no TTC event on the reference")
-    return PlanCase("follow-too-close", "ttc", scn.name, keyframe, v, _poses(x, np.zeros(6)), _time(step),
-                    f"{gap:.2f} m behind a car at {v_lead:.2f} m/s, closing at {v - v_lead:.2f} m/s; brakes at "
-                    f"{FOLLOW_BRAKE} m/s²", {"gap": gap, "lead_speed": v_lead, "closing": closing}, lead)
+    return PlanCase(
+        "follow-too-close",
+        "ttc",
+        scn.name,
+        keyframe,
+        v,
+        _poses(x, np.zeros(6)),
+        _time(step),
+        f"{gap:.2f} m behind a car at {v_lead:.2f} m/s, closing at {v - v_lead:.2f} m/s; brakes at {FOLLOW_BRAKE} m/s²",
+        {"gap": gap, "lead_speed": v_lead, "closing": closing},
+        lead,
+    )
 
 
 def safe_follow(scn: Scenario, keyframe: int) -> PlanCase:
@@ -312,11 +359,25 @@ def safe_follow(scn: Scenario, keyframe: int) -> PlanCase:
     xr, ur = _brake_to(v, v_lead, SAFE_BRAKE, np.arange(31) * REFERENCE_DT)
     if _ttc_step(xr, ur, lead) >= 0:  # pragma: no cover - 1.5 s of headway against at most 0.9 s of closing
         raise AssertionError("safe_follow: a TTC event on the reference")
-    return PlanCase("safe-follow", "ttc", scn.name, keyframe, v, _poses(x, np.zeros(6)), float("nan"),
-                    f"{gap:.2f} m behind a car at {v_lead:.2f} m/s; brakes at {SAFE_BRAKE} m/s² to its speed",
-                    {"gap": gap, "lead_speed": v_lead, "closing": 0.9 * (v - v_lead)}, lead)
+    return PlanCase(
+        "safe-follow",
+        "ttc",
+        scn.name,
+        keyframe,
+        v,
+        _poses(x, np.zeros(6)),
+        float("nan"),
+        f"{gap:.2f} m behind a car at {v_lead:.2f} m/s; brakes at {SAFE_BRAKE} m/s² to its speed",
+        {"gap": gap, "lead_speed": v_lead, "closing": 0.9 * (v - v_lead)},
+        lead,
+    )
 
 
 #: every case: (function, the scenario kind it is written for)
-CASES = {"wrong-way": (wrong_way, "cruise"), "hard-brake": (hard_brake, "cruise"), "swerve": (swerve, "cruise"),
-         "stop-short": (stop_short, "cruise"), "follow-too-close": (follow_too_close, "cruise")}
+CASES = {
+    "wrong-way": (wrong_way, "cruise"),
+    "hard-brake": (hard_brake, "cruise"),
+    "swerve": (swerve, "cruise"),
+    "stop-short": (stop_short, "cruise"),
+    "follow-too-close": (follow_too_close, "cruise"),
+}

@@ -75,7 +75,9 @@ RESULT_READS = 3
 BATCH_PROVIDERS = ("openai", "anthropic", "gemini")
 
 
-def adapter_for(provider: str, model: str, *, api_base: str | None, api_key: str | None, timeout: float) -> BatchAdapter:
+def adapter_for(
+    provider: str, model: str, *, api_base: str | None, api_key: str | None, timeout: float
+) -> BatchAdapter:
     """The batch adapter for ``provider``, or a :class:`UserError` naming the providers that have one.
 
     ``api_key`` is the key the run's :class:`~lightemma.backends.api.APIBackend` decided to send
@@ -96,8 +98,10 @@ def adapter_for(provider: str, model: str, *, api_base: str | None, api_key: str
         from lightemma.backends.batch.gemini import GeminiBatches
 
         return GeminiBatches(model, api_key=api_key, timeout=timeout, base=api_base)
-    raise UserError(f"--batch: {model} is served by {provider}, which has no batch interface in lightemma "
-                    f"(batch mode covers {', '.join(BATCH_PROVIDERS)}); run it without --batch")
+    raise UserError(
+        f"--batch: {model} is served by {provider}, which has no batch interface in lightemma "
+        f"(batch mode covers {', '.join(BATCH_PROVIDERS)}); run it without --batch"
+    )
 
 
 @dataclass
@@ -120,11 +124,22 @@ class BatchBackend(Backend):
     name = "api-batch"
     wants_all_frames = True  # the runner puts every frame in flight: a wave holds one stage of every pending frame
 
-    def __init__(self, model: str, *, api_base: str | None = None, api_key_env: str | None = None, timeout: float = 120.0,
-                 poll_seconds: float = 30.0, poll_cap: float = 600.0, idle_seconds: float | None = None,
-                 max_resubmits: int = 2, adapter: BatchAdapter | None = None, retry: Any = None,
-                 price: tuple[float, float] | None = None) -> None:
-        from lightemma.backends.api import APIBackend, IMAGE_LIMITS, DEFAULT_IMAGE_LIMIT, _ImageCache
+    def __init__(
+        self,
+        model: str,
+        *,
+        api_base: str | None = None,
+        api_key_env: str | None = None,
+        timeout: float = 120.0,
+        poll_seconds: float = 30.0,
+        poll_cap: float = 600.0,
+        idle_seconds: float | None = None,
+        max_resubmits: int = 2,
+        adapter: BatchAdapter | None = None,
+        retry: Any = None,
+        price: tuple[float, float] | None = None,
+    ) -> None:
+        from lightemma.backends.api import DEFAULT_IMAGE_LIMIT, IMAGE_LIMITS, APIBackend, _ImageCache
         from lightemma.backends.retry import RetryPolicy
         from lightemma.models.prices import run_price
 
@@ -135,8 +150,9 @@ class BatchBackend(Backend):
         self.provider = self.api.provider
         self.notices = self.api.notices
         self.served_elsewhere, self.api_base_shown = self.api.served_elsewhere, self.api.api_base_shown
-        self.adapter = adapter or adapter_for(self.provider or "", self.api.model, api_base=api_base,
-                                              api_key=self.api.sent_key, timeout=timeout)
+        self.adapter = adapter or adapter_for(
+            self.provider or "", self.api.model, api_base=api_base, api_key=self.api.sent_key, timeout=timeout
+        )
         if poll_seconds <= 0 or poll_cap <= 0:
             raise UserError(f"--batch-poll must be greater than 0, got {poll_seconds:g}")
         self.poll_seconds, self.poll_cap = float(poll_seconds), max(float(poll_cap), float(poll_seconds))
@@ -146,8 +162,12 @@ class BatchBackend(Backend):
         limit_b64, max_side = IMAGE_LIMITS.get(self.provider or "", DEFAULT_IMAGE_LIMIT)
         self._images = _ImageCache(max_b64=limit_b64, max_side=max_side)
         # --price for every call; another --api-base: not the provider's batch price (as APIBackend's list price)
-        self.price = run_price(self.model_info, batch=True, given=price,
-                               served_from=self.api.api_base_shown if self.api.served_elsewhere else None)
+        self.price = run_price(
+            self.model_info,
+            batch=True,
+            given=price,
+            served_from=self.api.api_base_shown if self.api.served_elsewhere else None,
+        )
         self.journal: BatchJournal | None = None
         self._resubmitted: dict[tuple[str, str], int] = {}  # (frame, stage) -> resubmissions this session, all attempts
         self.budget: Any = None  # the session's --max-cost budget (attach)
@@ -156,8 +176,14 @@ class BatchBackend(Backend):
         self._wake: asyncio.Event | None = None
         self._flusher: asyncio.Task[None] | None = None
         self._tasks: set[asyncio.Task[Any]] = set()
-        self.report: dict[str, Any] = {"waves": 0, "batches_created": 0, "batches_resumed": 0, "requests_submitted": 0,
-                                       "requests_resubmitted": 0, "turnaround_s": []}
+        self.report: dict[str, Any] = {
+            "waves": 0,
+            "batches_created": 0,
+            "batches_resumed": 0,
+            "requests_submitted": 0,
+            "requests_resubmitted": 0,
+            "turnaround_s": [],
+        }
         self.log: Callable[[str], None] | None = None
 
     # --- set by the runner ----------------------------------------------------------------------------------
@@ -170,13 +196,17 @@ class BatchBackend(Backend):
         self.budget = budget
         done = sum(1 for b in self.journal.batches.values() if b.results is not None)
         if log and self.journal.batches:
-            log(f"batch journal: {len(self.journal.batches)} batch(es) submitted earlier ({done} with saved results); "
-                "their requests are answered from them, not submitted again")
+            log(
+                f"batch journal: {len(self.journal.batches)} batch(es) submitted earlier ({done} with saved results); "
+                "their requests are answered from them, not submitted again"
+            )
 
     def structured_output(self) -> dict[str, Any]:
         if self.adapter.provider != "openai":
-            raise UserError(f"--answer-format structured with --batch: lightemma sends response schemas in batch mode only "
-                            f"to OpenAI (this model is served by {self.provider}); use --answer-format text or drop --batch")
+            raise UserError(
+                f"--answer-format structured with --batch: lightemma sends response schemas in batch mode only "
+                f"to OpenAI (this model is served by {self.provider}); use --answer-format text or drop --batch"
+            )
         return self.api.structured_output()
 
     def effective_params(self, params: GenerationParams) -> dict[str, Any]:
@@ -184,19 +214,32 @@ class BatchBackend(Backend):
 
     @property
     def info(self) -> Mapping[str, Any]:
-        return {**self.api.info, "mode": "batch", "transport": f"{self.adapter.provider} batch API",
-                "batch": {"provider": self.adapter.provider, "max_requests": self.adapter.max_requests,
-                          "max_bytes": self.adapter.max_bytes, "poll_s": self.poll_seconds, "poll_cap_s": self.poll_cap,
-                          "max_resubmits": self.max_resubmits, "journal": "batches.jsonl"},
-                "cost": f"provider-reported tokens at the batch price ({self.price['source']})",
-                "latency": "n/a per call: a call's seconds are its batch's turnaround"}
+        return {
+            **self.api.info,
+            "mode": "batch",
+            "transport": f"{self.adapter.provider} batch API",
+            "batch": {
+                "provider": self.adapter.provider,
+                "max_requests": self.adapter.max_requests,
+                "max_bytes": self.adapter.max_bytes,
+                "poll_s": self.poll_seconds,
+                "poll_cap_s": self.poll_cap,
+                "max_resubmits": self.max_resubmits,
+                "journal": "batches.jsonl",
+            },
+            "cost": f"provider-reported tokens at the batch price ({self.price['source']})",
+            "latency": "n/a per call: a call's seconds are its batch's turnaround",
+        }
 
     @property
     def batch_report(self) -> dict[str, Any]:
         """What this session did: waves, batches created / resumed, requests, turnarounds (seconds)."""
         turn = self.report["turnaround_s"]
-        return {**self.report, "turnaround_s": [round(t, 3) for t in turn],
-                "turnaround_s_mean": round(sum(turn) / len(turn), 3) if turn else None}
+        return {
+            **self.report,
+            "turnaround_s": [round(t, 3) for t in turn],
+            "turnaround_s_mean": round(sum(turn) / len(turn), 3) if turn else None,
+        }
 
     # --- the Backend interface -------------------------------------------------------------------------------
     async def generate(self, requests: Sequence[ChatRequest]) -> list[ChatResult]:
@@ -231,8 +274,16 @@ class BatchBackend(Backend):
 
     def _custom_id(self, req: ChatRequest) -> str:
         """The request's custom id: the same request gets the same id in every session (``le`` + 40 hex digits)."""
-        what = [self.api.model, req.frame_id, req.stage, req.attempt, req.text, [list(t) for t in req.turns],
-                str(req.image_path or ""), self._params(req)]
+        what = [
+            self.api.model,
+            req.frame_id,
+            req.stage,
+            req.attempt,
+            req.text,
+            [list(t) for t in req.turns],
+            str(req.image_path or ""),
+            self._params(req),
+        ]
         return "le" + hashlib.sha256(json.dumps(what, sort_keys=True, default=str).encode()).hexdigest()[:40]
 
     def _body(self, req: ChatRequest) -> dict[str, Any]:
@@ -250,11 +301,19 @@ class BatchBackend(Backend):
 
     def _result(self, item: Mapping[str, Any], seconds: float) -> ChatResult:
         cost = self._cost(item)
-        return ChatResult(text=item.get("text") if not item.get("error") else None, input_tokens=item.get("input_tokens"),
-                          output_tokens=item.get("output_tokens"), seconds=seconds, cost_cents=cost, error=item.get("error"),
-                          error_message=item.get("error_message"), finish_reason=item.get("finish_reason"),
-                          reasoning_tokens=item.get("reasoning_tokens"), cached_input_tokens=item.get("cached_input_tokens"),
-                          cache_write_tokens=item.get("cache_write_tokens"))
+        return ChatResult(
+            text=item.get("text") if not item.get("error") else None,
+            input_tokens=item.get("input_tokens"),
+            output_tokens=item.get("output_tokens"),
+            seconds=seconds,
+            cost_cents=cost,
+            error=item.get("error"),
+            error_message=item.get("error_message"),
+            finish_reason=item.get("finish_reason"),
+            reasoning_tokens=item.get("reasoning_tokens"),
+            cached_input_tokens=item.get("cached_input_tokens"),
+            cache_write_tokens=item.get("cache_write_tokens"),
+        )
 
     def _cost(self, item: Mapping[str, Any]) -> float | None:
         """US cents at the batch price; None when usage or a needed price is unknown."""
@@ -293,8 +352,11 @@ class BatchBackend(Backend):
             try:
                 await self._run_wave(wave)
             except RunStoreError as exc:  # the journal could not be written (disk full): nothing was created after it
-                raise RunFatalError(f"{exc}; no batch was created after the line that failed (a resume goes on from the "
-                                    "journal)", cause="disk", error="JournalWriteError") from None
+                raise RunFatalError(
+                    f"{exc}; no batch was created after the line that failed (a resume goes on from the journal)",
+                    cause="disk",
+                    error="JournalWriteError",
+                ) from None
         except asyncio.CancelledError:
             raise
         except BaseException as exc:  # noqa: BLE001 - every waiting chain learns why
@@ -343,10 +405,13 @@ class BatchBackend(Backend):
         held = max(budget.reserved_cents, 0.0) / budget.per_call_cents  # calls admitted and not yet made (this wave's)
         projected = budget.spent_cents + held * per_call
         if projected > budget.limit_cents + 1e-9:
-            raise RunFatalError(f"--max-cost {budget.limit_cents:g}: {budget.spent_cents:.2f} ¢ spent (provider-reported), "
-                                f"and the {held:.0f} call(s) the admitted frames still hold, at {per_call:.3f} ¢ each (the "
-                                f"finished waves' mean: the estimate was {budget.per_call_cents:.3f} ¢), would pass the "
-                                f"limit; the next wave ({n_new} request(s)) was not sent", cause="budget")
+            raise RunFatalError(
+                f"--max-cost {budget.limit_cents:g}: {budget.spent_cents:.2f} ¢ spent (provider-reported), "
+                f"and the {held:.0f} call(s) the admitted frames still hold, at {per_call:.3f} ¢ each (the "
+                f"finished waves' mean: the estimate was {budget.per_call_cents:.3f} ¢), would pass the "
+                f"limit; the next wave ({n_new} request(s)) was not sent",
+                cause="budget",
+            )
 
     async def _find(self, token: str, at: float, n_requests: int, what: str) -> str | None:
         """The batch a submission journaled at ``at`` created, looked up by its ``token`` (every page of the provider's
@@ -354,14 +419,18 @@ class BatchBackend(Backend):
         journal = self.journal
         assert journal is not None
         try:
-            return await self._call(lambda: self.adapter.find(token, at, n_requests, set(journal.batches)), what,
-                                    requests=n_requests)
+            return await self._call(
+                lambda: self.adapter.find(token, at, n_requests, set(journal.batches)), what, requests=n_requests
+            )
         except BatchUnconfirmed as exc:
-            raise RunFatalError(f"a batch submission of {n_requests} request(s) (token {token}) got no answer, and {exc}; "
-                                "lightemma neither creates it again (it would be paid twice) nor takes a batch it cannot "
-                                "tell is its own: check the provider's console; if none of them is this run's, delete the "
-                                f"'submitting' line of {token} from {journal.path} and resume again",
-                                cause="batch-unconfirmed", error="BatchUnconfirmed") from None
+            raise RunFatalError(
+                f"a batch submission of {n_requests} request(s) (token {token}) got no answer, and {exc}; "
+                "lightemma neither creates it again (it would be paid twice) nor takes a batch it cannot "
+                "tell is its own: check the provider's console; if none of them is this run's, delete the "
+                f"'submitting' line of {token} from {journal.path} and resume again",
+                cause="batch-unconfirmed",
+                error="BatchUnconfirmed",
+            ) from None
 
     async def _submit_all(self, pending: list[_Pending]) -> list[tuple[str, list[_Pending]]]:
         """Submit ``pending`` in batches within the provider's limits; (batch id, its requests) per batch."""
@@ -428,7 +497,7 @@ class BatchBackend(Backend):
 
     def _pause(self, tries: int) -> float:
         """Seconds before the next look-up or download of a batch: ``--batch-poll`` doubling, at most the poll cap."""
-        return min(self.poll_seconds * (2 ** tries), self.poll_cap)
+        return min(self.poll_seconds * (2**tries), self.poll_cap)
 
     async def _await(self, bid: str, pending: list[_Pending], *, resumed: bool = False) -> None:
         """Poll batch ``bid`` until it ends (or read its saved results), then answer its requests by custom id."""
@@ -446,24 +515,34 @@ class BatchBackend(Backend):
         elif items is None:
             delay = self.poll_seconds
             while True:
-                status = await self._call(lambda: self.adapter.status(bid), f"poll batch {bid}", requests=len(batch.custom_ids))
+                status = await self._call(
+                    lambda: self.adapter.status(bid), f"poll batch {bid}", requests=len(batch.custom_ids)
+                )
                 if status.state != PENDING:
                     break
                 await asyncio.sleep(delay)
                 delay = min(delay * 1.5, self.poll_cap)
             state = status.provider_state
             if status.state == FAILED and status.answered is None:
-                raise RunFatalError(f"the provider failed batch {bid} as a whole ({status.provider_state}: "
-                                    f"{status.reason or 'no reason given'}) without counts of what it ran; lightemma does "
-                                    "not submit again what may have been billed: check the batch in the provider's "
-                                    "console", cause="batch-failed", error="BatchFailed")
+                raise RunFatalError(
+                    f"the provider failed batch {bid} as a whole ({status.provider_state}: "
+                    f"{status.reason or 'no reason given'}) without counts of what it ran; lightemma does "
+                    "not submit again what may have been billed: check the batch in the provider's "
+                    "console",
+                    cause="batch-failed",
+                    error="BatchFailed",
+                )
             if status.state == FAILED and status.answered == 0:  # nothing ran: its requests may go out again
                 reason = status.reason or "no reason given"
                 journal.failed(bid, status.provider_state, reason)
                 if not status.retryable:
-                    raise RunFatalError(f"the provider rejected batch {bid} as a whole ({status.provider_state}: {reason}); "
-                                        "fix what it names and resume: the resume submits its requests again (a failed "
-                                        "batch ran none of them)", cause="batch-failed", error="BatchFailed")
+                    raise RunFatalError(
+                        f"the provider rejected batch {bid} as a whole ({status.provider_state}: {reason}); "
+                        "fix what it names and resume: the resume submits its requests again (a failed "
+                        "batch ran none of them)",
+                        cause="batch-failed",
+                        error="BatchFailed",
+                    )
                 items = self._unrun(bid, batch.custom_ids, f"batch {bid} failed as a whole ({reason})")
             else:
                 items = await self._ended_results(bid, status)
@@ -472,32 +551,44 @@ class BatchBackend(Backend):
                 ended_now, canceled = True, status.canceled
                 if self.log:
                     failed = sum(1 for i in items if i.get("error"))
-                    self.log(f"batch {bid}: {status.provider_state} after {turnaround or 0:.0f} s, {len(items)} result(s)"
-                             f"{f', {failed} with an error' if failed else ''}")
+                    self.log(
+                        f"batch {bid}: {status.provider_state} after {turnaround or 0:.0f} s, {len(items)} result(s)"
+                        f"{f', {failed} with an error' if failed else ''}"
+                    )
         turnaround = journal.batches[bid].turnaround_s
         if turnaround is not None and ended_now:
             self.report["turnaround_s"].append(float(turnaround))
         unrun = sum(1 for i in items if i.get("resubmit"))
         if canceled and unrun:  # a cancel made in the provider's console is not undone by resubmitting
-            raise RunFatalError(f"batch {bid} was canceled at the provider ({state}) with {unrun} of its "
-                                f"{len(batch.custom_ids)} request(s) not run; lightemma stops rather than undo the cancel "
-                                "(a resume submits them again; its answered requests are saved)",
-                                cause="batch-canceled", error="BatchCanceled")
+            raise RunFatalError(
+                f"batch {bid} was canceled at the provider ({state}) with {unrun} of its "
+                f"{len(batch.custom_ids)} request(s) not run; lightemma stops rather than undo the cancel "
+                "(a resume submits them again; its answered requests are saved)",
+                cause="batch-canceled",
+                error="BatchCanceled",
+            )
         by_id = {str(i.get("custom_id")): i for i in items}
         requeue = []
         whole = batch.failed if batch.failed is not None else None  # failed as a whole: none of its requests ran
-        if whole is not None and any(self._resubmitted.get((p.request.frame_id, p.request.stage), 0) >= self.max_resubmits
-                                     for p in pending):
-            raise RunFatalError(f"the provider failed batch {bid} as a whole ({whole}), and its requests were resubmitted "
-                                f"{self.max_resubmits} time(s) already; wait until the account's running batches have "
-                                "finished (OpenAI's enqueued-token limit counts them) or fix what it names, then resume",
-                                cause="batch-failed", error="BatchFailed")
+        if whole is not None and any(
+            self._resubmitted.get((p.request.frame_id, p.request.stage), 0) >= self.max_resubmits for p in pending
+        ):
+            raise RunFatalError(
+                f"the provider failed batch {bid} as a whole ({whole}), and its requests were resubmitted "
+                f"{self.max_resubmits} time(s) already; wait until the account's running batches have "
+                "finished (OpenAI's enqueued-token limit counts them) or fix what it names, then resume",
+                cause="batch-failed",
+                error="BatchFailed",
+            )
         for p in pending:
             item = by_id.get(p.custom_id)
             if item is None:  # saved results hold every request of their batch (BatchJournal.saved_results)
-                raise RunFatalError(f"batch {bid} has no result for request {p.custom_id}; lightemma does not ask it "
-                                    "again (the provider may have run it)", cause="batch-results",
-                                    error="BatchResultsIncomplete")
+                raise RunFatalError(
+                    f"batch {bid} has no result for request {p.custom_id}; lightemma does not ask it "
+                    "again (the provider may have run it)",
+                    cause="batch-results",
+                    error="BatchResultsIncomplete",
+                )
             key = (p.request.frame_id, p.request.stage)
             if item.get("resubmit") and self._resubmitted.get(key, 0) < self.max_resubmits:
                 p.resubmits += 1  # a new custom id; a resubmission journaled earlier is followed, not sent again
@@ -517,7 +608,9 @@ class BatchBackend(Backend):
     @staticmethod
     def _unrun(bid: str, custom_ids: Sequence[str], why: str) -> list[dict[str, Any]]:
         """Results for requests a batch never ran: each may be resubmitted (:data:`BatchExpired` past the limit)."""
-        return [item_result(cid, error="BatchExpired", error_message=f"not run: {why}", resubmit=True) for cid in custom_ids]
+        return [
+            item_result(cid, error="BatchExpired", error_message=f"not run: {why}", resubmit=True) for cid in custom_ids
+        ]
 
     async def _ended_results(self, bid: str, status: BatchStatus) -> list[dict[str, Any]]:
         """The results of ended batch ``bid``, complete by the provider's own counts, read up to
@@ -532,23 +625,34 @@ class BatchBackend(Backend):
             if tries:
                 await asyncio.sleep(self._pause(tries - 1))
                 status = await self._call(lambda: self.adapter.status(bid), f"poll batch {bid}", requests=len(ids))
-            items = await self._call(functools.partial(self._results, bid, status), f"read the results of batch {bid}",
-                                     requests=len(ids))
+            items = await self._call(
+                functools.partial(self._results, bid, status), f"read the results of batch {bid}", requests=len(ids)
+            )
             seen = {str(i.get("custom_id")) for i in items}
             missing = [cid for cid in ids if cid not in seen]
             if status.answered is not None and len(items) < status.answered:
                 problem = f"the provider reports {status.answered} result(s) and lightemma read {len(items)}"
             elif missing and status.unrun is None:
-                problem = (f"{len(missing)} of its {len(ids)} request(s) have no result, and the provider reported no "
-                           "counts to tell whether they ran")
+                problem = (
+                    f"{len(missing)} of its {len(ids)} request(s) have no result, and the provider reported no "
+                    "counts to tell whether they ran"
+                )
             elif len(missing) > (status.unrun or 0):
-                problem = (f"{len(missing)} of its {len(ids)} request(s) have no result, and the provider says "
-                           f"{status.unrun} were not run")
+                problem = (
+                    f"{len(missing)} of its {len(ids)} request(s) have no result, and the provider says "
+                    f"{status.unrun} were not run"
+                )
             else:
-                return items + self._unrun(bid, missing, f"not reached before batch {bid} ended ({status.provider_state})")
-        raise RunFatalError(f"the results of batch {bid} ({status.provider_state}) are incomplete after {RESULT_READS} "
-                            f"reads: {problem}; lightemma stops rather than ask again what the provider ran (it would be "
-                            "paid twice); a resume reads them again", cause="batch-results", error="BatchResultsIncomplete")
+                return items + self._unrun(
+                    bid, missing, f"not reached before batch {bid} ended ({status.provider_state})"
+                )
+        raise RunFatalError(
+            f"the results of batch {bid} ({status.provider_state}) are incomplete after {RESULT_READS} "
+            f"reads: {problem}; lightemma stops rather than ask again what the provider ran (it would be "
+            "paid twice); a resume reads them again",
+            cause="batch-results",
+            error="BatchResultsIncomplete",
+        )
 
     async def _results(self, bid: str, status: Any) -> list[dict[str, Any]]:
         """The adapter's results of batch ``bid`` (:func:`checked_results`)."""
@@ -563,15 +667,21 @@ class BatchBackend(Backend):
         try:
             with body_guard(results_limit(requests)):
                 return await asyncio.wait_for(make(), self.timeout)  # connect to last byte, as --timeout says
-        except asyncio.TimeoutError:  # a reply trickled (httpx bounds each read, not the whole call): retried
-            raise BatchHTTPError(0, f"no whole answer within --timeout {self.timeout:g} s (connect to last byte)",
-                                 deadline=True) from None
+        except TimeoutError:  # a reply trickled (httpx bounds each read, not the whole call): retried
+            raise BatchHTTPError(
+                0, f"no whole answer within --timeout {self.timeout:g} s (connect to last byte)", deadline=True
+            ) from None
         except HTTPCallError as exc:  # the body hooks: past the limit, or an encoding lightemma does not read
-            raise BatchHTTPError(0, f"{exc} (the limit for a batch of {requests} request(s): docs/run.md, "
-                                    "Limits)", answer=True) from None
+            raise BatchHTTPError(
+                0, f"{exc} (the limit for a batch of {requests} request(s): docs/run.md, Limits)", answer=True
+            ) from None
         except (ValueError, KeyError, TypeError, AttributeError, IndexError, RecursionError, OverflowError) as exc:
-            raise BatchHTTPError(0, f"the answer is not what the {self.adapter.provider} batch API documents "
-                                    f"({type(exc).__name__}: {str(exc)[:120]})", answer=True) from None
+            raise BatchHTTPError(
+                0,
+                f"the answer is not what the {self.adapter.provider} batch API documents "
+                f"({type(exc).__name__}: {str(exc)[:120]})",
+                answer=True,
+            ) from None
 
     def _fatal(self, exc: BatchHTTPError, what: str, tries: int) -> RunFatalError:
         """The one line that stops the run after a batch call failed for good."""
@@ -580,12 +690,17 @@ class BatchBackend(Backend):
         where = f"{self.adapter.provider} batch API"
         said = short_message(exc, secrets=self.api._secrets)  # no key or --api-base credential in it
         if exc.auth:
-            fatal = RunFatalError(f"{self.api.model}: cannot {what}: {said} — the {where} rejected the key",
-                                  cause="authentication", error="AuthenticationError")
+            fatal = RunFatalError(
+                f"{self.api.model}: cannot {what}: {said} — the {where} rejected the key",
+                cause="authentication",
+                error="AuthenticationError",
+            )
         else:
-            fatal = RunFatalError(f"{self.api.model}: cannot {what}: {said} ({where}"
-                                  f"{f', after {tries} retries' if tries else ''})", cause="batch-api",
-                                  error="Timeout" if exc.deadline else "BatchAPIError")
+            fatal = RunFatalError(
+                f"{self.api.model}: cannot {what}: {said} ({where}{f', after {tries} retries' if tries else ''})",
+                cause="batch-api",
+                error="Timeout" if exc.deadline else "BatchAPIError",
+            )
         fatal.http_status = exc.status  # type: ignore[attr-defined]  # the failed call's HTTP status, kept on the error
         return fatal
 

@@ -130,17 +130,37 @@ class ItemUsage(TypedDict, total=False):
     cache_write_tokens: int | None
 
 
-def item_result(custom_id: str, *, text: str | None = None, finish_reason: str | None = None,
-                input_tokens: int | None = None, output_tokens: int | None = None, reasoning_tokens: int | None = None,
-                cached_input_tokens: int | None = None, cache_write_tokens: int | None = None, error: str | None = None,
-                error_message: str | None = None, resubmit: bool = False) -> dict[str, Any]:
+def item_result(
+    custom_id: str,
+    *,
+    text: str | None = None,
+    finish_reason: str | None = None,
+    input_tokens: int | None = None,
+    output_tokens: int | None = None,
+    reasoning_tokens: int | None = None,
+    cached_input_tokens: int | None = None,
+    cache_write_tokens: int | None = None,
+    error: str | None = None,
+    error_message: str | None = None,
+    resubmit: bool = False,
+) -> dict[str, Any]:
     """One request's result as saved in ``batches/<id>.jsonl``: text or error, usage as reported (None = unknown).
 
     ``resubmit``: the provider never ran it (expired, canceled): it may be sent again in a new batch.
     """
-    return {"custom_id": custom_id, "text": text, "finish_reason": finish_reason, "input_tokens": input_tokens,
-            "output_tokens": output_tokens, "reasoning_tokens": reasoning_tokens, "cached_input_tokens": cached_input_tokens,
-            "cache_write_tokens": cache_write_tokens, "error": error, "error_message": error_message, "resubmit": resubmit}
+    return {
+        "custom_id": custom_id,
+        "text": text,
+        "finish_reason": finish_reason,
+        "input_tokens": input_tokens,
+        "output_tokens": output_tokens,
+        "reasoning_tokens": reasoning_tokens,
+        "cached_input_tokens": cached_input_tokens,
+        "cache_write_tokens": cache_write_tokens,
+        "error": error,
+        "error_message": error_message,
+        "resubmit": resubmit,
+    }
 
 
 async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
@@ -152,9 +172,13 @@ async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
     except httpx.HTTPError as exc:
         raise BatchHTTPError(0, f"{type(exc).__name__}: {exc}") from None
     if 300 <= response.status_code < 400 or response.status_code < 200:  # the key is not sent on to another place
-        raise BatchHTTPError(response.status_code, f"{method} answered with HTTP {response.status_code} "
-                             f"(to {str(response.headers.get('location'))[:120]!r}), not an answer; lightemma follows no "
-                             "redirect of a batch API", answer=True)
+        raise BatchHTTPError(
+            response.status_code,
+            f"{method} answered with HTTP {response.status_code} "
+            f"(to {str(response.headers.get('location'))[:120]!r}), not an answer; lightemma follows no "
+            "redirect of a batch API",
+            answer=True,
+        )
     if response.status_code >= 400:
         try:
             message = response.json().get("error", {}).get("message") or response.text[:300]
@@ -164,8 +188,9 @@ async def http_call(client: Any, method: str, url: str, **kw: Any) -> Any:
     return response
 
 
-def endpoint(api_base: str | None, default: str, api_key: str | None, *, key_header: str,
-             version: str) -> tuple[str, dict[str, str]]:
+def endpoint(
+    api_base: str | None, default: str, api_key: str | None, *, key_header: str, version: str
+) -> tuple[str, dict[str, str]]:
     """The base URL and headers of a provider's batch HTTP API.
 
     The base is ``api_base`` without credentials and a trailing ``version`` (``/v1``, ``/v1beta``; ``""``: the path
@@ -201,14 +226,21 @@ def checked_results(items: list[dict[str, Any]], custom_ids: Sequence[str]) -> l
     for i, item in enumerate(items):
         cid = item.get("custom_id")
         if not isinstance(cid, str) or cid not in wanted:
-            raise BatchHTTPError(0, f"the results answer {str(cid)[:80]!r}, which is no request of this batch", answer=True)
+            raise BatchHTTPError(
+                0, f"the results answer {str(cid)[:80]!r}, which is no request of this batch", answer=True
+            )
         if cid in seen:
             raise BatchHTTPError(0, f"the results hold request {cid} twice; lightemma does not choose one", answer=True)
         seen.add(cid)
         text = item.get("text")
         if isinstance(text, str) and _utf8_over(text, MAX_BODY_BYTES):
-            items[i] = {**item, "text": None, "error": "ResponseTooLargeError", "resubmit": False,
-                        "error_message": f"the answer is over {MAX_BODY_BYTES:,} bytes, more than lightemma reads"}
+            items[i] = {
+                **item,
+                "text": None,
+                "error": "ResponseTooLargeError",
+                "resubmit": False,
+                "error_message": f"the answer is over {MAX_BODY_BYTES:,} bytes, more than lightemma reads",
+            }
     return items
 
 
@@ -227,12 +259,15 @@ def jsonl_rows(data: bytes, where: str) -> Iterator[dict[str, Any]]:
         if not line.strip():
             continue
         if _utf8_over(line, limit):
-            raise BatchHTTPError(0, f"{where}: results line {number} is over {limit:,} bytes, more than one answer may be",
-                                 answer=True)
+            raise BatchHTTPError(
+                0, f"{where}: results line {number} is over {limit:,} bytes, more than one answer may be", answer=True
+            )
         try:
             row = json.loads(line)
         except (json.JSONDecodeError, RecursionError) as exc:
-            raise BatchHTTPError(0, f"{where}: results line {number} is not JSON ({type(exc).__name__})", answer=True) from None
+            raise BatchHTTPError(
+                0, f"{where}: results line {number} is not JSON ({type(exc).__name__})", answer=True
+            ) from None
         if not isinstance(row, dict):
             raise BatchHTTPError(0, f"{where}: results line {number} is not a JSON object", answer=True)
         yield row
@@ -276,8 +311,7 @@ class BatchAdapter(Protocol):
         """Create a batch of ``entries`` named/tagged ``token``; its id."""
         ...
 
-    async def status(self, batch_id: str) -> BatchStatus:
-        ...
+    async def status(self, batch_id: str) -> BatchStatus: ...
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         """Every result of an ended batch (:func:`item_result` dicts), in whatever order the provider gives them."""
@@ -291,5 +325,4 @@ class BatchAdapter(Protocol):
         :class:`BatchUnconfirmed` when the provider cannot tell (see there)."""
         ...
 
-    async def aclose(self) -> None:
-        ...
+    async def aclose(self) -> None: ...

@@ -42,7 +42,9 @@ TERMINAL, RUNNING = {"ended": ENDED}, ("in_progress", "canceling")  # processing
 
 
 def base_url() -> str:
-    return (os.environ.get("ANTHROPIC_API_BASE") or os.environ.get("ANTHROPIC_BASE_URL") or "https://api.anthropic.com").rstrip("/")
+    return (
+        os.environ.get("ANTHROPIC_API_BASE") or os.environ.get("ANTHROPIC_BASE_URL") or "https://api.anthropic.com"
+    ).rstrip("/")
 
 
 def _part(part: dict[str, Any]) -> dict[str, Any]:
@@ -70,9 +72,11 @@ class AnthropicBatches:
         self._client = batch_client(timeout, {**headers, "anthropic-version": VERSION})
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
-        params: dict[str, Any] = {"model": self.model, "max_tokens": body["max_tokens"],
-                                  "messages": [{"role": m["role"], "content": [_part(p) for p in m["content"]]}
-                                               for m in body["messages"]]}
+        params: dict[str, Any] = {
+            "model": self.model,
+            "max_tokens": body["max_tokens"],
+            "messages": [{"role": m["role"], "content": [_part(p) for p in m["content"]]} for m in body["messages"]],
+        }
         if "temperature" in body:
             params["temperature"] = body["temperature"]
         return {"custom_id": custom_id, "params": params}
@@ -89,17 +93,22 @@ class AnthropicBatches:
         data = (await self._request("GET", f"{self.base}/v1/messages/batches/{url_id(batch_id)}")).json()
         state = str(data.get("processing_status"))
         counts = data.get("request_counts")
-        return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state,
-                           counts=dict(counts) if isinstance(counts, dict) else {},
-                           handle={"results_url": data.get("results_url")},
-                           answered=tally(counts, ("succeeded", "errored", "canceled", "expired")),
-                           unrun=0 if isinstance(counts, dict) else None,  # every request of an ended batch has a line
-                           canceled=bool(data.get("cancel_initiated_at")) or state == "canceling")
+        return BatchStatus(
+            state=batch_state(batch_id, state, TERMINAL, RUNNING),
+            provider_state=state,
+            counts=dict(counts) if isinstance(counts, dict) else {},
+            handle={"results_url": data.get("results_url")},
+            answered=tally(counts, ("succeeded", "errored", "canceled", "expired")),
+            unrun=0 if isinstance(counts, dict) else None,  # every request of an ended batch has a line
+            canceled=bool(data.get("cancel_initiated_at")) or state == "canceling",
+        )
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         url = status.handle.get("results_url") or f"{self.base}/v1/messages/batches/{url_id(batch_id)}/results"
         if not str(url).startswith(self.base + "/"):  # the key goes only to the base the user chose
-            raise BatchHTTPError(0, f"results_url {url!r} is not under {self.base}; not sending the key there", answer=True)
+            raise BatchHTTPError(
+                0, f"results_url {url!r} is not under {self.base}; not sending the key there", answer=True
+            )
         data = (await self._request("GET", url)).content
         out = []
         for row in jsonl_rows(data, f"batch {batch_id}"):
@@ -108,10 +117,16 @@ class AnthropicBatches:
             if kind == "succeeded":
                 out.append(_message_result(cid, result.get("message") or {}))
             elif kind in ("expired", "canceled"):
-                out.append(item_result(cid, error="BatchExpired", error_message=f"{kind}: not run by the batch", resubmit=True))
+                out.append(
+                    item_result(cid, error="BatchExpired", error_message=f"{kind}: not run by the batch", resubmit=True)
+                )
             else:
                 err = (result.get("error") or {}).get("error") or result.get("error") or {}
-                out.append(item_result(cid, error="BatchRequestError", error_message=f"{err.get('type')}: {err.get('message')}"))
+                out.append(
+                    item_result(
+                        cid, error="BatchRequestError", error_message=f"{err.get('type')}: {err.get('message')}"
+                    )
+                )
         return out
 
     async def find(self, token: str, since: float, n_requests: int, known: Collection[str] = ()) -> str | None:
@@ -141,19 +156,26 @@ class AnthropicBatches:
                     continue
                 if str(batch.get("id")) in known:  # this run's own batches, journaled
                     continue
-                if tally(batch.get("request_counts"), ("processing", "succeeded", "errored", "canceled", "expired")) \
-                        in (n_requests, None):
+                if tally(
+                    batch.get("request_counts"), ("processing", "succeeded", "errored", "canceled", "expired")
+                ) in (n_requests, None):
                     candidates.append(str(batch.get("id")))
             last = page.get("last_id") or (data[-1].get("id") if data and isinstance(data[-1], dict) else None)
             if older or page.get("has_more") is not True or not last:
                 break
             params = {"limit": 100, "after_id": str(last)}
         else:
-            raise BatchHTTPError(0, f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
-                                    "submission; lightemma cannot tell whether the batch exists", answer=True)
+            raise BatchHTTPError(
+                0,
+                f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
+                "submission; lightemma cannot tell whether the batch exists",
+                answer=True,
+            )
         if candidates:
-            raise BatchUnconfirmed(f"Anthropic batches cannot be looked up by name, and {len(candidates)} batch(es) of "
-                                   f"{n_requests} request(s) were created since: {', '.join(candidates[:5])}")
+            raise BatchUnconfirmed(
+                f"Anthropic batches cannot be looked up by name, and {len(candidates)} batch(es) of "
+                f"{n_requests} request(s) were created since: {', '.join(candidates[:5])}"
+            )
         return None
 
     async def aclose(self) -> None:
@@ -168,9 +190,18 @@ def _message_result(custom_id: str, message: dict[str, Any]) -> dict[str, Any]:
     read, written = count(usage, "cache_read_input_tokens") or 0, count(usage, "cache_creation_input_tokens") or 0
     total = None if base is None else base + read + written
     text = "".join(b.get("text", "") for b in message.get("content") or [] if b.get("type") == "text")
-    kw = ItemUsage(finish_reason=message.get("stop_reason"), input_tokens=total if total else None,
-                   output_tokens=out_tokens if total else None, cached_input_tokens=read if total else None,
-                   cache_write_tokens=written if total else None)
+    kw = ItemUsage(
+        finish_reason=message.get("stop_reason"),
+        input_tokens=total if total else None,
+        output_tokens=out_tokens if total else None,
+        cached_input_tokens=read if total else None,
+        cache_write_tokens=written if total else None,
+    )
     if not text.strip():
-        return item_result(custom_id, error="EmptyResponse", error_message=f"no answer text (finish_reason={kw['finish_reason']})", **kw)
+        return item_result(
+            custom_id,
+            error="EmptyResponse",
+            error_message=f"no answer text (finish_reason={kw['finish_reason']})",
+            **kw,
+        )
     return item_result(custom_id, text=text, **kw)

@@ -38,8 +38,12 @@ from lightemma.backends.batch.adapter import (
     url_id,
 )
 
-TERMINAL = {"BATCH_STATE_SUCCEEDED": ENDED, "BATCH_STATE_EXPIRED": ENDED, "BATCH_STATE_CANCELLED": ENDED,
-            "BATCH_STATE_FAILED": FAILED}
+TERMINAL = {
+    "BATCH_STATE_SUCCEEDED": ENDED,
+    "BATCH_STATE_EXPIRED": ENDED,
+    "BATCH_STATE_CANCELLED": ENDED,
+    "BATCH_STATE_FAILED": FAILED,
+}
 RUNNING = ("BATCH_STATE_UNSPECIFIED", "BATCH_STATE_PENDING", "BATCH_STATE_RUNNING")  # any other state: not documented
 
 
@@ -70,8 +74,10 @@ class GeminiBatches:
         config: dict[str, Any] = {"maxOutputTokens": body["max_tokens"]}
         if "temperature" in body:
             config["temperature"] = body["temperature"]
-        contents = [{"role": "model" if m["role"] == "assistant" else "user", "parts": [_part(p) for p in m["content"]]}
-                    for m in body["messages"]]
+        contents = [
+            {"role": "model" if m["role"] == "assistant" else "user", "parts": [_part(p) for p in m["content"]]}
+            for m in body["messages"]
+        ]
         return {"request": {"contents": contents, "generationConfig": config}, "metadata": {"key": custom_id}}
 
     async def _request(self, method: str, url: str, **kw: Any) -> Any:
@@ -91,35 +97,54 @@ class GeminiBatches:
         meta = data.get("metadata") or {}
         state = str(meta.get("state"))
         error = data.get("error")
-        stats = {k: _int(v) for k, v in (meta.get("batchStats") or {}).items()} if isinstance(meta.get("batchStats"), dict) else None
+        stats = (
+            {k: _int(v) for k, v in (meta.get("batchStats") or {}).items()}
+            if isinstance(meta.get("batchStats"), dict)
+            else None
+        )
         zero = {"successfulRequestCount": 0, "failedRequestCount": 0}  # proto3 JSON leaves zero counts out
         answered = tally({**zero, **stats} if stats is not None else None, tuple(zero))
         total = tally(stats, ("requestCount",))
-        return BatchStatus(state=batch_state(batch_id, state, TERMINAL, RUNNING), provider_state=state, counts=dict(stats or {}),
-                           reason=f"{error.get('code')}: {error.get('message')}" if isinstance(error, dict) else None,
-                           handle={"operation": data}, answered=answered,
-                           unrun=None if answered is None or total is None else max(0, total - answered),
-                           canceled=state == "BATCH_STATE_CANCELLED")
+        return BatchStatus(
+            state=batch_state(batch_id, state, TERMINAL, RUNNING),
+            provider_state=state,
+            counts=dict(stats or {}),
+            reason=f"{error.get('code')}: {error.get('message')}" if isinstance(error, dict) else None,
+            handle={"operation": data},
+            answered=answered,
+            unrun=None if answered is None or total is None else max(0, total - answered),
+            canceled=state == "BATCH_STATE_CANCELLED",
+        )
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         """The batch's responses from every place Gemini documents: inlined in the operation
         (``response.inlinedResponses``) and the JSONL ``response.responsesFile`` (``GET /download/v1beta/{file}:download
         ?alt=media``, one ``{"key", "response" | "error"}`` per line)."""
-        data = status.handle.get("operation") or await self._request("GET", f"{self.base}/v1beta/{url_id(batch_id, slash=True)}")
+        data = status.handle.get("operation") or await self._request(
+            "GET", f"{self.base}/v1beta/{url_id(batch_id, slash=True)}"
+        )
         output = data.get("response") or {}
         rows = list(((output.get("inlinedResponses") or {}).get("inlinedResponses")) or [])
         if output.get("responsesFile"):
             name = url_id(output["responsesFile"], slash=True)
-            response = await http_call(self._client, "GET", f"{self.base}/download/v1beta/{name}:download", params={"alt": "media"})
+            response = await http_call(
+                self._client, "GET", f"{self.base}/download/v1beta/{name}:download", params={"alt": "media"}
+            )
             rows.extend(jsonl_rows(response.content, f"batch {batch_id} responses file"))
         out = []
         for row in rows:
             cid = (row.get("metadata") or {}).get("key") or row.get("key")
             if not cid:
-                raise BatchHTTPError(0, f"batch {batch_id}: a response without its request's metadata key; cannot match it", answer=True)
+                raise BatchHTTPError(
+                    0, f"batch {batch_id}: a response without its request's metadata key; cannot match it", answer=True
+                )
             if "error" in row:
                 err = row["error"] or {}
-                out.append(item_result(str(cid), error="BatchRequestError", error_message=f"{err.get('code')}: {err.get('message')}"))
+                out.append(
+                    item_result(
+                        str(cid), error="BatchRequestError", error_message=f"{err.get('code')}: {err.get('message')}"
+                    )
+                )
             else:
                 out.append(_response_result(str(cid), row.get("response") or {}))
         return out
@@ -151,8 +176,12 @@ class GeminiBatches:
             if older or not following:
                 return None
             params = {"pageSize": 100, "pageToken": str(following)}
-        raise BatchHTTPError(0, f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
-                                "submission; lightemma cannot tell whether the batch exists", answer=True)
+        raise BatchHTTPError(
+            0,
+            f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
+            "submission; lightemma cannot tell whether the batch exists",
+            answer=True,
+        )
 
     async def aclose(self) -> None:
         await self._client.aclose()
@@ -171,12 +200,22 @@ def _response_result(custom_id: str, response: dict[str, Any]) -> dict[str, Any]
     thoughts = count(usage, "thoughtsTokenCount")
     known = bool(prompt) and answer is not None
     candidate = (response.get("candidates") or [{}])[0]
-    text = "".join(p.get("text", "") for p in (candidate.get("content") or {}).get("parts") or [] if not p.get("thought"))
-    kw = dict(finish_reason=candidate.get("finishReason"), input_tokens=prompt if known else None,
-              output_tokens=(answer + (thoughts or 0)) if known and answer is not None else None,  # known: answer is
-              reasoning_tokens=thoughts if known else None,
-              cached_input_tokens=(count(usage, "cachedContentTokenCount") or 0) if known else None,
-              cache_write_tokens=0 if known else None)
+    text = "".join(
+        p.get("text", "") for p in (candidate.get("content") or {}).get("parts") or [] if not p.get("thought")
+    )
+    kw = dict(
+        finish_reason=candidate.get("finishReason"),
+        input_tokens=prompt if known else None,
+        output_tokens=(answer + (thoughts or 0)) if known and answer is not None else None,  # known: answer is
+        reasoning_tokens=thoughts if known else None,
+        cached_input_tokens=(count(usage, "cachedContentTokenCount") or 0) if known else None,
+        cache_write_tokens=0 if known else None,
+    )
     if not text.strip():
-        return item_result(custom_id, error="EmptyResponse", error_message=f"no answer text (finish_reason={kw['finish_reason']})", **kw)
+        return item_result(
+            custom_id,
+            error="EmptyResponse",
+            error_message=f"no answer text (finish_reason={kw['finish_reason']})",
+            **kw,
+        )
     return item_result(custom_id, text=text, **kw)

@@ -91,7 +91,9 @@ def _number(event: dict[str, Any], name: str, where: str) -> float | None:
     if value is None:
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-        raise RunStoreError(f"{where}: {name} is {str(value)[:40]!r}, not a time in seconds; the batch journal is damaged")
+        raise RunStoreError(
+            f"{where}: {name} is {str(value)[:40]!r}, not a time in seconds; the batch journal is damaged"
+        )
     return float(value)
 
 
@@ -127,13 +129,17 @@ class BatchJournal:
         for number, line in enumerate(lines, 1):
             where = f"{path}:{number}"
             if len(line) > MAX_JOURNAL_LINE_BYTES // 4 and len(line.encode("utf-8")) > MAX_JOURNAL_LINE_BYTES:
-                raise RunStoreError(f"{where}: a line over {MAX_JOURNAL_LINE_BYTES:,} bytes; the batch journal is damaged")
+                raise RunStoreError(
+                    f"{where}: a line over {MAX_JOURNAL_LINE_BYTES:,} bytes; the batch journal is damaged"
+                )
             if not line.strip():
                 continue
             try:
                 event = loads_bounded(line)
             except ValueError as exc:
-                raise RunStoreError(f"{where}: not a JSON line ({str(exc)[:80]}); the batch journal is damaged") from None
+                raise RunStoreError(
+                    f"{where}: not a JSON line ({str(exc)[:80]}); the batch journal is damaged"
+                ) from None
             journal._apply(event, where)
         if not torn.strip():
             return journal
@@ -144,7 +150,6 @@ class BatchJournal:
         except (ValueError, RunStoreError):
             whole = False
         if repair:  # the next line must start on a line of its own
-
             try:
                 if whole:
                     with open(path, "ab") as handle:
@@ -172,8 +177,12 @@ class BatchJournal:
         elif kind == "abandoned":
             self.unconfirmed.pop(str(_text(event, "token", where)), None)
         elif kind == "submitted":
-            batch = JournaledBatch(batch_id=str(_text(event, "batch_id", where)), token=str(_text(event, "token", where)),
-                                   custom_ids=_ids(event, where), submitted_at=_number(event, "at", where) or 0.0)
+            batch = JournaledBatch(
+                batch_id=str(_text(event, "batch_id", where)),
+                token=str(_text(event, "token", where)),
+                custom_ids=_ids(event, where),
+                submitted_at=_number(event, "at", where) or 0.0,
+            )
             self.unconfirmed.pop(batch.token, None)
             self.batches[batch.batch_id] = batch
             for cid in batch.custom_ids:
@@ -182,8 +191,10 @@ class BatchJournal:
             bid = _text(event, "batch_id", where)
             ended = self.batches.get(str(bid))
             if ended is None:
-                raise RunStoreError(f"{where}: ends batch {str(bid)[:80]!r}, which the journal never submitted; "
-                                    "the batch journal is damaged")
+                raise RunStoreError(
+                    f"{where}: ends batch {str(bid)[:80]!r}, which the journal never submitted; "
+                    "the batch journal is damaged"
+                )
             ended.state = _text(event, "state", where)
             if kind == "failed":
                 ended.failed = _text(event, "reason", where, optional=True) or "no reason given"
@@ -232,8 +243,15 @@ class BatchJournal:
 
     def submitted(self, token: str, batch_id: str, custom_ids: Iterable[str]) -> None:
         """Journal a created batch's id (before it is polled)."""
-        self._append({"event": "submitted", "token": token, "batch_id": batch_id, "custom_ids": list(custom_ids),
-                      "at": time.time()})
+        self._append(
+            {
+                "event": "submitted",
+                "token": token,
+                "batch_id": batch_id,
+                "custom_ids": list(custom_ids),
+                "at": time.time(),
+            }
+        )
 
     def abandoned(self, token: str, reason: str) -> None:
         """Journal a submission that created nothing (refused, or unknown to the provider)."""
@@ -249,8 +267,16 @@ class BatchJournal:
         folder.mkdir(exist_ok=True)
         relative = f"{RESULTS_DIR}/{_safe(batch_id)}.jsonl"
         write_text_atomic(self.run_dir / relative, "".join(json.dumps(i, ensure_ascii=True) + "\n" for i in items))
-        self._append({"event": "completed", "batch_id": batch_id, "state": state, "results": relative,
-                      "turnaround_s": turnaround_s, "at": time.time()})
+        self._append(
+            {
+                "event": "completed",
+                "batch_id": batch_id,
+                "state": state,
+                "results": relative,
+                "turnaround_s": turnaround_s,
+                "at": time.time(),
+            }
+        )
 
     def saved_results(self, batch_id: str) -> list[dict[str, Any]] | None:
         """The saved results of a completed batch, or None when it has not completed (poll it)."""

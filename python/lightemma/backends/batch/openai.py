@@ -63,8 +63,9 @@ class OpenAIBatches:
         the HTTP client litellm used sends it); messages are scrubbed of it by
         :class:`~lightemma.backends.batch.BatchBackend`."""
         self.model = model.split("/", 1)[1] if model.startswith(("openai/", "hosted_vllm/")) else model
-        self.base, headers = endpoint(api_base, base_url(), f"Bearer {api_key}" if api_key else None,
-                                      key_header="Authorization", version="")  # Basic auth, when given, replaces it
+        self.base, headers = endpoint(
+            api_base, base_url(), f"Bearer {api_key}" if api_key else None, key_header="Authorization", version=""
+        )  # Basic auth, when given, replaces it
         self._client = batch_client(timeout, headers)
 
     def entry(self, custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
@@ -85,11 +86,17 @@ class OpenAIBatches:
 
     async def submit(self, entries: list[dict[str, Any]], token: str) -> str:
         data = "".join(json.dumps(e, separators=(",", ":"), ensure_ascii=False) + "\n" for e in entries).encode("utf-8")
-        upload = await self._json("POST", "/files", files={"file": (f"{token}.jsonl", data)},
-                                  data={"purpose": "batch"})
-        batch = await self._json("POST", "/batches", json={"input_file_id": upload.get("id"), "completion_window": "24h",
-                                                           "endpoint": "/v1/chat/completions",
-                                                           "metadata": {"lightemma_token": token}})
+        upload = await self._json("POST", "/files", files={"file": (f"{token}.jsonl", data)}, data={"purpose": "batch"})
+        batch = await self._json(
+            "POST",
+            "/batches",
+            json={
+                "input_file_id": upload.get("id"),
+                "completion_window": "24h",
+                "endpoint": "/v1/chat/completions",
+                "metadata": {"lightemma_token": token},
+            },
+        )
         if not batch.get("id"):
             raise BatchHTTPError(0, "the created batch has no id", answer=True)
         return str(batch["id"])
@@ -101,17 +108,26 @@ class OpenAIBatches:
         reason = None
         errors = (batch.get("errors") or {}).get("data") if isinstance(batch.get("errors"), dict) else None
         if errors:
-            reason = "; ".join(f"{e.get('code')}: {e.get('message')}" + (f" (line {e['line']})" if e.get("line") else "")
-                               for e in errors[:3] if isinstance(e, dict))
+            reason = "; ".join(
+                f"{e.get('code')}: {e.get('message')}" + (f" (line {e['line']})" if e.get("line") else "")
+                for e in errors[:3]
+                if isinstance(e, dict)
+            )
         counts = batch.get("request_counts")
         answered = tally(counts, ("completed", "failed"))
         total = tally(counts, ("total",))
         codes = {str(e.get("code")) for e in errors or () if isinstance(e, dict)}
-        return BatchStatus(state=ours, provider_state=state,
-                           counts=dict(counts) if isinstance(counts, dict) else {}, reason=reason,
-                           handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")},
-                           answered=answered, unrun=None if answered is None or total is None else max(0, total - answered),
-                           canceled=state in ("cancelled", "cancelling"), retryable=bool(codes) and codes <= RETRYABLE)
+        return BatchStatus(
+            state=ours,
+            provider_state=state,
+            counts=dict(counts) if isinstance(counts, dict) else {},
+            reason=reason,
+            handle={"output_file_id": batch.get("output_file_id"), "error_file_id": batch.get("error_file_id")},
+            answered=answered,
+            unrun=None if answered is None or total is None else max(0, total - answered),
+            canceled=state in ("cancelled", "cancelling"),
+            retryable=bool(codes) and codes <= RETRYABLE,
+        )
 
     async def _content(self, file_id: str | None) -> bytes:
         if not file_id:
@@ -121,23 +137,37 @@ class OpenAIBatches:
 
     async def results(self, batch_id: str, status: BatchStatus) -> list[dict[str, Any]]:
         out = []
-        files = [(fid, await self._content(fid)) for fid in (status.handle.get("output_file_id"), status.handle.get("error_file_id"))]
+        files = [
+            (fid, await self._content(fid))
+            for fid in (status.handle.get("output_file_id"), status.handle.get("error_file_id"))
+        ]
         for line in (row for fid, data in files for row in jsonl_rows(data, f"file {fid}")):
             cid = str(line.get("custom_id"))
             error, response = line.get("error"), line.get("response") or {}
             if error:
                 code = str(error.get("code") or "error")
-                out.append(item_result(cid, error="BatchExpired" if code in UNRUN else "BatchRequestError",
-                                       error_message=f"{code}: {error.get('message')}", resubmit=code in UNRUN))
+                out.append(
+                    item_result(
+                        cid,
+                        error="BatchExpired" if code in UNRUN else "BatchRequestError",
+                        error_message=f"{code}: {error.get('message')}",
+                        resubmit=code in UNRUN,
+                    )
+                )
                 continue
             body = response.get("body") or {}
             http_status = response.get("status_code")
             if not isinstance(http_status, int) or isinstance(http_status, bool) or not 100 <= http_status <= 599:
                 raise ValueError(f"request {cid[:80]}: status_code {str(http_status)[:40]} is no HTTP status")
             if http_status >= 400 or not isinstance(body, dict) or "choices" not in body:
-                message = ((body.get("error") or {}).get("message") if isinstance(body, dict) else None) or "no completion"
-                out.append(item_result(cid, error="BatchRequestError",
-                                       error_message=f"HTTP {response.get('status_code')}: {message}"))
+                message = (
+                    (body.get("error") or {}).get("message") if isinstance(body, dict) else None
+                ) or "no completion"
+                out.append(
+                    item_result(
+                        cid, error="BatchRequestError", error_message=f"HTTP {response.get('status_code')}: {message}"
+                    )
+                )
                 continue
             out.append(_completion_result(cid, body))
         return out
@@ -163,8 +193,12 @@ class OpenAIBatches:
             if older or page.get("has_more") is not True or not last:
                 return None
             params = {"limit": 100, "after": str(last)}
-        raise BatchHTTPError(0, f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
-                                "submission; lightemma cannot tell whether the batch exists", answer=True)
+        raise BatchHTTPError(
+            0,
+            f"the batch list goes on past {MAX_LIST_PAGES} pages without reaching the run's "
+            "submission; lightemma cannot tell whether the batch exists",
+            answer=True,
+        )
 
     async def aclose(self) -> None:
         await self._client.aclose()
@@ -177,8 +211,19 @@ def _completion_result(custom_id: str, body: dict[str, Any]) -> dict[str, Any]:
     if text is not None and not isinstance(text, str):  # a chat completion's content is a string (or null)
         raise TypeError(f"request {custom_id[:80]}: message content is a {type(text).__name__}, not text")
     usage = _usage(body.get("usage"), "openai")
-    kw = dict(finish_reason=choice.get("finish_reason"), input_tokens=usage.input, output_tokens=usage.output,
-              reasoning_tokens=usage.reasoning, cached_input_tokens=usage.cached, cache_write_tokens=usage.written)
+    kw = dict(
+        finish_reason=choice.get("finish_reason"),
+        input_tokens=usage.input,
+        output_tokens=usage.output,
+        reasoning_tokens=usage.reasoning,
+        cached_input_tokens=usage.cached,
+        cache_write_tokens=usage.written,
+    )
     if not text or not str(text).strip():
-        return item_result(custom_id, error="EmptyResponse", error_message=f"no answer text (finish_reason={kw['finish_reason']})", **kw)
+        return item_result(
+            custom_id,
+            error="EmptyResponse",
+            error_message=f"no answer text (finish_reason={kw['finish_reason']})",
+            **kw,
+        )
     return item_result(custom_id, text=str(text), **kw)

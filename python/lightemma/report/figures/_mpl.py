@@ -31,8 +31,26 @@ FAMILY_COLORS = {
 OTHER_COLORS = ("#7f7f7f", "#3d3d3d", "#a39e7a", "#b5b5b5", "#5f6b7a", "#8a7f99")
 # one colour per run in a figure: tab10 without its green (the truth) and red (collisions), then high-contrast
 # extras; every pair is >= MIN_DELTA_E apart (CIE76, D65), and each as far from GT_COLOR, white and COLLISION_RED
-RUN_PALETTE = ("#1f77b4", "#ff7f0e", "#9467bd", "#8c564b", "#e377c2", "#17becf", "#bcbd22", "#7f7f7f", "#000080",
-               "#ff1493", "#000000", "#aec7e8", "#ffbb78", "#6a0000", "#808000", "#b15928", "#1a1a66", "#ff9896")
+RUN_PALETTE = (
+    "#1f77b4",
+    "#ff7f0e",
+    "#9467bd",
+    "#8c564b",
+    "#e377c2",
+    "#17becf",
+    "#bcbd22",
+    "#7f7f7f",
+    "#000080",
+    "#ff1493",
+    "#000000",
+    "#aec7e8",
+    "#ffbb78",
+    "#6a0000",
+    "#808000",
+    "#b15928",
+    "#1a1a66",
+    "#ff9896",
+)
 MIN_DELTA_E = 25.0
 COLLISION_RED = "#e00000"
 PAPER_GENERATIONS = 3  # the paper's families have three generations each
@@ -106,6 +124,7 @@ def model_colors(models: Iterable[Mapping[str, Any] | Any]) -> dict[str, str]:
     run and the paper's row of the same model share a colour; other families
     shade in the given order; models of family ``Other`` get distinct colours.
     """
+
     def get(m: Any, key: str) -> Any:
         return m.get(key) if isinstance(m, Mapping) else getattr(m, key, None)
 
@@ -137,7 +156,9 @@ def model_colors(models: Iterable[Mapping[str, Any] | Any]) -> dict[str, str]:
     return out
 
 
-def save_figure(fig: Any, stem: str | os.PathLike[str], *, formats: tuple[str, ...] = FORMATS, dpi: int = DPI) -> list[Path]:
+def save_figure(
+    fig: Any, stem: str | os.PathLike[str], *, formats: tuple[str, ...] = FORMATS, dpi: int = DPI
+) -> list[Path]:
     """Write ``fig`` as ``stem.png`` (150 dpi) and ``stem.svg`` (by default), close it, return the paths."""
     stem = Path(stem)
     stem.parent.mkdir(parents=True, exist_ok=True)

@@ -8,8 +8,13 @@ from typing import Any
 from lightemma.report.figures._mpl import pyplot
 
 
-def ablation_figure(ablations: Sequence[Mapping[str, Any]], gains: Sequence[Mapping[str, Any]], *, metric: str = "ade_avg",
-                    unit: str = "m") -> Any:
+def ablation_figure(
+    ablations: Sequence[Mapping[str, Any]],
+    gains: Sequence[Mapping[str, Any]],
+    *,
+    metric: str = "ade_avg",
+    unit: str = "m",
+) -> Any:
     """Two panels of horizontal intervals (rows of :func:`~lightemma.evaluation.ablations.input_ablations` and
     :func:`~lightemma.evaluation.ablations.baseline_gains`): left, full − ablated per ablation run (left of 0: the
     model uses what was taken away); right, each model's gain over the best baseline (right of 0: it beats the
@@ -17,10 +22,22 @@ def ablation_figure(ablations: Sequence[Mapping[str, Any]], gains: Sequence[Mapp
     interval (fewer than 2 scenes) shows its point alone.
     """
     plt = pyplot()
-    panels = [(ablations, "diff", lambda r: f"{r['model']} − {r['ablation']}", f"full − ablated, {metric} ({unit})",
-               "← the model uses what the ablation removes"),
-              (gains, "gain", lambda r: f"{r['model']} vs {r['baseline']}", f"gain over the best baseline, {metric} ({unit})",
-               "the model beats the history alone →")]
+    panels = [
+        (
+            ablations,
+            "diff",
+            lambda r: f"{r['model']} − {r['ablation']}",
+            f"full − ablated, {metric} ({unit})",
+            "← the model uses what the ablation removes",
+        ),
+        (
+            gains,
+            "gain",
+            lambda r: f"{r['model']} vs {r['baseline']}",
+            f"gain over the best baseline, {metric} ({unit})",
+            "the model beats the history alone →",
+        ),
+    ]
     panels = [p for p in panels if p[0]]
     if not panels:
         raise ValueError("no ablation or baseline comparison to draw")
@@ -35,8 +52,16 @@ def ablation_figure(ablations: Sequence[Mapping[str, Any]], gains: Sequence[Mapp
             ci = row.get(f"{metric}_ci95")
             err = [[value - ci[0]], [ci[1] - value]] if ci else None
             significant = bool(row.get(f"{metric}_significant"))
-            ax.errorbar([value], [yi], xerr=err, fmt="o", color="C0" if significant else "0.45", capsize=3,
-                        markerfacecolor="C0" if significant else "white", zorder=3)
+            ax.errorbar(
+                [value],
+                [yi],
+                xerr=err,
+                fmt="o",
+                color="C0" if significant else "0.45",
+                capsize=3,
+                markerfacecolor="C0" if significant else "white",
+                zorder=3,
+            )
         ax.axvline(0.0, color="0.3", linewidth=1.0, zorder=1)
         ax.set_yticks(y)
         ax.set_yticklabels([name(r) for r in rows], fontsize=7)

@@ -53,8 +53,17 @@ def _map_patch(ax: Any, area: Any, centre: np.ndarray, radius: float, transform:
         py0, py1 = int(max(0, h - (centre[1] + radius) / r)), int(min(h - 1, h - (centre[1] - radius) / r))
         if px1 > px0 and py1 > py0:
             crop = area.mask[py0 : py1 + 1, px0 : px1 + 1] == 255
-            ax.imshow(np.where(crop, 0.85, 1.0), cmap="gray", vmin=0, vmax=1, origin="upper", interpolation="nearest",
-                      extent=((px0 - 0.5) * r, (px1 + 0.5) * r, (h - py1 - 0.5) * r, (h - py0 + 0.5) * r), zorder=0, transform=transform)
+            ax.imshow(
+                np.where(crop, 0.85, 1.0),
+                cmap="gray",
+                vmin=0,
+                vmax=1,
+                origin="upper",
+                interpolation="nearest",
+                extent=((px0 - 0.5) * r, (px1 + 0.5) * r, (h - py1 - 0.5) * r, (h - py0 + 0.5) * r),
+                zorder=0,
+                transform=transform,
+            )
         return
     for p in range(len(area.polygons) - 1):
         r0, r1 = area.polygons[p], area.polygons[p + 1]
@@ -62,11 +71,28 @@ def _map_patch(ax: Any, area: Any, centre: np.ndarray, radius: float, transform:
             pts = area.xy[area.rings[ring] : area.rings[ring + 1]]
             if len(pts) < 3 or (np.abs(pts - centre).min(axis=0) > radius * 4).any():
                 continue
-            ax.add_patch(MplPolygon(pts, closed=True, facecolor="#d9d9d9" if k == 0 else "white", edgecolor="#9a9a9a", lw=0.6,
-                                    zorder=0 if k == 0 else 0.5, transform=transform))
+            ax.add_patch(
+                MplPolygon(
+                    pts,
+                    closed=True,
+                    facecolor="#d9d9d9" if k == 0 else "white",
+                    edgecolor="#9a9a9a",
+                    lw=0.6,
+                    zorder=0 if k == 0 else 0.5,
+                    transform=transform,
+                )
+            )
 
 
-def bev_figure(frame_id: str, trajectories: Sequence[tuple[str, np.ndarray, str]], gt: np.ndarray | None, data: Any, *, ego: Any = None, radius: float = 35.0) -> Any:
+def bev_figure(
+    frame_id: str,
+    trajectories: Sequence[tuple[str, np.ndarray, str]],
+    gt: np.ndarray | None,
+    data: Any,
+    *,
+    ego: Any = None,
+    radius: float = 35.0,
+) -> Any:
     """A top view of frame ``frame_id`` (``scene/sample_token``) in its ego frame (:func:`bev_transform`: forward up, left
     on the left; axes in metres, the lateral ticks reading y), ``radius`` metres to each side, 1.6 ``radius`` ahead and
     0.4 ``radius`` behind.
@@ -93,11 +119,23 @@ def bev_figure(frame_id: str, trajectories: Sequence[tuple[str, np.ndarray, str]
     tr = bev_transform(pose) + ax.transData
     key = data.map_of.get(token)
     area = data.areas.get(key) if key else None
-    _map_patch(ax, area if isinstance(area, S.DrivableArea) else None, centre, radius * 2.0, tr)  # > |(1, 1.6)|: the view's far corners
+    _map_patch(
+        ax, area if isinstance(area, S.DrivableArea) else None, centre, radius * 2.0, tr
+    )  # > |(1, 1.6)|: the view's far corners
     future = data.future.get(token, [])
     for k, ft in enumerate(future):
         for corners in box_corners(data.boxes.get(ft, np.zeros((0, 5)))):
-            ax.add_patch(MplPolygon(corners, closed=True, fill=False, edgecolor=str(0.65 - 0.1 * k), lw=0.8, zorder=Z_AGENT, transform=tr))
+            ax.add_patch(
+                MplPolygon(
+                    corners,
+                    closed=True,
+                    fill=False,
+                    edgecolor=str(0.65 - 0.1 * k),
+                    lw=0.8,
+                    zorder=Z_AGENT,
+                    transform=tr,
+                )
+            )
     series = [(label, traj, color, False) for label, traj, color in trajectories]
     if gt is not None:
         series.append(("ground truth", gt, GT_COLOR, True))  # last: over every model
@@ -110,12 +148,32 @@ def bev_figure(frame_id: str, trajectories: Sequence[tuple[str, np.ndarray, str]
         for k, c in enumerate(corners):
             hit = fs is not None and fs.coll_ok[0] and fs.collide[0, k].any()
             off = fs is not None and fs.area_ok[0] and fs.off_steps[0, k]
-            ax.add_patch(MplPolygon(c, closed=True, fill=hit, facecolor=COLLISION_COLOR if hit else "none", alpha=0.5 if hit else 1.0,
-                                    edgecolor=COLLISION_COLOR if off else color, linestyle="--" if off else "-", lw=1.4 if truth else 1.1,
-                                    zorder=Z_TRUTH if truth else Z_MODEL, transform=tr))
+            ax.add_patch(
+                MplPolygon(
+                    c,
+                    closed=True,
+                    fill=hit,
+                    facecolor=COLLISION_COLOR if hit else "none",
+                    alpha=0.5 if hit else 1.0,
+                    edgecolor=COLLISION_COLOR if off else color,
+                    linestyle="--" if off else "-",
+                    lw=1.4 if truth else 1.1,
+                    zorder=Z_TRUTH if truth else Z_MODEL,
+                    transform=tr,
+                )
+            )
         g = S.ego_poses(traj, np.asarray([pose]), ego)[0]
-        ax.plot(np.r_[pose[0], g[:, 0]], np.r_[pose[1], g[:, 1]], "-o", color=color, ms=2.5, lw=1.2, label=label,
-                zorder=Z_TRUTH_PATH if truth else Z_MODEL_PATH, transform=tr)
+        ax.plot(
+            np.r_[pose[0], g[:, 0]],
+            np.r_[pose[1], g[:, 1]],
+            "-o",
+            color=color,
+            ms=2.5,
+            lw=1.2,
+            label=label,
+            zorder=Z_TRUTH_PATH if truth else Z_MODEL_PATH,
+            transform=tr,
+        )
     ax.plot(*centre, marker="*", color="black", ms=9, zorder=Z_EGO, transform=tr)
     ax.set_xlim(-radius, radius)
     ax.set_ylim(-0.4 * radius, 1.6 * radius)  # the 3 s ahead: most of the view in front of the ego

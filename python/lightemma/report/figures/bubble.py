@@ -24,7 +24,9 @@ def _ordered(points: Sequence[Mapping[str, Any]]) -> list[Mapping[str, Any]]:
     return [p for _, p in indexed]
 
 
-def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "ADE by model family and generation") -> Any:
+def bubble_chart(
+    points: Sequence[Mapping[str, Any]], *, title: str | None = "ADE by model family and generation"
+) -> Any:
     """Draw the bubble chart from dicts with ``model``, ``family``, ``ade_avg``, ``seconds_per_frame``
     (optional ``generation`` to order within a family, ``ade_avg_ci95`` [low, high] drawn as a bar,
     ``color``, ``note`` after the name, ``source="paper"`` for hollow reference bubbles).
@@ -39,7 +41,9 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
     colors = model_colors(shown)
     seconds = [p.get("seconds_per_frame") or 0.0 for p in shown]
     slowest = max(max(seconds), 1e-9)
-    slots: dict[str, list[tuple[Mapping[str, Any], float]]] = {}  # a run and the paper's row of the same model share a slot
+    slots: dict[
+        str, list[tuple[Mapping[str, Any], float]]
+    ] = {}  # a run and the paper's row of the same model share a slot
     for p, secs in zip(shown, seconds):
         slots.setdefault(str(p["model"]), []).append((p, secs))
     fig, ax = plt.subplots(figsize=(min(18.0, max(6.0, 0.72 * len(slots) + 2.5)), 5.2))
@@ -58,20 +62,69 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
             color = p.get("color") or colors[label]
             area = MIN_AREA + (MAX_AREA - MIN_AREA) * (secs / slowest)
             hollow = p.get("source") == "paper"
-            ax.scatter([xpos], [p["ade_avg"]], s=area, facecolors="none" if hollow else color, edgecolors=color, linewidths=1.6, alpha=0.8 if hollow else 0.7, zorder=4 if hollow else 3)
+            ax.scatter(
+                [xpos],
+                [p["ade_avg"]],
+                s=area,
+                facecolors="none" if hollow else color,
+                edgecolors=color,
+                linewidths=1.6,
+                alpha=0.8 if hollow else 0.7,
+                zorder=4 if hollow else 3,
+            )
             ci = _interval(p)
             if ci:
-                ax.errorbar([xpos], [p["ade_avg"]], yerr=[[p["ade_avg"] - ci[0]], [ci[1] - p["ade_avg"]]], color="0.15", linewidth=1.1, capsize=3, zorder=5)
+                ax.errorbar(
+                    [xpos],
+                    [p["ade_avg"]],
+                    yerr=[[p["ade_avg"] - ci[0]], [ci[1] - p["ade_avg"]]],
+                    color="0.15",
+                    linewidth=1.1,
+                    capsize=3,
+                    zorder=5,
+                )
             # the value: a run's above its interval (or bubble), the paper's inside its hollow bubble (or below a small one)
             radius = math.sqrt(area / math.pi)
             if hollow:
                 inside = radius >= 11
-                ax.annotate(f"{p['ade_avg']:.2f}", (xpos, p["ade_avg"]), xytext=(0, 0 if inside else -radius - 2), textcoords="offset points", ha="center", va="center" if inside else "top", fontsize=7, color="0.3", style="italic", zorder=6, bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.75})
+                ax.annotate(
+                    f"{p['ade_avg']:.2f}",
+                    (xpos, p["ade_avg"]),
+                    xytext=(0, 0 if inside else -radius - 2),
+                    textcoords="offset points",
+                    ha="center",
+                    va="center" if inside else "top",
+                    fontsize=7,
+                    color="0.3",
+                    style="italic",
+                    zorder=6,
+                    bbox={"boxstyle": "round,pad=0.1", "fc": "white", "ec": "none", "alpha": 0.75},
+                )
             else:
                 top, lift = (ci[1], 2) if ci else (p["ade_avg"], radius + 2)
-                ax.annotate(f"{p['ade_avg']:.2f}", (xpos, top), xytext=(0, lift), textcoords="offset points", ha="center", va="bottom", fontsize=7, fontweight="bold", zorder=6)
+                ax.annotate(
+                    f"{p['ade_avg']:.2f}",
+                    (xpos, top),
+                    xytext=(0, lift),
+                    textcoords="offset points",
+                    ha="center",
+                    va="bottom",
+                    fontsize=7,
+                    fontweight="bold",
+                    zorder=6,
+                )
     ax.set_xticks(xs)
-    ax.set_xticklabels([label + (" (paper)" if all(p.get("source") == "paper" for p, _ in members) else "") + "".join(p.get("note") or "" for p, _ in members) for label, members in slots.items()], rotation=40, ha="right", fontsize=8)
+    ax.set_xticklabels(
+        [
+            label
+            + (" (paper)" if all(p.get("source") == "paper" for p, _ in members) else "")
+            + "".join(p.get("note") or "" for p, _ in members)
+            for label, members in slots.items()
+        ],
+        rotation=40,
+        ha="right",
+        fontsize=8,
+    )
     ades = [p["ade_avg"] for p in shown] + [v for p in shown for v in (_interval(p) or ())]
     span = max(ades) - min(ades)
     ax.set_ylim(max(0.0, min(ades) - 0.3 * span - 0.1), max(ades) + 0.3 * span + 0.1)
@@ -79,6 +132,7 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
     ax.set_ylabel("ADE avg (m) — lower is better")
     ax.grid(axis="y", alpha=0.3)
     families = list(dict.fromkeys(p.get("family", "Other") for p in shown))
+
     def swatch(family: str) -> str:  # baselines and others have a colour per model: show the first one's
         if family == "Other" or family not in FAMILY_COLORS:
             return next(colors[str(p["model"])] for p in shown if p.get("family", "Other") == family)
@@ -87,7 +141,18 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
     handles = [plt.Line2D([], [], marker="o", linestyle="", color=swatch(f), markersize=8, label=f) for f in families]
     handles.append(plt.Line2D([], [], linestyle="", label=f"area: time/frame (largest {slowest:.1f} s)"))
     if any(p.get("source") == "paper" for p in shown):
-        handles.append(plt.Line2D([], [], marker="o", linestyle="", markerfacecolor="none", markeredgecolor="0.3", markersize=8, label="the paper's (value in italics)"))
+        handles.append(
+            plt.Line2D(
+                [],
+                [],
+                marker="o",
+                linestyle="",
+                markerfacecolor="none",
+                markeredgecolor="0.3",
+                markersize=8,
+                label="the paper's (value in italics)",
+            )
+        )
     if any(_interval(p) for p in shown):
         handles.append(plt.Line2D([], [], color="0.15", linewidth=1.2, label="95 % CI (scenes)"))
     ax.legend(handles=handles, fontsize=8, loc="upper left", ncol=min(5, len(handles)), framealpha=0.9)
@@ -99,7 +164,11 @@ def bubble_chart(points: Sequence[Mapping[str, Any]], *, title: str | None = "AD
 
 def _interval(point: Mapping[str, Any]) -> list[float] | None:
     ci = point.get("ade_avg_ci95")
-    if isinstance(ci, (list, tuple)) and len(ci) == 2 and all(isinstance(v, (int, float)) and math.isfinite(v) for v in ci):
+    if (
+        isinstance(ci, (list, tuple))
+        and len(ci) == 2
+        and all(isinstance(v, (int, float)) and math.isfinite(v) for v in ci)
+    ):
         return [float(ci[0]), float(ci[1])]
     return None
 
@@ -122,7 +191,14 @@ def bubble_points(evaluation: Any, *, convention: str = "lightemma", with_paper:
         times = {r["model"]: r["seconds_per_frame"] for r in paper_efficiency_rows()}
         generation = {k.display_name: k.generation for k in PAPER_MODELS}
         points += [
-            {"model": r["model"], "family": r["family"], "generation": generation[r["model"]], "ade_avg": r["ade_avg"], "seconds_per_frame": times[r["model"]], "source": "paper"}
+            {
+                "model": r["model"],
+                "family": r["family"],
+                "generation": generation[r["model"]],
+                "ade_avg": r["ade_avg"],
+                "seconds_per_frame": times[r["model"]],
+                "source": "paper",
+            }
             for r in paper_accuracy_rows()
         ]
     return points

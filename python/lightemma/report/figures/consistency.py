@@ -15,8 +15,12 @@ BARS: tuple[str, ...] = ("consistent", "intent_accuracy")
 _TITLES = {"consistent": "Consistent with its plan", "intent_accuracy": "Intent accuracy (ground truth)"}
 
 
-def explanations_figure(rows: Sequence[Mapping[str, Any]], *, colors: Mapping[str, str] | None = None,
-                        notes: Mapping[str, str] | None = None) -> Any:
+def explanations_figure(
+    rows: Sequence[Mapping[str, Any]],
+    *,
+    colors: Mapping[str, str] | None = None,
+    notes: Mapping[str, str] | None = None,
+) -> Any:
     """Grouped bars: per row (model) its ``consistent`` and ``intent_accuracy`` rates (in [0, 1]) with their
     ``<key>_ci95`` intervals as error bars. ``rows``: explanation rows (``model`` and the keys of
     :data:`lightemma.evaluation.intent_audit.ROW_KEYS`); ``colors``: model label → colour; ``notes``: a flag after a
@@ -33,12 +37,21 @@ def explanations_figure(rows: Sequence[Mapping[str, Any]], *, colors: Mapping[st
         values = np.array([np.nan if row.get(k) is None else float(row[k]) for k in BARS])
         low = np.array([np.nan if not row.get(f"{k}_ci95") else float(row[f"{k}_ci95"][0]) for k in BARS])
         high = np.array([np.nan if not row.get(f"{k}_ci95") else float(row[f"{k}_ci95"][1]) for k in BARS])
-        err = np.vstack([np.where(np.isfinite(low), values - low, 0.0),
-                         np.where(np.isfinite(high), high - values, 0.0)])
+        err = np.vstack(
+            [np.where(np.isfinite(low), values - low, 0.0), np.where(np.isfinite(high), high - values, 0.0)]
+        )
         err = np.where(np.isfinite(err), np.maximum(err, 0.0), 0.0)
         pos = x - 0.4 + width * (j + 0.5)
-        ax.bar(pos, np.nan_to_num(values), width * 0.9, yerr=err, capsize=2, color=(colors or {}).get(label),
-               label=label + (notes or {}).get(label, ""), error_kw={"elinewidth": 0.8})
+        ax.bar(
+            pos,
+            np.nan_to_num(values),
+            width * 0.9,
+            yerr=err,
+            capsize=2,
+            color=(colors or {}).get(label),
+            label=label + (notes or {}).get(label, ""),
+            error_kw={"elinewidth": 0.8},
+        )
         for p, v in zip(pos, values):
             if not np.isfinite(v):
                 ax.text(p, 0.02, "n/a", rotation=90, ha="center", va="bottom", fontsize=6, color="0.4")

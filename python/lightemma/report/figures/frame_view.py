@@ -59,7 +59,9 @@ def open_image(path: str | Path | None, *, max_pixels: int = MAX_IMAGE_PIXELS) -
     return img
 
 
-def load_image(path: str | Path | None, *, max_pixels: int = MAX_IMAGE_PIXELS, width: int | None = None) -> np.ndarray | None:
+def load_image(
+    path: str | Path | None, *, max_pixels: int = MAX_IMAGE_PIXELS, width: int | None = None
+) -> np.ndarray | None:
     """The RGB image at ``path`` as an array (H, W, 3) uint8, or None when there is none, it is
     unreadable or larger than ``max_pixels``; with ``width``, scaled down to about that width
     (JPEGs are decoded at a reduced size directly)."""
@@ -96,15 +98,32 @@ GT_DASHES = (3.0, 3.0)
 PRED_WIDTH = 2.6
 
 
-def _draw_projected(ax: Any, camera: Camera, trajectory: np.ndarray, color: str, label: str, width: float, *, truth: bool = False) -> None:
+def _draw_projected(
+    ax: Any, camera: Camera, trajectory: np.ndarray, color: str, label: str, width: float, *, truth: bool = False
+) -> None:
     line, _ = project(densify(trajectory), camera.intrinsic, camera.extrinsic)
     style = {"dashes": GT_DASHES, "zorder": 6} if truth else {"zorder": 4}
     ax.plot(line[:, 0], line[:, 1], color=color, linewidth=width, label=label, solid_capstyle="round", **style)
     points, visible = project(trajectory, camera.intrinsic, camera.extrinsic)
-    ax.scatter(points[visible, 0], points[visible, 1], s=9 if truth else 14, color=color, edgecolors="white", linewidths=0.6, zorder=7 if truth else 5)
+    ax.scatter(
+        points[visible, 0],
+        points[visible, 1],
+        s=9 if truth else 14,
+        color=color,
+        edgecolors="white",
+        linewidths=0.6,
+        zorder=7 if truth else 5,
+    )
 
 
-def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None) -> None:
+def draw_camera(
+    ax: Any,
+    camera: Camera,
+    gt: np.ndarray,
+    predictions: Mapping[str, np.ndarray],
+    *,
+    colors: Mapping[str, str] | None = None,
+) -> None:
     """The camera view with the trajectories drawn on the ground; a plain grey background (no
     image drawn: it costs nothing) when there is no image."""
     width, height = camera.size
@@ -126,7 +145,9 @@ def draw_camera(ax: Any, camera: Camera, gt: np.ndarray, predictions: Mapping[st
         spine.set_visible(False)
 
 
-def bev_limits(trajectories: list[np.ndarray], *, min_extent: float = 5.0, margin: float = 0.12) -> tuple[tuple[float, float], tuple[float, float]]:
+def bev_limits(
+    trajectories: list[np.ndarray], *, min_extent: float = 5.0, margin: float = 0.12
+) -> tuple[tuple[float, float], tuple[float, float]]:
     """Square (horizontal, vertical) limits of a bird's-eye view holding the origin and every point.
 
     The view plots lateral −y to the right and forward x upward; the box is
@@ -139,7 +160,14 @@ def bev_limits(trajectories: list[np.ndarray], *, min_extent: float = 5.0, margi
     return (cx - half, cx + half), (cy - half, cy + half)
 
 
-def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, colors: Mapping[str, str] | None = None, units: bool = True) -> None:
+def draw_bev(
+    ax: Any,
+    gt: np.ndarray,
+    predictions: Mapping[str, np.ndarray],
+    *,
+    colors: Mapping[str, str] | None = None,
+    units: bool = True,
+) -> None:
     """Bird's-eye view, x (forward) upward, y (left) to the left; origin = the ego now; axes in metres.
 
     As the camera image shows it (nuScenes ego frame: x forward, y left): a point on the left is left of the
@@ -151,7 +179,18 @@ def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, 
 
     def plot(traj: np.ndarray, color: str, width: float, label: str, z: float, **style: Any) -> None:
         pts = np.concatenate([np.zeros((1, 2)), traj])
-        ax.plot(-pts[:, 1], pts[:, 0], "-", color=color, linewidth=width, marker="o", markersize=2.5, label=label, zorder=z, **style)
+        ax.plot(
+            -pts[:, 1],
+            pts[:, 0],
+            "-",
+            color=color,
+            linewidth=width,
+            marker="o",
+            markersize=2.5,
+            label=label,
+            zorder=z,
+            **style,
+        )
 
     shown = {label: t for label, t in predictions.items() if np.isfinite(t).all()}
     for i, (label, trajectory) in enumerate(shown.items()):
@@ -164,7 +203,9 @@ def draw_bev(ax: Any, gt: np.ndarray, predictions: Mapping[str, np.ndarray], *, 
     ax.plot([0], [0], marker="^", color="black", markersize=6, zorder=5)
     ax.set_facecolor("#f4f4f4")
     ax.tick_params(labelsize=6)
-    ax.xaxis.set_major_formatter(FuncFormatter(lambda h, _: f"{-h + 0.0:g}"))  # drawn at −y, labelled y (+ 0.0: no "-0")
+    ax.xaxis.set_major_formatter(
+        FuncFormatter(lambda h, _: f"{-h + 0.0:g}")
+    )  # drawn at −y, labelled y (+ 0.0: no "-0")
     if units:
         ax.set_xlabel("y, left ← lateral (m) → right", fontsize=6, labelpad=1)
         ax.set_ylabel("forward x (m)", fontsize=6, labelpad=1)
@@ -202,7 +243,16 @@ def frame_figure(
     gt = np.asarray(gt, dtype=np.float64)
     preds = {k: np.asarray(v, dtype=np.float64) for k, v in predictions.items()}
     fig = plt.figure(figsize=(11, 7.4 if texts else 4.6))
-    grid = fig.add_gridspec(2 if texts else 1, 1, height_ratios=[3, 1.6] if texts else [1], hspace=0.08, left=0.03, right=0.98, top=0.93, bottom=0.02 if texts else 0.08)
+    grid = fig.add_gridspec(
+        2 if texts else 1,
+        1,
+        height_ratios=[3, 1.6] if texts else [1],
+        hspace=0.08,
+        left=0.03,
+        right=0.98,
+        top=0.93,
+        bottom=0.02 if texts else 0.08,
+    )
     if camera is not None:
         # camera view and bird's-eye view side by side: the BEV never covers the image
         top = grid[0].subgridspec(1, 2, width_ratios=[1.9, 1], wspace=0.12)
@@ -215,7 +265,16 @@ def frame_figure(
     if texts:
         text_ax = fig.add_subplot(grid[1])
         text_ax.axis("off")
-        text_ax.text(0.0, 1.0, _stage_text(texts, text_limit), va="top", ha="left", fontsize=7.5, family="monospace", transform=text_ax.transAxes)
+        text_ax.text(
+            0.0,
+            1.0,
+            _stage_text(texts, text_limit),
+            va="top",
+            ha="left",
+            fontsize=7.5,
+            family="monospace",
+            transform=text_ax.transAxes,
+        )
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
@@ -242,7 +301,16 @@ def model_grid(
     with_camera = camera is not None
     panel_w = 6.4 if with_camera else 3.2
     fig = plt.figure(figsize=(panel_w * ncols, 3.0 * nrows + 0.9))
-    outer = fig.add_gridspec(nrows, ncols, left=0.03, right=0.99, top=0.93 if title else 0.97, bottom=0.1 if nrows == 1 else 0.06, wspace=0.12, hspace=0.35)
+    outer = fig.add_gridspec(
+        nrows,
+        ncols,
+        left=0.03,
+        right=0.99,
+        top=0.93 if title else 0.97,
+        bottom=0.1 if nrows == 1 else 0.06,
+        wspace=0.12,
+        hspace=0.35,
+    )
     palette = {label: (colors or {}).get(label, pred_color(i)) for i, label in enumerate(labels)}
     for k, label in enumerate(labels):
         cell = outer[k // ncols, k % ncols]
@@ -257,7 +325,11 @@ def model_grid(
         draw_bev(bev_ax, gt, pred, colors=palette)
         bev_ax.set_title("bird's-eye (m)" if with_camera else "", fontsize=6)
         error = (errors or {}).get(label)
-        cam_ax.set_title(label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""), fontsize=9, color=palette[label])
+        cam_ax.set_title(
+            label + (f" — ADE {error:.2f} m" if error is not None and np.isfinite(error) else ""),
+            fontsize=9,
+            color=palette[label],
+        )
     if title:
         fig.suptitle(title, fontsize=10)
     handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.0, dashes=GT_DASHES, label="ground truth")]
@@ -270,5 +342,8 @@ def _legend(ax: Any, preds: Mapping[str, np.ndarray], colors: Mapping[str, str] 
     """Ground truth and each model in its colour (whether or not its line is in view)."""
     plt = pyplot()
     handles = [plt.Line2D([], [], color=GT_COLOR, linewidth=2.0, dashes=GT_DASHES, label="ground truth")]
-    handles += [plt.Line2D([], [], color=(colors or {}).get(label, pred_color(i)), linewidth=2.2, label=label) for i, label in enumerate(preds)]
+    handles += [
+        plt.Line2D([], [], color=(colors or {}).get(label, pred_color(i)), linewidth=2.2, label=label)
+        for i, label in enumerate(preds)
+    ]
     ax.legend(handles=handles, loc=loc, fontsize=8, framealpha=0.8)

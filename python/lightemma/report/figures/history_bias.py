@@ -27,6 +27,7 @@ INPUT_MARKERS = {"full": "o", "no-image": "s", "blank-image": "D", "no-history":
 
 def _beside_full(runs: Sequence[Any]) -> tuple[list[int], dict[int, int]]:
     """Run order with each full run followed by its ablation runs (same model and variant), and ablated -> full index."""
+
     def key(run: Any) -> tuple[Any, ...]:
         return comparison_key(run.info)
 
@@ -37,7 +38,9 @@ def _beside_full(runs: Sequence[Any]) -> tuple[list[int], dict[int, int]]:
     for i, run in enumerate(runs):
         if inputs(run) == "full":
             full.setdefault(key(run), []).append(i)
-    partner = {i: full[key(run)][0] for i, run in enumerate(runs) if inputs(run) != "full" and len(full.get(key(run), [])) == 1}
+    partner = {
+        i: full[key(run)][0] for i, run in enumerate(runs) if inputs(run) != "full" and len(full.get(key(run), [])) == 1
+    }
     order: list[int] = []
     for i in range(len(runs)):
         if i in partner:
@@ -85,10 +88,21 @@ def history_bias_figure(
     labels, samples, stats = [labels[i] for i in order], [samples[i] for i in order], [stats[i] for i in order]
     # the truth of every frame any run covers (not only the first run's): its line never depends on run order or coverage
     truth = truth_over_runs(runs)
-    truth_fit = bias_row("truth", {"history": truth["history"], "pred": truth["true"], "true": truth["true"], "after_turn": truth["after_turn"], "short_path": np.array(0)})
+    truth_fit = bias_row(
+        "truth",
+        {
+            "history": truth["history"],
+            "pred": truth["true"],
+            "true": truth["true"],
+            "after_turn": truth["after_turn"],
+            "short_path": np.array(0),
+        },
+    )
     n = max(1, len(labels))
     height = max(4.6, 1.9 + 0.3 * n)  # every model gets a readable row in the two right panels
-    fig, (scatter, slopes, bars) = plt.subplots(1, 3, figsize=(16, height), gridspec_kw={"width_ratios": [1.35, 1, 1]}, layout="constrained")
+    fig, (scatter, slopes, bars) = plt.subplots(
+        1, 3, figsize=(16, height), gridspec_kw={"width_ratios": [1.35, 1, 1]}, layout="constrained"
+    )
 
     xlim = _limits([k["history"] for k in samples] + [truth["history"]], floor=0.05)
     ylim = _limits([k["pred"] for k in samples] + [truth["true"]], floor=0.05)
@@ -96,25 +110,49 @@ def history_bias_figure(
     for label, k in zip(labels, samples):
         keep = rng.permutation(len(k["history"]))[:max_points]
         if label in ablated:
-            scatter.scatter(k["history"][keep], k["pred"][keep], s=9, marker=INPUT_MARKERS.get(ablated[label], "s"), facecolors="none",
-                            edgecolors=palette[label], alpha=0.35, linewidths=0.6, zorder=2)
+            scatter.scatter(
+                k["history"][keep],
+                k["pred"][keep],
+                s=9,
+                marker=INPUT_MARKERS.get(ablated[label], "s"),
+                facecolors="none",
+                edgecolors=palette[label],
+                alpha=0.35,
+                linewidths=0.6,
+                zorder=2,
+            )
         else:
-            scatter.scatter(k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2)
+            scatter.scatter(
+                k["history"][keep], k["pred"][keep], s=7, color=palette[label], alpha=0.3, linewidths=0, zorder=2
+            )
     keep = rng.permutation(len(truth["history"]))[:max_points]
-    scatter.scatter(truth["history"][keep], truth["true"][keep], s=7, color=GT_COLOR, alpha=0.45, linewidths=0, zorder=3)
+    scatter.scatter(
+        truth["history"][keep], truth["true"][keep], s=7, color=GT_COLOR, alpha=0.45, linewidths=0, zorder=3
+    )
     xs = np.array(xlim)
-    scatter.plot(xs, xs, linestyle="--", color="0.35", linewidth=1.2, zorder=4, label="turn goes on unchanged (slope 1)")
+    scatter.plot(
+        xs, xs, linestyle="--", color="0.35", linewidth=1.2, zorder=4, label="turn goes on unchanged (slope 1)"
+    )
     few = len(labels) <= 4  # with many models the middle panel names them; the scatter shows their lines only
     for label, stat in zip(labels, stats):
         if stat["slope_pred"] is not None:
-            scatter.plot(xs, stat["slope_pred"] * xs + stat["intercept_pred"], color=palette[label], linewidth=1.6, zorder=5,
-                         linestyle="--" if label in ablated else "-", label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None)
+            scatter.plot(
+                xs,
+                stat["slope_pred"] * xs + stat["intercept_pred"],
+                color=palette[label],
+                linewidth=1.6,
+                zorder=5,
+                linestyle="--" if label in ablated else "-",
+                label=f"{label}: slope {stat['slope_pred']:.2f}" if few else None,
+            )
     if not few:
         scatter.plot([], [], color="0.3", linewidth=1.6, label="each model's fit (colours as in the middle panel)")
     if truth_fit["slope_true"] is not None:
         line = truth_fit["slope_true"] * xs + truth_fit["intercept_true"]
         scatter.plot(xs, line, color="white", linewidth=4.5, zorder=6)
-        scatter.plot(xs, line, color=GT_COLOR, linewidth=2.6, zorder=7, label=f"truth: slope {truth_fit['slope_true']:.2f}")
+        scatter.plot(
+            xs, line, color=GT_COLOR, linewidth=2.6, zorder=7, label=f"truth: slope {truth_fit['slope_true']:.2f}"
+        )
     scatter.axhline(0, color="0.75", linewidth=0.8, zorder=1)
     scatter.axvline(0, color="0.75", linewidth=0.8, zorder=1)
     scatter.set_xlim(xlim)
@@ -132,16 +170,39 @@ def history_bias_figure(
         if band:
             slopes.axvspan(band[0], band[1], color=GT_COLOR, alpha=0.25, zorder=1)
         shown = f" [{band[0]:.2f}, {band[1]:.2f}]" if band else ""
-        slopes.axvline(truth_fit["slope_true"], color=GT_COLOR, linewidth=2.2, zorder=2, label=f"truth {truth_fit['slope_true']:.2f}{shown}")
+        slopes.axvline(
+            truth_fit["slope_true"],
+            color=GT_COLOR,
+            linewidth=2.2,
+            zorder=2,
+            label=f"truth {truth_fit['slope_true']:.2f}{shown}",
+        )
     slopes.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=2, label="turn goes on unchanged (1)")
     slopes.axvline(0.0, color="0.75", linewidth=0.8, zorder=1)
     for yi, label, s in zip(y, labels, stats):
         if s["slope_pred"] is None:
-            slopes.text(0.5, yi, "too few moving frames for a slope", transform=slopes.get_yaxis_transform(), ha="center", va="center", fontsize=7, color="0.45")
+            slopes.text(
+                0.5,
+                yi,
+                "too few moving frames for a slope",
+                transform=slopes.get_yaxis_transform(),
+                ha="center",
+                va="center",
+                fontsize=7,
+                color="0.45",
+            )
             continue
         low, high = s["slope_pred_ci95"] or (s["slope_pred"], s["slope_pred"])
-        slopes.errorbar([s["slope_pred"]], [yi], xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]], fmt=INPUT_MARKERS.get(ablated.get(label, "full"), "o"), color=palette[label], capsize=3, zorder=3,
-                        markerfacecolor="white" if label in ablated else palette[label])
+        slopes.errorbar(
+            [s["slope_pred"]],
+            [yi],
+            xerr=[[s["slope_pred"] - low], [high - s["slope_pred"]]],
+            fmt=INPUT_MARKERS.get(ablated.get(label, "full"), "o"),
+            color=palette[label],
+            capsize=3,
+            zorder=3,
+            markerfacecolor="white" if label in ablated else palette[label],
+        )
     slopes.set_yticks(y)
     slopes.set_yticklabels(names, fontsize=7)
     slopes.set_ylim(-0.6, n - 0.4)
@@ -153,15 +214,38 @@ def history_bias_figure(
     values = [1.0, 0.0] + ([carried] if carried is not None else [])
     for yi, label, s in zip(y, labels, stats):
         if s["carry_pred"] is None:
-            bars.text(0.02, yi, "no frame straight just after a turn", transform=bars.get_yaxis_transform(), ha="left", va="center", fontsize=7, color="0.45")
+            bars.text(
+                0.02,
+                yi,
+                "no frame straight just after a turn",
+                transform=bars.get_yaxis_transform(),
+                ha="left",
+                va="center",
+                fontsize=7,
+                color="0.45",
+            )
             continue
         hollow = label in ablated
-        bars.barh([yi], [s["carry_pred"]], color="white" if hollow else palette[label], edgecolor=palette[label],
-                  hatch="//" if hollow else None, linewidth=1.0 if hollow else 0, height=0.6, zorder=2)
+        bars.barh(
+            [yi],
+            [s["carry_pred"]],
+            color="white" if hollow else palette[label],
+            edgecolor=palette[label],
+            hatch="//" if hollow else None,
+            linewidth=1.0 if hollow else 0,
+            height=0.6,
+            zorder=2,
+        )
         values.append(s["carry_pred"])
     if carried is not None:
         bars.axvline(carried, color="white", linewidth=4.5, zorder=3)
-        bars.axvline(carried, color=GT_COLOR, linewidth=2.4, zorder=4, label=f"truth ({carried:.2f}, n={truth_fit['after_turn_frames']})")
+        bars.axvline(
+            carried,
+            color=GT_COLOR,
+            linewidth=2.4,
+            zorder=4,
+            label=f"truth ({carried:.2f}, n={truth_fit['after_turn_frames']})",
+        )
     bars.axvline(1.0, color="0.35", linestyle="--", linewidth=1.0, zorder=4, label="turn goes on unchanged (1)")
     bars.axvline(0.0, color="0.6", linewidth=0.8, zorder=1)
     bars.set_yticks(y)

@@ -10,7 +10,13 @@ import numpy as np
 from lightemma.report.figures._mpl import pyplot
 
 
-def pairwise_figure(rows: Sequence[Mapping[str, Any]], labels: Sequence[str], *, notes: Mapping[str, str] | None = None, title: str | None = None) -> Any:
+def pairwise_figure(
+    rows: Sequence[Mapping[str, Any]],
+    labels: Sequence[str],
+    *,
+    notes: Mapping[str, str] | None = None,
+    title: str | None = None,
+) -> Any:
     """A matrix of ``pairwise_ade`` rows (see :func:`lightemma.evaluation.uncertainty.pairwise_ade`).
 
     Cell (row r, column c) = mean paired ADE avg of r − of c (m), coloured (blue:
@@ -42,7 +48,15 @@ def pairwise_figure(rows: Sequence[Mapping[str, Any]], labels: Sequence[str], *,
                 continue
             strong = significant[r, c] and abs(diff[r, c]) > 0.6 * reach
             color = "white" if strong else ("black" if significant[r, c] else "0.45")
-            ax.text(c, r, f"{diff[r, c]:+.2f}{'*' if significant[r, c] else ''}", ha="center", va="center", fontsize=7 if n <= 10 else 6, color=color)
+            ax.text(
+                c,
+                r,
+                f"{diff[r, c]:+.2f}{'*' if significant[r, c] else ''}",
+                ha="center",
+                va="center",
+                fontsize=7 if n <= 10 else 6,
+                color=color,
+            )
     names = [f"{label}{(notes or {}).get(label, '')}" for label in labels]
     ax.set_xticks(range(n))
     ax.set_xticklabels(names, rotation=45, ha="right", fontsize=8)
@@ -52,5 +66,9 @@ def pairwise_figure(rows: Sequence[Mapping[str, Any]], labels: Sequence[str], *,
     ax.set_ylabel("row model")
     bar = fig.colorbar(image, ax=ax, fraction=0.046, pad=0.03)
     bar.set_label("ADE avg, row − column (m)\n< 0: the row model is better", fontsize=8)
-    fig.suptitle(title or "Paired ADE avg differences on common frames\ncoloured with *: significant after Holm; grey: not distinguishable", fontsize=10)
+    fig.suptitle(
+        title
+        or "Paired ADE avg differences on common frames\ncoloured with *: significant after Holm; grey: not distinguishable",
+        fontsize=10,
+    )
     return fig

@@ -12,12 +12,29 @@ from lightemma.report.figures._mpl import GT_COLOR, pyplot
 
 #: the bars drawn, in order: the aggregates, then the sub-scores (tlc is always n/a on nuScenes: left out)
 BARS: tuple[str, ...] = ("pdms", "epdms", "epdms_map", "nc", "dac", "ddc", "ep", "ttc", "lk", "c", "hc", "ec")
-_TITLES = {"pdms": "PDMS", "epdms": "EPDMS", "epdms_map": "EPDMS-map", "nc": "NC", "dac": "DAC", "ddc": "DDC",
-           "ep": "EP", "ttc": "TTC", "lk": "LK", "c": "C", "hc": "HC", "ec": "EC"}
+_TITLES = {
+    "pdms": "PDMS",
+    "epdms": "EPDMS",
+    "epdms_map": "EPDMS-map",
+    "nc": "NC",
+    "dac": "DAC",
+    "ddc": "DDC",
+    "ep": "EP",
+    "ttc": "TTC",
+    "lk": "LK",
+    "c": "C",
+    "hc": "HC",
+    "ec": "EC",
+}
 
 
-def planning_figure(rows: Sequence[Mapping[str, Any]], *, colors: Mapping[str, str] | None = None,
-                    notes: Mapping[str, str] | None = None, gt_label: str | None = None) -> Any:
+def planning_figure(
+    rows: Sequence[Mapping[str, Any]],
+    *,
+    colors: Mapping[str, str] | None = None,
+    notes: Mapping[str, str] | None = None,
+    gt_label: str | None = None,
+) -> Any:
     """Grouped bars of each row's planning means (values in [0, 1]) with their 95 % intervals as error bars.
 
     ``rows``: planning rows (``model`` and the keys of :data:`lightemma.evaluation.planning_score.ROW_KEYS`), the ground
@@ -39,12 +56,21 @@ def planning_figure(rows: Sequence[Mapping[str, Any]], *, colors: Mapping[str, s
         values = np.array([np.nan if row.get(k) is None else float(row[k]) for k in keys])
         low = np.array([np.nan if not row.get(f"{k}_ci95") else float(row[f"{k}_ci95"][0]) for k in keys])
         high = np.array([np.nan if not row.get(f"{k}_ci95") else float(row[f"{k}_ci95"][1]) for k in keys])
-        err = np.vstack([np.where(np.isfinite(low), values - low, 0.0),
-                         np.where(np.isfinite(high), high - values, 0.0)])
+        err = np.vstack(
+            [np.where(np.isfinite(low), values - low, 0.0), np.where(np.isfinite(high), high - values, 0.0)]
+        )
         err = np.where(np.isfinite(err), np.maximum(err, 0.0), 0.0)
         pos = x - 0.4 + width * (j + 0.5)
-        ax.bar(pos, np.nan_to_num(values), width * 0.9, yerr=err, capsize=2, color=color,
-               label=label + (notes or {}).get(label, ""), error_kw={"elinewidth": 0.8})
+        ax.bar(
+            pos,
+            np.nan_to_num(values),
+            width * 0.9,
+            yerr=err,
+            capsize=2,
+            color=color,
+            label=label + (notes or {}).get(label, ""),
+            error_kw={"elinewidth": 0.8},
+        )
         for p, v in zip(pos, values):
             if not np.isfinite(v):
                 ax.text(p, 0.02, "n/a", rotation=90, ha="center", va="bottom", fontsize=6, color="0.4")
@@ -56,6 +82,8 @@ def planning_figure(rows: Sequence[Mapping[str, Any]], *, colors: Mapping[str, s
     if 0 < aggregates < n:
         ax.axvline(aggregates - 0.5, color="0.7", linewidth=0.8)
     ax.legend(fontsize=7, loc="lower left", ncol=max(1, min(3, m)))
-    fig.suptitle("Planning score (NAVSIM) by sub-score: aggregates, then each sub-score "
-                 "(95 % scene-bootstrap intervals)", fontsize=10)
+    fig.suptitle(
+        "Planning score (NAVSIM) by sub-score: aggregates, then each sub-score (95 % scene-bootstrap intervals)",
+        fontsize=10,
+    )
     return fig
