@@ -40,11 +40,11 @@ from lightemma.corruptions import NAMES, corrupt_array, corruption_seed, encode_
 
 def photos(n_distinct: int, source: str) -> list[tuple[str, np.ndarray]]:
     """(sample token, decoded RGB (900, 1600, 3)) of ``n_distinct`` 1600 × 900 frames: ``synth`` photos (smooth,
-    cheap to encode) or ``camera-like`` ones (tests/memframes.py: a gradient with pixel noise that compresses like a
+    cheap to encode) or ``camera-like`` ones (tests/support/memframes.py: a gradient with pixel noise that compresses like a
     CAM_FRONT photo, about 160 KiB)."""
     if source == "camera-like":
-        sys.path.insert(0, str(ROOT / "tests"))
-        from memframes import make_frames
+        sys.path.insert(0, str(ROOT))
+        from tests.support.memframes import make_frames
 
         frames = make_frames(Path(tempfile.mkdtemp(prefix="bench-corrupt-")), n_distinct, image_size=(1600, 900))
         return [(f.sample_token, np.asarray(Image.open(f.image_path).convert("RGB"))) for f in frames]

@@ -3,7 +3,7 @@
     python benches/bench_intents.py [--frames 50804] [--repeat 3] [--seed 0]
 
 The paper's benchmark: 13 runs × 3,908 frames = 50,804 stage-2 answers. The texts are made from the hand-labelled
-corpus (tests/intent_corpus.py) in the shape real answers have: a one- or two-sentence recap of the past with the
+corpus (tests/support/intent_corpus.py) in the shape real answers have: a one- or two-sentence recap of the past with the
 history's numbers, then two to four texts of the corpus (median about 500 characters; real GPT-4o and Claude
 intents are one paragraph of 300–1,000). Prints the
 wall and CPU seconds of ``lightemma.read_intents`` (the whole public call: Rust reading on all cores plus the class
@@ -22,10 +22,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import lightemma
-from intent_corpus import CORPUS
+from tests.support.intent_corpus import CORPUS
 
 RECAPS = [
     "The ego vehicle has been {verb} over the past 3 seconds, from about {v0:.1f} m/s to {v1:.1f} m/s, with a curvature near {c:.3f}.",

@@ -14,14 +14,14 @@ size 1's under greedy decoding. The device is named in the output.
 A frame is three-stage work only when every stage's answer ends: a stage cut off at
 ``--max-tokens`` stops its frame (docs/run.md). The tiny random-weight model never
 ends an answer by itself, so without ``--model`` it is first taught a scripted end
-(tests/local_models.py ``teach_to_answer``: 300 Adam steps on the first frame's three
+(tests/support/local_models.py ``teach_to_answer``: 300 Adam steps on the first frame's three
 prompts, to answer each with a strict action list and its end-of-turn token); the table
 says so, and a row whose frames did not all make 3 calls is flagged as not measuring the chain.
 
 On a GPU, pass a real checkpoint (``--model Qwen/Qwen2.5-VL-7B-Instruct``) and
 frames (``--dataroot``/``--version``/``--split``, default: a synthetic set at
 nuScenes' 1600×900). Without a GPU it uses a tiny random-weight Qwen2-VL built
-offline (tests/local_models.py) on small synthetic images, and says so: those
+offline (tests/support/local_models.py) on small synthetic images, and says so: those
 figures measure the batching machinery, not a real model.
 Target on a GPU: batched ≥ 10× the batch-1 throughput.
 
@@ -87,8 +87,8 @@ TEACHING_STEPS = (
 
 def tiny_checkpoint(root: Path, frames: Any = None) -> str:
     """A tiny random-weight Qwen2-VL; with ``frames``, taught to end every stage's answer (:data:`SCRIPTED_ANSWER`)."""
-    sys.path.insert(0, str(HERE.parent / "tests"))
-    from local_models import build_tiny_model, teach_to_answer
+    sys.path.insert(0, str(HERE.parent))
+    from tests.support.local_models import build_tiny_model, teach_to_answer
 
     path = build_tiny_model("qwen2_vl", root / "tiny-qwen2-vl")
     if frames is not None:

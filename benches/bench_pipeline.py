@@ -31,9 +31,9 @@ import numpy as np
 
 os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))
 
-from memframes import make_frames  # noqa: E402
+from tests.support.memframes import make_frames  # noqa: E402
 
 
 def rss_mib() -> float:
@@ -80,8 +80,8 @@ class InstantBackend(Backend):
     async def generate(self, requests):
         import asyncio
 
-        from fake_openai import GOOD_ACTIONS, INTENT_TEXT, SCENE_TEXT
         from lightemma.backends import ChatResult
+        from tests.support.fake_openai import GOOD_ACTIONS, INTENT_TEXT, SCENE_TEXT
 
         await asyncio.sleep(0)
         texts = {"scene": SCENE_TEXT, "intent": INTENT_TEXT, "actions": GOOD_ACTIONS}
@@ -114,7 +114,7 @@ def pipeline_cpu_ms_per_frame(frames, output: Path, concurrency: int) -> float:
 
 def start_server(latency: float) -> tuple[subprocess.Popen, str]:
     proc = subprocess.Popen(
-        [sys.executable, str(ROOT / "tests" / "fake_openai.py"), "--latency", str(latency)],
+        [sys.executable, str(ROOT / "tests" / "support" / "fake_openai.py"), "--latency", str(latency)],
         stdout=subprocess.PIPE,
         text=True,
     )

@@ -7,7 +7,7 @@
    comfort ``hc`` (14 derived past states + 31) and extended comfort ``ec`` (each frame against the one before it, as
    consecutive keyframes are: one simulation per frame serves both); wall and
    CPU seconds of each call (CPU = all threads of this process).
-2. The same definitions in NumPy/SciPy (the oracle of tests/test_planning_simulation.py: batched pseudo-inverse
+2. The same definitions in NumPy/SciPy (the oracle of tests/unit/planning/test_planning_simulation.py: batched pseudo-inverse
    fits, batched LQR, ``scipy.signal.savgol_filter``) on ``--numpy-frames`` plans in chunks of ``--chunk`` frames
    (memory), against the Rust kernels on the same plans; the results are checked to agree first.
 """
@@ -21,10 +21,10 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from lightemma.planning import simulation as sim  # noqa: E402
-from test_planning_simulation import oracle_comfort, oracle_extended, oracle_simulate, random_plans  # noqa: E402
+from tests.unit.planning.test_planning_simulation import oracle_comfort, oracle_extended, oracle_simulate, random_plans  # noqa: E402
 
 
 def timed(f):

@@ -11,7 +11,7 @@ the speed-up over one Ray replica, the scaling efficiency (speed-up / N; the tar
 machine is ≥ 0.8) and whether each row's answers equal the in-process answers under greedy
 decoding. One local Ray is started for all rows (or ``--ray-address`` joins a cluster).
 
-Without a GPU it uses a tiny random-weight Qwen2-VL built offline (tests/local_models.py) on
+Without a GPU it uses a tiny random-weight Qwen2-VL built offline (tests/support/local_models.py) on
 small synthetic images, one CPU per replica, and says so: on a 2-core machine the driver
 (chain, parsing, Ray's own processes) shares the cores with the replicas, so two replicas
 cannot reach 2×. On a GPU machine, one GPU per replica:

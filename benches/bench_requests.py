@@ -2,7 +2,7 @@
 
 For each provider protocol (OpenAI: GPT-4o; Anthropic: Claude-4.6-Sonnet; Gemini: Gemini-2.5-Flash) and each
 chain, ``--frames`` frames with 1600 × 900 camera-sized JPEGs run through `lightemma run` against the loopback
-server (tests/fake_openai.py) in this process, which
+server (tests/support/fake_openai.py) in this process, which
 
 * counts every request's tokens (:class:`fake_openai.TokenCounter`: text at 4 UTF-8 bytes per token plus 4 per
   message; each image by its provider's published pixel rule: 1105 tokens at 1600 × 900 for OpenAI, 1844 for
@@ -31,10 +31,10 @@ from pathlib import Path
 
 os.environ.setdefault("LITELLM_LOCAL_MODEL_COST_MAP", "True")
 ROOT = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(ROOT / "tests"))
+sys.path.insert(0, str(ROOT))
 
-from fake_openai import FakeOpenAIServer, Reply, default_reply  # noqa: E402
-from memframes import make_frames  # noqa: E402
+from tests.support.fake_openai import FakeOpenAIServer, Reply, default_reply  # noqa: E402
+from tests.support.memframes import make_frames  # noqa: E402
 
 MODELS = (
     ("gpt-4o", "OPENAI_API_KEY"),

@@ -10,7 +10,7 @@ of the CPU medians and the differences A − B (CPU: the robust figure on a shar
   (150 scene files per model, texts of realistic length), imported once by each tree; this
   tree's runs come with their sidecar (``frames.columns.npz``), the anchor's do not.
 * ``startup`` — ``lightemma --help``; ``lightemma run --limit 1`` with a baseline and with the
-  direct transport against the loopback server (tests/fake_openai.py), each beside loading the
+  direct transport against the loopback server (tests/support/fake_openai.py), each beside loading the
   same frames alone (``load_frames``): the difference is what ``run`` adds before its first frame.
 * ``import`` — ``lightemma import --jobs 1`` of one stand-in model folder (3,908 frames).
 
@@ -181,7 +181,7 @@ def startup(root: Path, anchor: Path, repeat: int) -> None:
     )
     side_by_side("run baseline --limit 1", (baseline, TREE), (baseline, anchor), repeat)
     server = subprocess.Popen(
-        [sys.executable, str(HERE.parent / "tests" / "fake_openai.py")],
+        [sys.executable, str(HERE.parent / "tests" / "support" / "fake_openai.py")],
         stdout=subprocess.PIPE,
         text=True,
         env={**os.environ, "PYTHONPATH": str(TREE)},

@@ -1,6 +1,6 @@
 //! lightemma's shared definitions (`docs/definitions.md`) that the kernels use: the step of an action,
 //! the ego box and the heading rule. The binding exports them as `_core` constants; `lightemma.definitions`
-//! re-exports them, and `tests/test_definitions.py` checks that both languages and every kernel default agree.
+//! re-exports them, and `tests/unit/package/test_definitions.py` checks that both languages and every kernel default agree.
 
 /// Seconds between two actions, and between nuScenes keyframes (docs/definitions.md#integration).
 pub const STEP_SECONDS: f64 = 0.5;

@@ -1,19 +1,15 @@
 """Shared test setup: no network for Hugging Face or litellm's price list."""
 
 import os
-import sys
-from pathlib import Path
 
 os.environ["HF_HUB_OFFLINE"] = "1"
 os.environ["LITELLM_LOCAL_MODEL_COST_MAP"] = "True"
 # The loopback servers of the tests play the providers themselves: a provider's key and its list price apply
-# there as on the provider's own host. Tests of what another --api-base gets (tests/test_hardening.py) clear it.
+# there as on the provider's own host. Tests of what another --api-base gets
+# (tests/integration/test_run_hostile.py) clear it.
 os.environ["LIGHTEMMA_PROVIDER_HOSTS"] = "openai=127.0.0.1,anthropic=127.0.0.1,gemini=127.0.0.1"
 
-# fake_openai.py lives beside the tests and is imported by them as a module
-sys.path.insert(0, str(Path(__file__).parent))
-
-import pytest  # noqa: E402
+import pytest
 
 
 @pytest.fixture

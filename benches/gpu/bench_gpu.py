@@ -123,8 +123,8 @@ ARCHITECTURES: dict[str, dict[str, Any]] = {
 
 # Qwen's special tokens and chat template (single user turns [image, text] and assistant turns), shared
 # with the tests' tiny models
-sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "tests"))
-from local_models import QWEN_SPECIALS, QWEN_TEMPLATE  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+from tests.support.local_models import QWEN_SPECIALS, QWEN_TEMPLATE  # noqa: E402
 
 
 def tiny_architecture(name: str) -> dict[str, Any]:

@@ -4,7 +4,7 @@ Checked against the built module by ``python -m mypy.stubtest lightemma._core`` 
 and default here is the binding's (rust/python.rs, rust/python/). A default written ``...`` is one the binding
 does not expose to introspection (a tuple or an ``Option``); its value is given in the docstring. The ``Literal``
 aliases below list the names each string-mode parameter accepts, in the order of the runtime lists
-(``METHODS``, ``CONVENTIONS``, ``PARSE_MODES``, ``PARSE_FAILURES``, ``PARSE_STATUSES``; tests/test_core_stub.py
+(``METHODS``, ``CONVENTIONS``, ``PARSE_MODES``, ``PARSE_FAILURES``, ``PARSE_STATUSES``; tests/unit/package/test_core_stub.py
 checks that they agree); any other string raises ``lightemma.errors.UnknownNameError`` (a ValueError) naming the
 accepted ones.
 """

@@ -2,7 +2,7 @@
 
 Where the Rust core has a definition it is the source, re-exported here from ``lightemma._core``
 (``rust/definitions.rs``, ``rust/parse/mod.rs``, ``rust/metrics.rs``, ``rust/kinematics.rs``); the rest is defined here.
-``tests/test_definitions.py`` checks that both languages, and every kernel's defaults, agree. Every other module
+``tests/unit/package/test_definitions.py`` checks that both languages, and every kernel's defaults, agree. Every other module
 imports these names from here.
 
 Two different code lists describe what became of an answer, under different names:

@@ -28,7 +28,7 @@ fn safety_inputs<'a>(
 /// The ego box of a safety kernel call. Every kernel's defaults are lightemma's ego box
 /// ([`crate::definitions::EGO_LENGTH`], [`crate::definitions::EGO_WIDTH`], [`crate::definitions::EGO_OFFSET`],
 /// [`crate::definitions::MIN_STEP`]), written as literals so that Python's signatures show them;
-/// tests/test_definitions.py checks each against the constants.
+/// tests/unit/package/test_definitions.py checks each against the constants.
 fn ego_shape(length: f64, width: f64, offset: f64, min_step: f64) -> PyResult<safety::EgoShape> {
     let shape = safety::EgoShape {
         length,

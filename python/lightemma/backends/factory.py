@@ -4,7 +4,7 @@
 :func:`run_backend` builds the one a run's settings name (the runner's call: it turns the
 settings into the chosen kind's options, then calls :func:`create_backend`, and shows the
 backend's notices). Every class in :data:`KINDS` subclasses :class:`~lightemma.backends.base.Backend`
-(``tests/test_backend_interface.py``).
+(``tests/unit/backends/test_backend_interface.py``).
 
 Which kind serves a model (:func:`backend_kind`): an explicit ``backend``, else ``baseline:…``
 → ``baseline``, a registry entry for a local checkpoint → ``hf`` / ``vllm`` (unless an

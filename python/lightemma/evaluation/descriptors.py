@@ -3,7 +3,7 @@
 Each column of ``lightemma evaluate``'s tables maps to a :class:`Descriptor` with an id of the form
 ``name@variant/version`` (``ade@lightemma/1``, ``l2@uniad/1``, ``miss@2m/1``, ``collision@uniad/1``), its unit, the
 range its values can take, whether lower is better, its source and the ``docs/definitions.md`` anchor that defines it.
-A change to how a metric is computed bumps its version here; tests/test_golden_metrics.py pins each metric's value on a
+A change to how a metric is computed bumps its version here; tests/unit/metrics/test_golden_metrics.py pins each metric's value on a
 small fixed input under its id, so a value that moves without a bump fails there.
 
 :func:`column_descriptors` gives the descriptors of a table's columns (the ``columns`` block of
@@ -101,7 +101,7 @@ _METERS = (0.0, None)
 _SHARE = (0.0, 1.0)
 _PCT = (0.0, 100.0)
 
-#: every metric lightemma computes, by id (the versions tests/test_golden_metrics.py pins)
+#: every metric lightemma computes, by id (the versions tests/unit/metrics/test_golden_metrics.py pins)
 METRICS: dict[str, Descriptor] = {
     d.id: d
     for d in (

@@ -5,7 +5,7 @@ Values are copied from the .tex; ``None`` stands for the paper's "-" and
 The paper scores 3,908 v1.0-test frames with the ``lightemma`` convention.
 
 Leaf data: this module imports nothing of lightemma. A row's family is the prefix of its name as the paper writes it
-(:data:`FAMILY_PREFIXES`; tests/test_registry.py checks it equals the catalog's family of the same model). Matching a
+(:data:`FAMILY_PREFIXES`; tests/unit/models/test_registry.py checks it equals the catalog's family of the same model). Matching a
 run's model string to a paper row: :mod:`lightemma.models.names`.
 """
 

@@ -2,7 +2,7 @@
 
 Every other part of lightemma receives what this package parsed — a :class:`~lightemma.frames.FrameSet`, the safety
 and planning data (:class:`~lightemma.nuscenes.annotations.SafetyData`), drivable areas and map layers, CAN bus
-readings — and never opens a dataroot's files itself (tests/test_nuscenes_reader.py checks it).
+readings — and never opens a dataroot's files itself (tests/unit/nuscenes/test_nuscenes_reader.py checks it).
 
 Modules: :mod:`~lightemma.nuscenes.json_tables` (the one bounded, checked table reader),
 :mod:`~lightemma.nuscenes.frames` (frames, windows and splits: ``splits.json``),

@@ -3,7 +3,7 @@
 lightemma reads the nuScenes JSON tables itself — ``scene`` → its chain of
 ``sample`` records → each sample's CAM_FRONT keyframe ``sample_data`` → its
 ``ego_pose`` and ``calibrated_sensor`` — exactly as ``nuscenes-devkit``'s
-``NuScenes`` indexes them (tests/test_frames.py checks the two readings agree
+``NuScenes`` indexes them (tests/unit/nuscenes/test_frames.py checks the two readings agree
 on the same dataroot), so that loading frames needs only numpy (1 or 2) and no
 devkit; the devkit stays an optional extra (``lightemma[nuscenes]``) for maps
 and rendering. The predefined splits are the devkit's ``create_splits_scenes()``,

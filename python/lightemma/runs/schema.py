@@ -10,7 +10,7 @@ misreads. Readers annotate with the same classes.
 
 The constructors keep the keys in the order the writer passes them: that order is the on-disk byte order of a
 record, and each writer's order is as it was before these types existed (a run's ``frames.jsonl`` is
-byte-identical; tests/test_run_schema.py pins it). JSON numbers are ``int`` or ``float``; a count, time or cost
+byte-identical; tests/unit/runs/test_run_schema.py pins it). JSON numbers are ``int`` or ``float``; a count, time or cost
 that is unknown is ``None`` (docs/run.md, "Unknown stays unknown"); the bounds on them are
 :mod:`lightemma.runs.records`' (:data:`~lightemma.runs.records.VALUE_BOUNDS`), checked by the readers.
 

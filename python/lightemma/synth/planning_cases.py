@@ -6,7 +6,7 @@ poses (x, y, heading in the keyframe's ego frame, at 0.5 … 3.0 s) and the time
 sub-score, computed on the plan's **reference** — the origin and the six poses resampled every 0.1 s (x, y and heading
 linear in time), which the re-simulation (:func:`lightemma.planning.simulation.simulate`) tracks. The simulated
 states differ: the tracker looks 10 steps (1 s) ahead, so it starts to follow a change before the reference makes it,
-and it lags sideways, so a lateral fault is reached later; tests/test_synth_lanes.py re-simulates every case and
+and it lags sideways, so a lateral fault is reached later; tests/unit/synth/test_synth_lanes.py re-simulates every case and
 checks that its sub-score is 0 there (``ep``: short of the scene's progress), and for ``ddc`` and ``lk`` that the
 simulated step is the reference's or later.
 
