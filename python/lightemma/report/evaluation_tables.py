@@ -678,12 +678,13 @@ def _row_frame_sets(rows: list[dict[str, Any]], group_of: dict[str, str]) -> lis
     truth's) is a reference row."""
     out: list[str | None] = []
     current, state = None, None
-    for r in rows:
+    for i, r in enumerate(rows):
         source = r.get("source")
+        paired = i + 1 < len(rows) and rows[i + 1].get("source") == "diff"  # beside_paper emits a match with its Δ
         if _is_run_row(r, group_of):
             current, state = group_of[r["model"]], "run"
             out.append(current)
-        elif source == "paper" and state == "run":
+        elif source == "paper" and state == "run" and paired:
             state = "paper"
             out.append(current)
         elif source == "diff" and state == "paper":
