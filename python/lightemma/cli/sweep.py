@@ -101,33 +101,33 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     return p
 
 
-#: command-line flag (argparse dest) -> lightemma.sweep keyword
-_OPTIONS = {
-    "backend": "backend",
-    "price": "price",
-    "concurrency": "concurrency",
-    "timeout": "timeout",
-    "rpm": "rpm",
-    "tpm": "tpm",
-    "prompt_set": "prompt_set",
-    "temperature": "temperature",
-    "max_tokens": "max_tokens",
-    "max_retries": "max_retries",
-    "backoff": "backoff_base",
-    "reask": "reask",
-    "max_attempts": "max_attempts",
-    "integrate": "integrate_method",
-    "chain": "chain",
-    "answer_format": "answer_format",
-    "transport": "transport",
-}
+#: the run settings a sweep forwards to every variant's run (flags as ``lightemma run`` names them: cli/run.FLAGS)
+_FORWARDED = (
+    "backend",
+    "price",
+    "concurrency",
+    "timeout",
+    "rpm",
+    "tpm",
+    "prompt_set",
+    "temperature",
+    "max_tokens",
+    "max_retries",
+    "backoff_base",
+    "reask",
+    "max_attempts",
+    "integrate_method",
+    "chain",
+    "answer_format",
+    "transport",
+)
 
 
 def main(args: argparse.Namespace) -> int:
     from lightemma._signals import interrupt_on_stop_signals
 
     interrupt_on_stop_signals()
-    from lightemma.cli.run import check_limits
+    from lightemma.cli.run import _attr, check_limits
     from lightemma.errors import UserError
     from lightemma.pipeline.variant_sweep import parse_variants, sweep
 
@@ -140,11 +140,8 @@ def main(args: argparse.Namespace) -> int:
     check_limits(args)
     if args.sample_seed is not None and args.sample is None:
         raise UserError("--sample-seed goes with --sample N")
-    options = {
-        kw: (tuple(getattr(args, flag)) if flag == "price" else getattr(args, flag))
-        for flag, kw in _OPTIONS.items()
-        if getattr(args, flag) is not None
-    }
+    given = {kw: getattr(args, _attr(kw)) for kw in _FORWARDED}
+    options = {kw: (tuple(value) if kw == "price" else value) for kw, value in given.items() if value is not None}
     if args.batch:
         options["batch"] = True
     result = sweep(
